@@ -1,0 +1,147 @@
+// benchctl: the valvebench command line.
+//
+// Exit codes (scripts can trust them): 0 success; 1 a run failed or was cancelled (or, later, a regression);
+// 2 bad input or usage (spec errors name the field); 3 an environment problem (file not writable, server
+// unreachable).
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
+
+#include <cmath>
+#include <cstdio>
+#include <iostream>
+
+#include "benchctl/local_run.h"
+
+namespace {
+
+using vb::Status;
+using vb::StatusCode;
+using Json = nlohmann::ordered_json;
+
+constexpr int kExitOk = 0, kExitRunFailed = 1, kExitBadInput = 2, kExitEnvironment = 3;
+
+int ExitFor(const Status& st) {
+  switch (st.code()) {
+    case StatusCode::kOk: return kExitOk;
+    case StatusCode::kInvalidArgument:
+    case StatusCode::kNotFound:
+    case StatusCode::kOutOfRange:
+    case StatusCode::kResourceExhausted:
+    case StatusCode::kFailedPrecondition: return kExitBadInput;
+    default: return kExitEnvironment;
+  }
+}
+
+int Fail(const Status& st) {
+  std::fprintf(stderr, "benchctl: %s\n", st.message().c_str());
+  return ExitFor(st);
+}
+
+Json Number(double v) { return std::isfinite(v) ? Json(v) : Json(nullptr); }
+
+Json SummaryJson(const vb::benchctl::LocalRunResult& r) {
+  const auto& s = r.summary;
+  Json j;
+  j["name"] = r.name;
+  j["controller"] = r.controller;
+  j["tags"] = r.tags;
+  j["status"] = vb::experiment::TerminationName(s.termination);
+  if (!s.message.empty()) j["message"] = s.message;
+  j["duration_s"] = s.duration_s;
+  j["samples"] = s.samples;
+  j["ticks"] = s.ticks;
+  j["wall_s"] = s.wall_s;
+  j["realtime_factor"] = s.realtime_factor;
+  if (s.loop.ticks > 0) {
+    j["loop"] = {{"paced_ticks", s.loop.ticks},
+                 {"overruns", s.loop.overruns},
+                 {"jitter_p50_s", s.loop.jitter_p50_s},
+                 {"jitter_p99_s", s.loop.jitter_p99_s},
+                 {"jitter_max_s", s.loop.jitter_max_s}};
+  }
+  Json m = Json::object();
+  for (const auto& [name, value] : vb::experiment::MetricList(s.metrics)) m[name] = Number(value);
+  j["metrics"] = m;
+  return j;
+}
+
+void PrintHuman(const vb::benchctl::LocalRunResult& r) {
+  const auto& s = r.summary;
+  std::printf("run %s [%s]: %s\n", r.name.c_str(), r.controller.c_str(), vb::experiment::TerminationName(s.termination));
+  if (!s.message.empty()) std::printf("  reason: %s\n", s.message.c_str());
+  std::printf("  %.6g s simulated, %zu samples, %llu control ticks, %.3g s wall, %.0fx real time\n", s.duration_s,
+              s.samples, static_cast<unsigned long long>(s.ticks), s.wall_s, s.realtime_factor);
+  if (s.loop.ticks > 0)
+    std::printf("  loop: %llu paced ticks, %llu overruns, jitter p50 %.1f us, p99 %.1f us, max %.1f us\n",
+                static_cast<unsigned long long>(s.loop.ticks), static_cast<unsigned long long>(s.loop.overruns),
+                s.loop.jitter_p50_s * 1e6, s.loop.jitter_p99_s * 1e6, s.loop.jitter_max_s * 1e6);
+  for (const auto& [name, value] : vb::experiment::MetricList(s.metrics))
+    if (std::isfinite(value)) std::printf("  %-20s %.6g\n", name.c_str(), value);
+}
+
+std::string IndexedPath(const std::string& path, size_t k, size_t n) {
+  if (n <= 1) return path;
+  const size_t dot = path.find_last_of('.');
+  const std::string suffix = "-" + std::to_string(k);
+  return dot == std::string::npos ? path + suffix : path.substr(0, dot) + suffix + path.substr(dot);
+}
+
+int CmdRun(const std::string& spec_path, bool local, const std::string& server, const std::string& trace_csv,
+           bool json, bool realtime) {
+  if (!local) {
+    return Fail(Status::FailedPrecondition(
+        "no server given: use --local to run on the embedded emulator" +
+        std::string(server.empty() ? "" : " (remote submission to " + server + " is not available yet)")));
+  }
+  auto spec = vb::experiment::LoadSpecFile(spec_path);
+  if (!spec.ok()) return Fail(spec.status());
+  auto results = vb::benchctl::RunLocal(*spec, realtime, !trace_csv.empty());
+  if (!results.ok()) return Fail(results.status().WithContext(spec_path));
+  int exit_code = kExitOk;
+  Json all = Json::array();
+  for (size_t k = 0; k < results->size(); ++k) {
+    const auto& r = (*results)[k];
+    if (!r.summary.ok()) exit_code = kExitRunFailed;
+    if (!trace_csv.empty()) {
+      auto st = vb::benchctl::WriteTraceCsv(r.trace, IndexedPath(trace_csv, k, results->size()));
+      if (!st.ok()) return Fail(st);
+    }
+    if (json) {
+      all.push_back(SummaryJson(r));
+    } else {
+      PrintHuman(r);
+    }
+  }
+  if (json) std::cout << (all.size() == 1 ? all[0] : all).dump(2) << "\n";
+  return exit_code;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"benchctl: run, watch and compare experiments on valvebench benches"};
+  app.require_subcommand(1);
+  bool json = false;
+  app.add_flag("--json", json, "machine-readable output on stdout");
+
+  std::string spec_path, trace_csv, server;
+  bool local = false, realtime = false;
+  const char* env_server = std::getenv("VALVEBENCH_SERVER");
+  if (env_server != nullptr) server = env_server;
+  auto* run = app.add_subcommand("run", "run an experiment spec (a single run or a sweep)");
+  run->add_option("spec", spec_path, "experiment spec (protobuf JSON)")->required();
+  run->add_flag("--local", local, "run on the embedded emulator, no server");
+  run->add_option("--server", server, "bench server address (or VALVEBENCH_SERVER)");
+  run->add_option("--trace-csv", trace_csv, "write the recorded channels as CSV (sweeps: FILE-<n>.csv)");
+  run->add_flag("--realtime", realtime, "pace the run to the wall clock and report loop jitter");
+  run->add_flag("--json", json, "print the summary as JSON");
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    const int rc = app.exit(e);
+    return rc == 0 ? 0 : kExitBadInput;
+  }
+  if (run->parsed()) return CmdRun(spec_path, local, server, trace_csv, json, realtime);
+  return kExitBadInput;
+}

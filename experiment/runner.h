@@ -1,0 +1,44 @@
+// The Runner closes the loop on any Bench: every tick it reads the measurement, calls the controller with
+// the reference, and applies the command: read -> update -> write (ros2_control). Ticks are at k * the
+// controller's period plus the experiment's breakpoints (segment starts, valve command edges, reference
+// steps), so nothing the spec schedules is rounded to the control grid.
+//
+// The loop itself does no allocation, locking or I/O beyond the bench: the trace is reserved beforehand.
+#pragma once
+
+#include <atomic>
+#include <string>
+
+#include "experiment/metrics.h"
+#include "experiment/spec.h"
+#include "experiment/trace.h"
+#include "hw/bench.h"
+
+namespace vb::experiment {
+
+struct RunSummary {
+  enum class Termination { kDone, kFailed, kCancelled };
+  Termination termination = Termination::kDone;
+  std::string message;              // why it failed or was cancelled
+  double duration_s = 0.0;          // simulated / experiment time covered
+  size_t samples = 0;
+  double wall_s = 0.0;
+  double realtime_factor = 0.0;     // experiment seconds per wall second
+  std::uint64_t ticks = 0;
+  hw::LoopStats loop;               // pacing (realtime runs)
+  Metrics metrics;
+
+  bool ok() const { return termination == Termination::kDone; }
+  std::string BriefReport() const;
+  std::string FullReport() const;
+};
+const char* TerminationName(RunSummary::Termination t);
+
+class Runner {
+ public:
+  // cancel may be null. The trace is cleared and filled.
+  static RunSummary Run(const Experiment& experiment, hw::Bench& bench, Trace* trace,
+                        const std::atomic<bool>* cancel = nullptr);
+};
+
+}  // namespace vb::experiment

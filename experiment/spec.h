@@ -1,0 +1,63 @@
+// Experiment specs: parse (protobuf JSON), validate (errors name the field path), expand sweeps and repeats,
+// and resolve one spec into a runnable Experiment (plant, driver, controller, reference, recording).
+#pragma once
+
+#include <memory>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "common/status.h"
+#include "control/controller.h"
+#include "experiment/metrics.h"
+#include "experiment/reference.h"
+#include "hw/bench.h"
+#include "model/driver.h"
+#include "model/params.h"
+#include "valvebench/v1/spec.pb.h"
+
+namespace vb::experiment {
+
+using valvebench::v1::ExperimentSpec;
+
+// Parses protobuf JSON (unknown fields are errors: a typo must not silently fall back to a default).
+StatusOr<ExperimentSpec> ParseSpecJson(std::string_view json);
+StatusOr<ExperimentSpec> LoadSpecFile(const std::string& path);
+std::string SpecToJson(const ExperimentSpec& spec, bool pretty = true);
+
+// Defaults a spec gets when a field is left out (documented in docs/spec.md).
+inline constexpr double kDefaultRecordRate_Hz = 50'000.0;
+inline constexpr double kDefaultSupply_V = 24.0;
+
+// Expands sweep axes (a full grid, first axis slowest) and repeats into single-run specs. Each result has no
+// sweep, repeats = 1, and tags "sweep:<field>=<value>" and "repeat:<k>". The count is bounded by max_runs.
+StatusOr<std::vector<ExperimentSpec>> ExpandSweep(const ExperimentSpec& spec, size_t max_runs = 100'000);
+// Sets a numeric field by path ("conditions.supply_V", "controller.open_loop_pwm.segments[0].duty",
+// "bench.model.params[R]").
+Status SetFieldByPath(ExperimentSpec* spec, std::string_view path, double value);
+StatusOr<double> GetFieldByPath(const ExperimentSpec& spec, std::string_view path);
+
+// One resolved run.
+struct Experiment {
+  ExperimentSpec spec;                  // the single-run spec (no sweep)
+  model::PlantParams plant;             // preset + overrides + perturbation
+  model::DriverParams driver;
+  hw::RunConfig run;
+  std::unique_ptr<control::Controller> controller;
+  ReferenceProfile reference;
+  ControlledVariable controlled = ControlledVariable::kNone;
+  double duration_s = 0.0;
+  double metric_start_s = 0.0, metric_end_s = 0.0;
+  double average_window_s = 0.0;        // moving average of x (one PWM period)
+  std::vector<double> breakpoints_s;    // where the runner ticks besides the controller period
+};
+
+// Validates every field (the message names the field path) and builds the run. A spec with sweep axes or
+// repeats > 1 is rejected here: expand it first.
+StatusOr<Experiment> BuildExperiment(const ExperimentSpec& spec);
+// Resolves only the plant (preset, overrides, perturbation): what an emulated bench needs.
+StatusOr<model::PlantParams> BuildPlant(const valvebench::v1::ModelSpec& model,
+                                        const valvebench::v1::Perturbation* perturbation = nullptr);
+StatusOr<model::DriverParams> BuildDriver(const valvebench::v1::DriverSpec& driver);
+
+}  // namespace vb::experiment

@@ -1,0 +1,88 @@
+// The Bench interface: real and emulated hardware behind one contract (after ros2_control).
+//
+// Lifecycle: Configure(run) -> Start(sink) -> { AdvanceTo(t) -> Apply(cmd) }* -> Stop(). SafeState() may be
+// called at any time from the owning thread and always leaves the coil de-energised (gate low, PWM stopped).
+// A Bench is not copyable: it stands for one piece of hardware.
+//
+// Time: t_s is run time from Start(). AdvanceTo(t) returns the measurement at t: an emulated bench integrates
+// to t (as fast as possible, or paced to the wall clock); a hardware bench waits for t and reads its inputs.
+// Samples at the recording rate go to the SampleSink as they are produced; the sink must not block.
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+#include "common/bench_io.h"
+#include "common/status.h"
+
+namespace vb::hw {
+
+struct Capabilities {
+  std::string kind;                  // "emulated", "hid", "u3"
+  std::string driver;                // low_side_flyback | h_bridge | internal_electronics
+  double max_supply_V = 0.0;
+  double min_carrier_Hz = 0.0;       // PWM carrier range
+  double max_carrier_Hz = 0.0;
+  double max_sample_rate_Hz = 0.0;   // recording
+  double max_control_rate_Hz = 0.0;  // host control loop
+  bool measures_position = false;
+  bool measures_velocity = false;
+  double max_current_A = 0.0;        // safety limit the bench enforces
+};
+
+struct RunConfig {
+  double supply_V = 24.0;
+  double supply_pressure_Pa = 0.0;   // gauge
+  double sample_rate_Hz = 50'000.0;  // recording rate; 0 = no samples
+  bool realtime = false;             // pace AdvanceTo to the wall clock
+};
+
+// One recorded sample. Channels a bench does not measure are NaN.
+struct BenchSample {
+  double t_s;
+  std::int8_t gate;
+  double v_coil_V;
+  double i_A;
+  double x_m;
+  double v_mps;
+};
+
+class SampleSink {
+ public:
+  virtual ~SampleSink() = default;
+  virtual void OnSample(const BenchSample& sample) = 0;
+};
+
+// How well a paced loop kept its deadlines.
+struct LoopStats {
+  std::uint64_t ticks = 0;
+  std::uint64_t overruns = 0;        // ticks whose work ended after their deadline
+  double jitter_p50_s = 0.0;         // wake-up lateness after the deadline
+  double jitter_p99_s = 0.0;
+  double jitter_max_s = 0.0;
+};
+
+class Bench {
+ public:
+  Bench() = default;
+  Bench(const Bench&) = delete;
+  Bench& operator=(const Bench&) = delete;
+  virtual ~Bench() = default;
+
+  virtual const Capabilities& capabilities() const = 0;
+  virtual Status Configure(const RunConfig& config) = 0;
+  // Starts a run from rest at t = 0.
+  virtual Status Start(SampleSink* sink) = 0;
+  // Takes effect now. FailedPrecondition if the bench cannot realise it (gate -1 without an H-bridge, ...).
+  virtual Status Apply(const SwitchCommand& command) = 0;
+  // Runs until t_s (>= the current time) and fills *m with the measurement at t_s.
+  virtual Status AdvanceTo(double t_s, Measurement* m) = 0;
+  // Ends the run: emits the last sample and leaves the bench in its safe state.
+  virtual Status Stop() = 0;
+  // Gate low, PWM stopped. Safe to call at any time, repeatedly.
+  virtual void SafeState() noexcept = 0;
+  // Pacing statistics of the last run (zeros when not paced).
+  virtual LoopStats loop_stats() const = 0;
+};
+
+}  // namespace vb::hw

@@ -1,0 +1,494 @@
+#include "model/simulator.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace vb::model {
+namespace {
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+// Two instants closer than this are the same instant (sample grid vs. edges computed in floating point).
+constexpr double kSameInstant_s = 1e-12;
+
+}  // namespace
+
+const char* EventKindName(EventKind kind) {
+  switch (kind) {
+    case EventKind::kLift: return "lift";
+    case EventKind::kOpen: return "open";
+    case EventKind::kRelease: return "release";
+    case EventKind::kClose: return "close";
+    case EventKind::kCurrentZero: return "izero";
+    case EventKind::kDriverSwitch: return "driver";
+  }
+  return "?";
+}
+
+Simulator::Simulator(const Plant& plant, const DriverParams& driver, const Conditions& conditions,
+                     const SolverOptions& options)
+    : plant_(plant),
+      driver_(driver),
+      cond_(conditions),
+      opt_(options),
+      stepper_(boost::numeric::odeint::make_dense_output(options.abs_tol, options.rel_tol, options.max_step_s,
+                                                         boost::numeric::odeint::runge_kutta_dopri5<State>())) {
+  const PlantParams& p = plant_.params();
+  x_lo_ = p.has_moving_part ? p.x_min_m : 0.0;
+  x_hi_ = p.has_moving_part ? p.x_max_m : 0.0;
+  x_scale_ = x_hi_ > x_lo_ ? x_hi_ - x_lo_ : 1.0;
+  inv_x_scale_ = 1.0 / x_scale_;
+  v_scale_ = x_scale_ / 1e-3;  // velocity in units of "full travel per millisecond"
+  inv_v_scale_ = 1.0 / v_scale_;
+  Reset();
+}
+
+void Simulator::Reset() {
+  t_ = 0.0;
+  i_ = 0.0;
+  x_ = x_lo_;
+  v_ = 0.0;
+  gate_ = 0;
+  contact_ = Contact::kLower;
+  blocked_ = true;
+  t_gate_change_s_ = 0.0;
+  chopper_started_ = false;
+  chopper_on_ = false;
+  next_sample_ = 0;
+  stepper_valid_ = false;
+  dt_guess_s_ = 1e-6;
+  ode_steps_ = 0;
+  restarts_ = 0;
+}
+
+void Simulator::SetSamplePeriod(double period_s) {
+  sample_period_s_ = period_s > 0.0 ? period_s : 0.0;
+  next_sample_ = sample_period_s_ > 0.0 ? static_cast<std::int64_t>(std::ceil(t_ / sample_period_s_ - 1e-9)) : 0;
+}
+
+void Simulator::SetGate(int gate) {
+  if (gate == gate_) return;
+  gate_ = gate;
+  t_gate_change_s_ = t_;
+  chopper_started_ = false;
+  if (gate != 0) blocked_ = false;
+  stepper_valid_ = false;
+}
+
+void Simulator::SetConditions(const Conditions& conditions) {
+  cond_ = conditions;
+  stepper_valid_ = false;
+}
+
+double Simulator::v_coil_V() const {
+  Simulator* self = const_cast<Simulator*>(this);
+  // CurrentSegment() only normalises driver bookkeeping; the physical state is unchanged.
+  Segment seg = self->CurrentSegment();
+  return seg.blocked ? 0.0 : SegmentVoltage(seg, t_);
+}
+
+Simulator::Segment Simulator::CurrentSegment() {
+  Segment s;
+  const double supply = cond_.supply_V;
+  const double drop = driver_.diode_drop_V;
+  auto freewheel_or_block = [&](double v_if_positive) {
+    if (blocked_ || i_ <= 0.0) {
+      blocked_ = true;
+      i_ = 0.0;
+      s.blocked = true;
+    } else {
+      s.v0_V = v_if_positive;
+      s.clamp = +1;
+    }
+  };
+  switch (driver_.kind) {
+    case DriverKind::kLowSideFlyback:
+      if (gate_ == 1) {
+        s.v0_V = supply;
+      } else {
+        freewheel_or_block(-drop);
+      }
+      break;
+    case DriverKind::kHBridge:
+      if (gate_ == 1) {
+        s.v0_V = supply;
+      } else if (gate_ == -1) {
+        s.v0_V = -supply;
+      } else if (!blocked_ && i_ > 0.0) {
+        s.v0_V = -(supply + 2.0 * drop);
+        s.clamp = +1;
+      } else if (!blocked_ && i_ < 0.0) {
+        s.v0_V = supply + 2.0 * drop;
+        s.clamp = -1;
+      } else {
+        blocked_ = true;
+        i_ = 0.0;
+        s.blocked = true;
+      }
+      break;
+    case DriverKind::kInternalElectronics: {
+      if (gate_ == 1) {
+        const double boost_end = t_gate_change_s_ + driver_.boost_time_s;
+        if (t_ < boost_end - kSameInstant_s) {
+          s.v0_V = supply;
+          s.t_end_s = boost_end;
+          break;
+        }
+        const double lo = driver_.hold_current_A - 0.5 * driver_.hold_band_A;
+        const double hi = driver_.hold_current_A + 0.5 * driver_.hold_band_A;
+        if (!chopper_started_) {
+          chopper_started_ = true;
+          chopper_on_ = i_ < lo;
+        }
+        if (!chopper_on_ && (blocked_ || i_ <= 0.0)) chopper_on_ = true;
+        if (chopper_on_) {
+          blocked_ = false;
+          s.v0_V = supply;
+          s.level_A = hi;
+          s.level_dir = +1;
+        } else {
+          s.v0_V = -drop;
+          s.clamp = +1;
+          s.level_A = lo;
+          s.level_dir = -1;
+        }
+      } else {
+        // Reverse voltage from the capacitor, decaying from the gate's falling edge.
+        if (blocked_ || i_ <= 0.0) {
+          blocked_ = true;
+          i_ = 0.0;
+          s.blocked = true;
+        } else {
+          s.v0_V = -driver_.reverse_V;
+          s.tau_s = driver_.reverse_tau_s;
+          s.t_origin_s = t_gate_change_s_;
+          s.clamp = +1;
+        }
+      }
+      break;
+    }
+  }
+  return s;
+}
+
+double Simulator::SegmentVoltage(const Segment& seg, double t) const {
+  if (seg.blocked) return 0.0;
+  if (seg.tau_s > 0.0) return seg.v0_V * std::exp(-(t - seg.t_origin_s) / seg.tau_s);
+  return seg.v0_V;
+}
+
+void Simulator::EmitSample(const Segment& seg, double t, double i, double x, double v, SimObserver* obs) const {
+  PlantSample s;
+  s.t_s = t;
+  s.gate = static_cast<std::int8_t>(gate_);
+  s.v_coil_V = SegmentVoltage(seg, t);
+  s.i_A = i;
+  s.x_m = x;
+  s.v_mps = v;
+  obs->OnSample(s);
+}
+
+void Simulator::EmitPendingSample(SimObserver* observer) {
+  if (sample_period_s_ <= 0.0 || observer == nullptr) return;
+  if (SampleTime(next_sample_) <= t_ + kSameInstant_s) {
+    Segment seg = CurrentSegment();
+    EmitSample(seg, SampleTime(next_sample_), i_, x_, v_, observer);
+    ++next_sample_;
+  }
+}
+
+void Simulator::CheckStopRelease(SimObserver* obs) {
+  if (!plant_.has_moving_part() || contact_ == Contact::kFree) return;
+  const double f = plant_.NetForceAtRest_N(i_, x_, cond_.supply_pressure_Pa);
+  if (contact_ == Contact::kLower && f > 0.0) {
+    contact_ = Contact::kFree;
+    v_ = 0.0;
+    stepper_valid_ = false;
+    if (obs) obs->OnEvent(EventKind::kLift, t_, i_, x_, v_);
+  } else if (contact_ == Contact::kUpper && f < 0.0) {
+    contact_ = Contact::kFree;
+    v_ = 0.0;
+    stepper_valid_ = false;
+    if (obs) obs->OnEvent(EventKind::kRelease, t_, i_, x_, v_);
+  }
+}
+
+void Simulator::AdvanceTo(double t_end_s, SimObserver* observer) {
+  while (t_ < t_end_s) {
+    CheckStopRelease(observer);
+    const Segment seg = CurrentSegment();
+    const double t_stop = std::min(t_end_s, seg.t_end_s);
+    if (contact_ != Contact::kFree && seg.tau_s == 0.0) {
+      AdvanceClosedForm(seg, t_stop, observer);
+    } else {
+      AdvanceOde(seg, t_stop, observer);
+    }
+    if (seg.t_end_s < kInf && t_ >= seg.t_end_s - kSameInstant_s) {
+      t_ = std::max(t_, seg.t_end_s);
+      stepper_valid_ = false;
+      if (observer) observer->OnEvent(EventKind::kDriverSwitch, t_, i_, x_, v_);
+    }
+  }
+}
+
+void Simulator::AdvanceClosedForm(const Segment& seg, double t_stop, SimObserver* obs) {
+  stepper_valid_ = false;
+  const double t0 = t_;
+  if (seg.blocked) {
+    if (sample_period_s_ > 0.0 && obs) {
+      for (double tk = SampleTime(next_sample_); tk < t_stop - kSameInstant_s; tk = SampleTime(++next_sample_))
+        EmitSample(seg, tk, 0.0, x_, 0.0, obs);
+    }
+    t_ = t_stop;
+    return;
+  }
+  const double R = plant_.params().R_ohm;
+  const double tau = plant_.L_H(x_) / R;
+  const double i_inf = seg.v0_V / R;
+  const double d0 = i_ - i_inf;
+
+  double best_t = t_stop;
+  Ev best_ev = Ev::kNone;
+  double best_level = 0.0;
+  // The exponential moves monotonically from i0 towards i_inf: level c is reached iff it lies strictly between.
+  auto consider = [&](double c, Ev ev) {
+    if (d0 == 0.0) return;
+    const double r = (c - i_inf) / d0;
+    if (!(r > 0.0 && r < 1.0)) return;
+    const double t = t0 - tau * std::log(r);
+    if (t < best_t) {
+      best_t = t;
+      best_ev = ev;
+      best_level = c;
+    }
+  };
+  if (seg.clamp != 0) consider(0.0, Ev::kClamp);
+  if (seg.level_dir != 0) consider(seg.level_A, Ev::kLevel);
+  if (plant_.has_moving_part()) {
+    const double i_bal = plant_.BalanceCurrent_A(x_, cond_.supply_pressure_Pa);
+    if (i_bal > 0.0) {
+      // At the lower stop the spool lifts when |i| rises above i_bal; at the upper stop it leaves when |i|
+      // falls below it. consider() keeps only levels the exponential actually crosses.
+      if (contact_ == Contact::kLower) {
+        if (std::abs(i_) < i_bal) {
+          consider(i_bal, Ev::kLeaveStop);
+          consider(-i_bal, Ev::kLeaveStop);
+        }
+      } else if (std::abs(i_) > i_bal) {
+        consider(i_ > 0.0 ? i_bal : -i_bal, Ev::kLeaveStop);
+      }
+    }
+  }
+
+  if (sample_period_s_ > 0.0 && obs) {
+    const double limit = best_t - kSameInstant_s;
+    for (double tk = SampleTime(next_sample_); tk < limit; tk = SampleTime(++next_sample_)) {
+      EmitSample(seg, tk, i_inf + d0 * std::exp(-(tk - t0) / tau), x_, 0.0, obs);
+    }
+  }
+  t_ = best_t;
+  i_ = best_ev != Ev::kNone ? best_level : i_inf + d0 * std::exp(-(t_ - t0) / tau);
+  if (best_ev != Ev::kNone) ApplyEvent(best_ev, seg, obs);
+}
+
+double Simulator::EventFunction(Ev ev, const Segment& seg, double i, double x, double v) const {
+  (void)v;
+  switch (ev) {
+    case Ev::kUpper: return (x_hi_ - x) * inv_x_scale_;
+    case Ev::kLower: return (x - x_lo_) * inv_x_scale_;
+    case Ev::kLeaveStop: {
+      const double f = plant_.NetForceAtRest_N(i, x_, cond_.supply_pressure_Pa);
+      return contact_ == Contact::kLower ? -f : f;
+    }
+    case Ev::kClamp: return seg.clamp * i;
+    case Ev::kLevel: return seg.level_dir * (seg.level_A - i);
+    case Ev::kNone: break;
+  }
+  return 1.0;
+}
+
+void Simulator::AdvanceOde(const Segment& seg, double t_stop, SimObserver* obs) {
+  const bool frozen = contact_ != Contact::kFree;
+  const Plant& plant = plant_;
+  const double pressure = cond_.supply_pressure_Pa;
+  const Simulator& self = *this;
+  auto rhs = [&plant, &seg, &self, frozen, pressure](const State& y, State& dy, double t) {
+    double i, x, v;
+    self.Unscale(y, &i, &x, &v);
+    if (seg.blocked) {
+      dy[0] = 0.0;
+    } else {
+      dy[0] = plant.CurrentRate_A_per_s(i, x, frozen ? 0.0 : v, self.SegmentVoltage(seg, t));
+    }
+    if (frozen) {
+      dy[1] = 0.0;
+      dy[2] = 0.0;
+    } else {
+      dy[1] = v * self.inv_x_scale_;
+      dy[2] = plant.Acceleration_mps2(i, x, v, pressure) * self.inv_v_scale_;
+    }
+  };
+
+  if (!stepper_valid_) {
+    stepper_.initialize(Scale(i_, x_, v_), t_, std::min(dt_guess_s_, opt_.max_step_s));
+    stepper_valid_ = true;
+    ++restarts_;
+  }
+
+  Ev events[4];
+  int n_events = 0;
+  if (frozen) {
+    if (plant_.has_moving_part()) events[n_events++] = Ev::kLeaveStop;
+  } else {
+    events[n_events++] = Ev::kUpper;
+    events[n_events++] = Ev::kLower;
+  }
+  if (seg.clamp != 0) events[n_events++] = Ev::kClamp;
+  if (seg.level_dir != 0) events[n_events++] = Ev::kLevel;
+
+  auto g_at = [&](Ev ev, double t) {
+    State y;
+    stepper_.calc_state(t, y);
+    double i, x, v;
+    Unscale(y, &i, &x, &v);
+    return EventFunction(ev, seg, i, x, v);
+  };
+  // Illinois (modified regula falsi) on the dense output: g(lo) > 0 >= g(hi); returns the first instant
+  // with g <= 0, to event_time_tol_s.
+  auto locate = [&](Ev ev, double lo, double flo, double hi, double fhi) {
+    int side = 0;
+    for (int iter = 0; iter < 200 && hi - lo > opt_.event_time_tol_s; ++iter) {
+      double m = (lo * fhi - hi * flo) / (fhi - flo);
+      if (!(m > lo && m < hi)) m = 0.5 * (lo + hi);
+      const double fm = g_at(ev, m);
+      if (fm > 0.0) {
+        lo = m;
+        flo = fm;
+        if (side == -1) fhi *= 0.5;
+        side = -1;
+      } else {
+        hi = m;
+        fhi = fm;
+        if (side == +1) flo *= 0.5;
+        side = +1;
+      }
+    }
+    return hi;
+  };
+
+  for (;;) {
+    if (stepper_.current_time() <= t_ + kSameInstant_s) {
+      stepper_.do_step(rhs);
+      ++ode_steps_;
+    }
+    const double a = t_;
+    const double b = std::min(stepper_.current_time(), t_stop);
+    State yb;
+    if (b >= stepper_.current_time()) {
+      yb = stepper_.current_state();
+    } else {
+      stepper_.calc_state(b, yb);
+    }
+    double ib, xb, vb;
+    Unscale(yb, &ib, &xb, &vb);
+
+    double best_t = b;
+    Ev best_ev = Ev::kNone;
+    for (int k = 0; k < n_events; ++k) {
+      const Ev ev = events[k];
+      const double gb = EventFunction(ev, seg, ib, xb, vb);
+      if (gb > 0.0) continue;
+      double ga = EventFunction(ev, seg, i_, x_, v_);
+      double lo = a;
+      if (!(ga > 0.0)) {
+        // Started exactly on the surface (just lifted, released, ...): look for the instant it leaves it.
+        bool found = false;
+        for (int j = 1; j < 16 && !found; ++j) {
+          const double tj = a + (b - a) * j / 16.0;
+          const double gj = g_at(ev, tj);
+          if (gj > 0.0) {
+            lo = tj;
+            ga = gj;
+            found = true;
+          }
+        }
+        if (!found) continue;  // grazing the surface within one step: no crossing to locate
+      }
+      const double t_ev = locate(ev, lo, ga, b, gb);
+      if (t_ev < best_t || (t_ev == best_t && best_ev == Ev::kNone)) {
+        best_t = t_ev;
+        best_ev = ev;
+      }
+    }
+
+    if (sample_period_s_ > 0.0 && obs) {
+      const double limit = best_t - kSameInstant_s;
+      for (double tk = SampleTime(next_sample_); tk < limit; tk = SampleTime(++next_sample_)) {
+        State y;
+        stepper_.calc_state(tk, y);
+        double i, x, v;
+        Unscale(y, &i, &x, &v);
+        if (seg.blocked) i = 0.0;
+        EmitSample(seg, tk, i, std::clamp(x, x_lo_, x_hi_), v, obs);
+      }
+    }
+
+    if (best_t >= stepper_.current_time()) {
+      Unscale(stepper_.current_state(), &i_, &x_, &v_);
+    } else {
+      State y;
+      stepper_.calc_state(best_t, y);
+      Unscale(y, &i_, &x_, &v_);
+    }
+    t_ = best_t;
+    if (seg.blocked) i_ = 0.0;
+    x_ = std::clamp(x_, x_lo_, x_hi_);
+    if (best_ev != Ev::kNone) {
+      dt_guess_s_ = stepper_.current_time_step();
+      ApplyEvent(best_ev, seg, obs);
+      return;
+    }
+    if (t_ >= t_stop) return;
+  }
+}
+
+void Simulator::ApplyEvent(Ev ev, const Segment& seg, SimObserver* obs) {
+  stepper_valid_ = false;
+  EventKind kind = EventKind::kDriverSwitch;
+  switch (ev) {
+    case Ev::kUpper: {
+      x_ = x_hi_;
+      v_ = 0.0;
+      const double f = plant_.NetForceAtRest_N(i_, x_, cond_.supply_pressure_Pa);
+      contact_ = f >= 0.0 ? Contact::kUpper : Contact::kFree;  // perfectly inelastic stop
+      kind = EventKind::kOpen;
+      break;
+    }
+    case Ev::kLower: {
+      x_ = x_lo_;
+      v_ = 0.0;
+      const double f = plant_.NetForceAtRest_N(i_, x_, cond_.supply_pressure_Pa);
+      contact_ = f <= 0.0 ? Contact::kLower : Contact::kFree;
+      kind = EventKind::kClose;
+      break;
+    }
+    case Ev::kLeaveStop:
+      kind = contact_ == Contact::kLower ? EventKind::kLift : EventKind::kRelease;
+      contact_ = Contact::kFree;
+      v_ = 0.0;
+      break;
+    case Ev::kClamp:
+      i_ = 0.0;
+      blocked_ = true;
+      kind = EventKind::kCurrentZero;
+      break;
+    case Ev::kLevel:
+      i_ = seg.level_A;
+      chopper_on_ = !chopper_on_;
+      kind = EventKind::kDriverSwitch;
+      break;
+    case Ev::kNone: return;
+  }
+  if (obs) obs->OnEvent(kind, t_, i_, x_, v_);
+}
+
+}  // namespace vb::model

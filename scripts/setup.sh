@@ -1,0 +1,43 @@
+#!/usr/bin/env bash
+# Installs every Debian 12 package valvebench needs (toolchain included), then configures and builds.
+# Idempotent: packages already present are left alone; an existing build/ is reused.
+#   scripts/setup.sh            install + configure + build (Release)
+#   scripts/setup.sh --deps     install only
+set -euo pipefail
+
+here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+packages=(
+  # toolchain
+  g++ cmake ninja-build make pkg-config git ca-certificates
+  # RPC and specs
+  libgrpc++-dev libprotobuf-dev protobuf-compiler protobuf-compiler-grpc
+  # numerics: Eigen for small linear algebra, Boost.Odeint for the dense-output Runge-Kutta stepper,
+  # NLopt for bounded fitting in the gap diagnosis
+  libeigen3-dev libboost-dev libnlopt-cxx-dev
+  # hardware
+  libusb-1.0-0-dev libhidapi-dev
+  # storage, CLI, JSON
+  libsqlite3-dev sqlite3 libcli11-dev nlohmann-json3-dev
+  # tests and benchmarks
+  libgtest-dev libgmock-dev libbenchmark-dev
+  # the foreign-client integration test (a gRPC client built only from our .proto files)
+  python3 python3-grpcio python3-protobuf
+)
+
+missing=()
+for p in "${packages[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ ${#missing[@]} -gt 0 ]; then
+  SUDO=""
+  [ "$(id -u)" -eq 0 ] || SUDO="sudo"
+  export DEBIAN_FRONTEND=noninteractive
+  $SUDO apt-get update
+  $SUDO apt-get install -y --no-install-recommends "${missing[@]}"
+fi
+
+[ "${1:-}" = "--deps" ] && exit 0
+
+cd "$here"
+cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE=Release
+cmake --build build

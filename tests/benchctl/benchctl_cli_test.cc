@@ -1,0 +1,59 @@
+// benchctl as a user runs it: exit codes, JSON, CSV, errors naming the field.
+#include <gtest/gtest.h>
+
+#include <array>
+#include <cstdio>
+#include <fstream>
+#include <memory>
+#include <string>
+
+namespace {
+
+struct Result {
+  int exit_code;
+  std::string out;
+};
+
+Result RunBenchctl(const std::string& args) {
+  const std::string cmd = std::string(VB_BENCHCTL) + " " + args + " 2>&1";
+  std::unique_ptr<FILE, int (*)(FILE*)> p(popen(cmd.c_str(), "r"), &pclose);
+  std::string out;
+  std::array<char, 4096> buf;
+  size_t n;
+  while ((n = fread(buf.data(), 1, buf.size(), p.get())) > 0) out.append(buf.data(), n);
+  const int status = pclose(p.release());
+  return {WEXITSTATUS(status), out};
+}
+
+std::string Example(const std::string& rel) { return std::string(VB_SOURCE_DIR) + "/examples/" + rel; }
+
+TEST(BenchctlCli, RunLocalWritesCsvAndJson) {
+  const std::string csv = ::testing::TempDir() + "/e3.csv";
+  Result r = RunBenchctl("run --local " + Example("standard/e3.json") + " --json --trace-csv " + csv);
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  EXPECT_NE(r.out.find("\"status\": \"done\""), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("\"samples\": 5001"), std::string::npos) << r.out;
+  std::ifstream in(csv);
+  std::string header;
+  std::getline(in, header);
+  EXPECT_EQ(header.rfind("t_s,gate,v_coil_V,i_A,x_m", 0), 0u) << header;
+  size_t lines = 0;
+  for (std::string line; std::getline(in, line);) ++lines;
+  EXPECT_EQ(lines, 5001u);
+}
+
+TEST(BenchctlCli, BadSpecExitsTwoAndNamesTheField) {
+  const std::string path = ::testing::TempDir() + "/bad.json";
+  std::ofstream(path) << R"({"duration_s": 1, "conditions": {"supply_V": -1},
+    "controller": {"open_loop_pwm": {"segments": [{"start_s": 0, "frequency_Hz": 50, "duty": 0.4}]}}})";
+  Result r = RunBenchctl("run --local " + path);
+  EXPECT_EQ(r.exit_code, 2) << r.out;
+  EXPECT_NE(r.out.find("conditions.supply_V"), std::string::npos) << r.out;
+  Result missing = RunBenchctl("run --local /nonexistent/spec.json");
+  EXPECT_EQ(missing.exit_code, 2) << missing.out;
+  Result no_server = RunBenchctl("run " + Example("standard/e3.json"));
+  EXPECT_EQ(no_server.exit_code, 2) << no_server.out;
+  EXPECT_NE(no_server.out.find("--local"), std::string::npos);
+}
+
+}  // namespace
