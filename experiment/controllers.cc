@@ -1,5 +1,10 @@
 #include "experiment/controllers.h"
 
+#include "control/dither_planner.h"
+#include "control/fuzzy_current.h"
+#include "control/hysteresis_current.h"
+#include "control/pi_current.h"
+#include "control/predictive_current.h"
 #include "control/open_loop_pwm.h"
 
 namespace vb::experiment {
@@ -9,9 +14,7 @@ using valvebench::v1::ControllerSpec;
 StatusOr<BuiltController> BuildController(const valvebench::v1::ExperimentSpec& spec,
                                           const model::PlantParams& plant, const model::DriverParams& driver,
                                           double supply_V) {
-  (void)plant;
   (void)driver;
-  (void)supply_V;
   BuiltController out;
   const ControllerSpec& cs = spec.controller();
   switch (cs.law_case()) {
@@ -27,6 +30,94 @@ StatusOr<BuiltController> BuildController(const valvebench::v1::ExperimentSpec& 
       }
       out.controller = std::make_unique<control::OpenLoopPwm>(std::move(segs));
       out.controlled = ControlledVariable::kNone;
+      return out;
+    }
+    case ControllerSpec::kDitherPwm: {
+      // Seed 003: plan (f, D) once, before the run, then hold it with the bench's PWM timer.
+      const auto& d = cs.dither_pwm();
+      control::RlCoil coil;
+      coil.supply_V = supply_V;
+      coil.R_ohm = d.coil_r_ohm() > 0.0 ? d.coil_r_ohm() : plant.R_ohm;
+      if (d.coil_l_h() > 0.0) {
+        coil.L_H = d.coil_l_h();
+      } else if (plant.law == model::InductanceLaw::kConstant) {
+        coil.L_H = plant.L_H;
+      } else {
+        return Status::InvalidArgument(
+            "controller.dither_pwm.coil_L_H: required for a coil whose inductance depends on the spool position");
+      }
+      control::DitherPlannerOptions opt;
+      if (d.min_frequency_hz() > 0.0) opt.frequency_min_Hz = d.min_frequency_hz();
+      if (d.max_frequency_hz() > 0.0) opt.frequency_max_Hz = d.max_frequency_hz();
+      if (d.min_duty() > 0.0) opt.duty_min = d.min_duty();
+      if (d.max_duty() > 0.0) opt.duty_max = d.max_duty();
+      const control::DitherRequest req{d.average_current_a(), d.dither_amplitude_a()};
+      StatusOr<control::DitherPlan> plan = Status::Internal("unset");
+      if (d.method().empty() || d.method() == "exact") {
+        plan = control::PlanDitherExact(coil, req, opt);
+      } else if (d.method() == "approximate") {
+        auto model = control::FitApproxDitherModel(coil, opt);
+        if (!model.ok()) return model.status().InField("controller.dither_pwm");
+        plan = control::PlanDitherApprox(*model, req);
+      } else {
+        return Status::InvalidArgument("controller.dither_pwm.method: '" + d.method() +
+                                       "' is not one of exact, approximate");
+      }
+      if (!plan.ok()) return plan.status().InField("controller");
+      std::vector<control::PwmSegment> segs = {{0.0, plan->frequency_Hz, plan->duty}};
+      out.breakpoints_s.push_back(0.0);
+      out.pwm_period_s = 1.0 / plan->frequency_Hz;
+      out.controller = std::make_unique<control::OpenLoopPwm>(std::move(segs));
+      out.controlled = ControlledVariable::kNone;
+      return out;
+    }
+    case ControllerSpec::kHysteresisCurrent: {
+      const auto& h = cs.hysteresis_current();
+      control::HysteresisCurrentParams p;
+      if (h.band_a() != 0.0) p.band_A = h.band_a();
+      if (h.sample_period_s() != 0.0) p.period_s = h.sample_period_s();
+      VB_RETURN_IF_ERROR(control::HysteresisCurrent::Validate(p).InField("controller"));
+      out.controller = std::make_unique<control::HysteresisCurrent>(p);
+      out.controlled = ControlledVariable::kCurrent;
+      return out;
+    }
+    case ControllerSpec::kPiCurrent: {
+      const auto& c = cs.pi_current();
+      control::PiCurrentParams p;
+      if (c.kp_v_per_a() != 0.0) p.kp_V_per_A = c.kp_v_per_a();
+      if (c.ki_v_per_a_s() != 0.0) p.ki_V_per_As = c.ki_v_per_a_s();
+      if (c.carrier_hz() != 0.0) p.carrier_Hz = c.carrier_hz();
+      if (c.has_feedforward_r_ohm()) p.feedforward_R_ohm = c.feedforward_r_ohm();
+      VB_RETURN_IF_ERROR(control::PiCurrent::Validate(p).InField("controller"));
+      out.controller = std::make_unique<control::PiCurrent>(p);
+      out.controlled = ControlledVariable::kCurrent;
+      return out;
+    }
+    case ControllerSpec::kPredictiveCurrent: {
+      const auto& c = cs.predictive_current();
+      control::PredictiveCurrentParams p;
+      if (c.horizon_s() != 0.0) p.h_s = c.horizon_s();
+      if (c.w_current() != 0.0) p.w_I_per_A2 = c.w_current();
+      if (c.has_w_voltage()) p.w_v_per_V2 = c.w_voltage();
+      if (c.r_ohm() != 0.0) p.R_ohm = c.r_ohm();
+      if (c.l_h() != 0.0) p.L_H = c.l_h();
+      if (c.carrier_hz() != 0.0) p.carrier_Hz = c.carrier_hz();
+      VB_RETURN_IF_ERROR(control::PredictiveCurrent::Validate(p).InField("controller"));
+      out.controller = std::make_unique<control::PredictiveCurrent>(p);
+      out.controlled = ControlledVariable::kCurrent;
+      return out;
+    }
+    case ControllerSpec::kFuzzyCurrent: {
+      const auto& c = cs.fuzzy_current();
+      control::FuzzyCurrentParams p;
+      if (c.error_scale_a() != 0.0) p.error_scale_A = c.error_scale_a();
+      if (c.rate_scale_a_per_s() != 0.0) p.rate_scale_A_per_s = c.rate_scale_a_per_s();
+      if (c.output_scale_v() != 0.0) p.output_step_V = c.output_scale_v();
+      if (c.carrier_hz() != 0.0) p.carrier_Hz = c.carrier_hz();
+      if (c.has_feedforward_r_ohm()) p.feedforward_R_ohm = c.feedforward_r_ohm();
+      VB_RETURN_IF_ERROR(control::FuzzyCurrent::Validate(p).InField("controller"));
+      out.controller = std::make_unique<control::FuzzyCurrent>(p);
+      out.controlled = ControlledVariable::kCurrent;
       return out;
     }
     case ControllerSpec::LAW_NOT_SET:

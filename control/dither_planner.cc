@@ -1,0 +1,406 @@
+#include "control/dither_planner.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdarg>
+#include <cstdio>
+#include <limits>
+#include <string>
+
+namespace vb::control {
+namespace {
+
+// printf-style formatting into a std::string (error paths only); the attribute lets the compiler check formats.
+[[gnu::format(printf, 1, 2)]] std::string Format(const char* fmt, ...) {
+  char buf[512];
+  std::va_list args;
+  va_start(args, fmt);
+  std::vsnprintf(buf, sizeof buf, fmt, args);
+  va_end(args);
+  return std::string(buf);
+}
+
+bool FinitePositive(double v) { return std::isfinite(v) && v > 0.0; }
+
+Status ValidateCoil(const RlCoil& coil) {
+  if (!FinitePositive(coil.R_ohm)) {
+    return Status::InvalidArgument(Format("coil.R_ohm: must be a finite resistance > 0 ohm, got %g", coil.R_ohm));
+  }
+  if (!FinitePositive(coil.L_H)) {
+    return Status::InvalidArgument(Format("coil.L_H: must be a finite inductance > 0 H, got %g", coil.L_H));
+  }
+  if (!FinitePositive(coil.supply_V)) {
+    return Status::InvalidArgument(Format("coil.supply_V: must be a finite voltage > 0 V, got %g", coil.supply_V));
+  }
+  return Status::Ok();
+}
+
+Status ValidateOptions(const DitherPlannerOptions& o) {
+  if (!FinitePositive(o.frequency_min_Hz)) {
+    return Status::InvalidArgument(
+        Format("options.frequency_min_Hz: must be a finite frequency > 0 Hz, got %g", o.frequency_min_Hz));
+  }
+  if (!std::isfinite(o.frequency_max_Hz) || !(o.frequency_max_Hz > o.frequency_min_Hz)) {
+    return Status::InvalidArgument(
+        Format("options.frequency_max_Hz: must be finite and > options.frequency_min_Hz (%g Hz), got %g",
+               o.frequency_min_Hz, o.frequency_max_Hz));
+  }
+  if (!(o.duty_min >= 0.0 && o.duty_min <= 1.0)) {
+    return Status::InvalidArgument(Format("options.duty_min: must be in [0, 1], got %g", o.duty_min));
+  }
+  if (!(o.duty_max >= 0.0 && o.duty_max <= 1.0)) {
+    return Status::InvalidArgument(Format("options.duty_max: must be in [0, 1], got %g", o.duty_max));
+  }
+  if (!(o.duty_min < o.duty_max)) {
+    return Status::InvalidArgument(Format("options.duty_min: %g must be < options.duty_max (%g)", o.duty_min,
+                                          o.duty_max));
+  }
+  return Status::Ok();
+}
+
+Status ValidateRequest(const DitherRequest& r) {
+  if (!FinitePositive(r.average_current_A)) {
+    return Status::InvalidArgument(
+        Format("dither.average_current_A: must be a finite current > 0 A, got %g", r.average_current_A));
+  }
+  if (!FinitePositive(r.amplitude_A)) {
+    return Status::InvalidArgument(
+        Format("dither.amplitude_A: must be a finite peak-to-peak current > 0 A, got %g", r.amplitude_A));
+  }
+  return Status::Ok();
+}
+
+// Eqs. (6)-(11) without input checks. Uses expm1 so that 1 - alpha etc. keep full relative precision when
+// T/tau is small (high frequency), where i_c - i_d would otherwise cancel.
+RlPwmSteadyStateResult Eval(const RlCoil& coil, double frequency_Hz, double duty) {
+  const double i_inf_A = coil.supply_V / coil.R_ohm;            // V/R
+  const double x = coil.R_ohm / (coil.L_H * frequency_Hz);       // T/tau
+  const double one_minus_alpha = -std::expm1(-duty * x);          // 1 - alpha, eq. (6)
+  const double one_minus_beta = -std::expm1(-(1.0 - duty) * x);   // 1 - beta,  eq. (7)
+  const double beta = std::exp(-(1.0 - duty) * x);                // not 1 - (1 - beta): keeps tiny beta exact
+  const double one_minus_alpha_beta = -std::expm1(-x);            // alpha*beta = exp(-T/tau)
+  RlPwmSteadyStateResult r;
+  r.i_mean_A = duty * i_inf_A;
+  if (!(one_minus_alpha_beta > 0.0)) {  // T/tau underflowed (absurd frequency): no ripple, DC current.
+    r.i_max_A = r.i_min_A = r.i_avg_A = r.i_mean_A;
+    r.i_amp_A = 0.0;
+    return r;
+  }
+  const double i_c = i_inf_A * one_minus_alpha / one_minus_alpha_beta;  // eq. (8)
+  r.i_max_A = i_c;
+  r.i_min_A = i_c * beta;                                                 // eq. (9)
+  r.i_avg_A = 0.5 * i_c * (1.0 + beta);                                   // eq. (10)
+  r.i_amp_A = i_c * one_minus_beta;                                       // eq. (11)
+  return r;
+}
+
+// Brent's bracketed root finder (van Wijngaarden-Dekker-Brent, as in Numerical Recipes' zbrent). Requires
+// f(a) and f(b) of opposite signs (or one of them zero); every iterate stays inside the bracket. Stops when the
+// bracket is narrower than ~abs_tol + 4 eps |x|.
+template <typename F>
+double BrentRoot(F&& f, double a, double b, double fa, double fb, double abs_tol) {
+  if (fa == 0.0) return a;
+  if (fb == 0.0) return b;
+  constexpr double kEps = std::numeric_limits<double>::epsilon();
+  double c = b, fc = fb;
+  double d = b - a, e = d;
+  for (int iter = 0; iter < 300; ++iter) {
+    if ((fb > 0.0 && fc > 0.0) || (fb < 0.0 && fc < 0.0)) {
+      c = a;
+      fc = fa;
+      d = e = b - a;
+    }
+    if (std::fabs(fc) < std::fabs(fb)) {
+      a = b;
+      b = c;
+      c = a;
+      fa = fb;
+      fb = fc;
+      fc = fa;
+    }
+    const double tol1 = 2.0 * kEps * std::fabs(b) + 0.5 * abs_tol;
+    const double xm = 0.5 * (c - b);
+    if (std::fabs(xm) <= tol1 || fb == 0.0) return b;
+    if (std::fabs(e) >= tol1 && std::fabs(fa) > std::fabs(fb)) {
+      const double s = fb / fa;
+      double p, q;
+      if (a == c) {  // secant
+        p = 2.0 * xm * s;
+        q = 1.0 - s;
+      } else {  // inverse quadratic interpolation
+        const double qq = fa / fc, r = fb / fc;
+        p = s * (2.0 * xm * qq * (qq - r) - (b - a) * (r - 1.0));
+        q = (qq - 1.0) * (r - 1.0) * (s - 1.0);
+      }
+      if (p > 0.0) q = -q;
+      p = std::fabs(p);
+      const double min1 = 3.0 * xm * q - std::fabs(tol1 * q);
+      const double min2 = std::fabs(e * q);
+      if (2.0 * p < std::min(min1, min2)) {
+        e = d;
+        d = p / q;
+      } else {  // interpolation not good enough: bisect
+        d = xm;
+        e = d;
+      }
+    } else {
+      d = xm;
+      e = d;
+    }
+    a = b;
+    fa = fb;
+    b += std::fabs(d) > tol1 ? d : std::copysign(tol1, xm);
+    fb = f(b);
+  }
+  return b;
+}
+
+constexpr double kDutyTol = 1e-15;  // absolute, on duty in [0, 1]
+
+// D_f(f): the duty with I_avg(f, D) = i_avg_A (eq. 10). I_avg(f, .) rises strictly from 0 at D = 0 to V/R at
+// D = 1, so the root is unique; the caller guarantees 0 < i_avg_A < V/R.
+double DutyForAverage(const RlCoil& coil, double frequency_Hz, double i_avg_A) {
+  auto h = [&](double duty) { return Eval(coil, frequency_Hz, duty).i_avg_A - i_avg_A; };
+  return BrentRoot(h, 0.0, 1.0, h(0.0), h(1.0), kDutyTol);
+}
+
+// The interval of frequencies [f_lo, f_hi] whose D_f lies inside the duty bounds (PlanDitherExact step 2).
+struct Band {
+  double f_lo_Hz, f_hi_Hz;
+  double duty_at_lo, duty_at_hi;
+};
+
+StatusOr<Band> FeasibleBand(const RlCoil& coil, double i_avg_A, const DitherPlannerOptions& o) {
+  const double f_min = o.frequency_min_Hz, f_max = o.frequency_max_Hz;
+  const double i_inf_A = coil.supply_V / coil.R_ohm;
+  auto unreachable = [&]() {
+    // I_avg(f, D) is monotone in f at fixed D, so the reachable range is spanned by the box corners.
+    const double lo = std::min(Eval(coil, f_min, o.duty_min).i_avg_A, Eval(coil, f_max, o.duty_min).i_avg_A);
+    const double hi = std::max(Eval(coil, f_min, o.duty_max).i_avg_A, Eval(coil, f_max, o.duty_max).i_avg_A);
+    return Status::InvalidArgument(
+        Format("dither.average_current_A: %.6g A is not reachable with duty in [%g, %g] and f in [%g, %g] Hz "
+               "(reachable %.4g..%.4g A; supply_V/R_ohm = %.4g A)",
+               i_avg_A, o.duty_min, o.duty_max, f_min, f_max, lo, hi, i_inf_A));
+  };
+  if (!(i_avg_A < i_inf_A)) return unreachable();
+
+  const double duty_a = DutyForAverage(coil, f_min, i_avg_A);
+  const double duty_b = DutyForAverage(coil, f_max, i_avg_A);
+  // A duty within kDutySlack of a bound counts as on it (a request computed from a plan on the boundary must
+  // plan again); the reported duties are clamped into the box.
+  constexpr double kDutySlack = 1e-12;
+  auto below = [&](double d) { return d < o.duty_min - kDutySlack; };
+  auto above = [&](double d) { return d > o.duty_max + kDutySlack; };
+  const bool a_in = !below(duty_a) && !above(duty_a);
+  const bool b_in = !below(duty_b) && !above(duty_b);
+  // D_f is monotone in f: if both ends violate the same bound, no frequency in the box works.
+  if (!a_in && !b_in && below(duty_a) == below(duty_b)) return unreachable();
+
+  // Where D_f crosses a duty bound: solve I_avg(f, bound) = i_avg_A in f. Because I_avg rises with D, the sign
+  // of I_avg(f, bound) - i_avg_A is the sign of bound - D_f(f), which differs at f_min and f_max here (or the
+  // other end is within kDutySlack of the bound: then that end is the crossing).
+  auto crossing = [&](double bound) {
+    auto h = [&](double f) { return Eval(coil, f, bound).i_avg_A - i_avg_A; };
+    const double h_min = h(f_min), h_max = h(f_max);
+    if ((h_min > 0.0 && h_max > 0.0) || (h_min < 0.0 && h_max < 0.0)) {
+      return std::fabs(h_min) < std::fabs(h_max) ? f_min : f_max;
+    }
+    return BrentRoot(h, f_min, f_max, h_min, h_max, 1e-12 * f_max);
+  };
+  auto clamp_duty = [&](double d) { return std::clamp(d, o.duty_min, o.duty_max); };
+  Band band{f_min, f_max, clamp_duty(duty_a), clamp_duty(duty_b)};
+  if (!a_in) {
+    const double bound = below(duty_a) ? o.duty_min : o.duty_max;
+    band.f_lo_Hz = crossing(bound);
+    band.duty_at_lo = bound;
+  }
+  if (!b_in) {
+    const double bound = below(duty_b) ? o.duty_min : o.duty_max;
+    band.f_hi_Hz = crossing(bound);
+    band.duty_at_hi = bound;
+  }
+  return band;
+}
+
+Status ValidateAll(const RlCoil& coil, const DitherPlannerOptions& o) {
+  VB_RETURN_IF_ERROR(ValidateCoil(coil));
+  return ValidateOptions(o);
+}
+
+}  // namespace
+
+StatusOr<RlPwmSteadyStateResult> RlPwmSteadyState(const RlCoil& coil, double frequency_Hz, double duty) {
+  VB_RETURN_IF_ERROR(ValidateCoil(coil));
+  if (!FinitePositive(frequency_Hz)) {
+    return Status::InvalidArgument(Format("frequency_Hz: must be a finite frequency > 0 Hz, got %g", frequency_Hz));
+  }
+  if (!(duty >= 0.0 && duty <= 1.0)) {
+    return Status::InvalidArgument(Format("duty: must be in [0, 1], got %g", duty));
+  }
+  return Eval(coil, frequency_Hz, duty);
+}
+
+StatusOr<DitherAmplitudeRange> DitherAmplitudeRangeAt(const RlCoil& coil, double average_current_A,
+                                                      const DitherPlannerOptions& options) {
+  VB_RETURN_IF_ERROR(ValidateAll(coil, options));
+  if (!FinitePositive(average_current_A)) {
+    return Status::InvalidArgument(
+        Format("dither.average_current_A: must be a finite current > 0 A, got %g", average_current_A));
+  }
+  StatusOr<Band> band = FeasibleBand(coil, average_current_A, options);
+  if (!band.ok()) return band.status();
+  DitherAmplitudeRange r;
+  r.frequency_at_max_Hz = band->f_lo_Hz;
+  r.duty_at_max = band->duty_at_lo;
+  r.max_amplitude_A = Eval(coil, band->f_lo_Hz, band->duty_at_lo).i_amp_A;
+  r.frequency_at_min_Hz = band->f_hi_Hz;
+  r.duty_at_min = band->duty_at_hi;
+  r.min_amplitude_A = Eval(coil, band->f_hi_Hz, band->duty_at_hi).i_amp_A;
+  return r;
+}
+
+StatusOr<DitherPlan> PlanDitherExact(const RlCoil& coil, const DitherRequest& request,
+                                     const DitherPlannerOptions& options) {
+  VB_RETURN_IF_ERROR(ValidateAll(coil, options));
+  VB_RETURN_IF_ERROR(ValidateRequest(request));
+  const double i_avg_A = request.average_current_A, i_amp_A = request.amplitude_A;
+  StatusOr<DitherAmplitudeRange> range = DitherAmplitudeRangeAt(coil, i_avg_A, options);
+  if (!range.ok()) return range.status();
+
+  // Requests within kAmpSlack (relative) of an end of the range are planned at that end: a request computed from
+  // a plan on the boundary of the box must plan again despite last-bit rounding.
+  constexpr double kAmpSlack = 1e-12;
+  if (i_amp_A > range->max_amplitude_A * (1.0 + kAmpSlack)) {
+    return Status::InvalidArgument(
+        Format("dither.amplitude_A: %.6g A is not reachable at average %.6g A within f in [%g, %g] Hz and duty "
+               "in [%g, %g] (max %.4g A, at %.4g Hz)",
+               i_amp_A, i_avg_A, options.frequency_min_Hz, options.frequency_max_Hz, options.duty_min,
+               options.duty_max, range->max_amplitude_A, range->frequency_at_max_Hz));
+  }
+  if (i_amp_A < range->min_amplitude_A * (1.0 - kAmpSlack)) {
+    return Status::InvalidArgument(
+        Format("dither.amplitude_A: %.6g A is not reachable at average %.6g A within f in [%g, %g] Hz and duty "
+               "in [%g, %g] (min %.4g A, at %.4g Hz; a smaller ripple needs a higher frequency)",
+               i_amp_A, i_avg_A, options.frequency_min_Hz, options.frequency_max_Hz, options.duty_min,
+               options.duty_max, range->min_amplitude_A, range->frequency_at_min_Hz));
+  }
+
+  // Step 3: g(f) = I_amp(f, D_f(f)) decreases strictly in f; bracket [f_lo, f_hi] holds the root.
+  auto g = [&](double f) { return Eval(coil, f, DutyForAverage(coil, f, i_avg_A)).i_amp_A - i_amp_A; };
+  const double f_lo = range->frequency_at_max_Hz, f_hi = range->frequency_at_min_Hz;
+  double f;
+  if (i_amp_A >= range->max_amplitude_A) {
+    f = f_lo;
+  } else if (i_amp_A <= range->min_amplitude_A) {
+    f = f_hi;
+  } else {
+    f = BrentRoot(g, f_lo, f_hi, range->max_amplitude_A - i_amp_A, range->min_amplitude_A - i_amp_A, 1e-13 * f_hi);
+  }
+  // D_f(f) is inside the duty box for f in [f_lo, f_hi]; the clamp only removes last-bit rounding.
+  const double duty = std::clamp(DutyForAverage(coil, f, i_avg_A), options.duty_min, options.duty_max);
+  const RlPwmSteadyStateResult ss = Eval(coil, f, duty);
+  return DitherPlan{f, duty, ss.i_avg_A, ss.i_amp_A, ss.i_mean_A};
+}
+
+StatusOr<ApproxDitherModel> FitApproxDitherModel(const RlCoil& coil, const DitherPlannerOptions& options,
+                                                 const ApproxFitOptions& fit) {
+  VB_RETURN_IF_ERROR(ValidateAll(coil, options));
+  if (!(options.duty_min > 0.0 && options.duty_max < 1.0)) {
+    return Status::InvalidArgument(
+        Format("options.duty_min: the approximate model needs duty bounds inside (0, 1) (k2 is infinite where "
+               "there is no ripple), got [%g, %g]",
+               options.duty_min, options.duty_max));
+  }
+  const double f1 = fit.k1_fit_frequency_Hz.value_or(options.frequency_max_Hz);
+  if (!FinitePositive(f1)) {
+    return Status::InvalidArgument(
+        Format("fit.k1_fit_frequency_Hz: must be a finite frequency > 0 Hz, got %g", f1));
+  }
+  if (fit.k1_duty_points < 2) {
+    return Status::InvalidArgument(Format("fit.k1_duty_points: must be >= 2, got %d", fit.k1_duty_points));
+  }
+  if (fit.k2_duty_points < 2) {
+    return Status::InvalidArgument(Format("fit.k2_duty_points: must be >= 2, got %d", fit.k2_duty_points));
+  }
+  if (fit.k2_frequency_points < 2) {
+    return Status::InvalidArgument(
+        Format("fit.k2_frequency_points: must be >= 2, got %d", fit.k2_frequency_points));
+  }
+  auto grid = [](double lo, double hi, int n, int i) { return lo + (hi - lo) * i / (n - 1); };
+
+  ApproxDitherModel m;
+  m.coil = coil;
+  m.options = options;
+  m.k1_fit_frequency_Hz = f1;
+
+  // k1, eq. (12): minimise sum_j (I_avg(f1, D_j) - k1 D_j)^2  =>  k1 = sum D_j I_avg_j / sum D_j^2.
+  double s_xy = 0.0, s_xx = 0.0;
+  for (int j = 0; j < fit.k1_duty_points; ++j) {
+    const double d = grid(options.duty_min, options.duty_max, fit.k1_duty_points, j);
+    s_xy += d * Eval(coil, f1, d).i_avg_A;
+    s_xx += d * d;
+  }
+  m.k1_A = s_xy / s_xx;
+
+  // k2(D_j), eq. (13): minimise sum_i (1/I_amp(f_i, D_j) - k2 f_i)^2  =>  k2 = sum f_i / I_amp_i / sum f_i^2.
+  m.k2_per_A_Hz.resize(static_cast<std::size_t>(fit.k2_duty_points));
+  for (int j = 0; j < fit.k2_duty_points; ++j) {
+    const double d = grid(options.duty_min, options.duty_max, fit.k2_duty_points, j);
+    double f_y = 0.0, f_f = 0.0;
+    for (int i = 0; i < fit.k2_frequency_points; ++i) {
+      const double f = grid(options.frequency_min_Hz, options.frequency_max_Hz, fit.k2_frequency_points, i);
+      f_y += f / Eval(coil, f, d).i_amp_A;
+      f_f += f * f;
+    }
+    m.k2_per_A_Hz[static_cast<std::size_t>(j)] = f_y / f_f;
+  }
+  return m;
+}
+
+double ApproxK2PerAHz(const ApproxDitherModel& model, double duty) {
+  const std::vector<double>& k2 = model.k2_per_A_Hz;
+  if (k2.empty()) return std::numeric_limits<double>::quiet_NaN();
+  if (k2.size() == 1) return k2[0];
+  const double last = static_cast<double>(k2.size() - 1);
+  const double span = model.options.duty_max - model.options.duty_min;
+  const double pos = std::clamp((duty - model.options.duty_min) / span * last, 0.0, last);
+  const std::size_t j = std::min(static_cast<std::size_t>(pos), k2.size() - 2);
+  const double t = pos - static_cast<double>(j);
+  // 1/k2 ~ (supply_V / L_H) D (1 - D) (the high-frequency limit of eq. 11), so the normalised slope
+  // s = 1 / (k2 D (1-D)) is nearly constant in D: interpolate s linearly, then undo the normalisation.
+  auto grid_duty = [&](std::size_t i) { return model.options.duty_min + span * static_cast<double>(i) / last; };
+  auto s = [&](std::size_t i) {
+    const double d = grid_duty(i);
+    return 1.0 / (k2[i] * d * (1.0 - d));
+  };
+  const double d = model.options.duty_min + span * pos / last;
+  const double s_d = (1.0 - t) * s(j) + t * s(j + 1);
+  return 1.0 / (s_d * d * (1.0 - d));
+}
+
+StatusOr<DitherPlan> PlanDitherApprox(const ApproxDitherModel& model, const DitherRequest& request) {
+  if (!FinitePositive(model.k1_A) || model.k2_per_A_Hz.size() < 2) {
+    return Status::InvalidArgument("model: not fitted (use FitApproxDitherModel)");
+  }
+  VB_RETURN_IF_ERROR(ValidateRequest(request));
+  const DitherPlannerOptions& o = model.options;
+  const double duty = request.average_current_A / model.k1_A;  // eq. (12)
+  if (duty < o.duty_min || duty > o.duty_max) {
+    return Status::InvalidArgument(
+        Format("dither.average_current_A: %.6g A needs duty %.4g by eq. (12) (k1 = %.6g A), outside [%g, %g]",
+               request.average_current_A, duty, model.k1_A, o.duty_min, o.duty_max));
+  }
+  const double k2 = ApproxK2PerAHz(model, duty);
+  const double f = 1.0 / (k2 * request.amplitude_A);  // eq. (13)
+  if (f < o.frequency_min_Hz || f > o.frequency_max_Hz) {
+    return Status::InvalidArgument(
+        Format("dither.amplitude_A: %.6g A at average %.6g A needs f = %.4g Hz by eq. (13) (k2 = %.6g 1/(A Hz) "
+               "at duty %.4g), outside [%g, %g] Hz",
+               request.amplitude_A, request.average_current_A, f, k2, duty, o.frequency_min_Hz,
+               o.frequency_max_Hz));
+  }
+  const RlPwmSteadyStateResult ss = Eval(model.coil, f, duty);
+  return DitherPlan{f, duty, ss.i_avg_A, ss.i_amp_A, ss.i_mean_A};
+}
+
+}  // namespace vb::control

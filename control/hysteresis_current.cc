@@ -1,0 +1,54 @@
+#include "control/hysteresis_current.h"
+
+#include <cmath>
+#include <cstdio>
+#include <string>
+
+namespace vb::control {
+namespace {
+
+std::string Num(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%g", v);
+  return buf;
+}
+
+Status MustBePositive(const char* field, double v) {
+  if (std::isfinite(v) && v > 0.0) return Status::Ok();
+  return Status::InvalidArgument(std::string("hysteresis.") + field + ": must be > 0, got " + Num(v));
+}
+
+}  // namespace
+
+Status HysteresisCurrent::Validate(const Params& p) {
+  VB_RETURN_IF_ERROR(MustBePositive("band_A", p.band_A));
+  VB_RETURN_IF_ERROR(MustBePositive("period_s", p.period_s));
+  return Status::Ok();
+}
+
+StatusOr<HysteresisCurrent> HysteresisCurrent::Create(const Params& p) {
+  Status s = Validate(p);
+  if (!s.ok()) return s;
+  return HysteresisCurrent(p);
+}
+
+SwitchCommand HysteresisCurrent::Step(const Measurement& m, const Reference& r, ControllerState* state) const {
+  if (!r.command_on) {
+    *state = InitialState();
+    return SwitchCommand::Gate(0);
+  }
+  const double i = m.current_A;
+  if (!std::isfinite(i) || !std::isfinite(r.value)) return SwitchCommand::Gate(0);
+
+  const double half = 0.5 * p_.band_A;
+  const double on_threshold = r.value - half;   // switch on at or below
+  const double off_threshold = r.value + half;  // switch off at or above
+  if (i <= on_threshold) {
+    state->mode = 1;
+  } else if (i >= off_threshold) {
+    state->mode = 0;
+  }  // else: inside the band, keep the previous output
+  return SwitchCommand::Gate(state->mode != 0 ? 1 : 0);
+}
+
+}  // namespace vb::control
