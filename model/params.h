@@ -58,7 +58,7 @@ struct PlantParams {
   // Flow, seed 000 eq. (12): dm/dt = C_d C_A xbar P_sup/sqrt(T) * (choked or subsonic factor). The paper gives
   // no values for C_d, C_A, T: they scale the flow but not its shape (the static map in % of max).
   double C_d = 0.8;                // discharge coefficient
-  double C_A_m = 2.4;              // orifice area per unit spool travel, A = C_A xbar [m^2/m]
+  double C_A_m = 2.4e-3;           // orifice area per unit spool travel, A = C_A xbar [m^2/m]: 0.8 mm^2 open
   double T_supply_K = 293.15;      // supply temperature
   double P_out_Pa = 101325.0;      // absolute downstream pressure (exhaust to atmosphere)
   double P_atm_Pa = 101325.0;      // supply_pressure_Pa is gauge; absolute = gauge + P_atm
