@@ -11,6 +11,10 @@
 #include <iostream>
 
 #include "benchctl/local_run.h"
+#include "experiment/compare.h"
+
+#include <fstream>
+#include <sstream>
 
 namespace {
 
@@ -86,6 +90,102 @@ std::string IndexedPath(const std::string& path, size_t k, size_t n) {
   return dot == std::string::npos ? path + suffix : path.substr(0, dot) + suffix + path.substr(dot);
 }
 
+// Strips the repeat tag so that repeats of one configuration share a name.
+std::string GroupName(const vb::benchctl::LocalRunResult& r) {
+  std::string name = r.name;
+  const size_t pos = name.find(" repeat:");
+  return pos == std::string::npos ? name : name.substr(0, pos);
+}
+
+std::vector<vb::experiment::RunRecord> Records(const std::vector<vb::benchctl::LocalRunResult>& results) {
+  std::vector<vb::experiment::RunRecord> out;
+  for (const auto& r : results) {
+    vb::experiment::RunRecord rec;
+    rec.name = GroupName(r);
+    rec.controller = r.controller;
+    rec.ok = r.summary.ok();
+    for (const auto& [name, value] : vb::experiment::MetricList(r.summary.metrics)) rec.metrics[name] = value;
+    out.push_back(std::move(rec));
+  }
+  return out;
+}
+
+Json ComparisonJson(const vb::experiment::Comparison& c) {
+  Json rows = Json::array();
+  for (const auto& r : c.rows) {
+    Json m = Json::object();
+    for (const auto& col : c.columns) {
+      const auto& s = r.metrics.at(col);
+      m[col] = s.n == 0 ? Json(nullptr) : Json{{"mean", s.mean}, {"spread", s.spread}, {"n", s.n}};
+    }
+    rows.push_back({{"rank", r.rank},
+                    {"name", r.name},
+                    {"controller", r.controller},
+                    {"runs", r.runs},
+                    {"failed", r.failed},
+                    {"pareto", r.pareto},
+                    {"metrics", m}});
+  }
+  return {{"rank_metric", c.rank_metric}, {"effort_metric", c.effort_metric}, {"rows", rows}};
+}
+
+int PrintComparison(const vb::experiment::Comparison& c, bool json, bool csv) {
+  if (json) {
+    std::cout << ComparisonJson(c).dump(2) << "\n";
+  } else if (csv) {
+    std::cout << vb::experiment::ComparisonCsv(c);
+  } else {
+    std::cout << vb::experiment::ComparisonTable(c);
+  }
+  return kExitOk;
+}
+
+// compare RESULTS.json (the output of `run --json`) or compare --local SPEC (runs it first).
+int CmdCompare(const std::string& input, bool local, bool json, bool csv) {
+  if (local) {
+    auto spec = vb::experiment::LoadSpecFile(input);
+    if (!spec.ok()) return Fail(spec.status());
+    auto results = vb::benchctl::RunLocal(*spec, false, false);
+    if (!results.ok()) return Fail(results.status().WithContext(input));
+    for (const auto& r : *results)
+      std::fprintf(stderr, "%s [%s]: %s\n", r.name.c_str(), r.controller.c_str(), r.summary.BriefReport().c_str());
+    return PrintComparison(vb::experiment::Compare(Records(*results)), json, csv);
+  }
+  std::ifstream in(input);
+  if (!in) return Fail(Status::NotFound(input + ": cannot open the results file"));
+  Json doc;
+  try {
+    doc = Json::parse(in);
+  } catch (const Json::exception& e) {
+    return Fail(Status::InvalidArgument(input + ": not JSON: " + e.what()));
+  }
+  if (doc.is_object()) doc = Json::array({doc});
+  std::vector<vb::experiment::RunRecord> records;
+  for (size_t k = 0; k < doc.size(); ++k) {
+    const Json& r = doc[k];
+    const std::string where = input + ": [" + std::to_string(k) + "]";
+    if (!r.is_object() || !r.contains("name") || !r["name"].is_string() || !r.contains("metrics") ||
+        !r["metrics"].is_object())
+      return Fail(Status::InvalidArgument(where + ": expected a run summary with 'name' and 'metrics'"));
+    vb::experiment::RunRecord rec;
+    rec.name = r["name"].get<std::string>();
+    const size_t pos = rec.name.find(" repeat:");
+    if (pos != std::string::npos) rec.name = rec.name.substr(0, pos);
+    rec.controller = r.value("controller", "");
+    rec.ok = r.value("status", "done") == "done";
+    for (const auto& [key, value] : r["metrics"].items()) {
+      if (value.is_number()) {
+        rec.metrics[key] = value.get<double>();
+      } else if (!value.is_null()) {
+        return Fail(Status::InvalidArgument(where + ".metrics." + key + ": not a number"));
+      }
+    }
+    records.push_back(std::move(rec));
+  }
+  if (records.empty()) return Fail(Status::InvalidArgument(input + ": no runs to compare"));
+  return PrintComparison(vb::experiment::Compare(records), json, csv);
+}
+
 int CmdRun(const std::string& spec_path, bool local, const std::string& server, const std::string& trace_csv,
            bool json, bool realtime) {
   if (!local) {
@@ -112,7 +212,11 @@ int CmdRun(const std::string& spec_path, bool local, const std::string& server, 
       PrintHuman(r);
     }
   }
-  if (json) std::cout << (all.size() == 1 ? all[0] : all).dump(2) << "\n";
+  if (json) {
+    std::cout << (all.size() == 1 ? all[0] : all).dump(2) << "\n";
+  } else if (results->size() > 1) {
+    std::cout << "\n" << vb::experiment::ComparisonTable(vb::experiment::Compare(Records(*results)));
+  }
   return exit_code;
 }
 
@@ -136,6 +240,14 @@ int main(int argc, char** argv) {
   run->add_flag("--realtime", realtime, "pace the run to the wall clock and report loop jitter");
   run->add_flag("--json", json, "print the summary as JSON");
 
+  std::string compare_input;
+  bool compare_local = false, csv = false;
+  auto* compare = app.add_subcommand("compare", "compare runs: RMSE, effort and the other metrics side by side");
+  compare->add_option("input", compare_input, "results JSON from `run --json`, or a spec with --local")->required();
+  compare->add_flag("--local", compare_local, "run the spec's batch on the embedded emulator, then compare");
+  compare->add_flag("--json", json, "print the comparison as JSON");
+  compare->add_flag("--csv", csv, "print the comparison as CSV");
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -143,5 +255,6 @@ int main(int argc, char** argv) {
     return rc == 0 ? 0 : kExitBadInput;
   }
   if (run->parsed()) return CmdRun(spec_path, local, server, trace_csv, json, realtime);
+  if (compare->parsed()) return CmdCompare(compare_input, compare_local, json, csv);
   return kExitBadInput;
 }

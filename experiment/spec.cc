@@ -214,6 +214,23 @@ StatusOr<double> GetFieldByPath(const ExperimentSpec& spec, std::string_view pat
 }
 
 StatusOr<std::vector<ExperimentSpec>> ExpandSweep(const ExperimentSpec& spec, size_t max_runs) {
+  if (spec.variants_size() > 0) {
+    std::vector<ExperimentSpec> out;
+    for (int v = 0; v < spec.variants_size(); ++v) {
+      const ExperimentSpec& overlay = spec.variants(v);
+      if (overlay.variants_size() > 0)
+        return Status::InvalidArgument("variants[" + std::to_string(v) + "].variants: variants do not nest");
+      ExperimentSpec merged = spec;
+      merged.clear_variants();
+      if (overlay.has_controller()) merged.clear_controller();  // a variant's law replaces the base law
+      merged.MergeFrom(overlay);
+      merged.set_name(spec.name() + "/" + (overlay.name().empty() ? std::to_string(v) : overlay.name()));
+      auto runs = ExpandSweep(merged, max_runs - out.size());
+      if (!runs.ok()) return runs.status().WithContext("variants[" + std::to_string(v) + "]");
+      for (auto& r : *runs) out.push_back(std::move(r));
+    }
+    return out;
+  }
   std::vector<std::pair<std::string, std::vector<double>>> axes;
   for (int a = 0; a < spec.sweep_size(); ++a) {
     const auto& ax = spec.sweep(a);
@@ -325,8 +342,8 @@ StatusOr<model::DriverParams> BuildDriver(const valvebench::v1::DriverSpec& ds) 
 StatusOr<Experiment> BuildExperiment(const ExperimentSpec& spec) {
   Experiment e;
   e.spec = spec;
-  if (spec.sweep_size() > 0 || spec.repeats() > 1)
-    return Status::InvalidArgument("sweep: expand sweeps and repeats before building a single run");
+  if (spec.sweep_size() > 0 || spec.repeats() > 1 || spec.variants_size() > 0)
+    return Status::InvalidArgument("sweep: expand variants, sweeps and repeats before building a single run");
   if (!(spec.duration_s() > 0.0) || !std::isfinite(spec.duration_s()))
     return Status::InvalidArgument("duration_s: must be > 0, got " + FormatValue(spec.duration_s()));
   e.duration_s = spec.duration_s();

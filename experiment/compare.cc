@@ -1,0 +1,166 @@
+#include "experiment/compare.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <sstream>
+
+namespace vb::experiment {
+namespace {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+const std::vector<std::string>& DefaultColumns() {
+  static const std::vector<std::string> cols = {"rmse",      "effort_l2",     "effort_rms",     "energy_J",
+                                                "switches",  "iae",           "max_abs_error",  "overshoot",
+                                                "settling_time_s", "opening_delay_s", "closing_delay_s",
+                                                "mean_current_A"};
+  return cols;
+}
+
+double Mean(const MetricStat& s) { return s.n > 0 ? s.mean : kNaN; }
+
+}  // namespace
+
+Comparison Compare(const std::vector<RunRecord>& runs) {
+  Comparison c;
+  c.columns = DefaultColumns();
+  // Group by name (repeats of one configuration share it), in first-seen order.
+  std::vector<CompareRow> rows;
+  std::map<std::string, std::vector<const RunRecord*>> groups;
+  for (const auto& r : runs) {
+    if (groups.find(r.name) == groups.end()) {
+      CompareRow row;
+      row.name = r.name;
+      row.controller = r.controller;
+      rows.push_back(row);
+    }
+    groups[r.name].push_back(&r);
+  }
+  for (auto& row : rows) {
+    const auto& members = groups[row.name];
+    row.runs = static_cast<int>(members.size());
+    for (const auto* r : members) row.failed += r->ok ? 0 : 1;
+    for (const auto& col : c.columns) {
+      MetricStat st;
+      double sum = 0, sum2 = 0;
+      for (const auto* r : members) {
+        if (!r->ok) continue;
+        auto it = r->metrics.find(col);
+        if (it == r->metrics.end() || !std::isfinite(it->second)) continue;
+        sum += it->second;
+        sum2 += it->second * it->second;
+        ++st.n;
+      }
+      if (st.n > 0) {
+        st.mean = sum / st.n;
+        st.spread = st.n > 1 ? std::sqrt(std::max(0.0, (sum2 - st.n * st.mean * st.mean) / (st.n - 1))) : 0.0;
+      }
+      row.metrics[col] = st;
+    }
+  }
+  // Sort by mean RMSE (missing last), then rank: a row only gets a new rank when its RMSE is worse than the
+  // previous rank's by more than their combined spread.
+  std::stable_sort(rows.begin(), rows.end(), [&](const CompareRow& a, const CompareRow& b) {
+    const double ea = Mean(a.metrics.at(c.rank_metric)), eb = Mean(b.metrics.at(c.rank_metric));
+    if (std::isnan(ea)) return false;
+    if (std::isnan(eb)) return true;
+    return ea < eb;
+  });
+  int rank = 0;
+  const CompareRow* anchor = nullptr;
+  for (auto& row : rows) {
+    const MetricStat& s = row.metrics.at(c.rank_metric);
+    if (s.n == 0) {
+      row.rank = 0;
+      continue;
+    }
+    if (anchor == nullptr) {
+      rank = 1;
+      anchor = &row;
+    } else {
+      const MetricStat& a = anchor->metrics.at(c.rank_metric);
+      if (s.mean - a.mean > s.spread + a.spread) {
+        ++rank;
+        anchor = &row;
+      }
+    }
+    row.rank = rank;
+  }
+  // Pareto front in (rank metric, effort): minimise both.
+  for (auto& row : rows) {
+    const double e = Mean(row.metrics.at(c.rank_metric)), u = Mean(row.metrics.at(c.effort_metric));
+    if (std::isnan(e) || std::isnan(u)) continue;
+    bool dominated = false;
+    for (const auto& other : rows) {
+      const double eo = Mean(other.metrics.at(c.rank_metric)), uo = Mean(other.metrics.at(c.effort_metric));
+      if (std::isnan(eo) || std::isnan(uo) || &other == &row) continue;
+      if (eo <= e && uo <= u && (eo < e || uo < u)) {
+        dominated = true;
+        break;
+      }
+    }
+    row.pareto = !dominated;
+  }
+  c.rows = std::move(rows);
+  return c;
+}
+
+std::string ComparisonTable(const Comparison& c) {
+  std::ostringstream os;
+  char buf[256];
+  size_t name_w = 4;
+  for (const auto& r : c.rows) name_w = std::max(name_w, r.name.size());
+  std::snprintf(buf, sizeof buf, "%-4s %-*s %-20s %4s", "rank", static_cast<int>(name_w), "name", "controller", "n");
+  os << buf;
+  for (const auto& col : c.columns) {
+    std::snprintf(buf, sizeof buf, " %15s", col.c_str());
+    os << buf;
+  }
+  os << "  pareto\n";
+  for (const auto& r : c.rows) {
+    std::snprintf(buf, sizeof buf, "%-4s %-*s %-20s %4d", r.rank > 0 ? std::to_string(r.rank).c_str() : "-",
+                  static_cast<int>(name_w), r.name.c_str(), r.controller.c_str(), r.runs);
+    os << buf;
+    for (const auto& col : c.columns) {
+      const MetricStat& s = r.metrics.at(col);
+      if (s.n == 0) {
+        std::snprintf(buf, sizeof buf, " %15s", "-");
+      } else if (s.n > 1) {
+        std::snprintf(buf, sizeof buf, " %8.4g±%-6.2g", s.mean, s.spread);
+      } else {
+        std::snprintf(buf, sizeof buf, " %15.6g", s.mean);
+      }
+      os << buf;
+    }
+    os << (r.pareto ? "  *" : "") << (r.failed > 0 ? "  (" + std::to_string(r.failed) + " failed)" : "") << "\n";
+  }
+  os << "rank by " << c.rank_metric << " (rows within the repeat spread share a rank); * = Pareto-optimal in ("
+     << c.rank_metric << ", " << c.effort_metric << ")\n";
+  return os.str();
+}
+
+std::string ComparisonCsv(const Comparison& c) {
+  std::ostringstream os;
+  os << "rank,name,controller,runs,failed,pareto";
+  for (const auto& col : c.columns) os << "," << col << "," << col << "_spread";
+  os << "\n";
+  os.precision(10);
+  for (const auto& r : c.rows) {
+    os << r.rank << ",\"" << r.name << "\"," << r.controller << "," << r.runs << "," << r.failed << ","
+       << (r.pareto ? 1 : 0);
+    for (const auto& col : c.columns) {
+      const MetricStat& s = r.metrics.at(col);
+      if (s.n == 0) {
+        os << ",,";
+      } else {
+        os << "," << s.mean << "," << s.spread;
+      }
+    }
+    os << "\n";
+  }
+  return os.str();
+}
+
+}  // namespace vb::experiment
