@@ -39,6 +39,17 @@ Metrics ComputeMetrics(const Trace& tr, ControlledVariable cv, double start_s, d
   m.effort_rms = std::sqrt(v2 * inv_n);
   m.energy_J = p * dt;
   m.switches = switches;
+  // Prefer the bench's exact running integrals: sampled sums cannot see a PWM faster than the sample rate.
+  const bool exact = !tr.v2_int_V2s.empty() && std::isfinite(tr.v2_int_V2s[k0]) &&
+                     std::isfinite(tr.v2_int_V2s[k1 - 1]) && k1 - 1 > k0;
+  if (exact) {
+    const double span_s = tr.t_s[k1 - 1] - tr.t_s[k0];
+    const double v2_exact = tr.v2_int_V2s[k1 - 1] - tr.v2_int_V2s[k0];
+    m.effort_l2 = std::sqrt(std::max(0.0, v2_exact));
+    m.effort_rms = std::sqrt(std::max(0.0, v2_exact) / span_s);
+    m.energy_J = tr.energy_int_J[k1 - 1] - tr.energy_int_J[k0];
+    m.switches = tr.switch_count[k1 - 1] - tr.switch_count[k0];
+  }
   m.mean_current_A = isum * inv_n;
 
   // Tracking.

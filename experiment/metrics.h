@@ -1,6 +1,7 @@
 // Run metrics, defined with formulas and units in docs/metrics.md. Computed from the recorded trace over a
 // window [start_s, end_s], with the sample-and-hold convention: a sample's value holds until the next sample
-// (exactly how the gate command behaves), so integrals are sums of value * sample_period.
+// (exactly how the gate command behaves), so integrals are sums of value * sample_period -- unless the bench
+// supplies exact running integrals (the emulator does), which are then used for effort, energy and switches.
 #pragma once
 
 #include <cstdint>

@@ -15,6 +15,9 @@ void Trace::Reserve(size_t n) {
   ref.reserve(n);
   x_avg_m.reserve(n);
   flow_kg_per_s.reserve(n);
+  v2_int_V2s.reserve(n);
+  energy_int_J.reserve(n);
+  switch_count.reserve(n);
 }
 
 void Trace::Clear() {
@@ -27,12 +30,16 @@ void Trace::Clear() {
   ref.clear();
   x_avg_m.clear();
   flow_kg_per_s.clear();
+  v2_int_V2s.clear();
+  energy_int_J.clear();
+  switch_count.clear();
   dropped = 0;
 }
 
 const std::vector<std::string>& Trace::ChannelNames() {
   static const std::vector<std::string> names = {"t_s", "gate", "v_coil_V", "i_A",           "x_m",
-                                                 "v_mps", "ref", "x_avg_m", "flow_kg_per_s"};
+                                                 "v_mps", "ref", "x_avg_m", "flow_kg_per_s",
+                                                 "v2_int_V2s", "energy_int_J", "switch_count"};
   return names;
 }
 
@@ -47,6 +54,9 @@ double Trace::Value(size_t channel, size_t k) const {
     case 6: return ref[k];
     case 7: return x_avg_m[k];
     case 8: return flow_kg_per_s[k];
+    case 9: return v2_int_V2s[k];
+    case 10: return energy_int_J[k];
+    case 11: return switch_count[k];
   }
   return std::numeric_limits<double>::quiet_NaN();
 }
@@ -80,6 +90,9 @@ void Recorder::OnSample(const hw::BenchSample& s) {
   trace_->flow_kg_per_s.push_back(plant_ != nullptr && !std::isnan(xbar)
                                       ? model::MassFlow_kg_per_s(*plant_, xbar, pressure_Pa_)
                                       : kNaN);
+  trace_->v2_int_V2s.push_back(s.v2_integral_V2s);
+  trace_->energy_int_J.push_back(s.energy_J);
+  trace_->switch_count.push_back(s.switches);
 }
 
 }  // namespace vb::experiment

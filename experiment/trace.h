@@ -21,6 +21,9 @@ struct Trace {
   std::vector<double> ref;              // reference of the controlled variable (NaN if none)
   std::vector<double> x_avg_m;          // moving average of x over one PWM period (seed 000 section 5)
   std::vector<double> flow_kg_per_s;    // eq. (12) from x_avg_m
+  std::vector<double> v2_int_V2s;       // exact running integral of v_coil^2 (NaN if the bench has none)
+  std::vector<double> energy_int_J;     // exact running integral of v_coil i
+  std::vector<double> switch_count;     // gate transitions so far
   std::uint64_t dropped = 0;            // samples that did not fit the reserved capacity
 
   size_t size() const { return t_s.size(); }

@@ -45,6 +45,11 @@ struct BenchSample {
   double i_A;
   double x_m;
   double v_mps;
+  // Running integrals from the run start, computed exactly by the bench where it can (NaN otherwise):
+  // metrics then do not depend on whether the sample rate resolves the PWM.
+  double v2_integral_V2s;   // integral of v_coil^2 dt
+  double energy_J;          // integral of v_coil i dt
+  double switches;          // gate transitions so far
 };
 
 class SampleSink {

@@ -63,7 +63,9 @@ class EmulatedBench final : public Bench {
    public:
     SampleSink* sink = nullptr;
     void OnSample(const model::PlantSample& s) override {
-      if (sink) sink->OnSample(BenchSample{s.t_s, s.gate, s.v_coil_V, s.i_A, s.x_m, s.v_mps});
+      if (sink)
+        sink->OnSample(BenchSample{s.t_s, s.gate, s.v_coil_V, s.i_A, s.x_m, s.v_mps, s.v2_integral_V2s, s.energy_J,
+                                   static_cast<double>(s.switches)});
     }
   };
   void RunPwmTo(double t_s);

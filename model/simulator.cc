@@ -47,6 +47,8 @@ void Simulator::Reset() {
   i_ = 0.0;
   x_ = x_lo_;
   v_ = 0.0;
+  v2_int_ = vi_int_ = 0.0;
+  switches_ = 0;
   gate_ = 0;
   contact_ = Contact::kLower;
   blocked_ = true;
@@ -68,6 +70,7 @@ void Simulator::SetSamplePeriod(double period_s) {
 void Simulator::SetGate(int gate) {
   if (gate == gate_) return;
   gate_ = gate;
+  ++switches_;
   t_gate_change_s_ = t_;
   chopper_started_ = false;
   if (gate != 0) blocked_ = false;
@@ -176,8 +179,12 @@ double Simulator::SegmentVoltage(const Segment& seg, double t) const {
   return seg.v0_V;
 }
 
-void Simulator::EmitSample(const Segment& seg, double t, double i, double x, double v, SimObserver* obs) const {
+void Simulator::EmitSample(const Segment& seg, double t, double i, double x, double v, double v2_int,
+                           double vi_int, SimObserver* obs) const {
   PlantSample s;
+  s.v2_integral_V2s = v2_int;
+  s.energy_J = vi_int;
+  s.switches = switches_;
   s.t_s = t;
   s.gate = static_cast<std::int8_t>(gate_);
   s.v_coil_V = SegmentVoltage(seg, t);
@@ -191,7 +198,7 @@ void Simulator::EmitPendingSample(SimObserver* observer) {
   if (sample_period_s_ <= 0.0 || observer == nullptr) return;
   if (SampleTime(next_sample_) <= t_ + kSameInstant_s) {
     Segment seg = CurrentSegment();
-    EmitSample(seg, SampleTime(next_sample_), i_, x_, v_, observer);
+    EmitSample(seg, SampleTime(next_sample_), i_, x_, v_, v2_int_, vi_int_, observer);
     ++next_sample_;
   }
 }
@@ -236,7 +243,7 @@ void Simulator::AdvanceClosedForm(const Segment& seg, double t_stop, SimObserver
   if (seg.blocked) {
     if (sample_period_s_ > 0.0 && obs) {
       for (double tk = SampleTime(next_sample_); tk < t_stop - kSameInstant_s; tk = SampleTime(++next_sample_))
-        EmitSample(seg, tk, 0.0, x_, 0.0, obs);
+        EmitSample(seg, tk, 0.0, x_, 0.0, v2_int_, vi_int_, obs);
     }
     t_ = t_stop;
     return;
@@ -279,14 +286,22 @@ void Simulator::AdvanceClosedForm(const Segment& seg, double t_stop, SimObserver
     }
   }
 
+  // Exact integrals over [t0, t]: v is constant, i = i_inf + d0 e^{-(t-t0)/tau}.
+  const double v0 = seg.v0_V;
+  auto v2_at = [&](double dt) { return v2_int_ + v0 * v0 * dt; };
+  auto vi_at = [&](double dt, double e) { return vi_int_ + v0 * (i_inf * dt + d0 * tau * (1.0 - e)); };
   if (sample_period_s_ > 0.0 && obs) {
     const double limit = best_t - kSameInstant_s;
     for (double tk = SampleTime(next_sample_); tk < limit; tk = SampleTime(++next_sample_)) {
-      EmitSample(seg, tk, i_inf + d0 * std::exp(-(tk - t0) / tau), x_, 0.0, obs);
+      const double dt = tk - t0, e = std::exp(-dt / tau);
+      EmitSample(seg, tk, i_inf + d0 * e, x_, 0.0, v2_at(dt), vi_at(dt, e), obs);
     }
   }
+  const double dt_end = best_t - t0, e_end = std::exp(-dt_end / tau);
+  v2_int_ = v2_at(dt_end);
+  vi_int_ = vi_at(dt_end, e_end);
   t_ = best_t;
-  i_ = best_ev != Ev::kNone ? best_level : i_inf + d0 * std::exp(-(t_ - t0) / tau);
+  i_ = best_ev != Ev::kNone ? best_level : i_inf + d0 * e_end;
   if (best_ev != Ev::kNone) ApplyEvent(best_ev, seg, obs);
 }
 
@@ -314,11 +329,10 @@ void Simulator::AdvanceOde(const Segment& seg, double t_stop, SimObserver* obs) 
   auto rhs = [&plant, &seg, &self, frozen, pressure](const State& y, State& dy, double t) {
     double i, x, v;
     self.Unscale(y, &i, &x, &v);
-    if (seg.blocked) {
-      dy[0] = 0.0;
-    } else {
-      dy[0] = plant.CurrentRate_A_per_s(i, x, frozen ? 0.0 : v, self.SegmentVoltage(seg, t));
-    }
+    const double vc = seg.blocked ? 0.0 : self.SegmentVoltage(seg, t);
+    dy[0] = seg.blocked ? 0.0 : plant.CurrentRate_A_per_s(i, x, frozen ? 0.0 : v, vc);
+    dy[3] = vc * vc;
+    dy[4] = seg.blocked ? 0.0 : vc * i;
     if (frozen) {
       dy[1] = 0.0;
       dy[2] = 0.0;
@@ -330,6 +344,8 @@ void Simulator::AdvanceOde(const Segment& seg, double t_stop, SimObserver* obs) 
 
   if (!stepper_valid_) {
     stepper_.initialize(Scale(i_, x_, v_), t_, std::min(dt_guess_s_, opt_.max_step_s));
+    ode_piece_v2_ = v2_int_;
+    ode_piece_vi_ = vi_int_;
     stepper_valid_ = true;
     ++restarts_;
   }
@@ -428,16 +444,20 @@ void Simulator::AdvanceOde(const Segment& seg, double t_stop, SimObserver* obs) 
         double i, x, v;
         Unscale(y, &i, &x, &v);
         if (seg.blocked) i = 0.0;
-        EmitSample(seg, tk, i, std::clamp(x, x_lo_, x_hi_), v, obs);
+        EmitSample(seg, tk, i, std::clamp(x, x_lo_, x_hi_), v, ode_piece_v2_ + y[3], ode_piece_vi_ + y[4], obs);
       }
     }
 
-    if (best_t >= stepper_.current_time()) {
-      Unscale(stepper_.current_state(), &i_, &x_, &v_);
-    } else {
+    {
       State y;
-      stepper_.calc_state(best_t, y);
+      if (best_t >= stepper_.current_time()) {
+        y = stepper_.current_state();
+      } else {
+        stepper_.calc_state(best_t, y);
+      }
       Unscale(y, &i_, &x_, &v_);
+      v2_int_ = ode_piece_v2_ + y[3];
+      vi_int_ = ode_piece_vi_ + y[4];
     }
     t_ = best_t;
     if (seg.blocked) i_ = 0.0;

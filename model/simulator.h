@@ -49,6 +49,10 @@ struct PlantSample {
   double i_A;
   double x_m;
   double v_mps;
+  // Exact running integrals from t = 0 (not sampled sums: a 20 kHz PWM is invisible to 50 kHz samples).
+  double v2_integral_V2s;   // integral of v_coil^2 dt
+  double energy_J;          // integral of v_coil * i dt
+  std::uint64_t switches;   // gate transitions so far
 };
 
 class SimObserver {
@@ -93,10 +97,15 @@ class Simulator {
   const Conditions& conditions() const { return cond_; }
   // Work counters, for benchmarks.
   std::uint64_t ode_steps() const { return ode_steps_; }
+  double v2_integral_V2s() const { return v2_int_; }
+  double energy_J() const { return vi_int_; }
+  std::uint64_t switches() const { return switches_; }
   std::uint64_t restarts() const { return restarts_; }
 
  private:
-  using State = std::array<double, 3>;  // scaled: i [A], (x - x_min)/x_scale, v/v_scale
+  // scaled: i [A], (x - x_min)/x_scale, v/v_scale, then two quadratures from the piece start:
+  // integral v_coil^2 dt and integral v_coil i dt.
+  using State = std::array<double, 5>;
   using Stepper = boost::numeric::odeint::result_of::make_dense_output<
       boost::numeric::odeint::runge_kutta_dopri5<State>>::type;
 
@@ -121,8 +130,11 @@ class Simulator {
   void CheckStopRelease(SimObserver* obs);
   double EventFunction(Ev ev, const Segment& seg, double i, double x, double v) const;
   double SampleTime(std::int64_t k) const { return static_cast<double>(k) * sample_period_s_; }
-  void EmitSample(const Segment& seg, double t, double i, double x, double v, SimObserver* obs) const;
-  State Scale(double i, double x, double v) const { return {i, (x - x_lo_) * inv_x_scale_, v * inv_v_scale_}; }
+  void EmitSample(const Segment& seg, double t, double i, double x, double v, double v2_int, double vi_int,
+                  SimObserver* obs) const;
+  State Scale(double i, double x, double v) const {
+    return {i, (x - x_lo_) * inv_x_scale_, v * inv_v_scale_, 0.0, 0.0};
+  }
   void Unscale(const State& s, double* i, double* x, double* v) const {
     *i = s[0];
     *x = x_lo_ + s[1] * x_scale_;
@@ -136,6 +148,9 @@ class Simulator {
   double x_lo_, x_hi_, x_scale_, inv_x_scale_, v_scale_, inv_v_scale_;
 
   double t_ = 0.0, i_ = 0.0, x_ = 0.0, v_ = 0.0;
+  double v2_int_ = 0.0, vi_int_ = 0.0;   // running integrals up to t_
+  std::uint64_t switches_ = 0;
+  double ode_piece_v2_ = 0.0, ode_piece_vi_ = 0.0;  // integrals at the ODE stepper's restart time
   int gate_ = 0;
   Contact contact_ = Contact::kLower;
   bool blocked_ = true;         // current held at zero by a blocking diode

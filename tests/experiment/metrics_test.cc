@@ -21,6 +21,9 @@ Trace Make(size_t n, double dt) {
     t.ref.push_back(0.5);
     t.x_avg_m.push_back(std::nan(""));
     t.flow_kg_per_s.push_back(std::nan(""));
+    t.v2_int_V2s.push_back(std::nan(""));  // no exact integrals: the sampled sums are used
+    t.energy_int_J.push_back(std::nan(""));
+    t.switch_count.push_back(std::nan(""));
   }
   return t;
 }
