@@ -1,5 +1,6 @@
 #include "experiment/trace.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 
@@ -69,6 +70,7 @@ Recorder::Recorder(Trace* trace, const ReferenceProfile* reference, const model:
   if (sample_period_s > 0.0 && average_window_s > 0.0)
     window = std::max(1, static_cast<int>(std::lround(average_window_s / sample_period_s)));
   window_buf_.assign(static_cast<size_t>(window), 0.0);
+  if (plant_ != nullptr) flow_per_m_ = model::MassFlow_kg_per_s(*plant_, 1.0, pressure_Pa_);
   avg_.Reset(window_buf_.data(), window);
 }
 
@@ -87,9 +89,7 @@ void Recorder::OnSample(const hw::BenchSample& s) {
   trace_->ref.push_back(reference_ != nullptr && reference_->has_reference() ? reference_->At(s.t_s).value : kNaN);
   const double xbar = std::isnan(s.x_m) ? kNaN : avg_.Push(s.x_m);
   trace_->x_avg_m.push_back(xbar);
-  trace_->flow_kg_per_s.push_back(plant_ != nullptr && !std::isnan(xbar)
-                                      ? model::MassFlow_kg_per_s(*plant_, xbar, pressure_Pa_)
-                                      : kNaN);
+  trace_->flow_kg_per_s.push_back(plant_ != nullptr && !std::isnan(xbar) ? flow_per_m_ * std::max(xbar, 0.0) : kNaN);
   trace_->v2_int_V2s.push_back(s.v2_integral_V2s);
   trace_->energy_int_J.push_back(s.energy_J);
   trace_->switch_count.push_back(s.switches);

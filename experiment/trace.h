@@ -46,6 +46,7 @@ class Recorder final : public hw::SampleSink {
   const ReferenceProfile* reference_;
   const model::PlantParams* plant_;
   double pressure_Pa_;
+  double flow_per_m_ = 0.0;  // eq. (12) is linear in xbar: flow = flow_per_m_ * xbar (one evaluation per run)
   std::vector<double> window_buf_;
   model::MovingAverage avg_;
 };

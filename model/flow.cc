@@ -34,7 +34,7 @@ double MovingAverage::Push(double value) {
   } else {
     sum_ += value - buf_[head_];
     buf_[head_] = value;
-    head_ = (head_ + 1) % window_;
+    if (++head_ == window_) head_ = 0;
   }
   return sum_ / n_;
 }

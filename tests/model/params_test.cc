@@ -94,3 +94,25 @@ TEST(Plant, BalanceCurrentIsWhereTheSpoolLifts) {
 
 }  // namespace
 }  // namespace vb::model
+
+#include "model/flow.h"
+
+namespace vb::model {
+namespace {
+
+// Eq. (12) is linear in the mean position (the recorder relies on it); choked at 4 bar into atmosphere.
+TEST(Flow, Equation12IsLinearInPositionAndChokedAt4Bar) {
+  PlantParams p = *Preset("taghizadeh2009");
+  const double f1 = MassFlow_kg_per_s(p, 0.1e-3, 4e5), f2 = MassFlow_kg_per_s(p, 0.2e-3, 4e5);
+  EXPECT_NEAR(f2, 2 * f1, 1e-15);
+  const double choked = 0.0405 * p.C_d * p.C_A_m * 0.1e-3 * (4e5 + p.P_atm_Pa) / std::sqrt(p.T_supply_K);
+  EXPECT_NEAR(f1, choked, 1e-15);
+  EXPECT_EQ(MassFlow_kg_per_s(p, 0.1e-3, 0.0), 0.0) << "no pressure difference, no flow";
+  // Subsonic at a small pressure ratio: less than the choked formula would give.
+  const double sub = MassFlow_kg_per_s(p, 0.1e-3, 0.3e5);
+  EXPECT_GT(sub, 0.0);
+  EXPECT_LT(sub, 0.0405 * p.C_d * p.C_A_m * 0.1e-3 * (0.3e5 + p.P_atm_Pa) / std::sqrt(p.T_supply_K));
+}
+
+}  // namespace
+}  // namespace vb::model
