@@ -1,6 +1,9 @@
 #include "experiment/controllers.h"
 
+#include "control/cascade_pi_position.h"
 #include "control/dither_planner.h"
+#include "control/peak_and_hold.h"
+#include "control/sliding_mode_position.h"
 #include "control/fuzzy_current.h"
 #include "control/hysteresis_current.h"
 #include "control/pi_current.h"
@@ -11,10 +14,30 @@ namespace vb::experiment {
 
 using valvebench::v1::ControllerSpec;
 
+namespace {
+
+// The nominal plant a position law is designed on: data from the bench's model (never the model itself).
+StatusOr<control::LungeSolenoidModel> LungeNominal(const model::PlantParams& plant, const char* law) {
+  if (plant.law != model::InductanceLaw::kLimitedTravel)
+    return Status::InvalidArgument(std::string("controller.") + law +
+                                   ": position laws are designed for a limited-travel solenoid (preset lunge2013), "
+                                   "not " + plant.preset);
+  control::LungeSolenoidModel m;
+  m.mass_kg = plant.m_kg;
+  m.spring_N_per_m = plant.k_N_per_m;
+  m.damping_N_s_per_m = plant.b_N_s_per_m;
+  m.gravity_mps2 = plant.g_r_m_per_s2;
+  m.inductance_scale_H = plant.L_prime_H();
+  m.overlap_length_m = plant.a_m;
+  m.coil_resistance_ohm = plant.R_ohm;
+  return m;
+}
+
+}  // namespace
+
 StatusOr<BuiltController> BuildController(const valvebench::v1::ExperimentSpec& spec,
                                           const model::PlantParams& plant, const model::DriverParams& driver,
                                           double supply_V) {
-  (void)driver;
   BuiltController out;
   const ControllerSpec& cs = spec.controller();
   switch (cs.law_case()) {
@@ -120,13 +143,67 @@ StatusOr<BuiltController> BuildController(const valvebench::v1::ExperimentSpec& 
       out.controlled = ControlledVariable::kCurrent;
       return out;
     }
+    case ControllerSpec::kCascadePiPosition: {
+      const auto& c = cs.cascade_pi_position();
+      auto nominal = LungeNominal(plant, "cascade_pi_position");
+      if (!nominal.ok()) return nominal.status();
+      control::CascadePiPosition::Params p;
+      p.model = *nominal;
+      p.current_limit_A = supply_V / plant.R_ohm;
+      p.h_bridge = driver.kind == model::DriverKind::kHBridge;
+      p.bridge_diode_drop_V = driver.diode_drop_V;
+      if (c.kp_position() != 0.0) p.position_kp_N_per_m = c.kp_position();
+      if (c.ki_position() != 0.0) p.position_ki_N_per_m_s = c.ki_position();
+      if (c.kp_current() != 0.0) p.current_kp_V_per_A = c.kp_current();
+      if (c.ki_current() != 0.0) p.current_ki_V_per_A_s = c.ki_current();
+      if (c.carrier_hz() != 0.0) p.carrier_Hz = c.carrier_hz();
+      VB_RETURN_IF_ERROR(control::CascadePiPosition::Validate(p).InField("controller"));
+      out.controller = std::make_unique<control::CascadePiPosition>(p);
+      out.controlled = ControlledVariable::kPosition;
+      return out;
+    }
+    case ControllerSpec::kSlidingModePosition: {
+      const auto& c = cs.sliding_mode_position();
+      auto nominal = LungeNominal(plant, "sliding_mode_position");
+      if (!nominal.ok()) return nominal.status();
+      control::SlidingModePosition::Params p;
+      p.model = *nominal;
+      p.current_limit_A = supply_V / plant.R_ohm;
+      p.h_bridge = driver.kind == model::DriverKind::kHBridge;
+      p.bridge_diode_drop_V = driver.diode_drop_V;
+      if (c.c_position() != 0.0) p.surface_slope_per_s = c.c_position();
+      if (c.k_position() != 0.0) p.reaching_gain_SI = c.k_position();
+      if (c.alpha() != 0.0) p.reaching_exponent = c.alpha();
+      if (c.k_current() != 0.0) p.current_reaching_rate_A_per_s = c.k_current();
+      if (c.sigmoid_delta() != 0.0) p.current_boundary_layer_A = c.sigmoid_delta();
+      if (c.carrier_hz() != 0.0) p.carrier_Hz = c.carrier_hz();
+      VB_RETURN_IF_ERROR(control::SlidingModePosition::Validate(p).InField("controller"));
+      out.controller = std::make_unique<control::SlidingModePosition>(p);
+      out.controlled = ControlledVariable::kPosition;
+      return out;
+    }
+    case ControllerSpec::kPeakAndHold: {
+      const auto& c = cs.peak_and_hold();
+      control::PeakAndHold::Params p;
+      if (c.switching_current_a() != 0.0) p.switching_current_A = c.switching_current_a();
+      if (c.holding_current_a() != 0.0) p.holding_current_A = c.holding_current_a();
+      if (c.band_a() != 0.0) p.hold_band_A = c.band_a();
+      if (c.peak_time_max_s() != 0.0) p.peak_time_max_s = c.peak_time_max_s();
+      p.reverse_on_release = c.reverse_on_release();
+      if (p.reverse_on_release && driver.kind != model::DriverKind::kHBridge)
+        return Status::InvalidArgument(
+            "controller.peak_and_hold.reverse_on_release: needs an H-bridge driver (bench.driver.kind = h_bridge)");
+      VB_RETURN_IF_ERROR(control::PeakAndHold::Validate(p).InField("controller"));
+      out.controller = std::make_unique<control::PeakAndHold>(p);
+      out.controlled = spec.reference().shape_case() == valvebench::v1::ReferenceSpec::SHAPE_NOT_SET
+                           ? ControlledVariable::kNone
+                           : ControlledVariable::kCurrent;
+      return out;
+    }
     case ControllerSpec::LAW_NOT_SET:
       return Status::InvalidArgument("controller: no law given (e.g. {\"open_loop_pwm\": {...}})");
-    default:
-      return Status::InvalidArgument("controller: law '" +
-                                     std::string(cs.GetDescriptor()->FindFieldByNumber(cs.law_case())->name()) +
-                                     "' is not available yet");
   }
+  return Status::Internal("controller: unhandled law");
 }
 
 }  // namespace vb::experiment

@@ -358,6 +358,9 @@ StatusOr<Experiment> BuildExperiment(const ExperimentSpec& spec) {
   if (!driver.ok()) return driver.status();
   e.driver = *driver;
 
+  if (spec.perturbation().disturbance_v() != 0.0 || spec.perturbation().disturbance_hz() != 0.0)
+    return Status::InvalidArgument(
+        "perturbation.disturbance_V: an input disturbance is not supported by the emulated bench yet");
   const auto& c = spec.conditions();
   e.run.supply_V = c.supply_v() == 0.0 ? kDefaultSupply_V : c.supply_v();
   if (!(e.run.supply_V > 0.0) || !std::isfinite(e.run.supply_V))
