@@ -1,5 +1,6 @@
 #include "experiment/runner.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <sstream>
@@ -59,7 +60,9 @@ RunSummary Runner::Run(const Experiment& e, hw::Bench& bench, Trace* trace, cons
 
   const control::Controller& ctl = *e.controller;
   control::ControllerState state = ctl.InitialState();
-  const double period = ctl.period_s();
+  // A paced run ticks at least every kMaxPacedTick_s, so that open-loop runs exercise (and report) the loop.
+  constexpr double kMaxPacedTick_s = 1e-3;
+  const double period = e.run.realtime ? std::min(ctl.period_s(), kMaxPacedTick_s) : ctl.period_s();
   const std::vector<double>& bp = e.breakpoints_s;
   size_t next_bp = 0;
   std::int64_t next_ctl = 1;  // the next controller instant is next_ctl * period
