@@ -21,10 +21,7 @@ StatusOr<std::vector<LocalRunResult>> RunLocal(const experiment::ExperimentSpec&
   }
   std::vector<LocalRunResult> out;
   for (auto& e : exps) {
-    hw::EmulatedBenchOptions opts;
-    opts.plant = e.plant;
-    opts.driver = e.driver;
-    hw::EmulatedBench bench(opts);
+    hw::EmulatedBench bench(experiment::EmulatedBenchFor(e));
     LocalRunResult r;
     r.name = e.spec.name();
     for (const auto& tag : e.spec.tags()) {

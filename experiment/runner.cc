@@ -36,6 +36,15 @@ std::string RunSummary::FullReport() const {
   return os.str();
 }
 
+hw::EmulatedBenchOptions EmulatedBenchFor(const Experiment& e) {
+  hw::EmulatedBenchOptions opts;
+  opts.name = "emulator";
+  opts.plant = e.plant;
+  opts.driver = e.driver;
+  opts.disturbance = e.disturbance;
+  return opts;
+}
+
 RunSummary Runner::Run(const Experiment& e, hw::Bench& bench, Trace* trace, const std::atomic<bool>* cancel) {
   RunSummary sum;
   const auto wall0 = std::chrono::steady_clock::now();

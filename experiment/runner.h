@@ -13,6 +13,7 @@
 #include "experiment/spec.h"
 #include "experiment/trace.h"
 #include "hw/bench.h"
+#include "hw/emulated_bench.h"
 
 namespace vb::experiment {
 
@@ -33,6 +34,10 @@ struct RunSummary {
   std::string FullReport() const;
 };
 const char* TerminationName(RunSummary::Termination t);
+
+// The emulated bench an experiment asks for: its plant, driver and disturbances. The one place that maps an
+// Experiment onto EmulatedBenchOptions, so no caller can forget a field.
+hw::EmulatedBenchOptions EmulatedBenchFor(const Experiment& e);
 
 class Runner {
  public:

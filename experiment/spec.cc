@@ -358,9 +358,15 @@ StatusOr<Experiment> BuildExperiment(const ExperimentSpec& spec) {
   if (!driver.ok()) return driver.status();
   e.driver = *driver;
 
-  if (spec.perturbation().disturbance_v() != 0.0 || spec.perturbation().disturbance_hz() != 0.0)
-    return Status::InvalidArgument(
-        "perturbation.disturbance_V: an input disturbance is not supported by the emulated bench yet");
+  const auto& pert = spec.perturbation();
+  for (const auto& [field, value] : {std::pair<const char*, double>{"disturbance_V", pert.disturbance_v()},
+                                     {"disturbance_force_N", pert.disturbance_force_n()},
+                                     {"disturbance_Hz", pert.disturbance_hz()}})
+    if (!std::isfinite(value)) return Status::InvalidArgument(std::string("perturbation.") + field + ": not finite");
+  if (pert.disturbance_hz() < 0.0) return Status::InvalidArgument("perturbation.disturbance_Hz: must be >= 0");
+  e.disturbance = model::Disturbance{pert.disturbance_v(), pert.disturbance_force_n(), pert.disturbance_hz()};
+  if (e.disturbance.active() && !kind.empty() && kind != "emulated")
+    return Status::InvalidArgument("perturbation: disturbances can only be injected on an emulated bench");
   const auto& c = spec.conditions();
   e.run.supply_V = c.supply_v() == 0.0 ? kDefaultSupply_V : c.supply_v();
   if (!(e.run.supply_V > 0.0) || !std::isfinite(e.run.supply_V))

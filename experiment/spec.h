@@ -14,6 +14,7 @@
 #include "hw/bench.h"
 #include "model/driver.h"
 #include "model/params.h"
+#include "model/simulator.h"
 #include "valvebench/v1/spec.pb.h"
 
 namespace vb::experiment {
@@ -50,6 +51,7 @@ struct Experiment {
   double metric_start_s = 0.0, metric_end_s = 0.0;
   double average_window_s = 0.0;        // moving average of x (one PWM period)
   std::vector<double> breakpoints_s;    // where the runner ticks besides the controller period
+  model::Disturbance disturbance;       // emulated benches only (perturbation.disturbance_*)
 };
 
 // Validates every field (the message names the field path) and builds the run. A spec with sweep axes or

@@ -68,6 +68,7 @@ Status EmulatedBench::Configure(const RunConfig& config) {
 Status EmulatedBench::Start(SampleSink* sink) {
   forwarder_.sink = sink;
   sim_.SetConditions(model::Conditions{config_.supply_V, config_.supply_pressure_Pa});
+  sim_.SetDisturbance(opt_.disturbance);
   sim_.Reset();
   sim_.SetSamplePeriod(config_.sample_rate_Hz > 0.0 ? 1.0 / config_.sample_rate_Hz : 0.0);
   pwm_mode_ = false;

@@ -23,6 +23,7 @@ struct EmulatedBenchOptions {
   model::PlantParams plant;               // validated by the caller (model::Validate)
   model::DriverParams driver;
   model::SolverOptions solver;
+  model::Disturbance disturbance;         // robustness runs (seed 002 IV.D)
   double max_supply_V = 1000.0;
   double max_current_A = 100.0;
 };

@@ -82,6 +82,21 @@ void Simulator::SetConditions(const Conditions& conditions) {
   stepper_valid_ = false;
 }
 
+void Simulator::SetDisturbance(const Disturbance& disturbance) {
+  dist_ = disturbance;
+  stepper_valid_ = false;
+}
+
+double Simulator::DisturbanceVoltage(double t) const {
+  if (dist_.voltage_V == 0.0) return 0.0;
+  return dist_.frequency_Hz > 0.0 ? dist_.voltage_V * std::sin(2.0 * M_PI * dist_.frequency_Hz * t) : dist_.voltage_V;
+}
+
+double Simulator::DisturbanceForce(double t) const {
+  if (dist_.force_N == 0.0) return 0.0;
+  return dist_.frequency_Hz > 0.0 ? dist_.force_N * std::sin(2.0 * M_PI * dist_.frequency_Hz * t) : dist_.force_N;
+}
+
 double Simulator::v_coil_V() const {
   Simulator* self = const_cast<Simulator*>(this);
   // CurrentSegment() only normalises driver bookkeeping; the physical state is unchanged.
@@ -187,7 +202,7 @@ void Simulator::EmitSample(const Segment& seg, double t, double i, double x, dou
   s.switches = switches_;
   s.t_s = t;
   s.gate = static_cast<std::int8_t>(gate_);
-  s.v_coil_V = SegmentVoltage(seg, t);
+  s.v_coil_V = seg.blocked ? 0.0 : SegmentVoltage(seg, t) + DisturbanceVoltage(t);
   s.i_A = i;
   s.x_m = x;
   s.v_mps = v;
@@ -205,7 +220,7 @@ void Simulator::EmitPendingSample(SimObserver* observer) {
 
 void Simulator::CheckStopRelease(SimObserver* obs) {
   if (!plant_.has_moving_part() || contact_ == Contact::kFree) return;
-  const double f = plant_.NetForceAtRest_N(i_, x_, cond_.supply_pressure_Pa);
+  const double f = plant_.NetForceAtRest_N(i_, x_, cond_.supply_pressure_Pa) + DisturbanceForce(t_);
   if (contact_ == Contact::kLower && f > 0.0) {
     contact_ = Contact::kFree;
     v_ = 0.0;
@@ -224,7 +239,7 @@ void Simulator::AdvanceTo(double t_end_s, SimObserver* observer) {
     CheckStopRelease(observer);
     const Segment seg = CurrentSegment();
     const double t_stop = std::min(t_end_s, seg.t_end_s);
-    if (contact_ != Contact::kFree && seg.tau_s == 0.0) {
+    if (contact_ != Contact::kFree && seg.tau_s == 0.0 && !dist_.active()) {
       AdvanceClosedForm(seg, t_stop, observer);
     } else {
       AdvanceOde(seg, t_stop, observer);
@@ -305,13 +320,13 @@ void Simulator::AdvanceClosedForm(const Segment& seg, double t_stop, SimObserver
   if (best_ev != Ev::kNone) ApplyEvent(best_ev, seg, obs);
 }
 
-double Simulator::EventFunction(Ev ev, const Segment& seg, double i, double x, double v) const {
+double Simulator::EventFunction(Ev ev, const Segment& seg, double t, double i, double x, double v) const {
   (void)v;
   switch (ev) {
     case Ev::kUpper: return (x_hi_ - x) * inv_x_scale_;
     case Ev::kLower: return (x - x_lo_) * inv_x_scale_;
     case Ev::kLeaveStop: {
-      const double f = plant_.NetForceAtRest_N(i, x_, cond_.supply_pressure_Pa);
+      const double f = plant_.NetForceAtRest_N(i, x_, cond_.supply_pressure_Pa) + DisturbanceForce(t);
       return contact_ == Contact::kLower ? -f : f;
     }
     case Ev::kClamp: return seg.clamp * i;
@@ -329,7 +344,7 @@ void Simulator::AdvanceOde(const Segment& seg, double t_stop, SimObserver* obs) 
   auto rhs = [&plant, &seg, &self, frozen, pressure](const State& y, State& dy, double t) {
     double i, x, v;
     self.Unscale(y, &i, &x, &v);
-    const double vc = seg.blocked ? 0.0 : self.SegmentVoltage(seg, t);
+    const double vc = seg.blocked ? 0.0 : self.SegmentVoltage(seg, t) + self.DisturbanceVoltage(t);
     dy[0] = seg.blocked ? 0.0 : plant.CurrentRate_A_per_s(i, x, frozen ? 0.0 : v, vc);
     dy[3] = vc * vc;
     dy[4] = seg.blocked ? 0.0 : vc * i;
@@ -338,7 +353,8 @@ void Simulator::AdvanceOde(const Segment& seg, double t_stop, SimObserver* obs) 
       dy[2] = 0.0;
     } else {
       dy[1] = v * self.inv_x_scale_;
-      dy[2] = plant.Acceleration_mps2(i, x, v, pressure) * self.inv_v_scale_;
+      dy[2] = (plant.Acceleration_mps2(i, x, v, pressure) + self.DisturbanceForce(t) / plant.params().m_kg) *
+              self.inv_v_scale_;
     }
   };
 
@@ -366,7 +382,7 @@ void Simulator::AdvanceOde(const Segment& seg, double t_stop, SimObserver* obs) 
     stepper_.calc_state(t, y);
     double i, x, v;
     Unscale(y, &i, &x, &v);
-    return EventFunction(ev, seg, i, x, v);
+    return EventFunction(ev, seg, t, i, x, v);
   };
   // Illinois (modified regula falsi) on the dense output: g(lo) > 0 >= g(hi); returns the first instant
   // with g <= 0, to event_time_tol_s.
@@ -411,9 +427,9 @@ void Simulator::AdvanceOde(const Segment& seg, double t_stop, SimObserver* obs) 
     Ev best_ev = Ev::kNone;
     for (int k = 0; k < n_events; ++k) {
       const Ev ev = events[k];
-      const double gb = EventFunction(ev, seg, ib, xb, vb);
+      const double gb = EventFunction(ev, seg, b, ib, xb, vb);
       if (gb > 0.0) continue;
-      double ga = EventFunction(ev, seg, i_, x_, v_);
+      double ga = EventFunction(ev, seg, a, i_, x_, v_);
       double lo = a;
       if (!(ga > 0.0)) {
         // Started exactly on the surface (just lifted, released, ...): look for the instant it leaves it.
@@ -478,7 +494,7 @@ void Simulator::ApplyEvent(Ev ev, const Segment& seg, SimObserver* obs) {
     case Ev::kUpper: {
       x_ = x_hi_;
       v_ = 0.0;
-      const double f = plant_.NetForceAtRest_N(i_, x_, cond_.supply_pressure_Pa);
+      const double f = plant_.NetForceAtRest_N(i_, x_, cond_.supply_pressure_Pa) + DisturbanceForce(t_);
       contact_ = f >= 0.0 ? Contact::kUpper : Contact::kFree;  // perfectly inelastic stop
       kind = EventKind::kOpen;
       break;
@@ -486,7 +502,7 @@ void Simulator::ApplyEvent(Ev ev, const Segment& seg, SimObserver* obs) {
     case Ev::kLower: {
       x_ = x_lo_;
       v_ = 0.0;
-      const double f = plant_.NetForceAtRest_N(i_, x_, cond_.supply_pressure_Pa);
+      const double f = plant_.NetForceAtRest_N(i_, x_, cond_.supply_pressure_Pa) + DisturbanceForce(t_);
       contact_ = f <= 0.0 ? Contact::kLower : Contact::kFree;
       kind = EventKind::kClose;
       break;

@@ -62,6 +62,15 @@ class SimObserver {
   virtual void OnEvent(EventKind /*kind*/, double /*t_s*/, double /*i_A*/, double /*x_m*/, double /*v_mps*/) {}
 };
 
+// Additive disturbances for robustness runs (seed 002 IV.D, eq. 14): a sinusoidal voltage in series with the
+// coil while it conducts, and a sinusoidal force on the spool (eq. 14's "33 sin wt" is that force over M).
+struct Disturbance {
+  double voltage_V = 0.0;      // amplitude
+  double force_N = 0.0;        // amplitude
+  double frequency_Hz = 0.0;   // common frequency; 0 = constant offsets
+  bool active() const { return voltage_V != 0.0 || force_N != 0.0; }
+};
+
 struct SolverOptions {
   double rel_tol = 1e-9;           // Dormand-Prince relative tolerance
   double abs_tol = 1e-10;          // absolute tolerance on the scaled states (i in A, x and v in units of travel)
@@ -81,6 +90,8 @@ class Simulator {
   // Changes the gate at the current time. The caller guarantees the driver accepts the level.
   void SetGate(int gate);
   void SetConditions(const Conditions& conditions);
+  // With a disturbance every piece is integrated (the closed form assumes a constant coil voltage).
+  void SetDisturbance(const Disturbance& disturbance);
   // Integrates to t_end_s, reporting samples with t_k in [t, t_end_s) and events in (t, t_end_s].
   void AdvanceTo(double t_end_s, SimObserver* observer);
   // Emits the sample at the current time if it lies on the grid and has not been emitted (end of a run).
@@ -128,7 +139,9 @@ class Simulator {
   void AdvanceOde(const Segment& seg, double t_stop, SimObserver* obs);
   void ApplyEvent(Ev ev, const Segment& seg, SimObserver* obs);
   void CheckStopRelease(SimObserver* obs);
-  double EventFunction(Ev ev, const Segment& seg, double i, double x, double v) const;
+  double EventFunction(Ev ev, const Segment& seg, double t, double i, double x, double v) const;
+  double DisturbanceVoltage(double t) const;
+  double DisturbanceForce(double t) const;
   double SampleTime(std::int64_t k) const { return static_cast<double>(k) * sample_period_s_; }
   void EmitSample(const Segment& seg, double t, double i, double x, double v, double v2_int, double vi_int,
                   SimObserver* obs) const;
@@ -145,6 +158,7 @@ class Simulator {
   DriverParams driver_;
   Conditions cond_;
   SolverOptions opt_;
+  Disturbance dist_;
   double x_lo_, x_hi_, x_scale_, inv_x_scale_, v_scale_, inv_v_scale_;
 
   double t_ = 0.0, i_ = 0.0, x_ = 0.0, v_ = 0.0;

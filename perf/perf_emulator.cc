@@ -75,10 +75,7 @@ int main() {
 
     // Level 1: the bare simulator driven by the bench's PWM peripheral, samples into memory.
     {
-      vb::hw::EmulatedBenchOptions opts;
-      opts.plant = e->plant;
-      opts.driver = e->driver;
-      vb::hw::EmulatedBench bench(opts);
+      vb::hw::EmulatedBench bench(vb::experiment::EmulatedBenchFor(*e));
       std::vector<double> times;
       double err = NAN;
       std::uint64_t steps = 0, restarts = 0;

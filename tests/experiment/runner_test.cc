@@ -20,10 +20,7 @@ struct Ran {
 Ran RunSpec(const ExperimentSpec& spec) {
   auto e = BuildExperiment(spec);
   EXPECT_TRUE(e.ok()) << e.status().message();
-  hw::EmulatedBenchOptions opts;
-  opts.plant = e->plant;
-  opts.driver = e->driver;
-  hw::EmulatedBench bench(opts);
+  hw::EmulatedBench bench(EmulatedBenchFor(*e));
   Ran r;
   r.summary = Runner::Run(*e, bench, &r.trace);
   return r;
@@ -70,9 +67,7 @@ TEST(Runner, CancelStopsTheRunAndLeavesTheBenchSafe) {
   ASSERT_TRUE(spec.ok());
   auto e = BuildExperiment(*spec);
   ASSERT_TRUE(e.ok());
-  hw::EmulatedBenchOptions opts;
-  opts.plant = e->plant;
-  hw::EmulatedBench bench(opts);
+  hw::EmulatedBench bench(EmulatedBenchFor(*e));
   std::atomic<bool> cancel{true};
   Trace trace;
   RunSummary s = Runner::Run(*e, bench, &trace, &cancel);

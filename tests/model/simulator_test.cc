@@ -175,3 +175,33 @@ TEST(Simulator, RunningIntegralsThroughMovingPieces) {
 
 }  // namespace
 }  // namespace vb::model
+
+namespace vb::model {
+namespace {
+
+TEST(Disturbance, ConstantVoltageShiftsTheSteadyCurrent) {
+  Plant plant(*Preset("ts98_coil"));
+  Simulator sim(plant, DriverParams{}, Conditions{24.0, 0.0});
+  sim.SetDisturbance(Disturbance{3.0, 0.0, 0.0});
+  sim.SetGate(1);
+  sim.AdvanceTo(0.3, nullptr);  // 26 time constants
+  EXPECT_NEAR(sim.i_A(), 27.0 / 28.5, 1e-9);
+}
+
+TEST(Disturbance, ForceAloneOpensTheValveWithoutCurrent) {
+  Plant plant(*Preset("taghizadeh2009"));
+  Simulator sim(plant, DriverParams{}, Conditions{24.0, 0.0});
+  // Spring preload k delta = 11 N; at x_max the spring needs 14.3 N: a constant 20 N opens the valve.
+  sim.SetDisturbance(Disturbance{0.0, 20.0, 0.0});
+  vb::testing::Recording rec;
+  sim.AdvanceTo(0.02, &rec);
+  ASSERT_GE(rec.events.size(), 2u);
+  EXPECT_EQ(rec.events[0].kind, EventKind::kLift);
+  EXPECT_EQ(rec.events[0].t_s, 0.0);
+  EXPECT_EQ(rec.events[1].kind, EventKind::kOpen);
+  EXPECT_EQ(sim.i_A(), 0.0);
+  EXPECT_EQ(sim.contact(), Contact::kUpper);
+}
+
+}  // namespace
+}  // namespace vb::model
