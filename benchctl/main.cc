@@ -186,8 +186,28 @@ int CmdCompare(const std::string& input, bool local, bool json, bool csv) {
   return PrintComparison(vb::experiment::Compare(records), json, csv);
 }
 
+// One CSV row per run: identity, status, and every metric (empty where not applicable).
+void PrintCsv(const std::vector<vb::benchctl::LocalRunResult>& results) {
+  std::printf("name,controller,status,duration_s,samples,wall_s");
+  for (const auto& [name, value] : vb::experiment::MetricList(vb::experiment::Metrics{})) std::printf(",%s", name.c_str());
+  std::printf("\n");
+  for (const auto& r : results) {
+    std::printf("\"%s\",%s,%s,%.9g,%zu,%.6g", r.name.c_str(), r.controller.c_str(),
+                vb::experiment::TerminationName(r.summary.termination), r.summary.duration_s, r.summary.samples,
+                r.summary.wall_s);
+    for (const auto& [name, value] : vb::experiment::MetricList(r.summary.metrics)) {
+      if (std::isfinite(value)) {
+        std::printf(",%.10g", value);
+      } else {
+        std::printf(",");
+      }
+    }
+    std::printf("\n");
+  }
+}
+
 int CmdRun(const std::string& spec_path, bool local, const std::string& server, const std::string& trace_csv,
-           bool json, bool realtime) {
+           bool json, bool csv, bool realtime) {
   if (!local) {
     return Fail(Status::FailedPrecondition(
         "no server given: use --local to run on the embedded emulator" +
@@ -208,11 +228,13 @@ int CmdRun(const std::string& spec_path, bool local, const std::string& server, 
     }
     if (json) {
       all.push_back(SummaryJson(r));
-    } else {
+    } else if (!csv) {
       PrintHuman(r);
     }
   }
-  if (json) {
+  if (csv && !json) {
+    PrintCsv(*results);
+  } else if (json) {
     std::cout << (all.size() == 1 ? all[0] : all).dump(2) << "\n";
   } else if (results->size() > 1) {
     std::cout << "\n" << vb::experiment::ComparisonTable(vb::experiment::Compare(Records(*results)));
@@ -239,6 +261,8 @@ int main(int argc, char** argv) {
   run->add_option("--trace-csv", trace_csv, "write the recorded channels as CSV (sweeps: FILE-<n>.csv)");
   run->add_flag("--realtime", realtime, "pace the run to the wall clock and report loop jitter");
   run->add_flag("--json", json, "print the summary as JSON");
+  bool run_csv = false;
+  run->add_flag("--csv", run_csv, "print one CSV row of metrics per run");
 
   std::string compare_input;
   bool compare_local = false, csv = false;
@@ -254,7 +278,7 @@ int main(int argc, char** argv) {
     const int rc = app.exit(e);
     return rc == 0 ? 0 : kExitBadInput;
   }
-  if (run->parsed()) return CmdRun(spec_path, local, server, trace_csv, json, realtime);
+  if (run->parsed()) return CmdRun(spec_path, local, server, trace_csv, json, run_csv, realtime);
   if (compare->parsed()) return CmdCompare(compare_input, compare_local, json, csv);
   return kExitBadInput;
 }

@@ -1,5 +1,8 @@
 #include "experiment/controllers.h"
 
+#include <string_view>
+#include <utility>
+
 #include "control/cascade_pi_position.h"
 #include "control/dither_planner.h"
 #include "control/peak_and_hold.h"
@@ -31,6 +34,22 @@ StatusOr<control::LungeSolenoidModel> LungeNominal(const model::PlantParams& pla
   m.overlap_length_m = plant.a_m;
   m.coil_resistance_ohm = plant.R_ohm;
   return m;
+}
+
+using FieldMap = std::initializer_list<std::pair<std::string_view, std::string_view>>;
+
+// A law validates its own C++ parameters ("pi.carrier_Hz: must be > 0"); the user wrote the spec. Rewrites the
+// message to the spec's field path ("controller.pi_current.carrier_Hz: must be > 0").
+Status InSpec(const Status& st, std::string_view law, std::string_view law_prefix, FieldMap fields) {
+  if (st.ok()) return st;
+  std::string msg = st.message();
+  if (!law_prefix.empty() && msg.rfind(law_prefix, 0) == 0) msg = msg.substr(law_prefix.size());
+  const size_t colon = msg.find(':');
+  const std::string param = msg.substr(0, colon);
+  const std::string rest = colon == std::string::npos ? "" : msg.substr(colon);
+  for (const auto& [cpp, spec] : fields)
+    if (param == cpp) return Status::InvalidArgument("controller." + std::string(law) + "." + std::string(spec) + rest);
+  return Status::InvalidArgument("controller." + std::string(law) + ": " + msg);
 }
 
 }  // namespace
@@ -86,7 +105,11 @@ StatusOr<BuiltController> BuildController(const valvebench::v1::ExperimentSpec& 
         return Status::InvalidArgument("controller.dither_pwm.method: '" + d.method() +
                                        "' is not one of exact, approximate");
       }
-      if (!plan.ok()) return plan.status().InField("controller");
+      if (!plan.ok())
+        return InSpec(plan.status(), "dither_pwm", "dither.",
+                      {{"amplitude_A", "dither_amplitude_A"}, {"average_current_A", "average_current_A"},
+                       {"frequency_min_Hz", "min_frequency_Hz"}, {"frequency_max_Hz", "max_frequency_Hz"},
+                       {"duty_min", "min_duty"}, {"duty_max", "max_duty"}});
       std::vector<control::PwmSegment> segs = {{0.0, plan->frequency_Hz, plan->duty}};
       out.breakpoints_s.push_back(0.0);
       out.pwm_period_s = 1.0 / plan->frequency_Hz;
@@ -99,7 +122,8 @@ StatusOr<BuiltController> BuildController(const valvebench::v1::ExperimentSpec& 
       control::HysteresisCurrentParams p;
       if (h.band_a() != 0.0) p.band_A = h.band_a();
       if (h.sample_period_s() != 0.0) p.period_s = h.sample_period_s();
-      VB_RETURN_IF_ERROR(control::HysteresisCurrent::Validate(p).InField("controller"));
+      VB_RETURN_IF_ERROR(InSpec(control::HysteresisCurrent::Validate(p), "hysteresis_current", "hysteresis.",
+                                {{"band_A", "band_A"}, {"period_s", "sample_period_s"}}));
       out.controller = std::make_unique<control::HysteresisCurrent>(p);
       out.controlled = ControlledVariable::kCurrent;
       return out;
@@ -111,7 +135,9 @@ StatusOr<BuiltController> BuildController(const valvebench::v1::ExperimentSpec& 
       if (c.ki_v_per_a_s() != 0.0) p.ki_V_per_As = c.ki_v_per_a_s();
       if (c.carrier_hz() != 0.0) p.carrier_Hz = c.carrier_hz();
       if (c.has_feedforward_r_ohm()) p.feedforward_R_ohm = c.feedforward_r_ohm();
-      VB_RETURN_IF_ERROR(control::PiCurrent::Validate(p).InField("controller"));
+      VB_RETURN_IF_ERROR(InSpec(control::PiCurrent::Validate(p), "pi_current", "pi.",
+                                {{"kp_V_per_A", "kp_V_per_A"}, {"ki_V_per_As", "ki_V_per_A_s"},
+                                 {"carrier_Hz", "carrier_Hz"}, {"feedforward_R_ohm", "feedforward_R_ohm"}}));
       out.controller = std::make_unique<control::PiCurrent>(p);
       out.controlled = ControlledVariable::kCurrent;
       return out;
@@ -125,7 +151,9 @@ StatusOr<BuiltController> BuildController(const valvebench::v1::ExperimentSpec& 
       if (c.r_ohm() != 0.0) p.R_ohm = c.r_ohm();
       if (c.l_h() != 0.0) p.L_H = c.l_h();
       if (c.carrier_hz() != 0.0) p.carrier_Hz = c.carrier_hz();
-      VB_RETURN_IF_ERROR(control::PredictiveCurrent::Validate(p).InField("controller"));
+      VB_RETURN_IF_ERROR(InSpec(control::PredictiveCurrent::Validate(p), "predictive_current", "predictive.",
+                                {{"h_s", "horizon_s"}, {"w_I_per_A2", "w_current"}, {"w_v_per_V2", "w_voltage"},
+                                 {"R_ohm", "R_ohm"}, {"L_H", "L_H"}, {"carrier_Hz", "carrier_Hz"}}));
       out.controller = std::make_unique<control::PredictiveCurrent>(p);
       out.controlled = ControlledVariable::kCurrent;
       return out;
@@ -138,7 +166,10 @@ StatusOr<BuiltController> BuildController(const valvebench::v1::ExperimentSpec& 
       if (c.output_scale_v() != 0.0) p.output_step_V = c.output_scale_v();
       if (c.carrier_hz() != 0.0) p.carrier_Hz = c.carrier_hz();
       if (c.has_feedforward_r_ohm()) p.feedforward_R_ohm = c.feedforward_r_ohm();
-      VB_RETURN_IF_ERROR(control::FuzzyCurrent::Validate(p).InField("controller"));
+      VB_RETURN_IF_ERROR(InSpec(control::FuzzyCurrent::Validate(p), "fuzzy_current", "fuzzy.",
+                                {{"error_scale_A", "error_scale_A"}, {"rate_scale_A_per_s", "rate_scale_A_per_s"},
+                                 {"output_step_V", "output_scale_V"}, {"carrier_Hz", "carrier_Hz"},
+                                 {"feedforward_R_ohm", "feedforward_R_ohm"}}));
       out.controller = std::make_unique<control::FuzzyCurrent>(p);
       out.controlled = ControlledVariable::kCurrent;
       return out;
@@ -157,7 +188,10 @@ StatusOr<BuiltController> BuildController(const valvebench::v1::ExperimentSpec& 
       if (c.kp_current() != 0.0) p.current_kp_V_per_A = c.kp_current();
       if (c.ki_current() != 0.0) p.current_ki_V_per_A_s = c.ki_current();
       if (c.carrier_hz() != 0.0) p.carrier_Hz = c.carrier_hz();
-      VB_RETURN_IF_ERROR(control::CascadePiPosition::Validate(p).InField("controller"));
+      VB_RETURN_IF_ERROR(InSpec(control::CascadePiPosition::Validate(p), "cascade_pi_position", "",
+                                {{"position_kp_N_per_m", "kp_position"}, {"position_ki_N_per_m_s", "ki_position"},
+                                 {"current_kp_V_per_A", "kp_current"}, {"current_ki_V_per_A_s", "ki_current"},
+                                 {"carrier_Hz", "carrier_Hz"}}));
       out.controller = std::make_unique<control::CascadePiPosition>(p);
       out.controlled = ControlledVariable::kPosition;
       return out;
@@ -177,7 +211,10 @@ StatusOr<BuiltController> BuildController(const valvebench::v1::ExperimentSpec& 
       if (c.k_current() != 0.0) p.current_reaching_rate_A_per_s = c.k_current();
       if (c.sigmoid_delta() != 0.0) p.current_boundary_layer_A = c.sigmoid_delta();
       if (c.carrier_hz() != 0.0) p.carrier_Hz = c.carrier_hz();
-      VB_RETURN_IF_ERROR(control::SlidingModePosition::Validate(p).InField("controller"));
+      VB_RETURN_IF_ERROR(InSpec(control::SlidingModePosition::Validate(p), "sliding_mode_position", "",
+                                {{"surface_slope_per_s", "c_position"}, {"reaching_gain_SI", "k_position"},
+                                 {"reaching_exponent", "alpha"}, {"current_reaching_rate_A_per_s", "k_current"},
+                                 {"current_boundary_layer_A", "sigmoid_delta"}, {"carrier_Hz", "carrier_Hz"}}));
       out.controller = std::make_unique<control::SlidingModePosition>(p);
       out.controlled = ControlledVariable::kPosition;
       return out;
@@ -193,7 +230,10 @@ StatusOr<BuiltController> BuildController(const valvebench::v1::ExperimentSpec& 
       if (p.reverse_on_release && driver.kind != model::DriverKind::kHBridge)
         return Status::InvalidArgument(
             "controller.peak_and_hold.reverse_on_release: needs an H-bridge driver (bench.driver.kind = h_bridge)");
-      VB_RETURN_IF_ERROR(control::PeakAndHold::Validate(p).InField("controller"));
+      VB_RETURN_IF_ERROR(InSpec(control::PeakAndHold::Validate(p), "peak_and_hold", "",
+                                {{"switching_current_A", "switching_current_A"},
+                                 {"holding_current_A", "holding_current_A"}, {"hold_band_A", "band_A"},
+                                 {"peak_time_max_s", "peak_time_max_s"}}));
       out.controller = std::make_unique<control::PeakAndHold>(p);
       out.controlled = spec.reference().shape_case() == valvebench::v1::ReferenceSpec::SHAPE_NOT_SET
                            ? ControlledVariable::kNone

@@ -56,4 +56,24 @@ TEST(BenchctlCli, BadSpecExitsTwoAndNamesTheField) {
   EXPECT_NE(no_server.out.find("--local"), std::string::npos);
 }
 
+TEST(BenchctlCli, CompareAndCsvOutputs) {
+  Result run = RunBenchctl("run --local " + Example("dither.json") + " --csv");
+  ASSERT_EQ(run.exit_code, 0) << run.out;
+  EXPECT_EQ(run.out.rfind("name,controller,status", 0), 0u) << run.out;
+  size_t rows = 0;
+  for (size_t p = run.out.find('\n'); p != std::string::npos; p = run.out.find('\n', p + 1)) ++rows;
+  EXPECT_EQ(rows, 5u) << "header + 4 sweep points";
+
+  const std::string results = ::testing::TempDir() + "/runs.json";
+  Result json = RunBenchctl("run --local " + Example("dither.json") + " --json > " + results);
+  ASSERT_EQ(json.exit_code, 0) << json.out;
+  Result cmp = RunBenchctl("compare " + results + " --csv");
+  ASSERT_EQ(cmp.exit_code, 0) << cmp.out;
+  EXPECT_EQ(cmp.out.rfind("rank,name,controller", 0), 0u) << cmp.out;
+
+  Result bad = RunBenchctl("compare " + Example("standard/e1.json"));
+  EXPECT_EQ(bad.exit_code, 2) << bad.out;
+  EXPECT_NE(bad.out.find("metrics"), std::string::npos) << bad.out;
+}
+
 }  // namespace

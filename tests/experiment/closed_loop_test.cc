@@ -176,3 +176,45 @@ TEST(PositionLawOnEmulator, SlidingModeRejectsTheMatchedDisturbance) {
 
 }  // namespace
 }  // namespace vb::experiment
+
+namespace vb::experiment {
+namespace {
+
+// Seed 003 on the emulated ts98_coil: the planned (f, D) gives the requested mid-range current and
+// peak-to-peak dither in steady state (examples/dither.json).
+TEST(DitherOnEmulator, PlannedPwmGivesTheRequestedAverageAndAmplitude) {
+  auto spec = LoadSpecFile(std::string(VB_SOURCE_DIR) + "/examples/dither.json");
+  ASSERT_TRUE(spec.ok()) << spec.status().message();
+  auto runs = ExpandSweep(*spec);
+  ASSERT_TRUE(runs.ok());
+  ASSERT_EQ(runs->size(), 4u);
+  for (const auto& r : *runs) {
+    const double want_avg = r.controller().dither_pwm().average_current_a();
+    auto e = BuildExperiment(r);
+    ASSERT_TRUE(e.ok()) << e.status().message();
+    hw::EmulatedBench bench(EmulatedBenchFor(*e));
+    Trace trace;
+    ASSERT_TRUE(Runner::Run(*e, bench, &trace).ok());
+    double lo = 1e9, hi = -1e9;
+    for (size_t k = 0; k < trace.size(); ++k)
+      if (trace.t_s[k] >= 0.25) {
+        lo = std::min(lo, trace.i_A[k]);
+        hi = std::max(hi, trace.i_A[k]);
+      }
+    // Sampled at 100 kHz, the extremes are within one sample's slope of the true ones.
+    EXPECT_NEAR((hi + lo) / 2, want_avg, 0.01 * want_avg) << want_avg;
+    EXPECT_NEAR(hi - lo, 0.05, 0.002) << want_avg;
+  }
+}
+
+TEST(DitherOnEmulator, InfeasibleRequestIsRejectedNamingTheField) {
+  auto spec = ParseSpecJson(R"({"duration_s": 0.1, "bench": {"model": {"preset": "ts98_coil"}},
+      "controller": {"dither_pwm": {"average_current_A": 0.1, "dither_amplitude_A": 0.2}}})");
+  ASSERT_TRUE(spec.ok());
+  auto e = BuildExperiment(*spec);
+  ASSERT_FALSE(e.ok());
+  EXPECT_NE(e.status().message().find("controller.dither"), std::string::npos) << e.status().message();
+}
+
+}  // namespace
+}  // namespace vb::experiment

@@ -108,3 +108,30 @@ TEST(Perturbation, ScalesModelParameters) {
 
 }  // namespace
 }  // namespace vb::experiment
+
+namespace vb::experiment {
+namespace {
+
+// A law's own parameter errors are reported at the spec's field path, the one the user wrote.
+TEST(Spec, ControllerErrorsNameTheSpecField) {
+  const std::string coil = R"("bench": {"model": {"preset": "ts98_coil"}}, "reference": {"constant": {"value": 0.5}})";
+  const std::string lunge = R"("bench": {"model": {"preset": "lunge2013"}}, "conditions": {"supply_V": 230},
+                               "reference": {"constant": {"value": 0.001}})";
+  const std::pair<std::string, std::string> cases[] = {
+      {coil + R"(, "controller": {"hysteresis_current": {"band_A": -1}})", "controller.hysteresis_current.band_A"},
+      {coil + R"(, "controller": {"pi_current": {"carrier_Hz": -5}})", "controller.pi_current.carrier_Hz"},
+      {coil + R"(, "controller": {"predictive_current": {"horizon_s": -1}})", "controller.predictive_current.horizon_s"},
+      {coil + R"(, "controller": {"fuzzy_current": {"error_scale_A": -1}})", "controller.fuzzy_current.error_scale_A"},
+      {coil + R"(, "controller": {"peak_and_hold": {"holding_current_A": -1}})",
+       "controller.peak_and_hold.holding_current_A"},
+      {coil + R"(, "controller": {"dither_pwm": {"average_current_A": 0.1, "dither_amplitude_A": 0.2}})",
+       "controller.dither_pwm.dither_amplitude_A"},
+      {lunge + R"(, "controller": {"cascade_pi_position": {"kp_position": -1}})",
+       "controller.cascade_pi_position.kp_position"},
+      {lunge + R"(, "controller": {"sliding_mode_position": {"alpha": 2}})", "controller.sliding_mode_position.alpha"},
+  };
+  for (const auto& [body, field] : cases) ExpectErrorNames(R"({"duration_s": 0.1, )" + body + "}", field);
+}
+
+}  // namespace
+}  // namespace vb::experiment
