@@ -1,4 +1,5 @@
 #include "control/cascade_pi_position.h"
+#include "control/param_check.h"
 
 #include <cmath>
 #include <cstdlib>
@@ -6,18 +7,6 @@
 
 namespace vb::control {
 namespace {
-
-Status CheckPositive(std::string_view prefix, std::string_view field, double v) {
-  if (std::isfinite(v) && v > 0.0) return Status::Ok();
-  return Status::InvalidArgument(std::string(prefix) + std::string(field) + ": must be finite and > 0, got " +
-                                 std::to_string(v));
-}
-
-Status CheckNonNegative(std::string_view prefix, std::string_view field, double v) {
-  if (std::isfinite(v) && v >= 0.0) return Status::Ok();
-  return Status::InvalidArgument(std::string(prefix) + std::string(field) + ": must be finite and >= 0, got " +
-                                 std::to_string(v));
-}
 
 double Clamp(double v, double lo, double hi) { return v < lo ? lo : (v > hi ? hi : v); }
 

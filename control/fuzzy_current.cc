@@ -1,4 +1,5 @@
 #include "control/fuzzy_current.h"
+#include "control/param_check.h"
 
 #include <cmath>
 #include <cstdio>
@@ -6,22 +7,6 @@
 
 namespace vb::control {
 namespace {
-
-std::string Num(double v) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%g", v);
-  return buf;
-}
-
-Status Positive(const char* field, double v) {
-  if (std::isfinite(v) && v > 0.0) return Status::Ok();
-  return Status::InvalidArgument(std::string("fuzzy.") + field + ": must be > 0, got " + Num(v));
-}
-
-Status NonNegative(const char* field, double v) {
-  if (std::isfinite(v) && v >= 0.0) return Status::Ok();
-  return Status::InvalidArgument(std::string("fuzzy.") + field + ": must be >= 0, got " + Num(v));
-}
 
 double Clamp(double x, double lo, double hi) { return x < lo ? lo : (x > hi ? hi : x); }
 
@@ -36,12 +21,12 @@ double SegmentMu(double a_fall, double a_rise, double s) {
 }  // namespace
 
 Status FuzzyCurrent::Validate(const Params& p) {
-  VB_RETURN_IF_ERROR(Positive("error_scale_A", p.error_scale_A));
-  VB_RETURN_IF_ERROR(Positive("rate_scale_A_per_s", p.rate_scale_A_per_s));
-  VB_RETURN_IF_ERROR(NonNegative("rate_filter_tau_s", p.rate_filter_tau_s));
-  VB_RETURN_IF_ERROR(Positive("output_step_V", p.output_step_V));
-  VB_RETURN_IF_ERROR(NonNegative("feedforward_R_ohm", p.feedforward_R_ohm));
-  VB_RETURN_IF_ERROR(Positive("carrier_Hz", p.carrier_Hz));
+  VB_RETURN_IF_ERROR(CheckPositive("fuzzy.", "error_scale_A", p.error_scale_A));
+  VB_RETURN_IF_ERROR(CheckPositive("fuzzy.", "rate_scale_A_per_s", p.rate_scale_A_per_s));
+  VB_RETURN_IF_ERROR(CheckNonNegative("fuzzy.", "rate_filter_tau_s", p.rate_filter_tau_s));
+  VB_RETURN_IF_ERROR(CheckPositive("fuzzy.", "output_step_V", p.output_step_V));
+  VB_RETURN_IF_ERROR(CheckNonNegative("fuzzy.", "feedforward_R_ohm", p.feedforward_R_ohm));
+  VB_RETURN_IF_ERROR(CheckPositive("fuzzy.", "carrier_Hz", p.carrier_Hz));
   return Status::Ok();
 }
 

@@ -1,28 +1,14 @@
 #include "control/hysteresis_current.h"
+#include "control/param_check.h"
 
 #include <cmath>
 #include <cstdio>
 #include <string>
 
 namespace vb::control {
-namespace {
-
-std::string Num(double v) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%g", v);
-  return buf;
-}
-
-Status MustBePositive(const char* field, double v) {
-  if (std::isfinite(v) && v > 0.0) return Status::Ok();
-  return Status::InvalidArgument(std::string("hysteresis.") + field + ": must be > 0, got " + Num(v));
-}
-
-}  // namespace
-
 Status HysteresisCurrent::Validate(const Params& p) {
-  VB_RETURN_IF_ERROR(MustBePositive("band_A", p.band_A));
-  VB_RETURN_IF_ERROR(MustBePositive("period_s", p.period_s));
+  VB_RETURN_IF_ERROR(CheckPositive("hysteresis.", "band_A", p.band_A));
+  VB_RETURN_IF_ERROR(CheckPositive("hysteresis.", "period_s", p.period_s));
   return Status::Ok();
 }
 

@@ -1,25 +1,17 @@
 #include "control/peak_and_hold.h"
+#include "control/param_check.h"
 
 #include <cmath>
 #include <cstdlib>
 #include <string>
 
 namespace vb::control {
-namespace {
-
-Status CheckPositive(std::string_view field, double v) {
-  if (std::isfinite(v) && v > 0.0) return Status::Ok();
-  return Status::InvalidArgument(std::string(field) + ": must be finite and > 0, got " + std::to_string(v));
-}
-
-}  // namespace
-
 Status PeakAndHold::Validate(const Params& p) {
-  VB_RETURN_IF_ERROR(CheckPositive("tick_period_s", p.tick_period_s));
-  VB_RETURN_IF_ERROR(CheckPositive("switching_current_A", p.switching_current_A));
-  VB_RETURN_IF_ERROR(CheckPositive("peak_time_max_s", p.peak_time_max_s));
-  VB_RETURN_IF_ERROR(CheckPositive("holding_current_A", p.holding_current_A));
-  VB_RETURN_IF_ERROR(CheckPositive("hold_band_A", p.hold_band_A));
+  VB_RETURN_IF_ERROR(CheckPositive("", "tick_period_s", p.tick_period_s));
+  VB_RETURN_IF_ERROR(CheckPositive("", "switching_current_A", p.switching_current_A));
+  VB_RETURN_IF_ERROR(CheckPositive("", "peak_time_max_s", p.peak_time_max_s));
+  VB_RETURN_IF_ERROR(CheckPositive("", "holding_current_A", p.holding_current_A));
+  VB_RETURN_IF_ERROR(CheckPositive("", "hold_band_A", p.hold_band_A));
   if (!(p.switching_current_A > p.holding_current_A)) {
     return Status::InvalidArgument("switching_current_A: must be > holding_current_A (" +
                                    std::to_string(p.holding_current_A) + "), got " +

@@ -1,4 +1,5 @@
 #include "control/pi_current.h"
+#include "control/param_check.h"
 
 #include <cmath>
 #include <cstdio>
@@ -7,15 +8,9 @@
 namespace vb::control {
 namespace {
 
-std::string Num(double v) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%g", v);
-  return buf;
-}
-
 Status Check(bool ok, const char* field, const char* problem, double v) {
   if (ok) return Status::Ok();
-  return Status::InvalidArgument(std::string("pi.") + field + ": " + problem + ", got " + Num(v));
+  return Status::InvalidArgument(std::string("pi.") + field + ": " + problem + ", got " + FormatNumber(v));
 }
 
 }  // namespace

@@ -1,4 +1,5 @@
 #include "control/predictive_current.h"
+#include "control/param_check.h"
 
 #include <cmath>
 #include <cstdio>
@@ -9,37 +10,21 @@ namespace {
 
 constexpr double kMu0 = 4.0e-7 * 3.14159265358979323846;  // [H/m]
 
-std::string Num(double v) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%g", v);
-  return buf;
-}
-
-Status Positive(const char* field, double v) {
-  if (std::isfinite(v) && v > 0.0) return Status::Ok();
-  return Status::InvalidArgument(std::string("predictive.") + field + ": must be > 0, got " + Num(v));
-}
-
-Status NonNegative(const char* field, double v) {
-  if (std::isfinite(v) && v >= 0.0) return Status::Ok();
-  return Status::InvalidArgument(std::string("predictive.") + field + ": must be >= 0, got " + Num(v));
-}
-
 }  // namespace
 
 Status PredictiveCurrent::Validate(const Params& p) {
-  VB_RETURN_IF_ERROR(Positive("h_s", p.h_s));
-  VB_RETURN_IF_ERROR(Positive("w_I_per_A2", p.w_I_per_A2));
-  VB_RETURN_IF_ERROR(NonNegative("w_v_per_V2", p.w_v_per_V2));
-  VB_RETURN_IF_ERROR(NonNegative("R_ohm", p.R_ohm));
-  VB_RETURN_IF_ERROR(Positive("L_H", p.L_H));
-  VB_RETURN_IF_ERROR(Positive("carrier_Hz", p.carrier_Hz));
+  VB_RETURN_IF_ERROR(CheckPositive("predictive.", "h_s", p.h_s));
+  VB_RETURN_IF_ERROR(CheckPositive("predictive.", "w_I_per_A2", p.w_I_per_A2));
+  VB_RETURN_IF_ERROR(CheckNonNegative("predictive.", "w_v_per_V2", p.w_v_per_V2));
+  VB_RETURN_IF_ERROR(CheckNonNegative("predictive.", "R_ohm", p.R_ohm));
+  VB_RETURN_IF_ERROR(CheckPositive("predictive.", "L_H", p.L_H));
+  VB_RETURN_IF_ERROR(CheckPositive("predictive.", "carrier_Hz", p.carrier_Hz));
   if (p.use_measured_position) {
-    VB_RETURN_IF_ERROR(Positive("turns", p.turns));
-    VB_RETURN_IF_ERROR(Positive("core_area_m2", p.core_area_m2));
-    VB_RETURN_IF_ERROR(Positive("core_length_m", p.core_length_m));
-    VB_RETURN_IF_ERROR(Positive("mu_r", p.mu_r));
-    VB_RETURN_IF_ERROR(Positive("total_gap_m", p.total_gap_m));
+    VB_RETURN_IF_ERROR(CheckPositive("predictive.", "turns", p.turns));
+    VB_RETURN_IF_ERROR(CheckPositive("predictive.", "core_area_m2", p.core_area_m2));
+    VB_RETURN_IF_ERROR(CheckPositive("predictive.", "core_length_m", p.core_length_m));
+    VB_RETURN_IF_ERROR(CheckPositive("predictive.", "mu_r", p.mu_r));
+    VB_RETURN_IF_ERROR(CheckPositive("predictive.", "total_gap_m", p.total_gap_m));
   }
   return Status::Ok();
 }

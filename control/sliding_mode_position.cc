@@ -1,4 +1,5 @@
 #include "control/sliding_mode_position.h"
+#include "control/param_check.h"
 
 #include <cmath>
 #include <cstdlib>
@@ -7,26 +8,21 @@
 namespace vb::control {
 namespace {
 
-Status CheckPositive(std::string_view field, double v) {
-  if (std::isfinite(v) && v > 0.0) return Status::Ok();
-  return Status::InvalidArgument(std::string(field) + ": must be finite and > 0, got " + std::to_string(v));
-}
-
 double Clamp(double v, double lo, double hi) { return v < lo ? lo : (v > hi ? hi : v); }
 
 }  // namespace
 
 Status SlidingModePosition::Validate(const Params& p) {
-  VB_RETURN_IF_ERROR(CheckPositive("carrier_Hz", p.carrier_Hz));
-  VB_RETURN_IF_ERROR(CheckPositive("surface_slope_per_s", p.surface_slope_per_s));
-  VB_RETURN_IF_ERROR(CheckPositive("reaching_gain_SI", p.reaching_gain_SI));
+  VB_RETURN_IF_ERROR(CheckPositive("", "carrier_Hz", p.carrier_Hz));
+  VB_RETURN_IF_ERROR(CheckPositive("", "surface_slope_per_s", p.surface_slope_per_s));
+  VB_RETURN_IF_ERROR(CheckPositive("", "reaching_gain_SI", p.reaching_gain_SI));
   if (!(p.reaching_exponent > 0.0 && p.reaching_exponent < 1.0)) {
     return Status::InvalidArgument("reaching_exponent: must be in (0, 1) (eq. 20), got " +
                                    std::to_string(p.reaching_exponent));
   }
-  VB_RETURN_IF_ERROR(CheckPositive("current_reaching_rate_A_per_s", p.current_reaching_rate_A_per_s));
-  VB_RETURN_IF_ERROR(CheckPositive("current_boundary_layer_A", p.current_boundary_layer_A));
-  VB_RETURN_IF_ERROR(CheckPositive("current_limit_A", p.current_limit_A));
+  VB_RETURN_IF_ERROR(CheckPositive("", "current_reaching_rate_A_per_s", p.current_reaching_rate_A_per_s));
+  VB_RETURN_IF_ERROR(CheckPositive("", "current_boundary_layer_A", p.current_boundary_layer_A));
+  VB_RETURN_IF_ERROR(CheckPositive("", "current_limit_A", p.current_limit_A));
   if (!(std::isfinite(p.bridge_diode_drop_V) && p.bridge_diode_drop_V >= 0.0)) {
     return Status::InvalidArgument("bridge_diode_drop_V: must be finite and >= 0, got " +
                                    std::to_string(p.bridge_diode_drop_V));

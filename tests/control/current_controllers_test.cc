@@ -21,20 +21,9 @@
 #include "control/pi_current.h"
 #include "control/predictive_current.h"
 
-// ---- Allocation counter: Step() must not allocate. ----------------------------------------------------------
-namespace {
-std::atomic<long> g_allocations{0};
-}  // namespace
+#include "alloc_counter.h"  // Step() must not allocate; this binary counts allocations
 
-// Replaced global allocation functions (noinline so GCC does not pair the inlined free() with operator new in
-// its -Wmismatched-new-delete analysis).
-[[gnu::noinline]] void* operator new(std::size_t n) {
-  g_allocations.fetch_add(1, std::memory_order_relaxed);
-  if (void* p = std::malloc(n == 0 ? 1 : n)) return p;
-  throw std::bad_alloc();
-}
-[[gnu::noinline]] void operator delete(void* p) noexcept { std::free(p); }
-[[gnu::noinline]] void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+using vb::testing::g_allocations;
 
 namespace vb::control {
 namespace {

@@ -17,18 +17,9 @@
 #include "control/peak_and_hold.h"
 #include "control/sliding_mode_position.h"
 
-// ---- Allocation counter: Step() must not allocate. This binary replaces the global allocation functions, so it
-// must stay its own test executable. noinline keeps GCC's -Wmismatched-new-delete analysis quiet.
-namespace {
-std::atomic<long> g_allocations{0};
-}  // namespace
-[[gnu::noinline]] void* operator new(std::size_t n) {
-  g_allocations.fetch_add(1, std::memory_order_relaxed);
-  if (void* p = std::malloc(n == 0 ? 1 : n)) return p;
-  throw std::bad_alloc();
-}
-[[gnu::noinline]] void operator delete(void* p) noexcept { std::free(p); }
-[[gnu::noinline]] void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+#include "alloc_counter.h"  // Step() must not allocate; this binary counts allocations
+
+using vb::testing::g_allocations;
 
 namespace vb::control {
 namespace {
