@@ -45,7 +45,41 @@ hw::EmulatedBenchOptions EmulatedBenchFor(const Experiment& e) {
   return opts;
 }
 
+namespace {
+
+// Sends each sample to the recorder and to an optional second sink.
+class TeeSink final : public hw::SampleSink {
+ public:
+  TeeSink(hw::SampleSink* a, hw::SampleSink* b) : a_(a), b_(b) {}
+  void OnSample(const hw::BenchSample& s) override {
+    a_->OnSample(s);
+    if (b_ != nullptr) b_->OnSample(s);
+  }
+
+ private:
+  hw::SampleSink* a_;
+  hw::SampleSink* b_;
+};
+
+RunSummary RunImpl(const Experiment& e, hw::Bench& bench, Trace* trace, const std::atomic<bool>* cancel,
+                   std::atomic<double>* progress_t, hw::SampleSink* extra_sink);
+
+}  // namespace
+
 RunSummary Runner::Run(const Experiment& e, hw::Bench& bench, Trace* trace, const std::atomic<bool>* cancel) {
+  return RunImpl(e, bench, trace, cancel, nullptr, nullptr);
+}
+
+RunSummary Runner::Run(const Experiment& e, hw::Bench& bench, Trace* trace, RunMonitor* monitor,
+                       hw::SampleSink* extra_sink) {
+  return RunImpl(e, bench, trace, monitor ? &monitor->cancel : nullptr, monitor ? &monitor->t_s : nullptr,
+                 extra_sink);
+}
+
+namespace {
+
+RunSummary RunImpl(const Experiment& e, hw::Bench& bench, Trace* trace, const std::atomic<bool>* cancel,
+                   std::atomic<double>* progress_t, hw::SampleSink* extra_sink) {
   RunSummary sum;
   const auto wall0 = std::chrono::steady_clock::now();
   trace->Clear();
@@ -60,8 +94,9 @@ RunSummary Runner::Run(const Experiment& e, hw::Bench& bench, Trace* trace, cons
     sum.message = st.message();
   };
 
+  TeeSink tee(&recorder, extra_sink);
   Status st = bench.Configure(e.run);
-  if (st.ok()) st = bench.Start(&recorder);
+  if (st.ok()) st = bench.Start(&tee);
   if (!st.ok()) {
     fail(st, RunSummary::Termination::kFailed);
     return sum;
@@ -88,6 +123,7 @@ RunSummary Runner::Run(const Experiment& e, hw::Bench& bench, Trace* trace, cons
     st = bench.Apply(ctl.Step(m, e.reference.At(t), &state));
     if (!st.ok()) break;
     ++sum.ticks;
+    if (progress_t != nullptr) progress_t->store(t, std::memory_order_relaxed);
     // Next tick: the earliest controller instant or breakpoint after t.
     while (next_bp < bp.size() && bp[next_bp] <= t + 1e-12) ++next_bp;
     while (static_cast<double>(next_ctl) * period <= t + 1e-12) ++next_ctl;
@@ -111,7 +147,10 @@ RunSummary Runner::Run(const Experiment& e, hw::Bench& bench, Trace* trace, cons
   sum.loop = bench.loop_stats();
   sum.metrics = ComputeMetrics(*trace, e.controlled, e.metric_start_s, std::min(e.metric_end_s, sum.duration_s),
                                e.plant.x_min_m, e.plant.x_max_m);
+  if (progress_t != nullptr) progress_t->store(sum.duration_s, std::memory_order_relaxed);
   return sum;
 }
+
+}  // namespace
 
 }  // namespace vb::experiment

@@ -39,11 +39,21 @@ const char* TerminationName(RunSummary::Termination t);
 // Experiment onto EmulatedBenchOptions, so no caller can forget a field.
 hw::EmulatedBenchOptions EmulatedBenchFor(const Experiment& e);
 
+// Lock-free window into a running experiment for another thread (a server worker's monitor): the loop only
+// stores relaxed atomics, never waits.
+struct RunMonitor {
+  std::atomic<bool> cancel{false};   // set by the observer; the loop stops at its next tick
+  std::atomic<double> t_s{0.0};      // experiment time reached, updated every tick
+};
+
 class Runner {
  public:
-  // cancel may be null. The trace is cleared and filled.
+  // cancel may be null. The trace is cleared and filled. `extra_sink`, if given, also receives every sample
+  // (e.g. a live tap); it must not block.
   static RunSummary Run(const Experiment& experiment, hw::Bench& bench, Trace* trace,
                         const std::atomic<bool>* cancel = nullptr);
+  static RunSummary Run(const Experiment& experiment, hw::Bench& bench, Trace* trace, RunMonitor* monitor,
+                        hw::SampleSink* extra_sink);
 };
 
 }  // namespace vb::experiment

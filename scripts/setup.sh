@@ -10,7 +10,7 @@ packages=(
   # toolchain
   g++ cmake ninja-build make pkg-config git ca-certificates
   # RPC and specs
-  libgrpc++-dev libprotobuf-dev protobuf-compiler protobuf-compiler-grpc
+  libgrpc++-dev libprotobuf-dev protobuf-compiler protobuf-compiler-grpc libssl-dev
   # numerics: Eigen for small linear algebra, Boost.Odeint for the dense-output Runge-Kutta stepper,
   # NLopt for bounded fitting in the gap diagnosis
   libeigen3-dev libboost-dev libnlopt-cxx-dev

@@ -1,0 +1,118 @@
+// The SQLite results store: runs with their exact spec, status history, metrics as rows, traces as chunked
+// BLOBs, batches, tags, and the run queue itself (a server that dies loses no queued run).
+//
+// Thread-safety: a Store is used by one thread at a time per connection; the server opens one Store per
+// thread that needs it (SQLite WAL lets readers and one writer proceed concurrently). Every method is a
+// transaction: it either fully happens or not at all (nothing already stored is lost on error).
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "common/status.h"
+
+namespace vb::db {
+
+enum class RunStatus { kQueued, kRunning, kDone, kFailed, kCancelled, kInterrupted };
+const char* RunStatusName(RunStatus s);  // "queued", "running", ...
+StatusOr<RunStatus> ParseRunStatus(const std::string& name);
+
+struct RunRecord {
+  std::int64_t id = 0;
+  std::int64_t batch_id = 0;
+  std::string name;                 // spec name + sweep/repeat tags
+  std::string controller;           // law name, e.g. "pi_current"
+  std::string bench_kind;           // spec's bench selector kind ("emulated", ...)
+  std::string bench_name;           // spec's requested bench ("" = any); after claiming: the bench that ran it
+  std::string spec_json;            // the exact single-run spec, verbatim
+  std::string submitter;            // token's user name
+  std::int32_t priority = 0;        // higher runs first
+  RunStatus status = RunStatus::kQueued;
+  std::string reason;               // why it failed / was cancelled / was interrupted
+  bool requeue_on_interrupt = true; // re-queue after a server crash (spec allows it)
+  double submitted_unix_s = 0.0, started_unix_s = 0.0, finished_unix_s = 0.0;
+  double progress = 0.0;            // 0..1, last reported
+  std::vector<std::string> tags;
+};
+
+struct StatusChange {
+  RunStatus status;
+  double at_unix_s;
+  std::string reason;
+};
+
+struct Metric {
+  std::string name;
+  double value;
+};
+
+// A trace chunk: consecutive samples of all channels, stored as one BLOB (channel-major float64 arrays,
+// `channels` names them in order). Chunks of one run are numbered from 0.
+struct TraceChunk {
+  std::int32_t index = 0;
+  double t0_s = 0.0;
+  double sample_period_s = 0.0;
+  std::int32_t samples = 0;
+  std::vector<std::string> channels;
+  std::vector<double> data;         // channels.size() * samples values, channel-major
+};
+
+struct RunFilter {
+  std::optional<RunStatus> status;
+  std::string tag;                  // runs carrying this tag
+  std::int64_t batch_id = 0;        // 0 = any
+  std::string controller;
+  std::string bench_name;
+  std::string submitter;
+  double submitted_after_unix_s = 0.0;
+  double submitted_before_unix_s = 0.0;  // 0 = no bound
+  std::int64_t after_id = 0;        // paging: runs with id > after_id
+  std::int32_t limit = 100;         // page size (1..1000)
+};
+
+class Store {
+ public:
+  // Opens (creating if needed) the database at path, with WAL, foreign keys and busy timeout on, and migrates
+  // the schema to the current version. ":memory:" works for tests.
+  static StatusOr<std::unique_ptr<Store>> Open(const std::string& path);
+  virtual ~Store() = default;
+
+  virtual int schema_version() const = 0;
+
+  // A batch and its runs, atomically (all queued, or none). Returns the batch id; run ids in order in *run_ids.
+  virtual StatusOr<std::int64_t> SubmitBatch(const std::string& submitter, const std::string& name,
+                                             const std::string& batch_spec_json, std::vector<RunRecord> runs,
+                                             std::vector<std::int64_t>* run_ids) = 0;
+
+  // Queue: atomically picks the queued run with the highest priority, then the oldest (lowest id), whose
+  // bench_kind equals `bench_kind` (or is empty) and whose bench_name is empty or equals `bench_name`; marks it
+  // running on bench_name. nullopt when none is waiting.
+  virtual StatusOr<std::optional<RunRecord>> ClaimNext(const std::string& bench_kind,
+                                                       const std::string& bench_name) = 0;
+  virtual Status SetProgress(std::int64_t run_id, double progress) = 0;
+  // Final state with metrics (written in the same transaction). FailedPrecondition if the run is not running.
+  virtual Status Finish(std::int64_t run_id, RunStatus final_status, const std::string& reason,
+                        const std::vector<Metric>& metrics) = 0;
+  // Cancels a queued run at once (returns kCancelled); for a running run records the request and returns
+  // kRunning (the worker stops it and calls Finish(kCancelled)); FailedPrecondition for finished runs.
+  virtual StatusOr<RunStatus> RequestCancel(std::int64_t run_id, const std::string& reason) = 0;
+  virtual StatusOr<bool> CancelRequested(std::int64_t run_id) = 0;
+  // On server start: every run still marked running becomes interrupted; those with requeue_on_interrupt
+  // are queued again (keeping their id, priority and age). Returns how many were interrupted.
+  virtual StatusOr<int> RecoverAfterCrash() = 0;
+
+  virtual StatusOr<RunRecord> GetRun(std::int64_t run_id) = 0;
+  virtual StatusOr<std::vector<RunRecord>> ListRuns(const RunFilter& filter) = 0;
+  virtual StatusOr<std::vector<StatusChange>> History(std::int64_t run_id) = 0;
+  virtual StatusOr<std::vector<Metric>> GetMetrics(std::int64_t run_id) = 0;
+  virtual StatusOr<std::int64_t> CountQueued(const std::string& submitter) = 0;
+
+  // Traces: chunks appended in index order while the run executes; read back in order.
+  virtual Status AppendTraceChunk(std::int64_t run_id, const TraceChunk& chunk) = 0;
+  virtual StatusOr<std::vector<TraceChunk>> ReadTrace(std::int64_t run_id) = 0;
+};
+
+}  // namespace vb::db
