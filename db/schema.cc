@@ -1,0 +1,136 @@
+#include "db/schema.h"
+
+#include "db/text.h"
+
+namespace vb::db::schema {
+namespace {
+
+// Version 1: the initial schema. Times are unix seconds (REAL); statuses are their RunStatusName() text so
+// that the file reads well in the sqlite3 shell. docs/store.md explains every table and index.
+constexpr const char* kV1 = R"sql(
+CREATE TABLE batches (
+  id        INTEGER PRIMARY KEY AUTOINCREMENT,
+  submitter TEXT NOT NULL,
+  name      TEXT NOT NULL,
+  spec_json TEXT NOT NULL,
+  created   REAL NOT NULL
+);
+
+CREATE TABLE runs (
+  id                   INTEGER PRIMARY KEY AUTOINCREMENT,
+  batch_id             INTEGER NOT NULL REFERENCES batches (id),
+  name                 TEXT NOT NULL,
+  controller           TEXT NOT NULL,
+  bench_kind           TEXT NOT NULL,
+  requested_bench      TEXT NOT NULL,
+  bench_name           TEXT NOT NULL,
+  spec_json            TEXT NOT NULL,
+  submitter            TEXT NOT NULL,
+  priority             INTEGER NOT NULL,
+  status               TEXT NOT NULL
+                       CHECK (status IN ('queued', 'running', 'done', 'failed', 'cancelled', 'interrupted')),
+  reason               TEXT NOT NULL DEFAULT '',
+  requeue_on_interrupt INTEGER NOT NULL CHECK (requeue_on_interrupt IN (0, 1)),
+  cancel_requested     INTEGER NOT NULL DEFAULT 0 CHECK (cancel_requested IN (0, 1)),
+  submitted            REAL NOT NULL,
+  started              REAL NOT NULL DEFAULT 0,
+  finished             REAL NOT NULL DEFAULT 0,
+  progress             REAL NOT NULL DEFAULT 0
+);
+CREATE INDEX runs_queue     ON runs (status, priority DESC, id);
+CREATE INDEX runs_batch     ON runs (batch_id, id);
+CREATE INDEX runs_submitter ON runs (submitter, status);
+CREATE INDEX runs_controller ON runs (controller);
+CREATE INDEX runs_bench     ON runs (bench_name);
+CREATE INDEX runs_submitted ON runs (submitted);
+
+CREATE TABLE run_tags (
+  run_id INTEGER NOT NULL REFERENCES runs (id) ON DELETE CASCADE,
+  tag    TEXT NOT NULL,
+  UNIQUE (run_id, tag)
+);
+CREATE INDEX run_tags_tag ON run_tags (tag, run_id);
+
+CREATE TABLE status_history (
+  id     INTEGER PRIMARY KEY,
+  run_id INTEGER NOT NULL REFERENCES runs (id) ON DELETE CASCADE,
+  status TEXT NOT NULL
+         CHECK (status IN ('queued', 'running', 'done', 'failed', 'cancelled', 'interrupted')),
+  at     REAL NOT NULL,
+  reason TEXT NOT NULL DEFAULT ''
+);
+CREATE INDEX status_history_run ON status_history (run_id, id);
+
+CREATE TABLE metrics (
+  run_id INTEGER NOT NULL REFERENCES runs (id) ON DELETE CASCADE,
+  name   TEXT NOT NULL,
+  value  REAL,
+  PRIMARY KEY (run_id, name)
+) WITHOUT ROWID;
+
+CREATE TABLE trace_chunks (
+  run_id   INTEGER NOT NULL REFERENCES runs (id) ON DELETE CASCADE,
+  idx      INTEGER NOT NULL CHECK (idx >= 0),
+  t0       REAL NOT NULL,
+  period   REAL NOT NULL,
+  samples  INTEGER NOT NULL CHECK (samples > 0),
+  channels TEXT NOT NULL,
+  data     BLOB NOT NULL,
+  PRIMARY KEY (run_id, idx)
+);
+)sql";
+
+constexpr Migration kMigrations[] = {
+    {1, "initial schema: batches, runs, run_tags, status_history, metrics, trace_chunks", kV1},
+};
+
+}  // namespace
+
+std::span<const Migration> Migrations() { return kMigrations; }
+int CurrentVersion() { return kMigrations[std::size(kMigrations) - 1].version; }
+
+StatusOr<int> ReadVersion(sql::Connection* conn) {
+  VB_DB_ASSIGN_OR_RETURN(const std::int64_t v, conn->QueryInt("PRAGMA user_version"));
+  return static_cast<int>(v);
+}
+
+Status CheckKnown(int version, std::span<const Migration> migrations, const std::string& path) {
+  const int known = migrations.empty() ? 0 : migrations.back().version;
+  if (version > known) {
+    return Status::FailedPrecondition(Cat("database '", path, "' has schema version ", version,
+                                          ", newer than this build knows (", known,
+                                          "); use a newer valvebench (the file was left untouched)"));
+  }
+  if (version < 0) {
+    return Status::DataLoss(
+        Cat("database '", path, "' has schema version ", version, " (user_version must not be negative)"));
+  }
+  return Status::Ok();
+}
+
+StatusOr<int> Migrate(sql::Connection* conn, std::span<const Migration> migrations, const std::string& path) {
+  for (std::size_t k = 0; k < migrations.size(); ++k) {
+    if (migrations[k].version != static_cast<int>(k) + 1) {
+      return Status::Internal(Cat("migration ", k, " has version ", migrations[k].version, ", expected ", k + 1));
+    }
+  }
+  const std::string where = Cat("database '", path, "'");
+  sql::Transaction txn(conn);
+  VB_RETURN_IF_ERROR(txn.Begin(sql::Transaction::Kind::kWrite).WithContext(where));
+  StatusOr<int> read = ReadVersion(conn);
+  if (!read.ok()) return read.status().WithContext(where);
+  int version = *read;
+  VB_RETURN_IF_ERROR(CheckKnown(version, migrations, path));
+  for (const Migration& m : migrations) {
+    if (m.version <= version) continue;
+    VB_RETURN_IF_ERROR(conn->Exec(m.sql).WithContext(
+        Cat(where, ": schema migration to version ", m.version, " (", m.description, ")")));
+    // PRAGMA takes no bound parameters; the value is our own integer.
+    VB_RETURN_IF_ERROR(conn->Exec(Cat("PRAGMA user_version = ", m.version)).WithContext(where));
+    version = m.version;
+  }
+  VB_RETURN_IF_ERROR(txn.Commit().WithContext(where));
+  return version;
+}
+
+}  // namespace vb::db::schema

@@ -1,0 +1,718 @@
+// The SQLite implementation of db/store.h. Schema and migrations: db/schema.cc; trace BLOB layout:
+// db/trace_codec.h; the why of both: docs/store.md.
+#include "db/store.h"
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <unordered_set>
+#include <utility>
+
+#include "db/checkpointer.h"
+#include "db/schema.h"
+#include "db/sqlite_conn.h"
+#include "db/text.h"
+#include "db/trace_codec.h"
+
+namespace vb::db {
+
+const char* RunStatusName(RunStatus s) {
+  switch (s) {
+    case RunStatus::kQueued: return "queued";
+    case RunStatus::kRunning: return "running";
+    case RunStatus::kDone: return "done";
+    case RunStatus::kFailed: return "failed";
+    case RunStatus::kCancelled: return "cancelled";
+    case RunStatus::kInterrupted: return "interrupted";
+  }
+  return "unknown";
+}
+
+StatusOr<RunStatus> ParseRunStatus(const std::string& name) {
+  for (RunStatus s : {RunStatus::kQueued, RunStatus::kRunning, RunStatus::kDone, RunStatus::kFailed,
+                      RunStatus::kCancelled, RunStatus::kInterrupted}) {
+    if (name == RunStatusName(s)) return s;
+  }
+  return Status::InvalidArgument(
+      Cat("unknown run status \"", name, "\" (expected queued, running, done, failed, cancelled or interrupted)"));
+}
+
+namespace {
+
+using sql::Stmt;
+using sql::Transaction;
+using TxnKind = sql::Transaction::Kind;
+
+constexpr int kBusyTimeoutMs = 5000;       // a writer waits this long for another connection's write lock
+constexpr int kPageSizeBytes = 32768;      // for new databases (SQLite's default is 4096)
+// Background checkpoints (db/checkpointer.h): requested each time the WAL grew by 32 MiB; a committing thread
+// waits for one once the WAL passes 256 MiB. The WAL file is allowed to keep that size between resets (it is
+// deleted when the last connection closes): truncating and re-growing it costs more than it saves.
+constexpr int kCheckpointEveryPages = 1000;
+constexpr int kWalWaitAbovePages = 8000;
+constexpr std::int64_t kWalLimitBytes =
+    static_cast<std::int64_t>(kWalWaitAbovePages + kCheckpointEveryPages) * kPageSizeBytes;
+constexpr std::int32_t kMaxListLimit = 1000;  // RunFilter::limit upper bound
+constexpr const char* kRecoverReason = "server restarted while running";
+
+// Column list shared by every query that builds a RunRecord (ReadRun() reads them in this order).
+constexpr const char* kRunColumns =
+    "id, batch_id, name, controller, bench_kind, bench_name, spec_json, submitter, priority, status, reason, "
+    "requeue_on_interrupt, submitted, started, finished, progress";
+
+double NowUnixS() {
+  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+}
+
+std::string Num(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.17g", v);
+  return buf;
+}
+
+Status RunNotFound(std::int64_t id) { return Status::NotFound(Cat("run ", id, " not found")); }
+
+// Output-only RunRecord fields (id, batch_id, status, reason, times, progress) are ignored on submit, as
+// output-only fields of an API resource are; everything else is checked here.
+Status ValidateBatch(const std::string& submitter, const std::vector<RunRecord>& runs) {
+  if (submitter.empty()) return Status::InvalidArgument("submitter: must not be empty");
+  if (runs.empty()) return Status::InvalidArgument("runs: a batch needs at least one run");
+  for (std::size_t k = 0; k < runs.size(); ++k) {
+    const RunRecord& r = runs[k];
+    const std::string field = Cat("runs[", k, "]");
+    if (r.name.empty()) return Status::InvalidArgument(field + ".name: must not be empty");
+    if (r.spec_json.empty()) return Status::InvalidArgument(field + ".spec_json: must not be empty");
+    if (!r.submitter.empty() && r.submitter != submitter) {
+      return Status::InvalidArgument(
+          Cat(field, ".submitter: \"", r.submitter, "\" differs from the batch's \"", submitter, "\""));
+    }
+    std::unordered_set<std::string_view> tags;
+    for (std::size_t j = 0; j < r.tags.size(); ++j) {
+      const std::string tag_field = Cat(field, ".tags[", j, "]");
+      if (r.tags[j].empty()) return Status::InvalidArgument(tag_field + ": must not be empty");
+      if (!tags.insert(r.tags[j]).second) {
+        return Status::InvalidArgument(Cat(tag_field, ": duplicate tag \"", r.tags[j], "\""));
+      }
+    }
+  }
+  return Status::Ok();
+}
+
+Status ValidateFilter(const RunFilter& f) {
+  if (f.limit < 1 || f.limit > kMaxListLimit) {
+    return Status::InvalidArgument(Cat("filter.limit: must be in 1..", kMaxListLimit, ", got ", f.limit));
+  }
+  if (f.after_id < 0) return Status::InvalidArgument(Cat("filter.after_id: must be >= 0, got ", f.after_id));
+  if (f.batch_id < 0) return Status::InvalidArgument(Cat("filter.batch_id: must be >= 0, got ", f.batch_id));
+  if (!std::isfinite(f.submitted_after_unix_s) || f.submitted_after_unix_s < 0) {
+    return Status::InvalidArgument(
+        Cat("filter.submitted_after_unix_s: must be finite and >= 0, got ", Num(f.submitted_after_unix_s)));
+  }
+  if (!std::isfinite(f.submitted_before_unix_s) || f.submitted_before_unix_s < 0) {
+    return Status::InvalidArgument(
+        Cat("filter.submitted_before_unix_s: must be finite and >= 0, got ", Num(f.submitted_before_unix_s)));
+  }
+  return Status::Ok();
+}
+
+class SqliteStore final : public Store {
+ public:
+  SqliteStore(sql::Connection conn, int version) : conn_(std::move(conn)), version_(version) {
+    // A file database gets its checkpoints on a thread of its own (db/checkpointer.h); if that cannot start,
+    // or for :memory:, SQLite's automatic checkpoints stay on.
+    Checkpointer::Options options;
+    options.request_every_pages = kCheckpointEveryPages;
+    options.wait_above_pages = kWalWaitAbovePages;
+    checkpointer_ = Checkpointer::Start(sqlite3_db_filename(conn_.raw(), "main"), options);
+    if (checkpointer_ != nullptr) checkpointer_->Attach(conn_.raw());
+  }
+  ~SqliteStore() override {
+    if (checkpointer_ != nullptr) Checkpointer::Detach(conn_.raw());
+  }
+  SqliteStore(const SqliteStore&) = delete;
+  SqliteStore& operator=(const SqliteStore&) = delete;
+
+  int schema_version() const override { return version_; }
+
+  StatusOr<std::int64_t> SubmitBatch(const std::string& submitter, const std::string& name,
+                                     const std::string& batch_spec_json, std::vector<RunRecord> runs,
+                                     std::vector<std::int64_t>* run_ids) override;
+  StatusOr<std::optional<RunRecord>> ClaimNext(const std::string& bench_kind, const std::string& bench_name) override;
+  Status SetProgress(std::int64_t run_id, double progress) override;
+  Status Finish(std::int64_t run_id, RunStatus final_status, const std::string& reason,
+                const std::vector<Metric>& metrics) override;
+  StatusOr<RunStatus> RequestCancel(std::int64_t run_id, const std::string& reason) override;
+  StatusOr<bool> CancelRequested(std::int64_t run_id) override;
+  StatusOr<int> RecoverAfterCrash() override;
+  StatusOr<RunRecord> GetRun(std::int64_t run_id) override;
+  StatusOr<std::vector<RunRecord>> ListRuns(const RunFilter& filter) override;
+  StatusOr<std::vector<StatusChange>> History(std::int64_t run_id) override;
+  StatusOr<std::vector<Metric>> GetMetrics(std::int64_t run_id) override;
+  StatusOr<std::int64_t> CountQueued(const std::string& submitter) override;
+  Status AppendTraceChunk(std::int64_t run_id, const TraceChunk& chunk) override;
+  StatusOr<std::vector<TraceChunk>> ReadTrace(std::int64_t run_id) override;
+
+ private:
+  // Helpers run inside the caller's transaction.
+  StatusOr<RunStatus> StatusOf(std::int64_t run_id);  // NotFound for an unknown run
+  Status AddHistory(std::int64_t run_id, RunStatus status, double at, const std::string& reason);
+  StatusOr<RunRecord> ReadRun(const Stmt& row);  // a row of kRunColumns, with its tags
+  StatusOr<RunRecord> LoadRun(std::int64_t run_id);
+
+  sql::Connection conn_;
+  int version_;
+  std::unique_ptr<Checkpointer> checkpointer_;  // destroyed (thread joined) before conn_ closes
+};
+
+StatusOr<RunStatus> SqliteStore::StatusOf(std::int64_t run_id) {
+  VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT status FROM runs WHERE id = ?1"));
+  st.Bind(1, run_id);
+  VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+  if (!row) return RunNotFound(run_id);
+  StatusOr<RunStatus> s = ParseRunStatus(st.Text(0));
+  if (!s.ok()) return Status::DataLoss(Cat("run ", run_id, ": ", s.status().message()));
+  return s;
+}
+
+Status SqliteStore::AddHistory(std::int64_t run_id, RunStatus status, double at, const std::string& reason) {
+  VB_DB_ASSIGN_OR_RETURN(
+      Stmt st, conn_.Prepare("INSERT INTO status_history (run_id, status, at, reason) VALUES (?1, ?2, ?3, ?4)"));
+  st.Bind(1, run_id);
+  st.Bind(2, RunStatusName(status));
+  st.Bind(3, at);
+  st.Bind(4, reason);
+  return st.Run();
+}
+
+StatusOr<RunRecord> SqliteStore::ReadRun(const Stmt& row) {
+  RunRecord r;
+  r.id = row.Int(0);
+  r.batch_id = row.Int(1);
+  r.name = row.Text(2);
+  r.controller = row.Text(3);
+  r.bench_kind = row.Text(4);
+  r.bench_name = row.Text(5);
+  r.spec_json = row.Text(6);
+  r.submitter = row.Text(7);
+  r.priority = static_cast<std::int32_t>(row.Int(8));
+  StatusOr<RunStatus> status = ParseRunStatus(row.Text(9));
+  if (!status.ok()) return Status::DataLoss(Cat("run ", r.id, ": ", status.status().message()));
+  r.status = *status;
+  r.reason = row.Text(10);
+  r.requeue_on_interrupt = row.Int(11) != 0;
+  r.submitted_unix_s = row.Double(12);
+  r.started_unix_s = row.Double(13);
+  r.finished_unix_s = row.Double(14);
+  r.progress = row.Double(15);
+
+  // Tags come back in submission order (rowid order).
+  VB_DB_ASSIGN_OR_RETURN(Stmt tags, conn_.Prepare("SELECT tag FROM run_tags WHERE run_id = ?1 ORDER BY rowid"));
+  tags.Bind(1, r.id);
+  while (true) {
+    VB_DB_ASSIGN_OR_RETURN(const bool more, tags.Step());
+    if (!more) break;
+    r.tags.push_back(tags.Text(0));
+  }
+  return r;
+}
+
+StatusOr<RunRecord> SqliteStore::LoadRun(std::int64_t run_id) {
+  VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare(Cat("SELECT ", kRunColumns, " FROM runs WHERE id = ?1")));
+  st.Bind(1, run_id);
+  VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+  if (!row) return RunNotFound(run_id);
+  return ReadRun(st);
+}
+
+// ---- Submission and the queue ----
+
+StatusOr<std::int64_t> SqliteStore::SubmitBatch(const std::string& submitter, const std::string& name,
+                                                const std::string& batch_spec_json, std::vector<RunRecord> runs,
+                                                std::vector<std::int64_t>* run_ids) {
+  VB_RETURN_IF_ERROR(ValidateBatch(submitter, runs));
+  const double now = NowUnixS();
+  Transaction txn(&conn_);
+  VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kWrite));
+
+  VB_DB_ASSIGN_OR_RETURN(
+      Stmt batch, conn_.Prepare("INSERT INTO batches (submitter, name, spec_json, created) VALUES (?1, ?2, ?3, ?4)"));
+  batch.Bind(1, submitter);
+  batch.Bind(2, name);
+  batch.Bind(3, batch_spec_json);
+  batch.Bind(4, now);
+  VB_RETURN_IF_ERROR(batch.Run());
+  const std::int64_t batch_id = sqlite3_last_insert_rowid(conn_.raw());
+
+  std::vector<std::int64_t> ids;
+  ids.reserve(runs.size());
+  for (const RunRecord& r : runs) {
+    VB_DB_ASSIGN_OR_RETURN(
+        Stmt run,
+        conn_.Prepare("INSERT INTO runs (batch_id, name, controller, bench_kind, requested_bench, bench_name, "
+                      "spec_json, submitter, priority, status, requeue_on_interrupt, submitted) "
+                      "VALUES (?1, ?2, ?3, ?4, ?5, ?5, ?6, ?7, ?8, 'queued', ?9, ?10)"));
+    run.Bind(1, batch_id);
+    run.Bind(2, r.name);
+    run.Bind(3, r.controller);
+    run.Bind(4, r.bench_kind);
+    run.Bind(5, r.bench_name);
+    run.Bind(6, r.spec_json);
+    run.Bind(7, submitter);
+    run.Bind(8, static_cast<std::int64_t>(r.priority));
+    run.Bind(9, r.requeue_on_interrupt);
+    run.Bind(10, now);
+    VB_RETURN_IF_ERROR(run.Run());
+    const std::int64_t id = sqlite3_last_insert_rowid(conn_.raw());
+    ids.push_back(id);
+    for (const std::string& tag : r.tags) {
+      VB_DB_ASSIGN_OR_RETURN(Stmt t, conn_.Prepare("INSERT INTO run_tags (run_id, tag) VALUES (?1, ?2)"));
+      t.Bind(1, id);
+      t.Bind(2, tag);
+      VB_RETURN_IF_ERROR(t.Run());
+    }
+    VB_RETURN_IF_ERROR(AddHistory(id, RunStatus::kQueued, now, ""));
+  }
+  VB_RETURN_IF_ERROR(txn.Commit());
+  if (run_ids != nullptr) *run_ids = std::move(ids);
+  return batch_id;
+}
+
+StatusOr<std::optional<RunRecord>> SqliteStore::ClaimNext(const std::string& bench_kind,
+                                                          const std::string& bench_name) {
+  if (bench_name.empty()) return Status::InvalidArgument("bench_name: must name the bench that claims the run");
+  Transaction txn(&conn_);
+  // BEGIN IMMEDIATE takes the database's single write lock before the SELECT: two claimers (threads or
+  // processes) are serialised here, so the run one of them sees as queued is still queued when it updates it.
+  VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kWrite));
+  // Walks runs_queue (status, priority DESC, id) in order and stops at the first compatible run.
+  VB_DB_ASSIGN_OR_RETURN(Stmt pick, conn_.Prepare("SELECT id FROM runs WHERE status = 'queued' "
+                                                  "AND (bench_kind = '' OR bench_kind = ?1) "
+                                                  "AND (bench_name = '' OR bench_name = ?2) "
+                                                  "ORDER BY priority DESC, id LIMIT 1"));
+  pick.Bind(1, bench_kind);
+  pick.Bind(2, bench_name);
+  VB_DB_ASSIGN_OR_RETURN(const bool found, pick.Step());
+  if (!found) return std::optional<RunRecord>();  // the destructor ends the (empty) transaction
+  const std::int64_t id = pick.Int(0);
+
+  const double now = NowUnixS();
+  VB_DB_ASSIGN_OR_RETURN(Stmt claim, conn_.Prepare("UPDATE runs SET status = 'running', bench_name = ?2, "
+                                                   "started = ?3, finished = 0, progress = 0, reason = '', "
+                                                   "cancel_requested = 0 WHERE id = ?1"));
+  claim.Bind(1, id);
+  claim.Bind(2, bench_name);
+  claim.Bind(3, now);
+  VB_RETURN_IF_ERROR(claim.Run());
+  VB_RETURN_IF_ERROR(AddHistory(id, RunStatus::kRunning, now, Cat("claimed by bench ", bench_name)));
+  VB_DB_ASSIGN_OR_RETURN(RunRecord run, LoadRun(id));
+  VB_RETURN_IF_ERROR(txn.Commit());
+  return std::optional<RunRecord>(std::move(run));
+}
+
+Status SqliteStore::SetProgress(std::int64_t run_id, double progress) {
+  if (!(progress >= 0.0 && progress <= 1.0)) {
+    return Status::InvalidArgument(Cat("progress: must be in [0, 1], got ", Num(progress)));
+  }
+  Transaction txn(&conn_);
+  VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kWrite));
+  VB_DB_ASSIGN_OR_RETURN(const RunStatus status, StatusOf(run_id));
+  if (status != RunStatus::kRunning) {
+    return Status::FailedPrecondition(Cat("run ", run_id, " is ", RunStatusName(status),
+                                          ", not running: only a running run reports progress"));
+  }
+  VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("UPDATE runs SET progress = ?2 WHERE id = ?1"));
+  st.Bind(1, run_id);
+  st.Bind(2, progress);
+  VB_RETURN_IF_ERROR(st.Run());
+  return txn.Commit();
+}
+
+Status SqliteStore::Finish(std::int64_t run_id, RunStatus final_status, const std::string& reason,
+                           const std::vector<Metric>& metrics) {
+  if (final_status != RunStatus::kDone && final_status != RunStatus::kFailed &&
+      final_status != RunStatus::kCancelled) {
+    return Status::InvalidArgument(
+        Cat("final_status: must be done, failed or cancelled, got ", RunStatusName(final_status)));
+  }
+  std::unordered_set<std::string_view> names;
+  for (std::size_t k = 0; k < metrics.size(); ++k) {
+    const std::string field = Cat("metrics[", k, "].name");
+    if (metrics[k].name.empty()) return Status::InvalidArgument(field + ": must not be empty");
+    if (!names.insert(metrics[k].name).second) {
+      return Status::InvalidArgument(Cat(field, ": duplicate metric \"", metrics[k].name, "\""));
+    }
+  }
+
+  Transaction txn(&conn_);
+  VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kWrite));
+  VB_DB_ASSIGN_OR_RETURN(const RunStatus status, StatusOf(run_id));
+  if (status != RunStatus::kRunning) {
+    return Status::FailedPrecondition(
+        Cat("run ", run_id, " is ", RunStatusName(status), ", not running: only a running run can finish"));
+  }
+  const double now = NowUnixS();
+  VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("UPDATE runs SET status = ?2, reason = ?3, finished = ?4, "
+                                                "progress = CASE WHEN ?2 = 'done' THEN 1.0 ELSE progress END "
+                                                "WHERE id = ?1"));
+  st.Bind(1, run_id);
+  st.Bind(2, RunStatusName(final_status));
+  st.Bind(3, reason);
+  st.Bind(4, now);
+  VB_RETURN_IF_ERROR(st.Run());
+  VB_RETURN_IF_ERROR(AddHistory(run_id, final_status, now, reason));
+  for (const Metric& m : metrics) {
+    // NaN binds as NULL (SQLite's rule) and GetMetrics() turns NULL back into NaN.
+    VB_DB_ASSIGN_OR_RETURN(Stmt ins, conn_.Prepare("INSERT INTO metrics (run_id, name, value) VALUES (?1, ?2, ?3)"));
+    ins.Bind(1, run_id);
+    ins.Bind(2, m.name);
+    ins.Bind(3, m.value);
+    VB_RETURN_IF_ERROR(ins.Run());
+  }
+  return txn.Commit();
+}
+
+StatusOr<RunStatus> SqliteStore::RequestCancel(std::int64_t run_id, const std::string& reason) {
+  Transaction txn(&conn_);
+  VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kWrite));
+  VB_DB_ASSIGN_OR_RETURN(const RunStatus status, StatusOf(run_id));
+  if (status == RunStatus::kQueued) {
+    const double now = NowUnixS();
+    VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("UPDATE runs SET status = 'cancelled', reason = ?2, "
+                                                  "finished = ?3 WHERE id = ?1"));
+    st.Bind(1, run_id);
+    st.Bind(2, reason);
+    st.Bind(3, now);
+    VB_RETURN_IF_ERROR(st.Run());
+    VB_RETURN_IF_ERROR(AddHistory(run_id, RunStatus::kCancelled, now, reason));
+    VB_RETURN_IF_ERROR(txn.Commit());
+    return RunStatus::kCancelled;
+  }
+  if (status == RunStatus::kRunning) {
+    // The worker polls CancelRequested() and ends the run with Finish(kCancelled); the reason is kept in the
+    // row meanwhile (the status does not change, so there is no history row yet).
+    VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("UPDATE runs SET cancel_requested = 1, reason = ?2 WHERE id = ?1"));
+    st.Bind(1, run_id);
+    st.Bind(2, reason);
+    VB_RETURN_IF_ERROR(st.Run());
+    VB_RETURN_IF_ERROR(txn.Commit());
+    return RunStatus::kRunning;
+  }
+  return Status::FailedPrecondition(
+      Cat("run ", run_id, " is ", RunStatusName(status), ": only a queued or running run can be cancelled"));
+}
+
+StatusOr<bool> SqliteStore::CancelRequested(std::int64_t run_id) {
+  Transaction txn(&conn_);
+  VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
+  VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT cancel_requested FROM runs WHERE id = ?1"));
+  st.Bind(1, run_id);
+  VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+  if (!row) return RunNotFound(run_id);
+  const bool requested = st.Int(0) != 0;
+  VB_RETURN_IF_ERROR(txn.Commit());
+  return requested;
+}
+
+StatusOr<int> SqliteStore::RecoverAfterCrash() {
+  struct Running {
+    std::int64_t id;
+    bool requeue;
+    bool cancel_requested;
+    std::string cancel_reason;
+  };
+  Transaction txn(&conn_);
+  VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kWrite));
+  std::vector<Running> running;
+  {
+    VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT id, requeue_on_interrupt, cancel_requested, reason "
+                                                  "FROM runs WHERE status = 'running' ORDER BY id"));
+    while (true) {
+      VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+      if (!row) break;
+      running.push_back({st.Int(0), st.Int(1) != 0, st.Int(2) != 0, st.Text(3)});
+    }
+  }
+  const double now = NowUnixS();
+  for (const Running& r : running) {
+    VB_DB_ASSIGN_OR_RETURN(Stmt stop, conn_.Prepare("UPDATE runs SET status = 'interrupted', reason = ?2, "
+                                                    "finished = ?3 WHERE id = ?1"));
+    stop.Bind(1, r.id);
+    stop.Bind(2, kRecoverReason);
+    stop.Bind(3, now);
+    VB_RETURN_IF_ERROR(stop.Run());
+    VB_RETURN_IF_ERROR(AddHistory(r.id, RunStatus::kInterrupted, now, kRecoverReason));
+
+    if (r.cancel_requested) {
+      // Somebody asked to cancel it while it ran: it has stopped now, so the request is fulfilled.
+      const std::string reason = r.cancel_reason.empty() ? "cancel requested before the server restarted"
+                                                         : r.cancel_reason;
+      VB_DB_ASSIGN_OR_RETURN(Stmt cancel,
+                             conn_.Prepare("UPDATE runs SET status = 'cancelled', reason = ?2 WHERE id = ?1"));
+      cancel.Bind(1, r.id);
+      cancel.Bind(2, reason);
+      VB_RETURN_IF_ERROR(cancel.Run());
+      VB_RETURN_IF_ERROR(AddHistory(r.id, RunStatus::kCancelled, now, reason));
+    } else if (r.requeue) {
+      // Back in the queue with its id, priority and age; the bench it asked for (not the one that was running
+      // it); the partial trace of the interrupted attempt is dropped, the rerun writes its own from chunk 0.
+      VB_DB_ASSIGN_OR_RETURN(Stmt requeue, conn_.Prepare("UPDATE runs SET status = 'queued', bench_name = "
+                                                         "requested_bench, started = 0, finished = 0, "
+                                                         "progress = 0, cancel_requested = 0 WHERE id = ?1"));
+      requeue.Bind(1, r.id);
+      VB_RETURN_IF_ERROR(requeue.Run());
+      VB_DB_ASSIGN_OR_RETURN(Stmt drop, conn_.Prepare("DELETE FROM trace_chunks WHERE run_id = ?1"));
+      drop.Bind(1, r.id);
+      VB_RETURN_IF_ERROR(drop.Run());
+      VB_RETURN_IF_ERROR(AddHistory(r.id, RunStatus::kQueued, now, kRecoverReason));
+    }
+  }
+  VB_RETURN_IF_ERROR(txn.Commit());
+  return static_cast<int>(running.size());
+}
+
+// ---- Reading runs ----
+
+StatusOr<RunRecord> SqliteStore::GetRun(std::int64_t run_id) {
+  Transaction txn(&conn_);
+  VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
+  VB_DB_ASSIGN_OR_RETURN(RunRecord run, LoadRun(run_id));
+  VB_RETURN_IF_ERROR(txn.Commit());
+  return run;
+}
+
+StatusOr<std::vector<RunRecord>> SqliteStore::ListRuns(const RunFilter& f) {
+  VB_RETURN_IF_ERROR(ValidateFilter(f));
+  // One SQL text per combination of filters in use, each prepared once and cached like the others.
+  std::string q = Cat("SELECT ", kRunColumns, " FROM runs WHERE id > :after_id");
+  if (f.status) q += " AND status = :status";
+  if (!f.tag.empty()) q += " AND id IN (SELECT run_id FROM run_tags WHERE tag = :tag)";
+  if (f.batch_id != 0) q += " AND batch_id = :batch_id";
+  if (!f.controller.empty()) q += " AND controller = :controller";
+  if (!f.bench_name.empty()) q += " AND bench_name = :bench_name";
+  if (!f.submitter.empty()) q += " AND submitter = :submitter";
+  if (f.submitted_after_unix_s > 0) q += " AND submitted >= :after_s";
+  if (f.submitted_before_unix_s > 0) q += " AND submitted < :before_s";
+  q += " ORDER BY id LIMIT :limit";
+
+  Transaction txn(&conn_);
+  VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
+  VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare(q));
+  st.BindNamed(":after_id", f.after_id);
+  if (f.status) st.BindNamed(":status", RunStatusName(*f.status));
+  st.BindNamed(":tag", f.tag);
+  st.BindNamed(":batch_id", f.batch_id);
+  st.BindNamed(":controller", f.controller);
+  st.BindNamed(":bench_name", f.bench_name);
+  st.BindNamed(":submitter", f.submitter);
+  st.BindNamed(":after_s", f.submitted_after_unix_s);
+  st.BindNamed(":before_s", f.submitted_before_unix_s);
+  st.BindNamed(":limit", static_cast<std::int64_t>(f.limit));
+  std::vector<RunRecord> out;
+  while (true) {
+    VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+    if (!row) break;
+    VB_DB_ASSIGN_OR_RETURN(RunRecord run, ReadRun(st));
+    out.push_back(std::move(run));
+  }
+  VB_RETURN_IF_ERROR(txn.Commit());
+  return out;
+}
+
+StatusOr<std::vector<StatusChange>> SqliteStore::History(std::int64_t run_id) {
+  Transaction txn(&conn_);
+  VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
+  VB_RETURN_IF_ERROR(StatusOf(run_id).status());
+  VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT status, at, reason FROM status_history "
+                                                "WHERE run_id = ?1 ORDER BY id"));
+  st.Bind(1, run_id);
+  std::vector<StatusChange> out;
+  while (true) {
+    VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+    if (!row) break;
+    StatusOr<RunStatus> s = ParseRunStatus(st.Text(0));
+    if (!s.ok()) return Status::DataLoss(Cat("history of run ", run_id, ": ", s.status().message()));
+    out.push_back({*s, st.Double(1), st.Text(2)});
+  }
+  VB_RETURN_IF_ERROR(txn.Commit());
+  return out;
+}
+
+StatusOr<std::vector<Metric>> SqliteStore::GetMetrics(std::int64_t run_id) {
+  Transaction txn(&conn_);
+  VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
+  VB_RETURN_IF_ERROR(StatusOf(run_id).status());
+  VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT name, value FROM metrics WHERE run_id = ?1 ORDER BY name"));
+  st.Bind(1, run_id);
+  std::vector<Metric> out;
+  while (true) {
+    VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+    if (!row) break;
+    out.push_back({st.Text(0), st.IsNull(1) ? std::nan("") : st.Double(1)});
+  }
+  VB_RETURN_IF_ERROR(txn.Commit());
+  return out;
+}
+
+StatusOr<std::int64_t> SqliteStore::CountQueued(const std::string& submitter) {
+  Transaction txn(&conn_);
+  VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
+  // Two texts so that each uses its index (runs_queue, runs_submitter).
+  VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare(submitter.empty()
+                                                    ? "SELECT count(*) FROM runs WHERE status = 'queued'"
+                                                    : "SELECT count(*) FROM runs WHERE submitter = ?1 AND "
+                                                      "status = 'queued'"));
+  if (!submitter.empty()) st.Bind(1, submitter);
+  VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+  if (!row) return Status::Internal("count(*) returned no row");
+  const std::int64_t n = st.Int(0);
+  VB_RETURN_IF_ERROR(txn.Commit());
+  return n;
+}
+
+// ---- Traces ----
+
+Status SqliteStore::AppendTraceChunk(std::int64_t run_id, const TraceChunk& chunk) {
+  VB_RETURN_IF_ERROR(trace::ValidateChunk(chunk));
+  const std::string where = Cat("trace chunk ", chunk.index, ": ");
+  const std::uint64_t bytes = 8 * static_cast<std::uint64_t>(chunk.data.size());
+  const auto max_bytes = static_cast<std::uint64_t>(sqlite3_limit(conn_.raw(), SQLITE_LIMIT_LENGTH, -1));
+  if (bytes > max_bytes) {
+    return Status::InvalidArgument(Cat(where, bytes, " bytes of data exceed the largest BLOB SQLite stores here (",
+                                       max_bytes, " bytes): use smaller chunks"));
+  }
+  const std::string channels = trace::JoinChannels(chunk.channels);
+
+  Transaction txn(&conn_);
+  VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kWrite));
+  VB_RETURN_IF_ERROR(StatusOf(run_id).status());
+  {
+    // The last chunk so far (primary key order); its channels must match (all chunks of a trace share them).
+    VB_DB_ASSIGN_OR_RETURN(Stmt last, conn_.Prepare("SELECT idx, channels FROM trace_chunks WHERE run_id = ?1 "
+                                                    "ORDER BY idx DESC LIMIT 1"));
+    last.Bind(1, run_id);
+    VB_DB_ASSIGN_OR_RETURN(const bool any, last.Step());
+    const std::int64_t next = any ? last.Int(0) + 1 : 0;
+    if (chunk.index < next) {
+      return Status::AlreadyExists(Cat(where, "already stored for run ", run_id, " (the next index is ", next, ")"));
+    }
+    if (chunk.index > next) {
+      return Status::InvalidArgument(Cat(where, "index must be ", next, " (chunks of run ", run_id,
+                                         " are appended in order from 0, without gaps)"));
+    }
+    if (any && last.Text(1) != channels) {
+      return Status::InvalidArgument(Cat(where, "channels differ from those of the run's earlier chunks"));
+    }
+  }
+
+  VB_DB_ASSIGN_OR_RETURN(Stmt ins, conn_.Prepare("INSERT INTO trace_chunks (run_id, idx, t0, period, samples, "
+                                                 "channels, data) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)"));
+  ins.Bind(1, run_id);
+  ins.Bind(2, static_cast<std::int64_t>(chunk.index));
+  ins.Bind(3, chunk.t0_s);
+  ins.Bind(4, chunk.sample_period_s);
+  ins.Bind(5, static_cast<std::int64_t>(chunk.samples));
+  ins.Bind(6, channels);
+  std::string swapped;  // big-endian hosts only: the little-endian copy
+  if constexpr (trace::kNativeIsLittleEndian) {
+    ins.BindBlobNoCopy(7, chunk.data.data(), bytes);  // the array already is the encoding: no copy here
+  } else {
+    swapped = trace::EncodeValues(chunk.data);
+    ins.BindBlobNoCopy(7, swapped.data(), swapped.size());
+  }
+  VB_RETURN_IF_ERROR(ins.Run());
+  return txn.Commit();
+}
+
+StatusOr<std::vector<TraceChunk>> SqliteStore::ReadTrace(std::int64_t run_id) {
+  Transaction txn(&conn_);
+  VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
+  VB_RETURN_IF_ERROR(StatusOf(run_id).status());
+  // length(data) comes from the record header without reading the BLOB; the BLOB itself is then copied straight
+  // into the chunk's vector by incremental BLOB I/O (one copy instead of two).
+  VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT rowid, idx, t0, period, samples, channels, length(data) "
+                                                "FROM trace_chunks WHERE run_id = ?1 ORDER BY idx"));
+  st.Bind(1, run_id);
+  sql::BlobReader blob(conn_.raw(), "trace_chunks", "data");
+  std::vector<TraceChunk> out;
+  while (true) {
+    VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+    if (!row) break;
+    TraceChunk c;
+    c.index = static_cast<std::int32_t>(st.Int(1));
+    c.t0_s = st.Double(2);
+    c.sample_period_s = st.Double(3);
+    c.samples = static_cast<std::int32_t>(st.Int(4));
+    c.channels = trace::SplitChannels(st.Text(5));
+    const std::string what = Cat("trace of run ", run_id, ", chunk ", c.index);
+    if (c.index != static_cast<std::int32_t>(out.size())) {
+      return Status::DataLoss(Cat(what, ": expected chunk ", out.size(), " (a chunk is missing)"));
+    }
+    const std::size_t values = c.channels.size() * static_cast<std::size_t>(c.samples);
+    VB_RETURN_IF_ERROR(trace::CheckSize(static_cast<std::size_t>(st.Int(6)), values, what));
+    VB_DB_ASSIGN_OR_RETURN(const std::size_t bytes, blob.Open(st.Int(0)));
+    VB_RETURN_IF_ERROR(trace::CheckSize(bytes, values, what));
+    c.data.resize(values);
+    VB_RETURN_IF_ERROR(blob.Read(c.data.data(), bytes));
+    trace::FromLittleEndian(&c.data);
+    out.push_back(std::move(c));
+  }
+  VB_RETURN_IF_ERROR(txn.Commit());
+  return out;
+}
+
+}  // namespace
+
+StatusOr<std::unique_ptr<Store>> Store::Open(const std::string& path) {
+  if (path.empty()) {
+    return Status::InvalidArgument("path: must not be empty (\":memory:\" opens a private in-memory database)");
+  }
+  const std::string where = Cat("database '", path, "'");
+  VB_DB_ASSIGN_OR_RETURN(sql::Connection conn, sql::Connection::Open(path));
+  sqlite3_busy_timeout(conn.raw(), kBusyTimeoutMs);
+  if (sqlite3_db_readonly(conn.raw(), "main") == 1) {
+    return Status::Unavailable(Cat(where, ": the file is read-only, and the store must write to it"));
+  }
+
+  // Check the version before anything can write (switching to WAL rewrites the header of a rollback-journal
+  // file): a database from a newer build is left exactly as it was.
+  StatusOr<int> version = schema::ReadVersion(&conn);
+  if (!version.ok()) return version.status().WithContext(where);
+  VB_RETURN_IF_ERROR(schema::CheckKnown(*version, schema::Migrations(), path));
+
+  if (*version == 0) {
+    // A new database, or somebody else's: ours always has a version once it has tables.
+    StatusOr<std::int64_t> objects = conn.QueryInt("SELECT count(*) FROM sqlite_schema");
+    if (!objects.ok()) return objects.status().WithContext(where);
+    if (*objects != 0) {
+      return Status::FailedPrecondition(Cat(where, " is not a valvebench database (it has tables but no schema "
+                                            "version); the file was left untouched"));
+    }
+    // Large pages: a trace BLOB spans 8x fewer pages than at SQLite's default 4 KiB, and trace ingest is ~1.7x
+    // faster (docs/store.md). Only takes effect on an empty file, before WAL mode is set.
+    VB_RETURN_IF_ERROR(conn.Exec(Cat("PRAGMA page_size = ", kPageSizeBytes)).WithContext(where));
+  }
+  // WAL: readers never block the writer nor each other, and several Stores (threads, processes) share the file.
+  // synchronous=NORMAL: no fsync per commit; a committed transaction survives a crash of the process, only an
+  // OS crash or power loss can lose the last few (the file stays consistent either way; docs/store.md).
+  StatusOr<std::string> mode = conn.QueryText("PRAGMA journal_mode = WAL");
+  if (!mode.ok()) return mode.status().WithContext(where);
+  if (*mode != "wal" && *mode != "memory") {
+    return Status::Unavailable(Cat(where, ": cannot switch to WAL journal mode (it stays in '", *mode,
+                                   "' mode); is the file on a network filesystem?"));
+  }
+  VB_RETURN_IF_ERROR(conn.Exec("PRAGMA synchronous = NORMAL").WithContext(where));
+  // A WAL that grew beyond the checkpointer's bound (long readers pin old frames) is cut back to it at the
+  // next reset instead of keeping its high-water mark on disk.
+  StatusOr<std::int64_t> limit = conn.QueryInt(Cat("PRAGMA journal_size_limit = ", kWalLimitBytes));
+  if (!limit.ok()) return limit.status().WithContext(where);
+  VB_RETURN_IF_ERROR(conn.Exec("PRAGMA foreign_keys = ON").WithContext(where));
+  StatusOr<std::int64_t> fk = conn.QueryInt("PRAGMA foreign_keys");
+  if (!fk.ok()) return fk.status().WithContext(where);
+  if (*fk != 1) return Status::Internal("this SQLite library was built without foreign key support");
+
+  StatusOr<int> migrated = schema::Migrate(&conn, schema::Migrations(), path);
+  if (!migrated.ok()) return migrated.status();  // Migrate() names the file
+  return std::unique_ptr<Store>(std::make_unique<SqliteStore>(std::move(conn), *migrated));
+}
+
+}  // namespace vb::db
