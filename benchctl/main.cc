@@ -1,8 +1,9 @@
 // benchctl: the valvebench command line.
 //
-// Exit codes (scripts can trust them): 0 success; 1 a run failed or was cancelled (or, later, a regression);
-// 2 bad input or usage (spec errors name the field); 3 an environment problem (file not writable, server
-// unreachable).
+// Local mode (--local): the embedded emulator and no server. Remote mode (--server ADDR or VALVEBENCH_SERVER,
+// --token TOKEN or VALVEBENCH_TOKEN): a valvebench-server. Data on stdout, progress on stderr; --json everywhere.
+// Exit codes (benchctl/cli_common.h): 0 success; 1 a run failed or was cancelled; 2 the request was refused
+// (bad input naming the field, not found, no capable bench, limits, permissions); 3 environment.
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
@@ -10,7 +11,9 @@
 #include <cstdio>
 #include <iostream>
 
+#include "benchctl/cli_common.h"
 #include "benchctl/local_run.h"
+#include "benchctl/remote.h"
 #include "experiment/compare.h"
 
 #include <fstream>
@@ -22,24 +25,12 @@ using vb::Status;
 using vb::StatusCode;
 using Json = nlohmann::ordered_json;
 
-constexpr int kExitOk = 0, kExitRunFailed = 1, kExitBadInput = 2, kExitEnvironment = 3;
-
-int ExitFor(const Status& st) {
-  switch (st.code()) {
-    case StatusCode::kOk: return kExitOk;
-    case StatusCode::kInvalidArgument:
-    case StatusCode::kNotFound:
-    case StatusCode::kOutOfRange:
-    case StatusCode::kResourceExhausted:
-    case StatusCode::kFailedPrecondition: return kExitBadInput;
-    default: return kExitEnvironment;
-  }
-}
-
-int Fail(const Status& st) {
-  std::fprintf(stderr, "benchctl: %s\n", st.message().c_str());
-  return ExitFor(st);
-}
+using vb::benchctl::ExitFor;
+using vb::benchctl::Fail;
+using vb::benchctl::kExitBadInput;
+using vb::benchctl::kExitEnvironment;
+using vb::benchctl::kExitOk;
+using vb::benchctl::kExitRunFailed;
 
 Json Number(double v) { return std::isfinite(v) ? Json(v) : Json(nullptr); }
 
@@ -208,10 +199,10 @@ void PrintCsv(const std::vector<vb::benchctl::LocalRunResult>& results) {
 
 int CmdRun(const std::string& spec_path, bool local, const std::string& server, const std::string& trace_csv,
            bool json, bool csv, bool realtime) {
+  (void)server;
   if (!local) {
     return Fail(Status::FailedPrecondition(
-        "no server given: use --local to run on the embedded emulator" +
-        std::string(server.empty() ? "" : " (remote submission to " + server + " is not available yet)")));
+        "no server given: use --local for the embedded emulator, or --server ADDR (or VALVEBENCH_SERVER)"));
   }
   auto spec = vb::experiment::LoadSpecFile(spec_path);
   if (!spec.ok()) return Fail(spec.status());
@@ -247,30 +238,71 @@ int CmdRun(const std::string& spec_path, bool local, const std::string& server, 
 int main(int argc, char** argv) {
   CLI::App app{"benchctl: run, watch and compare experiments on valvebench benches"};
   app.require_subcommand(1);
-  bool json = false;
+  bool json = false, csv = false;
+  std::string server, token, tls_ca_file;
+  if (const char* v = std::getenv("VALVEBENCH_SERVER")) server = v;
+  if (const char* v = std::getenv("VALVEBENCH_TOKEN")) token = v;
   app.add_flag("--json", json, "machine-readable output on stdout");
+  app.add_option("--server", server, "bench server address host:port (or VALVEBENCH_SERVER)");
+  app.add_option("--token", token, "bearer token (or VALVEBENCH_TOKEN)");
+  app.add_option("--tls-ca", tls_ca_file, "PEM file of the CA that signed the server's certificate (TLS)");
+  auto common = [&](CLI::App* sub, bool with_csv) {
+    sub->add_flag("--json", json, "machine-readable output on stdout");
+    if (with_csv) sub->add_flag("--csv", csv, "CSV output on stdout");
+    sub->add_option("--server", server, "bench server address host:port (or VALVEBENCH_SERVER)");
+    sub->add_option("--token", token, "bearer token (or VALVEBENCH_TOKEN)");
+    sub->add_option("--tls-ca", tls_ca_file, "PEM file of the CA that signed the server's certificate");
+  };
 
-  std::string spec_path, trace_csv, server;
-  bool local = false, realtime = false;
-  const char* env_server = std::getenv("VALVEBENCH_SERVER");
-  if (env_server != nullptr) server = env_server;
-  auto* run = app.add_subcommand("run", "run an experiment spec (a single run or a sweep)");
+  std::string spec_path, trace_csv;
+  bool local = false, realtime = false, wait = false;
+  auto* run = app.add_subcommand("run", "run an experiment spec (a single run or a batch)");
   run->add_option("spec", spec_path, "experiment spec (protobuf JSON)")->required();
   run->add_flag("--local", local, "run on the embedded emulator, no server");
-  run->add_option("--server", server, "bench server address (or VALVEBENCH_SERVER)");
-  run->add_option("--trace-csv", trace_csv, "write the recorded channels as CSV (sweeps: FILE-<n>.csv)");
-  run->add_flag("--realtime", realtime, "pace the run to the wall clock and report loop jitter");
-  run->add_flag("--json", json, "print the summary as JSON");
-  bool run_csv = false;
-  run->add_flag("--csv", run_csv, "print one CSV row of metrics per run");
+  run->add_flag("--wait", wait, "remote: wait for the runs, progress on stderr, then the summary");
+  run->add_option("--trace-csv", trace_csv, "local: write the recorded channels as CSV (batches: FILE-<n>.csv)");
+  run->add_flag("--realtime", realtime, "local: pace the run to the wall clock and report loop jitter");
+  common(run, true);
+
+  std::string status_filter, tag_filter;
+  std::int64_t batch = 0;
+  int limit = 100;
+  auto* queue = app.add_subcommand("queue", "list runs on the server (default: queued and running)");
+  queue->add_option("--status", status_filter, "queued, running, done, failed, cancelled, interrupted");
+  queue->add_option("--batch", batch, "runs of one batch");
+  queue->add_option("--tag", tag_filter, "runs with this tag");
+  queue->add_option("--limit", limit, "at most this many (1-1000)")->check(CLI::Range(1, 1000));
+  common(queue, true);
+
+  std::int64_t run_id = 0;
+  auto* show = app.add_subcommand("show", "a run: status, metrics, history");
+  show->add_option("run_id", run_id, "run id")->required();
+  common(show, false);
+  auto* watch = app.add_subcommand("watch", "follow a run until it ends (exit 1 if it did not succeed)");
+  watch->add_option("run_id", run_id, "run id")->required();
+  common(watch, false);
+  std::string reason;
+  auto* cancel = app.add_subcommand("cancel", "cancel a queued or running run");
+  cancel->add_option("run_id", run_id, "run id")->required();
+  cancel->add_option("--reason", reason, "recorded with the run");
+  common(cancel, false);
+  std::string export_csv;
+  auto* exp = app.add_subcommand("export", "a stored run's trace as CSV");
+  exp->add_option("run_id", run_id, "run id")->required();
+  exp->add_option("--csv", export_csv, "output file ('-' = stdout)")->required();
+  common(exp, false);
+  auto* benches = app.add_subcommand("benches", "the server's benches");
+  common(benches, false);
 
   std::string compare_input;
-  bool compare_local = false, csv = false;
+  bool compare_local = false;
+  std::vector<std::int64_t> run_ids;
   auto* compare = app.add_subcommand("compare", "compare runs: RMSE, effort and the other metrics side by side");
-  compare->add_option("input", compare_input, "results JSON from `run --json`, or a spec with --local")->required();
+  compare->add_option("input", compare_input, "local: results JSON from `run --json`, or a spec with --local");
   compare->add_flag("--local", compare_local, "run the spec's batch on the embedded emulator, then compare");
-  compare->add_flag("--json", json, "print the comparison as JSON");
-  compare->add_flag("--csv", csv, "print the comparison as CSV");
+  compare->add_option("--batch", batch, "server: compare the runs of this batch");
+  compare->add_option("--runs", run_ids, "server: compare these runs")->delimiter(',');
+  common(compare, true);
 
   try {
     app.parse(argc, argv);
@@ -278,7 +310,54 @@ int main(int argc, char** argv) {
     const int rc = app.exit(e);
     return rc == 0 ? 0 : kExitBadInput;
   }
-  if (run->parsed()) return CmdRun(spec_path, local, server, trace_csv, json, run_csv, realtime);
-  if (compare->parsed()) return CmdCompare(compare_input, compare_local, json, csv);
+  const vb::benchctl::Output out{json, csv};
+  auto make_client = [&]() -> std::unique_ptr<vb::client::Client> {
+    vb::client::ClientOptions opts;
+    opts.address = server;
+    opts.token = token;
+    if (!tls_ca_file.empty()) {
+      std::ifstream in(tls_ca_file);
+      std::stringstream ss;
+      ss << in.rdbuf();
+      opts.tls_ca_pem = ss.str();
+    }
+    return std::make_unique<vb::client::Client>(opts);
+  };
+  auto need_server = [&]() {
+    return Fail(Status::FailedPrecondition("no server given: --server ADDR or VALVEBENCH_SERVER"));
+  };
+
+  if (run->parsed()) {
+    if (local || server.empty()) return CmdRun(spec_path, local, server, trace_csv, json, csv, realtime);
+    if (!trace_csv.empty() || realtime)
+      return Fail(Status::InvalidArgument("--trace-csv and --realtime are local options; use `export` remotely"));
+    auto c = make_client();
+    return vb::benchctl::RemoteRun(*c, spec_path, wait, out);
+  }
+  if (compare->parsed()) {
+    if (batch != 0 || !run_ids.empty()) {
+      if (server.empty()) return need_server();
+      auto c = make_client();
+      return vb::benchctl::RemoteCompare(*c, batch, run_ids, out);
+    }
+    if (compare_input.empty())
+      return Fail(Status::InvalidArgument("compare: give --batch/--runs (server), or a results file or --local SPEC"));
+    return CmdCompare(compare_input, compare_local, json, csv);
+  }
+  if (server.empty()) return need_server();
+  auto c = make_client();
+  if (queue->parsed()) {
+    if (status_filter.empty() && batch == 0 && tag_filter.empty()) {
+      const int a = vb::benchctl::RemoteQueue(*c, "running", 0, "", limit, out);
+      if (a != kExitOk) return a;
+      return vb::benchctl::RemoteQueue(*c, "queued", 0, "", limit, out);
+    }
+    return vb::benchctl::RemoteQueue(*c, status_filter, batch, tag_filter, limit, out);
+  }
+  if (show->parsed()) return vb::benchctl::RemoteShow(*c, run_id, out);
+  if (watch->parsed()) return vb::benchctl::RemoteWatch(*c, run_id, out);
+  if (cancel->parsed()) return vb::benchctl::RemoteCancel(*c, run_id, reason, out);
+  if (exp->parsed()) return vb::benchctl::RemoteExport(*c, run_id, export_csv);
+  if (benches->parsed()) return vb::benchctl::RemoteBenches(*c, out);
   return kExitBadInput;
 }

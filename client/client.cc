@@ -1,0 +1,172 @@
+#include "client/client.h"
+
+#include <grpcpp/grpcpp.h>
+
+#include <cstring>
+
+namespace vb::client {
+
+namespace v1 = valvebench::v1;
+
+Status FromGrpc(const grpc::Status& st) {
+  if (st.ok()) return Status::Ok();
+  const std::string& m = st.error_message();
+  switch (st.error_code()) {
+    case grpc::StatusCode::INVALID_ARGUMENT: return Status::InvalidArgument(m);
+    case grpc::StatusCode::NOT_FOUND: return Status::NotFound(m);
+    case grpc::StatusCode::ALREADY_EXISTS: return Status::AlreadyExists(m);
+    case grpc::StatusCode::FAILED_PRECONDITION: return Status::FailedPrecondition(m);
+    case grpc::StatusCode::OUT_OF_RANGE: return Status::OutOfRange(m);
+    case grpc::StatusCode::RESOURCE_EXHAUSTED: return Status::ResourceExhausted(m);
+    case grpc::StatusCode::UNAUTHENTICATED: return Status::FailedPrecondition("not authenticated: " + m);
+    case grpc::StatusCode::PERMISSION_DENIED: return Status::FailedPrecondition("permission denied: " + m);
+    case grpc::StatusCode::UNAVAILABLE: return Status::Unavailable("server unavailable: " + m);
+    case grpc::StatusCode::DEADLINE_EXCEEDED: return Status::Unavailable("deadline exceeded: " + m);
+    case grpc::StatusCode::CANCELLED: return Status::Aborted(m);
+    case grpc::StatusCode::DATA_LOSS: return Status::DataLoss(m);
+    default: return Status::Internal(m);
+  }
+}
+
+Client::Client(const ClientOptions& options) : opt_(options) {
+  std::shared_ptr<grpc::ChannelCredentials> creds;
+  if (!opt_.tls_ca_pem.empty()) {
+    grpc::SslCredentialsOptions ssl;
+    ssl.pem_root_certs = opt_.tls_ca_pem;
+    creds = grpc::SslCredentials(ssl);
+  } else {
+    creds = grpc::InsecureChannelCredentials();
+  }
+  grpc::ChannelArguments args;
+  args.SetMaxReceiveMessageSize(64 << 20);
+  args.SetMaxSendMessageSize(64 << 20);
+  channel_ = grpc::CreateCustomChannel(opt_.address, creds, args);
+  stub_ = v1::BenchService::NewStub(channel_);
+}
+
+void Client::Prepare(grpc::ClientContext* ctx, double deadline_s) const {
+  ctx->set_deadline(std::chrono::system_clock::now() +
+                    std::chrono::microseconds(static_cast<std::int64_t>(deadline_s * 1e6)));
+  if (!opt_.token.empty()) ctx->AddMetadata("authorization", "Bearer " + opt_.token);
+}
+
+StatusOr<v1::SubmitRunResponse> Client::Submit(const v1::ExperimentSpec& spec, const std::string& batch_name) {
+  grpc::ClientContext ctx;
+  Prepare(&ctx, opt_.deadline_s);
+  v1::SubmitRunRequest req;
+  *req.mutable_spec() = spec;
+  req.set_batch_name(batch_name);
+  v1::SubmitRunResponse resp;
+  auto st = stub_->SubmitRun(&ctx, req, &resp);
+  if (!st.ok()) return FromGrpc(st);
+  return resp;
+}
+
+StatusOr<v1::Run> Client::GetRun(std::int64_t run_id) {
+  grpc::ClientContext ctx;
+  Prepare(&ctx, opt_.deadline_s);
+  v1::GetRunRequest req;
+  req.set_run_id(run_id);
+  v1::Run resp;
+  auto st = stub_->GetRun(&ctx, req, &resp);
+  if (!st.ok()) return FromGrpc(st);
+  return resp;
+}
+
+StatusOr<v1::ListRunsResponse> Client::ListRuns(const v1::ListRunsRequest& request) {
+  grpc::ClientContext ctx;
+  Prepare(&ctx, opt_.deadline_s);
+  v1::ListRunsResponse resp;
+  auto st = stub_->ListRuns(&ctx, request, &resp);
+  if (!st.ok()) return FromGrpc(st);
+  return resp;
+}
+
+StatusOr<v1::Run> Client::Cancel(std::int64_t run_id, const std::string& reason) {
+  grpc::ClientContext ctx;
+  Prepare(&ctx, opt_.deadline_s);
+  v1::CancelRunRequest req;
+  req.set_run_id(run_id);
+  req.set_reason(reason);
+  v1::Run resp;
+  auto st = stub_->CancelRun(&ctx, req, &resp);
+  if (!st.ok()) return FromGrpc(st);
+  return resp;
+}
+
+Status Client::Watch(std::int64_t run_id, double deadline_s, double sample_rate_Hz,
+                     const std::function<bool(const v1::RunEvent&)>& on_event) {
+  grpc::ClientContext ctx;
+  Prepare(&ctx, deadline_s);
+  v1::WatchRunRequest req;
+  req.set_run_id(run_id);
+  req.set_sample_rate_hz(sample_rate_Hz);
+  auto reader = stub_->WatchRun(&ctx, req);
+  v1::RunEvent ev;
+  while (reader->Read(&ev)) {
+    if (!on_event(ev)) {
+      ctx.TryCancel();
+      break;
+    }
+  }
+  auto st = reader->Finish();
+  if (st.error_code() == grpc::StatusCode::CANCELLED) return Status::Ok();
+  return FromGrpc(st);
+}
+
+StatusOr<FetchedTrace> Client::GetTrace(std::int64_t run_id, double deadline_s) {
+  grpc::ClientContext ctx;
+  Prepare(&ctx, deadline_s);
+  v1::GetTraceRequest req;
+  req.set_run_id(run_id);
+  auto reader = stub_->GetTrace(&ctx, req);
+  FetchedTrace out;
+  v1::TraceChunk chunk;
+  int expected = 0;
+  while (reader->Read(&chunk)) {
+    if (chunk.index() != expected)
+      return Status::DataLoss("trace chunk " + std::to_string(chunk.index()) + " arrived, expected " +
+                              std::to_string(expected));
+    const size_t n = static_cast<size_t>(chunk.samples());
+    if (chunk.data().size() != n * static_cast<size_t>(chunk.channels_size()) * sizeof(double))
+      return Status::DataLoss("trace chunk " + std::to_string(chunk.index()) + ": data size does not match");
+    if (expected == 0) {
+      out.t0_s = chunk.t0_s();
+      out.sample_period_s = chunk.sample_period_s();
+      out.channels.assign(chunk.channels().begin(), chunk.channels().end());
+    }
+    for (int c = 0; c < chunk.channels_size(); ++c) {
+      auto& col = out.columns[chunk.channels(c)];
+      const size_t at = col.size();
+      col.resize(at + n);
+      std::memcpy(col.data() + at, chunk.data().data() + c * n * sizeof(double), n * sizeof(double));
+    }
+    ++expected;
+  }
+  auto st = reader->Finish();
+  if (!st.ok()) return FromGrpc(st);
+  return out;
+}
+
+StatusOr<v1::CompareRunsResponse> Client::Compare(std::int64_t batch_id, const std::vector<std::int64_t>& run_ids) {
+  grpc::ClientContext ctx;
+  Prepare(&ctx, opt_.deadline_s);
+  v1::CompareRunsRequest req;
+  req.set_batch_id(batch_id);
+  for (auto id : run_ids) req.add_run_ids(id);
+  v1::CompareRunsResponse resp;
+  auto st = stub_->CompareRuns(&ctx, req, &resp);
+  if (!st.ok()) return FromGrpc(st);
+  return resp;
+}
+
+StatusOr<v1::ListBenchesResponse> Client::Benches() {
+  grpc::ClientContext ctx;
+  Prepare(&ctx, opt_.deadline_s);
+  v1::ListBenchesResponse resp;
+  auto st = stub_->ListBenches(&ctx, v1::ListBenchesRequest{}, &resp);
+  if (!st.ok()) return FromGrpc(st);
+  return resp;
+}
+
+}  // namespace vb::client

@@ -1,0 +1,62 @@
+// A small C++ client over the BenchService stub: a deadline on every call, the bearer token on every call,
+// gRPC status mapped back to vb::Status (the message keeps the server's field path).
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <functional>
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "common/status.h"
+#include "valvebench/v1/api.grpc.pb.h"
+
+namespace vb::client {
+
+struct ClientOptions {
+  std::string address = "127.0.0.1:50051";
+  std::string token;                    // bearer token
+  std::string tls_ca_pem;               // non-empty: TLS with this CA (PEM contents)
+  double deadline_s = 30.0;             // unary calls
+};
+
+// A trace fetched back: uniformly sampled columns by channel name.
+struct FetchedTrace {
+  double t0_s = 0.0;
+  double sample_period_s = 0.0;
+  std::vector<std::string> channels;
+  std::map<std::string, std::vector<double>> columns;
+  size_t samples() const { return columns.empty() ? 0 : columns.begin()->second.size(); }
+};
+
+class Client {
+ public:
+  explicit Client(const ClientOptions& options);
+
+  StatusOr<valvebench::v1::SubmitRunResponse> Submit(const valvebench::v1::ExperimentSpec& spec,
+                                                     const std::string& batch_name = "");
+  StatusOr<valvebench::v1::Run> GetRun(std::int64_t run_id);
+  StatusOr<valvebench::v1::ListRunsResponse> ListRuns(const valvebench::v1::ListRunsRequest& request);
+  StatusOr<valvebench::v1::Run> Cancel(std::int64_t run_id, const std::string& reason = "");
+  // Calls on_event for every event until the run ends, on_event returns false, or deadline_s passes.
+  Status Watch(std::int64_t run_id, double deadline_s, double sample_rate_Hz,
+               const std::function<bool(const valvebench::v1::RunEvent&)>& on_event);
+  StatusOr<FetchedTrace> GetTrace(std::int64_t run_id, double deadline_s = 60.0);
+  StatusOr<valvebench::v1::CompareRunsResponse> Compare(std::int64_t batch_id, const std::vector<std::int64_t>& run_ids);
+  StatusOr<valvebench::v1::ListBenchesResponse> Benches();
+
+ private:
+  void Prepare(grpc::ClientContext* ctx, double deadline_s) const;
+  ClientOptions opt_;
+  std::shared_ptr<grpc::Channel> channel_;
+  std::unique_ptr<valvebench::v1::BenchService::Stub> stub_;
+};
+
+// gRPC status -> vb::Status: INVALID_ARGUMENT, NOT_FOUND, FAILED_PRECONDITION, RESOURCE_EXHAUSTED keep their
+// meaning; UNAUTHENTICATED/PERMISSION_DENIED become FailedPrecondition with "permission: ..."; UNAVAILABLE and
+// DEADLINE_EXCEEDED become Unavailable.
+Status FromGrpc(const grpc::Status& st);
+
+}  // namespace vb::client

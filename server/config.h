@@ -1,0 +1,39 @@
+// valvebench-server configuration: loaded from protobuf JSON (proto/valvebench/v1/config.proto), validated
+// with errors that name the field, defaults applied.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "common/status.h"
+#include "hw/emulated_bench.h"
+#include "server/auth.h"
+#include "valvebench/v1/config.pb.h"
+
+namespace vb::server {
+
+struct BenchSetup {
+  std::string name;
+  std::string kind;             // "emulated"
+  std::string bench_class;      // what runs are matched on: "emulated:<preset>"
+  std::string preset;
+  valvebench::v1::ModelSpec model;
+  hw::EmulatedBenchOptions emulated;
+};
+
+struct Settings {
+  std::string listen_address = "127.0.0.1:50051";
+  std::string database_path;
+  std::vector<BenchSetup> benches;
+  Authenticator auth;
+  std::string tls_cert_pem, tls_key_pem;  // both set = TLS
+  valvebench::v1::Limits limits;          // defaults filled in
+};
+
+StatusOr<Settings> LoadSettings(const std::string& config_path);
+StatusOr<Settings> SettingsFromConfig(const valvebench::v1::ServerConfig& config, const std::string& base_dir);
+
+// The bench class a spec asks for ("emulated:<preset>"), as matched against BenchSetup::bench_class.
+std::string SpecBenchClass(const valvebench::v1::ExperimentSpec& spec);
+
+}  // namespace vb::server

@@ -1,0 +1,103 @@
+// valvebench-server --config FILE
+// Serves BenchService, grpc.health.v1 and server reflection; one worker per configured bench. Listens on
+// loopback unless the config says otherwise. SIGTERM/SIGINT: stop accepting, stop running experiments (the
+// benches go to their safe state; the runs are re-queued at the next start), exit 0.
+#include <grpcpp/ext/proto_server_reflection_plugin.h>
+#include <grpcpp/grpcpp.h>
+#include <grpcpp/health_check_service_interface.h>
+
+#include <CLI/CLI.hpp>
+
+#include <csignal>
+#include <cstdio>
+#include <memory>
+#include <pthread.h>
+#include <thread>
+
+#include "server/config.h"
+#include "server/service.h"
+#include "server/workers.h"
+
+int main(int argc, char** argv) {
+  CLI::App app{"valvebench-server: the bench server"};
+  std::string config_path;
+  app.add_option("--config", config_path, "server configuration (protobuf JSON)")->required();
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e) == 0 ? 0 : 2;
+  }
+
+  // Block the shutdown signals in every thread; one thread waits for them.
+  sigset_t signals;
+  sigemptyset(&signals);
+  sigaddset(&signals, SIGTERM);
+  sigaddset(&signals, SIGINT);
+  pthread_sigmask(SIG_BLOCK, &signals, nullptr);
+
+  auto settings = vb::server::LoadSettings(config_path);
+  if (!settings.ok()) {
+    std::fprintf(stderr, "valvebench-server: %s\n", settings.status().message().c_str());
+    return 2;
+  }
+  auto store = vb::db::Store::Open(settings->database_path);
+  if (!store.ok()) {
+    std::fprintf(stderr, "valvebench-server: %s: %s\n", settings->database_path.c_str(),
+                 store.status().message().c_str());
+    return 3;
+  }
+  auto recovered = (*store)->RecoverAfterCrash();
+  if (!recovered.ok()) {
+    std::fprintf(stderr, "valvebench-server: recovery failed: %s\n", recovered.status().message().c_str());
+    return 3;
+  }
+  if (*recovered > 0)
+    std::fprintf(stderr, "valvebench-server: %d run(s) were running when the server stopped: marked interrupted\n",
+                 *recovered);
+
+  vb::server::Registry registry;
+  std::vector<std::unique_ptr<vb::server::Worker>> workers;
+  for (const auto& b : settings->benches)
+    workers.push_back(std::make_unique<vb::server::Worker>(b, settings->database_path, &registry));
+  vb::server::StorePool pool(settings->database_path);
+  vb::server::BenchServiceImpl service(&settings.value(), &pool, &registry, &workers);
+
+  grpc::EnableDefaultHealthCheckService(true);
+  grpc::reflection::InitProtoReflectionServerBuilderPlugin();
+  grpc::ServerBuilder builder;
+  std::shared_ptr<grpc::ServerCredentials> creds;
+  if (!settings->tls_cert_pem.empty()) {
+    grpc::SslServerCredentialsOptions ssl;
+    ssl.pem_key_cert_pairs.push_back({settings->tls_key_pem, settings->tls_cert_pem});
+    creds = grpc::SslServerCredentials(ssl);
+  } else {
+    creds = grpc::InsecureServerCredentials();
+  }
+  int port = 0;
+  builder.AddListeningPort(settings->listen_address, creds, &port);
+  builder.RegisterService(&service);
+  builder.SetMaxReceiveMessageSize(64 << 20);
+  builder.SetMaxSendMessageSize(64 << 20);
+  std::unique_ptr<grpc::Server> server = builder.BuildAndStart();
+  if (server == nullptr || port == 0) {
+    std::fprintf(stderr, "valvebench-server: cannot listen on %s\n", settings->listen_address.c_str());
+    return 3;
+  }
+  for (auto& w : workers) w->Start();
+  // The address with the port actually bound (a config may ask for port 0: any free port).
+  std::string bound = settings->listen_address;
+  if (const size_t colon = bound.rfind(':'); colon != std::string::npos)
+    bound = bound.substr(0, colon + 1) + std::to_string(port);
+  std::fprintf(stderr, "valvebench-server: listening on %s (%s), %zu bench(es), database %s\n", bound.c_str(),
+               settings->tls_cert_pem.empty() ? "insecure" : "TLS", workers.size(),
+               settings->database_path.c_str());
+  std::fflush(stderr);
+
+  int sig = 0;
+  sigwait(&signals, &sig);
+  std::fprintf(stderr, "valvebench-server: %s: shutting down\n", sig == SIGTERM ? "SIGTERM" : "SIGINT");
+  server->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(2));
+  for (auto& w : workers) w->Stop();
+  server->Wait();
+  return 0;
+}

@@ -1,0 +1,450 @@
+#include "server/service.h"
+
+#include <google/protobuf/util/json_util.h>
+
+#include <chrono>
+#include <cmath>
+#include <sstream>
+#include <thread>
+
+#include "experiment/compare.h"
+#include "experiment/spec.h"
+#include "server/grpc_status.h"
+
+namespace vb::server {
+
+namespace v1 = valvebench::v1;
+
+StorePool::Handle::~Handle() {
+  if (store_ == nullptr) return;
+  std::lock_guard<std::mutex> lock(pool_->mu_);
+  pool_->free_.push_back(std::move(store_));
+}
+
+StatusOr<StorePool::Handle> StorePool::Acquire() {
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (!free_.empty()) {
+      auto s = std::move(free_.back());
+      free_.pop_back();
+      return Handle(this, std::move(s));
+    }
+  }
+  auto s = db::Store::Open(path_);
+  if (!s.ok()) return s.status();
+  return Handle(this, std::move(s.value()));
+}
+
+v1::RunStatus ToProto(db::RunStatus s) {
+  switch (s) {
+    case db::RunStatus::kQueued: return v1::QUEUED;
+    case db::RunStatus::kRunning: return v1::RUNNING;
+    case db::RunStatus::kDone: return v1::DONE;
+    case db::RunStatus::kFailed: return v1::FAILED;
+    case db::RunStatus::kCancelled: return v1::CANCELLED;
+    case db::RunStatus::kInterrupted: return v1::INTERRUPTED;
+  }
+  return v1::RUN_STATUS_UNSPECIFIED;
+}
+
+namespace {
+
+bool Finished(db::RunStatus s) {
+  return s == db::RunStatus::kDone || s == db::RunStatus::kFailed || s == db::RunStatus::kCancelled;
+}
+
+std::string LawName(const v1::ExperimentSpec& spec) {
+  const auto* f = spec.controller().GetDescriptor()->FindFieldByNumber(spec.controller().law_case());
+  return f != nullptr ? f->name() : "";
+}
+
+std::string RunName(const v1::ExperimentSpec& spec) {
+  std::string name = spec.name();
+  for (const auto& tag : spec.tags())
+    if (tag.rfind("sweep:", 0) == 0 || tag.rfind("repeat:", 0) == 0) name += " " + tag;
+  return name;
+}
+
+std::string Format(double v) {
+  std::ostringstream os;
+  os << v;
+  return os.str();
+}
+
+}  // namespace
+
+grpc::Status BenchServiceImpl::Authorize(grpc::ServerContext* ctx, Role need, Principal* who) const {
+  const auto& md = ctx->client_metadata();
+  auto it = md.find("authorization");
+  if (it == md.end()) return Unauthenticated(Status::FailedPrecondition("missing authorization metadata"));
+  auto p = settings_->auth.Authenticate(std::string_view(it->second.data(), it->second.size()));
+  if (!p.ok()) return Unauthenticated(p.status());
+  if (!p->AtLeast(need))
+    return PermissionDenied("user " + p->user + " (" + RoleName(p->role) + ") needs the " + RoleName(need) +
+                            " role for this call");
+  *who = *p;
+  return grpc::Status::OK;
+}
+
+grpc::Status BenchServiceImpl::SubmitRun(grpc::ServerContext* ctx, const v1::SubmitRunRequest* req,
+                                         v1::SubmitRunResponse* resp) {
+  Principal who;
+  if (auto st = Authorize(ctx, Role::kOperator, &who); !st.ok()) return st;
+  return Submit(who, {req->spec()}, req->batch_name().empty() ? req->spec().name() : req->batch_name(), resp);
+}
+
+grpc::Status BenchServiceImpl::SubmitBatch(grpc::ServerContext* ctx, const v1::SubmitBatchRequest* req,
+                                           v1::SubmitRunResponse* resp) {
+  Principal who;
+  if (auto st = Authorize(ctx, Role::kOperator, &who); !st.ok()) return st;
+  if (req->specs_size() == 0) return ToGrpcStatus(Status::InvalidArgument("specs: at least one spec is needed"));
+  std::vector<v1::ExperimentSpec> specs(req->specs().begin(), req->specs().end());
+  return Submit(who, specs, req->batch_name(), resp);
+}
+
+grpc::Status BenchServiceImpl::Submit(const Principal& who, const std::vector<v1::ExperimentSpec>& specs,
+                                      const std::string& batch_name, v1::SubmitRunResponse* resp) {
+  const v1::Limits& lim = settings_->limits;
+  std::vector<db::RunRecord> runs;
+  for (size_t s = 0; s < specs.size(); ++s) {
+    const std::string where = specs.size() > 1 ? "specs[" + std::to_string(s) + "]" : "spec";
+    if (specs[s].ByteSizeLong() > lim.max_spec_bytes())
+      return ToGrpcStatus(Status::ResourceExhausted(where + ": " + std::to_string(specs[s].ByteSizeLong()) +
+                                                    " bytes exceed the server limit of " +
+                                                    std::to_string(lim.max_spec_bytes())));
+    auto points = experiment::ExpandSweep(specs[s], lim.max_runs_per_submission());
+    if (!points.ok()) return ToGrpcStatus(points.status());
+    for (size_t k = 0; k < points->size(); ++k) {
+      const v1::ExperimentSpec& p = (*points)[k];
+      const std::string run_where = points->size() > 1 ? "run " + std::to_string(k) + " (" + RunName(p) + ")" : "";
+      auto ctxt = [&](const Status& st) { return run_where.empty() ? st : st.WithContext(run_where); };
+      auto e = experiment::BuildExperiment(p);
+      if (!e.ok()) return ToGrpcStatus(ctxt(e.status()));
+      if (e->duration_s > lim.max_duration_s())
+        return ToGrpcStatus(ctxt(Status::ResourceExhausted("duration_s: " + Format(e->duration_s) +
+                                                           " s exceeds the server limit of " +
+                                                           Format(lim.max_duration_s()) + " s")));
+      if (e->run.sample_rate_Hz > lim.max_record_rate_hz())
+        return ToGrpcStatus(ctxt(Status::ResourceExhausted("recording.rate_Hz: " + Format(e->run.sample_rate_Hz) +
+                                                           " Hz exceeds the server limit of " +
+                                                           Format(lim.max_record_rate_hz()) + " Hz")));
+      // Capabilities decide at submission, not at run time.
+      const std::string cls = SpecBenchClass(p);
+      bool compatible = false;
+      std::string available;
+      for (const auto& b : settings_->benches) {
+        available += (available.empty() ? "" : ", ") + b.name + " (" + b.bench_class + ")";
+        if (b.bench_class != cls) continue;
+        if (!p.bench().name().empty() && p.bench().name() != b.name) continue;
+        if (e->run.supply_V > b.emulated.max_supply_V) continue;
+        compatible = true;
+      }
+      if (!compatible)
+        return ToGrpcStatus(ctxt(Status::FailedPrecondition(
+            "bench: no configured bench can run it (needs " + cls +
+            (p.bench().name().empty() ? "" : " named " + p.bench().name()) + " at " + Format(e->run.supply_V) +
+            " V; configured: " + available + ")")));
+      db::RunRecord r;
+      r.name = RunName(p);
+      r.controller = LawName(p);
+      r.bench_kind = cls;
+      r.bench_name = p.bench().name();
+      r.spec_json = experiment::SpecToJson(p, false);
+      r.submitter = who.user;
+      r.priority = p.priority();
+      r.tags.assign(p.tags().begin(), p.tags().end());
+      runs.push_back(std::move(r));
+      if (runs.size() > lim.max_runs_per_submission())
+        return ToGrpcStatus(Status::ResourceExhausted("submission expands to more than " +
+                                                      std::to_string(lim.max_runs_per_submission()) + " runs"));
+    }
+  }
+  auto store = pool_->Acquire();
+  if (!store.ok()) return ToGrpcStatus(store.status());
+  auto queued = (*store)->CountQueued(who.user);
+  if (!queued.ok()) return ToGrpcStatus(queued.status());
+  if (static_cast<std::uint64_t>(*queued) + runs.size() > lim.max_queued_runs_per_user())
+    return ToGrpcStatus(Status::ResourceExhausted(
+        "user " + who.user + " has " + std::to_string(*queued) + " queued runs; " + std::to_string(runs.size()) +
+        " more would exceed the limit of " + std::to_string(lim.max_queued_runs_per_user())));
+  std::string batch_json;
+  if (specs.size() == 1) batch_json = experiment::SpecToJson(specs[0], false);
+  std::vector<std::int64_t> ids;
+  auto batch = (*store)->SubmitBatch(who.user, batch_name, batch_json, std::move(runs), &ids);
+  if (!batch.ok()) return ToGrpcStatus(batch.status());
+  resp->set_batch_id(*batch);
+  for (auto id : ids) resp->add_run_ids(id);
+  registry_->NotifyWork();
+  return grpc::Status::OK;
+}
+
+grpc::Status BenchServiceImpl::FillRun(db::Store* store, const db::RunRecord& r, bool full, v1::Run* out) {
+  out->set_id(r.id);
+  out->set_batch_id(r.batch_id);
+  out->set_name(r.name);
+  out->set_controller(r.controller);
+  out->set_bench(r.bench_name);
+  out->set_submitter(r.submitter);
+  out->set_priority(r.priority);
+  out->set_status(ToProto(r.status));
+  out->set_reason(r.reason);
+  out->set_submitted_unix_s(r.submitted_unix_s);
+  out->set_started_unix_s(r.started_unix_s);
+  out->set_finished_unix_s(r.finished_unix_s);
+  double progress = r.status == db::RunStatus::kDone ? 1.0 : r.progress;
+  if (r.status == db::RunStatus::kRunning) registry_->Progress(r.id, &progress);
+  out->set_progress(progress);
+  for (const auto& t : r.tags) out->add_tags(t);
+  auto metrics = store->GetMetrics(r.id);
+  if (!metrics.ok()) return ToGrpcStatus(metrics.status());
+  for (const auto& m : *metrics) (*out->mutable_metrics())[m.name] = m.value;
+  if (!full) return grpc::Status::OK;
+  google::protobuf::util::JsonParseOptions opts;
+  (void)google::protobuf::util::JsonStringToMessage(r.spec_json, out->mutable_spec(), opts);
+  auto history = store->History(r.id);
+  if (!history.ok()) return ToGrpcStatus(history.status());
+  for (const auto& h : *history) {
+    auto* c = out->add_history();
+    c->set_status(ToProto(h.status));
+    c->set_at_unix_s(h.at_unix_s);
+    c->set_reason(h.reason);
+  }
+  return grpc::Status::OK;
+}
+
+grpc::Status BenchServiceImpl::GetRun(grpc::ServerContext* ctx, const v1::GetRunRequest* req, v1::Run* resp) {
+  Principal who;
+  if (auto st = Authorize(ctx, Role::kViewer, &who); !st.ok()) return st;
+  auto store = pool_->Acquire();
+  if (!store.ok()) return ToGrpcStatus(store.status());
+  auto r = (*store)->GetRun(req->run_id());
+  if (!r.ok()) return ToGrpcStatus(r.status());
+  return FillRun(store->get(), *r, true, resp);
+}
+
+grpc::Status BenchServiceImpl::ListRuns(grpc::ServerContext* ctx, const v1::ListRunsRequest* req,
+                                        v1::ListRunsResponse* resp) {
+  Principal who;
+  if (auto st = Authorize(ctx, Role::kViewer, &who); !st.ok()) return st;
+  db::RunFilter f;
+  switch (req->status()) {
+    case v1::QUEUED: f.status = db::RunStatus::kQueued; break;
+    case v1::RUNNING: f.status = db::RunStatus::kRunning; break;
+    case v1::DONE: f.status = db::RunStatus::kDone; break;
+    case v1::FAILED: f.status = db::RunStatus::kFailed; break;
+    case v1::CANCELLED: f.status = db::RunStatus::kCancelled; break;
+    case v1::INTERRUPTED: f.status = db::RunStatus::kInterrupted; break;
+    default: break;
+  }
+  f.tag = req->tag();
+  f.batch_id = req->batch_id();
+  f.controller = req->controller();
+  f.bench_name = req->bench();
+  f.submitter = req->submitter();
+  f.submitted_after_unix_s = req->submitted_after_unix_s();
+  f.submitted_before_unix_s = req->submitted_before_unix_s();
+  if (req->page_size() < 0 || req->page_size() > 1000)
+    return ToGrpcStatus(Status::InvalidArgument("page_size: must be in [0, 1000] (0 = 100)"));
+  f.limit = req->page_size() == 0 ? 100 : req->page_size();
+  if (!req->page_token().empty()) {
+    try {
+      f.after_id = std::stoll(req->page_token());
+    } catch (...) {
+      return ToGrpcStatus(Status::InvalidArgument("page_token: not a token from a previous ListRuns"));
+    }
+  }
+  auto store = pool_->Acquire();
+  if (!store.ok()) return ToGrpcStatus(store.status());
+  auto runs = (*store)->ListRuns(f);
+  if (!runs.ok()) return ToGrpcStatus(runs.status());
+  for (const auto& r : *runs)
+    if (auto st = FillRun(store->get(), r, false, resp->add_runs()); !st.ok()) return st;
+  if (static_cast<std::int32_t>(runs->size()) == f.limit) resp->set_next_page_token(std::to_string(runs->back().id));
+  return grpc::Status::OK;
+}
+
+grpc::Status BenchServiceImpl::CancelRun(grpc::ServerContext* ctx, const v1::CancelRunRequest* req, v1::Run* resp) {
+  Principal who;
+  if (auto st = Authorize(ctx, Role::kOperator, &who); !st.ok()) return st;
+  auto store = pool_->Acquire();
+  if (!store.ok()) return ToGrpcStatus(store.status());
+  auto r = (*store)->GetRun(req->run_id());
+  if (!r.ok()) return ToGrpcStatus(r.status());
+  if (r->submitter != who.user && !who.AtLeast(Role::kAdmin))
+    return PermissionDenied("user " + who.user + " may cancel only their own runs (run " +
+                            std::to_string(r->id) + " is " + r->submitter + "'s)");
+  auto st = (*store)->RequestCancel(r->id, req->reason().empty() ? "cancelled by " + who.user : req->reason());
+  if (!st.ok()) return ToGrpcStatus(st.status());
+  if (*st == db::RunStatus::kRunning) {
+    registry_->Cancel(r->id);
+    // The loop stops within one control period; wait briefly so the answer shows the final state.
+    for (int k = 0; k < 100; ++k) {
+      auto now = (*store)->GetRun(r->id);
+      if (now.ok() && Finished(now->status)) break;
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+  }
+  auto now = (*store)->GetRun(r->id);
+  if (!now.ok()) return ToGrpcStatus(now.status());
+  return FillRun(store->get(), *now, true, resp);
+}
+
+grpc::Status BenchServiceImpl::WatchRun(grpc::ServerContext* ctx, const v1::WatchRunRequest* req,
+                                        grpc::ServerWriter<v1::RunEvent>* writer) {
+  Principal who;
+  if (auto st = Authorize(ctx, Role::kViewer, &who); !st.ok()) return st;
+  auto store = pool_->Acquire();
+  if (!store.ok()) return ToGrpcStatus(store.status());
+  std::uint64_t seq = 0;
+  bool first = true;
+  db::RunStatus last_status = db::RunStatus::kQueued;
+  double last_progress = -1.0;
+  while (!ctx->IsCancelled()) {
+    auto r = (*store)->GetRun(req->run_id());
+    if (!r.ok()) return ToGrpcStatus(r.status());
+    v1::RunEvent ev;
+    ev.set_run_id(r->id);
+    ev.set_status(ToProto(r->status));
+    ev.set_reason(r->reason);
+    double progress = r->status == db::RunStatus::kDone ? 1.0 : r->progress;
+    if (r->status == db::RunStatus::kRunning) {
+      registry_->Progress(r->id, &progress);
+      if (req->sample_rate_hz() >= 0.0) {
+        std::vector<LiveSample> samples;
+        registry_->SamplesSince(r->id, &seq, &samples);
+        for (const auto& s : samples) {
+          auto* ls = ev.add_samples();
+          ls->set_t_s(s.t_s);
+          ls->set_gate(s.gate);
+          ls->set_i_a(s.i_A);
+          ls->set_x_m(s.x_m);
+        }
+      }
+    }
+    ev.set_progress(progress);
+    const bool changed = first || r->status != last_status || std::abs(progress - last_progress) >= 0.01 ||
+                         ev.samples_size() > 0;
+    if (changed && !writer->Write(ev)) return grpc::Status::OK;  // the client went away
+    first = false;
+    last_status = r->status;
+    last_progress = progress;
+    if (Finished(r->status) || r->status == db::RunStatus::kInterrupted) return grpc::Status::OK;
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  return grpc::Status(grpc::StatusCode::CANCELLED, "watch cancelled by the client");
+}
+
+grpc::Status BenchServiceImpl::GetTrace(grpc::ServerContext* ctx, const v1::GetTraceRequest* req,
+                                        grpc::ServerWriter<v1::TraceChunk>* writer) {
+  Principal who;
+  if (auto st = Authorize(ctx, Role::kViewer, &who); !st.ok()) return st;
+  auto store = pool_->Acquire();
+  if (!store.ok()) return ToGrpcStatus(store.status());
+  auto r = (*store)->GetRun(req->run_id());
+  if (!r.ok()) return ToGrpcStatus(r.status());
+  if (!Finished(r->status))
+    return ToGrpcStatus(Status::FailedPrecondition("run " + std::to_string(r->id) + " is " +
+                                                   db::RunStatusName(r->status) +
+                                                   "; its trace is stored when it ends"));
+  auto chunks = (*store)->ReadTrace(r->id);
+  if (!chunks.ok()) return ToGrpcStatus(chunks.status());
+  for (const auto& c : *chunks) {
+    if (ctx->IsCancelled()) return grpc::Status(grpc::StatusCode::CANCELLED, "cancelled by the client");
+    v1::TraceChunk out;
+    out.set_index(c.index);
+    out.set_t0_s(c.t0_s);
+    out.set_sample_period_s(c.sample_period_s);
+    out.set_samples(c.samples);
+    for (const auto& ch : c.channels) out.add_channels(ch);
+    out.set_data(reinterpret_cast<const char*>(c.data.data()), c.data.size() * sizeof(double));
+    if (!writer->Write(out)) return grpc::Status::OK;
+  }
+  return grpc::Status::OK;
+}
+
+grpc::Status BenchServiceImpl::CompareRuns(grpc::ServerContext* ctx, const v1::CompareRunsRequest* req,
+                                           v1::CompareRunsResponse* resp) {
+  Principal who;
+  if (auto st = Authorize(ctx, Role::kViewer, &who); !st.ok()) return st;
+  if ((req->batch_id() == 0) == (req->run_ids_size() == 0))
+    return ToGrpcStatus(Status::InvalidArgument("batch_id, run_ids: give a batch or a list of runs"));
+  auto store = pool_->Acquire();
+  if (!store.ok()) return ToGrpcStatus(store.status());
+  std::vector<db::RunRecord> runs;
+  if (req->batch_id() != 0) {
+    db::RunFilter f;
+    f.batch_id = req->batch_id();
+    f.limit = 1000;
+    for (;;) {
+      auto page = (*store)->ListRuns(f);
+      if (!page.ok()) return ToGrpcStatus(page.status());
+      for (auto& r : *page) runs.push_back(r);
+      if (static_cast<std::int32_t>(page->size()) < f.limit) break;
+      f.after_id = page->back().id;
+    }
+    if (runs.empty()) return ToGrpcStatus(Status::NotFound("batch " + std::to_string(req->batch_id()) + " not found"));
+  } else {
+    for (auto id : req->run_ids()) {
+      auto r = (*store)->GetRun(id);
+      if (!r.ok()) return ToGrpcStatus(r.status());
+      runs.push_back(*r);
+    }
+  }
+  std::vector<experiment::RunRecord> records;
+  for (const auto& r : runs) {
+    experiment::RunRecord rec;
+    rec.name = r.name.substr(0, r.name.find(" repeat:"));
+    rec.controller = r.controller;
+    rec.ok = r.status == db::RunStatus::kDone;
+    auto metrics = (*store)->GetMetrics(r.id);
+    if (!metrics.ok()) return ToGrpcStatus(metrics.status());
+    for (const auto& m : *metrics) rec.metrics[m.name] = m.value;
+    records.push_back(std::move(rec));
+  }
+  const experiment::Comparison c = experiment::Compare(records);
+  resp->set_rank_metric(c.rank_metric);
+  resp->set_effort_metric(c.effort_metric);
+  for (const auto& col : c.columns) resp->add_columns(col);
+  for (const auto& row : c.rows) {
+    auto* out = resp->add_rows();
+    out->set_rank(row.rank);
+    out->set_name(row.name);
+    out->set_controller(row.controller);
+    out->set_runs(row.runs);
+    out->set_failed(row.failed);
+    out->set_pareto(row.pareto);
+    for (const auto& [name, stat] : row.metrics) {
+      if (stat.n == 0) continue;
+      v1::MetricStat ms;
+      ms.set_mean(stat.mean);
+      ms.set_spread(stat.spread);
+      ms.set_n(stat.n);
+      (*out->mutable_metrics())[name] = ms;
+    }
+  }
+  return grpc::Status::OK;
+}
+
+grpc::Status BenchServiceImpl::ListBenches(grpc::ServerContext* ctx, const v1::ListBenchesRequest* /*req*/,
+                                           v1::ListBenchesResponse* resp) {
+  Principal who;
+  if (auto st = Authorize(ctx, Role::kViewer, &who); !st.ok()) return st;
+  for (const auto& w : *workers_) {
+    const BenchSetup& b = w->setup();
+    auto* out = resp->add_benches();
+    out->set_name(b.name);
+    out->set_kind(b.kind);
+    out->set_driver(std::string(model::DriverKindName(b.emulated.driver.kind)));
+    out->set_model(b.preset);
+    out->set_max_supply_v(b.emulated.max_supply_V);
+    out->set_max_carrier_hz(1e6);
+    out->set_max_sample_rate_hz(10e6);
+    out->set_measures_position(b.emulated.plant.has_moving_part);
+    const auto current = w->current_run();
+    out->set_busy(current != 0);
+    out->set_current_run_id(current);
+  }
+  return grpc::Status::OK;
+}
+
+}  // namespace vb::server

@@ -1,0 +1,80 @@
+// The BenchService implementation: a thin layer over the store, the workers and the experiment core.
+// Every handler authenticates first, maps core errors through ToGrpcStatus, and never lets an exception out.
+#pragma once
+
+#include <memory>
+#include <mutex>
+#include <vector>
+
+#include "db/store.h"
+#include "server/config.h"
+#include "server/workers.h"
+#include "valvebench/v1/api.grpc.pb.h"
+
+namespace vb::server {
+
+// Store connections for handler threads (a Store is single-threaded; SQLite WAL lets them run side by side).
+class StorePool {
+ public:
+  explicit StorePool(std::string path) : path_(std::move(path)) {}
+  class Handle {
+   public:
+    Handle(StorePool* pool, std::unique_ptr<db::Store> s) : pool_(pool), store_(std::move(s)) {}
+    Handle(Handle&&) = default;
+    ~Handle();
+    db::Store* operator->() { return store_.get(); }
+    db::Store* get() { return store_.get(); }
+
+   private:
+    StorePool* pool_;
+    std::unique_ptr<db::Store> store_;
+  };
+  StatusOr<Handle> Acquire();
+
+ private:
+  friend class Handle;
+  std::string path_;
+  std::mutex mu_;
+  std::vector<std::unique_ptr<db::Store>> free_;
+};
+
+class BenchServiceImpl final : public valvebench::v1::BenchService::Service {
+ public:
+  BenchServiceImpl(const Settings* settings, StorePool* pool, Registry* registry,
+                   const std::vector<std::unique_ptr<Worker>>* workers)
+      : settings_(settings), pool_(pool), registry_(registry), workers_(workers) {}
+
+  grpc::Status SubmitRun(grpc::ServerContext* ctx, const valvebench::v1::SubmitRunRequest* req,
+                         valvebench::v1::SubmitRunResponse* resp) override;
+  grpc::Status SubmitBatch(grpc::ServerContext* ctx, const valvebench::v1::SubmitBatchRequest* req,
+                           valvebench::v1::SubmitRunResponse* resp) override;
+  grpc::Status GetRun(grpc::ServerContext* ctx, const valvebench::v1::GetRunRequest* req,
+                      valvebench::v1::Run* resp) override;
+  grpc::Status ListRuns(grpc::ServerContext* ctx, const valvebench::v1::ListRunsRequest* req,
+                        valvebench::v1::ListRunsResponse* resp) override;
+  grpc::Status CancelRun(grpc::ServerContext* ctx, const valvebench::v1::CancelRunRequest* req,
+                         valvebench::v1::Run* resp) override;
+  grpc::Status WatchRun(grpc::ServerContext* ctx, const valvebench::v1::WatchRunRequest* req,
+                        grpc::ServerWriter<valvebench::v1::RunEvent>* writer) override;
+  grpc::Status GetTrace(grpc::ServerContext* ctx, const valvebench::v1::GetTraceRequest* req,
+                        grpc::ServerWriter<valvebench::v1::TraceChunk>* writer) override;
+  grpc::Status CompareRuns(grpc::ServerContext* ctx, const valvebench::v1::CompareRunsRequest* req,
+                           valvebench::v1::CompareRunsResponse* resp) override;
+  grpc::Status ListBenches(grpc::ServerContext* ctx, const valvebench::v1::ListBenchesRequest* req,
+                           valvebench::v1::ListBenchesResponse* resp) override;
+
+ private:
+  grpc::Status Authorize(grpc::ServerContext* ctx, Role need, Principal* who) const;
+  grpc::Status Submit(const Principal& who, const std::vector<valvebench::v1::ExperimentSpec>& specs,
+                      const std::string& batch_name, valvebench::v1::SubmitRunResponse* resp);
+  grpc::Status FillRun(db::Store* store, const db::RunRecord& r, bool full, valvebench::v1::Run* out);
+
+  const Settings* settings_;
+  StorePool* pool_;
+  Registry* registry_;
+  const std::vector<std::unique_ptr<Worker>>* workers_;
+};
+
+valvebench::v1::RunStatus ToProto(db::RunStatus s);
+
+}  // namespace vb::server

@@ -1,0 +1,107 @@
+// One worker thread per bench: claims the next compatible queued run from the store (priority, then age),
+// runs it on its bench, stores trace and metrics, and leaves the bench in its safe state.
+//
+// The Registry is how request handlers reach running runs without touching the real-time loop: cancelling
+// sets the run's RunMonitor flag (the loop stops within one control period); watchers read the monitor's
+// progress atomic and drain the run's LiveTap, a lock-free single-producer ring the loop writes into.
+#pragma once
+
+#include <array>
+#include <atomic>
+#include <condition_variable>
+#include <cstdint>
+#include <deque>
+#include <map>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "db/store.h"
+#include "experiment/runner.h"
+#include "server/config.h"
+
+namespace vb::server {
+
+struct LiveSample {
+  double t_s;
+  int gate;
+  double i_A;
+  double x_m;
+};
+
+// Every `decimation`-th sample into a fixed ring; the loop never blocks (a full ring drops the sample).
+class LiveTap final : public hw::SampleSink {
+ public:
+  explicit LiveTap(int decimation) : decimation_(decimation > 0 ? decimation : 1) {}
+  void OnSample(const hw::BenchSample& s) override;
+  // Consumer side; one consumer at a time (the Registry holds its mutex).
+  size_t Drain(std::vector<LiveSample>* out);
+
+ private:
+  static constexpr size_t kCapacity = 8192;
+  std::array<LiveSample, kCapacity> ring_{};
+  std::atomic<size_t> head_{0}, tail_{0};
+  int decimation_;
+  int count_ = 0;
+};
+
+class Registry {
+ public:
+  void Add(std::int64_t run_id, experiment::RunMonitor* monitor, LiveTap* tap, double duration_s);
+  void Remove(std::int64_t run_id);
+  // True if the run is executing here (its loop is told to stop).
+  bool Cancel(std::int64_t run_id);
+  // Progress 0..1 of a run executing here.
+  bool Progress(std::int64_t run_id, double* progress);
+  // Live samples with sequence number >= *seq; advances *seq. False if the run is not executing here.
+  bool SamplesSince(std::int64_t run_id, std::uint64_t* seq, std::vector<LiveSample>* out);
+  // Work signalling between submit handlers and idle workers.
+  void NotifyWork();
+  void WaitForWork(int timeout_ms);
+
+ private:
+  struct Running {
+    experiment::RunMonitor* monitor;
+    LiveTap* tap;
+    double duration_s;
+    std::deque<LiveSample> recent;
+    std::uint64_t first_seq = 0;
+  };
+  std::mutex mu_;
+  std::map<std::int64_t, Running> running_;
+  std::condition_variable work_cv_;
+  std::uint64_t work_generation_ = 0;
+};
+
+class Worker {
+ public:
+  Worker(BenchSetup setup, std::string db_path, Registry* registry);
+  ~Worker();
+  Worker(const Worker&) = delete;
+  Worker& operator=(const Worker&) = delete;
+
+  void Start();
+  // Stops claiming, stops a running experiment (safe state), joins. A run stopped this way stays marked
+  // running in the store, so the next start marks it interrupted and re-queues it.
+  void Stop();
+  const BenchSetup& setup() const { return setup_; }
+  std::int64_t current_run() const { return current_run_.load(); }
+
+ private:
+  void Loop();
+  void Execute(db::Store* store, const db::RunRecord& run);
+
+  BenchSetup setup_;
+  std::string db_path_;
+  Registry* registry_;
+  std::thread thread_;
+  std::atomic<bool> stop_{false};
+  std::atomic<std::int64_t> current_run_{0};
+  std::atomic<experiment::RunMonitor*> monitor_{nullptr};
+};
+
+// Stores a trace as chunks of at most chunk_samples samples (all channels, channel-major).
+Status StoreTrace(db::Store* store, std::int64_t run_id, const experiment::Trace& trace, int chunk_samples = 65536);
+
+}  // namespace vb::server

@@ -1,0 +1,98 @@
+// benchctl as a user or a CI script drives a real server: exit codes, data on stdout, errors naming the field.
+#include <gtest/gtest.h>
+
+#include <array>
+#include <cstdio>
+#include <fstream>
+#include <memory>
+#include <regex>
+
+#include "server_process.h"
+
+namespace vb {
+namespace {
+
+struct Result {
+  int exit_code;
+  std::string out;
+};
+
+Result Benchctl(const std::string& args) {
+  const std::string cmd = std::string(VB_BENCHCTL) + " " + args + " 2>&1";
+  std::unique_ptr<FILE, int (*)(FILE*)> p(popen(cmd.c_str(), "r"), &pclose);
+  std::string out;
+  std::array<char, 4096> buf;
+  size_t n;
+  while ((n = fread(buf.data(), 1, buf.size(), p.get())) > 0) out.append(buf.data(), n);
+  const int status = pclose(p.release());
+  return {WEXITSTATUS(status), out};
+}
+
+std::string Example(const std::string& rel) { return std::string(VB_SOURCE_DIR) + "/examples/" + rel; }
+
+TEST(BenchctlRemote, RunWaitQueueShowExportCompareBenches) {
+  const std::string dir = ::testing::TempDir() + "/vb-cli-" + std::to_string(::getpid());
+  std::filesystem::remove_all(dir);
+  testing::ServerProcess server(dir);
+  const std::string addr = server.Start();
+  ASSERT_FALSE(addr.empty()) << server.Log();
+  const std::string op = "--server " + addr + " --token " + testing::kOperatorToken;
+
+  Result run = Benchctl("run " + Example("compare-current-controllers.json") + " --wait " + op);
+  ASSERT_EQ(run.exit_code, 0) << run.out;
+  EXPECT_NE(run.out.find("done"), std::string::npos) << run.out;
+  EXPECT_NE(run.out.find("rank by rmse"), std::string::npos) << "a batch ends with the comparison";
+
+  Result submitted = Benchctl("run " + Example("standard/e3.json") + " --json " + op);
+  ASSERT_EQ(submitted.exit_code, 0) << submitted.out;
+  std::smatch m;
+  ASSERT_TRUE(std::regex_search(submitted.out, m, std::regex(R"("run_ids":\s*\[\s*"?(\d+))"))) << submitted.out;
+  const std::string id = m[1];
+  Result watch = Benchctl("watch " + id + " " + op);
+  EXPECT_EQ(watch.exit_code, 0) << watch.out;
+
+  Result show = Benchctl("show " + id + " --json " + op);
+  ASSERT_EQ(show.exit_code, 0) << show.out;
+  EXPECT_NE(show.out.find("\"status\": \"DONE\""), std::string::npos) << show.out;
+
+  const std::string csv = dir + "/trace.csv";
+  Result exp = Benchctl("export " + id + " --csv " + csv + " " + op);
+  ASSERT_EQ(exp.exit_code, 0) << exp.out;
+  std::ifstream in(csv);
+  std::string header;
+  std::getline(in, header);
+  EXPECT_EQ(header.rfind("t_s,gate,v_coil_V,i_A,x_m", 0), 0u) << header;
+  size_t lines = 0;
+  for (std::string line; std::getline(in, line);) ++lines;
+  EXPECT_EQ(lines, 5001u);
+
+  Result queue = Benchctl("queue --status done --csv " + op);
+  ASSERT_EQ(queue.exit_code, 0) << queue.out;
+  EXPECT_NE(queue.out.find("id,batch,status"), std::string::npos);
+
+  Result cmp = Benchctl("compare --batch 1 --csv " + op);
+  ASSERT_EQ(cmp.exit_code, 0) << cmp.out;
+  EXPECT_NE(cmp.out.find("fuzzy_current"), std::string::npos) << cmp.out;
+
+  Result benches = Benchctl("benches " + op);
+  ASSERT_EQ(benches.exit_code, 0) << benches.out;
+  EXPECT_NE(benches.out.find("emu-a"), std::string::npos);
+
+  // Refusals exit 2 and say why; an unreachable server exits 3.
+  Result bad_token = Benchctl("benches --server " + addr + " --token nope");
+  EXPECT_EQ(bad_token.exit_code, 2) << bad_token.out;
+  const std::string bad_spec = dir + "/bad.json";
+  std::ofstream(bad_spec) << R"({"duration_s": 0.1, "recording": {"rate_Hz": -1},
+      "controller": {"open_loop_pwm": {"segments": [{"start_s": 0, "frequency_Hz": 50, "duty": 0.5}]}}})";
+  Result bad = Benchctl("run " + bad_spec + " " + op);
+  EXPECT_EQ(bad.exit_code, 2) << bad.out;
+  EXPECT_NE(bad.out.find("recording.rate_Hz"), std::string::npos) << bad.out;
+  Result missing = Benchctl("show 99999 " + op);
+  EXPECT_EQ(missing.exit_code, 2) << missing.out;
+  server.Kill(SIGTERM);
+  Result gone = Benchctl("benches " + op);
+  EXPECT_EQ(gone.exit_code, 3) << gone.out;
+}
+
+}  // namespace
+}  // namespace vb

@@ -1,0 +1,113 @@
+// Starts the real valvebench-server binary on a loopback port with a temporary database and config, for
+// integration tests; kills it (SIGTERM or SIGKILL) on request or at the end.
+#pragma once
+
+#include <fcntl.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <thread>
+
+#include "server/auth.h"
+
+extern char** environ;
+
+namespace vb::testing {
+
+// Tokens the fixture configures: one per role.
+inline constexpr const char* kViewerToken = "viewer-token-1";
+inline constexpr const char* kOperatorToken = "operator-token-1";
+inline constexpr const char* kOperator2Token = "operator-token-2";
+inline constexpr const char* kAdminToken = "admin-token-1";
+
+class ServerProcess {
+ public:
+  // dir: a fresh directory for config, database and logs (kept across Restart()).
+  explicit ServerProcess(std::string dir, std::string extra_limits = "") : dir_(std::move(dir)) {
+    std::filesystem::create_directories(dir_);
+    std::ofstream cfg(dir_ + "/server.json");
+    cfg << R"({"listen_address": "127.0.0.1:0", "database_path": "runs.db",
+      "benches": [{"name": "emu-a", "kind": "emulated", "model": {"preset": "taghizadeh2009"}},
+                  {"name": "emu-b", "kind": "emulated", "model": {"preset": "taghizadeh2009"}}],
+      "tokens": [)"
+        << Token("viewer", "viewer", kViewerToken) << "," << Token("olga", "operator", kOperatorToken) << ","
+        << Token("oscar", "operator", kOperator2Token) << "," << Token("ada", "admin", kAdminToken) << "]"
+        << (extra_limits.empty() ? "" : ", \"limits\": " + extra_limits) << "}";
+  }
+  ~ServerProcess() { Kill(SIGKILL); }
+
+  // Starts the server and waits until it listens; returns "127.0.0.1:<port>" or "" on failure.
+  std::string Start() {
+    const std::string log = dir_ + "/server-" + std::to_string(++starts_) + ".log";
+    log_ = log;
+    posix_spawn_file_actions_t fa;
+    posix_spawn_file_actions_init(&fa);
+    posix_spawn_file_actions_addopen(&fa, 2, log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    posix_spawn_file_actions_addopen(&fa, 1, "/dev/null", O_WRONLY, 0);
+    const std::string config = dir_ + "/server.json";
+    const char* argv[] = {VB_SERVER, "--config", config.c_str(), nullptr};
+    const int rc = posix_spawn(&pid_, VB_SERVER, &fa, nullptr, const_cast<char**>(argv), environ);
+    posix_spawn_file_actions_destroy(&fa);
+    if (rc != 0) return "";
+    const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+    while (std::chrono::steady_clock::now() < until) {
+      std::ifstream in(log);
+      std::stringstream ss;
+      ss << in.rdbuf();
+      const std::string text = ss.str();
+      const auto at = text.find("listening on ");
+      if (at != std::string::npos) {
+        const auto end = text.find(' ', at + 13);
+        address_ = text.substr(at + 13, end - at - 13);
+        return address_;
+      }
+      int status = 0;
+      if (waitpid(pid_, &status, WNOHANG) == pid_) {
+        pid_ = 0;
+        return "";
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+    return "";
+  }
+
+  // Sends sig and waits for the process; returns its exit status (as waitpid reports it).
+  int Kill(int sig) {
+    if (pid_ <= 0) return -1;
+    ::kill(pid_, sig);
+    int status = 0;
+    waitpid(pid_, &status, 0);
+    pid_ = 0;
+    return status;
+  }
+
+  const std::string& address() const { return address_; }
+  std::string Log() const {
+    std::ifstream in(log_);
+    std::stringstream ss;
+    ss << in.rdbuf();
+    return ss.str();
+  }
+  std::string db_path() const { return dir_ + "/runs.db"; }
+
+ private:
+  static std::string Token(const char* user, const char* role, const char* token) {
+    return std::string(R"({"user": ")") + user + R"(", "role": ")" + role + R"(", "token_sha256": ")" +
+           server::Sha256Hex(token) + R"("})";
+  }
+  std::string dir_;
+  std::string log_;
+  std::string address_;
+  pid_t pid_ = 0;
+  int starts_ = 0;
+};
+
+}  // namespace vb::testing

@@ -1,0 +1,277 @@
+// The real valvebench-server on a loopback port with a temporary database, driven through the C++ client.
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <cmath>
+#include <map>
+#include <set>
+#include <thread>
+
+#include "client/client.h"
+#include "experiment/runner.h"
+#include "experiment/spec.h"
+#include "server_process.h"
+
+namespace vb {
+namespace {
+
+namespace v1 = valvebench::v1;
+using testing::ServerProcess;
+
+std::string TempDir(const std::string& name) {
+  const std::string d = ::testing::TempDir() + "/vb-it-" + name + "-" + std::to_string(::getpid());
+  std::filesystem::remove_all(d);
+  return d;
+}
+
+client::Client MakeClient(const std::string& address, const char* token) {
+  client::ClientOptions o;
+  o.address = address;
+  o.token = token == nullptr ? "" : token;
+  o.deadline_s = 20.0;
+  return client::Client(o);
+}
+
+v1::ExperimentSpec Spec(const std::string& json) {
+  auto s = experiment::ParseSpecJson(json);
+  EXPECT_TRUE(s.ok()) << s.status().message();
+  return *s;
+}
+
+// A short open-loop run; paced runs take their duration in wall time, so the queue builds up.
+v1::ExperimentSpec ShortRun(const std::string& name, double duration_s, bool paced, int priority = 0) {
+  auto s = Spec(R"({"name": ")" + name + R"(", "duration_s": )" + std::to_string(duration_s) +
+                R"(, "conditions": {"supply_V": 24, "supply_pressure_Pa": 400000},
+                 "controller": {"open_loop_pwm": {"segments": [{"start_s": 0, "frequency_Hz": 100, "duty": 0.5}]}},
+                 "recording": {"rate_Hz": 10000}})");
+  s.set_realtime(paced);
+  s.set_priority(priority);
+  return s;
+}
+
+bool Ended(v1::RunStatus s) { return s == v1::DONE || s == v1::FAILED || s == v1::CANCELLED; }
+
+// Waits until every run has ended; returns them.
+std::vector<v1::Run> WaitAll(client::Client& c, const std::vector<std::int64_t>& ids, double timeout_s) {
+  const auto until = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
+  std::vector<v1::Run> out;
+  while (std::chrono::steady_clock::now() < until) {
+    out.clear();
+    bool all = true;
+    for (auto id : ids) {
+      auto r = c.GetRun(id);
+      if (!r.ok()) return {};
+      all = all && Ended(r->status());
+      out.push_back(*r);
+    }
+    if (all) return out;
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  return out;
+}
+
+TEST(Server, AuthenticationRolesAndErrorCodes) {
+  ServerProcess server(TempDir("auth"), R"({"max_duration_s": 5})");
+  const std::string addr = server.Start();
+  ASSERT_FALSE(addr.empty()) << server.Log();
+
+  auto anonymous = MakeClient(addr, nullptr);
+  auto st = anonymous.Benches();
+  ASSERT_FALSE(st.ok());
+  EXPECT_NE(st.status().message().find("not authenticated"), std::string::npos) << st.status().message();
+  auto wrong = MakeClient(addr, "not-a-token");
+  EXPECT_FALSE(wrong.Benches().ok());
+
+  auto viewer = MakeClient(addr, testing::kViewerToken);
+  auto benches = viewer.Benches();
+  ASSERT_TRUE(benches.ok()) << benches.status().message();
+  EXPECT_EQ(benches->benches_size(), 2);
+  auto denied = viewer.Submit(ShortRun("x", 0.01, false));
+  ASSERT_FALSE(denied.ok());
+  EXPECT_NE(denied.status().message().find("permission denied"), std::string::npos) << denied.status().message();
+
+  auto olga = MakeClient(addr, testing::kOperatorToken);
+  auto bad = olga.Submit(Spec(R"({"duration_s": 0.1, "conditions": {"supply_V": -2},
+      "controller": {"open_loop_pwm": {"segments": [{"start_s": 0, "frequency_Hz": 50, "duty": 0.5}]}}})"));
+  ASSERT_FALSE(bad.ok());
+  EXPECT_EQ(bad.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(bad.status().message().find("conditions.supply_V"), std::string::npos) << bad.status().message();
+
+  auto no_bench = olga.Submit(Spec(R"({"duration_s": 0.1, "bench": {"model": {"preset": "lunge2013"}},
+      "conditions": {"supply_V": 230}, "reference": {"constant": {"value": 0.001}},
+      "controller": {"sliding_mode_position": {}}})"));
+  ASSERT_FALSE(no_bench.ok());
+  EXPECT_EQ(no_bench.status().code(), StatusCode::kFailedPrecondition);
+  EXPECT_NE(no_bench.status().message().find("emulated:lunge2013"), std::string::npos) << no_bench.status().message();
+
+  auto too_long = olga.Submit(ShortRun("long", 10.0, false));
+  ASSERT_FALSE(too_long.ok());
+  EXPECT_EQ(too_long.status().code(), StatusCode::kResourceExhausted);
+  EXPECT_NE(too_long.status().message().find("duration_s"), std::string::npos);
+
+  auto missing = viewer.GetRun(424242);
+  ASSERT_FALSE(missing.ok());
+  EXPECT_EQ(missing.status().code(), StatusCode::kNotFound);
+
+  // Operators cancel only their own runs; admins anyone's.
+  auto mine = olga.Submit(ShortRun("mine", 2.0, true));
+  ASSERT_TRUE(mine.ok()) << mine.status().message();
+  auto oscar = MakeClient(addr, testing::kOperator2Token);
+  auto other = oscar.Cancel(mine->run_ids(0));
+  ASSERT_FALSE(other.ok());
+  EXPECT_NE(other.status().message().find("only their own"), std::string::npos) << other.status().message();
+  auto admin = MakeClient(addr, testing::kAdminToken);
+  auto cancelled = admin.Cancel(mine->run_ids(0), "test");
+  ASSERT_TRUE(cancelled.ok()) << cancelled.status().message();
+  EXPECT_EQ(cancelled->status(), v1::CANCELLED);
+}
+
+TEST(Server, FiftyRunsOnTwoBenchesWithPrioritiesAndCancellations) {
+  ServerProcess server(TempDir("fifty"));
+  const std::string addr = server.Start();
+  ASSERT_FALSE(addr.empty()) << server.Log();
+  auto olga = MakeClient(addr, testing::kOperatorToken);
+
+  std::vector<std::int64_t> low, high, all;
+  v1::ExperimentSpec batch_low = ShortRun("low", 0.02, true, 0);
+  batch_low.set_repeats(25);
+  auto a = olga.Submit(batch_low);
+  ASSERT_TRUE(a.ok()) << a.status().message();
+  low.assign(a->run_ids().begin(), a->run_ids().end());
+  v1::ExperimentSpec batch_high = ShortRun("high", 0.02, true, 5);
+  batch_high.set_repeats(25);
+  auto b = olga.Submit(batch_high);
+  ASSERT_TRUE(b.ok()) << b.status().message();
+  high.assign(b->run_ids().begin(), b->run_ids().end());
+  ASSERT_EQ(low.size() + high.size(), 50u);
+  // Cancel five low-priority runs that are still queued (the last ones: they wait behind 25 high ones).
+  for (int k = 0; k < 5; ++k) {
+    auto c = olga.Cancel(low[low.size() - 1 - k]);
+    ASSERT_TRUE(c.ok()) << c.status().message();
+    EXPECT_EQ(c->status(), v1::CANCELLED);
+  }
+  all = low;
+  all.insert(all.end(), high.begin(), high.end());
+  const auto runs = WaitAll(olga, all, 60.0);
+  ASSERT_EQ(runs.size(), 50u);
+  int done = 0, cancelled = 0;
+  std::set<std::string> benches;
+  double last_high_start = 0.0;
+  for (const auto& r : runs) {
+    done += r.status() == v1::DONE;
+    cancelled += r.status() == v1::CANCELLED;
+    if (r.status() == v1::DONE) benches.insert(r.bench());
+    if (r.priority() == 5) last_high_start = std::max(last_high_start, r.started_unix_s());
+  }
+  EXPECT_EQ(done, 45);
+  EXPECT_EQ(cancelled, 5);
+  EXPECT_EQ(benches.size(), 2u) << "both benches worked";
+  // Priority first: few low-priority runs can have started before the last high-priority one (those already
+  // claimed when the high batch arrived).
+  int low_before = 0;
+  for (const auto& r : runs)
+    if (r.priority() == 0 && r.status() == v1::DONE && r.started_unix_s() < last_high_start) ++low_before;
+  EXPECT_LE(low_before, 4);
+}
+
+TEST(Server, KilledMidQueueLosesNothingAndRunsNothingTwice) {
+  ServerProcess server(TempDir("kill"));
+  std::string addr = server.Start();
+  ASSERT_FALSE(addr.empty()) << server.Log();
+  auto olga = MakeClient(addr, testing::kOperatorToken);
+  v1::ExperimentSpec spec = ShortRun("k", 0.05, true, 0);
+  spec.set_repeats(30);
+  auto sub = olga.Submit(spec);
+  ASSERT_TRUE(sub.ok()) << sub.status().message();
+  const std::vector<std::int64_t> ids(sub->run_ids().begin(), sub->run_ids().end());
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  server.Kill(SIGKILL);
+
+  addr = server.Start();
+  ASSERT_FALSE(addr.empty()) << server.Log();
+  auto again = MakeClient(addr, testing::kOperatorToken);
+  const auto runs = WaitAll(again, ids, 60.0);
+  ASSERT_EQ(runs.size(), 30u);
+  int interrupted = 0;
+  for (const auto& r : runs) {
+    EXPECT_EQ(r.status(), v1::DONE) << r.id() << " " << r.reason();
+    int dones = 0;
+    for (const auto& h : r.history()) {
+      dones += h.status() == v1::DONE;
+      interrupted += h.status() == v1::INTERRUPTED;
+    }
+    EXPECT_EQ(dones, 1) << "run " << r.id() << " must complete exactly once";
+    auto trace = again.GetTrace(r.id());
+    ASSERT_TRUE(trace.ok()) << trace.status().message();
+    EXPECT_EQ(trace->samples(), 501u) << "one trace per run, no duplicated chunks";
+  }
+  EXPECT_GE(interrupted, 1) << "runs were executing when the server was killed";
+}
+
+TEST(Server, WatchTraceAndCompareMatchTheLocalRun) {
+  ServerProcess server(TempDir("watch"));
+  const std::string addr = server.Start();
+  ASSERT_FALSE(addr.empty()) << server.Log();
+  auto olga = MakeClient(addr, testing::kOperatorToken);
+  auto spec = experiment::LoadSpecFile(std::string(VB_SOURCE_DIR) + "/examples/compare-current-controllers.json");
+  ASSERT_TRUE(spec.ok());
+  auto sub = olga.Submit(*spec);
+  ASSERT_TRUE(sub.ok()) << sub.status().message();
+  ASSERT_EQ(sub->run_ids_size(), 4);
+  std::vector<v1::RunStatus> seen;
+  auto st = olga.Watch(sub->run_ids(3), 30.0, 0.0, [&](const v1::RunEvent& ev) {
+    seen.push_back(ev.status());
+    return !Ended(ev.status());
+  });
+  ASSERT_TRUE(st.ok()) << st.message();
+  ASSERT_FALSE(seen.empty());
+  EXPECT_EQ(seen.back(), v1::DONE);
+  const auto runs = WaitAll(olga, {sub->run_ids().begin(), sub->run_ids().end()}, 30.0);
+  ASSERT_EQ(runs.size(), 4u);
+
+  // The stored trace equals a local run of the same spec, sample for sample (the emulator is deterministic).
+  auto points = experiment::ExpandSweep(*spec);
+  ASSERT_TRUE(points.ok());
+  auto e = experiment::BuildExperiment((*points)[0]);
+  ASSERT_TRUE(e.ok());
+  hw::EmulatedBench bench(experiment::EmulatedBenchFor(*e));
+  experiment::Trace local;
+  ASSERT_TRUE(experiment::Runner::Run(*e, bench, &local).ok());
+  auto trace = olga.GetTrace(sub->run_ids(0));
+  ASSERT_TRUE(trace.ok()) << trace.status().message();
+  ASSERT_EQ(trace->samples(), local.size());
+  const auto& i = trace->columns.at("i_A");
+  for (size_t k = 0; k < local.size(); ++k) ASSERT_EQ(i[k], local.i_A[k]) << k;
+
+  auto cmp = olga.Compare(sub->batch_id(), {});
+  ASSERT_TRUE(cmp.ok()) << cmp.status().message();
+  ASSERT_EQ(cmp->rows_size(), 4);
+  EXPECT_EQ(cmp->rows(0).controller(), "fuzzy_current");
+  EXPECT_EQ(cmp->rows(0).rank(), 1);
+  EXPECT_GT(cmp->rows(0).metrics().at("effort_l2").mean(), 0.0);
+}
+
+TEST(Server, SigtermStopsCleanlyAndTheRunResumesAfterRestart) {
+  ServerProcess server(TempDir("term"));
+  std::string addr = server.Start();
+  ASSERT_FALSE(addr.empty()) << server.Log();
+  auto olga = MakeClient(addr, testing::kOperatorToken);
+  auto sub = olga.Submit(ShortRun("slow", 1.0, true));
+  ASSERT_TRUE(sub.ok());
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  const auto t0 = std::chrono::steady_clock::now();
+  const int status = server.Kill(SIGTERM);
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << server.Log();
+  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 3.0);
+  EXPECT_NE(server.Log().find("shutting down"), std::string::npos);
+
+  addr = server.Start();
+  ASSERT_FALSE(addr.empty());
+  auto again = MakeClient(addr, testing::kOperatorToken);
+  const auto runs = WaitAll(again, {sub->run_ids(0)}, 30.0);
+  ASSERT_EQ(runs.size(), 1u);
+  EXPECT_EQ(runs[0].status(), v1::DONE);
+}
+
+}  // namespace
+}  // namespace vb
