@@ -134,6 +134,7 @@ StatusOr<FetchedTrace> Client::GetTrace(std::int64_t run_id, double deadline_s) 
       out.t0_s = chunk.t0_s();
       out.sample_period_s = chunk.sample_period_s();
       out.channels.assign(chunk.channels().begin(), chunk.channels().end());
+      for (const auto& name : out.channels) out.columns[name].reserve(static_cast<size_t>(chunk.total_samples()));
     }
     for (int c = 0; c < chunk.channels_size(); ++c) {
       auto& col = out.columns[chunk.channels(c)];

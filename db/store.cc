@@ -151,6 +151,8 @@ class SqliteStore final : public Store {
   StatusOr<std::int64_t> CountQueued(const std::string& submitter) override;
   Status AppendTraceChunk(std::int64_t run_id, const TraceChunk& chunk) override;
   StatusOr<std::vector<TraceChunk>> ReadTrace(std::int64_t run_id) override;
+  Status ForEachTraceChunk(std::int64_t run_id,
+                           const std::function<Status(const TraceChunk&, std::int64_t)>& fn) override;
 
  private:
   // Helpers run inside the caller's transaction.
@@ -624,28 +626,45 @@ Status SqliteStore::AppendTraceChunk(std::int64_t run_id, const TraceChunk& chun
 }
 
 StatusOr<std::vector<TraceChunk>> SqliteStore::ReadTrace(std::int64_t run_id) {
+  std::vector<TraceChunk> out;
+  VB_RETURN_IF_ERROR(ForEachTraceChunk(run_id, [&](const TraceChunk& c, std::int64_t) {
+    out.push_back(c);
+    return Status::Ok();
+  }));
+  return out;
+}
+
+Status SqliteStore::ForEachTraceChunk(std::int64_t run_id,
+                                      const std::function<Status(const TraceChunk&, std::int64_t)>& fn) {
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
   VB_RETURN_IF_ERROR(StatusOf(run_id).status());
+  std::int64_t total = 0;
+  {
+    VB_DB_ASSIGN_OR_RETURN(Stmt sum, conn_.Prepare("SELECT COALESCE(SUM(samples), 0) FROM trace_chunks WHERE run_id = ?1"));
+    sum.Bind(1, run_id);
+    VB_DB_ASSIGN_OR_RETURN(const bool row, sum.Step());
+    if (row) total = sum.Int(0);
+  }
   // length(data) comes from the record header without reading the BLOB; the BLOB itself is then copied straight
-  // into the chunk's vector by incremental BLOB I/O (one copy instead of two).
+  // into the chunk's buffer by incremental BLOB I/O (one copy instead of two).
   VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT rowid, idx, t0, period, samples, channels, length(data) "
                                                 "FROM trace_chunks WHERE run_id = ?1 ORDER BY idx"));
   st.Bind(1, run_id);
   sql::BlobReader blob(conn_.raw(), "trace_chunks", "data");
-  std::vector<TraceChunk> out;
+  TraceChunk c;  // reused: its buffer keeps its capacity from chunk to chunk
+  std::int32_t expected = 0;
   while (true) {
     VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
     if (!row) break;
-    TraceChunk c;
     c.index = static_cast<std::int32_t>(st.Int(1));
     c.t0_s = st.Double(2);
     c.sample_period_s = st.Double(3);
     c.samples = static_cast<std::int32_t>(st.Int(4));
     c.channels = trace::SplitChannels(st.Text(5));
     const std::string what = Cat("trace of run ", run_id, ", chunk ", c.index);
-    if (c.index != static_cast<std::int32_t>(out.size())) {
-      return Status::DataLoss(Cat(what, ": expected chunk ", out.size(), " (a chunk is missing)"));
+    if (c.index != expected) {
+      return Status::DataLoss(Cat(what, ": expected chunk ", expected, " (a chunk is missing)"));
     }
     const std::size_t values = c.channels.size() * static_cast<std::size_t>(c.samples);
     VB_RETURN_IF_ERROR(trace::CheckSize(static_cast<std::size_t>(st.Int(6)), values, what));
@@ -654,10 +673,10 @@ StatusOr<std::vector<TraceChunk>> SqliteStore::ReadTrace(std::int64_t run_id) {
     c.data.resize(values);
     VB_RETURN_IF_ERROR(blob.Read(c.data.data(), bytes));
     trace::FromLittleEndian(&c.data);
-    out.push_back(std::move(c));
+    VB_RETURN_IF_ERROR(fn(c, total));
+    ++expected;
   }
-  VB_RETURN_IF_ERROR(txn.Commit());
-  return out;
+  return txn.Commit();
 }
 
 }  // namespace

@@ -7,6 +7,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
@@ -113,6 +114,11 @@ class Store {
   // Traces: chunks appended in index order while the run executes; read back in order.
   virtual Status AppendTraceChunk(std::int64_t run_id, const TraceChunk& chunk) = 0;
   virtual StatusOr<std::vector<TraceChunk>> ReadTrace(std::int64_t run_id) = 0;
+  // Streams the chunks in order within one read transaction, reusing one buffer: nothing but the current
+  // chunk is in memory. total_samples is the trace's length (the sum over its chunks). Stops at the first
+  // error fn returns, and returns it.
+  virtual Status ForEachTraceChunk(
+      std::int64_t run_id, const std::function<Status(const TraceChunk& chunk, std::int64_t total_samples)>& fn) = 0;
 };
 
 }  // namespace vb::db

@@ -346,19 +346,27 @@ grpc::Status BenchServiceImpl::GetTrace(grpc::ServerContext* ctx, const v1::GetT
     return ToGrpcStatus(Status::FailedPrecondition("run " + std::to_string(r->id) + " is " +
                                                    db::RunStatusName(r->status) +
                                                    "; its trace is stored when it ends"));
-  auto chunks = (*store)->ReadTrace(r->id);
-  if (!chunks.ok()) return ToGrpcStatus(chunks.status());
-  for (const auto& c : *chunks) {
-    if (ctx->IsCancelled()) return grpc::Status(grpc::StatusCode::CANCELLED, "cancelled by the client");
-    v1::TraceChunk out;
+  // Stream while reading: chunk k goes out while chunk k+1 is read; only one chunk is ever in memory.
+  v1::TraceChunk out;
+  bool client_gone = false;
+  auto st = (*store)->ForEachTraceChunk(r->id, [&](const db::TraceChunk& c, std::int64_t total) {
+    if (ctx->IsCancelled()) return Status::Aborted("cancelled by the client");
+    out.Clear();
     out.set_index(c.index);
     out.set_t0_s(c.t0_s);
     out.set_sample_period_s(c.sample_period_s);
     out.set_samples(c.samples);
+    out.set_total_samples(total);
     for (const auto& ch : c.channels) out.add_channels(ch);
     out.set_data(reinterpret_cast<const char*>(c.data.data()), c.data.size() * sizeof(double));
-    if (!writer->Write(out)) return grpc::Status::OK;
-  }
+    if (!writer->Write(out)) {
+      client_gone = true;
+      return Status::Aborted("client went away");
+    }
+    return Status::Ok();
+  });
+  if (client_gone) return grpc::Status::OK;
+  if (!st.ok()) return ToGrpcStatus(st);
   return grpc::Status::OK;
 }
 

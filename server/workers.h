@@ -102,6 +102,6 @@ class Worker {
 };
 
 // Stores a trace as chunks of at most chunk_samples samples (all channels, channel-major).
-Status StoreTrace(db::Store* store, std::int64_t run_id, const experiment::Trace& trace, int chunk_samples = 65536);
+Status StoreTrace(db::Store* store, std::int64_t run_id, const experiment::Trace& trace, int chunk_samples = 16384);
 
 }  // namespace vb::server

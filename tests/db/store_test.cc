@@ -1185,3 +1185,33 @@ TEST(StoreTraceTest, TracesOfDifferentRunsAreSeparate) {
 
 }  // namespace
 }  // namespace vb::db
+
+namespace vb::db {
+namespace {
+
+// The streaming read hands chunks over in order with the total length, and stops at the callback's error.
+TEST(StoreTraceTest, ForEachTraceChunkStreamsInOrderAndStopsOnError) {
+  auto store = OpenOrDie(":memory:");
+  auto ids = Submit(*store, {MakeRun("a")});
+  ASSERT_EQ(ClaimId(*store), ids[0]);
+  for (int k = 0; k < 3; ++k) ASSERT_TRUE(store->AppendTraceChunk(ids[0], MakeChunk(k, 7, {"i_A", "x_m"}, k)).ok());
+  std::vector<std::int32_t> seen;
+  ASSERT_TRUE(store->ForEachTraceChunk(ids[0], [&](const TraceChunk& c, std::int64_t total) {
+                     EXPECT_EQ(total, 21);
+                     EXPECT_EQ(c.data, MakeChunk(c.index, 7, {"i_A", "x_m"}, c.index).data);
+                     seen.push_back(c.index);
+                     return Status::Ok();
+                   }).ok());
+  EXPECT_EQ(seen, (std::vector<std::int32_t>{0, 1, 2}));
+  int calls = 0;
+  Status st = store->ForEachTraceChunk(ids[0], [&](const TraceChunk&, std::int64_t) {
+    return ++calls == 2 ? Status::Aborted("stop here") : Status::Ok();
+  });
+  EXPECT_EQ(st.code(), StatusCode::kAborted);
+  EXPECT_EQ(calls, 2);
+  EXPECT_EQ(store->ForEachTraceChunk(4242, [](const TraceChunk&, std::int64_t) { return Status::Ok(); }).code(),
+            StatusCode::kNotFound);
+}
+
+}  // namespace
+}  // namespace vb::db
