@@ -14,6 +14,7 @@
 #include "benchctl/cli_common.h"
 #include "benchctl/local_run.h"
 #include "benchctl/remote.h"
+#include "db/store.h"
 #include "experiment/compare.h"
 
 #include <fstream>
@@ -37,6 +38,10 @@ Json Number(double v) { return std::isfinite(v) ? Json(v) : Json(nullptr); }
 Json SummaryJson(const vb::benchctl::LocalRunResult& r) {
   const auto& s = r.summary;
   Json j;
+  if (r.run_id != 0) {
+    j["run_id"] = r.run_id;
+    j["batch_id"] = r.batch_id;
+  }
   j["name"] = r.name;
   j["controller"] = r.controller;
   j["tags"] = r.tags;
@@ -62,7 +67,13 @@ Json SummaryJson(const vb::benchctl::LocalRunResult& r) {
 
 void PrintHuman(const vb::benchctl::LocalRunResult& r) {
   const auto& s = r.summary;
-  std::printf("run %s [%s]: %s\n", r.name.c_str(), r.controller.c_str(), vb::experiment::TerminationName(s.termination));
+  if (r.run_id != 0) {
+    std::printf("run %s [%s] (local run %lld, batch %lld): %s\n", r.name.c_str(), r.controller.c_str(),
+                static_cast<long long>(r.run_id), static_cast<long long>(r.batch_id),
+                vb::experiment::TerminationName(s.termination));
+  } else {
+    std::printf("run %s [%s]: %s\n", r.name.c_str(), r.controller.c_str(), vb::experiment::TerminationName(s.termination));
+  }
   if (!s.message.empty()) std::printf("  reason: %s\n", s.message.c_str());
   std::printf("  %.6g s simulated, %zu samples, %llu control ticks, %.3g s wall, %.0fx real time\n", s.duration_s,
               s.samples, static_cast<unsigned long long>(s.ticks), s.wall_s, s.realtime_factor);
@@ -131,12 +142,41 @@ int PrintComparison(const vb::experiment::Comparison& c, bool json, bool csv) {
   return kExitOk;
 }
 
+// compare --local --batch B: a batch recorded in the local store.
+int CmdCompareLocalBatch(const std::string& store_path, std::int64_t batch, bool json, bool csv) {
+  auto store = vb::db::Store::Open(store_path);
+  if (!store.ok()) return Fail(store.status().WithContext("local store " + store_path));
+  vb::db::RunFilter f;
+  f.batch_id = batch;
+  f.limit = 1000;
+  std::vector<vb::experiment::RunRecord> records;
+  for (;;) {
+    auto page = (*store)->ListRuns(f);
+    if (!page.ok()) return Fail(page.status());
+    for (const auto& r : *page) {
+      vb::experiment::RunRecord rec;
+      rec.name = r.name.substr(0, r.name.find(" repeat:"));
+      rec.controller = r.controller;
+      rec.ok = r.status == vb::db::RunStatus::kDone;
+      auto metrics = (*store)->GetMetrics(r.id);
+      if (!metrics.ok()) return Fail(metrics.status());
+      for (const auto& m : *metrics) rec.metrics[m.name] = m.value;
+      records.push_back(std::move(rec));
+    }
+    if (static_cast<int>(page->size()) < f.limit) break;
+    f.after_id = page->back().id;
+  }
+  if (records.empty())
+    return Fail(Status::NotFound("batch " + std::to_string(batch) + " not found in the local store " + store_path));
+  return PrintComparison(vb::experiment::Compare(records), json, csv);
+}
+
 // compare RESULTS.json (the output of `run --json`) or compare --local SPEC (runs it first).
-int CmdCompare(const std::string& input, bool local, bool json, bool csv) {
+int CmdCompare(const std::string& input, bool local, const std::string& store_path, bool json, bool csv) {
   if (local) {
     auto spec = vb::experiment::LoadSpecFile(input);
     if (!spec.ok()) return Fail(spec.status());
-    auto results = vb::benchctl::RunLocal(*spec, false, false);
+    auto results = vb::benchctl::RunLocal(*spec, false, false, store_path);
     if (!results.ok()) return Fail(results.status().WithContext(input));
     for (const auto& r : *results)
       std::fprintf(stderr, "%s [%s]: %s\n", r.name.c_str(), r.controller.c_str(), r.summary.BriefReport().c_str());
@@ -197,16 +237,15 @@ void PrintCsv(const std::vector<vb::benchctl::LocalRunResult>& results) {
   }
 }
 
-int CmdRun(const std::string& spec_path, bool local, const std::string& server, const std::string& trace_csv,
+int CmdRun(const std::string& spec_path, bool local, const std::string& store_path, const std::string& trace_csv,
            bool json, bool csv, bool realtime) {
-  (void)server;
   if (!local) {
     return Fail(Status::FailedPrecondition(
         "no server given: use --local for the embedded emulator, or --server ADDR (or VALVEBENCH_SERVER)"));
   }
   auto spec = vb::experiment::LoadSpecFile(spec_path);
   if (!spec.ok()) return Fail(spec.status());
-  auto results = vb::benchctl::RunLocal(*spec, realtime, !trace_csv.empty());
+  auto results = vb::benchctl::RunLocal(*spec, realtime, !trace_csv.empty(), store_path);
   if (!results.ok()) return Fail(results.status().WithContext(spec_path));
   int exit_code = kExitOk;
   Json all = Json::array();
@@ -256,6 +295,13 @@ int main(int argc, char** argv) {
 
   std::string spec_path, trace_csv;
   bool local = false, realtime = false, wait = false;
+  std::string store_path = vb::benchctl::DefaultLocalStorePath();
+  bool no_store = false;
+  auto local_store = [&](CLI::App* sub) {
+    sub->add_option("--db", store_path, "local store (SQLite) for --local runs (default $VALVEBENCH_DB or "
+                                        "~/.local/share/valvebench/local.db)");
+    sub->add_flag("--no-store", no_store, "local: do not record the runs");
+  };
   auto* run = app.add_subcommand("run", "run an experiment spec (a single run or a batch)");
   run->add_option("spec", spec_path, "experiment spec (protobuf JSON)")->required();
   run->add_flag("--local", local, "run on the embedded emulator, no server");
@@ -263,6 +309,7 @@ int main(int argc, char** argv) {
   run->add_option("--trace-csv", trace_csv, "local: write the recorded channels as CSV (batches: FILE-<n>.csv)");
   run->add_flag("--realtime", realtime, "local: pace the run to the wall clock and report loop jitter");
   common(run, true);
+  local_store(run);
 
   std::string status_filter, tag_filter;
   std::int64_t batch = 0;
@@ -303,6 +350,7 @@ int main(int argc, char** argv) {
   compare->add_option("--batch", batch, "server: compare the runs of this batch");
   compare->add_option("--runs", run_ids, "server: compare these runs")->delimiter(',');
   common(compare, true);
+  local_store(compare);
 
   try {
     app.parse(argc, argv);
@@ -327,14 +375,19 @@ int main(int argc, char** argv) {
     return Fail(Status::FailedPrecondition("no server given: --server ADDR or VALVEBENCH_SERVER"));
   };
 
+  if (no_store) store_path.clear();
   if (run->parsed()) {
-    if (local || server.empty()) return CmdRun(spec_path, local, server, trace_csv, json, csv, realtime);
+    if (local || server.empty()) return CmdRun(spec_path, local, store_path, trace_csv, json, csv, realtime);
     if (!trace_csv.empty() || realtime)
       return Fail(Status::InvalidArgument("--trace-csv and --realtime are local options; use `export` remotely"));
     auto c = make_client();
     return vb::benchctl::RemoteRun(*c, spec_path, wait, out);
   }
   if (compare->parsed()) {
+    if (compare_local && batch != 0) {
+      if (store_path.empty()) return Fail(Status::InvalidArgument("--batch with --local needs the local store (--db)"));
+      return CmdCompareLocalBatch(store_path, batch, json, csv);
+    }
     if (batch != 0 || !run_ids.empty()) {
       if (server.empty()) return need_server();
       auto c = make_client();
@@ -342,7 +395,7 @@ int main(int argc, char** argv) {
     }
     if (compare_input.empty())
       return Fail(Status::InvalidArgument("compare: give --batch/--runs (server), or a results file or --local SPEC"));
-    return CmdCompare(compare_input, compare_local, json, csv);
+    return CmdCompare(compare_input, compare_local, store_path, json, csv);
   }
   if (server.empty()) return need_server();
   auto c = make_client();

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdio>
 
+#include "db/trace_writer.h"
 #include "experiment/spec.h"
 #include "hw/emulated_bench.h"
 
@@ -129,26 +130,6 @@ void Worker::Loop() {
   }
 }
 
-Status StoreTrace(db::Store* store, std::int64_t run_id, const experiment::Trace& trace, int chunk_samples) {
-  const auto& names = experiment::Trace::ChannelNames();
-  const size_t n = trace.size();
-  int index = 0;
-  for (size_t start = 0; start < n; start += static_cast<size_t>(chunk_samples), ++index) {
-    const size_t count = std::min(n - start, static_cast<size_t>(chunk_samples));
-    db::TraceChunk chunk;
-    chunk.index = index;
-    chunk.t0_s = trace.t_s[start];
-    chunk.sample_period_s = trace.sample_period_s;
-    chunk.samples = static_cast<std::int32_t>(count);
-    chunk.channels = names;
-    chunk.data.resize(names.size() * count);
-    for (size_t c = 0; c < names.size(); ++c)
-      for (size_t k = 0; k < count; ++k) chunk.data[c * count + k] = trace.Value(c, start + k);
-    VB_RETURN_IF_ERROR(store->AppendTraceChunk(run_id, chunk));
-  }
-  return Status::Ok();
-}
-
 void Worker::Execute(db::Store* store, const db::RunRecord& run) {
   current_run_.store(run.id);
   auto finish = [&](db::RunStatus status, const std::string& reason, const std::vector<db::Metric>& metrics) {
@@ -196,7 +177,7 @@ void Worker::Execute(db::Store* store, const db::RunRecord& run) {
     current_run_.store(0);
     return;
   }
-  auto st = StoreTrace(store, run.id, trace);
+  auto st = db::AppendRecordedTrace(store, run.id, trace);
   std::vector<db::Metric> metrics;
   for (const auto& [name, value] : experiment::MetricList(summary.metrics))
     if (std::isfinite(value)) metrics.push_back({name, value});

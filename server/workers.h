@@ -101,7 +101,5 @@ class Worker {
   std::atomic<experiment::RunMonitor*> monitor_{nullptr};
 };
 
-// Stores a trace as chunks of at most chunk_samples samples (all channels, channel-major).
-Status StoreTrace(db::Store* store, std::int64_t run_id, const experiment::Trace& trace, int chunk_samples = 16384);
 
 }  // namespace vb::server

@@ -15,7 +15,9 @@ struct Result {
 };
 
 Result RunBenchctl(const std::string& args) {
-  const std::string cmd = std::string(VB_BENCHCTL) + " " + args + " 2>&1";
+  // Local runs are recorded in a store of the test's own.
+  const std::string cmd = "VALVEBENCH_DB=" + ::testing::TempDir() + "/benchctl-cli-" + std::to_string(::getpid()) +
+                          ".db " + std::string(VB_BENCHCTL) + " " + args + " 2>&1";
   std::unique_ptr<FILE, int (*)(FILE*)> p(popen(cmd.c_str(), "r"), &pclose);
   std::string out;
   std::array<char, 4096> buf;
@@ -74,6 +76,23 @@ TEST(BenchctlCli, CompareAndCsvOutputs) {
   Result bad = RunBenchctl("compare " + Example("standard/e1.json"));
   EXPECT_EQ(bad.exit_code, 2) << bad.out;
   EXPECT_NE(bad.out.find("metrics"), std::string::npos) << bad.out;
+}
+
+TEST(BenchctlCli, LocalRunsAreRecordedAndComparableByBatch) {
+  Result run = RunBenchctl("run --local " + Example("compare-current-controllers.json") + " --json");
+  ASSERT_EQ(run.exit_code, 0) << run.out;
+  const size_t at = run.out.find("\"batch_id\": ");
+  ASSERT_NE(at, std::string::npos) << run.out;
+  const std::string batch = run.out.substr(at + 12, run.out.find_first_of(",\n", at + 12) - at - 12);
+  Result cmp = RunBenchctl("compare --local --batch " + batch + " --csv");
+  ASSERT_EQ(cmp.exit_code, 0) << cmp.out;
+  EXPECT_NE(cmp.out.find("fuzzy_current"), std::string::npos) << cmp.out;
+  EXPECT_NE(cmp.out.find("hysteresis_current"), std::string::npos) << cmp.out;
+  Result missing = RunBenchctl("compare --local --batch 999999");
+  EXPECT_EQ(missing.exit_code, 2) << missing.out;
+  Result unstored = RunBenchctl("run --local " + Example("standard/e3.json") + " --json --no-store");
+  ASSERT_EQ(unstored.exit_code, 0) << unstored.out;
+  EXPECT_EQ(unstored.out.find("run_id"), std::string::npos) << "--no-store records nothing";
 }
 
 }  // namespace
