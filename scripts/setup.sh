@@ -17,7 +17,7 @@ packages=(
   # hardware
   libusb-1.0-0-dev libhidapi-dev
   # storage, CLI, JSON
-  libsqlite3-dev sqlite3 libcli11-dev nlohmann-json3-dev
+  libsqlite3-dev sqlite3 libcli11-dev nlohmann-json3-dev openssl
   # tests and benchmarks
   libgtest-dev libgmock-dev libbenchmark-dev
   # the foreign-client integration test (a gRPC client built only from our .proto files)

@@ -152,6 +152,7 @@ grpc::Status BenchServiceImpl::Submit(const Principal& who, const std::vector<v1
       r.spec_json = experiment::SpecToJson(p, false);
       r.submitter = who.user;
       r.priority = p.priority();
+      r.requeue_on_interrupt = !p.never_requeue();
       r.tags.assign(p.tags().begin(), p.tags().end());
       runs.push_back(std::move(r));
       if (runs.size() > lim.max_runs_per_submission())

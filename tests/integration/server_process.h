@@ -30,8 +30,9 @@ inline constexpr const char* kAdminToken = "admin-token-1";
 
 class ServerProcess {
  public:
-  // dir: a fresh directory for config, database and logs (kept across Restart()).
-  explicit ServerProcess(std::string dir, std::string extra_limits = "") : dir_(std::move(dir)) {
+  // dir: a fresh directory for config, database and logs (kept across restarts). extra_fields: more top-level
+  // config fields, e.g. R"("limits": {...})" or R"("tls": {...})".
+  explicit ServerProcess(std::string dir, std::string extra_fields = "") : dir_(std::move(dir)) {
     std::filesystem::create_directories(dir_);
     std::ofstream cfg(dir_ + "/server.json");
     cfg << R"({"listen_address": "127.0.0.1:0", "database_path": "runs.db",
@@ -40,7 +41,7 @@ class ServerProcess {
       "tokens": [)"
         << Token("viewer", "viewer", kViewerToken) << "," << Token("olga", "operator", kOperatorToken) << ","
         << Token("oscar", "operator", kOperator2Token) << "," << Token("ada", "admin", kAdminToken) << "]"
-        << (extra_limits.empty() ? "" : ", \"limits\": " + extra_limits) << "}";
+        << (extra_fields.empty() ? "" : ", " + extra_fields) << "}";
   }
   ~ServerProcess() { Kill(SIGKILL); }
 
@@ -97,6 +98,7 @@ class ServerProcess {
     return ss.str();
   }
   std::string db_path() const { return dir_ + "/runs.db"; }
+  const std::string& dir() const { return dir_; }
 
  private:
   static std::string Token(const char* user, const char* role, const char* token) {

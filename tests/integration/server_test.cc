@@ -71,7 +71,7 @@ std::vector<v1::Run> WaitAll(client::Client& c, const std::vector<std::int64_t>&
 }
 
 TEST(Server, AuthenticationRolesAndErrorCodes) {
-  ServerProcess server(TempDir("auth"), R"({"max_duration_s": 5})");
+  ServerProcess server(TempDir("auth"), R"("limits": {"max_duration_s": 5})");
   const std::string addr = server.Start();
   ASSERT_FALSE(addr.empty()) << server.Log();
 
@@ -271,6 +271,67 @@ TEST(Server, SigtermStopsCleanlyAndTheRunResumesAfterRestart) {
   const auto runs = WaitAll(again, {sub->run_ids(0)}, 30.0);
   ASSERT_EQ(runs.size(), 1u);
   EXPECT_EQ(runs[0].status(), v1::DONE);
+}
+
+// A run whose spec says never_requeue stays interrupted after a crash; the others run again.
+TEST(Server, NeverRequeueIsHonouredAfterACrash) {
+  ServerProcess server(TempDir("norequeue"));
+  std::string addr = server.Start();
+  ASSERT_FALSE(addr.empty()) << server.Log();
+  auto olga = MakeClient(addr, testing::kOperatorToken);
+  auto once = ShortRun("once", 2.0, true);
+  once.set_never_requeue(true);
+  auto a = olga.Submit(once);
+  auto b = olga.Submit(ShortRun("again", 2.0, true));
+  ASSERT_TRUE(a.ok() && b.ok());
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));  // both execute, one per bench
+  server.Kill(SIGKILL);
+  addr = server.Start();
+  ASSERT_FALSE(addr.empty()) << server.Log();
+  auto again = MakeClient(addr, testing::kOperatorToken);
+  auto first = again.GetRun(a->run_ids(0));
+  ASSERT_TRUE(first.ok());
+  EXPECT_EQ(first->status(), v1::INTERRUPTED);
+  const auto runs = WaitAll(again, {b->run_ids(0)}, 30.0);
+  ASSERT_EQ(runs.size(), 1u);
+  EXPECT_EQ(runs[0].status(), v1::DONE);
+}
+
+// TLS when a certificate and key are configured: a client that trusts the certificate works, a plaintext
+// client does not get through.
+TEST(Server, TlsWhenCertificateAndKeyAreConfigured) {
+  const std::string dir = TempDir("tls");
+  std::filesystem::create_directories(dir);
+  const std::string gen = "openssl req -x509 -newkey rsa:2048 -nodes -days 2 -subj /CN=localhost "
+                          "-addext subjectAltName=DNS:localhost,IP:127.0.0.1 -keyout " + dir + "/key.pem -out " +
+                          dir + "/cert.pem > /dev/null 2>&1";
+  ASSERT_EQ(std::system(gen.c_str()), 0) << "openssl is installed by scripts/setup.sh";
+  ServerProcess server(dir, R"("tls": {"cert_file": "cert.pem", "key_file": "key.pem"})");
+  const std::string addr = server.Start();
+  ASSERT_FALSE(addr.empty()) << server.Log();
+  EXPECT_NE(server.Log().find("(TLS)"), std::string::npos);
+  const std::string port = addr.substr(addr.rfind(':') + 1);
+
+  std::ifstream in(dir + "/cert.pem");
+  std::stringstream pem;
+  pem << in.rdbuf();
+  client::ClientOptions o;
+  o.address = "localhost:" + port;
+  o.token = testing::kViewerToken;
+  o.tls_ca_pem = pem.str();
+  o.deadline_s = 10;
+  client::Client secure(o);
+  auto b = secure.Benches();
+  ASSERT_TRUE(b.ok()) << b.status().message();
+  EXPECT_EQ(b->benches_size(), 2);
+
+  client::ClientOptions plain = o;
+  plain.tls_ca_pem.clear();
+  plain.deadline_s = 3;
+  client::Client insecure(plain);
+  auto refused = insecure.Benches();
+  ASSERT_FALSE(refused.ok());
+  EXPECT_EQ(refused.status().code(), StatusCode::kUnavailable) << refused.status().message();
 }
 
 }  // namespace
