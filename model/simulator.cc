@@ -97,13 +97,6 @@ double Simulator::DisturbanceForce(double t) const {
   return dist_.frequency_Hz > 0.0 ? dist_.force_N * std::sin(2.0 * M_PI * dist_.frequency_Hz * t) : dist_.force_N;
 }
 
-double Simulator::v_coil_V() const {
-  Simulator* self = const_cast<Simulator*>(this);
-  // CurrentSegment() only normalises driver bookkeeping; the physical state is unchanged.
-  Segment seg = self->CurrentSegment();
-  return seg.blocked ? 0.0 : SegmentVoltage(seg, t_);
-}
-
 Simulator::Segment Simulator::CurrentSegment() {
   Segment s;
   const double supply = cond_.supply_V;

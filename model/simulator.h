@@ -103,7 +103,6 @@ class Simulator {
   double v_mps() const { return v_; }
   int gate() const { return gate_; }
   Contact contact() const { return contact_; }
-  double v_coil_V() const;
   const Plant& plant() const { return plant_; }
   const Conditions& conditions() const { return cond_; }
   // Work counters, for benchmarks.
