@@ -1,5 +1,8 @@
 // benchctl as a user runs it: exit codes, JSON, CSV, errors naming the field.
 #include <gtest/gtest.h>
+#include <unistd.h>
+
+#include "../common/run_command.h"
 
 #include <array>
 #include <cstdio>
@@ -9,22 +12,12 @@
 
 namespace {
 
-struct Result {
-  int exit_code;
-  std::string out;
-};
+using Result = vb::testing::CommandResult;
 
 Result RunBenchctl(const std::string& args) {
   // Local runs are recorded in a store of the test's own.
-  const std::string cmd = "VALVEBENCH_DB=" + ::testing::TempDir() + "/benchctl-cli-" + std::to_string(::getpid()) +
-                          ".db " + std::string(VB_BENCHCTL) + " " + args + " 2>&1";
-  std::unique_ptr<FILE, int (*)(FILE*)> p(popen(cmd.c_str(), "r"), &pclose);
-  std::string out;
-  std::array<char, 4096> buf;
-  size_t n;
-  while ((n = fread(buf.data(), 1, buf.size(), p.get())) > 0) out.append(buf.data(), n);
-  const int status = pclose(p.release());
-  return {WEXITSTATUS(status), out};
+  return vb::testing::RunCommand("VALVEBENCH_DB=" + ::testing::TempDir() + "/benchctl-cli-" +
+                                 std::to_string(::getpid()) + ".db " + std::string(VB_BENCHCTL) + " " + args);
 }
 
 std::string Example(const std::string& rel) { return std::string(VB_SOURCE_DIR) + "/examples/" + rel; }

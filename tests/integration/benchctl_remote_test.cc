@@ -7,26 +7,15 @@
 #include <memory>
 #include <regex>
 
+#include "../common/run_command.h"
 #include "server_process.h"
 
 namespace vb {
 namespace {
 
-struct Result {
-  int exit_code;
-  std::string out;
-};
+using Result = testing::CommandResult;
 
-Result Benchctl(const std::string& args) {
-  const std::string cmd = std::string(VB_BENCHCTL) + " " + args + " 2>&1";
-  std::unique_ptr<FILE, int (*)(FILE*)> p(popen(cmd.c_str(), "r"), &pclose);
-  std::string out;
-  std::array<char, 4096> buf;
-  size_t n;
-  while ((n = fread(buf.data(), 1, buf.size(), p.get())) > 0) out.append(buf.data(), n);
-  const int status = pclose(p.release());
-  return {WEXITSTATUS(status), out};
-}
+Result Benchctl(const std::string& args) { return testing::RunCommand(std::string(VB_BENCHCTL) + " " + args); }
 
 std::string Example(const std::string& rel) { return std::string(VB_SOURCE_DIR) + "/examples/" + rel; }
 
