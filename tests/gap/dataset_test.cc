@@ -202,6 +202,8 @@ TEST_F(DatasetTest, TimeTolerances) {
   // First sample within 1e-9 s of 0; steps within 1e-6 relative of the first.
   EXPECT_EQ(LoadB("t_s,gate,i_A\n1e-10,0,0\n0.25,0,0\n0.5000001,0,0\n0.75,0,0\n").t_s.size(), 4u);
   EXPECT_EQ(LoadB("t_s,gate,i_A\n-1e-10,0,0\n0.25,0,0\n").t_s.size(), 2u);
+  // Number spellings from_chars reads.
+  EXPECT_EQ(LoadB("t_s,gate,i_A\n0,0,.5\n0.25,0,1.\n0.5,0,1E-3\n").i_A, (std::vector<double>{0.5, 1.0, 1e-3}));
 }
 
 TEST_F(DatasetTest, UnknownColumnsAreIgnoredWithAWarning) {
@@ -404,6 +406,7 @@ TEST_F(DatasetTest, CsvLineErrors) {
   ExpectCsvError("t_s,gate,i_A\n0,0,0\n0.25,1,0,7\n", "ds/b.csv:3: 4 fields, but the header has 3");
   ExpectCsvError("t_s,gate,i_A\n0,0,0\n0.25,1,0,\n", "ds/b.csv:3: 4 fields, but the header has 3");
   ExpectCsvError("t_s,gate,i_A,note\n0,0,0,x\n0.25,1,0\n", "ds/b.csv:3: 3 fields, but the header has 4");
+  ExpectCsvError("t_s,gate,i_A\n0,0,0\nx,1,0,7\n", "ds/b.csv:3: 4 fields, but the header has 3");  // before values
 }
 
 TEST_F(DatasetTest, CsvValueErrors) {
@@ -411,6 +414,9 @@ TEST_F(DatasetTest, CsvValueErrors) {
   ExpectCsvError("t_s,gate,i_A\n0,0,\n", "ds/b.csv:2: column i_A: '' is not a number");
   ExpectCsvError("t_s,gate,i_A\n0, 1,0\n", "ds/b.csv:2: column gate: ' 1' is not a number");
   ExpectCsvError("t_s,gate,i_A\n0,0,0.5A\n", "ds/b.csv:2: column i_A: '0.5A' is not a number");
+  ExpectCsvError("t_s,gate,i_A\n0,0,+1\n", "ds/b.csv:2: column i_A: '+1' is not a number");
+  ExpectCsvError("t_s,gate,i_A\n0,0,0x1\n", "ds/b.csv:2: column i_A: '0x1' is not a number");
+  ExpectCsvError("t_s,gate,i_A\nabc,x,0\n", "ds/b.csv:2: column t_s: 'abc' is not a number");  // left to right
   ExpectCsvError("t_s,gate,i_A\n0,0,\"0.5\"\n", "ds/b.csv:2: column i_A: '\"0.5\"' is not a number");
   ExpectCsvError("t_s,gate,i_A\nx,0,0\n", "ds/b.csv:2: column t_s: 'x' is not a number");
   ExpectCsvError("t_s,gate,i_A\n0,0,0\n0.25,1,nan\n", "ds/b.csv:3: column i_A: 'nan' is not a finite number");
