@@ -44,3 +44,39 @@ TEST(Replay, BadInputNamesTheField) {
 
 }  // namespace
 }  // namespace vb::gap
+
+#include "gap/dataset.h"
+
+namespace vb::gap {
+namespace {
+
+// On the effect-free practice datasets (labels.json: p10, p12), replaying every run through the nominal
+// model leaves only the acquisition noise: the residual's RMS equals the noise floor estimated from the data
+// itself (second differences: sqrt(mean(d2^2)/6) for white noise). An independent simulator made the data,
+// so this checks our nominal model against theirs on data nothing was fitted to.
+TEST(Replay, NominalModelLeavesOnlyNoiseOnEffectFreePracticeData) {
+  for (const char* name : {"p10", "p12"}) {
+    const std::string dir = std::string(VB_SHARED_DIR) + "/gapbench/practice/" + name;
+    auto ds = LoadDataset(dir);
+    if (!ds.ok()) GTEST_SKIP() << ds.status().message();
+    double se = 0, d2 = 0;
+    size_t n = 0, n2 = 0;
+    for (const auto& r : ds->runs) {
+      ReplayInput in;
+      in.supply_V = r.supply_V;
+      in.supply_pressure_Pa = r.supply_pressure_Pa;
+      in.sample_period_s = r.sample_period_s;
+      in.gate = r.gate;
+      auto rep = ReplayRun(*model::Preset("taghizadeh2009"), model::DriverParams{}, in);
+      ASSERT_TRUE(rep.ok()) << rep.status().message();
+      for (size_t k = 0; k < r.i_A.size(); ++k, ++n) se += std::pow(r.i_A[k] - rep->i_A[k], 2);
+      for (size_t k = 2; k < r.i_A.size(); ++k, ++n2) d2 += std::pow(r.i_A[k] - 2 * r.i_A[k - 1] + r.i_A[k - 2], 2);
+    }
+    const double rms = std::sqrt(se / n), noise = std::sqrt(d2 / n2 / 6.0);
+    EXPECT_NEAR(rms, noise, 0.1 * noise) << name;
+    EXPECT_LT(rms, 2.5e-3) << name;
+  }
+}
+
+}  // namespace
+}  // namespace vb::gap
