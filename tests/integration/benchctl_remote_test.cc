@@ -5,7 +5,6 @@
 #include <cstdio>
 #include <fstream>
 #include <memory>
-#include <regex>
 
 #include "../common/run_command.h"
 #include "server_process.h"
@@ -34,9 +33,11 @@ TEST(BenchctlRemote, RunWaitQueueShowExportCompareBenches) {
 
   Result submitted = Benchctl("run " + Example("standard/e3.json") + " --json " + op);
   ASSERT_EQ(submitted.exit_code, 0) << submitted.out;
-  std::smatch m;
-  ASSERT_TRUE(std::regex_search(submitted.out, m, std::regex(R"("run_ids":\s*\[\s*"?(\d+))"))) << submitted.out;
-  const std::string id = m[1];
+  // {"batch_id": "2", "run_ids": ["5"]}: protobuf JSON writes int64 as strings.
+  const size_t ids_at = submitted.out.find("\"run_ids\"");
+  ASSERT_NE(ids_at, std::string::npos) << submitted.out;
+  const size_t digit = submitted.out.find_first_of("0123456789", ids_at);
+  const std::string id = submitted.out.substr(digit, submitted.out.find_first_not_of("0123456789", digit) - digit);
   Result watch = Benchctl("watch " + id + " " + op);
   EXPECT_EQ(watch.exit_code, 0) << watch.out;
 
