@@ -1,0 +1,269 @@
+// benchctl's local commands: run specs on the embedded emulator, compare runs, with the local store.
+#include "benchctl/local_commands.h"
+
+#include <nlohmann/json.hpp>
+
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <iostream>
+#include <sstream>
+
+#include "benchctl/cli_common.h"
+#include "benchctl/local_run.h"
+#include "db/store.h"
+#include "experiment/compare.h"
+
+namespace vb::benchctl {
+namespace {
+
+using vb::Status;
+using vb::StatusCode;
+using Json = nlohmann::ordered_json;
+
+
+Json Number(double v) { return std::isfinite(v) ? Json(v) : Json(nullptr); }
+
+Json SummaryJson(const vb::benchctl::LocalRunResult& r) {
+  const auto& s = r.summary;
+  Json j;
+  if (r.run_id != 0) {
+    j["run_id"] = r.run_id;
+    j["batch_id"] = r.batch_id;
+  }
+  j["name"] = r.name;
+  j["controller"] = r.controller;
+  j["tags"] = r.tags;
+  j["status"] = vb::experiment::TerminationName(s.termination);
+  if (!s.message.empty()) j["message"] = s.message;
+  j["duration_s"] = s.duration_s;
+  j["samples"] = s.samples;
+  j["ticks"] = s.ticks;
+  j["wall_s"] = s.wall_s;
+  j["realtime_factor"] = s.realtime_factor;
+  if (s.loop.ticks > 0) {
+    j["loop"] = {{"paced_ticks", s.loop.ticks},
+                 {"overruns", s.loop.overruns},
+                 {"jitter_p50_s", s.loop.jitter_p50_s},
+                 {"jitter_p99_s", s.loop.jitter_p99_s},
+                 {"jitter_max_s", s.loop.jitter_max_s}};
+  }
+  Json m = Json::object();
+  for (const auto& [name, value] : vb::experiment::MetricList(s.metrics)) m[name] = Number(value);
+  j["metrics"] = m;
+  return j;
+}
+
+void PrintHuman(const vb::benchctl::LocalRunResult& r) {
+  const auto& s = r.summary;
+  if (r.run_id != 0) {
+    std::printf("run %s [%s] (local run %lld, batch %lld): %s\n", r.name.c_str(), r.controller.c_str(),
+                static_cast<long long>(r.run_id), static_cast<long long>(r.batch_id),
+                vb::experiment::TerminationName(s.termination));
+  } else {
+    std::printf("run %s [%s]: %s\n", r.name.c_str(), r.controller.c_str(), vb::experiment::TerminationName(s.termination));
+  }
+  if (!s.message.empty()) std::printf("  reason: %s\n", s.message.c_str());
+  std::printf("  %.6g s simulated, %zu samples, %llu control ticks, %.3g s wall, %.0fx real time\n", s.duration_s,
+              s.samples, static_cast<unsigned long long>(s.ticks), s.wall_s, s.realtime_factor);
+  if (s.loop.ticks > 0)
+    std::printf("  loop: %llu paced ticks, %llu overruns, jitter p50 %.1f us, p99 %.1f us, max %.1f us\n",
+                static_cast<unsigned long long>(s.loop.ticks), static_cast<unsigned long long>(s.loop.overruns),
+                s.loop.jitter_p50_s * 1e6, s.loop.jitter_p99_s * 1e6, s.loop.jitter_max_s * 1e6);
+  for (const auto& [name, value] : vb::experiment::MetricList(s.metrics))
+    if (std::isfinite(value)) std::printf("  %-20s %.6g\n", name.c_str(), value);
+}
+
+std::string IndexedPath(const std::string& path, size_t k, size_t n) {
+  if (n <= 1) return path;
+  // Built by append: GCC 12 -O3 reports a false -Wrestrict on `"-" + std::to_string(k)` chains.
+  const size_t dot = path.find_last_of('.');
+  std::string out = dot == std::string::npos ? path : path.substr(0, dot);
+  out.append("-").append(std::to_string(k));
+  if (dot != std::string::npos) out.append(path, dot, std::string::npos);
+  return out;
+}
+
+// Strips the repeat tag so that repeats of one configuration share a name.
+std::string GroupName(const vb::benchctl::LocalRunResult& r) {
+  std::string name = r.name;
+  const size_t pos = name.find(" repeat:");
+  return pos == std::string::npos ? name : name.substr(0, pos);
+}
+
+std::vector<vb::experiment::RunRecord> Records(const std::vector<vb::benchctl::LocalRunResult>& results) {
+  std::vector<vb::experiment::RunRecord> out;
+  for (const auto& r : results) {
+    vb::experiment::RunRecord rec;
+    rec.name = GroupName(r);
+    rec.controller = r.controller;
+    rec.ok = r.summary.ok();
+    for (const auto& [name, value] : vb::experiment::MetricList(r.summary.metrics)) rec.metrics[name] = value;
+    out.push_back(std::move(rec));
+  }
+  return out;
+}
+
+Json ComparisonJson(const vb::experiment::Comparison& c) {
+  Json rows = Json::array();
+  for (const auto& r : c.rows) {
+    Json m = Json::object();
+    for (const auto& col : c.columns) {
+      const auto& s = r.metrics.at(col);
+      m[col] = s.n == 0 ? Json(nullptr) : Json{{"mean", s.mean}, {"spread", s.spread}, {"n", s.n}};
+    }
+    rows.push_back({{"rank", r.rank},
+                    {"name", r.name},
+                    {"controller", r.controller},
+                    {"runs", r.runs},
+                    {"failed", r.failed},
+                    {"pareto", r.pareto},
+                    {"metrics", m}});
+  }
+  return {{"rank_metric", c.rank_metric}, {"effort_metric", c.effort_metric}, {"rows", rows}};
+}
+
+int PrintComparison(const vb::experiment::Comparison& c, bool json, bool csv) {
+  if (json) {
+    std::cout << ComparisonJson(c).dump(2) << "\n";
+  } else if (csv) {
+    std::cout << vb::experiment::ComparisonCsv(c);
+  } else {
+    std::cout << vb::experiment::ComparisonTable(c);
+  }
+  return kExitOk;
+}
+
+// compare --local --batch B: a batch recorded in the local store.
+}  // namespace
+
+int CmdCompareLocalBatch(const std::string& store_path, std::int64_t batch, bool json, bool csv) {
+  auto store = vb::db::Store::Open(store_path);
+  if (!store.ok()) return Fail(store.status().WithContext("local store " + store_path));
+  vb::db::RunFilter f;
+  f.batch_id = batch;
+  f.limit = 1000;
+  std::vector<vb::experiment::RunRecord> records;
+  for (;;) {
+    auto page = (*store)->ListRuns(f);
+    if (!page.ok()) return Fail(page.status());
+    for (const auto& r : *page) {
+      vb::experiment::RunRecord rec;
+      rec.name = r.name.substr(0, r.name.find(" repeat:"));
+      rec.controller = r.controller;
+      rec.ok = r.status == vb::db::RunStatus::kDone;
+      auto metrics = (*store)->GetMetrics(r.id);
+      if (!metrics.ok()) return Fail(metrics.status());
+      for (const auto& m : *metrics) rec.metrics[m.name] = m.value;
+      records.push_back(std::move(rec));
+    }
+    if (static_cast<int>(page->size()) < f.limit) break;
+    f.after_id = page->back().id;
+  }
+  if (records.empty())
+    return Fail(Status::NotFound("batch " + std::to_string(batch) + " not found in the local store " + store_path));
+  return PrintComparison(vb::experiment::Compare(records), json, csv);
+}
+
+// compare RESULTS.json (the output of `run --json`) or compare --local SPEC (runs it first).
+int CmdCompare(const std::string& input, bool local, const std::string& store_path, bool json, bool csv) {
+  if (local) {
+    auto spec = vb::experiment::LoadSpecFile(input);
+    if (!spec.ok()) return Fail(spec.status());
+    auto results = vb::benchctl::RunLocal(*spec, false, false, store_path);
+    if (!results.ok()) return Fail(results.status().WithContext(input));
+    for (const auto& r : *results)
+      std::fprintf(stderr, "%s [%s]: %s\n", r.name.c_str(), r.controller.c_str(), r.summary.BriefReport().c_str());
+    return PrintComparison(vb::experiment::Compare(Records(*results)), json, csv);
+  }
+  std::ifstream in(input);
+  if (!in) return Fail(Status::NotFound(input + ": cannot open the results file"));
+  Json doc;
+  try {
+    doc = Json::parse(in);
+  } catch (const Json::exception& e) {
+    return Fail(Status::InvalidArgument(input + ": not JSON: " + e.what()));
+  }
+  if (doc.is_object()) doc = Json::array({doc});
+  std::vector<vb::experiment::RunRecord> records;
+  for (size_t k = 0; k < doc.size(); ++k) {
+    const Json& r = doc[k];
+    const std::string where = input + ": [" + std::to_string(k) + "]";
+    if (!r.is_object() || !r.contains("name") || !r["name"].is_string() || !r.contains("metrics") ||
+        !r["metrics"].is_object())
+      return Fail(Status::InvalidArgument(where + ": expected a run summary with 'name' and 'metrics'"));
+    vb::experiment::RunRecord rec;
+    rec.name = r["name"].get<std::string>();
+    const size_t pos = rec.name.find(" repeat:");
+    if (pos != std::string::npos) rec.name = rec.name.substr(0, pos);
+    rec.controller = r.value("controller", "");
+    rec.ok = r.value("status", "done") == "done";
+    for (const auto& [key, value] : r["metrics"].items()) {
+      if (value.is_number()) {
+        rec.metrics[key] = value.get<double>();
+      } else if (!value.is_null()) {
+        return Fail(Status::InvalidArgument(where + ".metrics." + key + ": not a number"));
+      }
+    }
+    records.push_back(std::move(rec));
+  }
+  if (records.empty()) return Fail(Status::InvalidArgument(input + ": no runs to compare"));
+  return PrintComparison(vb::experiment::Compare(records), json, csv);
+}
+
+// One CSV row per run: identity, status, and every metric (empty where not applicable).
+void PrintCsv(const std::vector<vb::benchctl::LocalRunResult>& results) {
+  std::printf("name,controller,status,duration_s,samples,wall_s");
+  for (const auto& [name, value] : vb::experiment::MetricList(vb::experiment::Metrics{})) std::printf(",%s", name.c_str());
+  std::printf("\n");
+  for (const auto& r : results) {
+    std::printf("\"%s\",%s,%s,%.9g,%zu,%.6g", r.name.c_str(), r.controller.c_str(),
+                vb::experiment::TerminationName(r.summary.termination), r.summary.duration_s, r.summary.samples,
+                r.summary.wall_s);
+    for (const auto& [name, value] : vb::experiment::MetricList(r.summary.metrics)) {
+      if (std::isfinite(value)) {
+        std::printf(",%.10g", value);
+      } else {
+        std::printf(",");
+      }
+    }
+    std::printf("\n");
+  }
+}
+
+int CmdRun(const std::string& spec_path, bool local, const std::string& store_path, const std::string& trace_csv,
+           bool json, bool csv, bool realtime) {
+  if (!local) {
+    return Fail(Status::FailedPrecondition(
+        "no server given: use --local for the embedded emulator, or --server ADDR (or VALVEBENCH_SERVER)"));
+  }
+  auto spec = vb::experiment::LoadSpecFile(spec_path);
+  if (!spec.ok()) return Fail(spec.status());
+  auto results = vb::benchctl::RunLocal(*spec, realtime, !trace_csv.empty(), store_path);
+  if (!results.ok()) return Fail(results.status().WithContext(spec_path));
+  int exit_code = kExitOk;
+  Json all = Json::array();
+  for (size_t k = 0; k < results->size(); ++k) {
+    const auto& r = (*results)[k];
+    if (!r.summary.ok()) exit_code = kExitRunFailed;
+    if (!trace_csv.empty()) {
+      auto st = vb::benchctl::WriteTraceCsv(r.trace, IndexedPath(trace_csv, k, results->size()));
+      if (!st.ok()) return Fail(st);
+    }
+    if (json) {
+      all.push_back(SummaryJson(r));
+    } else if (!csv) {
+      PrintHuman(r);
+    }
+  }
+  if (csv && !json) {
+    PrintCsv(*results);
+  } else if (json) {
+    std::cout << (all.size() == 1 ? all[0] : all).dump(2) << "\n";
+  } else if (results->size() > 1) {
+    std::cout << "\n" << vb::experiment::ComparisonTable(vb::experiment::Compare(Records(*results)));
+  }
+  return exit_code;
+}
+
+}  // namespace vb::benchctl
