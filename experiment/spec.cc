@@ -299,11 +299,27 @@ StatusOr<model::PlantParams> BuildPlant(const valvebench::v1::ModelSpec& ms,
     auto st = model::SetParam(&plant.value(), name, value);
     if (!st.ok()) return st.WithContext("bench.model.params[" + name + "]");
   }
-  if (ms.effects_size() > 0) {
-    for (int k = 0; k < ms.effects_size(); ++k)
-      if (ms.effects(k).name() != "none")
-        return Status::InvalidArgument("bench.model.effects[" + std::to_string(k) + "].name: effect '" +
-                                       ms.effects(k).name() + "' is not available yet");
+  // Effects: named additions (model/effects.h), and param:NAME, a nominal parameter that is simply off
+  // ({"value": v} or {"factor": f}).
+  for (int k = 0; k < ms.effects_size(); ++k) {
+    const auto& fx = ms.effects(k);
+    const std::string field = "bench.model.effects[" + std::to_string(k) + "]";
+    std::vector<std::pair<std::string, double>> params(fx.params().begin(), fx.params().end());
+    std::sort(params.begin(), params.end());
+    if (fx.name() == "none") continue;
+    if (fx.name().rfind("param:", 0) == 0) {
+      const std::string name = fx.name().substr(6);
+      auto current = model::GetParam(*plant, name);
+      if (!current.ok()) return current.status().WithContext(field + ".name");
+      if (params.size() != 1 || (params[0].first != "value" && params[0].first != "factor"))
+        return Status::InvalidArgument(field + ".params: param:" + name + " takes exactly one of value, factor");
+      const double v = params[0].first == "value" ? params[0].second : *current * params[0].second;
+      auto st = model::SetParam(&plant.value(), name, v);
+      if (!st.ok()) return st.WithContext(field);
+      continue;
+    }
+    auto st = model::AddEffect(&plant->effects, fx.name(), params);
+    if (!st.ok()) return st.InField(field);
   }
   if (perturbation != nullptr) {
     std::vector<std::pair<std::string, double>> scales(perturbation->param_scale().begin(),

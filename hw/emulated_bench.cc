@@ -158,7 +158,7 @@ Status EmulatedBench::AdvanceTo(double t_s, Measurement* m) {
   }
   if (m != nullptr) {
     m->t_s = sim_.t_s();
-    m->current_A = sim_.i_A();
+    m->current_A = sim_.measured_current_A();  // what the current sensor reports (sensor_lag)
     m->position_m = caps_.measures_position ? sim_.x_m() : kNotMeasured;
     m->velocity_mps = caps_.measures_velocity ? sim_.v_mps() : kNotMeasured;
     m->supply_V = config_.supply_V;

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "common/status.h"
+#include "model/effects.h"
 
 namespace vb::model {
 
@@ -62,6 +63,9 @@ struct PlantParams {
   double T_supply_K = 293.15;      // supply temperature
   double P_out_Pa = 101325.0;      // absolute downstream pressure (exhaust to atmosphere)
   double P_atm_Pa = 101325.0;      // supply_pressure_Pa is gauge; absolute = gauge + P_atm
+
+  // Named additions to the nominal model (model/effects.h); none by default.
+  Effects effects;
 
   // Derived: K = N^2 A_e mu_r mu0 (kReluctance), L' = pi d mu0 a N^2 / g (kLimitedTravel).
   double K_reluctance_H_m() const;

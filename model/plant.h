@@ -43,6 +43,21 @@ class Plant {
     return 0.0;
   }
 
+  // L(x) and dL/dx in one evaluation (the reluctance law's slope needs L itself).
+  void InductanceAndSlope(double x_m, double* L_H_out, double* dLdx_out) const {
+    switch (p_.law) {
+      case InductanceLaw::kReluctance: {
+        const double L = K_ / (p_.l_c_m + two_mu_r_ * (p_.x_t_m - x_m));
+        *L_H_out = L;
+        *dLdx_out = two_mu_r_ * L * L / K_;
+        return;
+      }
+      default:
+        *L_H_out = L_H(x_m);
+        *dLdx_out = dLdx_H_per_m(x_m);
+    }
+  }
+
   // Magnetic pull (seed 000 eq. 8; seed 002 eq. 6).
   double MagneticForce_N(double i_A, double x_m) const { return 0.5 * i_A * i_A * dLdx_H_per_m(x_m); }
 

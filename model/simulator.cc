@@ -49,6 +49,10 @@ void Simulator::Reset() {
   v_ = 0.0;
   v2_int_ = vi_int_ = 0.0;
   switches_ = 0;
+  const Effects& fx = plant_.params().effects;
+  dT_ = fx.heating ? fx.heating_dT0_K : 0.0;
+  sensor_ = 0.0;
+  general_ = fx.NeedsGeneralPath() || dist_.active();
   gate_ = 0;
   contact_ = Contact::kLower;
   blocked_ = true;
@@ -84,7 +88,65 @@ void Simulator::SetConditions(const Conditions& conditions) {
 
 void Simulator::SetDisturbance(const Disturbance& disturbance) {
   dist_ = disturbance;
+  general_ = plant_.params().effects.NeedsGeneralPath() || dist_.active();
   stepper_valid_ = false;
+}
+
+double Simulator::ResistanceAt(double dT) const {
+  const Effects& fx = plant_.params().effects;
+  const double R = plant_.params().R_ohm;
+  return fx.heating ? R * (1.0 + fx.heating_alpha_per_K * dT) : R;
+}
+
+// The coil as the driver and the sensor see it. Without eddy currents the terminal current is the magnetising
+// current. With a loss resistance R_p across the magnetising inductance (one eddy branch):
+//   v_source - R_s i = R i + v_L,  i = i_mag + v_L / R_p   =>   v_L = (v_source - (R + R_s) i_mag) / (1 + (R + R_s)/R_p)
+// and with the switch and the diode both off (blocked) the terminal current is 0 and i_mag decays through
+// R_p: v_L = -R_p i_mag.
+Simulator::Terminal Simulator::TerminalAt(const Segment& seg, double t, double i_mag, double dT) const {
+  const Effects& fx = plant_.params().effects;
+  if (!fx.any()) {  // the nominal coil: the hot path of every integrated piece
+    Terminal out;
+    out.i_A = seg.blocked ? 0.0 : i_mag;
+    out.v_V = seg.blocked ? 0.0 : SegmentVoltage(seg, t) + DisturbanceVoltage(t);
+    out.vL_V = out.v_V - plant_.params().R_ohm * out.i_A;
+    return out;
+  }
+  const double R = ResistanceAt(dT);
+  const double Rs = seg.from_supply ? fx.supply_R_ohm : 0.0;
+  Terminal out;
+  if (seg.blocked) {
+    out.i_A = 0.0;
+    out.vL_V = fx.eddy_R_p_ohm > 0.0 ? -fx.eddy_R_p_ohm * i_mag : 0.0;
+    out.v_V = out.vL_V;
+    return out;
+  }
+  const double v0 = SegmentVoltage(seg, t) + DisturbanceVoltage(t);
+  if (fx.eddy_R_p_ohm > 0.0) {
+    const double Rser = R + Rs;
+    out.vL_V = (v0 - Rser * i_mag) / (1.0 + Rser / fx.eddy_R_p_ohm);
+    out.i_A = i_mag + out.vL_V / fx.eddy_R_p_ohm;
+  } else {
+    out.i_A = i_mag;
+    out.vL_V = v0 - (R + Rs) * i_mag;
+  }
+  out.v_V = v0 - Rs * out.i_A;
+  return out;
+}
+
+double Simulator::measured_current_A() const {
+  const Effects& fx = plant_.params().effects;
+  if (fx.sensor_tau_s > 0.0) return sensor_;
+  if (fx.eddy_R_p_ohm > 0.0) {
+    Simulator* self = const_cast<Simulator*>(this);  // CurrentSegment() only normalises driver bookkeeping
+    return TerminalAt(self->CurrentSegment(), t_, i_, dT_).i_A;
+  }
+  return i_;
+}
+
+Simulator::State Simulator::CurrentState() const {
+  State y = Scale(i_, x_, v_);
+  return y;
 }
 
 double Simulator::DisturbanceVoltage(double t) const {
@@ -101,10 +163,11 @@ Simulator::Segment Simulator::CurrentSegment() {
   Segment s;
   const double supply = cond_.supply_V;
   const double drop = driver_.diode_drop_V;
+  const bool eddy = plant_.params().effects.eddy_R_p_ohm > 0.0;
   auto freewheel_or_block = [&](double v_if_positive) {
     if (blocked_ || i_ <= 0.0) {
       blocked_ = true;
-      i_ = 0.0;
+      if (!eddy) i_ = 0.0;
       s.blocked = true;
     } else {
       s.v0_V = v_if_positive;
@@ -115,6 +178,7 @@ Simulator::Segment Simulator::CurrentSegment() {
     case DriverKind::kLowSideFlyback:
       if (gate_ == 1) {
         s.v0_V = supply;
+        s.from_supply = true;
       } else {
         freewheel_or_block(-drop);
       }
@@ -122,8 +186,10 @@ Simulator::Segment Simulator::CurrentSegment() {
     case DriverKind::kHBridge:
       if (gate_ == 1) {
         s.v0_V = supply;
+        s.from_supply = true;
       } else if (gate_ == -1) {
         s.v0_V = -supply;
+        s.from_supply = true;
       } else if (!blocked_ && i_ > 0.0) {
         s.v0_V = -(supply + 2.0 * drop);
         s.clamp = +1;
@@ -132,7 +198,7 @@ Simulator::Segment Simulator::CurrentSegment() {
         s.clamp = -1;
       } else {
         blocked_ = true;
-        i_ = 0.0;
+        if (!eddy) i_ = 0.0;
         s.blocked = true;
       }
       break;
@@ -141,6 +207,7 @@ Simulator::Segment Simulator::CurrentSegment() {
         const double boost_end = t_gate_change_s_ + driver_.boost_time_s;
         if (t_ < boost_end - kSameInstant_s) {
           s.v0_V = supply;
+          s.from_supply = true;
           s.t_end_s = boost_end;
           break;
         }
@@ -154,6 +221,7 @@ Simulator::Segment Simulator::CurrentSegment() {
         if (chopper_on_) {
           blocked_ = false;
           s.v0_V = supply;
+          s.from_supply = true;
           s.level_A = hi;
           s.level_dir = +1;
         } else {
@@ -166,7 +234,7 @@ Simulator::Segment Simulator::CurrentSegment() {
         // Reverse voltage from the capacitor, decaying from the gate's falling edge.
         if (blocked_ || i_ <= 0.0) {
           blocked_ = true;
-          i_ = 0.0;
+          if (!eddy) i_ = 0.0;
           s.blocked = true;
         } else {
           s.v0_V = -driver_.reverse_V;
@@ -187,18 +255,18 @@ double Simulator::SegmentVoltage(const Segment& seg, double t) const {
   return seg.v0_V;
 }
 
-void Simulator::EmitSample(const Segment& seg, double t, double i, double x, double v, double v2_int,
-                           double vi_int, SimObserver* obs) const {
+void Simulator::EmitSample(const Segment& /*seg*/, double t, double i_meas, double v_term, double x, double v,
+                           double v2_int, double vi_int, SimObserver* obs) const {
   PlantSample s;
+  s.t_s = t;
+  s.gate = static_cast<std::int8_t>(gate_);
+  s.v_coil_V = v_term;
+  s.i_A = i_meas;
+  s.x_m = x;
+  s.v_mps = v;
   s.v2_integral_V2s = v2_int;
   s.energy_J = vi_int;
   s.switches = switches_;
-  s.t_s = t;
-  s.gate = static_cast<std::int8_t>(gate_);
-  s.v_coil_V = seg.blocked ? 0.0 : SegmentVoltage(seg, t) + DisturbanceVoltage(t);
-  s.i_A = i;
-  s.x_m = x;
-  s.v_mps = v;
   obs->OnSample(s);
 }
 
@@ -206,7 +274,8 @@ void Simulator::EmitPendingSample(SimObserver* observer) {
   if (sample_period_s_ <= 0.0 || observer == nullptr) return;
   if (SampleTime(next_sample_) <= t_ + kSameInstant_s) {
     Segment seg = CurrentSegment();
-    EmitSample(seg, SampleTime(next_sample_), i_, x_, v_, v2_int_, vi_int_, observer);
+    const Terminal term = TerminalAt(seg, t_, i_, dT_);
+    EmitSample(seg, SampleTime(next_sample_), measured_current_A(), term.v_V, x_, v_, v2_int_, vi_int_, observer);
     ++next_sample_;
   }
 }
@@ -232,7 +301,7 @@ void Simulator::AdvanceTo(double t_end_s, SimObserver* observer) {
     CheckStopRelease(observer);
     const Segment seg = CurrentSegment();
     const double t_stop = std::min(t_end_s, seg.t_end_s);
-    if (contact_ != Contact::kFree && seg.tau_s == 0.0 && !dist_.active()) {
+    if (contact_ != Contact::kFree && seg.tau_s == 0.0 && !general_) {
       AdvanceClosedForm(seg, t_stop, observer);
     } else {
       AdvanceOde(seg, t_stop, observer);
@@ -251,12 +320,14 @@ void Simulator::AdvanceClosedForm(const Segment& seg, double t_stop, SimObserver
   if (seg.blocked) {
     if (sample_period_s_ > 0.0 && obs) {
       for (double tk = SampleTime(next_sample_); tk < t_stop - kSameInstant_s; tk = SampleTime(++next_sample_))
-        EmitSample(seg, tk, 0.0, x_, 0.0, v2_int_, vi_int_, obs);
+        EmitSample(seg, tk, 0.0, 0.0, x_, 0.0, v2_int_, vi_int_, obs);
     }
     t_ = t_stop;
     return;
   }
-  const double R = plant_.params().R_ohm;
+  // The coil with the source resistance in series (supply_resistance), at a fixed position: linear.
+  const double Rs = seg.from_supply ? plant_.params().effects.supply_R_ohm : 0.0;
+  const double R = plant_.params().R_ohm + Rs;
   const double tau = plant_.L_H(x_) / R;
   const double i_inf = seg.v0_V / R;
   const double d0 = i_ - i_inf;
@@ -294,27 +365,43 @@ void Simulator::AdvanceClosedForm(const Segment& seg, double t_stop, SimObserver
     }
   }
 
-  // Exact integrals over [t0, t]: v is constant, i = i_inf + d0 e^{-(t-t0)/tau}.
+  // Exact integrals over [t0, t] of the terminal voltage v = v0 - Rs i, with i = i_inf + d0 e^{-(t-t0)/tau}:
+  //   int i = i_inf dt + d0 tau (1 - e),  int i^2 = i_inf^2 dt + 2 i_inf d0 tau (1 - e) + d0^2 tau/2 (1 - e^2)
   const double v0 = seg.v0_V;
-  auto v2_at = [&](double dt) { return v2_int_ + v0 * v0 * dt; };
-  auto vi_at = [&](double dt, double e) { return vi_int_ + v0 * (i_inf * dt + d0 * tau * (1.0 - e)); };
+  auto int_i = [&](double dt, double e) { return i_inf * dt + d0 * tau * (1.0 - e); };
+  auto int_i2 = [&](double dt, double e) {
+    return i_inf * i_inf * dt + 2.0 * i_inf * d0 * tau * (1.0 - e) + d0 * d0 * 0.5 * tau * (1.0 - e * e);
+  };
+  auto v2_at = [&](double dt, double e) {
+    return v2_int_ + v0 * v0 * dt - 2.0 * v0 * Rs * int_i(dt, e) + Rs * Rs * int_i2(dt, e);
+  };
+  auto vi_at = [&](double dt, double e) { return vi_int_ + v0 * int_i(dt, e) - Rs * int_i2(dt, e); };
   if (sample_period_s_ > 0.0 && obs) {
     const double limit = best_t - kSameInstant_s;
-    for (double tk = SampleTime(next_sample_); tk < limit; tk = SampleTime(++next_sample_)) {
-      const double dt = tk - t0, e = std::exp(-dt / tau);
-      EmitSample(seg, tk, i_inf + d0 * e, x_, 0.0, v2_at(dt), vi_at(dt, e), obs);
+    if (Rs == 0.0) {  // the nominal coil: v is constant, so the integrals need no i^2 term
+      for (double tk = SampleTime(next_sample_); tk < limit; tk = SampleTime(++next_sample_)) {
+        const double dt = tk - t0, e = std::exp(-dt / tau);
+        EmitSample(seg, tk, i_inf + d0 * e, v0, x_, 0.0, v2_int_ + v0 * v0 * dt, vi_int_ + v0 * int_i(dt, e), obs);
+      }
+    } else {
+      for (double tk = SampleTime(next_sample_); tk < limit; tk = SampleTime(++next_sample_)) {
+        const double dt = tk - t0, e = std::exp(-dt / tau);
+        const double i = i_inf + d0 * e;
+        EmitSample(seg, tk, i, v0 - Rs * i, x_, 0.0, v2_at(dt, e), vi_at(dt, e), obs);
+      }
     }
   }
   const double dt_end = best_t - t0, e_end = std::exp(-dt_end / tau);
-  v2_int_ = v2_at(dt_end);
+  v2_int_ = v2_at(dt_end, e_end);
   vi_int_ = vi_at(dt_end, e_end);
   t_ = best_t;
   i_ = best_ev != Ev::kNone ? best_level : i_inf + d0 * e_end;
   if (best_ev != Ev::kNone) ApplyEvent(best_ev, seg, obs);
 }
 
-double Simulator::EventFunction(Ev ev, const Segment& seg, double t, double i, double x, double v) const {
-  (void)v;
+double Simulator::EventFunction(Ev ev, const Segment& seg, double t, const State& y) const {
+  double i, x, v;
+  Unscale(y, &i, &x, &v);
   switch (ev) {
     case Ev::kUpper: return (x_hi_ - x) * inv_x_scale_;
     case Ev::kLower: return (x - x_lo_) * inv_x_scale_;
@@ -322,8 +409,9 @@ double Simulator::EventFunction(Ev ev, const Segment& seg, double t, double i, d
       const double f = plant_.NetForceAtRest_N(i, x_, cond_.supply_pressure_Pa) + DisturbanceForce(t);
       return contact_ == Contact::kLower ? -f : f;
     }
-    case Ev::kClamp: return seg.clamp * i;
-    case Ev::kLevel: return seg.level_dir * (seg.level_A - i);
+    // The diode and the chopper act on the terminal current.
+    case Ev::kClamp: return seg.clamp * TerminalAt(seg, t, i, y[5]).i_A;
+    case Ev::kLevel: return seg.level_dir * (seg.level_A - TerminalAt(seg, t, i, y[5]).i_A);
     case Ev::kNone: break;
   }
   return 1.0;
@@ -334,13 +422,22 @@ void Simulator::AdvanceOde(const Segment& seg, double t_stop, SimObserver* obs) 
   const Plant& plant = plant_;
   const double pressure = cond_.supply_pressure_Pa;
   const Simulator& self = *this;
-  auto rhs = [&plant, &seg, &self, frozen, pressure](const State& y, State& dy, double t) {
+  const Effects& fx = plant_.params().effects;
+  auto rhs = [&plant, &seg, &self, &fx, frozen, pressure](const State& y, State& dy, double t) {
     double i, x, v;
     self.Unscale(y, &i, &x, &v);
-    const double vc = seg.blocked ? 0.0 : self.SegmentVoltage(seg, t) + self.DisturbanceVoltage(t);
-    dy[0] = seg.blocked ? 0.0 : plant.CurrentRate_A_per_s(i, x, frozen ? 0.0 : v, vc);
-    dy[3] = vc * vc;
-    dy[4] = seg.blocked ? 0.0 : vc * i;
+    const Terminal term = self.TerminalAt(seg, t, i, y[5]);
+    // dlambda/dt = v_L with lambda = L(x) i  =>  L di/dt = v_L - i (dL/dx) v   (seed 000 eq. 7)
+    double L, dLdx;
+    plant.InductanceAndSlope(x, &L, &dLdx);
+    dy[0] = (term.vL_V - i * dLdx * (frozen ? 0.0 : v)) / L;
+    dy[3] = term.v_V * term.v_V;
+    dy[4] = term.v_V * term.i_A;
+    dy[5] = 0.0;
+    dy[6] = 0.0;
+    if (fx.heating)
+      dy[5] = (term.i_A * term.i_A * self.ResistanceAt(y[5]) - y[5] / fx.heating_R_th_K_per_W) / fx.heating_C_th_J_per_K;
+    if (fx.sensor_tau_s > 0.0) dy[6] = (term.i_A - y[6]) / fx.sensor_tau_s;
     if (frozen) {
       dy[1] = 0.0;
       dy[2] = 0.0;
@@ -373,9 +470,7 @@ void Simulator::AdvanceOde(const Segment& seg, double t_stop, SimObserver* obs) 
   auto g_at = [&](Ev ev, double t) {
     State y;
     stepper_.calc_state(t, y);
-    double i, x, v;
-    Unscale(y, &i, &x, &v);
-    return EventFunction(ev, seg, t, i, x, v);
+    return EventFunction(ev, seg, t, y);
   };
   // Illinois (modified regula falsi) on the dense output: g(lo) > 0 >= g(hi); returns the first instant
   // with g <= 0, to event_time_tol_s.
@@ -413,16 +508,14 @@ void Simulator::AdvanceOde(const Segment& seg, double t_stop, SimObserver* obs) 
     } else {
       stepper_.calc_state(b, yb);
     }
-    double ib, xb, vb;
-    Unscale(yb, &ib, &xb, &vb);
-
+    const State ya = CurrentState();
     double best_t = b;
     Ev best_ev = Ev::kNone;
     for (int k = 0; k < n_events; ++k) {
       const Ev ev = events[k];
-      const double gb = EventFunction(ev, seg, b, ib, xb, vb);
+      const double gb = EventFunction(ev, seg, b, yb);
       if (gb > 0.0) continue;
-      double ga = EventFunction(ev, seg, a, i_, x_, v_);
+      double ga = EventFunction(ev, seg, a, ya);
       double lo = a;
       if (!(ga > 0.0)) {
         // Started exactly on the surface (just lifted, released, ...): look for the instant it leaves it.
@@ -452,8 +545,11 @@ void Simulator::AdvanceOde(const Segment& seg, double t_stop, SimObserver* obs) 
         stepper_.calc_state(tk, y);
         double i, x, v;
         Unscale(y, &i, &x, &v);
-        if (seg.blocked) i = 0.0;
-        EmitSample(seg, tk, i, std::clamp(x, x_lo_, x_hi_), v, ode_piece_v2_ + y[3], ode_piece_vi_ + y[4], obs);
+        if (seg.blocked && fx.eddy_R_p_ohm == 0.0) i = 0.0;
+        const Terminal term = TerminalAt(seg, tk, i, y[5]);
+        const double measured = fx.sensor_tau_s > 0.0 ? y[6] : term.i_A;
+        EmitSample(seg, tk, measured, term.v_V, std::clamp(x, x_lo_, x_hi_), v, ode_piece_v2_ + y[3],
+                   ode_piece_vi_ + y[4], obs);
       }
     }
 
@@ -467,9 +563,11 @@ void Simulator::AdvanceOde(const Segment& seg, double t_stop, SimObserver* obs) 
       Unscale(y, &i_, &x_, &v_);
       v2_int_ = ode_piece_v2_ + y[3];
       vi_int_ = ode_piece_vi_ + y[4];
+      dT_ = y[5];
+      sensor_ = y[6];
     }
     t_ = best_t;
-    if (seg.blocked) i_ = 0.0;
+    if (seg.blocked && fx.eddy_R_p_ohm == 0.0) i_ = 0.0;
     x_ = std::clamp(x_, x_lo_, x_hi_);
     if (best_ev != Ev::kNone) {
       dt_guess_s_ = stepper_.current_time_step();
@@ -506,12 +604,13 @@ void Simulator::ApplyEvent(Ev ev, const Segment& seg, SimObserver* obs) {
       v_ = 0.0;
       break;
     case Ev::kClamp:
-      i_ = 0.0;
+      // The terminal current reached zero; without an eddy branch that is the whole coil current.
+      if (plant_.params().effects.eddy_R_p_ohm == 0.0) i_ = 0.0;
       blocked_ = true;
       kind = EventKind::kCurrentZero;
       break;
     case Ev::kLevel:
-      i_ = seg.level_A;
+      if (plant_.params().effects.eddy_R_p_ohm == 0.0) i_ = seg.level_A;
       chopper_on_ = !chopper_on_;
       kind = EventKind::kDriverSwitch;
       break;

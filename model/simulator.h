@@ -98,7 +98,10 @@ class Simulator {
   void EmitPendingSample(SimObserver* observer);
 
   double t_s() const { return t_; }
-  double i_A() const { return i_; }
+  double i_A() const { return i_; }  // the magnetising current (the force current)
+  // What the bench's current sensor reports now (lagged by sensor_lag; the terminal current otherwise).
+  double measured_current_A() const;
+  double coil_temperature_rise_K() const { return dT_; }
   double x_m() const { return x_; }
   double v_mps() const { return v_; }
   int gate() const { return gate_; }
@@ -113,9 +116,11 @@ class Simulator {
   std::uint64_t restarts() const { return restarts_; }
 
  private:
-  // scaled: i [A], (x - x_min)/x_scale, v/v_scale, then two quadratures from the piece start:
-  // integral v_coil^2 dt and integral v_coil i dt.
-  using State = std::array<double, 5>;
+  // scaled: i [A] (the magnetising current: the terminal current unless eddy currents branch off),
+  // (x - x_min)/x_scale, v/v_scale, two quadratures from the piece start (integral v_coil^2 dt and
+  // integral v_coil i dt), the coil's temperature rise dT [K] (coil_heating) and the current sensor's
+  // output [A] (sensor_lag).
+  using State = std::array<double, 7>;
   using Stepper = boost::numeric::odeint::result_of::make_dense_output<
       boost::numeric::odeint::runge_kutta_dopri5<State>>::type;
 
@@ -129,8 +134,17 @@ class Simulator {
     bool blocked = false;    // i is held at 0 (diode blocks), v_coil = 0
     double level_A = 0.0;    // driver threshold event on i ...
     int level_dir = 0;       // ... crossed upward (+1) or downward (-1); 0 = none
+    bool from_supply = false;  // the supply drives the coil (its source resistance is in series)
   };
   enum class Ev : std::uint8_t { kNone, kUpper, kLower, kLeaveStop, kClamp, kLevel };
+  // The coil's terminal quantities for a magnetising current: what the driver and the sensor see.
+  struct Terminal {
+    double i_A;   // terminal current
+    double v_V;   // terminal voltage
+    double vL_V;  // voltage across the magnetising inductance (drives dlambda/dt)
+  };
+  Terminal TerminalAt(const Segment& seg, double t, double i_mag, double dT) const;
+  double ResistanceAt(double dT) const;
 
   Segment CurrentSegment();
   double SegmentVoltage(const Segment& seg, double t) const;
@@ -138,14 +152,16 @@ class Simulator {
   void AdvanceOde(const Segment& seg, double t_stop, SimObserver* obs);
   void ApplyEvent(Ev ev, const Segment& seg, SimObserver* obs);
   void CheckStopRelease(SimObserver* obs);
-  double EventFunction(Ev ev, const Segment& seg, double t, double i, double x, double v) const;
+  double EventFunction(Ev ev, const Segment& seg, double t, const State& y) const;
+  State CurrentState() const;
   double DisturbanceVoltage(double t) const;
   double DisturbanceForce(double t) const;
   double SampleTime(std::int64_t k) const { return static_cast<double>(k) * sample_period_s_; }
-  void EmitSample(const Segment& seg, double t, double i, double x, double v, double v2_int, double vi_int,
-                  SimObserver* obs) const;
+  // i_meas: what the current sensor reports; v_term: the terminal voltage.
+  void EmitSample(const Segment& seg, double t, double i_meas, double v_term, double x, double v, double v2_int,
+                  double vi_int, SimObserver* obs) const;
   State Scale(double i, double x, double v) const {
-    return {i, (x - x_lo_) * inv_x_scale_, v * inv_v_scale_, 0.0, 0.0};
+    return {i, (x - x_lo_) * inv_x_scale_, v * inv_v_scale_, 0.0, 0.0, dT_, sensor_};
   }
   void Unscale(const State& s, double* i, double* x, double* v) const {
     *i = s[0];
@@ -162,6 +178,9 @@ class Simulator {
 
   double t_ = 0.0, i_ = 0.0, x_ = 0.0, v_ = 0.0;
   double v2_int_ = 0.0, vi_int_ = 0.0;   // running integrals up to t_
+  double dT_ = 0.0;                       // coil temperature rise (coil_heating)
+  double sensor_ = 0.0;                   // current sensor output (sensor_lag)
+  bool general_ = false;                  // effects or disturbances: integrate every piece
   std::uint64_t switches_ = 0;
   double ode_piece_v2_ = 0.0, ode_piece_vi_ = 0.0;  // integrals at the ODE stepper's restart time
   int gate_ = 0;

@@ -135,3 +135,29 @@ TEST(Spec, ControllerErrorsNameTheSpecField) {
 
 }  // namespace
 }  // namespace vb::experiment
+
+namespace vb::experiment {
+namespace {
+
+TEST(Spec, EffectsAndParamOffsetsReachThePlant) {
+  auto spec = ParseSpecJson(std::string(R"({"duration_s": 0.1, "bench": {"model": {"preset": "taghizadeh2009",
+      "effects": [{"name": "supply_resistance", "params": {"R_s": 0.8}}, {"name": "param:R", "params": {"factor": 1.12}},
+                  {"name": "sensor_lag", "params": {"tau_s": 0.0001}}]}}, )") + kPwm + "}");
+  ASSERT_TRUE(spec.ok()) << spec.status().message();
+  auto e = BuildExperiment(*spec);
+  ASSERT_TRUE(e.ok()) << e.status().message();
+  EXPECT_DOUBLE_EQ(e->plant.effects.supply_R_ohm, 0.8);
+  EXPECT_DOUBLE_EQ(e->plant.R_ohm, 13.0 * 1.12);
+  EXPECT_DOUBLE_EQ(e->plant.effects.sensor_tau_s, 1e-4);
+  ExpectErrorNames(R"({"duration_s": 0.1, "bench": {"model": {"effects": [{"name": "gremlins"}]}}, )" + std::string(kPwm) + "}",
+                   "bench.model.effects[0].name");
+  ExpectErrorNames(R"({"duration_s": 0.1, "bench": {"model": {"effects": [{"name": "eddy_currents", "params": {"R_p": -4}}]}}, )" +
+                       std::string(kPwm) + "}",
+                   "bench.model.effects[0].params[R_p]");
+  ExpectErrorNames(R"({"duration_s": 0.1, "bench": {"model": {"effects": [{"name": "param:Q", "params": {"value": 1}}]}}, )" +
+                       std::string(kPwm) + "}",
+                   "bench.model.effects[0].name");
+}
+
+}  // namespace
+}  // namespace vb::experiment

@@ -1,0 +1,76 @@
+#include "model/effects.h"
+
+#include <cmath>
+#include <sstream>
+
+namespace vb::model {
+
+const std::vector<EffectInfo>& EffectCatalog() {
+  static const std::vector<EffectInfo> catalog = {
+      {"supply_resistance", "source impedance: the coil voltage sags by R_s i while the switch is on", true,
+       {{"R_s", "ohm", &Effects::supply_R_ohm, 0.0, 100.0}}},
+      {"coil_heating", "R rises with coil temperature from I^2 R losses (one thermal node)", true,
+       {{"alpha", "1/K", &Effects::heating_alpha_per_K, 0.0, 0.02},
+        {"R_th", "K/W", &Effects::heating_R_th_K_per_W, 1e-3, 1e3},
+        {"C_th", "J/K", &Effects::heating_C_th_J_per_K, 1e-4, 1e4},
+        {"dT0", "K", &Effects::heating_dT0_K, 0.0, 300.0}}},
+      {"eddy_currents", "eddy currents in the core: flux and force lag the coil current (one branch)", true,
+       {{"R_p", "ohm", &Effects::eddy_R_p_ohm, 1.0, 1e7}}},
+      {"sensor_lag", "current-sensor bandwidth and latency", true,
+       {{"tau_s", "s", &Effects::sensor_tau_s, 0.0, 0.1}, {"delay_s", "s", &Effects::sensor_delay_s, 0.0, 0.1}}},
+      {"magnetic_saturation", "core flux saturates at high magnetomotive force", false, {}},
+      {"residual_magnetism", "remanent flux holds the spool after de-energising", false, {}},
+      {"coulomb_friction", "dry friction / stiction on the spool", false, {}},
+      {"end_stop_bounce", "elastic impact at the end stops", false, {}},
+  };
+  return catalog;
+}
+
+std::vector<std::string> EffectNames() {
+  std::vector<std::string> out = {"none"};
+  for (const auto& e : EffectCatalog()) out.emplace_back(e.name);
+  out.emplace_back("param:NAME");
+  return out;
+}
+
+Status AddEffect(Effects* effects, std::string_view name, const std::vector<std::pair<std::string, double>>& params) {
+  const EffectInfo* info = nullptr;
+  for (const auto& e : EffectCatalog())
+    if (e.name == name) info = &e;
+  if (info == nullptr) {
+    std::string known;
+    for (const auto& n : EffectNames()) known += (known.empty() ? "" : ", ") + n;
+    return Status::InvalidArgument("name: unknown effect '" + std::string(name) + "' (known: " + known + ")");
+  }
+  if (!info->simulated)
+    return Status::InvalidArgument("name: effect '" + std::string(name) + "' is catalogued but not simulated yet");
+  Effects e = *effects;
+  if (name == "coil_heating") e.heating = true;
+  if (name == "eddy_currents" && e.eddy_R_p_ohm == 0.0) e.eddy_R_p_ohm = 400.0;
+  if (name == "supply_resistance" && e.supply_R_ohm == 0.0) e.supply_R_ohm = 0.5;
+  if (name == "sensor_lag" && e.sensor_tau_s == 0.0 && e.sensor_delay_s == 0.0) e.sensor_tau_s = 50e-6;
+  for (const auto& [pname, value] : params) {
+    const EffectParamInfo* p = nullptr;
+    for (const auto& candidate : info->params)
+      if (candidate.name == pname) p = &candidate;
+    if (p == nullptr) {
+      std::string known;
+      for (const auto& c : info->params) known += (known.empty() ? "" : ", ") + std::string(c.name);
+      return Status::InvalidArgument("params[" + pname + "]: unknown parameter of " + std::string(name) +
+                                     " (known: " + known + ")");
+    }
+    if (!std::isfinite(value) || value < p->min || value > p->max) {
+      std::ostringstream os;
+      os << "params[" << pname << "]: " << value << " " << p->unit << " is outside [" << p->min << ", " << p->max
+         << "]";
+      return Status::InvalidArgument(os.str());
+    }
+    e.*(p->field) = value;
+  }
+  if (e.sensor_delay_s > 0.0)
+    return Status::InvalidArgument("params[delay_s]: a sensor latency is not simulated yet (tau_s is)");
+  *effects = e;
+  return Status::Ok();
+}
+
+}  // namespace vb::model

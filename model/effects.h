@@ -1,0 +1,64 @@
+// Effects: named, parameterised additions to a nominal model (issue 5's catalog; the names are part of the
+// diagnosis output contract). The emulator runs with them (an emulated bench with effects stands in for
+// hardware) and the gap diagnosis fits them. Each parameter has a unit and physical bounds.
+//
+// Implemented in the simulator so far (the coil side):
+//   supply_resistance  R_s [ohm]: the source impedance; while the switch connects the supply, the coil sees
+//                      V - R_s i. The freewheel loop does not include it.
+//   coil_heating       R(T) = R (1 + alpha dT), one thermal node: C_th d(dT)/dt = i^2 R(T) - dT / R_th
+//                      (copper alpha = 3.93e-3 1/K). dT0_K is the coil's temperature rise when the run starts.
+//   eddy_currents      a loss resistance R_p across the magnetising inductance (one eddy branch): the flux and
+//                      the force follow the magnetising current, which lags the terminal current; the measured
+//                      (terminal) current jumps at switching edges by dv/R_p.
+//   sensor_lag         the current sensor's first-order bandwidth tau_s; a latency delay_s is catalogued but
+//                      not simulated yet (asking for it is an error).
+// Catalogued, not yet simulated: magnetic_saturation, residual_magnetism, coulomb_friction, end_stop_bounce
+// (asking for them is an error that says so).
+#pragma once
+
+#include <limits>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "common/status.h"
+
+namespace vb::model {
+
+struct Effects {
+  double supply_R_ohm = 0.0;          // supply_resistance.R_s
+  bool heating = false;               // coil_heating
+  double heating_alpha_per_K = 3.93e-3;
+  double heating_R_th_K_per_W = 2.0;
+  double heating_C_th_J_per_K = 0.6;
+  double heating_dT0_K = 0.0;
+  double eddy_R_p_ohm = 0.0;          // eddy_currents.R_p; 0 = none
+  double sensor_tau_s = 0.0;          // sensor_lag.tau_s; 0 = none
+  double sensor_delay_s = 0.0;        // sensor_lag.delay_s
+
+  // Effects that need the general (integrated) path: the closed form assumes a constant R and L.
+  bool NeedsGeneralPath() const { return heating || eddy_R_p_ohm > 0.0 || sensor_tau_s > 0.0; }
+  bool any() const { return supply_R_ohm > 0.0 || NeedsGeneralPath() || sensor_delay_s > 0.0; }
+};
+
+// The catalog: every effect name of the contract, whether the simulator implements it, and its parameters.
+struct EffectParamInfo {
+  std::string_view name;
+  std::string_view unit;
+  double Effects::*field;
+  double min, max;
+};
+struct EffectInfo {
+  std::string_view name;
+  std::string_view meaning;
+  bool simulated;
+  std::vector<EffectParamInfo> params;
+};
+const std::vector<EffectInfo>& EffectCatalog();
+std::vector<std::string> EffectNames();  // including "none" and the param:NAME form
+
+// Turns an effect on with the given parameters (unspecified ones keep their defaults). Errors name the effect
+// and the parameter: unknown names, values outside the physical bounds, effects not simulated yet.
+Status AddEffect(Effects* effects, std::string_view name, const std::vector<std::pair<std::string, double>>& params);
+
+}  // namespace vb::model

@@ -1,0 +1,128 @@
+// Each coil-side effect changes what it should, and only that (issue 5: "each effect in the emulator changes
+// what it should").
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "model/simulator.h"
+#include "sim_util.h"
+
+namespace vb::model {
+namespace {
+
+PlantParams WithEffect(const char* preset, const char* name, std::vector<std::pair<std::string, double>> params) {
+  PlantParams p = *Preset(preset);
+  Status st = AddEffect(&p.effects, name, params);
+  EXPECT_TRUE(st.ok()) << st.message();
+  return p;
+}
+
+// A step on the plain RL coil (no moving part) for `t_s`; returns the final measured current and the sim.
+double StepCurrent(const PlantParams& p, double t_s, Simulator** keep = nullptr) {
+  static Plant* plant = nullptr;
+  delete plant;
+  plant = new Plant(p);
+  auto* sim = new Simulator(*plant, DriverParams{}, Conditions{24.0, 0.0});
+  sim->SetGate(1);
+  sim->AdvanceTo(t_s, nullptr);
+  const double i = sim->measured_current_A();
+  if (keep != nullptr) {
+    *keep = sim;
+  } else {
+    delete sim;
+  }
+  return i;
+}
+
+TEST(Effects, CatalogNamesAndErrors) {
+  const auto names = EffectNames();
+  for (const char* n : {"none", "coil_heating", "magnetic_saturation", "eddy_currents", "residual_magnetism",
+                        "coulomb_friction", "end_stop_bounce", "supply_resistance", "sensor_lag"})
+    EXPECT_NE(std::find(names.begin(), names.end(), n), names.end()) << n;
+  Effects fx;
+  EXPECT_NE(AddEffect(&fx, "gremlins", {}).message().find("unknown effect"), std::string::npos);
+  EXPECT_NE(AddEffect(&fx, "supply_resistance", {{"R_x", 1.0}}).message().find("params[R_x]"), std::string::npos);
+  EXPECT_NE(AddEffect(&fx, "supply_resistance", {{"R_s", -1.0}}).message().find("outside"), std::string::npos);
+  EXPECT_NE(AddEffect(&fx, "coulomb_friction", {}).message().find("not simulated yet"), std::string::npos);
+  EXPECT_FALSE(fx.any()) << "a rejected effect changes nothing";
+}
+
+// Supply resistance: the steady current is V / (R + R_s); the time constant L / (R + R_s); the freewheel decay
+// (diode loop) does not see R_s.
+TEST(Effects, SupplyResistanceSagsTheOnStateOnly) {
+  const PlantParams p = WithEffect("ts98_coil", "supply_resistance", {{"R_s", 1.5}});
+  EXPECT_NEAR(StepCurrent(p, 0.5), 24.0 / 30.0, 1e-9);
+  // The time constant with R_s: i(tau) = (1 - 1/e) of the final value.
+  const double tau = 0.33 / 30.0;
+  EXPECT_NEAR(StepCurrent(p, tau), 24.0 / 30.0 * (1.0 - std::exp(-1.0)), 1e-9);
+}
+
+// Coil heating: R rises with temperature, so the steady current falls below V/R and keeps falling; the
+// temperature rise tends to the thermal equilibrium of the I^2 R losses.
+TEST(Effects, CoilHeatingLowersTheCurrentAsTheCoilWarms) {
+  const PlantParams p =
+      WithEffect("ts98_coil", "coil_heating", {{"alpha", 3.93e-3}, {"R_th", 2.0}, {"C_th", 0.6}, {"dT0", 0.0}});
+  Simulator* sim = nullptr;
+  const double i_early = StepCurrent(p, 0.1, &sim);
+  sim->AdvanceTo(8.0, nullptr);  // ~6.7 thermal time constants
+  const double i_late = sim->measured_current_A();
+  EXPECT_LT(i_early, 24.0 / 28.5);
+  EXPECT_LT(i_late, i_early - 0.02);
+  // Equilibrium: dT = R_th i^2 R (1 + alpha dT) and i = V / (R (1 + alpha dT)).
+  const double dT = sim->coil_temperature_rise_K();
+  const double R_hot = 28.5 * (1.0 + 3.93e-3 * dT);
+  EXPECT_NEAR(i_late, 24.0 / R_hot, 1e-6);
+  EXPECT_NEAR(dT, 2.0 * i_late * i_late * R_hot, 0.02 * dT);
+  delete sim;
+}
+
+// Sensor lag: the measured current is the true one through a first-order lag; the steady value is unchanged.
+TEST(Effects, SensorLagDelaysTheMeasuredStepOnly) {
+  const PlantParams lagged = WithEffect("ts98_coil", "sensor_lag", {{"tau_s", 2e-3}});
+  const PlantParams plain = *Preset("ts98_coil");
+  // True current: (V/R)(1 - e^{-t/T}), T = L/R; lagged through tau: the standard two-pole step response.
+  const double T = 0.33 / 28.5, tau = 2e-3, t = 3e-3, I = 24.0 / 28.5;
+  const double expected = I * (1.0 - (T * std::exp(-t / T) - tau * std::exp(-t / tau)) / (T - tau));
+  EXPECT_NEAR(StepCurrent(lagged, t), expected, 1e-7);
+  EXPECT_GT(StepCurrent(plain, t), expected + 0.01);
+  EXPECT_NEAR(StepCurrent(lagged, 0.5), I, 1e-7);
+}
+
+// Eddy currents: the terminal current jumps by V / R_p at the edge (the loss branch), the magnetising current
+// (the force) rises more slowly than without the branch, and the valve opens later.
+TEST(Effects, EddyCurrentsDelayTheForceAndStepTheTerminalCurrent) {
+  PlantParams eddy = WithEffect("taghizadeh2009", "eddy_currents", {{"R_p", 400.0}});
+  Plant pe(eddy), pn(*Preset("taghizadeh2009"));
+  Simulator se(pe, DriverParams{}, Conditions{24.0, 4e5}), sn(pn, DriverParams{}, Conditions{24.0, 4e5});
+  vb::testing::Recording re, rn;
+  se.SetSamplePeriod(1e-6);
+  se.SetGate(1);
+  se.AdvanceTo(0.02, &re);
+  sn.SetGate(1);
+  sn.AdvanceTo(0.02, &rn);
+  ASSERT_GT(re.samples.size(), 10u);
+  // Just after the edge: i = V / (R + R_p) through the branch, while the inductance has barely started.
+  EXPECT_NEAR(re.samples[1].i_A, 24.0 / (13.0 + 400.0), 2e-3);
+  double open_e = -1, open_n = -1;
+  for (const auto& e : re.events)
+    if (e.kind == EventKind::kOpen && open_e < 0) open_e = e.t_s;
+  for (const auto& e : rn.events)
+    if (e.kind == EventKind::kOpen && open_n < 0) open_n = e.t_s;
+  ASSERT_GT(open_e, 0);
+  EXPECT_GT(open_e, open_n + 50e-6) << "the force lags: the valve opens later";
+  // At steady state (20 coil time constants) the branch carries nothing: the nominal coil's current.
+  se.AdvanceTo(0.25, nullptr);
+  sn.AdvanceTo(0.25, nullptr);
+  EXPECT_NEAR(se.measured_current_A(), sn.measured_current_A(), 1e-6);
+  EXPECT_NEAR(se.measured_current_A(), 24.0 / 13.0, 1e-6);
+}
+
+// With no effect, nothing changes: the nominal path is bit-for-bit the same.
+TEST(Effects, NoEffectIsTheNominalModel) {
+  Effects none;
+  EXPECT_FALSE(none.any());
+  EXPECT_FALSE(none.NeedsGeneralPath());
+}
+
+}  // namespace
+}  // namespace vb::model
