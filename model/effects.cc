@@ -18,7 +18,8 @@ const std::vector<EffectInfo>& EffectCatalog() {
        {{"R_p", "ohm", &Effects::eddy_R_p_ohm, 1.0, 1e7}}},
       {"sensor_lag", "current-sensor bandwidth and latency", true,
        {{"tau_s", "s", &Effects::sensor_tau_s, 0.0, 0.1}, {"delay_s", "s", &Effects::sensor_delay_s, 0.0, 0.1}}},
-      {"magnetic_saturation", "core flux saturates at high magnetomotive force", false, {}},
+      {"magnetic_saturation", "core flux saturates at high magnetomotive force", true,
+       {{"B_sat", "T", &Effects::saturation_B_T, 0.05, 20.0}}},
       {"residual_magnetism", "remanent flux holds the spool after de-energising", false, {}},
       {"coulomb_friction", "dry friction / stiction on the spool", false, {}},
       {"end_stop_bounce", "elastic impact at the end stops", false, {}},
@@ -49,6 +50,7 @@ Status AddEffect(Effects* effects, std::string_view name, const std::vector<std:
   if (name == "eddy_currents" && e.eddy_R_p_ohm == 0.0) e.eddy_R_p_ohm = 400.0;
   if (name == "supply_resistance" && e.supply_R_ohm == 0.0) e.supply_R_ohm = 0.5;
   if (name == "sensor_lag" && e.sensor_tau_s == 0.0 && e.sensor_delay_s == 0.0) e.sensor_tau_s = 50e-6;
+  if (name == "magnetic_saturation" && e.saturation_B_T == 0.0) e.saturation_B_T = 2.0;
   for (const auto& [pname, value] : params) {
     const EffectParamInfo* p = nullptr;
     for (const auto& candidate : info->params)

@@ -12,7 +12,11 @@
 //                      (terminal) current jumps at switching edges by dv/R_p.
 //   sensor_lag         the current sensor's first-order bandwidth tau_s; a latency delay_s is catalogued but
 //                      not simulated yet (asking for it is an error).
-// Catalogued, not yet simulated: magnetic_saturation, residual_magnetism, coulomb_friction, end_stop_bounce
+//   magnetic_saturation  the flux linkage saturates: lambda(i, x) = lambda_s tanh(L(x) i / lambda_s), with
+//                      lambda_s = N A_e B_sat (the linear law is its small-current limit). The coil law uses
+//                      d lambda/di and d lambda/dx; the force is the exact co-energy derivative
+//                      W'(i, x) = lambda_s^2 / L ln cosh(L i / lambda_s),  F = dW'/dx at constant i.
+// Catalogued, not yet simulated: residual_magnetism, coulomb_friction, end_stop_bounce
 // (asking for them is an error that says so).
 #pragma once
 
@@ -35,9 +39,12 @@ struct Effects {
   double eddy_R_p_ohm = 0.0;          // eddy_currents.R_p; 0 = none
   double sensor_tau_s = 0.0;          // sensor_lag.tau_s; 0 = none
   double sensor_delay_s = 0.0;        // sensor_lag.delay_s
+  double saturation_B_T = 0.0;        // magnetic_saturation.B_sat; 0 = none
 
   // Effects that need the general (integrated) path: the closed form assumes a constant R and L.
-  bool NeedsGeneralPath() const { return heating || eddy_R_p_ohm > 0.0 || sensor_tau_s > 0.0; }
+  bool NeedsGeneralPath() const {
+    return heating || eddy_R_p_ohm > 0.0 || sensor_tau_s > 0.0 || saturation_B_T > 0.0;
+  }
   bool any() const { return supply_R_ohm > 0.0 || NeedsGeneralPath() || sensor_delay_s > 0.0; }
 };
 

@@ -134,6 +134,34 @@ Simulator::Terminal Simulator::TerminalAt(const Segment& seg, double t, double i
   return out;
 }
 
+Simulator::Magnetics Simulator::MagneticsAt(double i, double x) const {
+  double L, dLdx;
+  plant_.InductanceAndSlope(x, &L, &dLdx);
+  Magnetics m;
+  const double B_sat = plant_.params().effects.saturation_B_T;
+  if (B_sat <= 0.0) {  // linear: lambda = L(x) i
+    m.dlambda_di = L;
+    m.dlambda_dx = dLdx * i;
+    m.force_N = 0.5 * i * i * dLdx;
+    return m;
+  }
+  // lambda = ls tanh(u), u = L i / ls; W' = ls^2/L ln cosh(u); F = dW'/dx|_i = dLdx (ls i tanh(u)/L - ls^2/L^2 ln cosh u)
+  const double ls = plant_.params().N_turns * plant_.params().A_e_m2 * B_sat;
+  const double u = L * i / ls;
+  const double th = std::tanh(u);
+  const double sech2 = 1.0 - th * th;
+  const double au = std::abs(u);
+  const double lncosh = au + std::log1p(std::exp(-2.0 * au)) - M_LN2;  // stable for large |u|
+  m.dlambda_di = L * sech2;
+  m.dlambda_dx = dLdx * i * sech2;
+  m.force_N = dLdx * (ls * i * th / L - ls * ls / (L * L) * lncosh);
+  return m;
+}
+
+double Simulator::NetForceAtRest_N(double i, double x, double t) const {
+  return MagneticsAt(i, x).force_N + plant_.PassiveForce_N(x, cond_.supply_pressure_Pa) + DisturbanceForce(t);
+}
+
 double Simulator::measured_current_A() const {
   const Effects& fx = plant_.params().effects;
   if (fx.sensor_tau_s > 0.0) return sensor_;
@@ -282,7 +310,7 @@ void Simulator::EmitPendingSample(SimObserver* observer) {
 
 void Simulator::CheckStopRelease(SimObserver* obs) {
   if (!plant_.has_moving_part() || contact_ == Contact::kFree) return;
-  const double f = plant_.NetForceAtRest_N(i_, x_, cond_.supply_pressure_Pa) + DisturbanceForce(t_);
+  const double f = NetForceAtRest_N(i_, x_, t_);
   if (contact_ == Contact::kLower && f > 0.0) {
     contact_ = Contact::kFree;
     v_ = 0.0;
@@ -406,7 +434,7 @@ double Simulator::EventFunction(Ev ev, const Segment& seg, double t, const State
     case Ev::kUpper: return (x_hi_ - x) * inv_x_scale_;
     case Ev::kLower: return (x - x_lo_) * inv_x_scale_;
     case Ev::kLeaveStop: {
-      const double f = plant_.NetForceAtRest_N(i, x_, cond_.supply_pressure_Pa) + DisturbanceForce(t);
+      const double f = NetForceAtRest_N(i, x_, t);
       return contact_ == Contact::kLower ? -f : f;
     }
     // The diode and the chopper act on the terminal current.
@@ -428,9 +456,8 @@ void Simulator::AdvanceOde(const Segment& seg, double t_stop, SimObserver* obs) 
     self.Unscale(y, &i, &x, &v);
     const Terminal term = self.TerminalAt(seg, t, i, y[5]);
     // dlambda/dt = v_L with lambda = L(x) i  =>  L di/dt = v_L - i (dL/dx) v   (seed 000 eq. 7)
-    double L, dLdx;
-    plant.InductanceAndSlope(x, &L, &dLdx);
-    dy[0] = (term.vL_V - i * dLdx * (frozen ? 0.0 : v)) / L;
+    const Magnetics mag = self.MagneticsAt(i, x);
+    dy[0] = (term.vL_V - mag.dlambda_dx * (frozen ? 0.0 : v)) / mag.dlambda_di;
     dy[3] = term.v_V * term.v_V;
     dy[4] = term.v_V * term.i_A;
     dy[5] = 0.0;
@@ -443,8 +470,9 @@ void Simulator::AdvanceOde(const Segment& seg, double t_stop, SimObserver* obs) 
       dy[2] = 0.0;
     } else {
       dy[1] = v * self.inv_x_scale_;
-      dy[2] = (plant.Acceleration_mps2(i, x, v, pressure) + self.DisturbanceForce(t) / plant.params().m_kg) *
-              self.inv_v_scale_;
+      const double force = mag.force_N + plant.PassiveForce_N(x, pressure) + self.DisturbanceForce(t) -
+                           plant.params().b_N_s_per_m * v;
+      dy[2] = force / plant.params().m_kg * self.inv_v_scale_;
     }
   };
 
@@ -585,7 +613,7 @@ void Simulator::ApplyEvent(Ev ev, const Segment& seg, SimObserver* obs) {
     case Ev::kUpper: {
       x_ = x_hi_;
       v_ = 0.0;
-      const double f = plant_.NetForceAtRest_N(i_, x_, cond_.supply_pressure_Pa) + DisturbanceForce(t_);
+      const double f = NetForceAtRest_N(i_, x_, t_);
       contact_ = f >= 0.0 ? Contact::kUpper : Contact::kFree;  // perfectly inelastic stop
       kind = EventKind::kOpen;
       break;
@@ -593,7 +621,7 @@ void Simulator::ApplyEvent(Ev ev, const Segment& seg, SimObserver* obs) {
     case Ev::kLower: {
       x_ = x_lo_;
       v_ = 0.0;
-      const double f = plant_.NetForceAtRest_N(i_, x_, cond_.supply_pressure_Pa) + DisturbanceForce(t_);
+      const double f = NetForceAtRest_N(i_, x_, t_);
       contact_ = f <= 0.0 ? Contact::kLower : Contact::kFree;
       kind = EventKind::kClose;
       break;

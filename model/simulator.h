@@ -102,6 +102,15 @@ class Simulator {
   // What the bench's current sensor reports now (lagged by sensor_lag; the terminal current otherwise).
   double measured_current_A() const;
   double coil_temperature_rise_K() const { return dT_; }
+  // The magnetic law with effects: dlambda/di, dlambda/dx and the force at current i and position x.
+  struct Magnetics {
+    double dlambda_di;  // incremental inductance [H]
+    double dlambda_dx;  // [Wb/m]
+    double force_N;     // magnetic pull
+  };
+  Magnetics MagneticsAt(double i, double x) const;
+  // Everything pushing the spool at rest at x with current i (magnetic + passive + disturbance).
+  double NetForceAtRest_N(double i, double x, double t) const;
   double x_m() const { return x_; }
   double v_mps() const { return v_; }
   int gate() const { return gate_; }
