@@ -22,7 +22,8 @@ const std::vector<EffectInfo>& EffectCatalog() {
        {{"B_sat", "T", &Effects::saturation_B_T, 0.05, 20.0}}},
       {"residual_magnetism", "remanent flux holds the spool after de-energising", false, {}},
       {"coulomb_friction", "dry friction / stiction on the spool", false, {}},
-      {"end_stop_bounce", "elastic impact at the end stops", false, {}},
+      {"end_stop_bounce", "elastic impact at the end stops", true,
+       {{"e", "1", &Effects::bounce_e, 0.0, 0.99}, {"v_stick", "m/s", &Effects::bounce_v_stick_mps, 1e-6, 1.0}}},
   };
   return catalog;
 }
@@ -51,6 +52,7 @@ Status AddEffect(Effects* effects, std::string_view name, const std::vector<std:
   if (name == "supply_resistance" && e.supply_R_ohm == 0.0) e.supply_R_ohm = 0.5;
   if (name == "sensor_lag" && e.sensor_tau_s == 0.0 && e.sensor_delay_s == 0.0) e.sensor_tau_s = 50e-6;
   if (name == "magnetic_saturation" && e.saturation_B_T == 0.0) e.saturation_B_T = 2.0;
+  if (name == "end_stop_bounce" && e.bounce_e == 0.0) e.bounce_e = 0.5;
   for (const auto& [pname, value] : params) {
     const EffectParamInfo* p = nullptr;
     for (const auto& candidate : info->params)

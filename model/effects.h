@@ -16,7 +16,9 @@
 //                      lambda_s = N A_e B_sat (the linear law is its small-current limit). The coil law uses
 //                      d lambda/di and d lambda/dx; the force is the exact co-energy derivative
 //                      W'(i, x) = lambda_s^2 / L ln cosh(L i / lambda_s),  F = dW'/dx at constant i.
-// Catalogued, not yet simulated: residual_magnetism, coulomb_friction, end_stop_bounce
+//   end_stop_bounce    an elastic impact at either stop: the spool rebounds with -e v (coefficient of restitution
+//                      e); an impact slower than v_stick_mps ends at rest (no infinite bounce sequence).
+// Catalogued, not yet simulated: residual_magnetism, coulomb_friction
 // (asking for them is an error that says so).
 #pragma once
 
@@ -40,12 +42,14 @@ struct Effects {
   double sensor_tau_s = 0.0;          // sensor_lag.tau_s; 0 = none
   double sensor_delay_s = 0.0;        // sensor_lag.delay_s
   double saturation_B_T = 0.0;        // magnetic_saturation.B_sat; 0 = none
+  double bounce_e = 0.0;              // end_stop_bounce.e; 0 = inelastic (nominal)
+  double bounce_v_stick_mps = 1e-3;   // end_stop_bounce.v_stick
 
   // Effects that need the general (integrated) path: the closed form assumes a constant R and L.
   bool NeedsGeneralPath() const {
     return heating || eddy_R_p_ohm > 0.0 || sensor_tau_s > 0.0 || saturation_B_T > 0.0;
   }
-  bool any() const { return supply_R_ohm > 0.0 || NeedsGeneralPath() || sensor_delay_s > 0.0; }
+  bool any() const { return supply_R_ohm > 0.0 || NeedsGeneralPath() || sensor_delay_s > 0.0 || bounce_e > 0.0; }
 };
 
 // The catalog: every effect name of the contract, whether the simulator implements it, and its parameters.

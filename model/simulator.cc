@@ -546,18 +546,32 @@ void Simulator::AdvanceOde(const Segment& seg, double t_stop, SimObserver* obs) 
       double ga = EventFunction(ev, seg, a, ya);
       double lo = a;
       if (!(ga > 0.0)) {
-        // Started exactly on the surface (just lifted, released, ...): look for the instant it leaves it.
+        // Started exactly on the surface (just lifted, released, rebounded): find an instant where it has left
+        // it. Probe close to the start first (a short rebound can be over long before the step's end), then
+        // across the step.
         bool found = false;
-        for (int j = 1; j < 16 && !found; ++j) {
-          const double tj = a + (b - a) * j / 16.0;
+        static constexpr double kProbe[] = {1e-9, 1e-7, 1e-5, 1e-3, 1.0 / 64, 1.0 / 16, 2.0 / 16, 3.0 / 16,
+                                            4.0 / 16, 6.0 / 16, 8.0 / 16, 10.0 / 16, 12.0 / 16, 14.0 / 16};
+        for (double frac : kProbe) {
+          const double tj = a + (b - a) * frac;
+          if (!(tj > a)) continue;
           const double gj = g_at(ev, tj);
           if (gj > 0.0) {
             lo = tj;
             ga = gj;
             found = true;
+            break;
           }
         }
-        if (!found) continue;  // grazing the surface within one step: no crossing to locate
+        if (!found) {
+          // Never measurably off the surface yet past it at the step's end: it is back on the surface at once
+          // (a vanishing rebound, or a contact that cannot be left). Never let the state pass through a stop.
+          if (a < best_t || best_ev == Ev::kNone) {
+            best_t = a;
+            best_ev = ev;
+          }
+          continue;
+        }
       }
       const double t_ev = locate(ev, lo, ga, b, gb);
       if (t_ev < best_t || (t_ev == best_t && best_ev == Ev::kNone)) {
@@ -610,20 +624,22 @@ void Simulator::ApplyEvent(Ev ev, const Segment& seg, SimObserver* obs) {
   stepper_valid_ = false;
   EventKind kind = EventKind::kDriverSwitch;
   switch (ev) {
-    case Ev::kUpper: {
-      x_ = x_hi_;
-      v_ = 0.0;
-      const double f = NetForceAtRest_N(i_, x_, t_);
-      contact_ = f >= 0.0 ? Contact::kUpper : Contact::kFree;  // perfectly inelastic stop
-      kind = EventKind::kOpen;
-      break;
-    }
+    case Ev::kUpper:
     case Ev::kLower: {
-      x_ = x_lo_;
+      // Impact. Nominal: perfectly inelastic. end_stop_bounce: rebound with -e v unless slower than v_stick.
+      const bool upper = ev == Ev::kUpper;
+      const Effects& fx = plant_.params().effects;
+      const double rebound = -fx.bounce_e * v_;
+      x_ = upper ? x_hi_ : x_lo_;
+      kind = upper ? EventKind::kOpen : EventKind::kClose;
+      if (fx.bounce_e > 0.0 && std::abs(rebound) > fx.bounce_v_stick_mps) {
+        v_ = rebound;
+        contact_ = Contact::kFree;
+        break;
+      }
       v_ = 0.0;
       const double f = NetForceAtRest_N(i_, x_, t_);
-      contact_ = f <= 0.0 ? Contact::kLower : Contact::kFree;
-      kind = EventKind::kClose;
+      contact_ = upper ? (f >= 0.0 ? Contact::kUpper : Contact::kFree) : (f <= 0.0 ? Contact::kLower : Contact::kFree);
       break;
     }
     case Ev::kLeaveStop:

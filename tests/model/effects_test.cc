@@ -192,3 +192,30 @@ TEST(Effects, SaturationWeakensThePullAndSpeedsTheRise) {
 
 }  // namespace
 }  // namespace vb::model
+
+namespace vb::model {
+namespace {
+
+// End-stop bounce: the spool hits x_max several times with decreasing rebound, then rests; each impact
+// dents the current (back-EMF reverses with the velocity). Nominal: exactly one impact.
+TEST(Effects, EndStopBounceReboundsAndSettles) {
+  auto impacts = [](const PlantParams& p) {
+    Plant plant(p);
+    Simulator sim(plant, DriverParams{}, Conditions{24.0, 4e5});
+    vb::testing::Recording rec;
+    sim.SetGate(1);
+    sim.AdvanceTo(0.02, &rec);
+    int opens = 0;
+    for (const auto& e : rec.events) opens += e.kind == EventKind::kOpen;
+    EXPECT_EQ(sim.contact(), Contact::kUpper) << "settles at the stop";
+    return opens;
+  };
+  EXPECT_EQ(impacts(*Preset("taghizadeh2009")), 1);
+  const int e5 = impacts(WithEffect("taghizadeh2009", "end_stop_bounce", {{"e", 0.5}}));
+  const int e8 = impacts(WithEffect("taghizadeh2009", "end_stop_bounce", {{"e", 0.8}}));
+  EXPECT_GE(e5, 2);
+  EXPECT_GT(e8, e5) << "a livelier stop bounces more often before it settles";
+}
+
+}  // namespace
+}  // namespace vb::model
