@@ -21,7 +21,8 @@ const std::vector<EffectInfo>& EffectCatalog() {
       {"magnetic_saturation", "core flux saturates at high magnetomotive force", true,
        {{"B_sat", "T", &Effects::saturation_B_T, 0.05, 20.0}}},
       {"residual_magnetism", "remanent flux holds the spool after de-energising", false, {}},
-      {"coulomb_friction", "dry friction / stiction on the spool", false, {}},
+      {"coulomb_friction", "dry friction / stiction on the spool", true,
+       {{"F_c", "N", &Effects::friction_F_c_N, 0.0, 100.0}, {"F_s", "N", &Effects::friction_F_s_N, 0.0, 100.0}}},
       {"end_stop_bounce", "elastic impact at the end stops", true,
        {{"e", "1", &Effects::bounce_e, 0.0, 0.99}, {"v_stick", "m/s", &Effects::bounce_v_stick_mps, 1e-6, 1.0}}},
   };
@@ -53,6 +54,10 @@ Status AddEffect(Effects* effects, std::string_view name, const std::vector<std:
   if (name == "sensor_lag" && e.sensor_tau_s == 0.0 && e.sensor_delay_s == 0.0) e.sensor_tau_s = 50e-6;
   if (name == "magnetic_saturation" && e.saturation_B_T == 0.0) e.saturation_B_T = 2.0;
   if (name == "end_stop_bounce" && e.bounce_e == 0.0) e.bounce_e = 0.5;
+  if (name == "coulomb_friction" && e.friction_F_c_N == 0.0 && e.friction_F_s_N == 0.0) {
+    e.friction_F_c_N = 1.0;
+    e.friction_F_s_N = 1.5;
+  }
   for (const auto& [pname, value] : params) {
     const EffectParamInfo* p = nullptr;
     for (const auto& candidate : info->params)
@@ -71,6 +76,8 @@ Status AddEffect(Effects* effects, std::string_view name, const std::vector<std:
     }
     e.*(p->field) = value;
   }
+  if (name == "coulomb_friction" && e.friction_F_s_N < e.friction_F_c_N)
+    return Status::InvalidArgument("params[F_s]: the static friction must be at least the kinetic F_c");
   if (e.sensor_delay_s > 0.0)
     return Status::InvalidArgument("params[delay_s]: a sensor latency is not simulated yet (tau_s is)");
   *effects = e;

@@ -18,7 +18,9 @@
 //                      W'(i, x) = lambda_s^2 / L ln cosh(L i / lambda_s),  F = dW'/dx at constant i.
 //   end_stop_bounce    an elastic impact at either stop: the spool rebounds with -e v (coefficient of restitution
 //                      e); an impact slower than v_stick_mps ends at rest (no infinite bounce sequence).
-// Catalogued, not yet simulated: residual_magnetism, coulomb_friction
+//   coulomb_friction   dry friction (Karnopp): a moving spool feels -F_c sgn(v); a spool at rest stays until the
+//                      net force exceeds the static F_s (>= F_c), mid-travel or at a stop.
+// Catalogued, not yet simulated: residual_magnetism
 // (asking for them is an error that says so).
 #pragma once
 
@@ -44,12 +46,16 @@ struct Effects {
   double saturation_B_T = 0.0;        // magnetic_saturation.B_sat; 0 = none
   double bounce_e = 0.0;              // end_stop_bounce.e; 0 = inelastic (nominal)
   double bounce_v_stick_mps = 1e-3;   // end_stop_bounce.v_stick
+  double friction_F_c_N = 0.0;        // coulomb_friction.F_c (kinetic)
+  double friction_F_s_N = 0.0;        // coulomb_friction.F_s (static, >= F_c)
 
   // Effects that need the general (integrated) path: the closed form assumes a constant R and L.
   bool NeedsGeneralPath() const {
-    return heating || eddy_R_p_ohm > 0.0 || sensor_tau_s > 0.0 || saturation_B_T > 0.0;
+    return heating || eddy_R_p_ohm > 0.0 || sensor_tau_s > 0.0 || saturation_B_T > 0.0 || friction_F_s_N > 0.0 ||
+           friction_F_c_N > 0.0;
   }
   bool any() const { return supply_R_ohm > 0.0 || NeedsGeneralPath() || sensor_delay_s > 0.0 || bounce_e > 0.0; }
+  bool friction() const { return friction_F_c_N > 0.0 || friction_F_s_N > 0.0; }
 };
 
 // The catalog: every effect name of the contract, whether the simulator implements it, and its parameters.

@@ -20,6 +20,8 @@ const char* EventKindName(EventKind kind) {
     case EventKind::kClose: return "close";
     case EventKind::kCurrentZero: return "izero";
     case EventKind::kDriverSwitch: return "driver";
+    case EventKind::kStick: return "stick";
+    case EventKind::kSlip: return "slip";
   }
   return "?";
 }
@@ -311,17 +313,21 @@ void Simulator::EmitPendingSample(SimObserver* observer) {
 void Simulator::CheckStopRelease(SimObserver* obs) {
   if (!plant_.has_moving_part() || contact_ == Contact::kFree) return;
   const double f = NetForceAtRest_N(i_, x_, t_);
-  if (contact_ == Contact::kLower && f > 0.0) {
-    contact_ = Contact::kFree;
-    v_ = 0.0;
-    stepper_valid_ = false;
-    if (obs) obs->OnEvent(EventKind::kLift, t_, i_, x_, v_);
-  } else if (contact_ == Contact::kUpper && f < 0.0) {
-    contact_ = Contact::kFree;
-    v_ = 0.0;
-    stepper_valid_ = false;
-    if (obs) obs->OnEvent(EventKind::kRelease, t_, i_, x_, v_);
+  const double fs = plant_.params().effects.friction_F_s_N;  // static friction: 0 for the nominal model
+  EventKind kind;
+  if (contact_ == Contact::kLower && f > fs) {
+    kind = EventKind::kLift;
+  } else if (contact_ == Contact::kUpper && f < -fs) {
+    kind = EventKind::kRelease;
+  } else if (contact_ == Contact::kStuck && std::abs(f) > fs) {
+    kind = EventKind::kSlip;
+  } else {
+    return;
   }
+  contact_ = Contact::kFree;
+  v_ = 0.0;
+  stepper_valid_ = false;
+  if (obs) obs->OnEvent(kind, t_, i_, x_, v_);
 }
 
 void Simulator::AdvanceTo(double t_end_s, SimObserver* observer) {
@@ -435,8 +441,12 @@ double Simulator::EventFunction(Ev ev, const Segment& seg, double t, const State
     case Ev::kLower: return (x - x_lo_) * inv_x_scale_;
     case Ev::kLeaveStop: {
       const double f = NetForceAtRest_N(i, x_, t);
-      return contact_ == Contact::kLower ? -f : f;
+      const double fs = plant_.params().effects.friction_F_s_N;
+      if (contact_ == Contact::kLower) return fs - f;
+      if (contact_ == Contact::kUpper) return f + fs;
+      return fs - std::abs(f);  // kStuck
     }
+    case Ev::kVelocityZero: return free_dir_ * v;
     // The diode and the chopper act on the terminal current.
     case Ev::kClamp: return seg.clamp * TerminalAt(seg, t, i, y[5]).i_A;
     case Ev::kLevel: return seg.level_dir * (seg.level_A - TerminalAt(seg, t, i, y[5]).i_A);
@@ -471,12 +481,14 @@ void Simulator::AdvanceOde(const Segment& seg, double t_stop, SimObserver* obs) 
     } else {
       dy[1] = v * self.inv_x_scale_;
       const double force = mag.force_N + plant.PassiveForce_N(x, pressure) + self.DisturbanceForce(t) -
-                           plant.params().b_N_s_per_m * v;
+                           plant.params().b_N_s_per_m * v - fx.friction_F_c_N * self.free_dir_;
       dy[2] = force / plant.params().m_kg * self.inv_v_scale_;
     }
   };
 
   if (!stepper_valid_) {
+    // Kinetic friction opposes the motion; from rest, the motion the net force starts.
+    if (!frozen) free_dir_ = v_ != 0.0 ? (v_ > 0.0 ? 1.0 : -1.0) : (NetForceAtRest_N(i_, x_, t_) >= 0.0 ? 1.0 : -1.0);
     stepper_.initialize(Scale(i_, x_, v_), t_, std::min(dt_guess_s_, opt_.max_step_s));
     ode_piece_v2_ = v2_int_;
     ode_piece_vi_ = vi_int_;
@@ -484,13 +496,14 @@ void Simulator::AdvanceOde(const Segment& seg, double t_stop, SimObserver* obs) 
     ++restarts_;
   }
 
-  Ev events[4];
+  Ev events[5];
   int n_events = 0;
   if (frozen) {
     if (plant_.has_moving_part()) events[n_events++] = Ev::kLeaveStop;
   } else {
     events[n_events++] = Ev::kUpper;
     events[n_events++] = Ev::kLower;
+    if (fx.friction()) events[n_events++] = Ev::kVelocityZero;
   }
   if (seg.clamp != 0) events[n_events++] = Ev::kClamp;
   if (seg.level_dir != 0) events[n_events++] = Ev::kLevel;
@@ -639,14 +652,30 @@ void Simulator::ApplyEvent(Ev ev, const Segment& seg, SimObserver* obs) {
       }
       v_ = 0.0;
       const double f = NetForceAtRest_N(i_, x_, t_);
-      contact_ = upper ? (f >= 0.0 ? Contact::kUpper : Contact::kFree) : (f <= 0.0 ? Contact::kLower : Contact::kFree);
+      contact_ = upper ? (f >= -fx.friction_F_s_N ? Contact::kUpper : Contact::kFree)
+                       : (f <= fx.friction_F_s_N ? Contact::kLower : Contact::kFree);
       break;
     }
     case Ev::kLeaveStop:
-      kind = contact_ == Contact::kLower ? EventKind::kLift : EventKind::kRelease;
+      kind = contact_ == Contact::kLower   ? EventKind::kLift
+             : contact_ == Contact::kUpper ? EventKind::kRelease
+                                           : EventKind::kSlip;
       contact_ = Contact::kFree;
       v_ = 0.0;
       break;
+    case Ev::kVelocityZero: {
+      // Motion stops mid-travel: static friction holds the spool unless the net force exceeds F_s.
+      v_ = 0.0;
+      const double f = NetForceAtRest_N(i_, x_, t_);
+      if (std::abs(f) <= plant_.params().effects.friction_F_s_N) {
+        contact_ = Contact::kStuck;
+        kind = EventKind::kStick;
+      } else {
+        contact_ = Contact::kFree;  // reverses: the next piece starts in the force's direction
+        kind = EventKind::kSlip;
+      }
+      break;
+    }
     case Ev::kClamp:
       // The terminal current reached zero; without an eddy branch that is the whole coil current.
       if (plant_.params().effects.eddy_R_p_ohm == 0.0) i_ = 0.0;

@@ -30,7 +30,8 @@ struct Conditions {
   double supply_pressure_Pa = 0.0;    // gauge supply pressure P_sup (seed 000 eq. 10)
 };
 
-enum class Contact : std::uint8_t { kLower, kUpper, kFree };
+// kStuck: at rest mid-travel, held by static friction (coulomb_friction).
+enum class Contact : std::uint8_t { kLower, kUpper, kFree, kStuck };
 
 enum class EventKind : std::uint8_t {
   kLift,         // the spool leaves the lower stop
@@ -39,6 +40,8 @@ enum class EventKind : std::uint8_t {
   kClose,        // the spool reaches the lower stop
   kCurrentZero,  // the current reaches zero in a freewheel path and stays there
   kDriverSwitch, // the driver changed its internal state (boost end, chopper threshold)
+  kStick,        // the spool came to rest mid-travel and static friction holds it
+  kSlip,         // the spool broke away from rest mid-travel
 };
 const char* EventKindName(EventKind kind);
 
@@ -145,7 +148,7 @@ class Simulator {
     int level_dir = 0;       // ... crossed upward (+1) or downward (-1); 0 = none
     bool from_supply = false;  // the supply drives the coil (its source resistance is in series)
   };
-  enum class Ev : std::uint8_t { kNone, kUpper, kLower, kLeaveStop, kClamp, kLevel };
+  enum class Ev : std::uint8_t { kNone, kUpper, kLower, kLeaveStop, kClamp, kLevel, kVelocityZero };
   // The coil's terminal quantities for a magnetising current: what the driver and the sensor see.
   struct Terminal {
     double i_A;   // terminal current
@@ -190,6 +193,7 @@ class Simulator {
   double dT_ = 0.0;                       // coil temperature rise (coil_heating)
   double sensor_ = 0.0;                   // current sensor output (sensor_lag)
   bool general_ = false;                  // effects or disturbances: integrate every piece
+  double free_dir_ = 1.0;                 // direction of motion in a free piece (kinetic friction's sign)
   std::uint64_t switches_ = 0;
   double ode_piece_v2_ = 0.0, ode_piece_vi_ = 0.0;  // integrals at the ODE stepper's restart time
   int gate_ = 0;

@@ -43,7 +43,7 @@ TEST(Effects, CatalogNamesAndErrors) {
   EXPECT_NE(AddEffect(&fx, "gremlins", {}).message().find("unknown effect"), std::string::npos);
   EXPECT_NE(AddEffect(&fx, "supply_resistance", {{"R_x", 1.0}}).message().find("params[R_x]"), std::string::npos);
   EXPECT_NE(AddEffect(&fx, "supply_resistance", {{"R_s", -1.0}}).message().find("outside"), std::string::npos);
-  EXPECT_NE(AddEffect(&fx, "coulomb_friction", {}).message().find("not simulated yet"), std::string::npos);
+  EXPECT_NE(AddEffect(&fx, "residual_magnetism", {}).message().find("not simulated yet"), std::string::npos);
   EXPECT_FALSE(fx.any()) << "a rejected effect changes nothing";
 }
 
@@ -215,6 +215,61 @@ TEST(Effects, EndStopBounceReboundsAndSettles) {
   const int e8 = impacts(WithEffect("taghizadeh2009", "end_stop_bounce", {{"e", 0.8}}));
   EXPECT_GE(e5, 2);
   EXPECT_GT(e8, e5) << "a livelier stop bounces more often before it settles";
+}
+
+}  // namespace
+}  // namespace vb::model
+
+namespace vb::model {
+namespace {
+
+// Coulomb friction: breaking away from the lower stop needs the static force on top of the spring and
+// pressure, so the spool lifts later, at a higher current, and the valve opens later. (The stroke itself can be
+// shorter: the spool breaks away with F_s of extra pull and only F_c < F_s opposes it while it moves.)
+TEST(Effects, FrictionDelaysTheLiftAndTheStroke) {
+  auto first = [](const PlantParams& p, EventKind kind) {
+    Plant plant(p);
+    Simulator sim(plant, DriverParams{}, Conditions{24.0, 4e5});
+    vb::testing::Recording rec;
+    sim.SetGate(1);
+    sim.AdvanceTo(0.02, &rec);
+    for (const auto& e : rec.events)
+      if (e.kind == kind) return std::make_pair(e.t_s, e.i_A);
+    return std::make_pair(-1.0, 0.0);
+  };
+  const PlantParams fr = WithEffect("taghizadeh2009", "coulomb_friction", {{"F_c", 2.0}, {"F_s", 3.0}});
+  const auto lift_n = first(*Preset("taghizadeh2009"), EventKind::kLift);
+  const auto lift_f = first(fr, EventKind::kLift);
+  ASSERT_GT(lift_f.first, 0.0);
+  EXPECT_GT(lift_f.first, lift_n.first);
+  // The lift current solves F_m(i) = k delta - (A1 - A2) P + F_s.
+  Plant plant(*Preset("taghizadeh2009"));
+  const double need = -plant.PassiveForce_N(0.0, 4e5) + 3.0;
+  EXPECT_NEAR(plant.MagneticForce_N(lift_f.second, 0.0), need, 1e-6 * need);
+  const auto open_n = first(*Preset("taghizadeh2009"), EventKind::kOpen);
+  const auto open_f = first(fr, EventKind::kOpen);
+  EXPECT_GT(open_f.first, open_n.first) << "the valve opens later";
+}
+
+// A short pulse lifts the spool; after the pulse it decelerates and static friction can hold it mid-travel:
+// "stick" events with the spool at rest strictly between the stops.
+TEST(Effects, StaticFrictionHoldsTheSpoolMidTravel) {
+  const PlantParams fr = WithEffect("taghizadeh2009", "coulomb_friction", {{"F_c", 4.0}, {"F_s", 6.0}});
+  Plant plant(fr);
+  Simulator sim(plant, DriverParams{}, Conditions{24.0, 0.0});
+  vb::testing::Recording rec;
+  bool stuck_mid = false;
+  for (int n = 0; n < 20 && !stuck_mid; ++n) {  // 200 Hz PWM at 35 %: the spool never settles at a stop
+    sim.SetGate(1);
+    sim.AdvanceTo(n * 5e-3 + 1.75e-3, &rec);
+    sim.SetGate(0);
+    sim.AdvanceTo((n + 1) * 5e-3, &rec);
+    for (const auto& e : rec.events)
+      if (e.kind == EventKind::kStick && e.x_m > 1e-6 && e.x_m < 0.33e-3 - 1e-6) stuck_mid = true;
+  }
+  EXPECT_TRUE(stuck_mid);
+  Effects bad;
+  EXPECT_NE(AddEffect(&bad, "coulomb_friction", {{"F_c", 3.0}, {"F_s", 2.0}}).message().find("F_s"), std::string::npos);
 }
 
 }  // namespace
