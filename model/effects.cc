@@ -20,7 +20,10 @@ const std::vector<EffectInfo>& EffectCatalog() {
        {{"tau_s", "s", &Effects::sensor_tau_s, 0.0, 0.1}, {"delay_s", "s", &Effects::sensor_delay_s, 0.0, 0.1}}},
       {"magnetic_saturation", "core flux saturates at high magnetomotive force", true,
        {{"B_sat", "T", &Effects::saturation_B_T, 0.05, 20.0}}},
-      {"residual_magnetism", "remanent flux holds the spool after de-energising", false, {}},
+      {"residual_magnetism", "remanent flux holds the spool after de-energising", true,
+       {{"w", "A", &Effects::residual_w_A, 1e-4, 10.0},
+        {"alpha", "1", &Effects::residual_alpha, 0.01, 1.0},
+        {"im0", "A", &Effects::residual_im0_A, -10.0, 10.0}}},
       {"coulomb_friction", "dry friction / stiction on the spool", true,
        {{"F_c", "N", &Effects::friction_F_c_N, 0.0, 100.0}, {"F_s", "N", &Effects::friction_F_s_N, 0.0, 100.0}}},
       {"end_stop_bounce", "elastic impact at the end stops", true,
@@ -54,6 +57,7 @@ Status AddEffect(Effects* effects, std::string_view name, const std::vector<std:
   if (name == "sensor_lag" && e.sensor_tau_s == 0.0 && e.sensor_delay_s == 0.0) e.sensor_tau_s = 50e-6;
   if (name == "magnetic_saturation" && e.saturation_B_T == 0.0) e.saturation_B_T = 2.0;
   if (name == "end_stop_bounce" && e.bounce_e == 0.0) e.bounce_e = 0.5;
+  if (name == "residual_magnetism" && e.residual_w_A == 0.0) e.residual_w_A = 0.08;
   if (name == "coulomb_friction" && e.friction_F_c_N == 0.0 && e.friction_F_s_N == 0.0) {
     e.friction_F_c_N = 1.0;
     e.friction_F_s_N = 1.5;

@@ -2,7 +2,7 @@
 // diagnosis output contract). The emulator runs with them (an emulated bench with effects stands in for
 // hardware) and the gap diagnosis fits them. Each parameter has a unit and physical bounds.
 //
-// Implemented in the simulator so far (the coil side):
+// Simulated:
 //   supply_resistance  R_s [ohm]: the source impedance; while the switch connects the supply, the coil sees
 //                      V - R_s i. The freewheel loop does not include it.
 //   coil_heating       R(T) = R (1 + alpha dT), one thermal node: C_th d(dT)/dt = i^2 R(T) - dT / R_th
@@ -20,7 +20,11 @@
 //                      e); an impact slower than v_stick_mps ends at rest (no infinite bounce sequence).
 //   coulomb_friction   dry friction (Karnopp): a moving spool feels -F_c sgn(v); a spool at rest stays until the
 //                      net force exceeds the static F_s (>= F_c), mid-travel or at a stop.
-// Catalogued, not yet simulated: residual_magnetism
+//   residual_magnetism a rate-independent hysteresis of the core: the flux follows the flux-equivalent current
+//                      j = alpha i + (1 - alpha) P_w(i), P_w a play operator of half-width w (the coercive
+//                      current H_c l_c / N) and alpha its reversible fraction. De-energised, P_w stays at w: a
+//                      remanent flux that delays the release (and, rising, the lift); inside the band the
+//                      coil's incremental inductance is alpha L. im0 is the play's state when the run starts.
 // (asking for them is an error that says so).
 #pragma once
 
@@ -48,11 +52,14 @@ struct Effects {
   double bounce_v_stick_mps = 1e-3;   // end_stop_bounce.v_stick
   double friction_F_c_N = 0.0;        // coulomb_friction.F_c (kinetic)
   double friction_F_s_N = 0.0;        // coulomb_friction.F_s (static, >= F_c)
+  double residual_w_A = 0.0;          // residual_magnetism.w (play half-width); 0 = none
+  double residual_alpha = 0.35;       // residual_magnetism.alpha (reversible fraction)
+  double residual_im0_A = 0.0;        // residual_magnetism.im0
 
   // Effects that need the general (integrated) path: the closed form assumes a constant R and L.
   bool NeedsGeneralPath() const {
     return heating || eddy_R_p_ohm > 0.0 || sensor_tau_s > 0.0 || saturation_B_T > 0.0 || friction_F_s_N > 0.0 ||
-           friction_F_c_N > 0.0;
+           friction_F_c_N > 0.0 || residual_w_A > 0.0;
   }
   bool any() const { return supply_R_ohm > 0.0 || NeedsGeneralPath() || sensor_delay_s > 0.0 || bounce_e > 0.0; }
   bool friction() const { return friction_F_c_N > 0.0 || friction_F_s_N > 0.0; }

@@ -54,6 +54,8 @@ void Simulator::Reset() {
   const Effects& fx = plant_.params().effects;
   dT_ = fx.heating ? fx.heating_dT0_K : 0.0;
   sensor_ = 0.0;
+  im_ = fx.residual_w_A > 0.0 ? fx.residual_im0_A : 0.0;
+  play_ = Play::kInside;
   general_ = fx.NeedsGeneralPath() || dist_.active();
   gate_ = 0;
   contact_ = Contact::kLower;
@@ -160,8 +162,45 @@ Simulator::Magnetics Simulator::MagneticsAt(double i, double x) const {
   return m;
 }
 
-double Simulator::NetForceAtRest_N(double i, double x, double t) const {
-  return MagneticsAt(i, x).force_N + plant_.PassiveForce_N(x, cond_.supply_pressure_Pa) + DisturbanceForce(t);
+double Simulator::NetForceAtRest_N(double j, double x, double t) const {
+  return MagneticsAt(j, x).force_N + plant_.PassiveForce_N(x, cond_.supply_pressure_Pa) + DisturbanceForce(t);
+}
+
+double Simulator::FluxCurrent(double i, double i_m) const {
+  const Effects& fx = plant_.params().effects;
+  if (fx.residual_w_A <= 0.0) return i;
+  return fx.residual_alpha * i + (1.0 - fx.residual_alpha) * i_m;
+}
+
+void Simulator::Rhs(const Segment& seg, const State& y, State& dy, double t) const {
+  const Effects& fx = plant_.params().effects;
+  const PlantParams& pp = plant_.params();
+  double i, x, v;
+  Unscale(y, &i, &x, &v);
+  const Terminal term = TerminalAt(seg, t, i, y[5]);
+  // dlambda/dt = v_L with lambda = lambda(j, x), j the flux-equivalent current (= i without hysteresis):
+  //   (dlambda/dj)(dj/di) di/dt = v_L - (dlambda/dx) v          (seed 000 eq. 7 for the linear law)
+  const double j = FluxCurrent(i, y[7]);
+  const Magnetics mag = MagneticsAt(j, x);
+  const double dj_di = fx.residual_w_A > 0.0 && play_ == Play::kInside ? fx.residual_alpha : 1.0;
+  dy[0] = (term.vL_V - mag.dlambda_dx * (frozen_ ? 0.0 : v)) / (mag.dlambda_di * dj_di);
+  dy[3] = term.v_V * term.v_V;
+  dy[4] = term.v_V * term.i_A;
+  dy[5] = 0.0;
+  dy[6] = 0.0;
+  dy[7] = fx.residual_w_A > 0.0 && play_ != Play::kInside ? dy[0] : 0.0;
+  if (fx.heating)
+    dy[5] = (term.i_A * term.i_A * ResistanceAt(y[5]) - y[5] / fx.heating_R_th_K_per_W) / fx.heating_C_th_J_per_K;
+  if (fx.sensor_tau_s > 0.0) dy[6] = (term.i_A - y[6]) / fx.sensor_tau_s;
+  if (frozen_) {
+    dy[1] = 0.0;
+    dy[2] = 0.0;
+  } else {
+    dy[1] = v * inv_x_scale_;
+    const double force = mag.force_N + plant_.PassiveForce_N(x, cond_.supply_pressure_Pa) + DisturbanceForce(t) -
+                         pp.b_N_s_per_m * v - fx.friction_F_c_N * free_dir_;
+    dy[2] = force / pp.m_kg * inv_v_scale_;
+  }
 }
 
 double Simulator::measured_current_A() const {
@@ -312,7 +351,7 @@ void Simulator::EmitPendingSample(SimObserver* observer) {
 
 void Simulator::CheckStopRelease(SimObserver* obs) {
   if (!plant_.has_moving_part() || contact_ == Contact::kFree) return;
-  const double f = NetForceAtRest_N(i_, x_, t_);
+  const double f = NetForceAtRest_N(FluxCurrent(i_, im_), x_, t_);
   const double fs = plant_.params().effects.friction_F_s_N;  // static friction: 0 for the nominal model
   EventKind kind;
   if (contact_ == Contact::kLower && f > fs) {
@@ -440,13 +479,21 @@ double Simulator::EventFunction(Ev ev, const Segment& seg, double t, const State
     case Ev::kUpper: return (x_hi_ - x) * inv_x_scale_;
     case Ev::kLower: return (x - x_lo_) * inv_x_scale_;
     case Ev::kLeaveStop: {
-      const double f = NetForceAtRest_N(i, x_, t);
+      const double f = NetForceAtRest_N(FluxCurrent(i, y[7]), x_, t);
       const double fs = plant_.params().effects.friction_F_s_N;
       if (contact_ == Contact::kLower) return fs - f;
       if (contact_ == Contact::kUpper) return f + fs;
       return fs - std::abs(f);  // kStuck
     }
     case Ev::kVelocityZero: return free_dir_ * v;
+    // residual_magnetism's play: a band edge reached (inside), or the current turning (on an edge).
+    case Ev::kPlayUpper: return y[7] - (i - plant_.params().effects.residual_w_A);
+    case Ev::kPlayLower: return (i + plant_.params().effects.residual_w_A) - y[7];
+    case Ev::kPlayTurn: {
+      State dy;
+      Rhs(seg, y, dy, t);
+      return play_ == Play::kRising ? dy[0] : -dy[0];
+    }
     // The diode and the chopper act on the terminal current.
     case Ev::kClamp: return seg.clamp * TerminalAt(seg, t, i, y[5]).i_A;
     case Ev::kLevel: return seg.level_dir * (seg.level_A - TerminalAt(seg, t, i, y[5]).i_A);
@@ -457,38 +504,33 @@ double Simulator::EventFunction(Ev ev, const Segment& seg, double t, const State
 
 void Simulator::AdvanceOde(const Segment& seg, double t_stop, SimObserver* obs) {
   const bool frozen = contact_ != Contact::kFree;
-  const Plant& plant = plant_;
-  const double pressure = cond_.supply_pressure_Pa;
-  const Simulator& self = *this;
   const Effects& fx = plant_.params().effects;
-  auto rhs = [&plant, &seg, &self, &fx, frozen, pressure](const State& y, State& dy, double t) {
-    double i, x, v;
-    self.Unscale(y, &i, &x, &v);
-    const Terminal term = self.TerminalAt(seg, t, i, y[5]);
-    // dlambda/dt = v_L with lambda = L(x) i  =>  L di/dt = v_L - i (dL/dx) v   (seed 000 eq. 7)
-    const Magnetics mag = self.MagneticsAt(i, x);
-    dy[0] = (term.vL_V - mag.dlambda_dx * (frozen ? 0.0 : v)) / mag.dlambda_di;
-    dy[3] = term.v_V * term.v_V;
-    dy[4] = term.v_V * term.i_A;
-    dy[5] = 0.0;
-    dy[6] = 0.0;
-    if (fx.heating)
-      dy[5] = (term.i_A * term.i_A * self.ResistanceAt(y[5]) - y[5] / fx.heating_R_th_K_per_W) / fx.heating_C_th_J_per_K;
-    if (fx.sensor_tau_s > 0.0) dy[6] = (term.i_A - y[6]) / fx.sensor_tau_s;
-    if (frozen) {
-      dy[1] = 0.0;
-      dy[2] = 0.0;
-    } else {
-      dy[1] = v * self.inv_x_scale_;
-      const double force = mag.force_N + plant.PassiveForce_N(x, pressure) + self.DisturbanceForce(t) -
-                           plant.params().b_N_s_per_m * v - fx.friction_F_c_N * self.free_dir_;
-      dy[2] = force / plant.params().m_kg * self.inv_v_scale_;
-    }
-  };
+  frozen_ = frozen;
+  const Simulator& self = *this;
+  auto rhs = [&self, &seg](const State& y, State& dy, double t) { self.Rhs(seg, y, dy, t); };
 
   if (!stepper_valid_) {
     // Kinetic friction opposes the motion; from rest, the motion the net force starts.
-    if (!frozen) free_dir_ = v_ != 0.0 ? (v_ > 0.0 ? 1.0 : -1.0) : (NetForceAtRest_N(i_, x_, t_) >= 0.0 ? 1.0 : -1.0);
+    if (!frozen)
+      free_dir_ = v_ != 0.0 ? (v_ > 0.0 ? 1.0 : -1.0) : (NetForceAtRest_N(FluxCurrent(i_, im_), x_, t_) >= 0.0 ? 1.0 : -1.0);
+    if (fx.residual_w_A > 0.0) {
+      // The play's mode from the state: on an edge only if the current moves outward.
+      const double w = fx.residual_w_A;
+      play_ = Play::kInside;
+      const double tiny = 1e-12;
+      if (i_ - w >= im_ - tiny || i_ + w <= im_ + tiny) {
+        const bool upper = i_ - w >= im_ - tiny;
+        const double im_saved = im_;
+        im_ = upper ? i_ - w : i_ + w;
+        play_ = upper ? Play::kRising : Play::kFalling;
+        State dy;
+        Rhs(seg, Scale(i_, x_, v_), dy, t_);
+        if ((upper && dy[0] <= 0.0) || (!upper && dy[0] >= 0.0)) {
+          play_ = Play::kInside;
+          im_ = im_saved;
+        }
+      }
+    }
     stepper_.initialize(Scale(i_, x_, v_), t_, std::min(dt_guess_s_, opt_.max_step_s));
     ode_piece_v2_ = v2_int_;
     ode_piece_vi_ = vi_int_;
@@ -496,8 +538,16 @@ void Simulator::AdvanceOde(const Segment& seg, double t_stop, SimObserver* obs) 
     ++restarts_;
   }
 
-  Ev events[5];
+  Ev events[7];
   int n_events = 0;
+  if (fx.residual_w_A > 0.0) {
+    if (play_ == Play::kInside) {
+      events[n_events++] = Ev::kPlayUpper;
+      events[n_events++] = Ev::kPlayLower;
+    } else {
+      events[n_events++] = Ev::kPlayTurn;
+    }
+  }
   if (frozen) {
     if (plant_.has_moving_part()) events[n_events++] = Ev::kLeaveStop;
   } else {
@@ -620,6 +670,7 @@ void Simulator::AdvanceOde(const Segment& seg, double t_stop, SimObserver* obs) 
       vi_int_ = ode_piece_vi_ + y[4];
       dT_ = y[5];
       sensor_ = y[6];
+      im_ = y[7];
     }
     t_ = best_t;
     if (seg.blocked && fx.eddy_R_p_ohm == 0.0) i_ = 0.0;
@@ -651,7 +702,7 @@ void Simulator::ApplyEvent(Ev ev, const Segment& seg, SimObserver* obs) {
         break;
       }
       v_ = 0.0;
-      const double f = NetForceAtRest_N(i_, x_, t_);
+      const double f = NetForceAtRest_N(FluxCurrent(i_, im_), x_, t_);
       contact_ = upper ? (f >= -fx.friction_F_s_N ? Contact::kUpper : Contact::kFree)
                        : (f <= fx.friction_F_s_N ? Contact::kLower : Contact::kFree);
       break;
@@ -666,7 +717,7 @@ void Simulator::ApplyEvent(Ev ev, const Segment& seg, SimObserver* obs) {
     case Ev::kVelocityZero: {
       // Motion stops mid-travel: static friction holds the spool unless the net force exceeds F_s.
       v_ = 0.0;
-      const double f = NetForceAtRest_N(i_, x_, t_);
+      const double f = NetForceAtRest_N(FluxCurrent(i_, im_), x_, t_);
       if (std::abs(f) <= plant_.params().effects.friction_F_s_N) {
         contact_ = Contact::kStuck;
         kind = EventKind::kStick;
@@ -687,6 +738,10 @@ void Simulator::ApplyEvent(Ev ev, const Segment& seg, SimObserver* obs) {
       chopper_on_ = !chopper_on_;
       kind = EventKind::kDriverSwitch;
       break;
+    case Ev::kPlayUpper:
+    case Ev::kPlayLower:
+    case Ev::kPlayTurn:
+      return;  // the play changes mode; the next piece starts in it (nothing to report)
     case Ev::kNone: return;
   }
   if (obs) obs->OnEvent(kind, t_, i_, x_, v_);

@@ -112,8 +112,9 @@ class Simulator {
     double force_N;     // magnetic pull
   };
   Magnetics MagneticsAt(double i, double x) const;
-  // Everything pushing the spool at rest at x with current i (magnetic + passive + disturbance).
-  double NetForceAtRest_N(double i, double x, double t) const;
+  // Everything pushing the spool at rest at x (magnetic + passive + disturbance), for a flux-equivalent
+  // current j (= the magnetising current unless residual_magnetism).
+  double NetForceAtRest_N(double j, double x, double t) const;
   double x_m() const { return x_; }
   double v_mps() const { return v_; }
   int gate() const { return gate_; }
@@ -130,9 +131,10 @@ class Simulator {
  private:
   // scaled: i [A] (the magnetising current: the terminal current unless eddy currents branch off),
   // (x - x_min)/x_scale, v/v_scale, two quadratures from the piece start (integral v_coil^2 dt and
-  // integral v_coil i dt), the coil's temperature rise dT [K] (coil_heating) and the current sensor's
-  // output [A] (sensor_lag).
-  using State = std::array<double, 7>;
+  // integral v_coil i dt), the coil's temperature rise dT [K] (coil_heating), the current sensor's
+  // output [A] (sensor_lag) and the play operator's output i_m [A] (residual_magnetism).
+  using State = std::array<double, 8>;
+  enum class Play : std::uint8_t { kInside, kRising, kFalling };  // residual_magnetism's mode
   using Stepper = boost::numeric::odeint::result_of::make_dense_output<
       boost::numeric::odeint::runge_kutta_dopri5<State>>::type;
 
@@ -148,7 +150,13 @@ class Simulator {
     int level_dir = 0;       // ... crossed upward (+1) or downward (-1); 0 = none
     bool from_supply = false;  // the supply drives the coil (its source resistance is in series)
   };
-  enum class Ev : std::uint8_t { kNone, kUpper, kLower, kLeaveStop, kClamp, kLevel, kVelocityZero };
+  enum class Ev : std::uint8_t {
+    kNone, kUpper, kLower, kLeaveStop, kClamp, kLevel, kVelocityZero, kPlayUpper, kPlayLower, kPlayTurn
+  };
+  // Right-hand side of the integrated piece (also used by events that need di/dt).
+  void Rhs(const Segment& seg, const State& y, State& dy, double t) const;
+  // The flux-equivalent current (residual_magnetism; the magnetising current otherwise).
+  double FluxCurrent(double i, double i_m) const;
   // The coil's terminal quantities for a magnetising current: what the driver and the sensor see.
   struct Terminal {
     double i_A;   // terminal current
@@ -173,7 +181,7 @@ class Simulator {
   void EmitSample(const Segment& seg, double t, double i_meas, double v_term, double x, double v, double v2_int,
                   double vi_int, SimObserver* obs) const;
   State Scale(double i, double x, double v) const {
-    return {i, (x - x_lo_) * inv_x_scale_, v * inv_v_scale_, 0.0, 0.0, dT_, sensor_};
+    return {i, (x - x_lo_) * inv_x_scale_, v * inv_v_scale_, 0.0, 0.0, dT_, sensor_, im_};
   }
   void Unscale(const State& s, double* i, double* x, double* v) const {
     *i = s[0];
@@ -194,6 +202,9 @@ class Simulator {
   double sensor_ = 0.0;                   // current sensor output (sensor_lag)
   bool general_ = false;                  // effects or disturbances: integrate every piece
   double free_dir_ = 1.0;                 // direction of motion in a free piece (kinetic friction's sign)
+  double im_ = 0.0;                       // play operator output (residual_magnetism)
+  Play play_ = Play::kInside;
+  bool frozen_ = false;                   // the current integrated piece holds the spool
   std::uint64_t switches_ = 0;
   double ode_piece_v2_ = 0.0, ode_piece_vi_ = 0.0;  // integrals at the ODE stepper's restart time
   int gate_ = 0;

@@ -43,7 +43,7 @@ TEST(Effects, CatalogNamesAndErrors) {
   EXPECT_NE(AddEffect(&fx, "gremlins", {}).message().find("unknown effect"), std::string::npos);
   EXPECT_NE(AddEffect(&fx, "supply_resistance", {{"R_x", 1.0}}).message().find("params[R_x]"), std::string::npos);
   EXPECT_NE(AddEffect(&fx, "supply_resistance", {{"R_s", -1.0}}).message().find("outside"), std::string::npos);
-  EXPECT_NE(AddEffect(&fx, "residual_magnetism", {}).message().find("not simulated yet"), std::string::npos);
+  EXPECT_NE(AddEffect(&fx, "sensor_lag", {{"delay_s", 1e-4}}).message().find("not simulated yet"), std::string::npos);
   EXPECT_FALSE(fx.any()) << "a rejected effect changes nothing";
 }
 
@@ -270,6 +270,46 @@ TEST(Effects, StaticFrictionHoldsTheSpoolMidTravel) {
   EXPECT_TRUE(stuck_mid);
   Effects bad;
   EXPECT_NE(AddEffect(&bad, "coulomb_friction", {{"F_c", 3.0}, {"F_s", 2.0}}).message().find("F_s"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace vb::model
+
+namespace vb::model {
+namespace {
+
+// Residual magnetism: the remanent flux delays the release after de-energising, and the lift needs more
+// current (the play lags the rising current); the steady energised current is unchanged (V/R).
+TEST(Effects, ResidualMagnetismDelaysReleaseAndLift) {
+  auto times = [](const PlantParams& p) {
+    Plant plant(p);
+    Simulator sim(plant, DriverParams{}, Conditions{24.0, 4e5});
+    vb::testing::Recording rec;
+    sim.SetGate(1);
+    sim.AdvanceTo(0.05, &rec);
+    const double i_on = sim.measured_current_A();
+    sim.SetGate(0);
+    sim.AdvanceTo(0.1, &rec);
+    double lift = -1, release = -1, lift_i = 0;
+    for (const auto& e : rec.events) {
+      if (e.kind == EventKind::kLift && lift < 0) {
+        lift = e.t_s;
+        lift_i = e.i_A;
+      }
+      if (e.kind == EventKind::kRelease && release < 0) release = e.t_s;
+    }
+    struct R {
+      double lift, lift_i, release, i_on;
+    };
+    return R{lift, lift_i, release, i_on};
+  };
+  const auto n = times(*Preset("taghizadeh2009"));
+  const auto r = times(WithEffect("taghizadeh2009", "residual_magnetism", {{"w", 0.08}, {"alpha", 0.35}}));
+  ASSERT_GT(r.lift, 0.0);
+  ASSERT_GT(r.release, 0.0);
+  EXPECT_GT(r.release, n.release) << "remanent flux holds the spool longer";
+  EXPECT_GT(r.lift_i, n.lift_i + 0.02) << "the lift needs (1 - alpha) w more current";
+  EXPECT_NEAR(r.i_on, n.i_on, 5e-3) << "energised, the coil current follows the nominal one";
 }
 
 }  // namespace
