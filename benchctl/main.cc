@@ -94,6 +94,14 @@ int main(int argc, char** argv) {
   auto* benches = app.add_subcommand("benches", "the server's benches");
   common(benches, false);
 
+  std::string dataset_dir, diag_model, diag_json;
+  auto* diagnose = app.add_subcommand("diagnose", "where and why measured runs (valve-runs/1) differ from the model");
+  diagnose->add_option("dataset", dataset_dir, "dataset directory (manifest.json + one CSV per run)")->required();
+  diagnose->add_option("--model", diag_model, "preset name or model file (ModelSpec JSON); default: the dataset's");
+  diagnose->add_option("--json", diag_json, "write the diagnosis as JSON to FILE ('-' or no FILE: stdout)")
+      ->expected(0, 1)
+      ->default_str("-");
+
   std::string compare_input;
   bool compare_local = false;
   std::vector<std::int64_t> run_ids;
@@ -135,6 +143,10 @@ int main(int argc, char** argv) {
       return Fail(Status::InvalidArgument("--trace-csv and --realtime are local options; use `export` remotely"));
     auto c = make_client();
     return vb::benchctl::RemoteRun(*c, spec_path, wait, out);
+  }
+  if (diagnose->parsed()) {
+    const bool json_given = diagnose->count("--json") > 0;
+    return vb::benchctl::CmdDiagnose(dataset_dir, diag_model, json_given ? (diag_json.empty() ? "-" : diag_json) : "");
   }
   if (compare->parsed()) {
     if (compare_local && batch != 0) {

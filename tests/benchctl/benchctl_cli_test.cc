@@ -7,6 +7,7 @@
 #include <array>
 #include <cstdio>
 #include <fstream>
+#include <sstream>
 #include <memory>
 #include <string>
 
@@ -86,6 +87,27 @@ TEST(BenchctlCli, LocalRunsAreRecordedAndComparableByBatch) {
   Result unstored = RunBenchctl("run --local " + Example("standard/e3.json") + " --json --no-store");
   ASSERT_EQ(unstored.exit_code, 0) << unstored.out;
   EXPECT_EQ(unstored.out.find("run_id"), std::string::npos) << "--no-store records nothing";
+}
+
+TEST(BenchctlCli, DiagnoseReportsJsonAndRefusesBadData) {
+  const std::string practice = std::string(VB_SHARED_DIR) + "/gapbench/practice/";
+  Result none = RunBenchctl("diagnose " + practice + "p12 --json");
+  if (none.out.find("does not exist") != std::string::npos) GTEST_SKIP() << "no practice data";
+  ASSERT_EQ(none.exit_code, 0) << none.out;
+  EXPECT_NE(none.out.find("\"verdict\": \"none\""), std::string::npos) << none.out;
+  const std::string file = ::testing::TempDir() + "/p05.json";
+  Result gap = RunBenchctl("diagnose " + practice + "p05 --json " + file);
+  ASSERT_EQ(gap.exit_code, 0) << gap.out;
+  EXPECT_NE(gap.out.find("SIGNIFICANT"), std::string::npos) << gap.out;
+  std::ifstream in(file);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  EXPECT_NE(ss.str().find("\"significant\": true"), std::string::npos);
+  Result bad = RunBenchctl("diagnose /nonexistent/dataset");
+  EXPECT_EQ(bad.exit_code, 2) << bad.out;
+  Result bad_model = RunBenchctl("diagnose " + practice + "p12 --model nosuchmodel");
+  EXPECT_EQ(bad_model.exit_code, 2) << bad_model.out;
+  EXPECT_NE(bad_model.out.find("--model"), std::string::npos) << bad_model.out;
 }
 
 }  // namespace
