@@ -1,5 +1,6 @@
 #include "gap/replay.h"
 
+#include <algorithm>
 #include <cmath>
 
 namespace vb::gap {
@@ -70,9 +71,40 @@ StatusOr<Replay> ReplayRun(const model::PlantParams& plant, const model::DriverP
   }
   sim.AdvanceTo(static_cast<double>(n - 1) * in.sample_period_s, &col);
   sim.EmitPendingSample(&col);
+  out.final_dT_K = sim.coil_temperature_rise_K();
+  out.final_im_A = sim.play_state_A();
   if (out.i_A.size() != n)
     return Status::Internal("replay produced " + std::to_string(out.i_A.size()) + " samples for " +
                             std::to_string(n));
+  return out;
+}
+
+StatusOr<std::vector<Replay>> ReplaySession(const model::PlantParams& plant, const model::DriverParams& driver,
+                                            const std::vector<SessionRun>& runs, const model::SolverOptions& solver) {
+  std::vector<Replay> out;
+  out.reserve(runs.size());
+  model::PlantParams p = plant;
+  const model::Effects& fx = plant.effects;
+  const double tau_th = fx.heating_R_th_K_per_W * fx.heating_C_th_J_per_K;
+  for (std::size_t r = 0; r < runs.size(); ++r) {
+    if (r > 0) {
+      const double end_prev = runs[r - 1].t_start_s +
+                              static_cast<double>(runs[r - 1].gate->size() - 1) * runs[r - 1].sample_period_s;
+      const double idle = std::max(0.0, runs[r].t_start_s - end_prev);
+      if (fx.heating) p.effects.heating_dT0_K = out.back().final_dT_K * std::exp(-idle / tau_th);
+      // The coil's current decays to zero during the idle time: the play follows it onto its band [-w, w].
+      if (fx.residual_w_A > 0.0)
+        p.effects.residual_im0_A = std::clamp(out.back().final_im_A, -fx.residual_w_A, fx.residual_w_A);
+    }
+    ReplayInput in;
+    in.supply_V = runs[r].supply_V;
+    in.supply_pressure_Pa = runs[r].supply_pressure_Pa;
+    in.sample_period_s = runs[r].sample_period_s;
+    in.gate = *runs[r].gate;
+    auto rep = ReplayRun(p, driver, in, solver);
+    if (!rep.ok()) return rep.status().WithContext("run " + std::to_string(r));
+    out.push_back(std::move(rep.value()));
+  }
   return out;
 }
 

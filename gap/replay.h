@@ -32,12 +32,26 @@ struct ReplayInput {
 };
 
 struct Replay {
-  std::vector<double> i_A, x_m, v_mps;
+  std::vector<double> i_A, x_m, v_mps;  // i_A: what the sensor reports (sensor_lag applies)
   std::vector<Phase> phase;
+  double final_dT_K = 0.0;    // coil temperature rise at the end (coil_heating)
+  double final_im_A = 0.0;    // core magnetisation state at the end (residual_magnetism)
 };
 
 // Simulates the input from rest with the given plant and driver.
 StatusOr<Replay> ReplayRun(const model::PlantParams& plant, const model::DriverParams& driver,
                            const ReplayInput& input, const model::SolverOptions& solver = {});
+
+// A whole bench session: every run in manifest (time) order, carrying the slow states from run to run: the
+// coil's temperature rise cools during the idle time between runs (coil_heating's thermal time constant),
+// the core's magnetisation persists (residual_magnetism). Only gate commands and conditions are used, never
+// measured currents.
+struct SessionRun {
+  double supply_V, supply_pressure_Pa, sample_period_s, t_start_s;
+  const std::vector<std::int8_t>* gate;
+};
+StatusOr<std::vector<Replay>> ReplaySession(const model::PlantParams& plant, const model::DriverParams& driver,
+                                            const std::vector<SessionRun>& runs,
+                                            const model::SolverOptions& solver = {});
 
 }  // namespace vb::gap

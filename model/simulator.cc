@@ -518,6 +518,7 @@ void Simulator::AdvanceOde(const Segment& seg, double t_stop, SimObserver* obs) 
       const double w = fx.residual_w_A;
       play_ = Play::kInside;
       const double tiny = 1e-12;
+      im_ = std::clamp(im_, i_ - w, i_ + w);  // the play's output never leaves its band around the input
       if (i_ - w >= im_ - tiny || i_ + w <= im_ + tiny) {
         const bool upper = i_ - w >= im_ - tiny;
         const double im_saved = im_;
@@ -627,8 +628,10 @@ void Simulator::AdvanceOde(const Segment& seg, double t_stop, SimObserver* obs) 
           }
         }
         if (!found) {
-          // Never measurably off the surface yet past it at the step's end: it is back on the surface at once
-          // (a vanishing rebound, or a contact that cannot be left). Never let the state pass through a stop.
+          // Still exactly on the surface (g = 0: nothing moved, e.g. a current held at zero on a play edge):
+          // no crossing. Past it at the step's end without ever being measurably off it: it is back on the
+          // surface at once (a vanishing rebound). Never let the state pass through a stop.
+          if (!(gb < 0.0)) continue;
           if (a < best_t || best_ev == Ev::kNone) {
             best_t = a;
             best_ev = ev;

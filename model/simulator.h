@@ -105,6 +105,7 @@ class Simulator {
   // What the bench's current sensor reports now (lagged by sensor_lag; the terminal current otherwise).
   double measured_current_A() const;
   double coil_temperature_rise_K() const { return dT_; }
+  double play_state_A() const { return im_; }  // residual_magnetism's play output (the core's memory)
   // The magnetic law with effects: dlambda/di, dlambda/dx and the force at current i and position x.
   struct Magnetics {
     double dlambda_di;  // incremental inductance [H]

@@ -80,3 +80,46 @@ TEST(Replay, NominalModelLeavesOnlyNoiseOnEffectFreePracticeData) {
 
 }  // namespace
 }  // namespace vb::gap
+
+namespace vb::gap {
+namespace {
+
+std::vector<SessionRun> Session(const Dataset& ds) {
+  std::vector<SessionRun> runs;
+  for (const auto& r : ds.runs) runs.push_back({r.supply_V, r.supply_pressure_Pa, r.sample_period_s, r.t_start_s, &r.gate});
+  return runs;
+}
+
+double SessionRms(const Dataset& ds, const model::PlantParams& p) {
+  auto reps = ReplaySession(p, model::DriverParams{}, Session(ds));
+  EXPECT_TRUE(reps.ok()) << reps.status().message();
+  double se = 0;
+  size_t n = 0;
+  for (size_t r = 0; r < ds.runs.size(); ++r)
+    for (size_t k = 0; k < ds.runs[r].i_A.size(); ++k, ++n) se += std::pow(ds.runs[r].i_A[k] - (*reps)[r].i_A[k], 2);
+  return std::sqrt(se / n);
+}
+
+// Coil heating accumulates over a session: with the temperature carried from run to run (cooling in the idle
+// time), our one-node thermal model at the label's values closes p01's 50 mA gap to the noise floor.
+TEST(ReplaySession, CarriesTheCoilTemperatureAcrossRuns) {
+  auto ds = LoadDataset(std::string(VB_SHARED_DIR) + "/gapbench/practice/p01");
+  if (!ds.ok()) GTEST_SKIP() << ds.status().message();
+  model::PlantParams p = *model::Preset("taghizadeh2009");
+  ASSERT_TRUE(model::AddEffect(&p.effects, "coil_heating", {{"R_th", 2.0}, {"C_th", 0.6}}).ok());
+  EXPECT_LT(SessionRms(*ds, p), 2.3e-3);
+  EXPECT_GT(SessionRms(*ds, *model::Preset("taghizadeh2009")), 40e-3);
+}
+
+// Regression: a run ending with current still flowing left the core's play state outside its band for the
+// next run (which starts at rest), and the simulator looped forever on that surface.
+TEST(ReplaySession, ResidualMagnetismStateCarriesWithoutStalling) {
+  auto ds = LoadDataset(std::string(VB_SHARED_DIR) + "/gapbench/practice/p03");
+  if (!ds.ok()) GTEST_SKIP() << ds.status().message();
+  model::PlantParams p = *model::Preset("taghizadeh2009");
+  ASSERT_TRUE(model::AddEffect(&p.effects, "residual_magnetism", {{"w", 0.0828}, {"alpha", 0.35}}).ok());
+  EXPECT_LT(SessionRms(*ds, p), SessionRms(*ds, *model::Preset("taghizadeh2009")));
+}
+
+}  // namespace
+}  // namespace vb::gap
