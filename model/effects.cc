@@ -82,8 +82,7 @@ Status AddEffect(Effects* effects, std::string_view name, const std::vector<std:
   }
   if (name == "coulomb_friction" && e.friction_F_s_N < e.friction_F_c_N)
     return Status::InvalidArgument("params[F_s]: the static friction must be at least the kinetic F_c");
-  if (e.sensor_delay_s > 0.0)
-    return Status::InvalidArgument("params[delay_s]: a sensor latency is not simulated yet (tau_s is)");
+
   *effects = e;
   return Status::Ok();
 }

@@ -10,12 +10,13 @@
 //   eddy_currents      a loss resistance R_p across the magnetising inductance (one eddy branch): the flux and
 //                      the force follow the magnetising current, which lags the terminal current; the measured
 //                      (terminal) current jumps at switching edges by dv/R_p.
-//   sensor_lag         the current sensor's first-order bandwidth tau_s; a latency delay_s is catalogued but
-//                      not simulated yet (asking for it is an error).
-//   magnetic_saturation  the flux linkage saturates: lambda(i, x) = lambda_s tanh(L(x) i / lambda_s), with
-//                      lambda_s = N A_e B_sat (the linear law is its small-current limit). The coil law uses
-//                      d lambda/di and d lambda/dx; the force is the exact co-energy derivative
-//                      W'(i, x) = lambda_s^2 / L ln cosh(L i / lambda_s),  F = dW'/dx at constant i.
+//   sensor_lag         the current sensor: a first-order lag tau_s and a latency delay_s, applied to the sampled
+//                      terminal current (exact for a current linear between samples); controllers see the
+//                      latest reading. Needs a sample rate (the chain works on samples).
+//   magnetic_saturation  the core's flux saturates, the air path's does not: lambda = lambda_s tanh(Lc i /
+//                      lambda_s) + La i with La = L/mu_r, Lc = L - La, lambda_s = N A_e B_sat (the linear law
+//                      is its small-current limit). The coil law uses d lambda/di and d lambda/dx; the force
+//                      is the exact co-energy derivative at constant i.
 //   end_stop_bounce    an elastic impact at either stop: the spool rebounds with -e v (coefficient of restitution
 //                      e); an impact slower than v_stick_mps ends at rest (no infinite bounce sequence).
 //   coulomb_friction   dry friction (Karnopp): a moving spool feels -F_c sgn(v); a spool at rest stays until the
@@ -57,9 +58,10 @@ struct Effects {
   double residual_im0_A = 0.0;        // residual_magnetism.im0
 
   // Effects that need the general (integrated) path: the closed form assumes a constant R and L.
+  // (The sensor chain works on samples and leaves the plant on its fast path.)
   bool NeedsGeneralPath() const {
-    return heating || eddy_R_p_ohm > 0.0 || sensor_tau_s > 0.0 || saturation_B_T > 0.0 || friction_F_s_N > 0.0 ||
-           friction_F_c_N > 0.0 || residual_w_A > 0.0;
+    return heating || eddy_R_p_ohm > 0.0 || saturation_B_T > 0.0 || friction_F_s_N > 0.0 || friction_F_c_N > 0.0 ||
+           residual_w_A > 0.0;
   }
   bool any() const { return supply_R_ohm > 0.0 || NeedsGeneralPath() || sensor_delay_s > 0.0 || bounce_e > 0.0; }
   bool friction() const { return friction_F_c_N > 0.0 || friction_F_s_N > 0.0; }

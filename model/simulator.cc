@@ -53,7 +53,10 @@ void Simulator::Reset() {
   switches_ = 0;
   const Effects& fx = plant_.params().effects;
   dT_ = fx.heating ? fx.heating_dT0_K : 0.0;
-  sensor_ = 0.0;
+  sensor_y_ = sensor_prev_i_ = 0.0;
+  sensor_prev_t_ = -1.0;
+  sensor_head_ = sensor_count_ = 0;
+  last_reading_ = 0.0;
   im_ = fx.residual_w_A > 0.0 ? fx.residual_im0_A : 0.0;
   play_ = Play::kInside;
   general_ = fx.NeedsGeneralPath() || dist_.active();
@@ -72,6 +75,13 @@ void Simulator::Reset() {
 
 void Simulator::SetSamplePeriod(double period_s) {
   sample_period_s_ = period_s > 0.0 ? period_s : 0.0;
+  // The sensor latency's history (outside the loop: no allocation while it runs).
+  const double delay = plant_.params().effects.sensor_delay_s;
+  sensor_hist_.assign(sample_period_s_ > 0.0 && delay > 0.0
+                          ? static_cast<std::size_t>(std::ceil(delay / sample_period_s_)) + 3
+                          : 1,
+                      0.0);
+  sensor_head_ = sensor_count_ = 0;
   next_sample_ = sample_period_s_ > 0.0 ? static_cast<std::int64_t>(std::ceil(t_ / sample_period_s_ - 1e-9)) : 0;
 }
 
@@ -149,16 +159,23 @@ Simulator::Magnetics Simulator::MagneticsAt(double i, double x) const {
     m.force_N = 0.5 * i * i * dLdx;
     return m;
   }
-  // lambda = ls tanh(u), u = L i / ls; W' = ls^2/L ln cosh(u); F = dW'/dx|_i = dLdx (ls i tanh(u)/L - ls^2/L^2 ln cosh u)
-  const double ls = plant_.params().N_turns * plant_.params().A_e_m2 * B_sat;
-  const double u = L * i / ls;
+  // A saturating core in parallel with the air path it can never lose (the core at mu_r -> 1):
+  //   lambda = ls tanh(Lc i / ls) + La i,   La = L / mu_r,  Lc = L - La,  ls = N A_e B_sat
+  // (small currents: lambda = L i). Co-energy W' = ls^2/Lc ln cosh(Lc i/ls) + La i^2 / 2, and at constant i
+  //   F = dW'/dx = (dLc/dx) (ls i tanh(u) / Lc - ls^2 / Lc^2 ln cosh u) + (dLa/dx) i^2 / 2,  u = Lc i / ls.
+  // The air path keeps the incremental inductance >= La: deep saturation stays physical and non-stiff.
+  const PlantParams& pp = plant_.params();
+  const double air = pp.law == InductanceLaw::kReluctance ? 1.0 / std::max(pp.mu_r, 1.0) : 0.01;
+  const double La = air * L, Lc = L - La, dLa = air * dLdx, dLc = dLdx - dLa;
+  const double ls = pp.N_turns * pp.A_e_m2 * B_sat;
+  const double u = Lc * i / ls;
   const double th = std::tanh(u);
   const double sech2 = 1.0 - th * th;
   const double au = std::abs(u);
   const double lncosh = au + std::log1p(std::exp(-2.0 * au)) - M_LN2;  // stable for large |u|
-  m.dlambda_di = L * sech2;
-  m.dlambda_dx = dLdx * i * sech2;
-  m.force_N = dLdx * (ls * i * th / L - ls * ls / (L * L) * lncosh);
+  m.dlambda_di = Lc * sech2 + La;
+  m.dlambda_dx = (dLc * sech2 + dLa) * i;
+  m.force_N = dLc * (ls * i * th / Lc - ls * ls / (Lc * Lc) * lncosh) + 0.5 * dLa * i * i;
   return m;
 }
 
@@ -180,18 +197,16 @@ void Simulator::Rhs(const Segment& seg, const State& y, State& dy, double t) con
   const Terminal term = TerminalAt(seg, t, i, y[5]);
   // dlambda/dt = v_L with lambda = lambda(j, x), j the flux-equivalent current (= i without hysteresis):
   //   (dlambda/dj)(dj/di) di/dt = v_L - (dlambda/dx) v          (seed 000 eq. 7 for the linear law)
-  const double j = FluxCurrent(i, y[7]);
+  const double j = FluxCurrent(i, y[6]);
   const Magnetics mag = MagneticsAt(j, x);
   const double dj_di = fx.residual_w_A > 0.0 && play_ == Play::kInside ? fx.residual_alpha : 1.0;
   dy[0] = (term.vL_V - mag.dlambda_dx * (frozen_ ? 0.0 : v)) / (mag.dlambda_di * dj_di);
   dy[3] = term.v_V * term.v_V;
   dy[4] = term.v_V * term.i_A;
   dy[5] = 0.0;
-  dy[6] = 0.0;
-  dy[7] = fx.residual_w_A > 0.0 && play_ != Play::kInside ? dy[0] : 0.0;
+  dy[6] = fx.residual_w_A > 0.0 && play_ != Play::kInside ? dy[0] : 0.0;
   if (fx.heating)
     dy[5] = (term.i_A * term.i_A * ResistanceAt(y[5]) - y[5] / fx.heating_R_th_K_per_W) / fx.heating_C_th_J_per_K;
-  if (fx.sensor_tau_s > 0.0) dy[6] = (term.i_A - y[6]) / fx.sensor_tau_s;
   if (frozen_) {
     dy[1] = 0.0;
     dy[2] = 0.0;
@@ -205,12 +220,49 @@ void Simulator::Rhs(const Segment& seg, const State& y, State& dy, double t) con
 
 double Simulator::measured_current_A() const {
   const Effects& fx = plant_.params().effects;
-  if (fx.sensor_tau_s > 0.0) return sensor_;
+  if ((fx.sensor_tau_s > 0.0 || fx.sensor_delay_s > 0.0) && sensor_prev_t_ >= 0.0) return last_reading_;
   if (fx.eddy_R_p_ohm > 0.0) {
     Simulator* self = const_cast<Simulator*>(this);  // CurrentSegment() only normalises driver bookkeeping
     return TerminalAt(self->CurrentSegment(), t_, i_, dT_).i_A;
   }
   return i_;
+}
+
+double Simulator::SensorReading(double t, double i_true) const {
+  const Effects& fx = plant_.params().effects;
+  if (fx.sensor_tau_s <= 0.0 && fx.sensor_delay_s <= 0.0) return i_true;
+  // First-order lag, exact for a current linear between samples (first-order hold):
+  //   y_k = a y_(k-1) + (1 - a) i_(k-1) + (i_k - i_(k-1)) (1 - tau (1 - a) / h),   a = exp(-h / tau)
+  if (sensor_prev_t_ < 0.0 || fx.sensor_tau_s <= 0.0) {
+    sensor_y_ = i_true;
+  } else {
+    const double h = t - sensor_prev_t_;
+    if (h > 0.0) {
+      const double tau = fx.sensor_tau_s;
+      const double a = std::exp(-h / tau);
+      sensor_y_ = a * sensor_y_ + (1.0 - a) * sensor_prev_i_ + (i_true - sensor_prev_i_) * (1.0 - tau * (1.0 - a) / h);
+    }
+  }
+  sensor_prev_i_ = i_true;
+  sensor_prev_t_ = t;
+  double out = sensor_y_;
+  if (fx.sensor_delay_s > 0.0 && sample_period_s_ > 0.0) {
+    // Latency: the lagged reading delay_s ago, interpolated between the samples around it (0 before the run).
+    const std::size_t cap = sensor_hist_.size();
+    sensor_hist_[sensor_head_] = sensor_y_;
+    sensor_head_ = (sensor_head_ + 1) % cap;
+    sensor_count_ = std::min(sensor_count_ + 1, cap);
+    const double back = fx.sensor_delay_s / sample_period_s_;
+    const auto k0 = static_cast<std::size_t>(std::floor(back));
+    const double frac = back - static_cast<double>(k0);
+    auto at = [&](std::size_t ago) {  // the reading `ago` samples back; before the first sample: 0
+      if (ago >= sensor_count_) return 0.0;
+      return sensor_hist_[(sensor_head_ + cap - 1 - ago) % cap];
+    };
+    out = (1.0 - frac) * at(k0) + frac * at(k0 + 1);
+  }
+  last_reading_ = out;
+  return out;
 }
 
 Simulator::State Simulator::CurrentState() const {
@@ -330,7 +382,7 @@ void Simulator::EmitSample(const Segment& /*seg*/, double t, double i_meas, doub
   s.t_s = t;
   s.gate = static_cast<std::int8_t>(gate_);
   s.v_coil_V = v_term;
-  s.i_A = i_meas;
+  s.i_A = SensorReading(t, i_meas);
   s.x_m = x;
   s.v_mps = v;
   s.v2_integral_V2s = v2_int;
@@ -344,7 +396,7 @@ void Simulator::EmitPendingSample(SimObserver* observer) {
   if (SampleTime(next_sample_) <= t_ + kSameInstant_s) {
     Segment seg = CurrentSegment();
     const Terminal term = TerminalAt(seg, t_, i_, dT_);
-    EmitSample(seg, SampleTime(next_sample_), measured_current_A(), term.v_V, x_, v_, v2_int_, vi_int_, observer);
+    EmitSample(seg, SampleTime(next_sample_), term.i_A, term.v_V, x_, v_, v2_int_, vi_int_, observer);
     ++next_sample_;
   }
 }
@@ -479,7 +531,7 @@ double Simulator::EventFunction(Ev ev, const Segment& seg, double t, const State
     case Ev::kUpper: return (x_hi_ - x) * inv_x_scale_;
     case Ev::kLower: return (x - x_lo_) * inv_x_scale_;
     case Ev::kLeaveStop: {
-      const double f = NetForceAtRest_N(FluxCurrent(i, y[7]), x_, t);
+      const double f = NetForceAtRest_N(FluxCurrent(i, y[6]), x_, t);
       const double fs = plant_.params().effects.friction_F_s_N;
       if (contact_ == Contact::kLower) return fs - f;
       if (contact_ == Contact::kUpper) return f + fs;
@@ -487,8 +539,8 @@ double Simulator::EventFunction(Ev ev, const Segment& seg, double t, const State
     }
     case Ev::kVelocityZero: return free_dir_ * v;
     // residual_magnetism's play: a band edge reached (inside), or the current turning (on an edge).
-    case Ev::kPlayUpper: return y[7] - (i - plant_.params().effects.residual_w_A);
-    case Ev::kPlayLower: return (i + plant_.params().effects.residual_w_A) - y[7];
+    case Ev::kPlayUpper: return y[6] - (i - plant_.params().effects.residual_w_A);
+    case Ev::kPlayLower: return (i + plant_.params().effects.residual_w_A) - y[6];
     case Ev::kPlayTurn: {
       State dy;
       Rhs(seg, y, dy, t);
@@ -631,7 +683,10 @@ void Simulator::AdvanceOde(const Segment& seg, double t_stop, SimObserver* obs) 
           // Still exactly on the surface (g = 0: nothing moved, e.g. a current held at zero on a play edge):
           // no crossing. Past it at the step's end without ever being measurably off it: it is back on the
           // surface at once (a vanishing rebound). Never let the state pass through a stop.
-          if (!(gb < 0.0)) continue;
+          // Round-off-level excursions (a spool at rest with zero net force over a few nanoseconds) are not a
+          // crossing: the surface functions are O(1), so 1e-9 is far below any real pass (a missed micro-rebound
+          // is ~1e-5 of the travel) and far above round-off.
+          if (!(gb < -1e-9)) continue;
           if (a < best_t || best_ev == Ev::kNone) {
             best_t = a;
             best_ev = ev;
@@ -655,8 +710,7 @@ void Simulator::AdvanceOde(const Segment& seg, double t_stop, SimObserver* obs) 
         Unscale(y, &i, &x, &v);
         if (seg.blocked && fx.eddy_R_p_ohm == 0.0) i = 0.0;
         const Terminal term = TerminalAt(seg, tk, i, y[5]);
-        const double measured = fx.sensor_tau_s > 0.0 ? y[6] : term.i_A;
-        EmitSample(seg, tk, measured, term.v_V, std::clamp(x, x_lo_, x_hi_), v, ode_piece_v2_ + y[3],
+        EmitSample(seg, tk, term.i_A, term.v_V, std::clamp(x, x_lo_, x_hi_), v, ode_piece_v2_ + y[3],
                    ode_piece_vi_ + y[4], obs);
       }
     }
@@ -672,8 +726,7 @@ void Simulator::AdvanceOde(const Segment& seg, double t_stop, SimObserver* obs) 
       v2_int_ = ode_piece_v2_ + y[3];
       vi_int_ = ode_piece_vi_ + y[4];
       dT_ = y[5];
-      sensor_ = y[6];
-      im_ = y[7];
+      im_ = y[6];
     }
     t_ = best_t;
     if (seg.blocked && fx.eddy_R_p_ohm == 0.0) i_ = 0.0;

@@ -15,6 +15,7 @@
 #pragma once
 
 #include <array>
+#include <vector>
 #include <cstdint>
 #include <limits>
 
@@ -132,9 +133,9 @@ class Simulator {
  private:
   // scaled: i [A] (the magnetising current: the terminal current unless eddy currents branch off),
   // (x - x_min)/x_scale, v/v_scale, two quadratures from the piece start (integral v_coil^2 dt and
-  // integral v_coil i dt), the coil's temperature rise dT [K] (coil_heating), the current sensor's
-  // output [A] (sensor_lag) and the play operator's output i_m [A] (residual_magnetism).
-  using State = std::array<double, 8>;
+  // integral v_coil i dt), the coil's temperature rise dT [K] (coil_heating) and the play operator's
+  // output i_m [A] (residual_magnetism). The current sensor is not part of the plant: see SensorReading().
+  using State = std::array<double, 7>;
   enum class Play : std::uint8_t { kInside, kRising, kFalling };  // residual_magnetism's mode
   using Stepper = boost::numeric::odeint::result_of::make_dense_output<
       boost::numeric::odeint::runge_kutta_dopri5<State>>::type;
@@ -182,7 +183,7 @@ class Simulator {
   void EmitSample(const Segment& seg, double t, double i_meas, double v_term, double x, double v, double v2_int,
                   double vi_int, SimObserver* obs) const;
   State Scale(double i, double x, double v) const {
-    return {i, (x - x_lo_) * inv_x_scale_, v * inv_v_scale_, 0.0, 0.0, dT_, sensor_, im_};
+    return {i, (x - x_lo_) * inv_x_scale_, v * inv_v_scale_, 0.0, 0.0, dT_, im_};
   }
   void Unscale(const State& s, double* i, double* x, double* v) const {
     *i = s[0];
@@ -200,7 +201,13 @@ class Simulator {
   double t_ = 0.0, i_ = 0.0, x_ = 0.0, v_ = 0.0;
   double v2_int_ = 0.0, vi_int_ = 0.0;   // running integrals up to t_
   double dT_ = 0.0;                       // coil temperature rise (coil_heating)
-  double sensor_ = 0.0;                   // current sensor output (sensor_lag)
+  // The measurement chain (sensor_lag): a first-order lag applied to the sampled terminal current, exact for a
+  // current linear between samples (first-order hold), then a latency by interpolation in a history ring.
+  double SensorReading(double t, double i_true) const;
+  mutable double sensor_y_ = 0.0, sensor_prev_i_ = 0.0, sensor_prev_t_ = -1.0;
+  mutable std::vector<double> sensor_hist_;   // sensor outputs at the last samples (latency), ring
+  mutable std::size_t sensor_head_ = 0, sensor_count_ = 0;
+  mutable double last_reading_ = 0.0;
   bool general_ = false;                  // effects or disturbances: integrate every piece
   double free_dir_ = 1.0;                 // direction of motion in a free piece (kinetic friction's sign)
   double im_ = 0.0;                       // play operator output (residual_magnetism)
