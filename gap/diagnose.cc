@@ -28,8 +28,15 @@ std::vector<std::string> MakeSplit(const Dataset& ds, std::string* note) {
   std::vector<std::string> split;
   bool given = true;
   for (const auto& r : ds.runs) given = given && !r.split.empty();
-  if (given) {
+  const bool any_holdout = std::any_of(ds.runs.begin(), ds.runs.end(), [](const RunData& r) { return r.split == "holdout"; });
+  if (given && any_holdout) {
     for (const auto& r : ds.runs) split.push_back(r.split);
+    return split;
+  }
+  if (given) {
+    // Every run may be fitted: still hold some out, or nothing would be measured on unseen runs.
+    for (std::size_t k = 0; k < ds.runs.size(); ++k) split.push_back(k % 4 == 3 ? "holdout" : "fit");
+    *note = "the manifest holds no run out: every fourth run is held out";
     return split;
   }
   std::map<double, int> count;
@@ -57,16 +64,96 @@ std::vector<std::string> MakeSplit(const Dataset& ds, std::string* note) {
 
 }  // namespace
 
-StatusOr<Diagnosis> Diagnose(const Dataset& ds, const model::PlantParams& nominal) {
+namespace {
+
+// A noise-robust view of a current trace: a centred moving average over `half` samples each side.
+std::vector<double> Smooth(const std::vector<double>& v, std::size_t half) {
+  std::vector<double> out(v.size());
+  double acc = 0.0;
+  std::size_t lo = 0, hi = 0;  // window [lo, hi)
+  for (std::size_t k = 0; k < v.size(); ++k) {
+    const std::size_t want_lo = k >= half ? k - half : 0, want_hi = std::min(v.size(), k + half + 1);
+    while (hi < want_hi) acc += v[hi++];
+    while (lo < want_lo) acc -= v[lo++];
+    out[k] = acc / static_cast<double>(hi - lo);
+  }
+  return out;
+}
+
+// Landmarks of one trace (see Landmarks). threshold_A: the smallest dip that counts (above the noise).
+void FindLandmarks(const std::vector<double>& i_A, const std::vector<std::int8_t>& gate, double dt, double threshold_A,
+                   int which, Landmarks* lm) {
+  const std::vector<double> s = Smooth(i_A, 3);
+  std::size_t on = 0;
+  while (on < gate.size() && gate[on] == 0) ++on;
+  if (on == gate.size()) return;
+  std::size_t off = on;
+  while (off < gate.size() && gate[off] != 0) ++off;
+  // The opening dip: a peak, then a fall of more than the threshold, then a rise of more than the threshold.
+  double peak = -1.0, low = 0.0;
+  std::size_t low_k = 0;
+  bool falling = false;
+  for (std::size_t k = on; k < off; ++k) {
+    if (!falling) {
+      peak = std::max(peak, s[k]);
+      if (s[k] < peak - threshold_A) {
+        falling = true;
+        low = s[k];
+        low_k = k;
+      }
+    } else if (s[k] < low) {
+      low = s[k];
+      low_k = k;
+    } else if (s[k] > low + threshold_A) {
+      lm->dip_t_s[which] = static_cast<double>(low_k - on) * dt;
+      lm->dip_depth_A[which] = peak - low;
+      break;
+    }
+  }
+  if (off == gate.size()) return;
+  const std::size_t from = off >= 5 ? off - 5 : 0;
+  double hold = 0.0;
+  for (std::size_t k = from; k < off; ++k) hold += i_A[k];
+  lm->hold_current_A[which] = hold / static_cast<double>(off - from);
+  const double zero = std::max(0.01, 3.0 * threshold_A);
+  for (std::size_t k = off; k < gate.size() && gate[k] == 0; ++k)
+    if (s[k] < zero) {
+      lm->decay_time_s[which] = static_cast<double>(k - off) * dt;
+      break;
+    }
+}
+
+double Pearson(const std::vector<double>& a, const std::vector<double>& b) {
+  const double n = static_cast<double>(a.size());
+  double ma = 0.0, mb = 0.0;
+  for (std::size_t k = 0; k < a.size(); ++k) {
+    ma += a[k] / n;
+    mb += b[k] / n;
+  }
+  double sab = 0.0, saa = 0.0, sbb = 0.0;
+  for (std::size_t k = 0; k < a.size(); ++k) {
+    sab += (a[k] - ma) * (b[k] - mb);
+    saa += (a[k] - ma) * (a[k] - ma);
+    sbb += (b[k] - mb) * (b[k] - mb);
+  }
+  return saa > 0.0 && sbb > 0.0 ? sab / std::sqrt(saa * sbb) : NAN;
+}
+
+bool IsParametric(const std::string& name) { return name.rfind("param:", 0) == 0; }
+
+}  // namespace
+
+StatusOr<Diagnosis> Diagnose(const Dataset& ds, const model::PlantParams& nominal, const DiagnoseOptions& opt) {
   if (ds.runs.empty()) return Status::InvalidArgument("dataset: no runs");
   Diagnosis d;
   d.model = ds.model;
   d.warnings = ds.warnings;
   const std::vector<std::string> split = MakeSplit(ds, &d.split_note);
-  std::array<double, kPhaseCount> energy{};
-  std::array<std::size_t, kPhaseCount> count{};
+  std::array<double, kPhaseCount> energy{}, hold_energy{};
+  std::array<std::size_t, kPhaseCount> count{}, hold_count{};
   double noise2 = 0.0, fit_e2 = 0.0, hold_e2 = 0.0;
   std::size_t noise_n = 0, fit_n = 0, hold_n = 0;
+  std::vector<std::vector<double>> nominal_i(ds.runs.size());
   for (std::size_t r = 0; r < ds.runs.size(); ++r) {
     const RunData& run = ds.runs[r];
     ReplayInput in;
@@ -76,6 +163,7 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds, const model::PlantParams& nomina
     in.gate = run.gate;
     auto rep = ReplayRun(nominal, model::DriverParams{}, in);
     if (!rep.ok()) return rep.status().WithContext("run " + run.id);
+    const bool holdout = split[r] == "holdout";
     double e2 = 0.0;
     for (std::size_t k = 0; k < run.i_A.size(); ++k) {
       const double e = run.i_A[k] - rep->i_A[k];
@@ -83,11 +171,15 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds, const model::PlantParams& nomina
       const int p = static_cast<int>(rep->phase[k]);
       energy[p] += e * e;
       ++count[p];
+      if (holdout) {
+        hold_energy[p] += e * e;
+        ++hold_count[p];
+      }
     }
     const double sigma = NoiseSigma(run.i_A);
     noise2 += sigma * sigma * static_cast<double>(run.i_A.size());
     noise_n += run.i_A.size();
-    if (split[r] == "holdout") {
+    if (holdout) {
       hold_e2 += e2;
       hold_n += run.i_A.size();
     } else {
@@ -95,6 +187,7 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds, const model::PlantParams& nomina
       fit_n += run.i_A.size();
     }
     d.runs.push_back({run.id, split[r], std::sqrt(e2 / static_cast<double>(run.i_A.size()))});
+    nominal_i[r] = std::move(rep->i_A);
   }
   d.noise_floor_A = std::sqrt(noise2 / static_cast<double>(noise_n));
   d.fit_rmse_A = fit_n > 0 ? std::sqrt(fit_e2 / static_cast<double>(fit_n)) : 0.0;
@@ -103,6 +196,7 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds, const model::PlantParams& nomina
   double total = 0.0;
   for (double e : energy) total += e;
   for (int p = 0; p < kPhaseCount; ++p) {
+    d.phase_holdout_before_A[p] = hold_count[p] > 0 ? std::sqrt(hold_energy[p] / static_cast<double>(hold_count[p])) : 0.0;
     if (count[p] == 0) continue;
     PhaseStat s;
     s.phase = static_cast<Phase>(p);
@@ -112,9 +206,163 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds, const model::PlantParams& nomina
     d.where.push_back(s);
   }
   std::sort(d.where.begin(), d.where.end(), [](const PhaseStat& a, const PhaseStat& b) { return a.share > b.share; });
-  d.verdict = d.significant ? "unknown" : "none";
+
+  // Landmarks and trends.
+  std::vector<double> rmse, t_start, supply, pressure, duty;
+  for (std::size_t r = 0; r < ds.runs.size(); ++r) {
+    const RunData& run = ds.runs[r];
+    Landmarks lm;
+    lm.run = run.id;
+    const double thr = std::max(4.0 * d.noise_floor_A, 1e-3);
+    FindLandmarks(run.i_A, run.gate, run.sample_period_s, thr, 0, &lm);
+    FindLandmarks(nominal_i[r], run.gate, run.sample_period_s, thr, 1, &lm);
+    d.landmarks.push_back(lm);
+    rmse.push_back(d.runs[r].rmse_A);
+    t_start.push_back(run.t_start_s);
+    supply.push_back(run.supply_V);
+    pressure.push_back(run.supply_pressure_Pa);
+    double on = 0.0;
+    for (auto g : run.gate) on += g;
+    duty.push_back(on / static_cast<double>(run.gate.size()));
+  }
+  for (const auto& [name, v] : {std::pair<const char*, const std::vector<double>*>{"t_start_s", &t_start},
+                                {"supply_V", &supply}, {"supply_pressure_Pa", &pressure}, {"duty", &duty}}) {
+    const double c = Pearson(*v, rmse);
+    if (std::isfinite(c)) d.trends.emplace_back(name, c);
+  }
+
+  if (!d.significant) {
+    d.verdict = "none";
+    d.verdict_reason = "the residual is within the noise floor";
+    return d;
+  }
+  if (!opt.attribute) {
+    d.verdict = "unknown";
+    d.verdict_reason = "attribution not run";
+    return d;
+  }
+
+  // Which: every candidate fitted on the fit runs, scored on the holdout runs.
+  std::vector<bool> fit_mask;
+  for (const auto& s : split) fit_mask.push_back(s != "holdout");
+  d.candidates = opt.candidates.empty() ? DefaultCandidates(nominal) : opt.candidates;
+  auto ranked = Attribute(ds, fit_mask, nominal, d.candidates, d.noise_floor_A, opt.attribution);
+  if (!ranked.ok()) return ranked.status();
+  d.ranking = std::move(*ranked);
+  auto candidate_of = [&](const std::string& name) -> const Candidate* {
+    for (const auto& c : d.candidates)
+      if (c.name == name) return &c;
+    return nullptr;
+  };
+  if (opt.try_pairs && !d.ranking.empty() && d.ranking.front().closed < kExplained) {
+    // No single effect closes the gap: pairs of the three best structural effects.
+    std::vector<const Candidate*> top;
+    for (const auto& row : d.ranking)
+      if (!IsParametric(row.name) && row.status.ok() && top.size() < 3) top.push_back(candidate_of(row.name));
+    std::vector<Candidate> pairs;
+    for (std::size_t a = 0; a < top.size(); ++a)
+      for (std::size_t b = a + 1; b < top.size(); ++b) pairs.push_back(PairCandidate(*top[a], *top[b]));
+    if (!pairs.empty()) {
+      auto pr = Attribute(ds, fit_mask, nominal, pairs, d.noise_floor_A, opt.attribution);
+      if (!pr.ok()) return pr.status();
+      for (auto& row : *pr) d.ranking.push_back(std::move(row));
+      d.candidates.insert(d.candidates.end(), pairs.begin(), pairs.end());
+      std::stable_sort(d.ranking.begin(), d.ranking.end(),
+                       [](const CandidateResult& a, const CandidateResult& b) { return a.score < b.score; });
+    }
+  }
+  // Keep d.candidates in ranking order.
+  {
+    std::vector<Candidate> ordered;
+    for (const auto& row : d.ranking) ordered.push_back(*candidate_of(row.name));
+    d.candidates = std::move(ordered);
+  }
+  for (std::size_t k = 0; k < d.ranking.size(); ++k)
+    if (IsParametric(d.ranking[k].name)) {
+      d.parametric = static_cast<int>(k);
+      break;
+    }
+
+  const CandidateResult& best = d.ranking.front();
+  const double gap = best.holdout_rmse_before_A - d.noise_floor_A;
+  if (best.status.ok() && best.closed >= kExplained) {
+    d.chosen = 0;
+    d.verdict = best.name;
+    char buf[160];
+    std::snprintf(buf, sizeof buf, "closes %.0f %% of the holdout gap above the noise floor", 100.0 * best.closed);
+    d.verdict_reason = buf;
+  } else {
+    d.verdict = "unknown";
+    char buf[200];
+    std::snprintf(buf, sizeof buf, "no candidate in the catalog closes %.0f %% of the holdout gap (best: %s, %.0f %%)",
+                  100.0 * kExplained, best.name.c_str(), 100.0 * best.closed);
+    d.verdict_reason = buf;
+  }
+  // Confusable: candidates whose holdout error is within a tenth of the gap of the best one's.
+  if (d.ranking.size() > 1) d.margin_A = d.ranking[1].holdout_rmse_after_A - best.holdout_rmse_after_A;
+  if (d.chosen >= 0) {
+    for (std::size_t k = 1; k < d.ranking.size(); ++k) {
+      const auto& row = d.ranking[k];
+      if (!row.status.ok() || row.name.find('+') != std::string::npos) continue;
+      // A structural candidate with the winning parameter free contains the parametric winner: it ties by
+      // construction and is not an alternative explanation.
+      if (IsParametric(best.name) && row.params.count(best.name.substr(6)) > 0) continue;
+      if (row.holdout_rmse_after_A - best.holdout_rmse_after_A < 0.1 * gap) d.confusable.push_back(row.name);
+    }
+  }
+
+  // Overlays: measured, nominal and the verdict's (or, when unknown, the best candidate's) fitted current.
+  auto fitted = FittedPlant(nominal, d.candidates.front(), best);
+  if (fitted.ok()) {
+    std::vector<SessionRun> runs;
+    for (const auto& run : ds.runs)
+      runs.push_back({run.supply_V, run.supply_pressure_Pa, run.sample_period_s, run.t_start_s, &run.gate});
+    auto reps = ReplaySession(*fitted, model::DriverParams{}, runs, opt.attribution.solver);
+    if (reps.ok()) {
+      for (std::size_t r = 0; r < ds.runs.size(); ++r) {
+        const auto& run = ds.runs[r];
+        Overlay ov;
+        ov.run = run.id;
+        ov.split = split[r];
+        const std::size_t n = run.i_A.size();
+        const std::size_t stride = std::max<std::size_t>(1, (n + opt.overlay_points - 1) / std::max<std::size_t>(opt.overlay_points, 1));
+        for (std::size_t k = 0; k < n; k += stride) {
+          ov.t_s.push_back(run.t_s[k]);
+          ov.measured_A.push_back(run.i_A[k]);
+          ov.nominal_A.push_back(nominal_i[r][k]);
+          ov.fitted_A.push_back((*reps)[r].i_A[k]);
+        }
+        d.overlays.push_back(std::move(ov));
+      }
+    }
+  }
   return d;
 }
+
+namespace {
+
+nlohmann::ordered_json RowJson(const CandidateResult& r) {
+  nlohmann::ordered_json row;
+  row["effect"] = r.name;
+  nlohmann::ordered_json params = nlohmann::ordered_json::object(), unc = nlohmann::ordered_json::object();
+  for (const auto& [k, v] : r.params) params[k] = v;
+  for (const auto& [k, v] : r.uncertainty) unc[k] = v;
+  row["params"] = params;
+  row["uncertainty"] = unc;
+  row["fit_rmse_A"] = r.fit_rmse_A;
+  row["holdout_rmse_before_A"] = r.holdout_rmse_before_A;
+  row["holdout_rmse_after_A"] = r.holdout_rmse_after_A;
+  row["closed"] = r.closed;
+  row["signature_match"] = r.signature_match;
+  row["score"] = std::isfinite(r.score) ? nlohmann::ordered_json(r.score) : nlohmann::ordered_json(nullptr);
+  row["evaluations"] = r.evaluations;
+  if (!r.status.ok()) row["error"] = r.status.message();
+  return row;
+}
+
+nlohmann::ordered_json NumOrNull(double v) { return std::isfinite(v) ? nlohmann::ordered_json(v) : nlohmann::ordered_json(nullptr); }
+
+}  // namespace
 
 std::string DiagnosisJson(const Diagnosis& d) {
   nlohmann::ordered_json j;
@@ -123,21 +371,58 @@ std::string DiagnosisJson(const Diagnosis& d) {
   j["gap"] = {{"fit_rmse_A", d.fit_rmse_A}, {"holdout_rmse_A", d.holdout_rmse_A}, {"significant", d.significant}};
   nlohmann::ordered_json where = nlohmann::ordered_json::array();
   for (const auto& w : d.where)
-    where.push_back({{"phase", std::string(PhaseName(w.phase))}, {"share", w.share}, {"rmse_A", w.rmse_A}});
+    where.push_back({{"phase", std::string(PhaseName(w.phase))}, {"share", w.share}, {"rmse_A", w.rmse_A},
+                     {"samples", w.samples}});
   j["where"] = where;
   nlohmann::ordered_json runs = nlohmann::ordered_json::array();
   for (const auto& r : d.runs) runs.push_back({{"id", r.id}, {"split", r.split}, {"rmse_A", r.rmse_A}});
   j["runs"] = runs;
-  j["ranking"] = nlohmann::ordered_json::array();
+  nlohmann::ordered_json lms = nlohmann::ordered_json::array();
+  for (const auto& l : d.landmarks) {
+    auto pair = [](const double v[2]) {
+      return nlohmann::ordered_json{{"measured", NumOrNull(v[0])}, {"nominal", NumOrNull(v[1])}};
+    };
+    lms.push_back({{"run", l.run}, {"dip_time_s", pair(l.dip_t_s)}, {"dip_depth_A", pair(l.dip_depth_A)},
+                   {"hold_current_A", pair(l.hold_current_A)}, {"decay_time_s", pair(l.decay_time_s)}});
+  }
+  j["landmarks"] = lms;
+  nlohmann::ordered_json trends = nlohmann::ordered_json::object();
+  for (const auto& [k, v] : d.trends) trends[k] = v;
+  j["trends"] = trends;
+  nlohmann::ordered_json ranking = nlohmann::ordered_json::array();
+  for (const auto& r : d.ranking) ranking.push_back(RowJson(r));
+  j["ranking"] = ranking;
+  if (d.parametric >= 0) j["parametric"] = RowJson(d.ranking[static_cast<std::size_t>(d.parametric)]);
   j["verdict"] = d.verdict;
+  j["verdict_reason"] = d.verdict_reason;
+  if (!d.ranking.empty()) {
+    j["confusable"] = d.confusable;
+    j["margin_A"] = d.margin_A;
+    const CandidateResult& best = d.ranking.front();
+    nlohmann::ordered_json phases = nlohmann::ordered_json::array();
+    for (int p = 0; p < kPhaseCount; ++p) {
+      if (d.phase_holdout_before_A[p] == 0.0) continue;
+      phases.push_back({{"phase", std::string(PhaseName(static_cast<Phase>(p)))},
+                        {"holdout_rmse_before_A", d.phase_holdout_before_A[p]},
+                        {"holdout_rmse_after_A", best.phase_holdout_after_A[p]}});
+    }
+    j["how_far"] = {{"candidate", best.name}, {"holdout_rmse_before_A", best.holdout_rmse_before_A},
+                    {"holdout_rmse_after_A", best.holdout_rmse_after_A}, {"closed", best.closed},
+                    {"phases", phases}};
+  }
   if (!d.split_note.empty()) j["split_note"] = d.split_note;
   if (!d.warnings.empty()) j["warnings"] = d.warnings;
+  nlohmann::ordered_json ovs = nlohmann::ordered_json::array();
+  for (const auto& o : d.overlays)
+    ovs.push_back({{"run", o.run}, {"split", o.split}, {"t_s", o.t_s}, {"measured_A", o.measured_A},
+                   {"nominal_A", o.nominal_A}, {"fitted_A", o.fitted_A}});
+  j["overlays"] = ovs;
   return j.dump(2);
 }
 
 std::string DiagnosisReport(const Diagnosis& d) {
   std::ostringstream os;
-  char buf[256];
+  char buf[320];
   std::snprintf(buf, sizeof buf, "model %s; noise floor %.2f mA (from the data)\n", d.model.c_str(), d.noise_floor_A * 1e3);
   os << buf;
   std::snprintf(buf, sizeof buf, "gap: fit runs %.2f mA RMS, holdout %.2f mA RMS: %s (threshold %.1fx noise)\n",
@@ -151,9 +436,67 @@ std::string DiagnosisReport(const Diagnosis& d) {
                   100.0 * w.share, w.rmse_A * 1e3, w.samples);
     os << buf;
   }
-  os << "verdict: " << d.verdict
-     << (d.verdict == "unknown" ? " (effect attribution is not implemented yet; the gap is real and localised above)" : "")
-     << "\n";
+  if (!d.trends.empty()) {
+    os << "trends (correlation of a run's residual RMS with):";
+    for (const auto& [k, v] : d.trends) {
+      std::snprintf(buf, sizeof buf, " %s %+.2f", k.c_str(), v);
+      os << buf;
+    }
+    os << "\n";
+  }
+  if (!d.landmarks.empty()) {
+    os << "landmarks, measured vs nominal (first gate-on of each run):\n";
+    auto ms = [](double v) { return std::isfinite(v) ? v * 1e3 : NAN; };
+    for (const auto& l : d.landmarks) {
+      std::snprintf(buf, sizeof buf,
+                    "  %-16s dip %6.2f/%6.2f ms depth %6.1f/%6.1f mA  hold %6.1f/%6.1f mA  decay %6.2f/%6.2f ms\n",
+                    l.run.c_str(), ms(l.dip_t_s[0]), ms(l.dip_t_s[1]), ms(l.dip_depth_A[0]), ms(l.dip_depth_A[1]),
+                    ms(l.hold_current_A[0]), ms(l.hold_current_A[1]), ms(l.decay_time_s[0]), ms(l.decay_time_s[1]));
+      os << buf;
+    }
+  }
+  if (!d.ranking.empty()) {
+    os << "which (fitted on the fit runs, scored on the holdout runs):\n";
+    os << "  rank  candidate                               holdout before -> after   closed  signature  fitted\n";
+    for (std::size_t k = 0; k < d.ranking.size(); ++k) {
+      const auto& r = d.ranking[k];
+      std::string params;
+      for (const auto& [name, v] : r.params) {
+        char pb[96];
+        auto u = r.uncertainty.find(name);
+        if (u != r.uncertainty.end())
+          std::snprintf(pb, sizeof pb, "%s%s=%.4g+-%.2g", params.empty() ? "" : " ", name.c_str(), v, u->second);
+        else
+          std::snprintf(pb, sizeof pb, "%s%s=%.4g", params.empty() ? "" : " ", name.c_str(), v);
+        params += pb;
+      }
+      if (!r.status.ok()) params = "failed: " + r.status.message();
+      std::snprintf(buf, sizeof buf, "  %4zu  %-38s %7.2f -> %7.2f mA  %5.0f %%  %8.2f  %s\n", k + 1, r.name.c_str(),
+                    r.holdout_rmse_before_A * 1e3, r.holdout_rmse_after_A * 1e3, 100.0 * r.closed, r.signature_match,
+                    params.c_str());
+      os << buf;
+    }
+    if (d.parametric >= 0) {
+      const auto& p = d.ranking[static_cast<std::size_t>(d.parametric)];
+      std::snprintf(buf, sizeof buf, "parameter-only re-fit: best %s closes %.0f %% (holdout %.2f mA)\n",
+                    p.name.c_str(), 100.0 * p.closed, p.holdout_rmse_after_A * 1e3);
+      os << buf;
+    }
+    const auto& best = d.ranking.front();
+    os << "how far (" << best.name << ", holdout RMSE per phase, before -> after):\n";
+    for (int p = 0; p < kPhaseCount; ++p) {
+      if (d.phase_holdout_before_A[p] == 0.0) continue;
+      std::snprintf(buf, sizeof buf, "  %-8s %7.2f -> %7.2f mA\n", std::string(PhaseName(static_cast<Phase>(p))).c_str(),
+                    d.phase_holdout_before_A[p] * 1e3, best.phase_holdout_after_A[p] * 1e3);
+      os << buf;
+    }
+    if (!d.confusable.empty()) {
+      os << "confusable with the verdict (the data cannot separate them):";
+      for (const auto& c : d.confusable) os << " " << c;
+      os << "\n";
+    }
+  }
+  os << "verdict: " << d.verdict << (d.verdict_reason.empty() ? "" : " (" + d.verdict_reason + ")") << "\n";
   for (const auto& w : d.warnings) os << "warning: " << w << "\n";
   return os.str();
 }

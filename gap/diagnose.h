@@ -1,17 +1,21 @@
-// The sim-to-real gap diagnosis (issue 5). This first stage answers "is there a gap, and where":
+// The sim-to-real gap diagnosis (issue 5; docs/gap.md):
 //   1. replay every run's recorded gate through the nominal model; residual = measured - simulated;
 //   2. the noise floor from the data itself: white-noise sigma from second differences,
 //      sqrt(mean(d2^2) / 6), which the smooth coil current barely contributes to at 50 kHz;
 //   3. the gap is significant when the fit runs' residual RMS exceeds kSignificance x the noise floor;
-//   4. where: each model phase's share of the residual energy and its RMSE, per split.
-// Attribution (fitting each catalogued effect) builds on this; until it runs, a significant gap is "unknown".
+//   4. where: each model phase's share of the residual energy and its RMSE, and landmarks per run;
+//   5. which: every catalogued candidate fitted on the fit runs (gap/attribution.h), ranked by holdout error
+//      and phase signature; pairs when no single effect closes the gap; confusable candidates named;
+//   6. how far: holdout RMSE before and after, overall and per phase, and the fraction of the gap closed.
 #pragma once
 
 #include <array>
+#include <cmath>
 #include <string>
 #include <vector>
 
 #include "common/status.h"
+#include "gap/attribution.h"
 #include "gap/dataset.h"
 #include "gap/replay.h"
 #include "model/params.h"
@@ -19,6 +23,7 @@
 namespace vb::gap {
 
 inline constexpr double kSignificance = 1.5;  // residual RMS / noise floor above which the gap is real
+inline constexpr double kExplained = 0.7;     // a candidate explains the gap when it closes this fraction of it
 
 struct PhaseStat {
   Phase phase;
@@ -33,6 +38,32 @@ struct RunGap {
   double rmse_A = 0.0;
 };
 
+// Measured, nominal and fitted current of one run, decimated for plots (the reports draw these).
+struct Overlay {
+  std::string run;
+  std::string split;
+  std::vector<double> t_s, measured_A, nominal_A, fitted_A;
+};
+
+// Landmarks of one run, measured vs nominal (NaN where the run has none): when the current's opening dip
+// happens and how deep it is, the current when the gate first turns off (hold current), and the time from
+// gate-off to the current reaching zero.
+struct Landmarks {
+  std::string run;
+  double dip_t_s[2] = {NAN, NAN};         // [measured, nominal]
+  double dip_depth_A[2] = {NAN, NAN};
+  double hold_current_A[2] = {NAN, NAN};
+  double decay_time_s[2] = {NAN, NAN};
+};
+
+struct DiagnoseOptions {
+  bool attribute = true;                 // fit the catalog (off: stop at "where")
+  std::vector<Candidate> candidates;     // empty: DefaultCandidates(nominal)
+  AttributionOptions attribution;
+  bool try_pairs = true;                 // when no single candidate explains the gap
+  std::size_t overlay_points = 600;      // per run
+};
+
 struct Diagnosis {
   std::string model;
   std::string split_note;          // how the split was made when the manifest gave none
@@ -42,11 +73,26 @@ struct Diagnosis {
   bool significant = false;
   std::vector<PhaseStat> where;    // over all runs, sorted by share
   std::vector<RunGap> runs;
-  std::string verdict;             // "none", or "unknown" until attribution runs
+  std::vector<Landmarks> landmarks;
+  // Trends of the per-run residual RMS: Pearson correlation with each run property (t_start_s, supply_V,
+  // supply_pressure_Pa, duty), over the runs where it varies.
+  std::vector<std::pair<std::string, double>> trends;
+
+  std::vector<CandidateResult> ranking;  // best first (singles, then pairs if tried)
+  std::vector<Candidate> candidates;     // the candidate behind each ranking row, same order
+  int parametric = -1;                   // index of the best param:* row (the parameter-only re-fit)
+  int chosen = -1;                       // index of the verdict's row (-1: none / unknown)
+  std::vector<std::string> confusable;   // candidates the data cannot separate from the verdict
+  double margin_A = 0.0;                 // runner-up's holdout RMSE minus the best's
+  std::array<double, kPhaseCount> phase_holdout_before_A{};
+  std::vector<Overlay> overlays;
+  std::string verdict;             // "none", an effect name, "a+b", or "unknown"
+  std::string verdict_reason;
   std::vector<std::string> warnings;
 };
 
-StatusOr<Diagnosis> Diagnose(const Dataset& dataset, const model::PlantParams& nominal);
+StatusOr<Diagnosis> Diagnose(const Dataset& dataset, const model::PlantParams& nominal,
+                             const DiagnoseOptions& options = {});
 
 // The diagnosis as JSON (the issue's output contract) and as a report for people.
 std::string DiagnosisJson(const Diagnosis& d);

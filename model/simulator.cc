@@ -160,22 +160,31 @@ Simulator::Magnetics Simulator::MagneticsAt(double i, double x) const {
     return m;
   }
   // A saturating core in parallel with the air path it can never lose (the core at mu_r -> 1):
-  //   lambda = ls tanh(Lc i / ls) + La i,   La = L / mu_r,  Lc = L - La,  ls = N A_e B_sat
-  // (small currents: lambda = L i). Co-energy W' = ls^2/Lc ln cosh(Lc i/ls) + La i^2 / 2, and at constant i
-  //   F = dW'/dx = (dLc/dx) (ls i tanh(u) / Lc - ls^2 / Lc^2 ln cosh u) + (dLa/dx) i^2 / 2,  u = Lc i / ls.
+  //   lambda = ls f(u) + La i,   u = Lc i / ls,   La = L / mu_r,  Lc = L - La,  ls = N A_e B_sat
+  // with the knee f Frohlich's f(u) = u / (1 + |u|) (the classic magnetisation-curve fit, a gradual knee) or
+  // tanh(u) (a sharp one); both give lambda = L i at small currents. Co-energy W' = ls^2/Lc G(u) + La i^2 / 2,
+  // G' = f (Frohlich: G = |u| - ln(1 + |u|); tanh: G = ln cosh u), so at constant i
+  //   F = dW'/dx = (dLc/dx) (ls i f(u) / Lc - ls^2 / Lc^2 G(u)) + (dLa/dx) i^2 / 2.
   // The air path keeps the incremental inductance >= La: deep saturation stays physical and non-stiff.
   const PlantParams& pp = plant_.params();
   const double air = pp.law == InductanceLaw::kReluctance ? 1.0 / std::max(pp.mu_r, 1.0) : 0.01;
   const double La = air * L, Lc = L - La, dLa = air * dLdx, dLc = dLdx - dLa;
   const double ls = pp.N_turns * pp.A_e_m2 * B_sat;
   const double u = Lc * i / ls;
-  const double th = std::tanh(u);
-  const double sech2 = 1.0 - th * th;
   const double au = std::abs(u);
-  const double lncosh = au + std::log1p(std::exp(-2.0 * au)) - M_LN2;  // stable for large |u|
-  m.dlambda_di = Lc * sech2 + La;
-  m.dlambda_dx = (dLc * sech2 + dLa) * i;
-  m.force_N = dLc * (ls * i * th / Lc - ls * ls / (Lc * Lc) * lncosh) + 0.5 * dLa * i * i;
+  double f, df, G;
+  if (pp.effects.saturation_tanh >= 0.5) {
+    f = std::tanh(u);
+    df = 1.0 - f * f;
+    G = au + std::log1p(std::exp(-2.0 * au)) - M_LN2;  // ln cosh u, stable for large |u|
+  } else {
+    f = u / (1.0 + au);
+    df = 1.0 / ((1.0 + au) * (1.0 + au));
+    G = au - std::log1p(au);
+  }
+  m.dlambda_di = Lc * df + La;
+  m.dlambda_dx = (dLc * df + dLa) * i;
+  m.force_N = dLc * (ls * i * f / Lc - ls * ls / (Lc * Lc) * G) + 0.5 * dLa * i * i;
   return m;
 }
 

@@ -5,10 +5,13 @@
 namespace vb::gap {
 namespace {
 
+// "Is there a gap, and where" only: attribution has its own tests (attribution_test.cc).
 StatusOr<Diagnosis> DiagnosePractice(const std::string& name) {
   auto ds = LoadDataset(std::string(VB_SHARED_DIR) + "/gapbench/practice/" + name);
   if (!ds.ok()) return ds.status();
-  return Diagnose(*ds, *model::Preset("taghizadeh2009"));
+  DiagnoseOptions opt;
+  opt.attribute = false;
+  return Diagnose(*ds, *model::Preset("taghizadeh2009"), opt);
 }
 
 // Effect-free data gets the verdict "none" (issue 5), and every labelled effect a significant gap.

@@ -149,31 +149,38 @@ namespace {
 // The saturated force is the co-energy derivative: compare with a finite difference of W'(i, x) = int lambda di
 // integrated numerically (Simpson), at currents from linear to deep saturation.
 TEST(Effects, SaturatedForceIsTheCoEnergyDerivative) {
-  PlantParams p = WithEffect("taghizadeh2009", "magnetic_saturation", {{"B_sat", 1.5}});
-  Plant plant(p);
-  Simulator sim(plant, DriverParams{}, Conditions{24.0, 0.0});
-  const double ls = p.N_turns * p.A_e_m2 * 1.5;
-  const double air = 1.0 / p.mu_r;  // the air path's share of L (docs/model.md)
-  auto lambda = [&](double i, double x) {
-    const double L = plant.L_H(x);
-    return ls * std::tanh((1.0 - air) * L * i / ls) + air * L * i;
-  };
-  auto coenergy = [&](double i, double x) {
-    const int n = 2000;  // Simpson on [0, i]
-    double s = lambda(0, x) + lambda(i, x);
-    for (int k = 1; k < n; ++k) s += (k % 2 ? 4.0 : 2.0) * lambda(i * k / n, x);
-    return s * i / (3.0 * n);
-  };
-  for (double i : {0.2, 0.8, 1.8, 3.0}) {
-    for (double x : {0.0, 0.2e-3, 0.33e-3}) {
-      const double h = 1e-7;
-      const double fd = (coenergy(i, x + h) - coenergy(i, x - h)) / (2 * h);
-      EXPECT_NEAR(sim.MagneticsAt(i, x).force_N, fd, 1e-6 * std::max(1.0, std::abs(fd))) << i << " A, " << x << " m";
+  for (const double tanh_knee : {0.0, 1.0}) {  // Frohlich's knee and the tanh knee
+    SCOPED_TRACE(tanh_knee > 0.5 ? "tanh" : "Frohlich");
+    PlantParams p = WithEffect("taghizadeh2009", "magnetic_saturation", {{"B_sat", 1.5}, {"tanh", tanh_knee}});
+    Plant plant(p);
+    Simulator sim(plant, DriverParams{}, Conditions{24.0, 0.0});
+    const double ls = p.N_turns * p.A_e_m2 * 1.5;
+    const double air = 1.0 / p.mu_r;  // the air path's share of L (docs/model.md)
+    auto knee = [&](double u) { return tanh_knee > 0.5 ? std::tanh(u) : u / (1.0 + std::abs(u)); };
+    auto lambda = [&](double i, double x) {
+      const double L = plant.L_H(x);
+      return ls * knee((1.0 - air) * L * i / ls) + air * L * i;
+    };
+    auto coenergy = [&](double i, double x) {
+      const int n = 2000;  // Simpson on [0, i]
+      double s = lambda(0, x) + lambda(i, x);
+      for (int k = 1; k < n; ++k) s += (k % 2 ? 4.0 : 2.0) * lambda(i * k / n, x);
+      return s * i / (3.0 * n);
+    };
+    for (double i : {0.2, 0.8, 1.8, 3.0}) {
+      for (double x : {0.0, 0.2e-3, 0.33e-3}) {
+        const double h = 1e-7;
+        const double fd = (coenergy(i, x + h) - coenergy(i, x - h)) / (2 * h);
+        EXPECT_NEAR(sim.MagneticsAt(i, x).force_N, fd, 1e-6 * std::max(1.0, std::abs(fd))) << i << " A, " << x << " m";
+        // and the flux slope the coil law uses
+        const double di = 1e-6;
+        EXPECT_NEAR(sim.MagneticsAt(i, x).dlambda_di, (lambda(i + di, x) - lambda(i - di, x)) / (2 * di), 1e-6);
+      }
     }
+    // Small currents: the linear law.
+    Plant nominal(*Preset("taghizadeh2009"));
+    EXPECT_NEAR(sim.MagneticsAt(0.001, 0.0).force_N, nominal.MagneticForce_N(0.001, 0.0), 1e-6);
   }
-  // Small currents: the linear law.
-  Plant nominal(*Preset("taghizadeh2009"));
-  EXPECT_NEAR(sim.MagneticsAt(0.01, 0.0).force_N, nominal.MagneticForce_N(0.01, 0.0), 1e-6);
 }
 
 // Saturation weakens the pull at high current and lowers the incremental inductance; the steady current is

@@ -1,0 +1,354 @@
+#include "gap/attribution.h"
+
+#include <nlopt.hpp>
+
+#include <Eigen/Dense>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <mutex>
+#include <thread>
+
+#include "gap/replay.h"
+
+namespace vb::gap {
+
+namespace {
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+// Sets one named parameter: "R" (nominal) or "effect.param".
+Status SetNamed(model::PlantParams* p, const std::string& name, double value) {
+  const size_t dot = name.find('.');
+  if (dot == std::string::npos) return model::SetParam(p, name, value);
+  const std::string effect = name.substr(0, dot), param = name.substr(dot + 1);
+  for (const auto& e : model::EffectCatalog()) {
+    if (e.name != effect) continue;
+    for (const auto& info : e.params) {
+      if (info.name != param) continue;
+      if (!std::isfinite(value) || value < info.min || value > info.max)
+        return Status::InvalidArgument(name + ": " + std::to_string(value) + " outside its bounds");
+      p->effects.*(info.field) = value;
+      return Status::Ok();
+    }
+  }
+  return Status::InvalidArgument(name + ": unknown effect parameter");
+}
+
+double FromUnit(const FreeParam& f, double u) {
+  u = std::clamp(u, 0.0, 1.0);
+  if (f.log_scale) return std::exp(std::log(f.lower) + u * (std::log(f.upper) - std::log(f.lower)));
+  return f.lower + u * (f.upper - f.lower);
+}
+
+double ToUnit(const FreeParam& f, double v) {
+  if (f.log_scale) return (std::log(v) - std::log(f.lower)) / (std::log(f.upper) - std::log(f.lower));
+  return (v - f.lower) / (f.upper - f.lower);
+}
+
+// The session's replay, compared with the measurement: squared errors of the fit runs and of the holdout runs,
+// and (with a nominal reference) the holdout errors and the change from the nominal model by nominal phase.
+struct Sse {
+  double fit = 0.0, holdout = 0.0;
+  std::size_t fit_n = 0, holdout_n = 0;
+  std::array<double, kPhaseCount> phase_holdout{}, diff{};
+  std::array<std::size_t, kPhaseCount> phase_holdout_n{};
+  bool ok = false;
+  Status status;
+};
+
+Sse Evaluate(const Dataset& ds, const std::vector<bool>& fit_mask, const model::PlantParams& plant,
+             const model::SolverOptions& solver, bool holdout_too, std::vector<double>* fit_residuals = nullptr,
+             const NominalReference* nominal = nullptr) {
+  Sse out;
+  // Only as far as needed: runs after the last one scored cannot change the score.
+  std::size_t last = 0;
+  for (std::size_t r = 0; r < ds.runs.size(); ++r)
+    if (fit_mask[r] || holdout_too) last = r;
+  std::vector<SessionRun> runs;
+  for (std::size_t r = 0; r <= last; ++r) {
+    const auto& run = ds.runs[r];
+    runs.push_back({run.supply_V, run.supply_pressure_Pa, run.sample_period_s, run.t_start_s, &run.gate});
+  }
+  auto reps = ReplaySession(plant, model::DriverParams{}, runs, solver);
+  if (!reps.ok()) {
+    out.status = reps.status();
+    return out;
+  }
+  for (std::size_t r = 0; r <= last; ++r) {
+    const auto& meas = ds.runs[r].i_A;
+    const auto& sim = (*reps)[r].i_A;
+    double e2 = 0.0;
+    for (std::size_t k = 0; k < meas.size(); ++k) {
+      const double e = meas[k] - sim[k];
+      e2 += e * e;
+      if (fit_mask[r] && fit_residuals != nullptr) fit_residuals->push_back(e);
+      if (nominal != nullptr) {
+        const int p = static_cast<int>(nominal->phase[r][k]);
+        const double d = sim[k] - nominal->i_A[r][k];
+        out.diff[p] += d * d;
+        if (!fit_mask[r]) {
+          out.phase_holdout[p] += e * e;
+          ++out.phase_holdout_n[p];
+        }
+      }
+    }
+    if (fit_mask[r]) {
+      out.fit += e2;
+      out.fit_n += meas.size();
+    } else {
+      out.holdout += e2;
+      out.holdout_n += meas.size();
+    }
+  }
+  out.ok = true;
+  return out;
+}
+
+double Rms(double sse, std::size_t n) { return n > 0 ? std::sqrt(sse / static_cast<double>(n)) : 0.0; }
+
+}  // namespace
+
+StatusOr<NominalReference> ReplayNominal(const Dataset& ds, const model::PlantParams& nominal,
+                                         const model::SolverOptions& solver) {
+  std::vector<SessionRun> runs;
+  for (const auto& run : ds.runs)
+    runs.push_back({run.supply_V, run.supply_pressure_Pa, run.sample_period_s, run.t_start_s, &run.gate});
+  auto reps = ReplaySession(nominal, model::DriverParams{}, runs, solver);
+  if (!reps.ok()) return reps.status();
+  NominalReference ref;
+  std::array<double, kPhaseCount> e2{};
+  for (std::size_t r = 0; r < ds.runs.size(); ++r) {
+    for (std::size_t k = 0; k < ds.runs[r].i_A.size(); ++k) {
+      const double e = ds.runs[r].i_A[k] - (*reps)[r].i_A[k];
+      e2[static_cast<int>((*reps)[r].phase[k])] += e * e;
+    }
+    ref.i_A.push_back(std::move((*reps)[r].i_A));
+    ref.phase.push_back(std::move((*reps)[r].phase));
+  }
+  double total = 0.0;
+  for (double e : e2) total += e;
+  for (int p = 0; p < kPhaseCount; ++p) ref.residual_share[p] = total > 0.0 ? e2[p] / total : 0.0;
+  return ref;
+}
+
+namespace {
+
+CandidateResult Fit(const Dataset& ds, const std::vector<bool>& fit_mask, const model::PlantParams& nominal,
+                    const NominalReference& ref, const Candidate& c, double holdout_before, double noise,
+                    const AttributionOptions& opt) {
+  CandidateResult res;
+  res.name = c.name;
+  const std::size_t k = c.params.size();
+  std::vector<double> u(k);
+  for (std::size_t j = 0; j < k; ++j) u[j] = std::clamp(ToUnit(c.params[j], c.params[j].initial), 0.0, 1.0);
+  auto values_of = [&](const std::vector<double>& uu) {
+    std::vector<double> v(k);
+    for (std::size_t j = 0; j < k; ++j) v[j] = FromUnit(c.params[j], uu[j]);
+    return v;
+  };
+  struct Ctx {
+    const Dataset* ds;
+    const std::vector<bool>* mask;
+    const model::PlantParams* nominal;
+    const Candidate* c;
+    const AttributionOptions* opt;
+    std::function<std::vector<double>(const std::vector<double>&)> values_of;
+    int evaluations = 0;
+    Status last_error;
+  } ctx{&ds, &fit_mask, &nominal, &c, &opt, values_of, 0, Status::Ok()};
+  auto objective = [](const std::vector<double>& x, std::vector<double>& /*grad*/, void* data) -> double {
+    auto* cx = static_cast<Ctx*>(data);
+    ++cx->evaluations;
+    auto plant = ApplyCandidate(*cx->nominal, *cx->c, cx->values_of(x));
+    if (!plant.ok()) {
+      cx->last_error = plant.status();
+      return 1e30;
+    }
+    const Sse s = Evaluate(*cx->ds, *cx->mask, *plant, cx->opt->solver, false);
+    if (!s.ok) {
+      cx->last_error = s.status;
+      return 1e30;
+    }
+    return s.fit / static_cast<double>(std::max<std::size_t>(s.fit_n, 1));
+  };
+  if (k > 0) {
+    nlopt::opt o(nlopt::LN_BOBYQA, static_cast<unsigned>(k));
+    o.set_lower_bounds(std::vector<double>(k, 0.0));
+    o.set_upper_bounds(std::vector<double>(k, 1.0));
+    o.set_min_objective(objective, &ctx);
+    o.set_xtol_rel(opt.xtol_rel);
+    o.set_maxeval(opt.max_evaluations);
+    o.set_initial_step(std::vector<double>(k, 0.15));
+    double minf = 0.0;
+    try {
+      o.optimize(u, minf);
+    } catch (const std::exception& e) {
+      // Out of evaluations or a roundoff stop: keep the best point NLopt reached (u holds it).
+      (void)e;
+    }
+  }
+  res.evaluations = ctx.evaluations;
+  const std::vector<double> best = values_of(u);
+  auto plant = ApplyCandidate(nominal, c, best);
+  if (!plant.ok()) {
+    res.status = plant.status();
+    res.score = kInf;
+    return res;
+  }
+  std::vector<double> residuals;
+  const Sse s = Evaluate(ds, fit_mask, *plant, opt.solver, true, &residuals, &ref);
+  if (!s.ok) {
+    res.status = s.status;
+    res.score = kInf;
+    return res;
+  }
+  for (std::size_t j = 0; j < k; ++j) res.params[c.params[j].name] = best[j];
+  res.fit_rmse_A = Rms(s.fit, s.fit_n);
+  res.holdout_rmse_before_A = holdout_before;
+  res.holdout_rmse_after_A = Rms(s.holdout, s.holdout_n);
+  double diff_total = 0.0;
+  for (double d : s.diff) diff_total += d;
+  for (int p = 0; p < kPhaseCount; ++p) {
+    res.phase_holdout_after_A[p] = Rms(s.phase_holdout[p], s.phase_holdout_n[p]);
+    res.signature[p] = diff_total > 0.0 ? s.diff[p] / diff_total : 0.0;
+    res.signature_match += std::sqrt(res.signature[p] * ref.residual_share[p]);
+  }
+  const double denom = holdout_before - noise;
+  res.closed = denom > 0.0 ? std::clamp((holdout_before - res.holdout_rmse_after_A) / denom, 0.0, 1.0) : 0.0;
+  res.score = res.holdout_rmse_after_A * (1.0 + opt.complexity_penalty * static_cast<double>(k));
+
+  // 1-sigma from the Gauss-Newton approximation: cov = s^2 (J^T J)^-1, J by forward differences.
+  if (k > 0 && !residuals.empty()) {
+    const std::size_t n = residuals.size();
+    Eigen::MatrixXd J(n, k);
+    bool ok = true;
+    for (std::size_t j = 0; j < k && ok; ++j) {
+      std::vector<double> v = best;
+      const double h = std::max(1e-6, 1e-3 * std::abs(best[j]));
+      v[j] = best[j] + h <= c.params[j].upper ? best[j] + h : best[j] - h;
+      const double step = v[j] - best[j];
+      auto pj = ApplyCandidate(nominal, c, v);
+      std::vector<double> rj;
+      if (!pj.ok() || !Evaluate(ds, fit_mask, *pj, opt.solver, false, &rj).ok || rj.size() != n) {
+        ok = false;
+        break;
+      }
+      for (std::size_t i = 0; i < n; ++i) J(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(j)) =
+          -(rj[i] - residuals[i]) / step;  // d(sim)/dp = -d(residual)/dp
+    }
+    if (ok && n > k) {
+      const double s2 = s.fit / static_cast<double>(n - k);
+      const Eigen::MatrixXd JtJ = J.transpose() * J;
+      Eigen::FullPivLU<Eigen::MatrixXd> lu(JtJ);
+      if (lu.isInvertible()) {
+        const Eigen::MatrixXd cov = s2 * lu.inverse();
+        for (std::size_t j = 0; j < k; ++j)
+          res.uncertainty[c.params[j].name] = std::sqrt(std::max(0.0, cov(static_cast<Eigen::Index>(j), static_cast<Eigen::Index>(j))));
+      }
+    }
+  }
+  return res;
+}
+
+}  // namespace
+
+StatusOr<model::PlantParams> ApplyCandidate(const model::PlantParams& nominal, const Candidate& c,
+                                            const std::vector<double>& values) {
+  model::PlantParams p = nominal;
+  for (const auto& e : c.effects) VB_RETURN_IF_ERROR(model::AddEffect(&p.effects, e, {}).WithContext(c.name));
+  if (values.size() != c.params.size()) return Status::Internal("candidate " + c.name + ": value count");
+  for (std::size_t j = 0; j < values.size(); ++j) VB_RETURN_IF_ERROR(SetNamed(&p, c.params[j].name, values[j]));
+  // Static friction is at least the kinetic one.
+  p.effects.friction_F_s_N = std::max(p.effects.friction_F_s_N, p.effects.friction_F_c_N);
+  return p;
+}
+
+std::vector<Candidate> DefaultCandidates(const model::PlantParams& nominal) {
+  std::vector<Candidate> out;
+  auto around = [](double v, double lo_f, double hi_f) { return std::make_pair(v * lo_f, v * hi_f); };
+  // The parametric part of the gap: each uncertain nominal parameter alone, +/-40 %.
+  for (const char* name : {"R", "k", "delta", "b", "mu_r", "x_t", "m", "l_c", "A_e"}) {
+    const double v = *model::GetParam(nominal, name);
+    auto [lo, hi] = around(v, 0.6, 1.4);
+    out.push_back({std::string("param:") + name, {}, {{name, lo, hi, v, false}}});
+  }
+  // Structural effects, each with R free too.
+  const auto [rlo, rhi] = around(nominal.R_ohm, 0.8, 1.2);
+  const FreeParam R{"R", rlo, rhi, nominal.R_ohm, false};
+  out.push_back({"coil_heating", {"coil_heating"},
+                 {R, {"coil_heating.R_th", 0.05, 100.0, 2.0, true}, {"coil_heating.C_th", 0.01, 100.0, 1.0, true}}});
+  out.push_back({"supply_resistance", {"supply_resistance"}, {R, {"supply_resistance.R_s", 0.01, 20.0, 0.5, true}}});
+  out.push_back({"eddy_currents", {"eddy_currents"}, {R, {"eddy_currents.R_p", 10.0, 1e5, 500.0, true}}});
+  out.push_back({"sensor_lag", {"sensor_lag"},
+                 {R, {"sensor_lag.tau_s", 1e-6, 5e-3, 1e-4, true}, {"sensor_lag.delay_s", 0.0, 1e-3, 2e-5, false}}});
+  out.push_back({"magnetic_saturation", {"magnetic_saturation"},
+                 {R, {"magnetic_saturation.B_sat", 0.3, 20.0, 3.0, true}}});
+  out.push_back({"residual_magnetism", {"residual_magnetism"},
+                 {R, {"residual_magnetism.w", 0.002, 1.0, 0.05, true}, {"residual_magnetism.alpha", 0.05, 1.0, 0.4, false}}});
+  out.push_back({"coulomb_friction", {"coulomb_friction"},
+                 {R, {"coulomb_friction.F_c", 0.0, 10.0, 1.0, false}, {"coulomb_friction.F_s", 0.0, 15.0, 1.5, false}}});
+  out.push_back({"end_stop_bounce", {"end_stop_bounce"}, {R, {"end_stop_bounce.e", 0.0, 0.95, 0.4, false}}});
+  return out;
+}
+
+StatusOr<std::vector<CandidateResult>> Attribute(const Dataset& ds, const std::vector<bool>& fit_mask,
+                                                 const model::PlantParams& nominal,
+                                                 const std::vector<Candidate>& candidates, double noise_floor_A,
+                                                 const AttributionOptions& opt) {
+  if (fit_mask.size() != ds.runs.size()) return Status::InvalidArgument("fit_mask: one entry per run");
+  if (std::find(fit_mask.begin(), fit_mask.end(), true) == fit_mask.end())
+    return Status::InvalidArgument("split: no fit runs to fit on");
+  auto ref = ReplayNominal(ds, nominal, opt.solver);
+  if (!ref.ok()) return ref.status().WithContext("nominal replay");
+  double hold_e2 = 0.0;
+  std::size_t hold_n = 0;
+  for (std::size_t r = 0; r < ds.runs.size(); ++r) {
+    if (fit_mask[r]) continue;
+    for (std::size_t k = 0; k < ds.runs[r].i_A.size(); ++k) {
+      const double e = ds.runs[r].i_A[k] - ref->i_A[r][k];
+      hold_e2 += e * e;
+    }
+    hold_n += ds.runs[r].i_A.size();
+  }
+  const double holdout_before = Rms(hold_e2, hold_n);
+  std::vector<CandidateResult> results(candidates.size());
+  std::atomic<std::size_t> next{0};
+  auto worker = [&]() {
+    for (std::size_t i = next++; i < candidates.size(); i = next++)
+      results[i] = Fit(ds, fit_mask, nominal, *ref, candidates[i], holdout_before, noise_floor_A, opt);
+  };
+  std::vector<std::thread> pool;
+  const int threads = std::clamp(opt.threads, 1, static_cast<int>(std::max<std::size_t>(candidates.size(), 1)));
+  for (int t = 0; t < threads; ++t) pool.emplace_back(worker);
+  for (auto& t : pool) t.join();
+  std::stable_sort(results.begin(), results.end(),
+                   [](const CandidateResult& a, const CandidateResult& b) { return a.score < b.score; });
+  return results;
+}
+
+Candidate PairCandidate(const Candidate& a, const Candidate& b) {
+  Candidate c{a.name + "+" + b.name, a.effects, a.params};
+  c.effects.insert(c.effects.end(), b.effects.begin(), b.effects.end());
+  for (const auto& p : b.params) {
+    const bool dup = std::any_of(c.params.begin(), c.params.end(), [&](const FreeParam& q) { return q.name == p.name; });
+    if (!dup) c.params.push_back(p);
+  }
+  return c;
+}
+
+StatusOr<model::PlantParams> FittedPlant(const model::PlantParams& nominal, const Candidate& c,
+                                         const CandidateResult& r) {
+  std::vector<double> values;
+  for (const auto& p : c.params) {
+    auto it = r.params.find(p.name);
+    if (it == r.params.end()) return Status::Internal("candidate " + c.name + ": no fitted " + p.name);
+    values.push_back(it->second);
+  }
+  return ApplyCandidate(nominal, c, values);
+}
+
+}  // namespace vb::gap

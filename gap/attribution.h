@@ -1,0 +1,101 @@
+// Attribution: which unmodelled effect explains the gap (issue 5, "Which" and "How far").
+//
+// Every candidate is fitted on the fit runs only, by a bounded derivative-free optimiser (NLopt BOBYQA) in
+// normalised coordinates (log-scaled where a parameter spans decades), replaying the whole session so slow
+// states carry over (holdout runs' gate commands drive those states; their measured currents never enter
+// the objective). Candidates: each nominal parameter alone (param:NAME: the parametric part of the gap), and
+// each catalogued effect with the coil resistance free too, so no effect wins merely by absorbing an R
+// offset. A candidate's worth is its error on the holdout runs, with a small complexity penalty.
+#pragma once
+
+#include <array>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "common/status.h"
+#include "gap/dataset.h"
+#include "gap/replay.h"
+#include "model/params.h"
+#include "model/simulator.h"
+
+namespace vb::gap {
+
+struct FreeParam {
+  std::string name;     // a nominal parameter ("R") or an effect's ("eddy_currents.R_p")
+  double lower = 0.0, upper = 0.0, initial = 0.0;
+  bool log_scale = false;
+};
+
+struct Candidate {
+  std::string name;                  // the output name: "eddy_currents", "param:R", "a+b"
+  std::vector<std::string> effects;  // effects switched on
+  std::vector<FreeParam> params;
+};
+
+struct CandidateResult {
+  std::string name;
+  std::map<std::string, double> params;       // fitted values
+  std::map<std::string, double> uncertainty;  // 1-sigma (Gauss-Newton at the optimum; optimistic with
+                                              // correlated residuals)
+  double fit_rmse_A = 0.0;
+  double holdout_rmse_before_A = 0.0;
+  double holdout_rmse_after_A = 0.0;
+  double closed = 0.0;        // (before - after) / (before - noise floor), in [0, 1]
+  double score = 0.0;         // holdout RMSE x (1 + complexity_penalty x parameters): lower is better
+  // Holdout RMSE after the fit in each phase of the nominal model (phases where the holdout runs have samples).
+  std::array<double, kPhaseCount> phase_holdout_after_A{};
+  // How the fitted effect changes the model, phase by phase: the share of the energy of (fitted - nominal)
+  // in each nominal phase, over every run (the effect's model-derived signature).
+  std::array<double, kPhaseCount> signature{};
+  double signature_match = 0.0;  // Bhattacharyya coefficient of that signature and the residual's, in [0, 1]
+  int evaluations = 0;
+  Status status;              // a candidate whose replay failed is ranked last with its reason
+};
+
+struct AttributionOptions {
+  int max_evaluations = 150;          // per candidate
+  double xtol_rel = 1e-3;             // on the normalised parameters
+  int threads = 2;                    // candidates fitted concurrently
+  double complexity_penalty = 0.01;   // per free parameter, relative to the holdout RMSE
+  model::SolverOptions solver = FastSolver();
+  static model::SolverOptions FastSolver() {
+    model::SolverOptions s;
+    s.rel_tol = 1e-7;                 // plenty at a 2 mA noise floor, and 2-3x fewer steps
+    s.abs_tol = 1e-9;
+    return s;
+  }
+};
+
+// The catalog as candidates, around a nominal plant.
+std::vector<Candidate> DefaultCandidates(const model::PlantParams& nominal);
+
+// Applies a candidate's effects and parameter values to a copy of the nominal plant.
+StatusOr<model::PlantParams> ApplyCandidate(const model::PlantParams& nominal, const Candidate& c,
+                                            const std::vector<double>& values);
+
+// The nominal model's replay of every run, which the fitted candidates are compared with.
+struct NominalReference {
+  std::vector<std::vector<double>> i_A;     // per run
+  std::vector<std::vector<Phase>> phase;    // per run
+  std::array<double, kPhaseCount> residual_share{};  // share of (measured - nominal)^2 by phase, all runs
+};
+StatusOr<NominalReference> ReplayNominal(const Dataset& ds, const model::PlantParams& nominal,
+                                         const model::SolverOptions& solver);
+
+// Fits every candidate; results sorted by score, best first. fit_mask[r]: run r may be used to fit; the
+// measured currents of the other runs never reach the objective.
+StatusOr<std::vector<CandidateResult>> Attribute(const Dataset& ds, const std::vector<bool>& fit_mask,
+                                                 const model::PlantParams& nominal,
+                                                 const std::vector<Candidate>& candidates, double noise_floor_A,
+                                                 const AttributionOptions& options = {});
+
+// Pairs of structural effects (each with both effects' parameters and R free), for when no single effect
+// closes the gap.
+Candidate PairCandidate(const Candidate& a, const Candidate& b);
+
+// The session replayed with a candidate's fitted values (for overlays and the improved model).
+StatusOr<model::PlantParams> FittedPlant(const model::PlantParams& nominal, const Candidate& c,
+                                         const CandidateResult& r);
+
+}  // namespace vb::gap
