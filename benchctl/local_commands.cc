@@ -14,10 +14,8 @@
 #include "db/store.h"
 #include "experiment/compare.h"
 #include "experiment/spec.h"
-#include "gap/diagnose.h"
 #include "model/params.h"
 
-#include <google/protobuf/util/json_util.h>
 
 namespace vb::benchctl {
 namespace {
@@ -269,39 +267,6 @@ int CmdRun(const std::string& spec_path, bool local, const std::string& store_pa
     std::cout << "\n" << vb::experiment::ComparisonTable(vb::experiment::Compare(Records(*results)));
   }
   return exit_code;
-}
-
-int CmdDiagnose(const std::string& dataset_dir, const std::string& model, const std::string& json_path) {
-  const auto presets = vb::model::PresetNames();
-  auto ds = vb::gap::LoadDataset(dataset_dir, presets);
-  if (!ds.ok()) return Fail(ds.status());
-  const std::string which = model.empty() ? ds->model : model;
-  StatusOr<vb::model::PlantParams> plant = vb::model::Preset(which);
-  if (!plant.ok()) {
-    // Not a preset: a model file (ModelSpec JSON), e.g. one written by --emit-model or identify.
-    std::ifstream in(which);
-    if (!in) return Fail(Status::InvalidArgument("--model: '" + which + "' is neither a preset nor a readable file"));
-    std::stringstream ss;
-    ss << in.rdbuf();
-    valvebench::v1::ModelSpec spec;
-    auto st = google::protobuf::util::JsonStringToMessage(ss.str(), &spec);
-    if (!st.ok()) return Fail(Status::InvalidArgument(which + ": " + std::string(st.message())));
-    plant = vb::experiment::BuildPlant(spec);
-    if (!plant.ok()) return Fail(plant.status().WithContext(which));
-  }
-  auto d = vb::gap::Diagnose(*ds, *plant);
-  if (!d.ok()) return Fail(d.status().WithContext(dataset_dir));
-  if (json_path == "-") {
-    std::cout << vb::gap::DiagnosisJson(*d) << "\n";
-    return kExitOk;
-  }
-  if (!json_path.empty()) {
-    std::ofstream out(json_path);
-    out << vb::gap::DiagnosisJson(*d) << "\n";
-    if (!out) return Fail(Status::Unavailable(json_path + ": cannot write"));
-  }
-  std::cout << vb::gap::DiagnosisReport(*d);
-  return kExitOk;
 }
 
 }  // namespace vb::benchctl

@@ -11,10 +11,6 @@ int CmdRun(const std::string& spec_path, bool local, const std::string& store_pa
            bool json, bool csv, bool realtime);
 // compare RESULTS.json (from run --json), or compare --local SPEC (runs it first).
 int CmdCompare(const std::string& input, bool local, const std::string& store_path, bool json, bool csv);
-// diagnose DATASET_DIR: the sim-to-real gap of a valve-runs/1 dataset against a model (a preset name or a
-// model file in ModelSpec JSON; default: the dataset's own). json_path: "" = a report for people, "-" =
-// JSON on stdout, else JSON into that file (and the report on stdout).
-int CmdDiagnose(const std::string& dataset_dir, const std::string& model, const std::string& json_path);
 
 // compare --local --batch B: a batch recorded in the local store.
 int CmdCompareLocalBatch(const std::string& store_path, std::int64_t batch, bool json, bool csv);

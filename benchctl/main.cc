@@ -11,6 +11,7 @@
 #include <iostream>
 
 #include "benchctl/cli_common.h"
+#include "benchctl/gap_commands.h"
 #include "benchctl/local_commands.h"
 #include "benchctl/local_run.h"
 #include "benchctl/remote.h"
@@ -101,6 +102,17 @@ int main(int argc, char** argv) {
   diagnose->add_option("--json", diag_json, "write the diagnosis as JSON to FILE ('-' or no FILE: stdout)")
       ->expected(0, 1)
       ->default_str("-");
+  std::string emit_model;
+  diagnose->add_option("--emit-model", emit_model, "write the improved model (ModelSpec JSON an emulated bench loads)");
+  std::vector<std::string> identify_params;
+  std::string identify_out;
+  bool identify_json = false;
+  auto* identify = app.add_subcommand("identify", "fit chosen nominal parameters to measured runs (seed 000 sec. 4)");
+  identify->add_option("dataset", dataset_dir, "dataset directory (valve-runs/1)")->required();
+  identify->add_option("--params", identify_params, "parameters to fit, e.g. R,mu_r,b,x_t")->delimiter(',')->required();
+  identify->add_option("--model", diag_model, "preset name or model file (ModelSpec JSON); default: the dataset's");
+  identify->add_option("--out", identify_out, "write the identified model (ModelSpec JSON)");
+  identify->add_flag("--json", identify_json, "machine-readable output on stdout");
 
   std::string compare_input;
   bool compare_local = false;
@@ -146,8 +158,11 @@ int main(int argc, char** argv) {
   }
   if (diagnose->parsed()) {
     const bool json_given = diagnose->count("--json") > 0;
-    return vb::benchctl::CmdDiagnose(dataset_dir, diag_model, json_given ? (diag_json.empty() ? "-" : diag_json) : "");
+    return vb::benchctl::CmdDiagnose(dataset_dir, diag_model, json_given ? (diag_json.empty() ? "-" : diag_json) : "",
+                                     emit_model);
   }
+  if (identify->parsed()) return vb::benchctl::CmdIdentify(dataset_dir, diag_model, identify_params, identify_out,
+                                                           identify_json || json);
   if (compare->parsed()) {
     if (compare_local && batch != 0) {
       if (store_path.empty()) return Fail(Status::InvalidArgument("--batch with --local needs the local store (--db)"));

@@ -1,5 +1,6 @@
 // benchctl as a user runs it: exit codes, JSON, CSV, errors naming the field.
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 #include <unistd.h>
 
 #include "../common/run_command.h"
@@ -95,19 +96,43 @@ TEST(BenchctlCli, DiagnoseReportsJsonAndRefusesBadData) {
   if (none.out.find("does not exist") != std::string::npos) GTEST_SKIP() << "no practice data";
   ASSERT_EQ(none.exit_code, 0) << none.out;
   EXPECT_NE(none.out.find("\"verdict\": \"none\""), std::string::npos) << none.out;
-  const std::string file = ::testing::TempDir() + "/p05.json";
-  Result gap = RunBenchctl("diagnose " + practice + "p05 --json " + file);
+  // A gap, its cause, and the improved model: with it, the same data shows no gap any more.
+  const std::string file = ::testing::TempDir() + "/p07.json", improved = ::testing::TempDir() + "/p07-model.json";
+  Result gap = RunBenchctl("diagnose " + practice + "p07 --json " + file + " --emit-model " + improved);
   ASSERT_EQ(gap.exit_code, 0) << gap.out;
   EXPECT_NE(gap.out.find("SIGNIFICANT"), std::string::npos) << gap.out;
+  EXPECT_NE(gap.out.find("verdict: supply_resistance"), std::string::npos) << gap.out;
   std::ifstream in(file);
   std::stringstream ss;
   ss << in.rdbuf();
   EXPECT_NE(ss.str().find("\"significant\": true"), std::string::npos);
+  EXPECT_NE(ss.str().find("\"verdict\": \"supply_resistance\""), std::string::npos);
+  Result after = RunBenchctl("diagnose " + practice + "p07 --model " + improved + " --json");
+  ASSERT_EQ(after.exit_code, 0) << after.out;
+  EXPECT_NE(after.out.find("\"verdict\": \"none\""), std::string::npos) << after.out;
   Result bad = RunBenchctl("diagnose /nonexistent/dataset");
   EXPECT_EQ(bad.exit_code, 2) << bad.out;
   Result bad_model = RunBenchctl("diagnose " + practice + "p12 --model nosuchmodel");
   EXPECT_EQ(bad_model.exit_code, 2) << bad_model.out;
   EXPECT_NE(bad_model.out.find("--model"), std::string::npos) << bad_model.out;
+}
+
+// identify: a bounded fit of named parameters; p05's coil resistance is 12 % high (14.56 ohm).
+TEST(BenchctlCli, IdentifyFitsNamedParametersAndWritesAModel) {
+  const std::string practice = std::string(VB_SHARED_DIR) + "/gapbench/practice/";
+  const std::string out = ::testing::TempDir() + "/p05-identified.json";
+  Result r = RunBenchctl("identify " + practice + "p05 --params R --out " + out + " --json");
+  if (r.out.find("does not exist") != std::string::npos) GTEST_SKIP() << "no practice data";
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  auto j = nlohmann::json::parse(r.out.substr(r.out.find('{')));
+  EXPECT_NEAR(j["params"]["R"]["value"].get<double>(), 14.56, 0.05);
+  EXPECT_GT(j["params"]["R"]["sigma"].get<double>(), 0.0);
+  EXPECT_LT(j["holdout_rmse_after_A"].get<double>(), 3e-3);
+  Result check = RunBenchctl("diagnose " + practice + "p05 --model " + out + " --json");
+  EXPECT_NE(check.out.find("\"verdict\": \"none\""), std::string::npos) << check.out;
+  Result bad = RunBenchctl("identify " + practice + "p05 --params R,flux_capacitor");
+  EXPECT_EQ(bad.exit_code, 2) << bad.out;
+  EXPECT_NE(bad.out.find("flux_capacitor"), std::string::npos) << bad.out;
 }
 
 }  // namespace
