@@ -23,7 +23,7 @@
 namespace vb::gap {
 
 inline constexpr double kSignificance = 1.5;  // residual RMS / noise floor above which the gap is real
-inline constexpr double kExplained = 0.7;     // a candidate explains the gap when it closes this fraction of it
+inline constexpr double kExplained = 0.6;     // a candidate explains the gap when it closes this fraction of it (docs/gap.md)
 
 struct PhaseStat {
   Phase phase;
