@@ -1,8 +1,13 @@
 // benchctl's sim-to-real gap commands (issue 5): diagnose and identify, locally on a valve-runs/1 dataset.
 #pragma once
 
+#include <cstdint>
 #include <string>
 #include <vector>
+
+namespace vb::client {
+class Client;
+}
 
 namespace vb::benchctl {
 
@@ -17,5 +22,14 @@ int CmdDiagnose(const std::string& dataset_dir, const std::string& model, const 
 // model as ModelSpec JSON.
 int CmdIdentify(const std::string& dataset_dir, const std::string& model, const std::vector<std::string>& params,
                 const std::string& out_path, bool json);
+
+// diagnose --runs ID,...: runs stored on the server (imported datasets, or runs of a low-side bench).
+// Imported runs keep their t_start_s and split (tags); other runs take t_start_s from their start times
+// and the diagnosis makes its own split.
+int RemoteDiagnose(client::Client& c, const std::vector<std::int64_t>& run_ids, const std::string& model,
+                   const std::string& json_path, const std::string& emit_model);
+
+// import DATASET_DIR: validates the dataset locally, then stores its runs on the server as one batch.
+int RemoteImport(client::Client& c, const std::string& dataset_dir, bool json);
 
 }  // namespace vb::benchctl

@@ -97,13 +97,21 @@ int main(int argc, char** argv) {
 
   std::string dataset_dir, diag_model, diag_json;
   auto* diagnose = app.add_subcommand("diagnose", "where and why measured runs (valve-runs/1) differ from the model");
-  diagnose->add_option("dataset", dataset_dir, "dataset directory (manifest.json + one CSV per run)")->required();
+  std::vector<std::int64_t> diag_runs;
+  diagnose->add_option("dataset", dataset_dir, "dataset directory (manifest.json + one CSV per run)");
+  diagnose->add_option("--runs", diag_runs, "server: diagnose these stored runs instead")->delimiter(',');
+  diagnose->add_option("--server", server, "bench server address host:port (or VALVEBENCH_SERVER)");
+  diagnose->add_option("--token", token, "bearer token (or VALVEBENCH_TOKEN)");
+  diagnose->add_option("--tls-ca", tls_ca_file, "PEM file of the CA that signed the server's certificate");
   diagnose->add_option("--model", diag_model, "preset name or model file (ModelSpec JSON); default: the dataset's");
   diagnose->add_option("--json", diag_json, "write the diagnosis as JSON to FILE ('-' or no FILE: stdout)")
       ->expected(0, 1)
       ->default_str("-");
   std::string emit_model;
   diagnose->add_option("--emit-model", emit_model, "write the improved model (ModelSpec JSON an emulated bench loads)");
+  auto* import = app.add_subcommand("import", "store a dataset's runs (valve-runs/1) on the server");
+  import->add_option("dataset", dataset_dir, "dataset directory (manifest.json + one CSV per run)")->required();
+  common(import, false);
   std::vector<std::string> identify_params;
   std::string identify_out;
   bool identify_json = false;
@@ -158,8 +166,15 @@ int main(int argc, char** argv) {
   }
   if (diagnose->parsed()) {
     const bool json_given = diagnose->count("--json") > 0;
-    return vb::benchctl::CmdDiagnose(dataset_dir, diag_model, json_given ? (diag_json.empty() ? "-" : diag_json) : "",
-                                     emit_model);
+    const std::string json_to = json_given ? (diag_json.empty() ? "-" : diag_json) : "";
+    if (!diag_runs.empty()) {
+      if (!dataset_dir.empty()) return Fail(Status::InvalidArgument("diagnose: give a dataset directory or --runs, not both"));
+      if (server.empty()) return need_server();
+      auto c = make_client();
+      return vb::benchctl::RemoteDiagnose(*c, diag_runs, diag_model, json_to, emit_model);
+    }
+    if (dataset_dir.empty()) return Fail(Status::InvalidArgument("diagnose: give a dataset directory or --runs ID,..."));
+    return vb::benchctl::CmdDiagnose(dataset_dir, diag_model, json_to, emit_model);
   }
   if (identify->parsed()) return vb::benchctl::CmdIdentify(dataset_dir, diag_model, identify_params, identify_out,
                                                            identify_json || json);
@@ -192,5 +207,6 @@ int main(int argc, char** argv) {
   if (cancel->parsed()) return vb::benchctl::RemoteCancel(*c, run_id, reason, out);
   if (exp->parsed()) return vb::benchctl::RemoteExport(*c, run_id, export_csv);
   if (benches->parsed()) return vb::benchctl::RemoteBenches(*c, out);
+  if (import->parsed()) return vb::benchctl::RemoteImport(*c, dataset_dir, json);
   return kExitBadInput;
 }

@@ -170,4 +170,13 @@ StatusOr<v1::ListBenchesResponse> Client::Benches() {
   return resp;
 }
 
+StatusOr<v1::SubmitRunResponse> Client::ImportRuns(const v1::ImportRunsRequest& request, double deadline_s) {
+  grpc::ClientContext ctx;
+  Prepare(&ctx, deadline_s);
+  v1::SubmitRunResponse resp;
+  auto st = stub_->ImportRuns(&ctx, request, &resp);
+  if (!st.ok()) return FromGrpc(st);
+  return resp;
+}
+
 }  // namespace vb::client

@@ -46,6 +46,8 @@ class Client {
   StatusOr<FetchedTrace> GetTrace(std::int64_t run_id, double deadline_s = 60.0);
   StatusOr<valvebench::v1::CompareRunsResponse> Compare(std::int64_t batch_id, const std::vector<std::int64_t>& run_ids);
   StatusOr<valvebench::v1::ListBenchesResponse> Benches();
+  StatusOr<valvebench::v1::SubmitRunResponse> ImportRuns(const valvebench::v1::ImportRunsRequest& request,
+                                                         double deadline_s = 300.0);
 
  private:
   void Prepare(grpc::ClientContext* ctx, double deadline_s) const;

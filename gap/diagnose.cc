@@ -254,8 +254,11 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds, const model::PlantParams& nomina
       if (c.name == name) return &c;
     return nullptr;
   };
-  if (opt.try_pairs && !d.ranking.empty() && d.ranking.front().closed < kExplained) {
-    // No single effect closes the gap: pairs of the three best structural effects.
+  // Pairs of the three best structural effects when no single one explains the gap down to the noise: it
+  // leaves more than a significant residual on the holdout runs, or closes less than kExplained.
+  const CandidateResult single = d.ranking.empty() ? CandidateResult{} : d.ranking.front();
+  if (opt.try_pairs && !d.ranking.empty() &&
+      (single.closed < kExplained || single.holdout_rmse_after_A > kSignificance * d.noise_floor_A)) {
     std::vector<const Candidate*> top;
     for (const auto& row : d.ranking)
       if (!IsParametric(row.name) && row.status.ok() && top.size() < 3) top.push_back(candidate_of(row.name));
@@ -265,7 +268,13 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds, const model::PlantParams& nomina
     if (!pairs.empty()) {
       auto pr = Attribute(ds, fit_mask, nominal, pairs, d.noise_floor_A, opt.attribution);
       if (!pr.ok()) return pr.status();
-      for (auto& row : *pr) d.ranking.push_back(std::move(row));
+      for (auto& row : *pr) {
+        // A pair must be decisive: close at least half of what the best single effect leaves above the noise.
+        // Otherwise its second effect is fitting the first one's imperfect form, and it ranks behind.
+        const double decisive = single.holdout_rmse_after_A - 0.5 * (single.holdout_rmse_after_A - d.noise_floor_A);
+        if (!(row.holdout_rmse_after_A <= decisive)) row.score = std::max(row.score, single.score * (1.0 + 1e-9));
+        d.ranking.push_back(std::move(row));
+      }
       d.candidates.insert(d.candidates.end(), pairs.begin(), pairs.end());
       std::stable_sort(d.ranking.begin(), d.ranking.end(),
                        [](const CandidateResult& a, const CandidateResult& b) { return a.score < b.score; });

@@ -62,6 +62,9 @@ class BenchServiceImpl final : public valvebench::v1::BenchService::Service {
                            valvebench::v1::CompareRunsResponse* resp) override;
   grpc::Status ListBenches(grpc::ServerContext* ctx, const valvebench::v1::ListBenchesRequest* req,
                            valvebench::v1::ListBenchesResponse* resp) override;
+  // server/import.cc
+  grpc::Status ImportRuns(grpc::ServerContext* ctx, const valvebench::v1::ImportRunsRequest* req,
+                          valvebench::v1::SubmitRunResponse* resp) override;
 
  private:
   grpc::Status Authorize(grpc::ServerContext* ctx, Role need, Principal* who) const;

@@ -159,7 +159,7 @@ TEST(Attribution, TriesPairsWhenNoSingleEffectCloses) {
   auto d = Diagnose(ds, *model::Preset("taghizadeh2009"), Options({"supply_resistance", "sensor_lag"}, true));
   ASSERT_TRUE(d.ok());
   EXPECT_TRUE(d->verdict == "supply_resistance+sensor_lag" || d->verdict == "sensor_lag+supply_resistance")
-      << d->verdict;
+      << DiagnosisReport(*d);
 }
 
 // Effect-free data: no attribution at all, the verdict is none.

@@ -1,5 +1,8 @@
 // benchctl as a user or a CI script drives a real server: exit codes, data on stdout, errors naming the field.
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <filesystem>
 
 #include <array>
 #include <cstdio>
@@ -82,6 +85,70 @@ TEST(BenchctlRemote, RunWaitQueueShowExportCompareBenches) {
   server.Kill(SIGTERM);
   Result gone = Benchctl("benches " + op);
   EXPECT_EQ(gone.exit_code, 3) << gone.out;
+}
+
+// A measured dataset stored on the server and diagnosed from there: the same verdict as from the directory,
+// the holdout split kept, the stored current equal to the CSV's.
+TEST(BenchctlRemote, ImportThenDiagnoseStoredRuns) {
+  const std::string p07 = std::string(VB_SHARED_DIR) + "/gapbench/practice/p07";
+  if (!std::filesystem::exists(p07)) GTEST_SKIP() << "no practice data";
+  const std::string dir = ::testing::TempDir() + "/vb-import-" + std::to_string(::getpid());
+  std::filesystem::remove_all(dir);
+  testing::ServerProcess server(dir);
+  const std::string addr = server.Start();
+  ASSERT_FALSE(addr.empty()) << server.Log();
+  const std::string op = "--server " + addr + " --token " + testing::kOperatorToken;
+
+  Result imported = Benchctl("import " + p07 + " --json " + op);
+  ASSERT_EQ(imported.exit_code, 0) << imported.out;
+  const auto j = nlohmann::json::parse(imported.out);
+  std::string ids;
+  for (const auto& id : j["run_ids"]) {
+    if (!ids.empty()) ids += ',';
+    ids += std::to_string(id.get<std::int64_t>());
+  }
+  ASSERT_EQ(j["run_ids"].size(), 12u);  // p07 has 12 runs
+
+  // The stored trace is the CSV's current.
+  const std::string first = std::to_string(j["run_ids"][0].get<std::int64_t>());
+  Result exp = Benchctl("export " + first + " --csv " + dir + "/first.csv " + op);
+  ASSERT_EQ(exp.exit_code, 0) << exp.out;
+  std::ifstream manifest_in(p07 + "/manifest.json");
+  const auto manifest = nlohmann::json::parse(manifest_in);
+  std::ifstream stored(dir + "/first.csv"), original(p07 + "/" + manifest["runs"][0]["file"].get<std::string>());
+  std::string a, b;
+  std::getline(stored, a);
+  std::getline(original, b);
+  EXPECT_EQ(a.rfind("t_s,gate,i_A", 0), 0u) << a;
+  std::size_t rows = 0, mismatches = 0;
+  while (std::getline(stored, a) && std::getline(original, b)) {
+    ++rows;
+    double ts, gs, is, to, go, io;
+    if (std::sscanf(a.c_str(), "%lf,%lf,%lf", &ts, &gs, &is) != 3 || std::sscanf(b.c_str(), "%lf,%lf,%lf", &to, &go, &io) != 3 ||
+        std::abs(is - io) > 1e-12 || gs != go || std::abs(ts - to) > 1e-9)
+      ++mismatches;
+  }
+  EXPECT_GT(rows, 1000u);
+  EXPECT_EQ(mismatches, 0u);
+  Result show = Benchctl("show " + first + " --json " + op);
+  EXPECT_NE(show.out.find("split:" + manifest["runs"][0]["split"].get<std::string>()), std::string::npos) << show.out;
+
+  Result d = Benchctl("diagnose --runs " + ids + " --json " + op);
+  ASSERT_EQ(d.exit_code, 0) << d.out;
+  const auto diag = nlohmann::json::parse(d.out);
+  EXPECT_EQ(diag["verdict"], "supply_resistance");
+  EXPECT_FALSE(diag.contains("split_note")) << "the manifest's split travels with the runs";
+
+  // A bad dataset is refused before anything is sent, naming the file and line.
+  const std::string bad = dir + "/bad";
+  std::filesystem::create_directories(bad);
+  std::ofstream(bad + "/manifest.json") << R"({"format": "valve-runs/1", "model": "taghizadeh2009", "runs": [)"
+                                        << R"({"id": "r", "file": "r.csv", "supply_V": 24, "supply_pressure_Pa": 0,)"
+                                        << R"( "t_start_s": 0}]})";
+  std::ofstream(bad + "/r.csv") << "t_s,gate,i_A\n0,0,0\n2e-05,2,0.1\n4e-05,1,0.2\n";
+  Result refused = Benchctl("import " + bad + " " + op);
+  EXPECT_EQ(refused.exit_code, 2) << refused.out;
+  EXPECT_NE(refused.out.find("r.csv:3"), std::string::npos) << refused.out;
 }
 
 }  // namespace
