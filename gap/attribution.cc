@@ -6,10 +6,9 @@
 
 #include <algorithm>
 #include <atomic>
-#include <chrono>
 #include <cmath>
+#include <functional>
 #include <limits>
-#include <mutex>
 #include <thread>
 
 #include "gap/replay.h"
