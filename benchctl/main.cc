@@ -13,6 +13,7 @@
 #include "benchctl/cli_common.h"
 #include "benchctl/local_commands.h"
 #include "benchctl/local_run.h"
+#include "benchctl/regress_commands.h"
 #include "benchctl/remote.h"
 
 #include <fstream>
@@ -113,6 +114,9 @@ int main(int argc, char** argv) {
   common(compare, true);
   local_store(compare);
 
+  // baseline, regress, nights (benchctl/regress_commands.cc).
+  vb::benchctl::RegressCli regress_cli(&app, {&json, &server, &token, &tls_ca_file, &store_path});
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -137,6 +141,7 @@ int main(int argc, char** argv) {
   };
 
   if (no_store) store_path.clear();
+  if (regress_cli.parsed()) return regress_cli.Run(make_client);
   if (run->parsed()) {
     if (local || server.empty()) return vb::benchctl::CmdRun(spec_path, local, store_path, trace_csv, json, csv, realtime);
     if (!trace_csv.empty() || realtime)
