@@ -1,4 +1,4 @@
-// benchctl baseline / regress / nights (docs/regress.md).
+// benchctl baseline / regress (docs/regress.md).
 #include "benchctl/regress_commands.h"
 
 #include <cmath>
@@ -248,14 +248,9 @@ RegressCli::RegressCli(CLI::App* app, SharedOptions shared) : shared_(shared) {
   regress_->add_option("--junit", junit_path_, "write JUnit XML here");
   regress_->add_option("--seed", seed_, "jitter seed (default: the suite's seed)");
   common(regress_);
-
-  nights_ = app->add_subcommand("nights", "recent scheduled nights and their verdicts");
-  nights_->add_option("--limit", limit_, "at most this many (1-1000)")->check(CLI::Range(1, 1000));
-  nights_->add_flag("--local", local_, "nights recorded in the local store");
-  common(nights_);
 }
 
-bool RegressCli::parsed() const { return baseline_->parsed() || regress_->parsed() || nights_->parsed(); }
+bool RegressCli::parsed() const { return baseline_->parsed() || regress_->parsed(); }
 
 int RegressCli::Run(const ClientFactory& make_client) {
   const bool json = *shared_.json;
@@ -400,29 +395,6 @@ int RegressCli::Run(const ClientFactory& make_client) {
     return r.regressed() ? kExitRunFailed : kExitOk;
   }
 
-  if (nights_->parsed()) {
-    if (!server.empty())
-      return Fail(Status::FailedPrecondition("nights --server: not served yet (see docs/regress.md); use --local "
-                                             "for nights recorded in the local store"));
-    auto store = OpenStore(store_path);
-    if (!store.ok()) return Fail(store.status());
-    auto list = (*store)->ListRegressions(true, limit_);
-    if (!list.ok()) return Fail(list.status());
-    if (json) {
-      Json a = Json::array();
-      for (const auto& n : *list)
-        a.push_back({{"id", n.id}, {"night", n.night}, {"suite", n.suite}, {"baseline", n.baseline_name},
-                     {"baseline_version", n.baseline_version}, {"batch_id", n.batch_id}, {"verdict", n.verdict}});
-      std::cout << a.dump(2) << "\n";
-    } else {
-      if (list->empty()) std::printf("no nights recorded\n");
-      for (const auto& n : *list)
-        std::printf("%s  %-10s suite %-16s baseline %s v%d  batch %lld  (regression %lld)\n", n.night.c_str(),
-                    n.verdict.c_str(), n.suite.c_str(), n.baseline_name.c_str(), n.baseline_version,
-                    static_cast<long long>(n.batch_id), static_cast<long long>(n.id));
-    }
-    return kExitOk;
-  }
   return kExitBadInput;
 }
 

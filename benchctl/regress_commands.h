@@ -2,7 +2,6 @@
 //   baseline set NAME (--batch B | --suite SUITE) [--local | --server ADDR] [--note TEXT]
 //   baseline list | baseline show NAME [--version N]     (--json of show is the baseline file format)
 //   regress SUITE --baseline NAME|FILE.json [--local | --server ADDR] [--junit FILE] [--json] [--seed N]
-//   nights [--server ADDR | --local] [--limit N]
 // Baselines and regression results live in the local store (--db); a baseline can also be a JSON file (CI).
 // Exit codes: 0 nothing regressed; 1 a regression or a failed run; 2 bad input or refused; 3 environment.
 #pragma once
@@ -42,11 +41,9 @@ class RegressCli {
   CLI::App* baseline_list_ = nullptr;
   CLI::App* baseline_show_ = nullptr;
   CLI::App* regress_ = nullptr;
-  CLI::App* nights_ = nullptr;
   std::string name_, suite_path_, note_, baseline_arg_, junit_path_;
   std::int64_t batch_ = 0;
   int version_ = 0;
-  int limit_ = 20;
   std::uint64_t seed_ = 0;
   bool local_ = false;
 };

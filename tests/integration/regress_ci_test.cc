@@ -43,6 +43,17 @@ TEST(CiRegression, SmallSuiteAgainstTheEmulatedBenchServerPasses) {
   EXPECT_NE(xml.find("failures=\"0\""), std::string::npos) << xml;
   EXPECT_NE(xml.find("name=\"mean_position_pct\""), std::string::npos) << xml;
 
+  // A report of the server's batch: comparison, static map and traces fetched over gRPC.
+  const std::string html = dir + "/batch.html";
+  auto rep = testing::RunCommand(std::string(VB_BENCHCTL) + " report --batch 1 --server " + addr + " --token " +
+                                 testing::kViewerToken + " --html " + html + " --json");
+  EXPECT_EQ(rep.exit_code, 0) << rep.out;
+  const std::string page = ReadAll(html);
+  EXPECT_NE(page.find("\"kind\":\"scatter\""), std::string::npos);
+  EXPECT_NE(page.find("Static map"), std::string::npos);
+  EXPECT_NE(page.find("\"kind\":\"traces\",\"title\":\"Traces (drag to zoom, double-click to reset)\",\"runs\":[{"),
+            std::string::npos);
+
   // The same suite with the PI law's integral gain cut tenfold fails against the same baseline.
   std::filesystem::copy_file(examples + "ci.json", dir + "/ci.json");
   std::string spec = ReadAll(examples + "ci-current-hold.json");
