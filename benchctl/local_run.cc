@@ -50,11 +50,17 @@ StatusOr<std::vector<LocalRunResult>> RunLocal(const experiment::ExperimentSpec&
                                                const std::string& store_path) {
   auto points = experiment::ExpandSweep(spec);
   if (!points.ok()) return points.status();
+  return RunLocalPoints(*points, spec.name(), experiment::SpecToJson(spec, false), realtime, keep_traces, store_path);
+}
+
+StatusOr<std::vector<LocalRunResult>> RunLocalPoints(const std::vector<experiment::ExperimentSpec>& points,
+                                                     const std::string& batch_name, const std::string& batch_json,
+                                                     bool realtime, bool keep_traces, const std::string& store_path) {
   // Build everything first: a bad point fails the whole submission before anything runs or is stored.
   std::vector<experiment::Experiment> exps;
-  for (size_t k = 0; k < points->size(); ++k) {
-    auto e = experiment::BuildExperiment((*points)[k]);
-    if (!e.ok()) return points->size() > 1 ? e.status().WithContext("run " + std::to_string(k)) : e.status();
+  for (size_t k = 0; k < points.size(); ++k) {
+    auto e = experiment::BuildExperiment(points[k]);
+    if (!e.ok()) return points.size() > 1 ? e.status().WithContext("run " + std::to_string(k)) : e.status();
     if (realtime) e->run.realtime = true;
     exps.push_back(std::move(e.value()));
   }
@@ -85,8 +91,7 @@ StatusOr<std::vector<LocalRunResult>> RunLocal(const experiment::ExperimentSpec&
     records.push_back(std::move(rec));
   }
   std::vector<std::int64_t> ids;
-  auto batch = (*store)->SubmitBatch(submitter, spec.name(), experiment::SpecToJson(spec, false), std::move(records),
-                                     &ids);
+  auto batch = (*store)->SubmitBatch(submitter, batch_name, batch_json, std::move(records), &ids);
   if (!batch.ok()) return batch.status().WithContext("local store " + store_path);
   std::map<std::int64_t, size_t> index_of;
   for (size_t k = 0; k < ids.size(); ++k) index_of[ids[k]] = k;

@@ -26,6 +26,11 @@ struct LocalRunResult {
 StatusOr<std::vector<LocalRunResult>> RunLocal(const experiment::ExperimentSpec& spec, bool realtime, bool keep_traces,
                                                const std::string& store_path = "");
 
+// The same for points already expanded (single-run specs, e.g. a regression suite's runs), recorded as one batch.
+StatusOr<std::vector<LocalRunResult>> RunLocalPoints(const std::vector<experiment::ExperimentSpec>& points,
+                                                     const std::string& batch_name, const std::string& batch_json,
+                                                     bool realtime, bool keep_traces, const std::string& store_path);
+
 // Where local runs are recorded: $VALVEBENCH_DB, else ~/.local/share/valvebench/local.db, else ./valvebench-local.db.
 std::string DefaultLocalStorePath();
 

@@ -14,6 +14,8 @@
 #include "benchctl/gap_commands.h"
 #include "benchctl/local_commands.h"
 #include "benchctl/local_run.h"
+#include "benchctl/regress_commands.h"
+#include "benchctl/report_commands.h"
 #include "benchctl/remote.h"
 
 #include <fstream>
@@ -133,6 +135,10 @@ int main(int argc, char** argv) {
   common(compare, true);
   local_store(compare);
 
+  // baseline, regress, nights (benchctl/regress_commands.cc).
+  vb::benchctl::RegressCli regress_cli(&app, {&json, &server, &token, &tls_ca_file, &store_path});
+  vb::benchctl::ReportCli report_cli(&app, {&json, &server, &token, &tls_ca_file, &store_path});
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -157,6 +163,8 @@ int main(int argc, char** argv) {
   };
 
   if (no_store) store_path.clear();
+  if (regress_cli.parsed()) return regress_cli.Run(make_client);
+  if (report_cli.parsed()) return report_cli.Run(make_client);
   if (run->parsed()) {
     if (local || server.empty()) return vb::benchctl::CmdRun(spec_path, local, store_path, trace_csv, json, csv, realtime);
     if (!trace_csv.empty() || realtime)

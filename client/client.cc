@@ -62,6 +62,19 @@ StatusOr<v1::SubmitRunResponse> Client::Submit(const v1::ExperimentSpec& spec, c
   return resp;
 }
 
+StatusOr<v1::SubmitRunResponse> Client::SubmitBatch(const std::vector<v1::ExperimentSpec>& specs,
+                                                   const std::string& batch_name) {
+  grpc::ClientContext ctx;
+  Prepare(&ctx, opt_.deadline_s);
+  v1::SubmitBatchRequest req;
+  for (const auto& s : specs) *req.add_specs() = s;
+  req.set_batch_name(batch_name);
+  v1::SubmitRunResponse resp;
+  auto st = stub_->SubmitBatch(&ctx, req, &resp);
+  if (!st.ok()) return FromGrpc(st);
+  return resp;
+}
+
 StatusOr<v1::Run> Client::GetRun(std::int64_t run_id) {
   grpc::ClientContext ctx;
   Prepare(&ctx, opt_.deadline_s);

@@ -80,8 +80,47 @@ CREATE TABLE trace_chunks (
 );
 )sql";
 
+// Version 2. A baseline version is immutable: (name, version) is unique and nothing updates or deletes rows, so
+// `baseline set` under an existing name can only add version n+1. Metric rows like the runs' metrics table.
+constexpr const char* kV2 = R"sql(
+CREATE TABLE baselines (
+  id       INTEGER PRIMARY KEY AUTOINCREMENT,
+  name     TEXT NOT NULL CHECK (length(name) > 0),
+  version  INTEGER NOT NULL CHECK (version >= 1),
+  created  REAL NOT NULL,
+  source   TEXT NOT NULL DEFAULT '',
+  note     TEXT NOT NULL DEFAULT '',
+  UNIQUE (name, version)
+);
+
+CREATE TABLE baseline_metrics (
+  baseline_id INTEGER NOT NULL REFERENCES baselines (id) ON DELETE CASCADE,
+  case_name   TEXT NOT NULL,
+  metric      TEXT NOT NULL,
+  mean        REAL NOT NULL,
+  spread      REAL NOT NULL CHECK (spread >= 0),
+  n           INTEGER NOT NULL CHECK (n >= 1),
+  PRIMARY KEY (baseline_id, case_name, metric)
+) WITHOUT ROWID;
+
+CREATE TABLE regressions (
+  id               INTEGER PRIMARY KEY AUTOINCREMENT,
+  suite            TEXT NOT NULL,
+  baseline_name    TEXT NOT NULL,
+  baseline_version INTEGER NOT NULL,
+  batch_id         INTEGER NOT NULL DEFAULT 0,
+  night            TEXT NOT NULL DEFAULT '',
+  created          REAL NOT NULL,
+  verdict          TEXT NOT NULL,
+  result_json      TEXT NOT NULL
+);
+CREATE INDEX regressions_night ON regressions (night, id);
+)sql";
+
 constexpr Migration kMigrations[] = {
     {1, "initial schema: batches, runs, run_tags, status_history, metrics, trace_chunks", kV1},
+    {2, "baselines, baseline_metrics, regressions (benchctl baseline / regress / nights)",
+     kV2},
 };
 
 }  // namespace

@@ -9,6 +9,7 @@
 #include <utility>
 
 #include "db/checkpointer.h"
+#include "db/regress_tables.h"
 #include "db/schema.h"
 #include "db/sqlite_conn.h"
 #include "db/text.h"
@@ -153,6 +154,13 @@ class SqliteStore final : public Store {
   StatusOr<std::vector<TraceChunk>> ReadTrace(std::int64_t run_id) override;
   Status ForEachTraceChunk(std::int64_t run_id,
                            const std::function<Status(const TraceChunk&, std::int64_t)>& fn) override;
+  StatusOr<std::int32_t> SaveBaseline(const std::string& name, const std::string& source, const std::string& note,
+                                      const std::vector<BaselineEntry>& entries) override;
+  StatusOr<BaselineRecord> GetBaseline(const std::string& name, std::int32_t version) override;
+  StatusOr<std::vector<BaselineRecord>> ListBaselines() override;
+  StatusOr<std::int64_t> SaveRegression(const RegressionRecord& record) override;
+  StatusOr<RegressionRecord> GetRegression(std::int64_t id) override;
+  StatusOr<std::vector<RegressionRecord>> ListRegressions(bool nights_only, std::int32_t limit) override;
 
  private:
   // Helpers run inside the caller's transaction.
@@ -732,6 +740,64 @@ StatusOr<std::unique_ptr<Store>> Store::Open(const std::string& path) {
   StatusOr<int> migrated = schema::Migrate(&conn, schema::Migrations(), path);
   if (!migrated.ok()) return migrated.status();  // Migrate() names the file
   return std::unique_ptr<Store>(std::make_unique<SqliteStore>(std::move(conn), *migrated));
+}
+
+
+// Baselines and regressions: the SQL is in db/regress_tables.cc; each method is one transaction here.
+StatusOr<std::int32_t> SqliteStore::SaveBaseline(const std::string& name, const std::string& source,
+                                                 const std::string& note, const std::vector<BaselineEntry>& entries) {
+  VB_RETURN_IF_ERROR(regress_tables::ValidateBaseline(name, entries));
+  Transaction txn(&conn_);
+  VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kWrite));
+  VB_DB_ASSIGN_OR_RETURN(const int version,
+                         regress_tables::InsertBaseline(&conn_, name, source, note, entries, NowUnixS()));
+  VB_RETURN_IF_ERROR(txn.Commit());
+  return version;
+}
+
+StatusOr<BaselineRecord> SqliteStore::GetBaseline(const std::string& name, std::int32_t version) {
+  Transaction txn(&conn_);
+  VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
+  VB_DB_ASSIGN_OR_RETURN(BaselineRecord b, regress_tables::LoadBaseline(&conn_, name, version));
+  VB_RETURN_IF_ERROR(txn.Commit());
+  return b;
+}
+
+StatusOr<std::vector<BaselineRecord>> SqliteStore::ListBaselines() {
+  Transaction txn(&conn_);
+  VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
+  VB_DB_ASSIGN_OR_RETURN(std::vector<BaselineRecord> out, regress_tables::ListBaselines(&conn_));
+  VB_RETURN_IF_ERROR(txn.Commit());
+  return out;
+}
+
+StatusOr<std::int64_t> SqliteStore::SaveRegression(const RegressionRecord& record) {
+  if (record.suite.empty()) return Status::InvalidArgument("regression.suite: must not be empty");
+  if (record.verdict.empty()) return Status::InvalidArgument("regression.verdict: must not be empty");
+  Transaction txn(&conn_);
+  VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kWrite));
+  VB_DB_ASSIGN_OR_RETURN(const std::int64_t id, regress_tables::InsertRegression(&conn_, record, NowUnixS()));
+  VB_RETURN_IF_ERROR(txn.Commit());
+  return id;
+}
+
+StatusOr<RegressionRecord> SqliteStore::GetRegression(std::int64_t id) {
+  Transaction txn(&conn_);
+  VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
+  VB_DB_ASSIGN_OR_RETURN(RegressionRecord r, regress_tables::LoadRegression(&conn_, id));
+  VB_RETURN_IF_ERROR(txn.Commit());
+  return r;
+}
+
+StatusOr<std::vector<RegressionRecord>> SqliteStore::ListRegressions(bool nights_only, std::int32_t limit) {
+  if (limit < 1 || limit > kMaxListLimit)
+    return Status::InvalidArgument(Cat("limit: must be in 1..", kMaxListLimit, ", got ", limit));
+  Transaction txn(&conn_);
+  VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
+  VB_DB_ASSIGN_OR_RETURN(std::vector<RegressionRecord> out,
+                         regress_tables::ListRegressions(&conn_, nights_only, limit));
+  VB_RETURN_IF_ERROR(txn.Commit());
+  return out;
 }
 
 }  // namespace vb::db

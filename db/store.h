@@ -74,6 +74,35 @@ struct RunFilter {
   std::int32_t limit = 100;         // page size (1..1000)
 };
 
+// A named, versioned set of metric values with their spread over repeats (benchctl baseline; docs/regress.md).
+struct BaselineEntry {
+  std::string case_name;            // spec name + sweep tags (repeats share it)
+  std::string metric;
+  double mean = 0.0;
+  double spread = 0.0;              // sample standard deviation over repeats
+  std::int32_t n = 0;               // runs with a finite value
+};
+struct BaselineRecord {
+  std::string name;
+  std::int32_t version = 0;         // 1, 2, ...: a new set under an existing name is the next version
+  double created_unix_s = 0.0;
+  std::string source;               // where the values came from, e.g. "local batch 12"
+  std::string note;
+  std::vector<BaselineEntry> entries;  // empty in listings
+};
+// A regression run's outcome (the full comparison is kept as JSON for reports).
+struct RegressionRecord {
+  std::int64_t id = 0;
+  std::string suite;
+  std::string baseline_name;
+  std::int32_t baseline_version = 0;
+  std::int64_t batch_id = 0;        // 0 = runs not in this store
+  std::string night;                // YYYY-MM-DD for a scheduled night, "" otherwise
+  double created_unix_s = 0.0;
+  std::string verdict;              // "passed" | "regressed" | "error"
+  std::string result_json;          // empty in listings
+};
+
 class Store {
  public:
   // Opens (creating if needed) the database at path, with WAL, foreign keys and busy timeout on, and migrates
@@ -119,6 +148,17 @@ class Store {
   // error fn returns, and returns it.
   virtual Status ForEachTraceChunk(
       std::int64_t run_id, const std::function<Status(const TraceChunk& chunk, std::int64_t total_samples)>& fn) = 0;
+  // Baselines (schema v2): never overwritten; saving under an existing name adds the next version, returned.
+  virtual StatusOr<std::int32_t> SaveBaseline(const std::string& name, const std::string& source,
+                                              const std::string& note, const std::vector<BaselineEntry>& entries) = 0;
+  // version 0 = the newest. NotFound naming the name (and version).
+  virtual StatusOr<BaselineRecord> GetBaseline(const std::string& name, std::int32_t version) = 0;
+  // Every version of every baseline, without entries, by name then version.
+  virtual StatusOr<std::vector<BaselineRecord>> ListBaselines() = 0;
+  // Regression results: returns the new id. List: newest first, at most `limit` (1..1000), nights only if asked.
+  virtual StatusOr<std::int64_t> SaveRegression(const RegressionRecord& record) = 0;
+  virtual StatusOr<RegressionRecord> GetRegression(std::int64_t id) = 0;
+  virtual StatusOr<std::vector<RegressionRecord>> ListRegressions(bool nights_only, std::int32_t limit) = 0;
 };
 
 }  // namespace vb::db

@@ -178,12 +178,13 @@ TEST(StoreSchemaTest, NewDatabaseIsAtTheCurrentVersionInWalMode) {
     auto store = OpenOrDie(path);
     ASSERT_NE(store, nullptr);
     EXPECT_EQ(store->schema_version(), schema::CurrentVersion());
-    EXPECT_EQ(schema::CurrentVersion(), 1);
+    EXPECT_EQ(schema::CurrentVersion(), 2);  // v2: baselines and regressions
   }
   RawDb raw(path);
   EXPECT_EQ(raw.Int("PRAGMA user_version"), schema::CurrentVersion());
   EXPECT_EQ(raw.Text("PRAGMA journal_mode"), "wal");  // persistent in the file
-  for (const char* table : {"batches", "runs", "run_tags", "status_history", "metrics", "trace_chunks"}) {
+  for (const char* table : {"batches", "runs", "run_tags", "status_history", "metrics", "trace_chunks", "baselines",
+                            "baseline_metrics", "regressions"}) {
     EXPECT_EQ(raw.Int(Cat("SELECT count(*) FROM sqlite_schema WHERE type = 'table' AND name = '", table, "'")), 1)
         << table;
   }
@@ -194,7 +195,7 @@ TEST(StoreSchemaTest, NewDatabaseIsAtTheCurrentVersionInWalMode) {
 TEST(StoreSchemaTest, InMemoryDatabaseWorks) {
   auto store = OpenOrDie(":memory:");
   ASSERT_NE(store, nullptr);
-  EXPECT_EQ(store->schema_version(), 1);
+  EXPECT_EQ(store->schema_version(), schema::CurrentVersion());
   auto ids = Submit(*store, {MakeRun("a")});
   ASSERT_EQ(ids.size(), 1u);
   EXPECT_EQ(ClaimId(*store), ids[0]);
@@ -209,7 +210,7 @@ TEST(StoreSchemaTest, ReopeningKeepsDataAndVersion) {
   }
   auto store = OpenOrDie(path);
   ASSERT_NE(store, nullptr);
-  EXPECT_EQ(store->schema_version(), 1);
+  EXPECT_EQ(store->schema_version(), schema::CurrentVersion());
   auto run = store->GetRun(ids[1]);
   ASSERT_TRUE(run.ok());
   EXPECT_EQ(run->name, "b");
@@ -222,42 +223,44 @@ TEST(StoreSchemaTest, MigrationsApplyInOrderAndKeepData) {
     auto store = OpenOrDie(path);
     ids = Submit(*store, {MakeRun("kept")});
   }
-  // A hypothetical v2 on top of this build's list.
+  // A hypothetical next version on top of this build's list.
+  const int next = schema::CurrentVersion() + 1;
   std::vector<schema::Migration> list(schema::Migrations().begin(), schema::Migrations().end());
-  list.push_back({2, "add runs.note", "ALTER TABLE runs ADD COLUMN note TEXT NOT NULL DEFAULT 'n/a'"});
+  list.push_back({next, "add runs.note", "ALTER TABLE runs ADD COLUMN note TEXT NOT NULL DEFAULT 'n/a'"});
   auto conn = sql::Connection::Open(path);
   ASSERT_TRUE(conn.ok());
   auto v = schema::Migrate(&*conn, list, path);
   ASSERT_TRUE(v.ok()) << v.status().ToString();
-  EXPECT_EQ(*v, 2);
+  EXPECT_EQ(*v, next);
   RawDb raw(path);
-  EXPECT_EQ(raw.Int("PRAGMA user_version"), 2);
+  EXPECT_EQ(raw.Int("PRAGMA user_version"), next);
   EXPECT_EQ(raw.Text(Cat("SELECT note FROM runs WHERE id = ", ids[0])), "n/a");
   // Migrating again is a no-op.
   auto again = schema::Migrate(&*conn, list, path);
   ASSERT_TRUE(again.ok());
-  EXPECT_EQ(*again, 2);
+  EXPECT_EQ(*again, next);
 }
 
 TEST(StoreSchemaTest, AFailingMigrationChangesNothing) {
   const std::string path = TempDb("migrate_fail");
   std::vector<schema::Migration> list(schema::Migrations().begin(), schema::Migrations().end());
-  list.push_back({2, "broken", "CREATE TABLE fine (a); THIS IS NOT SQL"});
+  const int next = schema::CurrentVersion() + 1;
+  list.push_back({next, "broken", "CREATE TABLE fine (a); THIS IS NOT SQL"});
   {
     auto conn = sql::Connection::Open(path);
     ASSERT_TRUE(conn.ok());
     auto v = schema::Migrate(&*conn, list, path);
     ASSERT_FALSE(v.ok());
-    EXPECT_NE(v.status().message().find("schema migration to version 2"), std::string::npos) << v.status().message();
+    EXPECT_NE(v.status().message().find(Cat("schema migration to version ", next)), std::string::npos) << v.status().message();
   }
   {
     RawDb raw(path);
-    EXPECT_EQ(raw.Int("PRAGMA user_version"), 0);  // v1 was in the same transaction: rolled back too
+    EXPECT_EQ(raw.Int("PRAGMA user_version"), 0);  // v1.. were in the same transaction: rolled back too
     EXPECT_EQ(raw.Int("SELECT count(*) FROM sqlite_schema"), 0);
   }
   auto store = OpenOrDie(path);  // the real list still works on it
   ASSERT_NE(store, nullptr);
-  EXPECT_EQ(store->schema_version(), 1);
+  EXPECT_EQ(store->schema_version(), schema::CurrentVersion());
 }
 
 TEST(StoreSchemaTest, MigrationListWithAGapIsABug) {
@@ -282,7 +285,7 @@ void ExpectNewerSchemaRefused(const std::string& path, const char* journal_mode)
   ASSERT_FALSE(store.ok());
   EXPECT_EQ(store.status().code(), StatusCode::kFailedPrecondition);
   EXPECT_NE(store.status().message().find("schema version 7"), std::string::npos) << store.status().message();
-  EXPECT_NE(store.status().message().find("(1)"), std::string::npos) << store.status().message();
+  EXPECT_NE(store.status().message().find(Cat("(", schema::CurrentVersion(), ")")), std::string::npos) << store.status().message();
   EXPECT_EQ(ReadFileBytes(path), before) << "the file was modified";
   RawDb raw(path);
   EXPECT_EQ(raw.Text("PRAGMA journal_mode"), journal_mode);

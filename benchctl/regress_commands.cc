@@ -1,0 +1,401 @@
+// benchctl baseline / regress (docs/regress.md).
+#include "benchctl/regress_commands.h"
+
+#include <cmath>
+#include <cstdio>
+#include <ctime>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <sstream>
+
+#include "benchctl/cli_common.h"
+#include "benchctl/local_run.h"
+#include "db/store.h"
+#include "experiment/spec.h"
+#include "regress/compare.h"
+#include "regress/suite.h"
+
+namespace vb::benchctl {
+namespace {
+
+namespace v1 = valvebench::v1;
+using regress::Json;
+
+constexpr double kRunDeadline_s = 6 * 3600.0;  // one run of a suite, waited for on the server
+
+std::string Where(const std::string& server) { return server.empty() ? "local" : "server " + server; }
+
+StatusOr<std::unique_ptr<db::Store>> OpenStore(const std::string& path) {
+  if (path.empty())
+    return Status::InvalidArgument("--no-store: baselines and regression results need the local store (--db FILE)");
+  if (const auto parent = std::filesystem::path(path).parent_path(); !parent.empty()) {
+    std::error_code ec;
+    std::filesystem::create_directories(parent, ec);
+  }
+  auto s = db::Store::Open(path);
+  if (!s.ok()) return s.status().WithContext("local store " + path);
+  return s;
+}
+
+// Runs of a batch with their metrics, from the local store or the server.
+StatusOr<std::vector<regress::RunMetrics>> BatchRunsLocal(db::Store& store, std::int64_t batch) {
+  db::RunFilter f;
+  f.batch_id = batch;
+  f.limit = 1000;
+  std::vector<regress::RunMetrics> out;
+  for (;;) {
+    auto page = store.ListRuns(f);
+    if (!page.ok()) return page.status();
+    for (const auto& r : *page) {
+      regress::RunMetrics m;
+      m.run_id = r.id;
+      m.name = r.name;
+      m.ok = r.status == db::RunStatus::kDone;
+      m.reason = m.ok ? "" : std::string(db::RunStatusName(r.status)) + (r.reason.empty() ? "" : ": " + r.reason);
+      auto metrics = store.GetMetrics(r.id);
+      if (!metrics.ok()) return metrics.status();
+      for (const auto& x : *metrics) m.metrics[x.name] = x.value;
+      out.push_back(std::move(m));
+    }
+    if (static_cast<int>(page->size()) < f.limit) break;
+    f.after_id = page->back().id;
+  }
+  if (out.empty()) return Status::NotFound("batch " + std::to_string(batch) + " not found (or has no runs)");
+  return out;
+}
+
+StatusOr<std::vector<regress::RunMetrics>> BatchRunsRemote(client::Client& c, std::int64_t batch) {
+  v1::ListRunsRequest req;
+  req.set_batch_id(batch);
+  req.set_page_size(1000);
+  std::vector<regress::RunMetrics> out;
+  for (;;) {
+    auto resp = c.ListRuns(req);
+    if (!resp.ok()) return resp.status();
+    for (const auto& r : resp->runs()) {
+      regress::RunMetrics m;
+      m.run_id = r.id();
+      m.name = r.name();
+      m.ok = r.status() == v1::DONE;
+      if (!m.ok) m.reason = v1::RunStatus_Name(r.status()) + (r.reason().empty() ? "" : ": " + r.reason());
+      for (const auto& [k, v] : r.metrics()) m.metrics[k] = v;
+      out.push_back(std::move(m));
+    }
+    if (resp->next_page_token().empty()) break;
+    req.set_page_token(resp->next_page_token());
+  }
+  if (out.empty()) return Status::NotFound("batch " + std::to_string(batch) + " not found on the server");
+  return out;
+}
+
+struct SuiteOutcome {
+  std::int64_t batch_id = 0;
+  std::vector<regress::RunMetrics> runs;
+};
+
+// Runs the expanded suite: on the embedded emulator (recorded in the local store unless --no-store) or on the
+// server as one batch, waiting for every run.
+StatusOr<SuiteOutcome> RunSuite(const regress::LoadedSuite& suite, std::uint64_t seed, const std::string& server,
+                                const std::string& store_path, const ClientFactory& make_client) {
+  auto runs = regress::ExpandSuite(suite.suite, seed);
+  if (!runs.ok()) return runs.status();
+  std::vector<v1::ExperimentSpec> specs;
+  for (auto& r : *runs) specs.push_back(r.spec);
+  SuiteOutcome out;
+  if (server.empty()) {
+    for (const auto& r : *runs)
+      if (regress::BenchClassOf(r.spec).rfind("emulated", 0) != 0)
+        return Status::FailedPrecondition("experiments[" + std::to_string(r.entry) + "].bench_class: '" +
+                                          regress::BenchClassOf(r.spec) + "' needs a server (--server ADDR)");
+    std::string suite_json;
+    google::protobuf::util::JsonPrintOptions o;
+    o.preserve_proto_field_names = true;
+    (void)google::protobuf::util::MessageToJsonString(suite.suite, &suite_json, o);
+    auto results = RunLocalPoints(specs, suite.suite.name(), suite_json, false, false, store_path);
+    if (!results.ok()) return results.status();
+    for (const auto& r : *results) {
+      regress::RunMetrics m;
+      m.run_id = r.run_id;
+      m.name = r.name;
+      m.ok = r.summary.ok();
+      m.reason = r.summary.message;
+      for (const auto& [k, v] : experiment::MetricList(r.summary.metrics)) m.metrics[k] = v;
+      out.batch_id = r.batch_id;
+      out.runs.push_back(std::move(m));
+      std::fprintf(stderr, "  %s: %s\n", r.name.c_str(), r.summary.BriefReport().c_str());
+    }
+    return out;
+  }
+  auto c = make_client();
+  auto resp = c->SubmitBatch(specs, suite.suite.name());
+  if (!resp.ok()) return resp.status().WithContext(suite.path.empty() ? suite.suite.name() : suite.path);
+  out.batch_id = resp->batch_id();
+  std::fprintf(stderr, "suite %s: batch %lld, %d runs on %s\n", suite.suite.name().c_str(),
+               static_cast<long long>(out.batch_id), resp->run_ids_size(), server.c_str());
+  for (auto id : resp->run_ids()) {
+    auto st = c->Watch(id, kRunDeadline_s, 0.0, [](const v1::RunEvent& ev) {
+      return !(ev.status() == v1::DONE || ev.status() == v1::FAILED || ev.status() == v1::CANCELLED);
+    });
+    if (!st.ok()) return st.WithContext("waiting for run " + std::to_string(id));
+  }
+  auto fetched = BatchRunsRemote(*c, out.batch_id);
+  if (!fetched.ok()) return fetched.status();
+  out.runs = std::move(*fetched);
+  return out;
+}
+
+regress::Baseline FromRecord(const db::BaselineRecord& r) {
+  regress::Baseline b;
+  b.name = r.name;
+  b.version = r.version;
+  b.created_unix_s = r.created_unix_s;
+  b.source = r.source;
+  b.note = r.note;
+  for (const auto& e : r.entries) b.cases[e.case_name][e.metric] = {e.mean, e.spread, e.n};
+  return b;
+}
+
+std::vector<db::BaselineEntry> ToEntries(const regress::CaseStats& stats) {
+  std::vector<db::BaselineEntry> out;
+  for (const auto& [c, metrics] : stats)
+    for (const auto& [name, s] : metrics)
+      if (s.n > 0) out.push_back({c, name, s.mean, s.spread, s.n});
+  return out;
+}
+
+bool LooksLikeFile(const std::string& arg) {
+  return arg.find('/') != std::string::npos || (arg.size() > 5 && arg.compare(arg.size() - 5, 5, ".json") == 0);
+}
+
+StatusOr<regress::Baseline> LoadBaselineArg(const std::string& arg, int version, const std::string& store_path) {
+  if (LooksLikeFile(arg)) {
+    std::ifstream in(arg);
+    if (!in) return Status::NotFound("--baseline: cannot open the baseline file '" + arg + "'");
+    Json j;
+    try {
+      j = Json::parse(in);
+    } catch (const Json::exception& e) {
+      return Status::InvalidArgument("--baseline " + arg + ": not JSON: " + e.what());
+    }
+    auto b = regress::BaselineFromJson(j);
+    if (!b.ok()) return b.status().WithContext("--baseline " + arg);
+    return b;
+  }
+  auto store = OpenStore(store_path);
+  if (!store.ok()) return store.status();
+  auto rec = (*store)->GetBaseline(arg, version);
+  if (!rec.ok()) {
+    if (rec.status().code() == StatusCode::kNotFound)
+      return Status::NotFound("--baseline: " + rec.status().message() + " in " + store_path +
+                              " (create it: benchctl baseline set " + arg + " --suite SUITE, or --batch B)");
+    return rec.status();
+  }
+  return FromRecord(*rec);
+}
+
+std::string Time(double unix_s) {
+  const std::time_t t = static_cast<std::time_t>(unix_s);
+  std::tm tm{};
+  localtime_r(&t, &tm);
+  char buf[32];
+  std::strftime(buf, sizeof buf, "%Y-%m-%d %H:%M:%S", &tm);
+  return buf;
+}
+
+Status WriteFile(const std::string& path, const std::string& text) {
+  std::ofstream out(path);
+  out << text;
+  out.close();
+  if (!out) return Status::Unavailable(path + ": cannot write");
+  return Status::Ok();
+}
+
+}  // namespace
+
+RegressCli::RegressCli(CLI::App* app, SharedOptions shared) : shared_(shared) {
+  auto common = [this](CLI::App* sub) {
+    sub->add_flag("--json", *shared_.json, "machine-readable output on stdout");
+    sub->add_option("--server", *shared_.server, "bench server address host:port (or VALVEBENCH_SERVER)");
+    sub->add_option("--token", *shared_.token, "bearer token (or VALVEBENCH_TOKEN)");
+    sub->add_option("--tls-ca", *shared_.tls_ca_file, "PEM file of the CA that signed the server's certificate");
+    sub->add_option("--db", *shared_.store_path, "local store holding baselines and regression results");
+  };
+  baseline_ = app->add_subcommand("baseline", "named, versioned metric baselines for regress");
+  baseline_->require_subcommand(1);
+  baseline_set_ = baseline_->add_subcommand("set", "store a baseline (a new version if NAME exists)");
+  baseline_set_->add_option("name", name_, "baseline name")->required();
+  baseline_set_->add_option("--batch", batch_, "from the runs of this batch (local store, or --server's)");
+  baseline_set_->add_option("--suite", suite_path_, "run this suite now and take its values");
+  baseline_set_->add_option("--seed", seed_, "with --suite: jitter seed (default: the suite's)");
+  baseline_set_->add_option("--note", note_, "stored with the baseline");
+  baseline_set_->add_flag("--local", local_, "batch/suite on the embedded emulator and local store");
+  common(baseline_set_);
+  baseline_list_ = baseline_->add_subcommand("list", "every baseline and version");
+  common(baseline_list_);
+  baseline_show_ = baseline_->add_subcommand("show", "one baseline's values (--json: the baseline file format)");
+  baseline_show_->add_option("name", name_, "baseline name")->required();
+  baseline_show_->add_option("--version", version_, "an older version (default: the newest)");
+  common(baseline_show_);
+
+  regress_ = app->add_subcommand("regress", "run a suite and compare it with a baseline (exit 1 on a regression)");
+  regress_->add_option("suite", suite_path_, "suite file (protobuf JSON, proto/valvebench/v1/suite.proto)")
+      ->required();
+  regress_->add_option("--baseline", baseline_arg_, "baseline name in the local store, or a baseline JSON file")
+      ->required();
+  regress_->add_option("--baseline-version", version_, "compare with this version (default: the newest)");
+  regress_->add_flag("--local", local_, "run on the embedded emulator");
+  regress_->add_option("--junit", junit_path_, "write JUnit XML here");
+  regress_->add_option("--seed", seed_, "jitter seed (default: the suite's seed)");
+  common(regress_);
+}
+
+bool RegressCli::parsed() const { return baseline_->parsed() || regress_->parsed(); }
+
+int RegressCli::Run(const ClientFactory& make_client) {
+  const bool json = *shared_.json;
+  const std::string server = local_ ? "" : *shared_.server;
+  const std::string& store_path = *shared_.store_path;
+
+  if (baseline_set_->parsed()) {
+    if ((batch_ != 0) == !suite_path_.empty())
+      return Fail(Status::InvalidArgument("baseline set: give exactly one of --batch B and --suite SUITE"));
+    std::vector<regress::RunMetrics> runs;
+    std::string source;
+    if (!suite_path_.empty()) {
+      auto suite = regress::LoadSuite(suite_path_);
+      if (!suite.ok()) return Fail(suite.status());
+      const std::uint64_t seed = seed_ != 0 ? seed_ : (suite->suite.seed() != 0 ? suite->suite.seed() : 1);
+      auto out = RunSuite(*suite, seed, server, store_path, make_client);
+      if (!out.ok()) return Fail(out.status());
+      runs = std::move(out->runs);
+      source = "suite " + suite->suite.name() + " (" + Where(server) + " batch " + std::to_string(out->batch_id) +
+               ", seed " + std::to_string(seed) + ")";
+    } else if (server.empty()) {
+      auto store = OpenStore(store_path);
+      if (!store.ok()) return Fail(store.status());
+      auto r = BatchRunsLocal(**store, batch_);
+      if (!r.ok()) return Fail(r.status().WithContext("--batch"));
+      runs = std::move(*r);
+      source = "local batch " + std::to_string(batch_);
+    } else {
+      auto c = make_client();
+      auto r = BatchRunsRemote(*c, batch_);
+      if (!r.ok()) return Fail(r.status().WithContext("--batch"));
+      runs = std::move(*r);
+      source = "server " + server + " batch " + std::to_string(batch_);
+    }
+    const regress::Measured m = regress::Summarise(runs);
+    if (!m.failures.empty()) {
+      std::string list;
+      for (const auto& [c, f] : m.failures) list += "\n  " + f.front();
+      return Fail(Status::FailedPrecondition("baseline set: runs did not succeed; a baseline must come from good "
+                                             "runs:" + list));
+    }
+    auto store = OpenStore(store_path);
+    if (!store.ok()) return Fail(store.status());
+    auto v = (*store)->SaveBaseline(name_, source, note_, ToEntries(m.stats));
+    if (!v.ok()) return Fail(v.status());
+    auto rec = (*store)->GetBaseline(name_, *v);
+    if (!rec.ok()) return Fail(rec.status());
+    if (json) {
+      std::cout << regress::BaselineToJson(FromRecord(*rec)).dump(2) << "\n";
+    } else {
+      std::printf("baseline %s version %d stored (%zu values from %s)%s\n", name_.c_str(), *v, rec->entries.size(),
+                  source.c_str(),
+                  *v > 1 ? ("; versions 1-" + std::to_string(*v - 1) + " are kept (baseline show " + name_ +
+                            " --version N)").c_str()
+                         : "");
+    }
+    return kExitOk;
+  }
+
+  if (baseline_list_->parsed()) {
+    auto store = OpenStore(store_path);
+    if (!store.ok()) return Fail(store.status());
+    auto list = (*store)->ListBaselines();
+    if (!list.ok()) return Fail(list.status());
+    if (json) {
+      Json a = Json::array();
+      for (const auto& b : *list)
+        a.push_back({{"name", b.name}, {"version", b.version}, {"created_unix_s", b.created_unix_s},
+                     {"source", b.source}, {"note", b.note}});
+      std::cout << a.dump(2) << "\n";
+    } else {
+      if (list->empty()) std::printf("no baselines in %s\n", store_path.c_str());
+      for (const auto& b : *list)
+        std::printf("%-20s v%-3d %s  %s%s%s\n", b.name.c_str(), b.version, Time(b.created_unix_s).c_str(),
+                    b.source.c_str(), b.note.empty() ? "" : "  -- ", b.note.c_str());
+    }
+    return kExitOk;
+  }
+
+  if (baseline_show_->parsed()) {
+    auto store = OpenStore(store_path);
+    if (!store.ok()) return Fail(store.status());
+    auto rec = (*store)->GetBaseline(name_, version_);
+    if (!rec.ok()) return Fail(rec.status());
+    const regress::Baseline b = FromRecord(*rec);
+    if (json) {
+      std::cout << regress::BaselineToJson(b).dump(2) << "\n";
+      return kExitOk;
+    }
+    std::printf("baseline %s version %d, %s, from %s%s%s\n", b.name.c_str(), b.version, Time(b.created_unix_s).c_str(),
+                b.source.c_str(), b.note.empty() ? "" : "; ", b.note.c_str());
+    for (const auto& [c, metrics] : b.cases)
+      for (const auto& [name, s] : metrics)
+        std::printf("  %-40s %-18s %-12.6g +/- %-10.3g n=%d\n", c.c_str(), name.c_str(), s.mean, s.spread, s.n);
+    return kExitOk;
+  }
+
+  if (regress_->parsed()) {
+    if (version_ < 0) return Fail(Status::InvalidArgument("--baseline-version: must be >= 1"));
+    auto suite = regress::LoadSuite(suite_path_);
+    if (!suite.ok()) return Fail(suite.status());
+    auto baseline = LoadBaselineArg(baseline_arg_, version_, store_path);
+    if (!baseline.ok()) return Fail(baseline.status());
+    const std::uint64_t seed = seed_ != 0 ? seed_ : (suite->suite.seed() != 0 ? suite->suite.seed() : 1);
+    if (!json)
+      std::fprintf(stderr, "regress: suite %s (%d entries) on %s vs baseline %s v%d, seed %llu\n",
+                   suite->suite.name().c_str(), suite->suite.experiments_size(), Where(server).c_str(),
+                   baseline->name.c_str(), baseline->version, static_cast<unsigned long long>(seed));
+    auto out = RunSuite(*suite, seed, server, store_path, make_client);
+    if (!out.ok()) return Fail(out.status());
+    regress::RegressResult r = regress::Compare(suite->suite, *baseline, regress::Summarise(out->runs));
+    r.batch_id = out->batch_id;
+    r.where = server.empty() ? "local" : server;
+    r.seed = seed;
+    if (!store_path.empty()) {
+      auto store = OpenStore(store_path);
+      if (store.ok()) {
+        db::RegressionRecord rec;
+        rec.suite = r.suite;
+        rec.baseline_name = r.baseline_name;
+        rec.baseline_version = r.baseline_version;
+        rec.batch_id = server.empty() ? r.batch_id : 0;  // a server batch is not in this store
+        rec.created_unix_s = r.created_unix_s;
+        rec.verdict = r.verdict();
+        rec.result_json = regress::ResultToJson(r).dump();
+        auto id = (*store)->SaveRegression(rec);
+        if (id.ok()) r.id = *id;
+        else std::fprintf(stderr, "benchctl: warning: the result was not stored: %s\n", id.status().message().c_str());
+      }
+    }
+    if (!junit_path_.empty()) {
+      auto st = WriteFile(junit_path_, regress::JUnitXml(r));
+      if (!st.ok()) return Fail(st);
+    }
+    if (json) {
+      std::cout << regress::ResultToJson(r).dump(2) << "\n";
+    } else {
+      std::cout << regress::ResultTable(r);
+      if (r.id != 0) std::printf("regression %lld stored (benchctl report --regress %lld --html FILE)\n",
+                                 static_cast<long long>(r.id), static_cast<long long>(r.id));
+    }
+    return r.regressed() ? kExitRunFailed : kExitOk;
+  }
+
+  return kExitBadInput;
+}
+
+}  // namespace vb::benchctl

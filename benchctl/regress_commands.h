@@ -1,0 +1,51 @@
+// benchctl's regression commands (docs/regress.md):
+//   baseline set NAME (--batch B | --suite SUITE) [--local | --server ADDR] [--note TEXT]
+//   baseline list | baseline show NAME [--version N]     (--json of show is the baseline file format)
+//   regress SUITE --baseline NAME|FILE.json [--local | --server ADDR] [--junit FILE] [--json] [--seed N]
+// Baselines and regression results live in the local store (--db); a baseline can also be a JSON file (CI).
+// Exit codes: 0 nothing regressed; 1 a regression or a failed run; 2 bad input or refused; 3 environment.
+#pragma once
+
+#include <CLI/CLI.hpp>
+
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+
+#include "client/client.h"
+
+namespace vb::benchctl {
+
+// benchctl's shared options, owned by main(): the new subcommands bind the same variables.
+struct SharedOptions {
+  bool* json;
+  std::string* server;
+  std::string* token;
+  std::string* tls_ca_file;
+  std::string* store_path;  // local store ("" after --no-store)
+};
+
+using ClientFactory = std::function<std::unique_ptr<client::Client>()>;
+
+class RegressCli {
+ public:
+  RegressCli(CLI::App* app, SharedOptions shared);
+  bool parsed() const;
+  int Run(const ClientFactory& make_client);
+
+ private:
+  SharedOptions shared_;
+  CLI::App* baseline_ = nullptr;
+  CLI::App* baseline_set_ = nullptr;
+  CLI::App* baseline_list_ = nullptr;
+  CLI::App* baseline_show_ = nullptr;
+  CLI::App* regress_ = nullptr;
+  std::string name_, suite_path_, note_, baseline_arg_, junit_path_;
+  std::int64_t batch_ = 0;
+  int version_ = 0;
+  std::uint64_t seed_ = 0;
+  bool local_ = false;
+};
+
+}  // namespace vb::benchctl

@@ -1,0 +1,62 @@
+// Regression suites (proto/valvebench/v1/suite.proto, docs/regress.md): load and validate a suite file (errors
+// name the field), and expand it into the single runs to execute, with seeded run-to-run jitter.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "common/status.h"
+#include "valvebench/v1/spec.pb.h"
+#include "valvebench/v1/suite.pb.h"
+
+namespace vb::regress {
+
+using valvebench::v1::Suite;
+
+// A suite with every entry's spec resolved (spec_file read and parsed) and validated.
+struct LoadedSuite {
+  Suite suite;                                        // entries carry their spec inline after loading
+  std::string path;                                   // where it was read from ("" when parsed from text)
+};
+
+// Parses protobuf JSON (unknown fields are errors); base_dir resolves spec_file. Validates: name, at least one
+// entry, exactly one of spec/spec_file per entry, unique case names, bench_class matching the spec, known
+// metrics and non-negative tolerances, jitter fields that exist, and that every spec expands and builds.
+StatusOr<LoadedSuite> ParseSuite(const std::string& json, const std::string& base_dir);
+StatusOr<LoadedSuite> LoadSuite(const std::string& path);
+
+// "emulated:<preset>" (the server's bench classes; docs/server.md), or the kind for non-emulated benches.
+std::string BenchClassOf(const valvebench::v1::ExperimentSpec& spec);
+
+// One run to execute: the single-run spec (tags sweep:... and repeat:k as ExpandSweep gives them) and the case
+// it belongs to (entry name + its sweep tags: repeats of one configuration share a case).
+struct SuiteRun {
+  int entry = 0;                                      // index into suite.experiments
+  std::string case_name;
+  valvebench::v1::ExperimentSpec spec;
+};
+
+// Expands every entry (variants, sweeps, repeats), then applies the entry's jitter with a generator seeded by
+// (seed, run index): the same seed gives the same runs, bit for bit.
+StatusOr<std::vector<SuiteRun>> ExpandSuite(const Suite& suite, std::uint64_t seed);
+
+// The case a run belongs to, from its run name (spec name + sweep/repeat tags): drops " repeat:<k>".
+std::string CaseOfRunName(const std::string& run_name);
+
+// The metrics compared for an entry (its tolerances over the suite's), in order, and the tolerance of each.
+struct ResolvedTolerance {
+  std::string metric;
+  double absolute = 0.0;
+  double relative = 0.0;
+  valvebench::v1::Direction direction = valvebench::v1::BOTH;  // never DIRECTION_DEFAULT
+};
+std::vector<ResolvedTolerance> TolerancesFor(const Suite& suite, int entry);
+double NoiseSigmas(const Suite& suite);
+
+// The metric names runs produce (experiment::MetricList order) and the default direction of each.
+const std::vector<std::string>& KnownMetrics();
+valvebench::v1::Direction DefaultDirection(const std::string& metric);
+const char* DirectionName(valvebench::v1::Direction d);  // "lower", "higher", "both"
+
+}  // namespace vb::regress

@@ -1,0 +1,101 @@
+// The HTML reports in a real browser: Debian's chromium, headless. Each page must finish rendering (its script
+// writes "rendered-ok" into #vb-status only when every section drew without an exception), log nothing to the
+// console, and a screenshot must show the plots. Skipped, saying so, when chromium is not installed
+// (scripts/setup.sh installs it, so CI runs it).
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include "../common/run_command.h"
+
+namespace {
+
+namespace fs = std::filesystem;
+using vb::testing::RunCommand;
+
+std::string Chromium() {
+  for (const char* p : {"/usr/bin/chromium", "/usr/bin/chromium-browser"})
+    if (::access(p, X_OK) == 0) return p;
+  return "";
+}
+
+class HeadlessReport : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    chromium_ = Chromium();
+    if (chromium_.empty()) GTEST_SKIP() << "chromium is not installed (scripts/setup.sh installs it): not rendering";
+    dir_ = ::testing::TempDir() + "/vb-headless-" + std::to_string(::getpid());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override {
+    if (!dir_.empty()) fs::remove_all(dir_);
+  }
+  std::string Browser(const std::string& args) {
+    return "timeout 90 " + chromium_ + " --headless --no-sandbox --disable-gpu --hide-scrollbars --user-data-dir=" +
+           dir_ + "/profile-" + std::to_string(++browsers_) + " --enable-logging=stderr --v=0 " + args;
+  }
+  // Loads the page; returns the DOM and browser log, failing the test on a missing marker or console output.
+  std::string ExpectRenders(const std::string& html, const std::string& what) {
+    auto r = RunCommand(Browser("--dump-dom file://" + html));
+    EXPECT_EQ(r.exit_code, 0) << what << "\n" << r.out;
+    // The status element's text, as the script left it (the script's own source also contains the words).
+    EXPECT_NE(r.out.find("id=\"vb-status\">rendered-ok: "), std::string::npos)
+        << what << ": the page did not finish rendering\n" << r.out.substr(0, 4000);
+    EXPECT_EQ(r.out.find(":CONSOLE"), std::string::npos) << what << ": console output\n" << r.out.substr(0, 4000);
+    return r.out;
+  }
+  void ExpectScreenshot(const std::string& html, const std::string& png, std::uintmax_t min_bytes) {
+    auto r = RunCommand(Browser("--window-size=1100,1600 --screenshot=" + png + " file://" + html));
+    ASSERT_TRUE(fs::exists(png)) << r.out;
+    EXPECT_GT(fs::file_size(png), min_bytes) << png << " is nearly empty: no plots drawn?";
+  }
+  std::string Benchctl(const std::string& args, int expect = 0) {
+    auto r = RunCommand(std::string(VB_BENCHCTL) + " " + args + " --db " + dir_ + "/local.db");
+    EXPECT_EQ(r.exit_code, expect) << args << "\n" << r.out;
+    return r.out;
+  }
+
+  std::string chromium_, dir_;
+  int browsers_ = 0;
+};
+
+TEST_F(HeadlessReport, BatchRunRegressionAndDiagnosisPagesRenderWithoutErrors) {
+  const std::string suites = std::string(VB_SOURCE_DIR) + "/examples/suites/";
+  // A suite run: batch 1 (PI and hysteresis repeats, a 3-point static map) and regression result 1.
+  Benchctl("regress " + suites + "ci.json --baseline " + suites + "ci-baseline.json --local");
+  Benchctl("report --batch 1 --html " + dir_ + "/batch.html --max-traces 2");
+  Benchctl("report --run 1 --html " + dir_ + "/run.html");
+  Benchctl("report --regress 1 --html " + dir_ + "/regress.html");
+  const std::string fixtures = std::string(VB_SOURCE_DIR) + "/tests/report/";
+  Benchctl("report --diagnosis " + fixtures + "diagnosis_fixture.json --html " + dir_ + "/diag.html");
+  Benchctl("report --diagnosis " + fixtures + "diagnosis_partial.json --html " + dir_ + "/partial.html");
+  for (const char* page : {"run", "regress", "partial"}) ExpectRenders(dir_ + "/" + page + ".html", page);
+  // The batch page: comparison table, Pareto scatter, static map, 2 runs x 3 trace panels.
+  const std::string batch = ExpectRenders(dir_ + "/batch.html", "batch");
+  EXPECT_NE(batch.find("id=\"vb-status\">rendered-ok: 5 sections, 8 plots"), std::string::npos)
+      << batch.substr(0, 2000);
+  EXPECT_NE(batch.find("Static map"), std::string::npos);
+  EXPECT_NE(batch.find("<polyline"), std::string::npos);
+  // The diagnosis page: summary, shares, per-phase table, ranking, one overlay of three curves.
+  const std::string diag = ExpectRenders(dir_ + "/diag.html", "diag");
+  EXPECT_NE(diag.find("id=\"vb-status\">rendered-ok: 5 sections, 2 plots"), std::string::npos) << diag.substr(0, 2000);
+  ExpectScreenshot(dir_ + "/batch.html", dir_ + "/batch.png", 40000);
+}
+
+TEST_F(HeadlessReport, ABrokenPageIsCaught) {
+  // The checks above can fail: a page whose script throws never writes the marker, and the console shows it.
+  const std::string html = dir_ + "/broken.html";
+  std::ofstream(html) << "<html><body><div id=\"vb-status\">rendering</div><script>"
+                         "window.onerror = function (m) { document.getElementById('vb-status').textContent = "
+                         "'render-error: ' + m; }; undefinedFunction();</script></body></html>";
+  auto r = RunCommand(Browser("--dump-dom file://" + html));
+  EXPECT_EQ(r.out.find("id=\"vb-status\">rendered-ok"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("id=\"vb-status\">render-error: "), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find(":CONSOLE"), std::string::npos) << r.out;
+}
+
+}  // namespace

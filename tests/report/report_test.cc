@@ -1,0 +1,138 @@
+// report/: section builders (what they keep, what they tolerate) and the page's data embedding.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <fstream>
+#include <sstream>
+
+#include "report/report.h"
+
+namespace vb::report {
+namespace {
+
+Json Load(const std::string& name) {
+  std::ifstream in(std::string(VB_SOURCE_DIR) + "/tests/report/" + name);
+  return Json::parse(in);
+}
+
+const Json* Find(const Json& sections, const std::string& kind, const std::string& title_part = "") {
+  for (const auto& s : sections)
+    if (s["kind"] == kind && (title_part.empty() || s.value("title", std::string()).find(title_part) != std::string::npos))
+      return &s;
+  return nullptr;
+}
+
+TEST(ReportDiagnosis, RendersEveryFieldOfAFullDiagnosis) {
+  const Json s = DiagnosisSections(Load("diagnosis_fixture.json"));
+  const Json* summary = Find(s, "table", "Gap diagnosis");
+  ASSERT_NE(summary, nullptr);
+  const std::string text = summary->dump();
+  for (const char* k : {"noise_floor_A", "gap.holdout_rmse_A", "verdict"}) EXPECT_NE(text.find(k), std::string::npos) << k;
+  EXPECT_NE(text.find("taghizadeh2009"), std::string::npos);
+  const Json* shares = Find(s, "bars", "Where the gap lies");
+  ASSERT_NE(shares, nullptr);
+  EXPECT_EQ((*shares)["labels"].size(), 3u);
+  EXPECT_DOUBLE_EQ((*shares)["values"][0].get<double>(), 0.62);
+  const Json* ranking = Find(s, "table", "Candidate effects");
+  ASSERT_NE(ranking, nullptr);
+  EXPECT_EQ((*ranking)["rows"].size(), 2u);
+  EXPECT_EQ((*ranking)["rows"][0][0], "coil_heating");
+  const Json* overlay = Find(s, "lines", "p07-r1");
+  ASSERT_NE(overlay, nullptr);
+  ASSERT_EQ((*overlay)["series"].size(), 3u);
+  EXPECT_EQ((*overlay)["series"][0]["name"], "measured");
+  EXPECT_EQ((*overlay)["series"][2]["name"], "fitted");
+  EXPECT_EQ(Find(s, "note", ""), nullptr);  // nothing missing
+}
+
+TEST(ReportDiagnosis, ToleratesMissingAndMalformedParts) {
+  const Json s = DiagnosisSections(Load("diagnosis_partial.json"));
+  const Json* note = Find(s, "note");
+  ASSERT_NE(note, nullptr);
+  const std::string text = (*note)["text"];
+  for (const char* k : {"noise_floor_A", "gap", "ranking", "overlays"}) EXPECT_NE(text.find(k), std::string::npos) << k;
+  EXPECT_EQ(text.find("where"), std::string::npos);  // present (partly usable)
+  const Json* where = Find(s, "table", "Per phase");
+  ASSERT_NE(where, nullptr);
+  EXPECT_EQ((*where)["rows"].size(), 2u);  // the non-object entry is skipped
+  EXPECT_FALSE(DiagnosisSections(Json::array()).empty());
+  EXPECT_FALSE(DiagnosisSections(Json::object()).empty());
+}
+
+TEST(ReportTraces, DecimationBoundsPointsAndKeepsPeaks) {
+  TraceData t;
+  t.label = "run 1";
+  t.sample_period_s = 1e-5;
+  const std::size_t n = 100000;
+  std::vector<double> i(n), gate(n);
+  for (std::size_t k = 0; k < n; ++k) {
+    i[k] = std::sin(k * 1e-3);
+    gate[k] = (k / 37) % 2;
+  }
+  i[54321] = 5.0;  // a one-sample spike must survive
+  t.channels = {{"i_A", i}, {"gate", gate}};
+  const Json s = TraceSection({t}, 2000);
+  const Json& run = s["runs"][0];
+  EXPECT_LE(run["t"].size(), 2100u);
+  EXPECT_GT(run["t"].size(), 500u);
+  double peak = -1, t_peak = 0;
+  for (std::size_t k = 0; k < run["i_A"].size(); ++k)
+    if (run["i_A"][k].get<double>() > peak) {
+      peak = run["i_A"][k].get<double>();
+      t_peak = run["t"][k].get<double>();
+    }
+  EXPECT_EQ(peak, 5.0);
+  EXPECT_NEAR(t_peak, 54321 * 1e-5, 1e-12);
+  EXPECT_EQ(run["samples"], n);
+  // Short traces are kept whole.
+  t.channels = {{"i_A", {1, 2, 3}}};
+  EXPECT_EQ(TraceSection({t})["runs"][0]["t"].size(), 3u);
+}
+
+TEST(ReportMaps, StaticMapGroupsBySweepAndIgnoresNonSweeps) {
+  std::vector<MapPoint> pts = {{"m/fig8 sweep:p=0 sweep:duty=0.2", 10}, {"m/fig8 sweep:p=0 sweep:duty=0.6", 60},
+                               {"m/fig8 sweep:p=4 sweep:duty=0.2", 5},  {"m/fig8 sweep:p=4 sweep:duty=0.6 repeat:1", 50},
+                               {"m/fig8 sweep:p=4 sweep:duty=0.6 repeat:0", 52}};
+  const Json s = StaticMapSection(pts, "pct");
+  ASSERT_FALSE(s.is_null());
+  EXPECT_EQ(s["x_label"], "duty");
+  ASSERT_EQ(s["series"].size(), 2u);
+  EXPECT_EQ(s["series"][1]["name"], "m/fig8 sweep:p=4");
+  EXPECT_DOUBLE_EQ(s["series"][1]["y"][1].get<double>(), 51.0);  // repeats averaged
+  EXPECT_TRUE(StaticMapSection({{"a", 1}, {"b", 2}, {"c", 3}}, "pct").is_null());
+}
+
+TEST(ReportPage, DataCannotCloseTheScriptElement) {
+  const Json sections = Json::array({{{"kind", "note"}, {"text", "</script><script>alert(1)</script>"}}});
+  const std::string html = RenderHtml("t <b>", sections);
+  EXPECT_EQ(html.find("</script><script>alert"), std::string::npos);
+  EXPECT_NE(html.find("\\u003c/script>"), std::string::npos);
+  EXPECT_NE(html.find("<title>t &lt;b&gt;</title>"), std::string::npos);
+  EXPECT_EQ(html.find("http://"), html.find("http://www.w3.org/2000/svg"));  // no network references
+  EXPECT_EQ(html.find("https://"), std::string::npos);
+}
+
+TEST(ReportRegression, TablesAndBarsFromAResult) {
+  Json r = {{"suite", "ci"}, {"baseline", {{"name", "main"}, {"version", 2}}}, {"verdict", "regressed"},
+            {"counts", {{"regressed", 1}, {"improved", 0}, {"unchanged", 1}, {"new", 0}}},
+            {"findings", Json::array({{{"case", "hold/pi"}, {"metric", "rmse"}, {"verdict", "regressed"},
+                                       {"direction", "lower"}, {"baseline", {{"mean", 0.0003}, {"spread", 0}, {"n", 3}}},
+                                       {"now", {{"mean", 0.0011}, {"spread", 0}, {"n", 3}}}, {"delta", 0.0008},
+                                       {"allowed", 0.0004}},
+                                      {{"case", "hold/pi"}, {"metric", "switches"}, {"verdict", "unchanged"},
+                                       {"direction", "lower"}, {"baseline", {{"mean", 800}, {"spread", 0}, {"n", 3}}},
+                                       {"now", {{"mean", 800}, {"spread", 0}, {"n", 3}}}, {"delta", 0}, {"allowed", 40}}})}};
+  const Json s = RegressionSections(r);
+  ASSERT_GE(s.size(), 3u);
+  EXPECT_EQ(s[0]["class"], "bad");
+  const Json* table = Find(s, "table");
+  ASSERT_NE(table, nullptr);
+  EXPECT_EQ((*table)["row_classes"][0], "regressed");
+  const Json* bars = Find(s, "bars");
+  ASSERT_NE(bars, nullptr);
+  EXPECT_DOUBLE_EQ((*bars)["values"][0].get<double>(), 2.0);  // twice the allowance
+  EXPECT_DOUBLE_EQ((*bars)["values"][1].get<double>(), 0.0);
+}
+
+}  // namespace
+}  // namespace vb::report
