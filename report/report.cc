@@ -298,17 +298,29 @@ Json DiagnosisSections(const Json& d) {
     for (const auto& r : d["ranking"]) {
       if (!r.is_object()) continue;
       auto n = [&](const char* k) { return r.contains(k) && r[k].is_number() ? r[k].get<double>() : NAN; };
-      const std::string params = r.contains("params") ? r["params"].dump() : "";
+      // Fitted values as "name = value +- sigma", short enough to read.
+      std::string params;
+      if (r.contains("params") && r["params"].is_object()) {
+        for (const auto& [k, v] : r["params"].items()) {
+          if (!v.is_number()) continue;
+          if (!params.empty()) params += ", ";
+          params += k + " = " + Fmt(v.get<double>(), "%.4g");
+          if (r.contains("uncertainty") && r["uncertainty"].is_object() && r["uncertainty"].contains(k) &&
+              r["uncertainty"][k].is_number())
+            params += " \u00b1 " + Fmt(r["uncertainty"][k].get<double>(), "%.2g");
+        }
+      }
       const Json closed = r.contains("closed") ? r["closed"] : Json(nullptr);
-      rows.push_back(Json::array({r.value("effect", std::string("?")), params, Fmt(n("holdout_rmse_before_A")),
+      rows.push_back(Json::array({r.value("effect", std::string("?")), Fmt(n("holdout_rmse_before_A")),
                                   Fmt(n("holdout_rmse_after_A")),
                                   closed.is_boolean() ? (closed.get<bool>() ? "yes" : "no")
                                   : closed.is_number() ? Fmt(closed.get<double>(), "%.3f")
-                                                       : ""}));
+                                                       : "",
+                                  params}));
     }
     out.push_back({{"kind", "table"},
                    {"title", "Candidate effects, ranked"},
-                   {"columns", Json::array({"effect", "params", "holdout rmse before [A]", "after [A]", "closed"})},
+                   {"columns", Json::array({"effect", "holdout rmse before [A]", "after [A]", "closed", "fitted"})},
                    {"rows", rows}});
   } else {
     missing.push_back("ranking");
