@@ -184,6 +184,10 @@ Status SafetyBench::AdvanceTo(double t_s, Measurement* m) {
   // In pieces of at most check_period_s, so a trip stops the coil within that much bench time.
   double t = t_s_;
   do {
+    if (cancel_ != nullptr && cancel_->load(std::memory_order_relaxed)) {
+      SafeState();
+      return Status::Aborted("cancelled at t = " + Num(t) + " s");
+    }
     t = std::min(t_s, t + lim_.check_period_s);
     if (t_s - t < 1e-12) t = t_s;
     Status st;

@@ -62,6 +62,12 @@ class SafetyBench final : public Bench {
   void SafeState() noexcept override;
   LoopStats loop_stats() const override { return inner_->loop_stats(); }
 
+  // The run's cancel flag (a server worker's RunMonitor): a long AdvanceTo() stops at the next check period
+  // once it is set and puts the bench in its safe state, so cancel and shutdown (SIGTERM) do not wait for the
+  // controller's next tick. Not a trip: AdvanceTo answers Aborted("cancelled ...") and the Runner, seeing the
+  // flag, ends the run as cancelled. May be null.
+  void set_cancel_flag(const std::atomic<bool>* cancel) { cancel_ = cancel; }
+
   bool tripped() const { return tripped_.load(); }
   double coil_temp_C() const { return temp_C_; }
   const SafetyLimits& limits() const { return lim_; }
@@ -93,6 +99,7 @@ class SafetyBench final : public Bench {
   double on_since_s_ = 0.0;
   double sample_trip_t_s_ = std::numeric_limits<double>::quiet_NaN(), sample_trip_i_A_ = 0.0;
 
+  const std::atomic<bool>* cancel_ = nullptr;
   std::mutex inner_mu_;                      // the loop's calls into inner_ vs the watchdog's SafeState
   std::atomic<bool> claimed_{false};         // the first tripper writes reason_, then sets tripped_
   std::atomic<bool> tripped_{false};

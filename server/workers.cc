@@ -173,6 +173,7 @@ void Worker::Execute(db::Store* store, const db::RunRecord& run) {
   auto cancel_requested = store->CancelRequested(run.id);
   if (stop_.load() || (cancel_requested.ok() && *cancel_requested)) monitor.cancel.store(true);
 
+  bench.set_cancel_flag(&monitor.cancel);  // cancel and shutdown act within a check period, not a tick
   experiment::Trace trace;
   const experiment::RunSummary summary = experiment::Runner::Run(*e, bench, &trace, &monitor, &tap);
   bench.SafeState();
