@@ -12,7 +12,7 @@
 namespace vb::hw::testing {
 
 // Open-loop PWM on taghizadeh2009 at 24 V; the carrier (375 Hz) and duty (0.5) are ones every bench here
-// realises exactly (the U3's 8-bit PWM at 48 MHz / 256 / 500 included).
+// realises exactly (the U3 included: 12 MHz / 125 / 256 in 8-bit PWM mode).
 inline std::string OpenLoopJson(double duration_s, double rate_Hz, double carrier_Hz = 375.0, double duty = 0.5) {
   return R"({"name":"hw","bench":{"model":{"preset":"taghizadeh2009"}},"conditions":{"supply_V":24},)"
          R"("controller":{"open_loop_pwm":{"segments":[{"start_s":0,"frequency_Hz":)" +

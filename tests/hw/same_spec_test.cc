@@ -17,11 +17,14 @@
 namespace vb::hw::testing {
 namespace {
 
-// Open-loop PWM then gate-level hold: 375 Hz at duty 0.5 for 0.1 s, then the gate low (the current decays).
+// Recording at 1 kHz: one sample per report/packet, so a host command acts at the sample instant of its tick
+// (at higher rates a device batches samples and a command acts up to a report period later: see
+// docs/hw-protocol.md, "Command latency"). Open-loop PWM then a gate-level command: 375 Hz at duty 0.5 for 0.1 s, then the gate low for 2 ms (the
+// current is still decaying through the flyback diode at the end).
 const char* kSpec = R"({"name":"same","bench":{"model":{"preset":"taghizadeh2009"}},"conditions":{"supply_V":24},
   "controller":{"open_loop_pwm":{"segments":[{"start_s":0,"frequency_Hz":375,"duty":0.5},
                                              {"start_s":0.1,"frequency_Hz":0,"duty":0}]}},
-  "duration_s":0.15,"recording":{"rate_Hz":2000}})";
+  "duration_s":0.102,"recording":{"rate_Hz":1000}})";
 
 struct Benches {
   explicit Benches(const experiment::Experiment& e) : emu(ValveFor(e)) {
@@ -60,11 +63,12 @@ TEST(SameSpec, RunsUnchangedOnEmulatedHidAndU3) {
     samples[k] = r.trace.size();
   }
   EXPECT_GT(mean[0], 0.3);
+  EXPECT_GT(last[0], 0.05);  // still decaying: the comparison of the final current means something
   for (int k = 1; k < 3; ++k) {
     EXPECT_EQ(samples[k], samples[0]) << names[k];
-    // Quantisation: HID 0.1 mA counts plus its 16-bit duty, U3 37 uA counts: well under 0.1 mA on the mean.
-    EXPECT_NEAR(mean[k], mean[0], 1e-4) << names[k];
-    EXPECT_NEAR(last[k], last[0], 1e-4) << names[k];
+    // Quantisation: HID 0.1 mA counts plus its 16-bit duty (<= 14 uA), U3 37 uA counts.
+    EXPECT_NEAR(mean[k], mean[0], 3e-5) << names[k];
+    EXPECT_NEAR(last[k], last[0], 6e-5) << names[k];
   }
   EXPECT_EQ(b.hid_dev->gate(), 0);
   EXPECT_EQ(b.u3_dev->gate(), 0);
