@@ -12,6 +12,7 @@
 
 #include "benchctl/cli_common.h"
 #include "benchctl/gap_commands.h"
+#include "benchctl/hw_commands.h"
 #include "benchctl/local_commands.h"
 #include "benchctl/local_run.h"
 #include "benchctl/regress_commands.h"
@@ -94,7 +95,8 @@ int main(int argc, char** argv) {
   exp->add_option("run_id", run_id, "run id")->required();
   exp->add_option("--csv", export_csv, "output file ('-' = stdout)")->required();
   common(exp, false);
-  auto* benches = app.add_subcommand("benches", "the server's benches");
+  auto* benches = app.add_subcommand("benches", "the server's benches and attached USB devices (--local: this machine's)");
+  benches->add_flag("--local", local, "the embedded emulator and the USB devices this machine sees, no server");
   common(benches, false);
 
   std::string dataset_dir, diag_model, diag_json;
@@ -200,6 +202,7 @@ int main(int argc, char** argv) {
       return Fail(Status::InvalidArgument("compare: give --batch/--runs (server), or a results file or --local SPEC"));
     return vb::benchctl::CmdCompare(compare_input, compare_local, store_path, json, csv);
   }
+  if (benches->parsed() && local) return vb::benchctl::CmdBenchesLocal(json);
   if (server.empty()) return need_server();
   auto c = make_client();
   if (queue->parsed()) {

@@ -8,6 +8,7 @@
 #include <memory>
 
 #include "benchctl/cli_common.h"
+#include "benchctl/hw_commands.h"
 #include "experiment/compare.h"
 #include "experiment/spec.h"
 
@@ -256,6 +257,7 @@ int RemoteBenches(client::Client& c, const Output& out) {
   for (const auto& x : b->benches())
     std::printf("%-16s %-9s %-18s %-16s %s\n", x.name().c_str(), x.kind().c_str(), x.driver().c_str(),
                 x.model().c_str(), x.busy() ? ("busy (run " + std::to_string(x.current_run_id()) + ")").c_str() : "idle");
+  PrintAttached(*b);
   return kExitOk;
 }
 

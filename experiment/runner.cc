@@ -115,11 +115,12 @@ RunSummary RunImpl(const Experiment& e, hw::Bench& bench, Trace* trace, const st
   bool cancelled = false;
   while (t < e.duration_s) {
     st = bench.AdvanceTo(t, &m);
-    if (!st.ok()) break;
+    // A bench may cut a long step short when the run is cancelled (SafetyBench does): that is a cancellation.
     if (cancel != nullptr && cancel->load(std::memory_order_relaxed)) {
       cancelled = true;
       break;
     }
+    if (!st.ok()) break;
     st = bench.Apply(ctl.Step(m, e.reference.At(t), &state));
     if (!st.ok()) break;
     ++sum.ticks;
@@ -131,8 +132,11 @@ RunSummary RunImpl(const Experiment& e, hw::Bench& bench, Trace* trace, const st
     if (next_bp < bp.size()) t_next = std::min(t_next, bp[next_bp]);
     t = t_next;
   }
-  if (st.ok() && !cancelled) st = bench.AdvanceTo(e.duration_s, &m);
-  if (!st.ok()) {
+  if (st.ok() && !cancelled) {
+    st = bench.AdvanceTo(e.duration_s, &m);
+    if (cancel != nullptr && cancel->load(std::memory_order_relaxed)) cancelled = true;
+  }
+  if (!st.ok() && !cancelled) {
     fail(st, RunSummary::Termination::kFailed);
   } else if (cancelled) {
     fail(Status::Aborted("cancelled at t = " + std::to_string(t) + " s"), RunSummary::Termination::kCancelled);

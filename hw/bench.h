@@ -11,6 +11,7 @@
 
 #include <cstdint>
 #include <string>
+#include <vector>
 
 #include "common/bench_io.h"
 #include "common/status.h"
@@ -28,6 +29,11 @@ struct Capabilities {
   bool measures_position = false;
   bool measures_velocity = false;
   double max_current_A = 0.0;        // safety limit the bench enforces
+  // Hardware benches: what identifies the device, and the current loops its firmware runs on-device
+  // ("open_loop", "hysteresis", "pi") at up to max_device_loop_Hz.
+  std::string serial;
+  std::vector<std::string> device_loops;
+  double max_device_loop_Hz = 0.0;
 };
 
 struct RunConfig {

@@ -2,6 +2,7 @@
 
 #include <google/protobuf/util/json_util.h>
 
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <set>
@@ -26,6 +27,70 @@ std::string Resolve(const std::string& base_dir, const std::string& path) {
   return (std::filesystem::path(base_dir) / path).string();
 }
 
+StatusOr<hw::SafetyLimits> SafetyFromConfig(const valvebench::v1::SafetyConfig& c, double max_current_A, bool hardware,
+                                            const std::string& field) {
+  hw::SafetyLimits l;
+  l.max_current_A = max_current_A;
+  if (c.max_duty() != 0.0) l.max_duty = c.max_duty();
+  l.max_on_time_s = c.max_on_time_s();
+  l.max_coil_temp_C = c.max_coil_temp_c();
+  l.coil_R_ohm = c.coil_r_ohm();
+  l.thermal_resistance_K_per_W = c.thermal_resistance_k_per_w();
+  l.thermal_time_constant_s = c.thermal_time_constant_s();
+  if (c.ambient_c() != 0.0) l.ambient_C = c.ambient_c();
+  l.watchdog_s = c.watchdog_s() > 0.0 ? c.watchdog_s() : (hardware ? 1.0 : 0.0);
+  Status st = l.Validate();
+  if (!st.ok()) return st.WithContext(field);
+  return l;
+}
+
+std::string Hex4(unsigned v) {
+  char buf[8];
+  std::snprintf(buf, sizeof buf, "%04x", v & 0xFFFF);
+  return buf;
+}
+
+// A hid or u3 bench: its declared capabilities (what submissions are checked against; the device's own
+// identity narrows them when it is opened) and interlocks.
+Status HardwareSetup(const valvebench::v1::BenchConfig& b, const std::string& field, BenchSetup* setup) {
+  auto positive = [&](double v, const char* name) -> Status {
+    if (v < 0.0) return Status::InvalidArgument(field + "." + name + ": must be >= 0, got " + std::to_string(v));
+    return Status::Ok();
+  };
+  VB_RETURN_IF_ERROR(positive(b.max_supply_v(), "max_supply_V"));
+  VB_RETURN_IF_ERROR(positive(b.max_current_a(), "max_current_A"));
+  VB_RETURN_IF_ERROR(positive(b.max_sample_rate_hz(), "max_sample_rate_Hz"));
+  VB_RETURN_IF_ERROR(positive(b.max_control_rate_hz(), "max_control_rate_Hz"));
+  VB_RETURN_IF_ERROR(positive(b.amps_per_volt(), "amps_per_volt"));
+  if (b.has_model()) return Status::InvalidArgument(field + ".model: only emulated benches have a model");
+  const bool hid = setup->kind == "hid";
+  if (b.vendor_id() > 0xFFFF || b.product_id() > 0xFFFF)
+    return Status::InvalidArgument(field + ".vendor_id/product_id: must fit 16 bits");
+  if (!hid && (b.vendor_id() != 0 || b.product_id() != 0))
+    return Status::InvalidArgument(field + ".vendor_id/product_id: a u3 is always 0cd5:0003");
+  if (!hid && !b.serial().empty() && b.serial().find_first_not_of("0123456789") != std::string::npos)
+    return Status::InvalidArgument(field + ".serial: a U3 serial number is decimal, got '" + b.serial() + "'");
+  hw::Capabilities& c = setup->caps;
+  c.kind = setup->kind;
+  c.driver = "low_side_flyback";
+  c.max_supply_V = b.max_supply_v() > 0.0 ? b.max_supply_v() : 24.0;
+  c.max_current_A = b.max_current_a() > 0.0 ? b.max_current_a() : 2.0;
+  c.max_sample_rate_Hz = b.max_sample_rate_hz() > 0.0 ? b.max_sample_rate_hz() : (hid ? 20'000.0 : 10'000.0);
+  c.max_control_rate_Hz = b.max_control_rate_hz() > 0.0 ? b.max_control_rate_hz() : 1'000.0;
+  c.min_carrier_Hz = hid ? 10.0 : 1e6 / 256.0 / 65536.0;
+  c.max_carrier_Hz = hid ? 100e3 : 48e6 / 256.0;
+  c.serial = b.serial();
+  setup->bench_class = setup->kind;
+  setup->device = hid ? "hid " + Hex4(b.vendor_id() ? b.vendor_id() : 0x2E8A) + ":" +
+                            Hex4(b.product_id() ? b.product_id() : 0x10C0) +
+                            (b.serial().empty() ? "" : " serial " + b.serial())
+                      : "u3 0cd5:0003" + (b.serial().empty() ? std::string() : " serial " + b.serial());
+  auto safety = SafetyFromConfig(b.safety(), c.max_current_A, /*hardware=*/true, field);
+  if (!safety.ok()) return safety.status();
+  setup->safety = *safety;
+  return Status::Ok();
+}
+
 }  // namespace
 
 std::string SpecBenchClass(const valvebench::v1::ExperimentSpec& spec) {
@@ -48,11 +113,18 @@ StatusOr<Settings> SettingsFromConfig(const valvebench::v1::ServerConfig& c, con
     if (!names.insert(b.name()).second)
       return Status::InvalidArgument(field + ".name: '" + b.name() + "' appears twice");
     const std::string kind = b.kind().empty() ? "emulated" : b.kind();
-    if (kind != "emulated")
-      return Status::InvalidArgument(field + ".kind: '" + kind + "' is not available yet (known: emulated)");
+    if (kind != "emulated" && kind != "hid" && kind != "u3")
+      return Status::InvalidArgument(field + ".kind: unknown bench kind '" + kind + "' (known: emulated, hid, u3)");
     BenchSetup setup;
     setup.name = b.name();
     setup.kind = kind;
+    setup.config = b;
+    if (kind != "emulated") {
+      auto hw = HardwareSetup(b, field, &setup);
+      if (!hw.ok()) return hw;
+      s.benches.push_back(std::move(setup));
+      continue;
+    }
     setup.model = b.model();
     auto plant = experiment::BuildPlant(b.model());
     if (!plant.ok()) return plant.status().WithContext(field);
@@ -65,6 +137,10 @@ StatusOr<Settings> SettingsFromConfig(const valvebench::v1::ServerConfig& c, con
     setup.emulated.driver = *driver;
     if (b.max_supply_v() > 0.0) setup.emulated.max_supply_V = b.max_supply_v();
     if (b.max_current_a() > 0.0) setup.emulated.max_current_A = b.max_current_a();
+    setup.caps = hw::EmulatedBench(setup.emulated).capabilities();
+    auto safety = SafetyFromConfig(b.safety(), setup.caps.max_current_A, /*hardware=*/false, field);
+    if (!safety.ok()) return safety.status();
+    setup.safety = *safety;
     s.benches.push_back(std::move(setup));
   }
   auto auth = Authenticator::Create(c.tokens());

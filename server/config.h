@@ -7,6 +7,7 @@
 
 #include "common/status.h"
 #include "hw/emulated_bench.h"
+#include "hw/safety.h"
 #include "server/auth.h"
 #include "valvebench/v1/config.pb.h"
 
@@ -14,11 +15,15 @@ namespace vb::server {
 
 struct BenchSetup {
   std::string name;
-  std::string kind;             // "emulated"
-  std::string bench_class;      // what runs are matched on: "emulated:<preset>"
+  std::string kind;             // "emulated", "hid", "u3"
+  std::string bench_class;      // what runs are matched on: "emulated:<preset>", "hid", "u3"
   std::string preset;
   valvebench::v1::ModelSpec model;
   hw::EmulatedBenchOptions emulated;
+  valvebench::v1::BenchConfig config;  // as configured (hardware: which device)
+  hw::Capabilities caps;        // what submissions are checked against
+  hw::SafetyLimits safety;      // the interlocks every run on this bench goes through
+  std::string device;           // hardware: "hid 2e8a:10c0 serial X", "u3 serial N"
 };
 
 struct Settings {

@@ -7,8 +7,10 @@
 #include <sstream>
 #include <thread>
 
+#include "experiment/capabilities.h"
 #include "experiment/compare.h"
 #include "experiment/spec.h"
+#include "hw/usb/list_attached.h"
 #include "server/grpc_status.h"
 
 namespace vb::server {
@@ -131,19 +133,22 @@ grpc::Status BenchServiceImpl::Submit(const Principal& who, const std::vector<v1
       // Capabilities decide at submission, not at run time.
       const std::string cls = SpecBenchClass(p);
       bool compatible = false;
-      std::string available;
+      std::string available, refusals;
       for (const auto& b : settings_->benches) {
         available += (available.empty() ? "" : ", ") + b.name + " (" + b.bench_class + ")";
         if (b.bench_class != cls) continue;
         if (!p.bench().name().empty() && p.bench().name() != b.name) continue;
-        if (e->run.supply_V > b.emulated.max_supply_V) continue;
+        if (Status why = experiment::CheckCapabilities(*e, b.caps); !why.ok()) {
+          refusals += "; " + b.name + ": " + why.message();
+          continue;
+        }
         compatible = true;
       }
       if (!compatible)
         return ToGrpcStatus(ctxt(Status::FailedPrecondition(
             "bench: no configured bench can run it (needs " + cls +
             (p.bench().name().empty() ? "" : " named " + p.bench().name()) + " at " + Format(e->run.supply_V) +
-            " V; configured: " + available + ")")));
+            " V; configured: " + available + ")" + refusals)));
       db::RunRecord r;
       r.name = RunName(p);
       r.controller = LawName(p);
@@ -443,16 +448,31 @@ grpc::Status BenchServiceImpl::ListBenches(grpc::ServerContext* ctx, const v1::L
     auto* out = resp->add_benches();
     out->set_name(b.name);
     out->set_kind(b.kind);
-    out->set_driver(std::string(model::DriverKindName(b.emulated.driver.kind)));
+    out->set_driver(b.kind == "emulated" ? std::string(model::DriverKindName(b.emulated.driver.kind)) : b.caps.driver);
     out->set_model(b.preset);
-    out->set_max_supply_v(b.emulated.max_supply_V);
-    out->set_max_carrier_hz(1e6);
-    out->set_max_sample_rate_hz(10e6);
-    out->set_measures_position(b.emulated.plant.has_moving_part);
+    out->set_max_supply_v(b.caps.max_supply_V);
+    out->set_max_carrier_hz(b.caps.max_carrier_Hz);
+    out->set_max_sample_rate_hz(b.caps.max_sample_rate_Hz);
+    out->set_max_control_rate_hz(b.caps.max_control_rate_Hz);
+    out->set_measures_position(b.kind == "emulated" ? b.emulated.plant.has_moving_part : b.caps.measures_position);
+    out->set_device(b.device);
     const auto current = w->current_run();
     out->set_busy(current != 0);
     out->set_current_run_id(current);
   }
+  const hw::AttachedDevices attached = hw::ListAttachedDevices();
+  for (const auto& d : attached.devices) {
+    auto* a = resp->add_attached();
+    a->set_kind(d.kind);
+    a->set_vendor_id(d.vendor_id);
+    a->set_product_id(d.product_id);
+    a->set_serial(d.serial);
+    a->set_product(d.product);
+    a->set_path(d.path);
+  }
+  std::string note = attached.note;
+  for (const auto& err : attached.errors) note += (note.empty() ? "" : "; ") + err;
+  resp->set_attached_note(note);
   return grpc::Status::OK;
 }
 

@@ -7,6 +7,8 @@
 #include "db/trace_writer.h"
 #include "experiment/spec.h"
 #include "hw/emulated_bench.h"
+#include "hw/safety.h"
+#include "server/benches.h"
 
 namespace vb::server {
 
@@ -146,17 +148,22 @@ void Worker::Execute(db::Store* store, const db::RunRecord& run) {
   }
   // On an emulated bench the bench's configured model is the plant (it stands in for hardware); the spec's
   // perturbations still apply on top of it.
-  *spec->mutable_bench()->mutable_model() = setup_.model;
+  if (setup_.kind == "emulated") *spec->mutable_bench()->mutable_model() = setup_.model;
   auto e = experiment::BuildExperiment(*spec);
   if (!e.ok()) {
     finish(db::RunStatus::kFailed, e.status().message(), {});
     current_run_.store(0);
     return;
   }
-  hw::EmulatedBenchOptions opts = setup_.emulated;
-  opts.plant = e->plant;
-  opts.disturbance = e->disturbance;
-  hw::EmulatedBench bench(opts);
+  auto opened = OpenBench(setup_, *e);
+  if (!opened.ok()) {
+    finish(db::RunStatus::kFailed, "bench " + setup_.name + ": " + opened.status().message(), {});
+    current_run_.store(0);
+    return;
+  }
+  // Every run goes through the interlocks (current, duty, on-time, coil temperature, watchdog): a trip puts the
+  // bench in its safe state and fails the run with the reason, keeping the samples up to the trip.
+  hw::SafetyBench bench(opened->get(), setup_.safety);
 
   experiment::RunMonitor monitor;
   const int decimation = std::max(1, static_cast<int>(std::lround(e->run.sample_rate_Hz / 1000.0)));
@@ -166,6 +173,7 @@ void Worker::Execute(db::Store* store, const db::RunRecord& run) {
   auto cancel_requested = store->CancelRequested(run.id);
   if (stop_.load() || (cancel_requested.ok() && *cancel_requested)) monitor.cancel.store(true);
 
+  bench.set_cancel_flag(&monitor.cancel);  // cancel and shutdown act within a check period, not a tick
   experiment::Trace trace;
   const experiment::RunSummary summary = experiment::Runner::Run(*e, bench, &trace, &monitor, &tap);
   bench.SafeState();

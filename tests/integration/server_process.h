@@ -32,12 +32,14 @@ class ServerProcess {
  public:
   // dir: a fresh directory for config, database and logs (kept across restarts). extra_fields: more top-level
   // config fields, e.g. R"("limits": {...})" or R"("tls": {...})".
-  explicit ServerProcess(std::string dir, std::string extra_fields = "") : dir_(std::move(dir)) {
+  // benches: the "benches" array's JSON, two emulated benches unless given.
+  explicit ServerProcess(std::string dir, std::string extra_fields = "",
+                         std::string benches = R"([{"name": "emu-a", "kind": "emulated", "model": {"preset": "taghizadeh2009"}},
+                  {"name": "emu-b", "kind": "emulated", "model": {"preset": "taghizadeh2009"}}])")
+      : dir_(std::move(dir)) {
     std::filesystem::create_directories(dir_);
     std::ofstream cfg(dir_ + "/server.json");
-    cfg << R"({"listen_address": "127.0.0.1:0", "database_path": "runs.db",
-      "benches": [{"name": "emu-a", "kind": "emulated", "model": {"preset": "taghizadeh2009"}},
-                  {"name": "emu-b", "kind": "emulated", "model": {"preset": "taghizadeh2009"}}],
+    cfg << R"({"listen_address": "127.0.0.1:0", "database_path": "runs.db", "benches": )" << benches << R"(,
       "tokens": [)"
         << Token("viewer", "viewer", kViewerToken) << "," << Token("olga", "operator", kOperatorToken) << ","
         << Token("oscar", "operator", kOperator2Token) << "," << Token("ada", "admin", kAdminToken) << "]"

@@ -1,0 +1,70 @@
+#include "benchctl/hw_commands.h"
+
+#include <google/protobuf/util/json_util.h>
+
+#include <cstdio>
+#include <iostream>
+
+#include "benchctl/cli_common.h"
+#include "hw/emulated_bench.h"
+#include "hw/usb/list_attached.h"
+
+namespace vb::benchctl {
+
+void PrintAttached(const valvebench::v1::ListBenchesResponse& r) {
+  std::printf("attached USB devices:%s\n", r.attached().empty() ? " none" : "");
+  for (const auto& a : r.attached())
+    std::printf("  %-4s %04x:%04x  serial %-14s %-20s %s\n", a.kind().c_str(), a.vendor_id(), a.product_id(),
+                a.serial().empty() ? "?" : a.serial().c_str(), a.product().c_str(), a.path().c_str());
+  if (!r.attached_note().empty()) std::printf("  (%s)\n", r.attached_note().c_str());
+}
+
+int CmdBenchesLocal(bool json) {
+  valvebench::v1::ListBenchesResponse r;
+  {
+    hw::EmulatedBenchOptions opts;  // what `run --local` drives
+    opts.name = "local-emulator";
+    hw::EmulatedBench emu(opts);
+    const hw::Capabilities& c = emu.capabilities();
+    auto* b = r.add_benches();
+    b->set_name(opts.name);
+    b->set_kind(c.kind);
+    b->set_driver(c.driver);
+    b->set_model("the spec's");
+    b->set_max_supply_v(c.max_supply_V);
+    b->set_max_carrier_hz(c.max_carrier_Hz);
+    b->set_max_sample_rate_hz(c.max_sample_rate_Hz);
+    b->set_max_control_rate_hz(c.max_control_rate_Hz);
+    b->set_measures_position(c.measures_position);
+  }
+  const hw::AttachedDevices attached = hw::ListAttachedDevices();
+  for (const auto& d : attached.devices) {
+    auto* a = r.add_attached();
+    a->set_kind(d.kind);
+    a->set_vendor_id(d.vendor_id);
+    a->set_product_id(d.product_id);
+    a->set_serial(d.serial);
+    a->set_product(d.product);
+    a->set_path(d.path);
+  }
+  std::string note = attached.note;
+  for (const auto& err : attached.errors) note += (note.empty() ? "" : "; ") + err;
+  r.set_attached_note(note);
+  if (json) {
+    std::string out;
+    google::protobuf::util::JsonPrintOptions opts;
+    opts.add_whitespace = true;
+    opts.preserve_proto_field_names = true;
+    opts.always_print_primitive_fields = true;
+    (void)google::protobuf::util::MessageToJsonString(r, &out, opts);
+    std::cout << out << "\n";
+    return kExitOk;
+  }
+  for (const auto& x : r.benches())
+    std::printf("%-16s %-9s %-18s %-16s idle\n", x.name().c_str(), x.kind().c_str(), x.driver().c_str(),
+                x.model().c_str());
+  PrintAttached(r);
+  return kExitOk;
+}
+
+}  // namespace vb::benchctl
