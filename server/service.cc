@@ -305,6 +305,19 @@ grpc::Status BenchServiceImpl::WatchRun(grpc::ServerContext* ctx, const v1::Watc
   bool first = true;
   db::RunStatus last_status = db::RunStatus::kQueued;
   double last_progress = -1.0;
+  // An interactive run watched by its submitter is cancelled when that watch goes away before the run ends.
+  bool owns_interactive = false;
+  if (auto r = (*store)->GetRun(req->run_id()); r.ok() && r->submitter == who.user) {
+    v1::ExperimentSpec spec;
+    google::protobuf::util::JsonParseOptions opts;
+    opts.ignore_unknown_fields = true;
+    owns_interactive = google::protobuf::util::JsonStringToMessage(r->spec_json, &spec, opts).ok() && spec.interactive();
+  }
+  auto client_gone = [&]() {
+    if (!owns_interactive) return;
+    auto st = (*store)->RequestCancel(req->run_id(), "client disconnected from an interactive run");
+    if (st.ok() && *st == db::RunStatus::kRunning) registry_->Cancel(req->run_id());  // safe state now
+  };
   while (!ctx->IsCancelled()) {
     auto r = (*store)->GetRun(req->run_id());
     if (!r.ok()) return ToGrpcStatus(r.status());
@@ -330,13 +343,17 @@ grpc::Status BenchServiceImpl::WatchRun(grpc::ServerContext* ctx, const v1::Watc
     ev.set_progress(progress);
     const bool changed = first || r->status != last_status || std::abs(progress - last_progress) >= 0.01 ||
                          ev.samples_size() > 0;
-    if (changed && !writer->Write(ev)) return grpc::Status::OK;  // the client went away
+    if (changed && !writer->Write(ev)) {  // the client went away
+      if (!Finished(r->status)) client_gone();
+      return grpc::Status::OK;
+    }
     first = false;
     last_status = r->status;
     last_progress = progress;
     if (Finished(r->status) || r->status == db::RunStatus::kInterrupted) return grpc::Status::OK;
     std::this_thread::sleep_for(std::chrono::milliseconds(50));
   }
+  client_gone();
   return grpc::Status(grpc::StatusCode::CANCELLED, "watch cancelled by the client");
 }
 

@@ -194,6 +194,8 @@ void Worker::Execute(db::Store* store, const db::RunRecord& run) {
   if (summary.termination == experiment::RunSummary::Termination::kCancelled) {
     status = db::RunStatus::kCancelled;
     reason = summary.message;
+    // Keep why it was cancelled (the request's reason, stored by RequestCancel), not only when.
+    if (auto row = store->GetRun(run.id); row.ok() && !row->reason.empty()) reason = row->reason + "; " + reason;
   } else if (summary.termination == experiment::RunSummary::Termination::kFailed) {
     status = db::RunStatus::kFailed;
     reason = summary.message;

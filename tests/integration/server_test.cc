@@ -335,4 +335,39 @@ TEST(Server, TlsWhenCertificateAndKeyAreConfigured) {
 }
 
 }  // namespace
+// Interactive runs: when the submitter's watch goes away mid-run, the run is cancelled (safe state); a
+// non-interactive run watched the same way keeps running.
+TEST(Server, InteractiveRunIsCancelledWhenItsClientDisconnects) {
+  ServerProcess server(TempDir("interactive"));
+  const std::string addr = server.Start();
+  ASSERT_FALSE(addr.empty()) << server.Log();
+  auto olga = MakeClient(addr, testing::kOperatorToken);
+  auto interactive = ShortRun("interactive", 20.0, true);
+  interactive.set_interactive(true);
+  auto a = olga.Submit(interactive);
+  ASSERT_TRUE(a.ok()) << a.status().message();
+  const std::int64_t id = a->run_ids(0);
+  // Watch until it runs, then drop the stream (a disconnecting client: the deadline ends the call).
+  bool running = false;
+  (void)olga.Watch(id, 1.0, 0.0, [&](const v1::RunEvent& ev) {
+    running = running || ev.status() == v1::RUNNING;
+    return true;
+  });
+  ASSERT_TRUE(running);
+  auto ended = WaitAll(olga, {id}, 5.0);
+  ASSERT_EQ(ended.size(), 1u);
+  EXPECT_EQ(ended[0].status(), v1::CANCELLED);
+  EXPECT_NE(ended[0].reason().find("client disconnected"), std::string::npos) << ended[0].reason();
+  EXPECT_LT(ended[0].finished_unix_s() - ended[0].started_unix_s(), 5.0);
+
+  auto b = olga.Submit(ShortRun("plain", 20.0, true));
+  ASSERT_TRUE(b.ok());
+  (void)olga.Watch(b->run_ids(0), 1.0, 0.0, [](const v1::RunEvent&) { return true; });
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  auto still = olga.GetRun(b->run_ids(0));
+  ASSERT_TRUE(still.ok());
+  EXPECT_EQ(still->status(), v1::RUNNING) << "only interactive runs follow their client";
+  ASSERT_TRUE(olga.Cancel(b->run_ids(0)).ok());
+}
+
 }  // namespace vb
