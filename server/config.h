@@ -7,6 +7,7 @@
 
 #include "common/status.h"
 #include "hw/emulated_bench.h"
+#include "regress/compare.h"
 #include "server/auth.h"
 #include "valvebench/v1/config.pb.h"
 
@@ -21,6 +22,15 @@ struct BenchSetup {
   hw::EmulatedBenchOptions emulated;
 };
 
+// The nightly regression (config "nights"; docs/regress.md). Paths resolved against the config's directory.
+struct NightsSetup {
+  bool enabled = false;
+  std::string cron;             // validated 5-field expression
+  std::string suite_path;
+  std::string baseline_path;
+  bool utc = true;              // the only time zone supported
+};
+
 struct Settings {
   std::string listen_address = "127.0.0.1:50051";
   std::string database_path;
@@ -28,10 +38,14 @@ struct Settings {
   Authenticator auth;
   std::string tls_cert_pem, tls_key_pem;  // both set = TLS
   valvebench::v1::Limits limits;          // defaults filled in
+  NightsSetup nights;
 };
 
 StatusOr<Settings> LoadSettings(const std::string& config_path);
 StatusOr<Settings> SettingsFromConfig(const valvebench::v1::ServerConfig& config, const std::string& base_dir);
+
+// A baseline JSON file as `benchctl baseline show --json` writes it (nights.baseline_file).
+StatusOr<regress::Baseline> LoadBaselineFile(const std::string& path);
 
 // The bench class a spec asks for ("emulated:<preset>"), as matched against BenchSetup::bench_class.
 std::string SpecBenchClass(const valvebench::v1::ExperimentSpec& spec);
