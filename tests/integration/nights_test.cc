@@ -4,7 +4,9 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <fstream>
 #include <nlohmann/json.hpp>
+#include <sstream>
 #include <thread>
 
 #include "../common/run_command.h"
@@ -127,6 +129,45 @@ TEST(Nights, RunNowStoresAPassingNightListedByBenchctl) {
 
   // Bad input: exit 2.
   EXPECT_EQ(testing::RunCommand(nights_cmd + " --limit 0").exit_code, 2);
+}
+
+// The same suite with the PI law's integral gain cut tenfold (as in regress_ci_test): the night regresses and
+// `benchctl nights` exits 1 with the first regression in the summary.
+TEST(Nights, AWorseControllerMakesARegressedNight) {
+  const std::string dir = ::testing::TempDir() + "/vb-nights-worse-" + std::to_string(::getpid());
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  std::filesystem::copy_file(kSuites + "ci.json", dir + "/ci.json");
+  std::ifstream in(kSuites + "ci-current-hold.json");
+  std::stringstream ss;
+  ss << in.rdbuf();
+  std::string spec = ss.str();
+  const size_t law = spec.find("\"pi_current\": {}", spec.find("\"name\": \"pi\""));
+  ASSERT_NE(law, std::string::npos);
+  spec.replace(law, 16, R"("pi_current": {"ki_V_per_A_s": 4080})");
+  std::ofstream(dir + "/ci-current-hold.json") << spec;
+  testing::ServerProcess server(dir, R"("nights": {"cron": "0 2 * * *", "suite_file": "ci.json", "baseline_file": ")" +
+                                         kSuites + R"(ci-baseline.json"})");
+  server.AddArg("--run-night-now");
+  const std::string addr = server.Start();
+  ASSERT_FALSE(addr.empty()) << server.Log();
+  const std::string cmd =
+      std::string(VB_BENCHCTL) + " nights --json --server " + addr + " --token " + testing::kViewerToken;
+  nlohmann::json list;
+  testing::CommandResult r;
+  const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  while (std::chrono::steady_clock::now() < until) {
+    r = testing::RunCommand(cmd);
+    const size_t at = r.out.find('[');
+    list = nlohmann::json::parse(at == std::string::npos ? std::string() : r.out.substr(at), nullptr, false);
+    if (list.is_array() && !list.empty()) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  }
+  ASSERT_TRUE(list.is_array() && list.size() == 1) << r.out << "\n" << server.Log();
+  EXPECT_EQ(list[0]["verdict"], "regressed") << list.dump(2);
+  EXPECT_GT(list[0]["regressed"].get<int>(), 0);
+  EXPECT_NE(list[0]["summary"].get<std::string>().find("first: "), std::string::npos) << list.dump(2);
+  EXPECT_EQ(r.exit_code, 1) << r.out;
 }
 
 }  // namespace
