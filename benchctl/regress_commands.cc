@@ -1,4 +1,4 @@
-// benchctl baseline / regress (docs/regress.md).
+// benchctl baseline / regress / nights (docs/regress.md).
 #include "benchctl/regress_commands.h"
 
 #include <cmath>
@@ -248,9 +248,14 @@ RegressCli::RegressCli(CLI::App* app, SharedOptions shared) : shared_(shared) {
   regress_->add_option("--junit", junit_path_, "write JUnit XML here");
   regress_->add_option("--seed", seed_, "jitter seed (default: the suite's seed)");
   common(regress_);
+
+  nights_ = app->add_subcommand("nights", "the server's scheduled regression nights, newest first (exit 1 if the "
+                                          "latest did not pass)");
+  nights_->add_option("--limit", limit_, "how many nights (1-1000, default 10)");
+  common(nights_);
 }
 
-bool RegressCli::parsed() const { return baseline_->parsed() || regress_->parsed(); }
+bool RegressCli::parsed() const { return baseline_->parsed() || regress_->parsed() || nights_->parsed(); }
 
 int RegressCli::Run(const ClientFactory& make_client) {
   const bool json = *shared_.json;
@@ -393,6 +398,41 @@ int RegressCli::Run(const ClientFactory& make_client) {
                                  static_cast<long long>(r.id), static_cast<long long>(r.id));
     }
     return r.regressed() ? kExitRunFailed : kExitOk;
+  }
+
+  if (nights_->parsed()) {
+    if (limit_ < 1 || limit_ > 1000) return Fail(Status::InvalidArgument("--limit: must be 1-1000"));
+    if (server.empty())
+      return Fail(Status::InvalidArgument("nights: the nights run on a server (--server ADDR or VALVEBENCH_SERVER)"));
+    auto c = make_client();
+    auto resp = c->ListNights(limit_);
+    if (!resp.ok()) return Fail(resp.status());
+    if (json) {
+      Json a = Json::array();
+      for (const auto& n : resp->nights())
+        a.push_back({{"date", n.date()},
+                     {"verdict", n.verdict()},
+                     {"batch_id", n.batch_id()},
+                     {"regression_id", n.regression_id()},
+                     {"suite", n.suite()},
+                     {"baseline", n.baseline()},
+                     {"regressed", n.regressed_count()},
+                     {"unchanged", n.unchanged()},
+                     {"improved", n.improved()},
+                     {"started_unix_s", n.started_unix_s()},
+                     {"finished_unix_s", n.finished_unix_s()},
+                     {"summary", n.summary()}});
+      std::cout << a.dump(2) << "\n";
+    } else {
+      if (resp->nights_size() == 0) std::printf("no nights yet on %s\n", server.c_str());
+      for (const auto& n : resp->nights())
+        std::printf("%s  %-9s  batch %-5lld %s vs %s  %s\n", n.date().c_str(), n.verdict().c_str(),
+                    static_cast<long long>(n.batch_id()), n.suite().c_str(), n.baseline().c_str(),
+                    n.summary().c_str());
+    }
+    // The newest night decides: a script can gate on "did last night pass" (no nights yet is not a failure).
+    if (resp->nights_size() > 0 && resp->nights(0).verdict() != "passed") return kExitRunFailed;
+    return kExitOk;
   }
 
   return kExitBadInput;

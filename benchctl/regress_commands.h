@@ -41,6 +41,8 @@ class RegressCli {
   CLI::App* baseline_list_ = nullptr;
   CLI::App* baseline_show_ = nullptr;
   CLI::App* regress_ = nullptr;
+  CLI::App* nights_ = nullptr;
+  int limit_ = 10;
   std::string name_, suite_path_, note_, baseline_arg_, junit_path_;
   std::int64_t batch_ = 0;
   int version_ = 0;

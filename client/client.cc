@@ -174,6 +174,17 @@ StatusOr<v1::CompareRunsResponse> Client::Compare(std::int64_t batch_id, const s
   return resp;
 }
 
+StatusOr<v1::ListNightsResponse> Client::ListNights(int limit) {
+  grpc::ClientContext ctx;
+  Prepare(&ctx, opt_.deadline_s);
+  v1::ListNightsRequest req;
+  req.set_limit(limit);
+  v1::ListNightsResponse resp;
+  auto st = stub_->ListNights(&ctx, req, &resp);
+  if (!st.ok()) return FromGrpc(st);
+  return resp;
+}
+
 StatusOr<v1::ListBenchesResponse> Client::Benches() {
   grpc::ClientContext ctx;
   Prepare(&ctx, opt_.deadline_s);

@@ -49,6 +49,7 @@ class Client {
   StatusOr<FetchedTrace> GetTrace(std::int64_t run_id, double deadline_s = 60.0);
   StatusOr<valvebench::v1::CompareRunsResponse> Compare(std::int64_t batch_id, const std::vector<std::int64_t>& run_ids);
   StatusOr<valvebench::v1::ListBenchesResponse> Benches();
+  StatusOr<valvebench::v1::ListNightsResponse> ListNights(int limit);
   StatusOr<valvebench::v1::SubmitRunResponse> ImportRuns(const valvebench::v1::ImportRunsRequest& request,
                                                          double deadline_s = 300.0);
 

@@ -9,6 +9,9 @@
 #include <sstream>
 
 #include "experiment/spec.h"
+#include "regress/compare.h"
+#include "regress/cron.h"
+#include "regress/suite.h"
 
 namespace vb::server {
 
@@ -91,7 +94,43 @@ Status HardwareSetup(const valvebench::v1::BenchConfig& b, const std::string& fi
   return Status::Ok();
 }
 
+// nights: every field checked now (a bad suite or baseline should stop the server at start, not at 02:00).
+StatusOr<NightsSetup> NightsFromConfig(const valvebench::v1::NightsConfig& n, const std::string& base_dir) {
+  NightsSetup out;
+  if (n.cron().empty() && n.suite_file().empty() && n.baseline_file().empty() && n.timezone().empty()) return out;
+  if (n.cron().empty()) return Status::InvalidArgument("nights.cron: must be set (5 fields, e.g. \"0 2 * * *\")");
+  auto cron = regress::Cron::Parse(n.cron());
+  if (!cron.ok()) return Status::InvalidArgument("nights.cron: " + cron.status().message());
+  if (!n.timezone().empty() && n.timezone() != "UTC")
+    return Status::InvalidArgument("nights.timezone: '" + n.timezone() + "' is not supported (only \"UTC\")");
+  if (n.suite_file().empty()) return Status::InvalidArgument("nights.suite_file: must be set");
+  if (n.baseline_file().empty()) return Status::InvalidArgument("nights.baseline_file: must be set");
+  out.enabled = true;
+  out.cron = n.cron();
+  out.suite_path = Resolve(base_dir, n.suite_file());
+  out.baseline_path = Resolve(base_dir, n.baseline_file());
+  auto suite = regress::LoadSuite(out.suite_path);
+  if (!suite.ok()) return suite.status().WithContext("nights.suite_file " + out.suite_path);
+  auto baseline = LoadBaselineFile(out.baseline_path);
+  if (!baseline.ok()) return baseline.status().WithContext("nights.baseline_file");
+  return out;
+}
+
 }  // namespace
+
+StatusOr<regress::Baseline> LoadBaselineFile(const std::string& path) {
+  auto text = ReadFile(path, path);
+  if (!text.ok()) return text.status();
+  regress::Json j;
+  try {
+    j = regress::Json::parse(*text);
+  } catch (const regress::Json::exception& e) {
+    return Status::InvalidArgument(path + ": not JSON: " + e.what());
+  }
+  auto b = regress::BaselineFromJson(j);
+  if (!b.ok()) return b.status().WithContext(path);
+  return b;
+}
 
 std::string SpecBenchClass(const valvebench::v1::ExperimentSpec& spec) {
   const std::string kind = spec.bench().kind().empty() ? "emulated" : spec.bench().kind();
@@ -163,6 +202,9 @@ StatusOr<Settings> SettingsFromConfig(const valvebench::v1::ServerConfig& c, con
   if (s.limits.max_record_rate_hz() == 0.0) s.limits.set_max_record_rate_hz(1e6);
   if (s.limits.max_queued_runs_per_user() == 0) s.limits.set_max_queued_runs_per_user(10000);
   if (s.limits.max_runs_per_submission() == 0) s.limits.set_max_runs_per_submission(10000);
+  auto nights = NightsFromConfig(c.nights(), base_dir);
+  if (!nights.ok()) return nights.status();
+  s.nights = std::move(*nights);
   return s;
 }
 

@@ -8,6 +8,7 @@
 #include "common/status.h"
 #include "hw/emulated_bench.h"
 #include "hw/safety.h"
+#include "regress/compare.h"
 #include "server/auth.h"
 #include "valvebench/v1/config.pb.h"
 
@@ -26,6 +27,15 @@ struct BenchSetup {
   std::string device;           // hardware: "hid 2e8a:10c0 serial X", "u3 serial N"
 };
 
+// The nightly regression (config "nights"; docs/regress.md). Paths resolved against the config's directory.
+struct NightsSetup {
+  bool enabled = false;
+  std::string cron;             // validated 5-field expression
+  std::string suite_path;
+  std::string baseline_path;
+  bool utc = true;              // the only time zone supported
+};
+
 struct Settings {
   std::string listen_address = "127.0.0.1:50051";
   std::string database_path;
@@ -33,10 +43,14 @@ struct Settings {
   Authenticator auth;
   std::string tls_cert_pem, tls_key_pem;  // both set = TLS
   valvebench::v1::Limits limits;          // defaults filled in
+  NightsSetup nights;
 };
 
 StatusOr<Settings> LoadSettings(const std::string& config_path);
 StatusOr<Settings> SettingsFromConfig(const valvebench::v1::ServerConfig& config, const std::string& base_dir);
+
+// A baseline JSON file as `benchctl baseline show --json` writes it (nights.baseline_file).
+StatusOr<regress::Baseline> LoadBaselineFile(const std::string& path);
 
 // The bench class a spec asks for ("emulated:<preset>"), as matched against BenchSetup::bench_class.
 std::string SpecBenchClass(const valvebench::v1::ExperimentSpec& spec);

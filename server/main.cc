@@ -1,4 +1,6 @@
 // valvebench-server --config FILE
+// With a "nights" block in the config, a scheduler thread runs the regression suite at each cron fire (UTC;
+// server/nights.h). Test hook (hidden): --run-night-now runs one night right after start.
 // Serves BenchService, grpc.health.v1 and server reflection; one worker per configured bench. Listens on
 // loopback unless the config says otherwise. SIGTERM/SIGINT: stop accepting, stop running experiments (the
 // benches go to their safe state; the runs are re-queued at the next start), exit 0.
@@ -15,6 +17,7 @@
 #include <thread>
 
 #include "server/config.h"
+#include "server/nights.h"
 #include "server/service.h"
 #include "server/workers.h"
 
@@ -22,6 +25,8 @@ int main(int argc, char** argv) {
   CLI::App app{"valvebench-server: the bench server"};
   std::string config_path;
   app.add_option("--config", config_path, "server configuration (protobuf JSON)")->required();
+  bool run_night_now = false;
+  app.add_flag("--run-night-now", run_night_now, "run one night at start (tests)")->group("");
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -38,6 +43,10 @@ int main(int argc, char** argv) {
   auto settings = vb::server::LoadSettings(config_path);
   if (!settings.ok()) {
     std::fprintf(stderr, "valvebench-server: %s\n", settings.status().message().c_str());
+    return 2;
+  }
+  if (run_night_now && !settings->nights.enabled) {
+    std::fprintf(stderr, "valvebench-server: --run-night-now: the config has no \"nights\" block\n");
     return 2;
   }
   auto store = vb::db::Store::Open(settings->database_path);
@@ -84,6 +93,16 @@ int main(int argc, char** argv) {
     return 3;
   }
   for (auto& w : workers) w->Start();
+  std::unique_ptr<vb::server::NightScheduler> nights;
+  if (settings->nights.enabled) {
+    nights = std::make_unique<vb::server::NightScheduler>(
+        settings->nights, &pool,
+        [&service](const std::string& user, const std::vector<valvebench::v1::ExperimentSpec>& specs,
+                   const std::string& batch, valvebench::v1::SubmitRunResponse* resp) {
+          return service.SubmitAs(user, specs, batch, resp);
+        });
+    nights->Start(run_night_now);
+  }
   // The address with the port actually bound (a config may ask for port 0: any free port).
   std::string bound = settings->listen_address;
   if (const size_t colon = bound.rfind(':'); colon != std::string::npos)
@@ -91,11 +110,14 @@ int main(int argc, char** argv) {
   std::fprintf(stderr, "valvebench-server: listening on %s (%s), %zu bench(es), database %s\n", bound.c_str(),
                settings->tls_cert_pem.empty() ? "insecure" : "TLS", workers.size(),
                settings->database_path.c_str());
+  if (nights) std::fprintf(stderr, "valvebench-server: nights: '%s' (UTC), suite %s\n",
+                           settings->nights.cron.c_str(), settings->nights.suite_path.c_str());
   std::fflush(stderr);
 
   int sig = 0;
   sigwait(&signals, &sig);
   std::fprintf(stderr, "valvebench-server: %s: shutting down\n", sig == SIGTERM ? "SIGTERM" : "SIGINT");
+  if (nights) nights->Stop();
   server->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(2));
   for (auto& w : workers) w->Stop();
   server->Wait();

@@ -184,6 +184,15 @@ grpc::Status BenchServiceImpl::Submit(const Principal& who, const std::vector<v1
   return grpc::Status::OK;
 }
 
+Status BenchServiceImpl::SubmitAs(const std::string& user, const std::vector<v1::ExperimentSpec>& specs,
+                                  const std::string& batch_name, v1::SubmitRunResponse* resp) {
+  const grpc::Status st = Submit(Principal{user, Role::kOperator}, specs, batch_name, resp);
+  if (st.ok()) return Status::Ok();
+  if (st.error_code() == grpc::StatusCode::UNAVAILABLE || st.error_code() == grpc::StatusCode::INTERNAL)
+    return Status::Unavailable(st.error_message());
+  return Status::FailedPrecondition(st.error_message());
+}
+
 grpc::Status BenchServiceImpl::FillRun(db::Store* store, const db::RunRecord& r, bool full, v1::Run* out) {
   out->set_id(r.id);
   out->set_batch_id(r.batch_id);

@@ -65,6 +65,14 @@ class BenchServiceImpl final : public valvebench::v1::BenchService::Service {
   // server/import.cc
   grpc::Status ImportRuns(grpc::ServerContext* ctx, const valvebench::v1::ImportRunsRequest* req,
                           valvebench::v1::SubmitRunResponse* resp) override;
+  // server/nights_service.cc
+  grpc::Status ListNights(grpc::ServerContext* ctx, const valvebench::v1::ListNightsRequest* req,
+                          valvebench::v1::ListNightsResponse* resp) override;
+
+  // For the server's own submissions (the nights scheduler): the same checks and limits as SubmitBatch, as
+  // operator `user`.
+  Status SubmitAs(const std::string& user, const std::vector<valvebench::v1::ExperimentSpec>& specs,
+                  const std::string& batch_name, valvebench::v1::SubmitRunResponse* resp);
 
  private:
   grpc::Status Authorize(grpc::ServerContext* ctx, Role need, Principal* who) const;

@@ -15,6 +15,7 @@
 #include <sstream>
 #include <string>
 #include <thread>
+#include <vector>
 
 #include "server/auth.h"
 
@@ -56,8 +57,11 @@ class ServerProcess {
     posix_spawn_file_actions_addopen(&fa, 2, log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
     posix_spawn_file_actions_addopen(&fa, 1, "/dev/null", O_WRONLY, 0);
     const std::string config = dir_ + "/server.json";
-    const char* argv[] = {VB_SERVER, "--config", config.c_str(), nullptr};
-    const int rc = posix_spawn(&pid_, VB_SERVER, &fa, nullptr, const_cast<char**>(argv), environ);
+    std::vector<char*> argv = {const_cast<char*>(VB_SERVER), const_cast<char*>("--config"),
+                               const_cast<char*>(config.c_str())};
+    for (auto& a : extra_args_) argv.push_back(a.data());
+    argv.push_back(nullptr);
+    const int rc = posix_spawn(&pid_, VB_SERVER, &fa, nullptr, argv.data(), environ);
     posix_spawn_file_actions_destroy(&fa);
     if (rc != 0) return "";
     const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(20);
@@ -92,6 +96,8 @@ class ServerProcess {
     return status;
   }
 
+  // More command-line arguments for the next Start(), e.g. "--run-night-now".
+  void AddArg(std::string arg) { extra_args_.push_back(std::move(arg)); }
   const std::string& address() const { return address_; }
   std::string Log() const {
     std::ifstream in(log_);
@@ -112,6 +118,7 @@ class ServerProcess {
   std::string address_;
   pid_t pid_ = 0;
   int starts_ = 0;
+  std::vector<std::string> extra_args_;
 };
 
 }  // namespace vb::testing

@@ -1,0 +1,204 @@
+#include "server/nights.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+
+#include "regress/compare.h"
+#include "regress/cron.h"
+#include "regress/suite.h"
+
+namespace vb::server {
+
+namespace v1 = valvebench::v1;
+
+namespace {
+
+constexpr double kNightDeadline_s = 20 * 3600.0;  // a night still unfinished after this is stored as "error"
+constexpr double kPollPeriod_s = 0.2;             // how often the batch's runs are checked while waiting
+
+double WallClock() {
+  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+}
+
+bool Final(db::RunStatus s) {
+  return s == db::RunStatus::kDone || s == db::RunStatus::kFailed || s == db::RunStatus::kCancelled ||
+         s == db::RunStatus::kInterrupted;
+}
+
+}  // namespace
+
+NightScheduler::NightScheduler(NightsSetup setup, StorePool* pool, SubmitFn submit, ClockFn clock)
+    : setup_(std::move(setup)), pool_(pool), submit_(std::move(submit)), clock_(clock ? std::move(clock) : WallClock) {}
+
+NightScheduler::~NightScheduler() { Stop(); }
+
+void NightScheduler::Start(bool run_now) {
+  thread_ = std::thread([this, run_now] { Loop(run_now); });
+}
+
+void NightScheduler::Stop() {
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    stop_ = true;
+  }
+  cv_.notify_all();
+  if (thread_.joinable()) thread_.join();
+}
+
+bool NightScheduler::SleepUntil(double t_unix_s) {
+  std::unique_lock<std::mutex> lock(mu_);
+  for (;;) {
+    if (stop_) return false;
+    const double left_s = t_unix_s - clock_();
+    if (left_s <= 0.0) return true;
+    // Re-read the clock at least each minute: the wall clock may be set while we sleep.
+    cv_.wait_for(lock, std::chrono::duration<double>(std::min(left_s, 60.0)), [this] { return stop_; });
+  }
+}
+
+void NightScheduler::Loop(bool run_now) {
+  auto cron = regress::Cron::Parse(setup_.cron);
+  if (!cron.ok()) {  // validated with the config; kept as a guard
+    std::fprintf(stderr, "valvebench-server: nights.cron: %s\n", cron.status().message().c_str());
+    return;
+  }
+  auto night = [this](double fire_unix_s) {
+    auto id = RunNight(fire_unix_s);
+    if (!id.ok()) std::fprintf(stderr, "valvebench-server: night: %s\n", id.status().message().c_str());
+    std::fflush(stderr);
+  };
+  if (run_now) night(clock_());
+  for (;;) {
+    auto next = cron->NextUnix(clock_(), setup_.utc);
+    if (!next.ok()) {
+      std::fprintf(stderr, "valvebench-server: nights.cron '%s': %s; no nights will run\n", setup_.cron.c_str(),
+                   next.status().message().c_str());
+      return;
+    }
+    if (!SleepUntil(*next)) return;
+    night(*next);
+  }
+}
+
+StatusOr<std::int64_t> NightScheduler::SaveNight(const std::string& date, std::int64_t batch_id,
+                                                 const std::string& verdict, const std::string& result_json,
+                                                 double finished_unix_s) {
+  auto store = pool_->Acquire();
+  if (!store.ok()) return store.status();
+  db::RegressionRecord rec;
+  rec.night = date;
+  rec.batch_id = batch_id;
+  rec.verdict = verdict;
+  rec.result_json = result_json;
+  rec.created_unix_s = finished_unix_s;
+  auto j = regress::Json::parse(result_json, nullptr, false);
+  if (j.is_object()) {
+    rec.suite = j.value("suite", "");
+    if (j.contains("baseline") && j["baseline"].is_object()) {
+      rec.baseline_name = j["baseline"].value("name", "");
+      rec.baseline_version = j["baseline"].value("version", 0);
+    }
+  }
+  auto id = (*store)->SaveRegression(rec);
+  if (!id.ok()) return id.status().WithContext("night " + date);
+  std::fprintf(stderr, "valvebench-server: night %s: %s (batch %lld, regression %lld)\n", date.c_str(), verdict.c_str(),
+               static_cast<long long>(batch_id), static_cast<long long>(*id));
+  return id;
+}
+
+StatusOr<std::int64_t> NightScheduler::RunNight(double fire_unix_s) {
+  const std::string date = regress::DateOf(fire_unix_s, setup_.utc);
+  const double started_unix_s = clock_();
+  std::int64_t batch_id = 0;
+  std::string suite_name, baseline_name;
+  int baseline_version = 0;
+  auto error = [&](const Status& st) {
+    regress::Json j = {{"night", date},
+                       {"suite", suite_name},
+                       {"baseline", {{"name", baseline_name}, {"version", baseline_version}}},
+                       {"batch_id", batch_id},
+                       {"started_unix_s", started_unix_s},
+                       {"error", st.message()}};
+    return SaveNight(date, batch_id, "error", j.dump(), clock_());
+  };
+
+  auto suite = regress::LoadSuite(setup_.suite_path);
+  if (!suite.ok()) return error(suite.status().WithContext("nights.suite_file " + setup_.suite_path));
+  suite_name = suite->suite.name();
+  auto baseline = LoadBaselineFile(setup_.baseline_path);
+  if (!baseline.ok()) return error(baseline.status().WithContext("nights.baseline_file"));
+  baseline_name = baseline->name;
+  baseline_version = baseline->version;
+  const std::uint64_t seed = suite->suite.seed() != 0 ? suite->suite.seed() : 1;
+  auto runs = regress::ExpandSuite(suite->suite, seed);
+  if (!runs.ok()) return error(runs.status());
+  std::vector<v1::ExperimentSpec> specs;
+  for (auto& r : *runs) {
+    r.spec.add_tags("night");
+    r.spec.add_tags("night:" + date);
+    specs.push_back(std::move(r.spec));
+  }
+  v1::SubmitRunResponse resp;
+  if (auto st = submit_("nights", specs, "night:" + date, &resp); !st.ok()) return error(st.WithContext("submit"));
+  batch_id = resp.batch_id();
+  std::fprintf(stderr, "valvebench-server: night %s: suite %s, batch %lld, %d runs\n", date.c_str(), suite_name.c_str(),
+               static_cast<long long>(batch_id), resp.run_ids_size());
+  std::fflush(stderr);
+
+  // Wait for every run of the batch to end; collect what regress compares.
+  std::vector<regress::RunMetrics> measured;
+  for (;;) {
+    {
+      std::unique_lock<std::mutex> lock(mu_);
+      if (stop_)
+        return Status::Aborted("night " + date + ": the server stopped before batch " + std::to_string(batch_id) +
+                               " finished; nothing stored");
+    }
+    auto store = pool_->Acquire();
+    if (!store.ok()) return error(store.status());
+    db::RunFilter f;
+    f.batch_id = batch_id;
+    f.limit = 1000;
+    std::vector<db::RunRecord> all;
+    for (;;) {
+      auto page = (*store)->ListRuns(f);
+      if (!page.ok()) return error(page.status());
+      all.insert(all.end(), page->begin(), page->end());
+      if (static_cast<int>(page->size()) < f.limit) break;
+      f.after_id = page->back().id;
+    }
+    bool done = !all.empty();
+    for (const auto& r : all) done = done && Final(r.status);
+    if (done) {
+      for (const auto& r : all) {
+        regress::RunMetrics m;
+        m.run_id = r.id;
+        m.name = r.name;
+        m.ok = r.status == db::RunStatus::kDone;
+        m.reason = m.ok ? "" : std::string(db::RunStatusName(r.status)) + (r.reason.empty() ? "" : ": " + r.reason);
+        auto metrics = (*store)->GetMetrics(r.id);
+        if (!metrics.ok()) return error(metrics.status());
+        for (const auto& x : *metrics) m.metrics[x.name] = x.value;
+        measured.push_back(std::move(m));
+      }
+      break;
+    }
+    if (clock_() - started_unix_s > kNightDeadline_s)
+      return error(Status::Unavailable("batch " + std::to_string(batch_id) + " did not finish within " +
+                                       std::to_string(static_cast<int>(kNightDeadline_s / 3600)) + " h"));
+    std::unique_lock<std::mutex> lock(mu_);
+    cv_.wait_for(lock, std::chrono::duration<double>(kPollPeriod_s), [this] { return stop_; });
+  }
+
+  regress::RegressResult r = regress::Compare(suite->suite, *baseline, regress::Summarise(measured));
+  r.batch_id = batch_id;
+  r.where = "server nights";
+  r.night = date;
+  r.seed = seed;
+  regress::Json j = regress::ResultToJson(r);
+  j["started_unix_s"] = started_unix_s;
+  return SaveNight(date, batch_id, r.verdict(), j.dump(), clock_());
+}
+
+}  // namespace vb::server

@@ -1,0 +1,69 @@
+// BenchServiceImpl::ListNights: the scheduled regression nights (server/nights.h) from the regressions table.
+#include <string>
+
+#include "regress/compare.h"
+#include "server/grpc_status.h"
+#include "server/service.h"
+
+namespace vb::server {
+
+namespace v1 = valvebench::v1;
+
+namespace {
+
+// One line for people: the counts, then the first regression or failed run.
+std::string Summary(const regress::Json& j, const std::string& verdict) {
+  if (verdict == "error") return j.value("error", std::string("error"));
+  const auto c = j.value("counts", regress::Json::object());
+  std::string s = std::to_string(c.value("regressed", 0)) + " regressed, " + std::to_string(c.value("unchanged", 0)) +
+                  " unchanged, " + std::to_string(c.value("improved", 0)) + " improved, " +
+                  std::to_string(c.value("new", 0)) + " new";
+  if (const int failed = c.value("failed_cases", 0); failed > 0)
+    s += ", " + std::to_string(failed) + " case(s) with failed runs";
+  if (j.contains("findings") && j["findings"].is_array())
+    for (const auto& f : j["findings"])
+      if (f.value("verdict", "") == "regressed") return s + "; first: " + f.value("message", std::string());
+  if (j.contains("failures") && j["failures"].is_object())
+    for (const auto& [c_name, list] : j["failures"].items())
+      if (list.is_array() && !list.empty()) return s + "; first: " + c_name + ": " + list[0].get<std::string>();
+  return s;
+}
+
+}  // namespace
+
+grpc::Status BenchServiceImpl::ListNights(grpc::ServerContext* ctx, const v1::ListNightsRequest* req,
+                                          v1::ListNightsResponse* resp) {
+  Principal who;
+  if (auto st = Authorize(ctx, Role::kViewer, &who); !st.ok()) return st;
+  if (req->limit() < 0 || req->limit() > 1000)
+    return ToGrpcStatus(Status::InvalidArgument("limit: " + std::to_string(req->limit()) + " is outside 0-1000"));
+  const int limit = req->limit() == 0 ? 30 : req->limit();
+  auto store = pool_->Acquire();
+  if (!store.ok()) return ToGrpcStatus(store.status());
+  auto list = (*store)->ListRegressions(true, limit);
+  if (!list.ok()) return ToGrpcStatus(list.status());
+  for (const auto& brief : *list) {
+    auto rec = (*store)->GetRegression(brief.id);  // listings carry no result JSON
+    if (!rec.ok()) return ToGrpcStatus(rec.status());
+    const auto j = regress::Json::parse(rec->result_json, nullptr, false);
+    const auto obj = j.is_object() ? j : regress::Json::object();
+    v1::Night* n = resp->add_nights();
+    n->set_date(rec->night);
+    n->set_batch_id(rec->batch_id);
+    n->set_verdict(rec->verdict);
+    const auto counts = obj.value("counts", regress::Json::object());
+    n->set_regressed_count(counts.value("regressed", 0));
+    n->set_unchanged(counts.value("unchanged", 0));
+    n->set_improved(counts.value("improved", 0));
+    n->set_started_unix_s(obj.value("started_unix_s", rec->created_unix_s));
+    n->set_finished_unix_s(rec->created_unix_s);
+    n->set_summary(Summary(obj, rec->verdict));
+    n->set_regression_id(rec->id);
+    n->set_suite(rec->suite);
+    n->set_baseline(rec->baseline_name.empty() ? ""
+                                               : rec->baseline_name + " v" + std::to_string(rec->baseline_version));
+  }
+  return grpc::Status::OK;
+}
+
+}  // namespace vb::server
