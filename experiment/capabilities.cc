@@ -1,19 +1,13 @@
+#include "common/format.h"
 #include "experiment/capabilities.h"
 
 #include <google/protobuf/descriptor.h>
 #include <google/protobuf/message.h>
 
-#include <sstream>
 
 namespace vb::experiment {
 
 namespace {
-
-std::string Num(double v) {
-  std::ostringstream os;
-  os << v;
-  return os.str();
-}
 
 // Every PWM carrier the controller section asks for, with its field path ("controller.pi_current.carrier_Hz").
 // A carrier_Hz left at 0 means the 20 kHz default (docs/spec.md); a frequency_Hz of 0 a constant gate level.
@@ -48,11 +42,11 @@ Status CheckCapabilities(const Experiment& e, const hw::Capabilities& caps) {
     return Status::FailedPrecondition(what + " (bench kind " + caps.kind + ")");
   };
   if (e.run.supply_V > caps.max_supply_V)
-    return refuse("conditions.supply_V: " + Num(e.run.supply_V) + " V exceeds the bench's " + Num(caps.max_supply_V) +
+    return refuse("conditions.supply_V: " + FormatNumber(e.run.supply_V) + " V exceeds the bench's " + FormatNumber(caps.max_supply_V) +
                   " V");
   if (e.run.sample_rate_Hz > caps.max_sample_rate_Hz)
-    return refuse("recording.rate_Hz: " + Num(e.run.sample_rate_Hz) + " Hz exceeds the bench's " +
-                  Num(caps.max_sample_rate_Hz) + " Hz");
+    return refuse("recording.rate_Hz: " + FormatNumber(e.run.sample_rate_Hz) + " Hz exceeds the bench's " +
+                  FormatNumber(caps.max_sample_rate_Hz) + " Hz");
   if (e.controller != nullptr && e.controller->period_s() > 0.0 && caps.max_control_rate_Hz > 0.0) {
     const double rate = 1.0 / e.controller->period_s();
     if (rate > caps.max_control_rate_Hz * (1.0 + 1e-9)) {
@@ -61,8 +55,8 @@ Status CheckCapabilities(const Experiment& e, const hw::Capabilities& caps) {
         hint = "; its firmware runs these loops on-device:";
         for (const auto& l : caps.device_loops) hint += " " + l;
       }
-      return refuse("controller: its loop runs at " + Num(rate) + " Hz, faster than the bench's host loop of " +
-                    Num(caps.max_control_rate_Hz) + " Hz" + hint);
+      return refuse("controller: its loop runs at " + FormatNumber(rate) + " Hz, faster than the bench's host loop of " +
+                    FormatNumber(caps.max_control_rate_Hz) + " Hz" + hint);
     }
   }
   if (e.controlled == ControlledVariable::kPosition && !caps.measures_position)
@@ -75,8 +69,8 @@ Status CheckCapabilities(const Experiment& e, const hw::Capabilities& caps) {
   Carriers(e.spec.controller(), "controller", &carriers);
   for (const auto& [path, f] : carriers)
     if (f < caps.min_carrier_Hz || f > caps.max_carrier_Hz)
-      return refuse(path + ": " + Num(f) + " Hz is outside the bench's PWM range [" + Num(caps.min_carrier_Hz) +
-                    ", " + Num(caps.max_carrier_Hz) + "] Hz");
+      return refuse(path + ": " + FormatNumber(f) + " Hz is outside the bench's PWM range [" + FormatNumber(caps.min_carrier_Hz) +
+                    ", " + FormatNumber(caps.max_carrier_Hz) + "] Hz");
   return Status::Ok();
 }
 

@@ -1,3 +1,4 @@
+#include "common/format.h"
 #include "gap/dataset.h"
 
 #include <algorithm>
@@ -31,13 +32,6 @@ constexpr size_t kMaxQuoted = 40;            // longest value quoted back in a m
 // ---- message helpers -------------------------------------------------------------------------------------
 
 // Shortest text that reads back as the same double: 2e-05, 1.5, 300000.
-std::string Num(double v) {
-  std::array<char, 32> buf{};
-  auto [end, ec] = std::to_chars(buf.data(), buf.data() + buf.size(), v);
-  if (ec != std::errc()) return "?";
-  return std::string(buf.data(), end);
-}
-
 // A computed value (a time step) to 9 significant digits, so that 7e-05 - 4e-05 reads 3e-05.
 std::string Num9(double v) {
   std::array<char, 32> buf{};
@@ -269,20 +263,20 @@ Status ParseCsv(std::string_view text, const std::string& display, RunData* run,
     const size_t k = run->t_s.size() - 1;
     if (k == 0) {
       if (std::abs(t) > kStartTolerance_s) {
-        return Status::InvalidArgument(at("t_s") + " the first sample is at " + Num(t) +
+        return Status::InvalidArgument(at("t_s") + " the first sample is at " + FormatNumber(t) +
                                        " s; a run starts at t_s = 0");
       }
     } else if (k == 1) {
       step0 = t - t_prev;
       if (!(step0 > 0.0)) {
-        return Status::InvalidArgument(at("t_s") + " time does not increase (" + Num(t) + " s after " +
-                                       Num(t_prev) + " s)");
+        return Status::InvalidArgument(at("t_s") + " time does not increase (" + FormatNumber(t) + " s after " +
+                                       FormatNumber(t_prev) + " s)");
       }
     } else {
       const double step = t - t_prev;
       if (std::abs(step - step0) > kStepRelTolerance * step0) {
-        return Status::InvalidArgument(at("t_s") + " step " + Num9(step) + " s (from " + Num(t_prev) + " to " +
-                                       Num(t) + " s) differs from the first step " + Num9(step0) +
+        return Status::InvalidArgument(at("t_s") + " step " + Num9(step) + " s (from " + FormatNumber(t_prev) + " to " +
+                                       FormatNumber(t) + " s) differs from the first step " + Num9(step0) +
                                        " s; sampling must be uniform");
       }
     }
@@ -327,7 +321,7 @@ Status GetNumber(const ManifestContext& m, const json& obj, const char* key, con
   if (it == obj.end()) return m.Error(path, "missing");
   if (!it->is_number()) return m.Error(path, "must be a number, found " + JsonTypeName(*it));
   *out = it->get<double>();
-  if (!std::isfinite(*out)) return m.Error(path, Num(*out) + " is not finite");
+  if (!std::isfinite(*out)) return m.Error(path, FormatNumber(*out) + " is not finite");
   return Status::Ok();
 }
 
@@ -368,13 +362,13 @@ Status ParseRun(const ManifestContext& m, const fs::path& dir, const json& j, co
   run->file = *s;
 
   VB_RETURN_IF_ERROR(GetNumber(m, j, "supply_V", path + ".supply_V", &run->supply_V));
-  if (!(run->supply_V > 0.0)) return m.Error(path + ".supply_V", Num(run->supply_V) + " must be > 0");
+  if (!(run->supply_V > 0.0)) return m.Error(path + ".supply_V", FormatNumber(run->supply_V) + " must be > 0");
   VB_RETURN_IF_ERROR(GetNumber(m, j, "supply_pressure_Pa", path + ".supply_pressure_Pa", &run->supply_pressure_Pa));
   if (!(run->supply_pressure_Pa >= 0.0)) {
-    return m.Error(path + ".supply_pressure_Pa", Num(run->supply_pressure_Pa) + " must be >= 0");
+    return m.Error(path + ".supply_pressure_Pa", FormatNumber(run->supply_pressure_Pa) + " must be >= 0");
   }
   VB_RETURN_IF_ERROR(GetNumber(m, j, "t_start_s", path + ".t_start_s", &run->t_start_s));
-  if (!(run->t_start_s >= 0.0)) return m.Error(path + ".t_start_s", Num(run->t_start_s) + " must be >= 0");
+  if (!(run->t_start_s >= 0.0)) return m.Error(path + ".t_start_s", FormatNumber(run->t_start_s) + " must be >= 0");
 
   VB_RETURN_IF_ERROR(GetString(m, j, "split", path + ".split", false, &s));
   run->split = s.value_or("");
@@ -438,9 +432,9 @@ Status ParseManifest(const ManifestContext& m, const fs::path& dir, std::string_
     }
     if (k > 0 && run.t_start_s < ds->runs[k - 1].t_start_s) {
       const RunData& prev = ds->runs[k - 1];
-      return m.Error(path + ".t_start_s", "run " + Quote(run.id) + " starts at " + Num(run.t_start_s) +
+      return m.Error(path + ".t_start_s", "run " + Quote(run.id) + " starts at " + FormatNumber(run.t_start_s) +
                                               " s, before runs[" + std::to_string(k - 1) + "] " + Quote(prev.id) +
-                                              " at " + Num(prev.t_start_s) +
+                                              " at " + FormatNumber(prev.t_start_s) +
                                               " s; runs must be listed in time order");
     }
   }

@@ -1,19 +1,13 @@
+#include "common/format.h"
 #include "hw/safety.h"
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <sstream>
 
 namespace vb::hw {
 
 namespace {
-
-std::string Num(double v) {
-  std::ostringstream os;
-  os << v;
-  return os.str();
-}
 
 std::int64_t NowNs() {
   return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
@@ -28,12 +22,12 @@ Status SafetyLimits::Validate() const {
   auto bad = [](const char* field, const std::string& what) {
     return Status::InvalidArgument(std::string("safety.") + field + ": " + what);
   };
-  if (!(max_current_A >= 0.0)) return bad("max_current_A", "must be >= 0, got " + Num(max_current_A));
-  if (!(max_duty > 0.0 && max_duty <= 1.0)) return bad("max_duty", "must be in (0, 1], got " + Num(max_duty));
-  if (!(max_on_time_s >= 0.0)) return bad("max_on_time_s", "must be >= 0, got " + Num(max_on_time_s));
-  if (!(watchdog_s >= 0.0)) return bad("watchdog_s", "must be >= 0, got " + Num(watchdog_s));
-  if (!(check_period_s > 0.0)) return bad("check_period_s", "must be > 0, got " + Num(check_period_s));
-  if (!(max_coil_temp_C >= 0.0)) return bad("max_coil_temp_C", "must be >= 0, got " + Num(max_coil_temp_C));
+  if (!(max_current_A >= 0.0)) return bad("max_current_A", "must be >= 0, got " + FormatNumber(max_current_A));
+  if (!(max_duty > 0.0 && max_duty <= 1.0)) return bad("max_duty", "must be in (0, 1], got " + FormatNumber(max_duty));
+  if (!(max_on_time_s >= 0.0)) return bad("max_on_time_s", "must be >= 0, got " + FormatNumber(max_on_time_s));
+  if (!(watchdog_s >= 0.0)) return bad("watchdog_s", "must be >= 0, got " + FormatNumber(watchdog_s));
+  if (!(check_period_s > 0.0)) return bad("check_period_s", "must be > 0, got " + FormatNumber(check_period_s));
+  if (!(max_coil_temp_C >= 0.0)) return bad("max_coil_temp_C", "must be >= 0, got " + FormatNumber(max_coil_temp_C));
   if (max_coil_temp_C > 0.0) {
     if (!(coil_R_ohm > 0.0)) return bad("coil_R_ohm", "must be > 0 for the temperature estimate");
     if (!(thermal_resistance_K_per_W > 0.0))
@@ -122,8 +116,8 @@ void SafetyBench::WatchdogLoop() {
     if (idle_s <= lim_.watchdog_s) continue;
     // The loop is not calling: take the bench if it is free (try_lock: never make the loop wait on us).
     if (inner_mu_.try_lock()) {
-      Claim("software watchdog: no call from the control loop for " + Num(idle_s) + " s (limit " +
-            Num(lim_.watchdog_s) + " s)");
+      Claim("software watchdog: no call from the control loop for " + FormatNumber(idle_s) + " s (limit " +
+            FormatNumber(lim_.watchdog_s) + " s)");
       inner_->SafeState();
       inner_mu_.unlock();
       if (tripped_.load()) break;
@@ -150,14 +144,14 @@ void SafetyBench::Guard::OnSample(const BenchSample& s) {
 
 Status SafetyBench::Check(const Measurement& m, double t_s) {
   if (!std::isnan(sample_trip_t_s_))
-    return Trip("coil current " + Num(sample_trip_i_A_) + " A exceeds the limit of " + Num(max_current_A_) +
-                " A at t = " + Num(sample_trip_t_s_) + " s");
-  if (std::isnan(m.current_A)) return Trip("the current measurement at t = " + Num(t_s) + " s is not a number");
+    return Trip("coil current " + FormatNumber(sample_trip_i_A_) + " A exceeds the limit of " + FormatNumber(max_current_A_) +
+                " A at t = " + FormatNumber(sample_trip_t_s_) + " s");
+  if (std::isnan(m.current_A)) return Trip("the current measurement at t = " + FormatNumber(t_s) + " s is not a number");
   if (!(std::abs(m.current_A) <= max_current_A_))
-    return Trip("coil current " + Num(m.current_A) + " A exceeds the limit of " + Num(max_current_A_) +
-                " A at t = " + Num(t_s) + " s");
+    return Trip("coil current " + FormatNumber(m.current_A) + " A exceeds the limit of " + FormatNumber(max_current_A_) +
+                " A at t = " + FormatNumber(t_s) + " s");
   if (m.t_s < t_s - 1e-9)
-    return Trip("stale measurement: it is from t = " + Num(m.t_s) + " s at the tick t = " + Num(t_s) + " s");
+    return Trip("stale measurement: it is from t = " + FormatNumber(m.t_s) + " s at the tick t = " + FormatNumber(t_s) + " s");
   const double dt = t_s - t_s_;
   if (lim_.max_coil_temp_C > 0.0 && dt > 0.0) {
     const double R = lim_.coil_R_ohm * (1.0 + kCopperAlpha_per_K * (temp_C_ - 20.0));
@@ -165,14 +159,14 @@ Status SafetyBench::Check(const Measurement& m, double t_s) {
     const double t_inf = lim_.ambient_C + i * i * R * lim_.thermal_resistance_K_per_W;
     temp_C_ = t_inf + (temp_C_ - t_inf) * std::exp(-dt / lim_.thermal_time_constant_s);
     if (temp_C_ > lim_.max_coil_temp_C)
-      return Trip("estimated coil temperature " + Num(temp_C_) + " C exceeds the limit of " +
-                  Num(lim_.max_coil_temp_C) + " C at t = " + Num(t_s) + " s");
+      return Trip("estimated coil temperature " + FormatNumber(temp_C_) + " C exceeds the limit of " +
+                  FormatNumber(lim_.max_coil_temp_C) + " C at t = " + FormatNumber(t_s) + " s");
   }
   last_i_A_ = m.current_A;
   t_s_ = std::max(t_s_, t_s);
   if (on_ && lim_.max_on_time_s > 0.0 && t_s - on_since_s_ > lim_.max_on_time_s)
-    return Trip("the gate was held high for " + Num(t_s - on_since_s_) + " s, over the continuous on-time limit of " +
-                Num(lim_.max_on_time_s) + " s (t = " + Num(t_s) + " s)");
+    return Trip("the gate was held high for " + FormatNumber(t_s - on_since_s_) + " s, over the continuous on-time limit of " +
+                FormatNumber(lim_.max_on_time_s) + " s (t = " + FormatNumber(t_s) + " s)");
   return Status::Ok();
 }
 
@@ -186,7 +180,7 @@ Status SafetyBench::AdvanceTo(double t_s, Measurement* m) {
   do {
     if (cancel_ != nullptr && cancel_->load(std::memory_order_relaxed)) {
       SafeState();
-      return Status::Aborted("cancelled at t = " + Num(t) + " s");
+      return Status::Aborted("cancelled at t = " + FormatNumber(t) + " s");
     }
     t = std::min(t_s, t + lim_.check_period_s);
     if (t_s - t < 1e-12) t = t_s;
@@ -195,7 +189,7 @@ Status SafetyBench::AdvanceTo(double t_s, Measurement* m) {
       std::lock_guard<std::mutex> lock(inner_mu_);
       st = inner_->AdvanceTo(t, out);
     }
-    if (!st.ok()) return Trip("bench error at t = " + Num(t) + " s: " + st.message());
+    if (!st.ok()) return Trip("bench error at t = " + FormatNumber(t) + " s: " + st.message());
     VB_RETURN_IF_ERROR(Check(*out, t));
     Beat();  // a paced bench may take many watchdog periods of wall time for one long step
   } while (t < t_s);
@@ -207,7 +201,7 @@ Status SafetyBench::Apply(const SwitchCommand& c) {
   Beat();
   if (tripped_.load(std::memory_order_acquire)) return Tripped();
   if (c.mode == SwitchCommand::Mode::kPwm && c.duty > lim_.max_duty)
-    return Trip("duty " + Num(c.duty) + " exceeds the limit of " + Num(lim_.max_duty) + " at t = " + Num(t_s_) + " s");
+    return Trip("duty " + FormatNumber(c.duty) + " exceeds the limit of " + FormatNumber(lim_.max_duty) + " at t = " + FormatNumber(t_s_) + " s");
   const bool on = c.mode == SwitchCommand::Mode::kGate ? c.gate != 0 : c.duty >= 1.0;
   if (on && !on_) on_since_s_ = t_s_;
   on_ = on;
@@ -217,7 +211,7 @@ Status SafetyBench::Apply(const SwitchCommand& c) {
     st = inner_->Apply(c);
   }
   if (!st.ok() && st.code() != StatusCode::kFailedPrecondition && st.code() != StatusCode::kInvalidArgument)
-    return Trip("bench error at t = " + Num(t_s_) + " s: " + st.message());
+    return Trip("bench error at t = " + FormatNumber(t_s_) + " s: " + st.message());
   return st;  // a command the bench cannot realise is the caller's error, not a trip (the Runner fails the run)
 }
 

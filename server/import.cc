@@ -9,6 +9,7 @@
 #include <cmath>
 #include <mutex>
 
+#include "common/format.h"
 #include "model/params.h"
 #include "server/grpc_status.h"
 #include "server/service.h"
@@ -22,22 +23,16 @@ namespace {
 constexpr const char* kImportedKind = "imported";
 constexpr std::size_t kChunkSamples = 65536;
 
-std::string Num(double v) {
-  char buf[64];
-  std::snprintf(buf, sizeof buf, "%.10g", v);
-  return buf;
-}
-
 Status ValidateRun(const v1::ImportedRun& r, const std::string& where) {
   if (r.id().empty()) return Status::InvalidArgument(where + ".id: must not be empty");
   if (!(r.supply_v() > 0.0) || !std::isfinite(r.supply_v()))
-    return Status::InvalidArgument(where + ".supply_V: must be > 0, got " + Num(r.supply_v()));
+    return Status::InvalidArgument(where + ".supply_V: must be > 0, got " + FormatNumber(r.supply_v()));
   if (!(r.supply_pressure_pa() >= 0.0) || !std::isfinite(r.supply_pressure_pa()))
-    return Status::InvalidArgument(where + ".supply_pressure_Pa: must be >= 0, got " + Num(r.supply_pressure_pa()));
+    return Status::InvalidArgument(where + ".supply_pressure_Pa: must be >= 0, got " + FormatNumber(r.supply_pressure_pa()));
   if (!(r.t_start_s() >= 0.0) || !std::isfinite(r.t_start_s()))
-    return Status::InvalidArgument(where + ".t_start_s: must be >= 0, got " + Num(r.t_start_s()));
+    return Status::InvalidArgument(where + ".t_start_s: must be >= 0, got " + FormatNumber(r.t_start_s()));
   if (!(r.sample_period_s() > 0.0) || !std::isfinite(r.sample_period_s()))
-    return Status::InvalidArgument(where + ".sample_period_s: must be > 0, got " + Num(r.sample_period_s()));
+    return Status::InvalidArgument(where + ".sample_period_s: must be > 0, got " + FormatNumber(r.sample_period_s()));
   if (!r.split().empty() && r.split() != "fit" && r.split() != "holdout")
     return Status::InvalidArgument(where + ".split: must be \"fit\", \"holdout\" or empty, got \"" + r.split() + "\"");
   const int n = r.gate_size();
@@ -94,7 +89,7 @@ grpc::Status BenchServiceImpl::ImportRuns(grpc::ServerContext* ctx, const v1::Im
     spec.set_never_requeue(true);
     for (const std::string& tag : {std::string("imported"), "dataset:" + req->dataset(),
                                    "split:" + (r.split().empty() ? std::string("none") : r.split()),
-                                   "t_start_s:" + Num(r.t_start_s())})
+                                   "t_start_s:" + FormatNumber(r.t_start_s())})
       spec.add_tags(tag);
     db::RunRecord rec;
     rec.name = r.id();

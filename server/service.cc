@@ -1,10 +1,10 @@
+#include "common/format.h"
 #include "server/service.h"
 
 #include <google/protobuf/util/json_util.h>
 
 #include <chrono>
 #include <cmath>
-#include <sstream>
 #include <thread>
 
 #include "experiment/capabilities.h"
@@ -67,12 +67,6 @@ std::string RunName(const v1::ExperimentSpec& spec) {
   return name;
 }
 
-std::string Format(double v) {
-  std::ostringstream os;
-  os << v;
-  return os.str();
-}
-
 }  // namespace
 
 grpc::Status BenchServiceImpl::Authorize(grpc::ServerContext* ctx, Role need, Principal* who) const {
@@ -123,13 +117,13 @@ grpc::Status BenchServiceImpl::Submit(const Principal& who, const std::vector<v1
       auto e = experiment::BuildExperiment(p);
       if (!e.ok()) return ToGrpcStatus(ctxt(e.status()));
       if (e->duration_s > lim.max_duration_s())
-        return ToGrpcStatus(ctxt(Status::ResourceExhausted("duration_s: " + Format(e->duration_s) +
+        return ToGrpcStatus(ctxt(Status::ResourceExhausted("duration_s: " + FormatNumber(e->duration_s) +
                                                            " s exceeds the server limit of " +
-                                                           Format(lim.max_duration_s()) + " s")));
+                                                           FormatNumber(lim.max_duration_s()) + " s")));
       if (e->run.sample_rate_Hz > lim.max_record_rate_hz())
-        return ToGrpcStatus(ctxt(Status::ResourceExhausted("recording.rate_Hz: " + Format(e->run.sample_rate_Hz) +
+        return ToGrpcStatus(ctxt(Status::ResourceExhausted("recording.rate_Hz: " + FormatNumber(e->run.sample_rate_Hz) +
                                                            " Hz exceeds the server limit of " +
-                                                           Format(lim.max_record_rate_hz()) + " Hz")));
+                                                           FormatNumber(lim.max_record_rate_hz()) + " Hz")));
       // Capabilities decide at submission, not at run time.
       const std::string cls = SpecBenchClass(p);
       bool compatible = false;
@@ -147,7 +141,7 @@ grpc::Status BenchServiceImpl::Submit(const Principal& who, const std::vector<v1
       if (!compatible)
         return ToGrpcStatus(ctxt(Status::FailedPrecondition(
             "bench: no configured bench can run it (needs " + cls +
-            (p.bench().name().empty() ? "" : " named " + p.bench().name()) + " at " + Format(e->run.supply_V) +
+            (p.bench().name().empty() ? "" : " named " + p.bench().name()) + " at " + FormatNumber(e->run.supply_V) +
             " V; configured: " + available + ")" + refusals)));
       db::RunRecord r;
       r.name = RunName(p);

@@ -1,20 +1,10 @@
+#include "common/format.h"
 #include "hw/hid/hid_bench.h"
 
 #include <algorithm>
 #include <cmath>
-#include <sstream>
 
 namespace vb::hw {
-
-namespace {
-
-std::string Num(double v) {
-  std::ostringstream os;
-  os << v;
-  return os.str();
-}
-
-}  // namespace
 
 HidBench::HidBench(std::unique_ptr<Transport> transport, HidBenchOptions options)
     : transport_(std::move(transport)), opt_(std::move(options)) {}
@@ -22,7 +12,7 @@ HidBench::HidBench(std::unique_ptr<Transport> transport, HidBenchOptions options
 StatusOr<std::unique_ptr<HidBench>> HidBench::Open(std::unique_ptr<Transport> transport, HidBenchOptions options) {
   if (transport == nullptr) return Status::InvalidArgument("transport: none given");
   if (!(options.watchdog_s > 0.0) || options.watchdog_s > 60.0)
-    return Status::InvalidArgument("watchdog_s: must be in (0, 60] s, got " + Num(options.watchdog_s));
+    return Status::InvalidArgument("watchdog_s: must be in (0, 60] s, got " + FormatNumber(options.watchdog_s));
   std::unique_ptr<HidBench> b(new HidBench(std::move(transport), std::move(options)));
   VB_RETURN_IF_ERROR(b->Identify());
   return b;
@@ -69,7 +59,7 @@ Status HidBench::Identify() {
   if (id_.flags & hid::kCapLoopHysteresis) caps_.device_loops.push_back("hysteresis");
   if (id_.flags & hid::kCapLoopPi) caps_.device_loops.push_back("pi");
   if (opt_.watchdog_s * 1000.0 < id_.min_watchdog_ms)
-    return Status::InvalidArgument("watchdog_s: " + Num(opt_.watchdog_s) + " s is below the device's minimum of " +
+    return Status::InvalidArgument("watchdog_s: " + FormatNumber(opt_.watchdog_s) + " s is below the device's minimum of " +
                                    std::to_string(id_.min_watchdog_ms) + " ms");
   return Status::Ok();
 }
@@ -118,12 +108,12 @@ Status HidBench::Configure(const RunConfig& config) {
     need_reopen_ = false;
   }
   if (!(config.supply_V > 0.0) || config.supply_V > caps_.max_supply_V)
-    return Status::FailedPrecondition("supply_V: " + Num(config.supply_V) + " V is outside (0, " +
-                                      Num(caps_.max_supply_V) + "] for bench " + opt_.name);
+    return Status::FailedPrecondition("supply_V: " + FormatNumber(config.supply_V) + " V is outside (0, " +
+                                      FormatNumber(caps_.max_supply_V) + "] for bench " + opt_.name);
   const double rate = config.sample_rate_Hz > 0.0 ? config.sample_rate_Hz : opt_.default_sample_rate_Hz;
   if (rate > caps_.max_sample_rate_Hz || rate != std::floor(rate))
-    return Status::FailedPrecondition("sample_rate_Hz: " + Num(rate) + " Hz; bench " + opt_.name +
-                                      " samples at whole rates up to " + Num(caps_.max_sample_rate_Hz) + " Hz");
+    return Status::FailedPrecondition("sample_rate_Hz: " + FormatNumber(rate) + " Hz; bench " + opt_.name +
+                                      " samples at whole rates up to " + FormatNumber(caps_.max_sample_rate_Hz) + " Hz");
   per_report_ = std::clamp(static_cast<int>(std::ceil(rate / id_.max_report_rate_Hz)), 1, hid::kMaxSamplesPerReport);
   hid::Configure c;
   c.sample_rate_Hz = static_cast<std::uint32_t>(rate);
@@ -202,12 +192,12 @@ Status HidBench::Handle(const hid::Report& r, const hid::Header& h) {
     VB_RETURN_IF_ERROR(hid::Decode(r, &f));
     std::string what = std::string("device fault on ") + transport_->Describe() + ": " + hid::FaultName(f.code);
     switch (f.code) {
-      case hid::FaultCode::kWatchdog: what += " (no host report for " + Num(f.value) + " ms)"; break;
-      case hid::FaultCode::kOvercurrent: what += " (" + Num(f.value) + " A)"; break;
-      case hid::FaultCode::kSupplyLow: what += " (" + Num(f.value) + " V)"; break;
+      case hid::FaultCode::kWatchdog: what += " (no host report for " + FormatNumber(f.value) + " ms)"; break;
+      case hid::FaultCode::kOvercurrent: what += " (" + FormatNumber(f.value) + " A)"; break;
+      case hid::FaultCode::kSupplyLow: what += " (" + FormatNumber(f.value) + " V)"; break;
       default: break;
     }
-    if (rate_Hz_ > 0.0) what += " at t = " + Num(f.sample_index / rate_Hz_) + " s; the device went to its safe state";
+    if (rate_Hz_ > 0.0) what += " at t = " + FormatNumber(f.sample_index / rate_Hz_) + " s; the device went to its safe state";
     fault_ = Status::Aborted(what);
     return fault_;
   }
@@ -272,8 +262,8 @@ Status HidBench::Apply(const SwitchCommand& c) {
     r = hid::Encode(hid::SetGate{c.gate}, ++host_seq_);
   } else {
     if (!(c.carrier_Hz >= caps_.min_carrier_Hz && c.carrier_Hz <= caps_.max_carrier_Hz))
-      return Status::FailedPrecondition("carrier_Hz: " + Num(c.carrier_Hz) + " Hz is outside the PWM range [" +
-                                        Num(caps_.min_carrier_Hz) + ", " + Num(caps_.max_carrier_Hz) +
+      return Status::FailedPrecondition("carrier_Hz: " + FormatNumber(c.carrier_Hz) + " Hz is outside the PWM range [" +
+                                        FormatNumber(caps_.min_carrier_Hz) + ", " + FormatNumber(caps_.max_carrier_Hz) +
                                         "] of bench " + opt_.name);
     hid::SetPwm p;
     p.carrier_Hz = static_cast<float>(c.carrier_Hz);

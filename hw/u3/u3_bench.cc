@@ -1,20 +1,10 @@
+#include "common/format.h"
 #include "hw/u3/u3_bench.h"
 
 #include <algorithm>
 #include <cmath>
-#include <sstream>
 
 namespace vb::hw {
-
-namespace {
-
-std::string Num(double v) {
-  std::ostringstream os;
-  os << v;
-  return os.str();
-}
-
-}  // namespace
 
 StatusOr<U3Pwm> RealiseU3Pwm(double carrier_Hz) {
   if (!(carrier_Hz > 0.0)) return Status::InvalidArgument("carrier_Hz: must be > 0");
@@ -32,8 +22,8 @@ StatusOr<U3Pwm> RealiseU3Pwm(double carrier_Hz) {
       }
     }
   }
-  return Status::NotFound("carrier_Hz: the U3's timer cannot make " + Num(carrier_Hz) + " Hz exactly (nearest: " +
-                          Num(best_below) + " Hz and " + Num(best_above) + " Hz)");
+  return Status::NotFound("carrier_Hz: the U3's timer cannot make " + FormatNumber(carrier_Hz) + " Hz exactly (nearest: " +
+                          FormatNumber(best_below) + " Hz and " + FormatNumber(best_above) + " Hz)");
 }
 
 std::uint16_t U3TimerValue(std::uint8_t mode, double duty) {
@@ -132,12 +122,12 @@ Status U3Bench::Configure(const RunConfig& config) {
     need_reopen_ = false;
   }
   if (!(config.supply_V > 0.0) || config.supply_V > caps_.max_supply_V)
-    return Status::FailedPrecondition("supply_V: " + Num(config.supply_V) + " V is outside (0, " +
-                                      Num(caps_.max_supply_V) + "] for bench " + opt_.name);
+    return Status::FailedPrecondition("supply_V: " + FormatNumber(config.supply_V) + " V is outside (0, " +
+                                      FormatNumber(caps_.max_supply_V) + "] for bench " + opt_.name);
   const double rate = config.sample_rate_Hz > 0.0 ? config.sample_rate_Hz : opt_.default_sample_rate_Hz;
   if (rate > caps_.max_sample_rate_Hz)
-    return Status::FailedPrecondition("sample_rate_Hz: " + Num(rate) + " Hz exceeds bench " + opt_.name + "'s " +
-                                      Num(caps_.max_sample_rate_Hz) + " Hz");
+    return Status::FailedPrecondition("sample_rate_Hz: " + FormatNumber(rate) + " Hz exceeds bench " + opt_.name + "'s " +
+                                      FormatNumber(caps_.max_sample_rate_Hz) + " Hz");
   // Scan rate = clock / ScanInterval exactly, from the 4 MHz clock, the 48 MHz one, or 4 MHz / 256.
   u3::StreamConfig sc;
   bool found = false;
@@ -153,7 +143,7 @@ Status U3Bench::Configure(const RunConfig& config) {
     }
   }
   if (!found)
-    return Status::FailedPrecondition("sample_rate_Hz: " + Num(rate) + " Hz is not 4 MHz or 48 MHz divided by a "
+    return Status::FailedPrecondition("sample_rate_Hz: " + FormatNumber(rate) + " Hz is not 4 MHz or 48 MHz divided by a "
                                       "whole ScanInterval (1..65535); bench " + opt_.name);
   scans_per_packet_ = std::clamp(static_cast<int>(std::ceil(rate / opt_.max_control_rate_Hz)), 1, 12);
   sc.samples_per_packet = static_cast<std::uint8_t>(2 * scans_per_packet_);
