@@ -1,4 +1,5 @@
 #include "common/format.h"
+#include "hw/device_bench.h"
 #include "hw/hid/hid_bench.h"
 
 #include <algorithm>
@@ -99,17 +100,10 @@ Status HidBench::Lost(Status st) {
 Status HidBench::Configure(const RunConfig& config) {
   if (running_) return Status::FailedPrecondition("bench " + opt_.name + " is running");
   if (need_reopen_) {
-    Status st = Status::Unavailable("not reopened");
-    for (int k = 0; k < std::max(1, opt_.reopen_attempts) && !st.ok(); ++k) {
-      st = transport_->Reopen();
-      if (st.ok()) st = Identify();
-    }
-    if (!st.ok()) return st.WithContext("bench " + opt_.name + ": reconnect");
+    VB_RETURN_IF_ERROR(Reconnect(*transport_, opt_.reopen_attempts, [this] { return Identify(); }, opt_.name));
     need_reopen_ = false;
   }
-  if (!(config.supply_V > 0.0) || config.supply_V > caps_.max_supply_V)
-    return Status::FailedPrecondition("supply_V: " + FormatNumber(config.supply_V) + " V is outside (0, " +
-                                      FormatNumber(caps_.max_supply_V) + "] for bench " + opt_.name);
+  VB_RETURN_IF_ERROR(CheckSupply(config.supply_V, caps_.max_supply_V, opt_.name));
   const double rate = config.sample_rate_Hz > 0.0 ? config.sample_rate_Hz : opt_.default_sample_rate_Hz;
   if (rate > caps_.max_sample_rate_Hz || rate != std::floor(rate))
     return Status::FailedPrecondition("sample_rate_Hz: " + FormatNumber(rate) + " Hz; bench " + opt_.name +
@@ -176,14 +170,7 @@ void HidBench::Emit(std::uint32_t index) {
   const Sample& s = ring_[index % kRing];
   emitted_ = index;
   if (sink_ == nullptr) return;
-  BenchSample b;
-  b.t_s = index / rate_Hz_;
-  b.gate = s.gate;
-  b.v_coil_V = kNotMeasured;
-  b.i_A = s.i_A;
-  b.x_m = b.v_mps = kNotMeasured;
-  b.v2_integral_V2s = b.energy_J = b.switches = kNotMeasured;
-  sink_->OnSample(b);
+  sink_->OnSample(CurrentOnlySample(index / rate_Hz_, s.gate, s.i_A));
 }
 
 Status HidBench::Handle(const hid::Report& r, const hid::Header& h) {
@@ -237,12 +224,8 @@ Status HidBench::AdvanceTo(double t_s, Measurement* m) {
     }
   }
   ++stats_.ticks;
-  if (m != nullptr) {
-    m->t_s = t_s;
-    m->current_A = ring_[static_cast<std::size_t>(target_) % kRing].i_A;
-    m->position_m = m->velocity_mps = kNotMeasured;
-    m->supply_V = config_.supply_V;
-  }
+  if (m != nullptr)
+    FillCurrentOnlyMeasurement(t_s, ring_[static_cast<std::size_t>(target_) % kRing].i_A, config_.supply_V, m);
   return Status::Ok();
 }
 
