@@ -4,6 +4,8 @@
 // leaves every one of them safe.
 #include <gtest/gtest.h>
 
+#include <cstdio>
+
 #include <atomic>
 #include <cmath>
 
@@ -64,6 +66,7 @@ TEST(SameSpec, RunsUnchangedOnEmulatedHidAndU3) {
   }
   EXPECT_GT(mean[0], 0.3);
   EXPECT_GT(last[0], 0.05);  // still decaying: the comparison of the final current means something
+  std::printf("one spec: mean current emulated %.7f / HID %.7f / U3 %.7f A\n", mean[0], mean[1], mean[2]);
   for (int k = 1; k < 3; ++k) {
     EXPECT_EQ(samples[k], samples[0]) << names[k];
     // Quantisation: HID 0.1 mA counts plus its 16-bit duty (<= 14 uA), U3 37 uA counts.
@@ -96,6 +99,8 @@ TEST(SameSpec, CancellingARunLeavesEveryBenchSafe) {
     experiment::Trace trace;
     const auto s = experiment::Runner::Run(e, safe, &trace, &monitor, &tap);
     EXPECT_EQ(s.termination, experiment::RunSummary::Termination::kCancelled) << bench->capabilities().kind;
+    std::printf("%s: cancel requested at 0.05 s, last sample at %.4f s\n", bench->capabilities().kind.c_str(),
+                trace.t_s.back());
     // Stopped within a check period (1 ms) of the request, not at the controller's next tick (0.1 s).
     EXPECT_LT(trace.t_s.back(), 0.0515) << bench->capabilities().kind;
   }
