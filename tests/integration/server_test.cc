@@ -370,4 +370,46 @@ TEST(Server, InteractiveRunIsCancelledWhenItsClientDisconnects) {
   ASSERT_TRUE(olga.Cancel(b->run_ids(0)).ok());
 }
 
+// ImportRuns validates the whole request before storing anything; errors name the run and the field.
+TEST(Server, ImportRunsRefusesBadRunsAndStoresNothing) {
+  ServerProcess server(TempDir("import"));
+  const std::string addr = server.Start();
+  ASSERT_FALSE(addr.empty()) << server.Log();
+  auto olga = MakeClient(addr, testing::kOperatorToken);
+  v1::ImportRunsRequest req;
+  req.set_dataset("lab7");
+  auto add = [&](const char* id, std::vector<int> gate, std::vector<double> i) {
+    auto* r = req.add_runs();
+    r->set_id(id);
+    r->set_supply_v(24.0);
+    r->set_sample_period_s(2e-5);
+    for (int g : gate) r->add_gate(g);
+    for (double v : i) r->add_i_a(v);
+    return r;
+  };
+  add("good", {0, 1, 1}, {0.0, 0.01, 0.02});
+  add("bad", {0, 2, 1}, {0.0, 0.01, 0.02});
+  auto refused = olga.ImportRuns(req);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_EQ(refused.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(refused.status().message().find("runs[1].gate[1]: must be 0 or 1"), std::string::npos)
+      << refused.status().message();
+  req.mutable_runs(1)->set_gate(1, 1);
+  req.mutable_runs(1)->add_i_a(0.03);  // one current too many
+  auto ragged = olga.ImportRuns(req);
+  ASSERT_FALSE(ragged.ok());
+  EXPECT_NE(ragged.status().message().find("runs[1].i_A: 4 samples for 3"), std::string::npos)
+      << ragged.status().message();
+  v1::ListRunsRequest all;
+  auto listed = olga.ListRuns(all);
+  ASSERT_TRUE(listed.ok());
+  EXPECT_EQ(listed->runs_size(), 0) << "a refused import stores nothing";
+  req.mutable_runs(1)->mutable_i_a()->RemoveLast();
+  auto ok = olga.ImportRuns(req);
+  ASSERT_TRUE(ok.ok()) << ok.status().message();
+  EXPECT_EQ(ok->run_ids_size(), 2);
+  auto viewer = MakeClient(addr, testing::kViewerToken);
+  EXPECT_FALSE(viewer.ImportRuns(req).ok()) << "importing needs the operator role";
+}
+
 }  // namespace vb
