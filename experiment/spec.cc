@@ -299,6 +299,8 @@ StatusOr<model::PlantParams> BuildPlant(const valvebench::v1::ModelSpec& ms,
     auto st = model::SetParam(&plant.value(), name, value);
     if (!st.ok()) return st.WithContext("bench.model.params[" + name + "]");
   }
+  plant->inductance_stroke_m.assign(ms.inductance_table().stroke_m().begin(), ms.inductance_table().stroke_m().end());
+  plant->inductance_L_H.assign(ms.inductance_table().l_h().begin(), ms.inductance_table().l_h().end());
   // Effects: named additions (model/effects.h), and param:NAME, a nominal parameter that is simply off
   // ({"value": v} or {"factor": f}).
   for (int k = 0; k < ms.effects_size(); ++k) {

@@ -29,6 +29,14 @@ const std::vector<EffectInfo>& EffectCatalog() {
        {{"F_c", "N", &Effects::friction_F_c_N, 0.0, 100.0}, {"F_s", "N", &Effects::friction_F_s_N, 0.0, 100.0}}},
       {"end_stop_bounce", "elastic impact at the end stops", true,
        {{"e", "1", &Effects::bounce_e, 0.0, 0.99}, {"v_stick", "m/s", &Effects::bounce_v_stick_mps, 1e-6, 1.0}}},
+      {"sensor_offset", "the current-sense chain reads a constant offset", true,
+       {{"offset_A", "A", &Effects::sensor_offset_A, -10.0, 10.0}}},
+      {"sensor_gain", "the current-sense chain's gain is off its nominal value", true,
+       {{"gain", "1", &Effects::sensor_gain, 0.2, 5.0}}},
+      {"resistance_temperature", "the winding resistance follows the run's temperature, R (1 + alpha (T - T_ref))",
+       true,
+       {{"alpha", "1/K", &Effects::temperature_alpha_per_K, 0.0, 0.05},
+        {"T_ref", "C", &Effects::temperature_ref_C, -60.0, 300.0}}},
   };
   return catalog;
 }
@@ -59,6 +67,7 @@ Status AddEffect(Effects* effects, std::string_view name, const std::vector<std:
   if (name == "magnetic_saturation" && e.saturation_B_T == 0.0) e.saturation_B_T = 2.0;
   if (name == "end_stop_bounce" && e.bounce_e == 0.0) e.bounce_e = 0.5;
   if (name == "residual_magnetism" && e.residual_w_A == 0.0) e.residual_w_A = 0.08;
+  if (name == "resistance_temperature") e.temperature = true;
   if (name == "coulomb_friction" && e.friction_F_c_N == 0.0 && e.friction_F_s_N == 0.0) {
     e.friction_F_c_N = 1.0;
     e.friction_F_s_N = 1.5;

@@ -26,6 +26,13 @@
 //                      current H_c l_c / N) and alpha its reversible fraction. De-energised, P_w stays at w: a
 //                      remanent flux that delays the release (and, rising, the lift); inside the band the
 //                      coil's incremental inductance is alpha L. im0 is the play's state when the run starts.
+//   sensor_offset      the current-sense chain reads offset_A more than the current (an amplifier or ADC offset).
+//   sensor_gain        the current-sense chain reads gain x the current (a shunt or amplifier gain off its
+//                      nominal value). Offset and gain act on what the sensor reports, after sensor_lag.
+//   resistance_temperature  the winding resistance at a known temperature: R(T) = R (1 + alpha (T - T_ref)),
+//                      R being the resistance at T_ref. A static covariate, not a dynamic state: it applies
+//                      to runs that carry a winding (or ambient) temperature (model::AtState), e.g. readings
+//                      taken at several chamber temperatures; coil_heating is the dynamic self-heating.
 // (asking for them is an error that says so).
 #pragma once
 
@@ -57,6 +64,11 @@ struct Effects {
   double residual_w_A = 0.0;          // residual_magnetism.w (play half-width); 0 = none
   double residual_alpha = 0.35;       // residual_magnetism.alpha (reversible fraction)
   double residual_im0_A = 0.0;        // residual_magnetism.im0
+  double sensor_offset_A = 0.0;       // sensor_offset.offset_A
+  double sensor_gain = 1.0;           // sensor_gain.gain; 1 = none
+  bool temperature = false;           // resistance_temperature
+  double temperature_alpha_per_K = 3.93e-3;  // resistance_temperature.alpha (copper: 3.93e-3 1/K at 20 C)
+  double temperature_ref_C = 20.0;    // resistance_temperature.T_ref: the temperature R is given at
 
   // Effects that need the general (integrated) path: the closed form assumes a constant R and L.
   // (The sensor chain works on samples and leaves the plant on its fast path.)
@@ -64,7 +76,11 @@ struct Effects {
     return heating || eddy_R_p_ohm > 0.0 || saturation_B_T > 0.0 || friction_F_s_N > 0.0 || friction_F_c_N > 0.0 ||
            residual_w_A > 0.0;
   }
-  bool any() const { return supply_R_ohm > 0.0 || NeedsGeneralPath() || sensor_delay_s > 0.0 || bounce_e > 0.0; }
+  bool any() const {
+    return supply_R_ohm > 0.0 || NeedsGeneralPath() || sensor_delay_s > 0.0 || bounce_e > 0.0 || sensor_chain();
+  }
+  // The static part of the sense chain (offset, gain) is not the identity.
+  bool sensor_chain() const { return sensor_offset_A != 0.0 || sensor_gain != 1.0; }
   bool friction() const { return friction_F_c_N > 0.0 || friction_F_s_N > 0.0; }
 };
 

@@ -1,8 +1,11 @@
 #include "model/params.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <sstream>
+
+#include "model/plant.h"
 
 namespace vb::model {
 namespace {
@@ -163,6 +166,16 @@ Status Validate(const PlantParams& p) {
       return Status::InvalidArgument(os.str());
     }
   }
+  if (p.inductance_stroke_m.size() != p.inductance_L_H.size())
+    return Status::InvalidArgument("inductance_table: stroke_m and L_H must have the same length");
+  for (std::size_t k = 0; k < p.inductance_L_H.size(); ++k) {
+    const double s = p.inductance_stroke_m[k], L = p.inductance_L_H[k];
+    if (!std::isfinite(s) || (k > 0 && !(s > p.inductance_stroke_m[k - 1])))
+      return Status::InvalidArgument("inductance_table.stroke_m[" + std::to_string(k) +
+                                     "]: strokes must be finite and increasing");
+    if (!std::isfinite(L) || !(L > 0.0) || L > 100.0)
+      return Status::InvalidArgument("inductance_table.L_H[" + std::to_string(k) + "]: must be in (0, 100] H");
+  }
   if (!p.has_moving_part) return Status::Ok();
   if (!(p.x_max_m > p.x_min_m))
     return Status::InvalidArgument("parameter x_max must be greater than x_min");
@@ -181,6 +194,56 @@ Status Validate(const PlantParams& p) {
   }
   if (!(p.m_kg > 0.0)) return Status::InvalidArgument("parameter m must be > 0");
   return Status::Ok();
+}
+
+StatusOr<PlantParams> AtState(const PlantParams& p, const HeldState& s) {
+  PlantParams out = p;
+  if (std::isfinite(s.stroke_m)) {
+    double L = 0.0;
+    const auto& xs = p.inductance_stroke_m;
+    if (!xs.empty()) {
+      const double lo = xs.front(), hi = xs.back(), tol = 1e-9 + 1e-6 * std::abs(hi - lo);
+      if (s.stroke_m < lo - tol || s.stroke_m > hi + tol) {
+        std::ostringstream os;
+        os << "stroke_m: " << s.stroke_m << " m is outside the model's inductance table [" << lo << ", " << hi << "] m";
+        return Status::InvalidArgument(os.str());
+      }
+      const auto it = std::upper_bound(xs.begin(), xs.end(), s.stroke_m);
+      const std::size_t k = it == xs.begin() ? 0 : std::min<std::size_t>(it - xs.begin(), xs.size()) - 1;
+      if (k + 1 >= xs.size()) {
+        L = p.inductance_L_H[k];
+      } else {
+        const double f = std::clamp((s.stroke_m - xs[k]) / (xs[k + 1] - xs[k]), 0.0, 1.0);
+        L = p.inductance_L_H[k] + f * (p.inductance_L_H[k + 1] - p.inductance_L_H[k]);
+      }
+    } else if (p.law == InductanceLaw::kConstant) {
+      L = p.L_H;  // a plain coil: the stroke changes nothing
+    } else {
+      if (p.has_moving_part && (s.stroke_m < p.x_min_m || s.stroke_m > p.x_max_m)) {
+        std::ostringstream os;
+        os << "stroke_m: " << s.stroke_m << " m is outside the travel [" << p.x_min_m << ", " << p.x_max_m << "] m";
+        return Status::InvalidArgument(os.str());
+      }
+      L = Plant(p).L_H(s.stroke_m);
+    }
+    out.law = InductanceLaw::kConstant;
+    out.has_moving_part = false;
+    out.L_H = L;
+    out.x_min_m = out.x_max_m = 0.0;
+    out.A1_m2 = out.A2_m2 = out.C_A_m = 0.0;
+    out.inductance_stroke_m.clear();
+    out.inductance_L_H.clear();
+  }
+  if (p.effects.temperature && std::isfinite(s.coil_C)) {
+    const double f = 1.0 + p.effects.temperature_alpha_per_K * (s.coil_C - p.effects.temperature_ref_C);
+    if (!(f > 0.0)) {
+      std::ostringstream os;
+      os << "coil_C: " << s.coil_C << " C makes the winding resistance non-positive";
+      return Status::InvalidArgument(os.str());
+    }
+    out.R_ohm = p.R_ohm * f;
+  }
+  return out;
 }
 
 }  // namespace vb::model

@@ -3,6 +3,7 @@
 // field and the problem. Nothing here is a constant buried in code: the presets are data tables.
 #pragma once
 
+#include <limits>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -64,6 +65,11 @@ struct PlantParams {
   double P_out_Pa = 101325.0;      // absolute downstream pressure (exhaust to atmosphere)
   double P_atm_Pa = 101325.0;      // supply_pressure_Pa is gauge; absolute = gauge + P_atm
 
+  // A coil whose plunger a fixture holds at a fixed stroke (a bench that measures L against stroke): the
+  // inductance at each stroke as measured or identified, strokes increasing, linear in between. Empty: the
+  // inductance law gives L(stroke). Used by AtState.
+  std::vector<double> inductance_stroke_m, inductance_L_H;
+
   // Named additions to the nominal model (model/effects.h); none by default.
   Effects effects;
 
@@ -94,5 +100,16 @@ StatusOr<double> GetParam(const PlantParams& p, std::string_view name);
 
 // Checks every field against its bounds and the cross-field constraints (x_min < x_max < x_t, ...).
 Status Validate(const PlantParams& p);
+
+// The state of the device in one run, where a run records it (NaN: not recorded).
+struct HeldState {
+  double stroke_m = std::numeric_limits<double>::quiet_NaN();  // the plunger held at this stroke (no motion)
+  double coil_C = std::numeric_limits<double>::quiet_NaN();    // the winding's temperature
+};
+// The plant as it is in that state. A held plunger makes a constant-inductance coil with no moving part,
+// L = the inductance table at the stroke (linear interpolation; a stroke outside the table is an error) or,
+// without a table, the inductance law at x = stroke. A winding temperature scales R when the
+// resistance_temperature effect is on: R (1 + alpha (T - T_ref)). Errors name the field (stroke_m, coil_C).
+StatusOr<PlantParams> AtState(const PlantParams& p, const HeldState& s);
 
 }  // namespace vb::model

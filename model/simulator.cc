@@ -229,17 +229,28 @@ void Simulator::Rhs(const Segment& seg, const State& y, State& dy, double t) con
 
 double Simulator::measured_current_A() const {
   const Effects& fx = plant_.params().effects;
-  if ((fx.sensor_tau_s > 0.0 || fx.sensor_delay_s > 0.0) && sensor_prev_t_ >= 0.0) return last_reading_;
+  if ((fx.sensor_tau_s > 0.0 || fx.sensor_delay_s > 0.0) && sensor_prev_t_ >= 0.0) return SenseChain(last_reading_);
   if (fx.eddy_R_p_ohm > 0.0) {
     Simulator* self = const_cast<Simulator*>(this);  // CurrentSegment() only normalises driver bookkeeping
-    return TerminalAt(self->CurrentSegment(), t_, i_, dT_).i_A;
+    return SenseChain(TerminalAt(self->CurrentSegment(), t_, i_, dT_).i_A);
   }
-  return i_;
+  return SenseChain(i_);
+}
+
+double Simulator::SenseChain(double i_A) const {
+  const Effects& fx = plant_.params().effects;
+  return fx.sensor_gain * i_A + fx.sensor_offset_A;
+}
+
+void Simulator::SetCoilCurrent(double i_A) {
+  i_ = std::max(i_A, 0.0);
+  if (i_ > 0.0) blocked_ = false;
+  stepper_valid_ = false;
 }
 
 double Simulator::SensorReading(double t, double i_true) const {
   const Effects& fx = plant_.params().effects;
-  if (fx.sensor_tau_s <= 0.0 && fx.sensor_delay_s <= 0.0) return i_true;
+  if (fx.sensor_tau_s <= 0.0 && fx.sensor_delay_s <= 0.0) return SenseChain(i_true);
   // First-order lag, exact for a current linear between samples (first-order hold):
   //   y_k = a y_(k-1) + (1 - a) i_(k-1) + (i_k - i_(k-1)) (1 - tau (1 - a) / h),   a = exp(-h / tau)
   if (sensor_prev_t_ < 0.0 || fx.sensor_tau_s <= 0.0) {
@@ -271,7 +282,7 @@ double Simulator::SensorReading(double t, double i_true) const {
     out = (1.0 - frac) * at(k0) + frac * at(k0 + 1);
   }
   last_reading_ = out;
-  return out;
+  return SenseChain(out);
 }
 
 Simulator::State Simulator::CurrentState() const {

@@ -89,6 +89,10 @@ class Simulator {
 
   // Back to rest: t = 0, i = 0, x = x_min, v = 0, gate 0, no sample emitted yet.
   void Reset();
+  // Sets the coil's (magnetising) current now, leaving every other state as it is: the shooting step of a
+  // periodic steady-state search (gap/predict.h), which guesses the current at a gate edge and integrates one
+  // period from it. Negative values are taken as 0 (the low-side driver's diode blocks reverse current).
+  void SetCoilCurrent(double i_A);
   // Samples at t_k = k * period_s (k = 0, 1, ...); 0 disables sampling.
   void SetSamplePeriod(double period_s);
   // Changes the gate at the current time. The caller guarantees the driver accepts the level.
@@ -204,6 +208,9 @@ class Simulator {
   // The measurement chain (sensor_lag): a first-order lag applied to the sampled terminal current, exact for a
   // current linear between samples (first-order hold), then a latency by interpolation in a history ring.
   double SensorReading(double t, double i_true) const;
+  // The static part of the sense chain: what the sensor reports for a (lagged) current (sensor_offset,
+  // sensor_gain).
+  double SenseChain(double i_A) const;
   mutable double sensor_y_ = 0.0, sensor_prev_i_ = 0.0, sensor_prev_t_ = -1.0;
   mutable std::vector<double> sensor_hist_;   // sensor outputs at the last samples (latency), ring
   mutable std::size_t sensor_head_ = 0, sensor_count_ = 0;
