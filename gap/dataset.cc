@@ -108,9 +108,15 @@ std::string DatasetName(const std::string& directory) {
 
 // ---- CSV -------------------------------------------------------------------------------------------------
 
-enum class Column { kT, kGate, kI, kX, kVCoil, kUnknown };
+enum class Column { kT, kGate, kI, kX, kVCoil, kSd, kUnknown };
 
-Column ColumnOf(std::string_view name) {
+Column ColumnOf(std::string_view name, RunKind kind) {
+  if (kind == RunKind::kSamples) {
+    if (name == "t_s") return Column::kT;
+    if (name == "i_A") return Column::kI;
+    if (name == "i_sd_A") return Column::kSd;
+    return Column::kUnknown;
+  }
   if (name == "t_s") return Column::kT;
   if (name == "gate") return Column::kGate;
   if (name == "i_A") return Column::kI;
@@ -160,7 +166,9 @@ NumberError ParseDouble(std::string_view field, double* out) {
 Status ParseCsv(std::string_view text, const std::string& display, RunData* run,
                 std::vector<std::string>* warnings) {
   if (text.size() >= 3 && text.substr(0, 3) == "\xEF\xBB\xBF") text.remove_prefix(3);  // UTF-8 BOM
-  const std::string needs_header = "; expected a header row such as t_s,gate,i_A";
+  const bool samples = run->kind == RunKind::kSamples;
+  const std::string needs_header =
+      samples ? "; expected a header row such as t_s,i_A" : "; expected a header row such as t_s,gate,i_A";
   if (text.empty()) return Status::InvalidArgument(display + ": empty file" + needs_header);
 
   LineReader lines(text);
@@ -182,23 +190,27 @@ Status ParseCsv(std::string_view text, const std::string& display, RunData* run,
       return Status::InvalidArgument(display + ":1: column " + std::string(name) + " appears twice in the header");
     }
     names.push_back(name);
-    roles.push_back(ColumnOf(name));
+    roles.push_back(ColumnOf(name, run->kind));
     if (comma == std::string_view::npos) break;
     start = comma + 1;
   }
-  for (const char* required : {"t_s", "gate", "i_A"}) {
+  const std::vector<const char*> required_columns =
+      samples ? std::vector<const char*>{"t_s", "i_A"} : std::vector<const char*>{"t_s", "gate", "i_A"};
+  for (const char* required : required_columns) {
     if (std::find(names.begin(), names.end(), required) == names.end()) {
       return Status::InvalidArgument(display + ":1: missing required column " + required + " (header " +
                                      Quote(header) + ")");
     }
   }
-  bool has_x = false, has_v = false;
+  bool has_x = false, has_v = false, has_sd = false;
   for (size_t c = 0; c < roles.size(); ++c) {
     if (roles[c] == Column::kX) has_x = true;
     if (roles[c] == Column::kVCoil) has_v = true;
+    if (roles[c] == Column::kSd) has_sd = true;
     if (roles[c] == Column::kUnknown) {
       warnings->push_back(display + ": column " + Quote(names[c]) +
-                          " is not a valve-runs/1 column (t_s, gate, i_A, x_m, v_coil_V); ignored");
+                          (samples ? " is not a samples column (t_s, i_A, i_sd_A); ignored"
+                                   : " is not a valve-runs/1 column (t_s, gate, i_A, x_m, v_coil_V); ignored"));
     }
   }
 
@@ -213,6 +225,8 @@ Status ParseCsv(std::string_view text, const std::string& display, RunData* run,
   run->i_A.reserve(expected_rows);
   if (has_x) run->x_m.reserve(expected_rows);
   if (has_v) run->v_coil_V.reserve(expected_rows);
+  run->i_sd_A.clear();
+  if (has_sd) run->i_sd_A.reserve(expected_rows);
 
   const size_t ncol = roles.size();
   double t_prev = 0.0, step0 = 0.0;
@@ -256,11 +270,26 @@ Status ParseCsv(std::string_view text, const std::string& display, RunData* run,
         case Column::kI: run->i_A.push_back(v); break;
         case Column::kX: run->x_m.push_back(v); break;
         case Column::kVCoil: run->v_coil_V.push_back(v); break;
+        case Column::kSd:
+          if (v < 0.0) return Status::InvalidArgument(at(names[c]) + " " + Quote(field) + " is negative");
+          run->i_sd_A.push_back(v);
+          break;
         case Column::kUnknown: break;
       }
     }
-    // Uniform sampling from t = 0, checked as the rows come so the first bad line is the one named.
     const size_t k = run->t_s.size() - 1;
+    if (samples) {
+      // Samples at arbitrary instants: from t >= 0, strictly increasing.
+      if (k == 0 && t < 0.0)
+        return Status::InvalidArgument(at("t_s") + " " + FormatNumber(t) + " s is before the run's start (t_s >= 0)");
+      if (k > 0 && !(t > t_prev)) {
+        return Status::InvalidArgument(at("t_s") + " time does not increase (" + FormatNumber(t) + " s after " +
+                                       FormatNumber(t_prev) + " s)");
+      }
+      t_prev = t;
+      continue;
+    }
+    // Uniform sampling from t = 0, checked as the rows come so the first bad line is the one named.
     if (k == 0) {
       if (std::abs(t) > kStartTolerance_s) {
         return Status::InvalidArgument(at("t_s") + " the first sample is at " + FormatNumber(t) +
@@ -284,6 +313,10 @@ Status ParseCsv(std::string_view text, const std::string& display, RunData* run,
   }
 
   const size_t n = run->t_s.size();
+  if (samples) {
+    if (n == 0) return Status::InvalidArgument(display + ": 0 samples; a run needs at least 1");
+    return Status::Ok();
+  }
   if (n < kMinSamples) {
     return Status::InvalidArgument(display + ": " + std::to_string(n) + (n == 1 ? " sample" : " samples") +
                                    "; a run needs at least " + std::to_string(kMinSamples));
@@ -322,6 +355,39 @@ Status GetNumber(const ManifestContext& m, const json& obj, const char* key, con
   if (!it->is_number()) return m.Error(path, "must be a number, found " + JsonTypeName(*it));
   *out = it->get<double>();
   if (!std::isfinite(*out)) return m.Error(path, FormatNumber(*out) + " is not finite");
+  return Status::Ok();
+}
+
+Status GetBool(const ManifestContext& m, const json& obj, const char* key, const std::string& path, bool* out) {
+  const auto it = obj.find(key);
+  if (it == obj.end()) return Status::Ok();
+  if (!it->is_boolean()) return m.Error(path, "must be true or false, found " + JsonTypeName(*it));
+  *out = it->get<bool>();
+  return Status::Ok();
+}
+
+// An optional number within [lo, hi]; left as it is when absent.
+Status GetBounded(const ManifestContext& m, const json& obj, const char* key, const std::string& path, double lo,
+                  double hi, const char* unit, double* out) {
+  if (obj.find(key) == obj.end()) return Status::Ok();
+  double v = 0.0;
+  VB_RETURN_IF_ERROR(GetNumber(m, obj, key, path, &v));
+  if (v < lo || v > hi) {
+    return m.Error(path, FormatNumber(v) + " " + unit + " is outside [" + FormatNumber(lo) + ", " + FormatNumber(hi) +
+                             "] " + unit);
+  }
+  *out = v;
+  return Status::Ok();
+}
+
+Status WarnUnknownKeys(const ManifestContext& m, const json& j, const std::string& path,
+                       const std::vector<std::string_view>& known, std::vector<std::string>* warnings) {
+  for (const auto& item : j.items()) {
+    if (std::find(known.begin(), known.end(), item.key()) == known.end()) {
+      warnings->push_back(m.display + ": " + (path.empty() ? "" : path + ": ") + "unknown key " + Quote(item.key()) +
+                          " ignored");
+    }
+  }
   return Status::Ok();
 }
 
@@ -376,6 +442,174 @@ Status ParseRun(const ManifestContext& m, const fs::path& dir, const json& j, co
   return Status::Ok();
 }
 
+// valve-runs/2: a run of any kind, with its covariates.
+Status ParseRunV2(const ManifestContext& m, const fs::path& dir, const json& j, const std::string& path,
+                  RunData* run, std::vector<std::string>* warnings) {
+  if (!j.is_object()) return m.Error(path, "must be an object, found " + JsonTypeName(j));
+  VB_RETURN_IF_ERROR(WarnUnknownKeys(m, j, path,
+                                     {"id", "kind", "file", "supply_V", "supply_pressure_Pa", "t_start_s", "split",
+                                      "ambient_C", "coil_C", "stroke_m", "from_rest", "gate_edges_s", "pwm_Hz",
+                                      "on_time_s", "readings"},
+                                     warnings));
+  std::optional<std::string> s;
+  VB_RETURN_IF_ERROR(GetString(m, j, "id", path + ".id", true, &s));
+  if (s->empty()) return m.Error(path + ".id", "must not be empty");
+  run->id = *s;
+  VB_RETURN_IF_ERROR(GetString(m, j, "kind", path + ".kind", false, &s));
+  const std::string kind = s.value_or("waveform");
+  if (kind == "waveform") {
+    run->kind = RunKind::kWaveform;
+  } else if (kind == "samples") {
+    run->kind = RunKind::kSamples;
+  } else if (kind == "periodic") {
+    run->kind = RunKind::kPeriodic;
+  } else {
+    return m.Error(path + ".kind", Quote(kind) + " is not waveform, samples or periodic");
+  }
+  auto forbid = [&](const char* key, const char* why) -> Status {
+    if (j.find(key) != j.end()) return m.Error(path + "." + key, std::string("not allowed for a ") + kind + " run (" + why + ")");
+    return Status::Ok();
+  };
+  if (run->kind == RunKind::kPeriodic) {
+    VB_RETURN_IF_ERROR(forbid("file", "its readings are in the manifest"));
+  } else {
+    VB_RETURN_IF_ERROR(GetString(m, j, "file", path + ".file", true, &s));
+    VB_RETURN_IF_ERROR(CheckRunFile(m, dir, *s, path + ".file"));
+    run->file = *s;
+  }
+
+  VB_RETURN_IF_ERROR(GetNumber(m, j, "supply_V", path + ".supply_V", &run->supply_V));
+  if (!(run->supply_V > 0.0) || run->supply_V > 1e4)
+    return m.Error(path + ".supply_V", FormatNumber(run->supply_V) + " V is outside (0, 10000] V");
+  run->supply_pressure_Pa = 0.0;
+  VB_RETURN_IF_ERROR(GetBounded(m, j, "supply_pressure_Pa", path + ".supply_pressure_Pa", 0.0, 1e8, "Pa",
+                                &run->supply_pressure_Pa));
+  run->t_start_s = kNaN;
+  VB_RETURN_IF_ERROR(GetBounded(m, j, "t_start_s", path + ".t_start_s", 0.0, 1e9, "s", &run->t_start_s));
+  VB_RETURN_IF_ERROR(GetString(m, j, "split", path + ".split", false, &s));
+  run->split = s.value_or("");
+  if (s && *s != "fit" && *s != "holdout") return m.Error(path + ".split", Quote(*s) + " is not fit or holdout");
+  VB_RETURN_IF_ERROR(GetBounded(m, j, "ambient_C", path + ".ambient_C", -100.0, 400.0, "C", &run->ambient_C));
+  VB_RETURN_IF_ERROR(GetBounded(m, j, "coil_C", path + ".coil_C", -100.0, 400.0, "C", &run->coil_C));
+  VB_RETURN_IF_ERROR(GetBounded(m, j, "stroke_m", path + ".stroke_m", 0.0, 1.0, "m", &run->stroke_m));
+
+  if (run->kind != RunKind::kWaveform) VB_RETURN_IF_ERROR(forbid("from_rest", "only a waveform starts somewhere"));
+  VB_RETURN_IF_ERROR(GetBool(m, j, "from_rest", path + ".from_rest", &run->from_rest));
+
+  if (run->kind == RunKind::kSamples) {
+    const auto it = j.find("gate_edges_s");
+    if (it == j.end()) return m.Error(path + ".gate_edges_s", "missing (a samples run needs its gate command)");
+    if (!it->is_array()) return m.Error(path + ".gate_edges_s", "must be an array, found " + JsonTypeName(*it));
+    for (std::size_t k = 0; k < it->size(); ++k) {
+      const std::string ep = path + ".gate_edges_s[" + std::to_string(k) + "]";
+      const json& e = (*it)[k];
+      if (!e.is_number()) return m.Error(ep, "must be a number, found " + JsonTypeName(e));
+      const double t = e.get<double>();
+      if (!std::isfinite(t) || t < 0.0) return m.Error(ep, FormatNumber(t) + " s must be finite and >= 0");
+      if (!run->gate_edges_s.empty() && !(t > run->gate_edges_s.back()))
+        return m.Error(ep, FormatNumber(t) + " s does not come after the previous edge");
+      run->gate_edges_s.push_back(t);
+    }
+  } else {
+    VB_RETURN_IF_ERROR(forbid("gate_edges_s", "only samples runs take gate edges"));
+  }
+
+  if (run->kind != RunKind::kPeriodic) {
+    for (const char* key : {"pwm_Hz", "on_time_s", "readings"})
+      VB_RETURN_IF_ERROR(forbid(key, "only periodic runs take it"));
+    return Status::Ok();
+  }
+  VB_RETURN_IF_ERROR(GetNumber(m, j, "pwm_Hz", path + ".pwm_Hz", &run->pwm_Hz));
+  if (!(run->pwm_Hz > 0.0) || run->pwm_Hz > 1e6)
+    return m.Error(path + ".pwm_Hz", FormatNumber(run->pwm_Hz) + " Hz is outside (0, 1e6] Hz");
+  const double period_s = 1.0 / run->pwm_Hz;
+  VB_RETURN_IF_ERROR(GetNumber(m, j, "on_time_s", path + ".on_time_s", &run->on_time_s));
+  if (!(run->on_time_s > 0.0) || run->on_time_s > period_s * (1.0 + 1e-9)) {
+    return m.Error(path + ".on_time_s", FormatNumber(run->on_time_s) + " s is outside (0, " + FormatNumber(period_s) +
+                                            "] s, the PWM period");
+  }
+  run->on_time_s = std::min(run->on_time_s, period_s);
+  const auto it = j.find("readings");
+  if (it == j.end()) return m.Error(path + ".readings", "missing");
+  if (!it->is_array()) return m.Error(path + ".readings", "must be an array, found " + JsonTypeName(*it));
+  if (it->empty()) return m.Error(path + ".readings", "must not be empty");
+  for (std::size_t k = 0; k < it->size(); ++k) {
+    const std::string rp = path + ".readings[" + std::to_string(k) + "]";
+    const json& r = (*it)[k];
+    if (!r.is_object()) return m.Error(rp, "must be an object, found " + JsonTypeName(r));
+    VB_RETURN_IF_ERROR(WarnUnknownKeys(m, r, rp, {"t_after_edge_s", "i_A", "sd_A", "repeats"}, warnings));
+    double t = 0.0, i = 0.0, sd = 0.0, n = 1.0;
+    VB_RETURN_IF_ERROR(GetNumber(m, r, "t_after_edge_s", rp + ".t_after_edge_s", &t));
+    if (t < 0.0 || !(t < period_s)) {
+      return m.Error(rp + ".t_after_edge_s", FormatNumber(t) + " s is outside [0, " + FormatNumber(period_s) +
+                                                 ") s, the PWM period");
+    }
+    VB_RETURN_IF_ERROR(GetNumber(m, r, "i_A", rp + ".i_A", &i));
+    if (std::abs(i) > 1e3) return m.Error(rp + ".i_A", FormatNumber(i) + " A is outside [-1000, 1000] A");
+    VB_RETURN_IF_ERROR(GetBounded(m, r, "sd_A", rp + ".sd_A", 0.0, 1e3, "A", &sd));
+    VB_RETURN_IF_ERROR(GetBounded(m, r, "repeats", rp + ".repeats", 1.0, 1e9, "repeats", &n));
+    if (n != std::floor(n)) return m.Error(rp + ".repeats", FormatNumber(n) + " is not a whole number");
+    run->t_s.push_back(t);
+    run->i_A.push_back(i);
+    run->i_sd_A.push_back(sd);
+    run->repeats.push_back(static_cast<int>(n));
+  }
+  return Status::Ok();
+}
+
+Status ParseSensor(const ManifestContext& m, const json& root, SensorChain* sc, std::vector<std::string>* warnings) {
+  const auto it = root.find("sensor");
+  if (it == root.end()) return Status::Ok();
+  if (!it->is_object()) return m.Error("sensor", "must be an object, found " + JsonTypeName(*it));
+  const json& j = *it;
+  VB_RETURN_IF_ERROR(WarnUnknownKeys(m, j, "sensor",
+                                     {"shunt_ohm", "shunt_in_switch_path", "amplifier_gain", "adc_lsb_V", "adc_lsb_A",
+                                      "noise_A", "offset_A", "averaged"},
+                                     warnings));
+  VB_RETURN_IF_ERROR(GetBounded(m, j, "shunt_ohm", "sensor.shunt_ohm", 1e-6, 1e6, "ohm", &sc->shunt_ohm));
+  VB_RETURN_IF_ERROR(GetBool(m, j, "shunt_in_switch_path", "sensor.shunt_in_switch_path", &sc->shunt_in_switch_path));
+  if (sc->shunt_in_switch_path && !std::isfinite(sc->shunt_ohm))
+    return m.Error("sensor.shunt_in_switch_path", "needs sensor.shunt_ohm");
+  VB_RETURN_IF_ERROR(GetBounded(m, j, "amplifier_gain", "sensor.amplifier_gain", 1e-6, 1e9, "V/V", &sc->amplifier_gain));
+  VB_RETURN_IF_ERROR(GetBounded(m, j, "adc_lsb_V", "sensor.adc_lsb_V", 1e-12, 10.0, "V", &sc->adc_lsb_V));
+  VB_RETURN_IF_ERROR(GetBounded(m, j, "adc_lsb_A", "sensor.adc_lsb_A", 1e-15, 10.0, "A", &sc->adc_lsb_A));
+  VB_RETURN_IF_ERROR(GetBounded(m, j, "noise_A", "sensor.noise_A", 0.0, 10.0, "A", &sc->noise_A));
+  VB_RETURN_IF_ERROR(GetBounded(m, j, "offset_A", "sensor.offset_A", -10.0, 10.0, "A", &sc->offset_A));
+  double averaged = 1.0;
+  VB_RETURN_IF_ERROR(GetBounded(m, j, "averaged", "sensor.averaged", 1.0, 1e9, "readings", &averaged));
+  if (averaged != std::floor(averaged)) return m.Error("sensor.averaged", FormatNumber(averaged) + " is not a whole number");
+  sc->averaged = static_cast<int>(averaged);
+  if (std::isfinite(sc->adc_lsb_V) && !std::isfinite(sc->adc_lsb_A)) {
+    if (!std::isfinite(sc->shunt_ohm) || !std::isfinite(sc->amplifier_gain))
+      return m.Error("sensor.adc_lsb_V", "needs sensor.shunt_ohm and sensor.amplifier_gain to convert to amperes");
+    sc->adc_lsb_A = sc->adc_lsb_V / (sc->shunt_ohm * sc->amplifier_gain);
+  }
+  return Status::Ok();
+}
+
+Status ParseDriver(const ManifestContext& m, const json& root, model::DriverParams* d, std::vector<std::string>* warnings) {
+  const auto it = root.find("driver");
+  if (it == root.end()) return Status::Ok();
+  if (!it->is_object()) return m.Error("driver", "must be an object, found " + JsonTypeName(*it));
+  for (const auto& item : it->items()) {
+    const std::string path = "driver." + item.key();
+    if (item.key() == "kind") {
+      if (!item.value().is_string()) return m.Error(path, "must be a string, found " + JsonTypeName(item.value()));
+      auto kind = model::ParseDriverKind(item.value().get<std::string>());
+      if (!kind.ok()) return m.Error(path, kind.status().message());
+      d->kind = *kind;
+      continue;
+    }
+    if (!item.value().is_number()) return m.Error(path, "must be a number, found " + JsonTypeName(item.value()));
+    auto st = model::SetDriverParam(d, item.key(), item.value().get<double>());
+    if (!st.ok()) return m.Error(path, st.message());
+  }
+  (void)warnings;
+  auto st = model::Validate(*d);
+  if (!st.ok()) return m.Error("driver", st.message());
+  return Status::Ok();
+}
+
 Status ParseManifest(const ManifestContext& m, const fs::path& dir, std::string_view text,
                      const std::vector<std::string>& known_models, Dataset* ds) {
   json root;
@@ -390,25 +624,36 @@ Status ParseManifest(const ManifestContext& m, const fs::path& dir, std::string_
     return m.Error("", "not valid JSON: " + what);
   }
   if (!root.is_object()) return m.Error("", "must be a JSON object, found " + JsonTypeName(root));
-  static constexpr std::array<std::string_view, 4> kKeys = {"format", "model", "description", "runs"};
-  for (const auto& item : root.items()) {
-    if (std::find(kKeys.begin(), kKeys.end(), item.key()) == kKeys.end()) {
-      ds->warnings.push_back(m.display + ": unknown key " + Quote(item.key()) + " ignored");
-    }
-  }
-
   std::optional<std::string> s;
   VB_RETURN_IF_ERROR(GetString(m, root, "format", "format", true, &s));
-  if (*s != kFormatValveRuns1) {
-    return m.Error("format", Quote(*s) + " is not " + std::string(kFormatValveRuns1));
+  if (*s != kFormatValveRuns1 && *s != kFormatValveRuns2) {
+    return m.Error("format", Quote(*s) + " is not " + std::string(kFormatValveRuns1) + " or " +
+                                 std::string(kFormatValveRuns2));
   }
   ds->format = *s;
+  const bool v2 = ds->format == kFormatValveRuns2;
+  if (v2) {
+    VB_RETURN_IF_ERROR(WarnUnknownKeys(m, root, "", {"format", "model", "description", "runs", "device", "sensor", "driver"},
+                                       &ds->warnings));
+    VB_RETURN_IF_ERROR(GetString(m, root, "device", "device", false, &s));
+    ds->device = s.value_or("");
+    VB_RETURN_IF_ERROR(ParseSensor(m, root, &ds->sensor, &ds->warnings));
+    VB_RETURN_IF_ERROR(ParseDriver(m, root, &ds->driver, &ds->warnings));
+  } else {
+    VB_RETURN_IF_ERROR(WarnUnknownKeys(m, root, "", {"format", "model", "description", "runs"}, &ds->warnings));
+  }
 
   VB_RETURN_IF_ERROR(GetString(m, root, "model", "model", true, &s));
-  if (std::find(known_models.begin(), known_models.end(), *s) == known_models.end()) {
+  const bool model_file = v2 && s->size() > 5 && s->substr(s->size() - 5) == ".json" &&
+                          std::find(known_models.begin(), known_models.end(), *s) == known_models.end();
+  if (model_file) {
+    VB_RETURN_IF_ERROR(CheckRunFile(m, dir, *s, "model"));
+    ds->model_file = (dir / *s).string();
+  } else if (std::find(known_models.begin(), known_models.end(), *s) == known_models.end()) {
     std::string known;
     for (const auto& k : known_models) known += (known.empty() ? "" : ", ") + k;
-    return m.Error("model", Quote(*s) + " is not a known model (known: " + (known.empty() ? "none" : known) + ")");
+    return m.Error("model", Quote(*s) + " is not a known model (known: " + (known.empty() ? "none" : known) + ")" +
+                                (v2 ? " nor a model file (NAME.json in the dataset directory)" : ""));
   }
   ds->model = *s;
 
@@ -425,12 +670,16 @@ Status ParseManifest(const ManifestContext& m, const fs::path& dir, std::string_
   for (size_t k = 0; k < runs->size(); ++k) {
     const std::string path = "runs[" + std::to_string(k) + "]";
     RunData& run = ds->runs[k];
-    VB_RETURN_IF_ERROR(ParseRun(m, dir, (*runs)[k], path, &run, &ds->warnings));
+    if (v2) {
+      VB_RETURN_IF_ERROR(ParseRunV2(m, dir, (*runs)[k], path, &run, &ds->warnings));
+    } else {
+      VB_RETURN_IF_ERROR(ParseRun(m, dir, (*runs)[k], path, &run, &ds->warnings));
+    }
     const auto [it, inserted] = index_of_id.emplace(run.id, k);
     if (!inserted) {
       return m.Error(path + ".id", Quote(run.id) + " is also the id of runs[" + std::to_string(it->second) + "]");
     }
-    if (k > 0 && run.t_start_s < ds->runs[k - 1].t_start_s) {
+    if (k > 0 && std::isfinite(run.t_start_s) && run.t_start_s < ds->runs[k - 1].t_start_s) {
       const RunData& prev = ds->runs[k - 1];
       return m.Error(path + ".t_start_s", "run " + Quote(run.id) + " starts at " + FormatNumber(run.t_start_s) +
                                               " s, before runs[" + std::to_string(k - 1) + "] " + Quote(prev.id) +
@@ -439,6 +688,25 @@ Status ParseManifest(const ManifestContext& m, const fs::path& dir, std::string_
     }
   }
   return Status::Ok();
+}
+
+// The current at a waveform's start: the mean of its first n samples.
+double StartCurrent(const RunData& run, std::size_t n) {
+  n = std::min(n, run.i_A.size());
+  double sum = 0.0;
+  for (std::size_t k = 0; k < n; ++k) sum += run.i_A[k];
+  return n > 0 ? sum / static_cast<double>(n) : 0.0;
+}
+
+// White-noise sigma from second differences (the smooth current barely contributes at dense sampling).
+double NoiseSigmaOf(const std::vector<double>& i) {
+  if (i.size() < 3) return 0.0;
+  double s = 0.0;
+  for (std::size_t k = 2; k < i.size(); ++k) {
+    const double d2 = i[k] - 2.0 * i[k - 1] + i[k - 2];
+    s += d2 * d2;
+  }
+  return std::sqrt(s / static_cast<double>(i.size() - 2) / 6.0);
 }
 
 }  // namespace
@@ -465,12 +733,67 @@ StatusOr<Dataset> LoadDataset(const std::string& directory, const std::vector<st
   VB_RETURN_IF_ERROR(ReadFile(manifest_path, m.display, &text));
   VB_RETURN_IF_ERROR(ParseManifest(m, dir, text, known_models, &ds));
 
-  for (RunData& run : ds.runs) {
+  for (std::size_t k = 0; k < ds.runs.size(); ++k) {
+    RunData& run = ds.runs[k];
+    if (run.kind == RunKind::kPeriodic) continue;
     const std::string display = name + "/" + run.file;
     VB_RETURN_IF_ERROR(ReadFile(dir / run.file, display, &text));
     VB_RETURN_IF_ERROR(ParseCsv(text, display, &run, &ds.warnings));
+    if (run.kind == RunKind::kWaveform && run.from_rest) {
+      // A waveform is replayed from rest unless it says otherwise: one that plainly does not start there
+      // would be compared with the wrong model response. Judged on the samples before the gate first turns
+      // on (at switch-on the terminal current may jump even from rest, e.g. through an eddy-current path):
+      // with the coil undriven, a current well above the noise means it was still carrying one.
+      std::size_t idle = 0;
+      while (idle < run.gate.size() && run.gate[idle] == 0) ++idle;
+      idle = std::min<std::size_t>(idle, 20);
+      const double first = StartCurrent(run, idle) - ds.sensor.offset_A;
+      const double noise = std::max(NoiseSigmaOf(run.i_A), std::isfinite(ds.sensor.noise_A) ? ds.sensor.noise_A : 0.0);
+      double peak = 0.0;
+      for (double i : run.i_A) peak = std::max(peak, std::abs(i - ds.sensor.offset_A));
+      if (idle >= 3 && std::abs(first) > std::max(6.0 * noise, 0.02 * peak)) {
+        const std::string what = "run " + Quote(run.id) + " starts at i_A = " + FormatNumber(first) +
+                                 " A, not at rest (noise about " + FormatNumber(noise) + " A)";
+        if (ds.format == kFormatValveRuns2) {
+          return m.Error("runs[" + std::to_string(k) + "].from_rest",
+                         what + "; declare \"from_rest\": false, or trim the file to start at rest");
+        }
+        ds.warnings.push_back(m.display + ": runs[" + std::to_string(k) + "]: " + what +
+                              "; valve-runs/1 replays every run from rest");
+      }
+    }
   }
   return ds;
+}
+
+std::string_view RunKindName(RunKind k) {
+  switch (k) {
+    case RunKind::kWaveform: return "waveform";
+    case RunKind::kSamples: return "samples";
+    case RunKind::kPeriodic: return "periodic";
+  }
+  return "?";
+}
+
+std::vector<double> DeclaredStandardErrors(const Dataset& ds, const RunData& run) {
+  const SensorChain& sc = ds.sensor;
+  const bool any = !run.i_sd_A.empty() || std::isfinite(sc.adc_lsb_A) || std::isfinite(sc.noise_A);
+  if (!any) return {};
+  std::vector<double> se(run.i_A.size());
+  for (std::size_t k = 0; k < se.size(); ++k) {
+    const double n = run.repeats.empty() ? 1.0 : static_cast<double>(run.repeats[k]);
+    const double sd = run.i_sd_A.empty() ? 0.0 : run.i_sd_A[k];
+    double v = sd * sd / n;
+    if (std::isfinite(sc.adc_lsb_A)) {
+      // Rounding to the ADC step: uniform, LSB^2/12. Repeats that all read the same step carry no dither, so
+      // their mean keeps the whole rounding error; spread repeats average it down.
+      const double q2 = sc.adc_lsb_A * sc.adc_lsb_A / 12.0;
+      v += sd > 0.0 ? q2 / n : q2;
+    }
+    if (std::isfinite(sc.noise_A)) v += sc.noise_A * sc.noise_A / (n * static_cast<double>(sc.averaged));
+    se[k] = std::sqrt(v);
+  }
+  return se;
 }
 
 }  // namespace vb::gap

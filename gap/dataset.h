@@ -1,38 +1,93 @@
-// Importer for valve-runs/1 datasets: measured valve runs to compare with a nominal model (the sim-to-real gap).
-// A dataset is a directory with manifest.json and one CSV file per run; docs/dataset-format.md gives the format
+// Importer for measured-run datasets: measured valve runs to compare with a model (the sim-to-real gap).
+// A dataset is a directory with manifest.json and the files it names; docs/dataset-format.md gives both formats
 // as accepted here, every validation rule and its error message.
+//   valve-runs/1: dense waveforms from rest on a uniform grid with the gate command (the gapbench format).
+//   valve-runs/2: what benches actually record: dense waveforms, samples at arbitrary instants, and periodic
+//                 steady-state readings (mean and spread over repeats at fixed delays after the PWM's rising
+//                 edge); per run the temperature and a held stroke; per dataset the sense chain and the driver.
 #pragma once
 
+#include <cmath>
 #include <cstdint>
+#include <limits>
 #include <string>
 #include <string_view>
 #include <vector>
 
 #include "common/status.h"
+#include "model/driver.h"
 
 namespace vb::gap {
 
 inline constexpr std::string_view kFormatValveRuns1 = "valve-runs/1";
+inline constexpr std::string_view kFormatValveRuns2 = "valve-runs/2";
+inline constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
-// One run: the manifest entry and its CSV columns (all columns have the same length, >= 2 samples).
+// What a run holds.
+enum class RunKind : std::uint8_t {
+  kWaveform,  // dense samples on a uniform grid with the gate command per sample (valve-runs/1's only kind)
+  kSamples,   // current samples at arbitrary instants; the gate command as a list of edge times
+  kPeriodic,  // PWM held until the current is periodic; readings at fixed delays after the rising edge
+};
+std::string_view RunKindName(RunKind k);
+
+// One run: the manifest entry and its measurements. i_A holds every measured value of the run (one per
+// sample or reading), t_s their instants: from the run's start (waveform, samples) or after the PWM's rising
+// edge (periodic).
 struct RunData {
   std::string id;
-  std::string file;                     // as written in the manifest, relative to the dataset directory
-  double supply_V = 0.0;                // > 0
+  std::string file;                     // as written in the manifest, relative to the dataset directory ("" for
+                                        // periodic runs, whose readings are in the manifest)
+  RunKind kind = RunKind::kWaveform;
+  double supply_V = 0.0;                // > 0: the supply as measured
   double supply_pressure_Pa = 0.0;      // >= 0
-  double t_start_s = 0.0;               // >= 0, seconds since the bench was powered
+  double t_start_s = 0.0;               // >= 0, seconds since the bench was powered; NaN: not recorded
   std::string split;                    // "fit", "holdout", or "" if absent
+  // Covariates (NaN: not recorded).
+  double ambient_C = kNaN;              // the air (chamber) temperature
+  double coil_C = kNaN;                 // the winding temperature
+  double stroke_m = kNaN;               // the plunger is held at this stroke for the whole run
+  bool from_rest = true;                // waveform: the current starts at 0 (else at the first sample's value)
+  // kWaveform
   double sample_period_s = 0.0;         // (t_s.back() - t_s.front()) / (samples - 1)
-  std::vector<double> t_s;              // starts at 0 (within 1e-9 s), uniform
-  std::vector<int8_t> gate;             // 0 or 1
-  std::vector<double> i_A;
+  std::vector<int8_t> gate;             // 0 or 1, per sample
   std::vector<double> x_m;              // empty if the column is absent
   std::vector<double> v_coil_V;         // empty if the column is absent
+  // kSamples: the gate is 0 before gate_edges_s[0] and toggles at every edge.
+  std::vector<double> gate_edges_s;
+  // kPeriodic
+  double pwm_Hz = 0.0;
+  double on_time_s = 0.0;
+  // Every kind.
+  std::vector<double> t_s;              // waveform: from 0, uniform; samples: increasing; periodic: after the edge
+  std::vector<double> i_A;              // measured (a reading's mean over its repeats)
+  std::vector<double> i_sd_A;           // spread over repeats (sample standard deviation); empty: not given
+  std::vector<int> repeats;             // repeats behind each reading; empty: 1 each
+
+  // The temperature that best describes the winding: coil_C, else ambient_C, else NaN.
+  double temperature_C() const { return std::isfinite(coil_C) ? coil_C : ambient_C; }
+};
+
+// The current-sense chain as the dataset declares it (valve-runs/2 "sensor"; NaN: not declared).
+struct SensorChain {
+  double shunt_ohm = kNaN;              // sense resistor
+  bool shunt_in_switch_path = false;    // a low-side source shunt: in series with the coil only while the
+                                        // switch conducts (the model adds it as supply resistance)
+  double amplifier_gain = kNaN;         // V/V between the shunt and the ADC
+  double adc_lsb_V = kNaN;              // the ADC's step, at its input
+  double adc_lsb_A = kNaN;              // the step in amperes (given, or adc_lsb_V / (shunt_ohm x gain))
+  double noise_A = kNaN;                // white noise of one raw reading
+  double offset_A = 0.0;                // a known offset of the readings (the model starts from it)
+  int averaged = 1;                     // raw readings averaged into one reported reading
 };
 
 struct Dataset {
-  std::string format;                   // "valve-runs/1"
-  std::string model;                    // one of the known model names
+  std::string format;                   // "valve-runs/1" or "valve-runs/2"
+  std::string model;                    // one of the known model names, or (valve-runs/2) a model file
+  std::string model_file;               // the model file's path (directory / model) when model names a file
+  std::string device;                   // valve-runs/2: the device's name ("" if absent)
+  SensorChain sensor;                   // valve-runs/2: the sense chain (defaults: nothing declared)
+  model::DriverParams driver;           // valve-runs/2: the bench's driver (default: low-side with flyback diode)
   std::string description;              // "" if absent
   std::string directory;                // as passed to LoadDataset
   std::vector<RunData> runs;            // in manifest order (= time order)
@@ -43,6 +98,11 @@ struct Dataset {
 // The model names accepted when the caller passes none: {"taghizadeh2009"}. Callers that know the model
 // presets pass them instead (e.g. model::PresetNames()).
 std::vector<std::string> DefaultKnownModels();
+
+// The standard error of each measured value from what the dataset says: a reading's spread over its repeats,
+// the ADC step and the declared noise (per raw reading, divided by averaging and repeats). Empty when the
+// dataset says nothing of its noise (waveforms estimate it from the data instead).
+std::vector<double> DeclaredStandardErrors(const Dataset& ds, const RunData& run);
 
 // Loads and validates a dataset directory. Every violation is InvalidArgument with a message that starts with
 // the file ("<dataset>/manifest.json: runs[3].split: ...", "<dataset>/<file>.csv:1234: column i_A: ..."), where

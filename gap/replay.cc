@@ -55,6 +55,7 @@ StatusOr<Replay> ReplayRun(const model::PlantParams& plant, const model::DriverP
   model::Plant p(plant);
   model::Simulator sim(p, driver, model::Conditions{in.supply_V, in.supply_pressure_Pa}, solver);
   sim.SetSamplePeriod(in.sample_period_s);
+  if (in.initial_i_A > 0.0) sim.SetCoilCurrent(in.initial_i_A);
   Replay out;
   const size_t n = in.gate.size();
   out.i_A.reserve(n);

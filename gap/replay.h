@@ -29,6 +29,7 @@ struct ReplayInput {
   double supply_pressure_Pa = 0.0;
   double sample_period_s = 2e-5;
   std::vector<std::int8_t> gate;     // one per sample, 0 or 1
+  double initial_i_A = 0.0;          // the coil current at t = 0 (a run that does not start from rest)
 };
 
 struct Replay {

@@ -293,8 +293,8 @@ TEST_F(DatasetTest, ManifestNotJson) {
 TEST_F(DatasetTest, ManifestTopLevelErrors) {
   ExpectManifestError([](json& m) { m.erase("format"); }, "ds/manifest.json: format: missing");
   ExpectManifestError([](json& m) { m["format"] = 1; }, "ds/manifest.json: format: must be a string, found a number");
-  ExpectManifestError([](json& m) { m["format"] = "valve-runs/2"; },
-                      "ds/manifest.json: format: 'valve-runs/2' is not valve-runs/1");
+  ExpectManifestError([](json& m) { m["format"] = "valve-runs/3"; },
+                      "ds/manifest.json: format: 'valve-runs/3' is not valve-runs/1 or valve-runs/2");
   ExpectManifestError([](json& m) { m.erase("model"); }, "ds/manifest.json: model: missing");
   ExpectManifestError([](json& m) { m["model"] = "foo"; },
                       "ds/manifest.json: model: 'foo' is not a known model (known: taghizadeh2009)");
