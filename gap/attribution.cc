@@ -11,6 +11,7 @@
 #include <limits>
 #include <thread>
 
+#include "gap/predict.h"
 #include "gap/replay.h"
 
 namespace vb::gap {
@@ -21,6 +22,7 @@ constexpr double kInf = std::numeric_limits<double>::infinity();
 
 // Sets one named parameter: "R" (nominal) or "effect.param".
 Status SetNamed(model::PlantParams* p, const std::string& name, double value) {
+  if (name.rfind("driver.", 0) == 0) return Status::Ok();  // ApplyCandidateDriver's
   const size_t dot = name.find('.');
   if (dot == std::string::npos) return model::SetParam(p, name, value);
   const std::string effect = name.substr(0, dot), param = name.substr(dot + 1);
@@ -60,26 +62,22 @@ struct Sse {
 };
 
 Sse Evaluate(const Dataset& ds, const std::vector<bool>& fit_mask, const model::PlantParams& plant,
-             const model::SolverOptions& solver, bool holdout_too, std::vector<double>* fit_residuals = nullptr,
-             const NominalReference* nominal = nullptr) {
+             const model::DriverParams& driver, const model::SolverOptions& solver, bool holdout_too,
+             std::vector<double>* fit_residuals = nullptr, const NominalReference* nominal = nullptr) {
   Sse out;
-  // Only as far as needed: runs after the last one scored cannot change the score.
-  std::size_t last = 0;
-  for (std::size_t r = 0; r < ds.runs.size(); ++r)
-    if (fit_mask[r] || holdout_too) last = r;
-  std::vector<SessionRun> runs;
-  for (std::size_t r = 0; r <= last; ++r) {
-    const auto& run = ds.runs[r];
-    runs.push_back({run.supply_V, run.supply_pressure_Pa, run.sample_period_s, run.t_start_s, &run.gate});
-  }
-  auto reps = ReplaySession(plant, model::DriverParams{}, runs, solver);
-  if (!reps.ok()) {
-    out.status = reps.status();
+  PredictOptions popt;
+  popt.solver = solver;
+  popt.driver = &driver;
+  // Only what is scored: runs after the last one scored cannot change the score (Predict skips them).
+  auto pred = Predict(ds, plant, popt, holdout_too ? std::vector<bool>{} : fit_mask);
+  if (!pred.ok()) {
+    out.status = pred.status();
     return out;
   }
-  for (std::size_t r = 0; r <= last; ++r) {
+  for (std::size_t r = 0; r < ds.runs.size(); ++r) {
+    if (!fit_mask[r] && !holdout_too) continue;
     const auto& meas = ds.runs[r].i_A;
-    const auto& sim = (*reps)[r].i_A;
+    const auto& sim = pred->i_A[r];
     double e2 = 0.0;
     for (std::size_t k = 0; k < meas.size(); ++k) {
       const double e = meas[k] - sim[k];
@@ -113,20 +111,19 @@ double Rms(double sse, std::size_t n) { return n > 0 ? std::sqrt(sse / static_ca
 
 StatusOr<NominalReference> ReplayNominal(const Dataset& ds, const model::PlantParams& nominal,
                                          const model::SolverOptions& solver) {
-  std::vector<SessionRun> runs;
-  for (const auto& run : ds.runs)
-    runs.push_back({run.supply_V, run.supply_pressure_Pa, run.sample_period_s, run.t_start_s, &run.gate});
-  auto reps = ReplaySession(nominal, model::DriverParams{}, runs, solver);
-  if (!reps.ok()) return reps.status();
+  PredictOptions popt;
+  popt.solver = solver;
+  auto pred = Predict(ds, nominal, popt);
+  if (!pred.ok()) return pred.status();
   NominalReference ref;
   std::array<double, kPhaseCount> e2{};
   for (std::size_t r = 0; r < ds.runs.size(); ++r) {
     for (std::size_t k = 0; k < ds.runs[r].i_A.size(); ++k) {
-      const double e = ds.runs[r].i_A[k] - (*reps)[r].i_A[k];
-      e2[static_cast<int>((*reps)[r].phase[k])] += e * e;
+      const double e = ds.runs[r].i_A[k] - pred->i_A[r][k];
+      e2[static_cast<int>(pred->phase[r][k])] += e * e;
     }
-    ref.i_A.push_back(std::move((*reps)[r].i_A));
-    ref.phase.push_back(std::move((*reps)[r].phase));
+    ref.i_A.push_back(std::move(pred->i_A[r]));
+    ref.phase.push_back(std::move(pred->phase[r]));
   }
   double total = 0.0;
   for (double e : e2) total += e;
@@ -158,48 +155,104 @@ CandidateResult Fit(const Dataset& ds, const std::vector<bool>& fit_mask, const 
     std::function<std::vector<double>(const std::vector<double>&)> values_of;
     int evaluations = 0;
     Status last_error;
+    std::vector<std::pair<double, std::vector<double>>>* seen = nullptr;  // the global stage's points
   } ctx{&ds, &fit_mask, &nominal, &c, &opt, values_of, 0, Status::Ok()};
-  auto objective = [](const std::vector<double>& x, std::vector<double>& /*grad*/, void* data) -> double {
-    auto* cx = static_cast<Ctx*>(data);
+  auto mse = [](Ctx* cx, const std::vector<double>& x) -> double {
     ++cx->evaluations;
-    auto plant = ApplyCandidate(*cx->nominal, *cx->c, cx->values_of(x));
+    const std::vector<double> values = cx->values_of(x);
+    auto plant = ApplyCandidate(*cx->nominal, *cx->c, values);
     if (!plant.ok()) {
       cx->last_error = plant.status();
       return 1e30;
     }
-    const Sse s = Evaluate(*cx->ds, *cx->mask, *plant, cx->opt->solver, false);
+    auto driver = ApplyCandidateDriver(cx->ds->driver, *cx->c, values);
+    if (!driver.ok()) {
+      cx->last_error = driver.status();
+      return 1e30;
+    }
+    const Sse s = Evaluate(*cx->ds, *cx->mask, *plant, *driver, cx->opt->solver, false);
     if (!s.ok) {
       cx->last_error = s.status;
       return 1e30;
     }
     return s.fit / static_cast<double>(std::max<std::size_t>(s.fit_n, 1));
   };
-  if (k > 0) {
-    nlopt::opt o(nlopt::LN_BOBYQA, static_cast<unsigned>(k));
-    o.set_lower_bounds(std::vector<double>(k, 0.0));
-    o.set_upper_bounds(std::vector<double>(k, 1.0));
-    o.set_min_objective(objective, &ctx);
-    o.set_xtol_rel(opt.xtol_rel);
-    o.set_maxeval(opt.max_evaluations);
-    o.set_initial_step(std::vector<double>(k, 0.15));
-    double minf = 0.0;
+  auto objective = [](const std::vector<double>& x, std::vector<double>& /*grad*/, void* data) -> double {
+    auto* cx = static_cast<Ctx*>(data);
+    const double f = decltype(mse){}(cx, x);  // a captureless lambda: its type is default-constructible
+    if (cx->seen != nullptr) cx->seen->emplace_back(f, x);
+    return f;
+  };
+  // Local fits start from the initial point and, after a global search, from the best distinct points it
+  // found (a basin the global search sampled but did not descend is still explored); the best end wins.
+  std::vector<std::vector<double>> starts;
+  if (k > 0 && opt.global_evaluations > 0) {
+    std::vector<std::pair<double, std::vector<double>>> seen;
+    ctx.seen = &seen;
+    nlopt::srand(opt.seed);
+    nlopt::opt g(nlopt::GN_CRS2_LM, static_cast<unsigned>(k));
+    g.set_lower_bounds(std::vector<double>(k, 0.0));
+    g.set_upper_bounds(std::vector<double>(k, 1.0));
+    g.set_min_objective(objective, &ctx);
+    g.set_maxeval(opt.global_evaluations);
+    std::vector<double> ug = u;
+    double gmin = 0.0;
     try {
-      o.optimize(u, minf);
+      g.optimize(ug, gmin);
     } catch (const std::exception& e) {
-      // Out of evaluations or a roundoff stop: keep the best point NLopt reached (u holds it).
-      (void)e;
+      (void)e;  // out of evaluations: the points seen are what counts
     }
+    ctx.seen = nullptr;
+    std::stable_sort(seen.begin(), seen.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+    for (const auto& [f, x] : seen) {
+      if (starts.size() >= 3) break;
+      bool distinct = true;
+      for (const auto& st : starts) {
+        double d2 = 0.0;
+        for (std::size_t j = 0; j < k; ++j) d2 += (x[j] - st[j]) * (x[j] - st[j]);
+        distinct = distinct && d2 > 0.1 * 0.1;
+      }
+      if (distinct) starts.push_back(x);
+    }
+  }
+  starts.push_back(u);
+  if (k > 0) {
+    double best_f = INFINITY;
+    std::vector<double> best_u = u;
+    for (auto start : starts) {
+      nlopt::opt o(nlopt::LN_BOBYQA, static_cast<unsigned>(k));
+      o.set_lower_bounds(std::vector<double>(k, 0.0));
+      o.set_upper_bounds(std::vector<double>(k, 1.0));
+      o.set_min_objective(objective, &ctx);
+      o.set_xtol_rel(opt.xtol_rel);
+      o.set_maxeval(opt.max_evaluations);
+      o.set_initial_step(std::vector<double>(k, 0.15));
+      double minf = INFINITY;
+      try {
+        o.optimize(start, minf);
+      } catch (const std::exception& e) {
+        // Out of evaluations or a roundoff stop: keep the best point NLopt reached (start holds it).
+        (void)e;
+        minf = decltype(mse){}(&ctx, start);
+      }
+      if (minf < best_f) {
+        best_f = minf;
+        best_u = start;
+      }
+    }
+    u = best_u;
   }
   res.evaluations = ctx.evaluations;
   const std::vector<double> best = values_of(u);
   auto plant = ApplyCandidate(nominal, c, best);
-  if (!plant.ok()) {
-    res.status = plant.status();
+  auto driver = ApplyCandidateDriver(ds.driver, c, best);
+  if (!plant.ok() || !driver.ok()) {
+    res.status = plant.ok() ? driver.status() : plant.status();
     res.score = kInf;
     return res;
   }
   std::vector<double> residuals;
-  const Sse s = Evaluate(ds, fit_mask, *plant, opt.solver, true, &residuals, &ref);
+  const Sse s = Evaluate(ds, fit_mask, *plant, *driver, opt.solver, true, &residuals, &ref);
   if (!s.ok) {
     res.status = s.status;
     res.score = kInf;
@@ -219,6 +272,19 @@ CandidateResult Fit(const Dataset& ds, const std::vector<bool>& fit_mask, const 
   const double denom = holdout_before - noise;
   res.closed = denom > 0.0 ? std::clamp((holdout_before - res.holdout_rmse_after_A) / denom, 0.0, 1.0) : 0.0;
   res.score = res.holdout_rmse_after_A * (1.0 + opt.complexity_penalty * static_cast<double>(k));
+  // An effect that ended where it vanishes found nothing; a fit with as many free parameters as values
+  // can match anything. Neither may be the verdict.
+  bool has_effect_param = false, all_absent = true;
+  for (std::size_t j = 0; j < k; ++j) {
+    const FreeParam& f = c.params[j];
+    if (!std::isfinite(f.absent)) continue;
+    has_effect_param = true;
+    if (std::abs(ToUnit(f, best[j]) - ToUnit(f, f.absent)) > 0.02) all_absent = false;
+  }
+  if (has_effect_param && all_absent)
+    res.disqualified = "fitted at the value where the effect vanishes: no such effect in the data";
+  if (k > 0 && s.fit_n <= k)
+    res.disqualified = "as many free parameters (" + std::to_string(k) + ") as fit values (" + std::to_string(s.fit_n) + ")";
 
   // 1-sigma from the Gauss-Newton approximation: cov = s^2 (J^T J)^-1, J by forward differences.
   if (k > 0 && !residuals.empty()) {
@@ -231,8 +297,9 @@ CandidateResult Fit(const Dataset& ds, const std::vector<bool>& fit_mask, const 
       v[j] = best[j] + h <= c.params[j].upper ? best[j] + h : best[j] - h;
       const double step = v[j] - best[j];
       auto pj = ApplyCandidate(nominal, c, v);
+      auto dj = ApplyCandidateDriver(ds.driver, c, v);
       std::vector<double> rj;
-      if (!pj.ok() || !Evaluate(ds, fit_mask, *pj, opt.solver, false, &rj).ok || rj.size() != n) {
+      if (!pj.ok() || !dj.ok() || !Evaluate(ds, fit_mask, *pj, *dj, opt.solver, false, &rj).ok || rj.size() != n) {
         ok = false;
         break;
       }
@@ -243,10 +310,23 @@ CandidateResult Fit(const Dataset& ds, const std::vector<bool>& fit_mask, const 
       const double s2 = s.fit / static_cast<double>(n - k);
       const Eigen::MatrixXd JtJ = J.transpose() * J;
       Eigen::FullPivLU<Eigen::MatrixXd> lu(JtJ);
-      if (lu.isInvertible()) {
+      // A parameter the residuals do not move (a zero column) or a near-singular J^T J: not determined, and
+      // no uncertainty is reported for any parameter (0 would read as "exactly known").
+      const double cond_limit = 1e12;
+      Eigen::JacobiSVD<Eigen::MatrixXd> svd(JtJ);
+      const auto& sv = svd.singularValues();
+      const bool well_posed = lu.isInvertible() && sv(0) > 0.0 && sv(sv.size() - 1) > sv(0) / cond_limit;
+      if (well_posed) {
         const Eigen::MatrixXd cov = s2 * lu.inverse();
         for (std::size_t j = 0; j < k; ++j)
           res.uncertainty[c.params[j].name] = std::sqrt(std::max(0.0, cov(static_cast<Eigen::Index>(j), static_cast<Eigen::Index>(j))));
+        res.correlation.assign(k, std::vector<double>(k, 0.0));
+        for (std::size_t a = 0; a < k; ++a)
+          for (std::size_t b = 0; b < k; ++b) {
+            const auto ia = static_cast<Eigen::Index>(a), ib = static_cast<Eigen::Index>(b);
+            const double d = std::sqrt(cov(ia, ia) * cov(ib, ib));
+            res.correlation[a][b] = d > 0.0 ? cov(ia, ib) / d : 0.0;
+          }
       }
     }
   }
@@ -255,10 +335,44 @@ CandidateResult Fit(const Dataset& ds, const std::vector<bool>& fit_mask, const 
 
 }  // namespace
 
+void SortRanking(std::vector<CandidateResult>* rows) {
+  std::stable_sort(rows->begin(), rows->end(), [](const CandidateResult& a, const CandidateResult& b) {
+    const bool qa = a.disqualified.empty() && a.status.ok(), qb = b.disqualified.empty() && b.status.ok();
+    if (qa != qb) return qa;
+    return a.score < b.score;
+  });
+}
+
+StatusOr<model::DriverParams> ApplyCandidateDriver(const model::DriverParams& driver, const Candidate& c,
+                                                   const std::vector<double>& values) {
+  model::DriverParams d = driver;
+  if (values.size() != c.params.size()) return Status::Internal("candidate " + c.name + ": value count");
+  for (const auto& [name, v] : c.fixed)
+    if (name.rfind("driver.", 0) == 0) VB_RETURN_IF_ERROR(model::SetDriverParam(&d, name.substr(7), v).WithContext(name));
+  for (std::size_t j = 0; j < values.size(); ++j) {
+    const std::string& name = c.params[j].name;
+    if (name.rfind("driver.", 0) != 0) continue;
+    VB_RETURN_IF_ERROR(model::SetDriverParam(&d, name.substr(7), values[j]).WithContext(name));
+  }
+  return d;
+}
+
+StatusOr<model::DriverParams> FittedDriver(const model::DriverParams& driver, const Candidate& c,
+                                           const CandidateResult& r) {
+  std::vector<double> values;
+  for (const auto& p : c.params) {
+    auto it = r.params.find(p.name);
+    if (it == r.params.end()) return Status::Internal("candidate " + c.name + ": no fitted " + p.name);
+    values.push_back(it->second);
+  }
+  return ApplyCandidateDriver(driver, c, values);
+}
+
 StatusOr<model::PlantParams> ApplyCandidate(const model::PlantParams& nominal, const Candidate& c,
                                             const std::vector<double>& values) {
   model::PlantParams p = nominal;
   for (const auto& e : c.effects) VB_RETURN_IF_ERROR(model::AddEffect(&p.effects, e, {}).WithContext(c.name));
+  for (const auto& [name, v] : c.fixed) VB_RETURN_IF_ERROR(SetNamed(&p, name, v));
   if (values.size() != c.params.size()) return Status::Internal("candidate " + c.name + ": value count");
   for (std::size_t j = 0; j < values.size(); ++j) VB_RETURN_IF_ERROR(SetNamed(&p, c.params[j].name, values[j]));
   // Static friction is at least the kinetic one.
@@ -273,24 +387,98 @@ std::vector<Candidate> DefaultCandidates(const model::PlantParams& nominal) {
   for (const char* name : {"R", "k", "delta", "b", "mu_r", "x_t", "m", "l_c", "A_e"}) {
     const double v = *model::GetParam(nominal, name);
     auto [lo, hi] = around(v, 0.6, 1.4);
-    out.push_back({std::string("param:") + name, {}, {{name, lo, hi, v, false}}});
+    out.push_back({std::string("param:") + name, {}, {{name, lo, hi, v, false}}, {}});
   }
-  // Structural effects, each with R free too.
+  // Structural effects, each with R free too; `absent` marks where each effect vanishes.
   const auto [rlo, rhi] = around(nominal.R_ohm, 0.8, 1.2);
   const FreeParam R{"R", rlo, rhi, nominal.R_ohm, false};
   out.push_back({"coil_heating", {"coil_heating"},
-                 {R, {"coil_heating.R_th", 0.05, 100.0, 2.0, true}, {"coil_heating.C_th", 0.01, 100.0, 1.0, true}}});
-  out.push_back({"supply_resistance", {"supply_resistance"}, {R, {"supply_resistance.R_s", 0.01, 20.0, 0.5, true}}});
-  out.push_back({"eddy_currents", {"eddy_currents"}, {R, {"eddy_currents.R_p", 10.0, 1e5, 500.0, true}}});
+                 {R, {"coil_heating.R_th", 0.05, 100.0, 2.0, true, 0.05}, {"coil_heating.C_th", 0.01, 100.0, 1.0, true}}, {}});
+  out.push_back({"supply_resistance", {"supply_resistance"}, {R, {"supply_resistance.R_s", 0.01, 20.0, 0.5, true, 0.01}}, {}});
+  out.push_back({"eddy_currents", {"eddy_currents"}, {R, {"eddy_currents.R_p", 10.0, 1e5, 500.0, true, 1e5}}, {}});
   out.push_back({"sensor_lag", {"sensor_lag"},
-                 {R, {"sensor_lag.tau_s", 1e-6, 5e-3, 1e-4, true}, {"sensor_lag.delay_s", 0.0, 1e-3, 2e-5, false}}});
+                 {R, {"sensor_lag.tau_s", 1e-6, 5e-3, 1e-4, true, 1e-6}, {"sensor_lag.delay_s", 0.0, 1e-3, 2e-5, false, 0.0}}, {}});
   out.push_back({"magnetic_saturation", {"magnetic_saturation"},
-                 {R, {"magnetic_saturation.B_sat", 0.3, 20.0, 3.0, true}}});
+                 {R, {"magnetic_saturation.B_sat", 0.3, 20.0, 3.0, true, 20.0}}, {}});
   out.push_back({"residual_magnetism", {"residual_magnetism"},
-                 {R, {"residual_magnetism.w", 0.002, 1.0, 0.05, true}, {"residual_magnetism.alpha", 0.05, 1.0, 0.4, false}}});
+                 {R, {"residual_magnetism.w", 0.002, 1.0, 0.05, true, 0.002}, {"residual_magnetism.alpha", 0.05, 1.0, 0.4, false}}, {}});
   out.push_back({"coulomb_friction", {"coulomb_friction"},
-                 {R, {"coulomb_friction.F_c", 0.0, 10.0, 1.0, false}, {"coulomb_friction.F_s", 0.0, 15.0, 1.5, false}}});
-  out.push_back({"end_stop_bounce", {"end_stop_bounce"}, {R, {"end_stop_bounce.e", 0.0, 0.95, 0.4, false}}});
+                 {R, {"coulomb_friction.F_c", 0.0, 10.0, 1.0, false, 0.0}, {"coulomb_friction.F_s", 0.0, 15.0, 1.5, false, 0.0}}, {}});
+  out.push_back({"end_stop_bounce", {"end_stop_bounce"}, {R, {"end_stop_bounce.e", 0.0, 0.95, 0.4, false, 0.0}}, {}});
+  return out;
+}
+
+std::vector<Candidate> DefaultCandidates(const model::PlantParams& nominal, const Dataset& ds,
+                                         const std::vector<bool>& fit_mask, double reference_C) {
+  const bool waveforms = HasWaveforms(ds);
+  const bool moving = CanShowMotion(ds, nominal);
+  bool all_held = true;
+  for (const auto& r : ds.runs) all_held = all_held && std::isfinite(r.stroke_m);
+  const bool constant_law = nominal.law == model::InductanceLaw::kConstant || all_held;
+  auto law_param = [&](const std::string& name) {
+    if (name == "R") return true;
+    static const std::vector<std::string> mech = {"k", "delta", "b", "m"};
+    if (std::find(mech.begin(), mech.end(), name) != mech.end()) return moving;
+    if (constant_law) return false;  // L is the only magnetic parameter left (added below)
+    if (nominal.law == model::InductanceLaw::kReluctance) return name == "mu_r" || name == "x_t" || name == "l_c" || name == "A_e";
+    return false;
+  };
+  std::vector<Candidate> out;
+  for (auto& c : DefaultCandidates(nominal)) {
+    if (c.name.rfind("param:", 0) == 0) {
+      if (law_param(c.name.substr(6))) out.push_back(std::move(c));
+      continue;
+    }
+    const std::string& e = c.effects.front();
+    if ((e == "coulomb_friction" || e == "end_stop_bounce") && !moving) continue;
+    // Sampled chains and within-run dynamics of slow states show on waveforms only.
+    if ((e == "sensor_lag" || e == "coil_heating" || e == "residual_magnetism") && !waveforms) continue;
+    out.push_back(std::move(c));
+  }
+  // A coil with one inductance: L itself (unless a table gives it per stroke).
+  const bool table = !nominal.inductance_stroke_m.empty();
+  if (constant_law && !(all_held && table)) {
+    double L = nominal.L_H;
+    if (nominal.law != model::InductanceLaw::kConstant && all_held) {
+      auto held = model::AtState(nominal, model::HeldState{ds.runs.front().stroke_m, NAN});
+      if (held.ok()) L = held->L_H;
+    }
+    out.insert(out.begin() + 1, Candidate{"param:L", {}, {{"L", L * 0.6, L * 1.4, L, false}}, {}});
+  }
+  // The sense chain: an offset (bounded by the currents seen) and a gain, each with R free.
+  double peak = 0.0;
+  for (const auto& r : ds.runs)
+    for (double i : r.i_A) peak = std::max(peak, std::abs(i));
+  const double off = std::max(0.3 * peak, 1e-3);
+  const FreeParam R{"R", nominal.R_ohm * 0.8, nominal.R_ohm * 1.2, nominal.R_ohm, false};
+  const double off0 = nominal.effects.sensor_offset_A, gain0 = nominal.effects.sensor_gain;
+  out.push_back({"sensor_offset", {"sensor_offset"}, {R, {"sensor_offset.offset_A", off0 - off, off0 + off, off0, false, off0}}, {}});
+  out.push_back({"sensor_gain", {"sensor_gain"}, {R, {"sensor_gain.gain", gain0 * 0.7, gain0 * 1.4, gain0, false, gain0}}, {}});
+  // The winding's resistance against the runs' temperatures.
+  std::vector<double> fit_T, all_T;
+  for (std::size_t r = 0; r < ds.runs.size(); ++r) {
+    const double T = ds.runs[r].temperature_C();
+    if (!std::isfinite(T)) continue;
+    all_T.push_back(T);
+    if (fit_mask.empty() || fit_mask[r]) fit_T.push_back(T);
+  }
+  if (!all_T.empty()) {
+    const auto [fmin, fmax] = std::minmax_element(fit_T.begin(), fit_T.end());
+    const auto [amin, amax] = std::minmax_element(all_T.begin(), all_T.end());
+    const FreeParam alpha{"resistance_temperature.alpha", 0.0, 0.02, 3.93e-3, false, 0.0};
+    if (std::isfinite(reference_C) && (*amax != reference_C || *amin != reference_C)) {
+      // R is the reference session's, at its temperature: how fast it rose is all that is left to find.
+      out.push_back({"resistance_temperature", {"resistance_temperature"}, {alpha},
+                     {{"resistance_temperature.T_ref", reference_C}}});
+    } else if (!fit_T.empty() && *fmax - *fmin > 1.0) {
+      out.push_back({"resistance_temperature", {"resistance_temperature"}, {R, alpha},
+                     {{"resistance_temperature.T_ref", *fmin}}});
+    } else if (!fit_T.empty() && (*amax - *amin > 1.0)) {
+      // One temperature to fit at, others held out: copper's coefficient carries R to them.
+      out.push_back({"resistance_temperature", {"resistance_temperature"}, {R},
+                     {{"resistance_temperature.T_ref", *fmin}, {"resistance_temperature.alpha", 3.93e-3}}});
+    }
+  }
   return out;
 }
 
@@ -324,8 +512,7 @@ StatusOr<std::vector<CandidateResult>> Attribute(const Dataset& ds, const std::v
   const int threads = std::clamp(opt.threads, 1, static_cast<int>(std::max<std::size_t>(candidates.size(), 1)));
   for (int t = 0; t < threads; ++t) pool.emplace_back(worker);
   for (auto& t : pool) t.join();
-  std::stable_sort(results.begin(), results.end(),
-                   [](const CandidateResult& a, const CandidateResult& b) { return a.score < b.score; });
+  SortRanking(&results);
   return results;
 }
 

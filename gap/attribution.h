@@ -9,6 +9,8 @@
 #pragma once
 
 #include <array>
+#include <cmath>
+#include <limits>
 #include <map>
 #include <string>
 #include <vector>
@@ -22,15 +24,20 @@
 namespace vb::gap {
 
 struct FreeParam {
-  std::string name;     // a nominal parameter ("R") or an effect's ("eddy_currents.R_p")
+  std::string name;     // a nominal parameter ("R"), an effect's ("eddy_currents.R_p") or the driver's
+                        // ("driver.diode_drop_V")
   double lower = 0.0, upper = 0.0, initial = 0.0;
   bool log_scale = false;
+  // The value at which the effect vanishes (an effect's own parameter); NaN for nominal parameters. A
+  // candidate whose effect parameters all end there has found no effect in the data and cannot win.
+  double absent = std::numeric_limits<double>::quiet_NaN();
 };
 
 struct Candidate {
   std::string name;                  // the output name: "eddy_currents", "param:R", "a+b"
   std::vector<std::string> effects;  // effects switched on
   std::vector<FreeParam> params;
+  std::vector<std::pair<std::string, double>> fixed = {};  // set before the free ones (e.g. a reference temperature)
 };
 
 struct CandidateResult {
@@ -49,8 +56,14 @@ struct CandidateResult {
   // in each nominal phase, over every run (the effect's model-derived signature).
   std::array<double, kPhaseCount> signature{};
   double signature_match = 0.0;  // Bhattacharyya coefficient of that signature and the residual's, in [0, 1]
+  // Correlations of the fitted parameters (from the same covariance), in the candidate's parameter order;
+  // empty when the covariance could not be formed (then no parameter is determined by the data).
+  std::vector<std::vector<double>> correlation;
   int evaluations = 0;
   Status status;              // a candidate whose replay failed is ranked last with its reason
+  // Why the candidate may not be the verdict, "" if it may: its effect ended at its absent value, it has as
+  // many free parameters as the fit has values, or (gap/diagnose.h) R alone does as well.
+  std::string disqualified;
 };
 
 struct AttributionOptions {
@@ -58,6 +71,10 @@ struct AttributionOptions {
   double xtol_rel = 1e-3;             // on the normalised parameters
   int threads = 2;                    // candidates fitted concurrently
   double complexity_penalty = 0.01;   // per free parameter, relative to the holdout RMSE
+  // A global search over the whole box before the local fit (NLopt's controlled random search with local
+  // mutation, seeded): for identification far from the starting values. 0: local fit only.
+  int global_evaluations = 0;
+  unsigned seed = 1;
   model::SolverOptions solver = FastSolver();
   static model::SolverOptions FastSolver() {
     model::SolverOptions s;
@@ -69,6 +86,17 @@ struct AttributionOptions {
 
 // The catalog as candidates, around a nominal plant.
 std::vector<Candidate> DefaultCandidates(const model::PlantParams& nominal);
+// The candidates this dataset can tell apart: no mechanical candidate where nothing moves (a plain coil, a
+// held plunger), the law's own parameters, sensor_lag only on waveforms (it acts on a sampled chain), the
+// sense chain's offset and gain, and resistance_temperature where the runs' temperatures differ from the
+// model's reference temperature or from each other.
+// reference_C: the temperature of a reference session the nominal was fitted on (NaN: none).
+std::vector<Candidate> DefaultCandidates(const model::PlantParams& nominal, const Dataset& ds,
+                                         const std::vector<bool>& fit_mask, double reference_C = NAN);
+
+// Applies the driver parameters of a candidate ("driver.NAME") to a copy of the dataset's driver.
+StatusOr<model::DriverParams> ApplyCandidateDriver(const model::DriverParams& driver, const Candidate& c,
+                                                   const std::vector<double>& values);
 
 // Applies a candidate's effects and parameter values to a copy of the nominal plant.
 StatusOr<model::PlantParams> ApplyCandidate(const model::PlantParams& nominal, const Candidate& c,
@@ -93,6 +121,13 @@ StatusOr<std::vector<CandidateResult>> Attribute(const Dataset& ds, const std::v
 // Pairs of structural effects (each with both effects' parameters and R free), for when no single effect
 // closes the gap.
 Candidate PairCandidate(const Candidate& a, const Candidate& b);
+
+// Ranking order: candidates that may be the verdict first, then by score.
+void SortRanking(std::vector<CandidateResult>* rows);
+
+// The dataset's driver with a candidate's fitted driver parameters.
+StatusOr<model::DriverParams> FittedDriver(const model::DriverParams& driver, const Candidate& c,
+                                           const CandidateResult& r);
 
 // The session replayed with a candidate's fitted values (for overlays and the improved model).
 StatusOr<model::PlantParams> FittedPlant(const model::PlantParams& nominal, const Candidate& c,

@@ -1,5 +1,8 @@
 #include "gap/diagnose.h"
 
+#include "common/format.h"
+#include "gap/predict.h"
+
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
@@ -141,34 +144,97 @@ double Pearson(const std::vector<double>& a, const std::vector<double>& b) {
 
 bool IsParametric(const std::string& name) { return name.rfind("param:", 0) == 0; }
 
+// A structural candidate fits the coil resistance as well as its effect. When it does no better on the
+// holdout runs than R alone (by a twentieth of the gap), its effect added nothing the data can see: it may
+// not be the verdict. On valve-runs/1 waveforms this never bites (each effect there has its own signature).
+template <typename CandidateOf>
+void DisqualifyWhatRAloneExplains(Diagnosis* d, CandidateOf candidate_of) {
+  const CandidateResult* r_alone = nullptr;
+  for (const auto& row : d->ranking)
+    if (row.name == "param:R" && row.status.ok()) r_alone = &row;
+  if (r_alone == nullptr) return;
+  const double gap = r_alone->holdout_rmse_before_A - d->noise_floor_A;
+  if (!(gap > 0.0)) return;
+  bool changed = false;
+  for (auto& row : d->ranking) {
+    if (IsParametric(row.name) || !row.status.ok() || !row.disqualified.empty()) continue;
+    const Candidate* c = candidate_of(row.name);
+    if (c == nullptr) continue;
+    const bool r_free = std::any_of(c->params.begin(), c->params.end(), [](const FreeParam& f) { return f.name == "R"; });
+    if (!r_free) continue;
+    if (row.holdout_rmse_after_A > r_alone->holdout_rmse_after_A - 0.05 * gap) {
+      row.disqualified = "R alone (param:R) does as well on the holdout runs: the effect adds nothing the data shows";
+      changed = true;
+    }
+  }
+  if (changed) SortRanking(&d->ranking);
+}
+
 }  // namespace
 
-StatusOr<Diagnosis> Diagnose(const Dataset& ds, const model::PlantParams& nominal, const DiagnoseOptions& opt) {
-  if (ds.runs.empty()) return Status::InvalidArgument("dataset: no runs");
+StatusOr<FittedDevice> ReferenceDevice(const Dataset& reference, const model::PlantParams& nominal,
+                                       const IdentifyOptions& fit, ReferenceFit* out) {
+  auto id = Identify(reference, nominal, fit);
+  if (!id.ok()) return id.status().WithContext("reference " + reference.directory);
+  FittedDevice dev;
+  auto plant = IdentifiedPlant(nominal, *id);
+  if (!plant.ok()) return plant.status();
+  auto driver = IdentifiedDriver(reference.driver, *id);
+  if (!driver.ok()) return driver.status();
+  dev.plant = *plant;
+  dev.driver = *driver;
+  if (out != nullptr) {
+    out->directory = reference.directory;
+    out->fit_rmse_A = id->fit.fit_rmse_A;
+    out->params = id->fit.params;
+    double tmin = INFINITY, tmax = -INFINITY;
+    for (const auto& r : reference.runs) {
+      tmin = std::min(tmin, r.temperature_C());
+      tmax = std::max(tmax, r.temperature_C());
+    }
+    out->temperature_C = std::isfinite(tmin) && tmax - tmin <= 1.0 ? 0.5 * (tmin + tmax) : NAN;
+  }
+  return dev;
+}
+
+StatusOr<Diagnosis> Diagnose(const Dataset& ds_in, const model::PlantParams& nominal_in, const DiagnoseOptions& opt) {
+  if (ds_in.runs.empty()) return Status::InvalidArgument("dataset: no runs");
   Diagnosis d;
-  d.model = ds.model;
-  d.warnings = ds.warnings;
+  d.model = opt.model_name.empty() ? ds_in.model : opt.model_name;
+  d.device = ds_in.device;
+  d.warnings = ds_in.warnings;
+  // With a reference session: the device as identified there, and this session seen through the same driver.
+  model::PlantParams nominal = nominal_in;
+  const Dataset* dsp = &ds_in;
+  Dataset with_driver;
+  if (opt.reference != nullptr) {
+    auto dev = ReferenceDevice(*opt.reference, nominal_in, opt.reference_fit, &d.reference);
+    if (!dev.ok()) return dev.status();
+    d.has_reference = true;
+    nominal = dev->plant;
+    with_driver = ds_in;
+    with_driver.driver = dev->driver;
+    dsp = &with_driver;
+  }
+  const Dataset& ds = *dsp;
   const std::vector<std::string> split = MakeSplit(ds, &d.split_note);
   std::array<double, kPhaseCount> energy{}, hold_energy{};
   std::array<std::size_t, kPhaseCount> count{}, hold_count{};
   double noise2 = 0.0, fit_e2 = 0.0, hold_e2 = 0.0;
   std::size_t noise_n = 0, fit_n = 0, hold_n = 0;
-  std::vector<std::vector<double>> nominal_i(ds.runs.size());
+  PredictOptions popt;
+  popt.solver = opt.attribution.solver;
+  auto nominal_pred = Predict(ds, nominal, popt);
+  if (!nominal_pred.ok()) return nominal_pred.status();
+  const std::vector<std::vector<double>>& nominal_i = nominal_pred->i_A;
   for (std::size_t r = 0; r < ds.runs.size(); ++r) {
     const RunData& run = ds.runs[r];
-    ReplayInput in;
-    in.supply_V = run.supply_V;
-    in.supply_pressure_Pa = run.supply_pressure_Pa;
-    in.sample_period_s = run.sample_period_s;
-    in.gate = run.gate;
-    auto rep = ReplayRun(nominal, model::DriverParams{}, in);
-    if (!rep.ok()) return rep.status().WithContext("run " + run.id);
     const bool holdout = split[r] == "holdout";
     double e2 = 0.0;
     for (std::size_t k = 0; k < run.i_A.size(); ++k) {
-      const double e = run.i_A[k] - rep->i_A[k];
+      const double e = run.i_A[k] - nominal_i[r][k];
       e2 += e * e;
-      const int p = static_cast<int>(rep->phase[k]);
+      const int p = static_cast<int>(nominal_pred->phase[r][k]);
       energy[p] += e * e;
       ++count[p];
       if (holdout) {
@@ -176,8 +242,18 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds, const model::PlantParams& nomina
         ++hold_count[p];
       }
     }
-    const double sigma = NoiseSigma(run.i_A);
-    noise2 += sigma * sigma * static_cast<double>(run.i_A.size());
+    // The noise of each value: declared (spread over repeats, ADC step, declared noise) and, for waveforms,
+    // estimated from the data; the larger of the two.
+    const std::vector<double> se = DeclaredStandardErrors(ds, run);
+    const double sigma = run.kind == RunKind::kWaveform ? NoiseSigma(run.i_A) : 0.0;
+    if (se.empty() && run.kind != RunKind::kWaveform) {
+      return Status::InvalidArgument("run " + run.id + ": no noise level: its readings carry no spread (sd_A with "
+                                     "repeats) and the dataset declares none (sensor.noise_A or sensor.adc_lsb_V)");
+    }
+    for (std::size_t k = 0; k < run.i_A.size(); ++k) {
+      const double v = std::max(sigma, se.empty() ? 0.0 : se[k]);
+      noise2 += v * v;
+    }
     noise_n += run.i_A.size();
     if (holdout) {
       hold_e2 += e2;
@@ -187,9 +263,19 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds, const model::PlantParams& nomina
       fit_n += run.i_A.size();
     }
     d.runs.push_back({run.id, split[r], std::sqrt(e2 / static_cast<double>(run.i_A.size()))});
-    nominal_i[r] = std::move(rep->i_A);
   }
-  d.noise_floor_A = std::sqrt(noise2 / static_cast<double>(noise_n));
+  d.measurement_noise_A = std::sqrt(noise2 / static_cast<double>(noise_n));
+  if (!(d.measurement_noise_A > 0.0)) {
+    // Noise-free numbers (a simulation, or values rounded to nothing): the resolution of a double is all that
+    // is left; say so rather than report a floor of 0.
+    double peak = 0.0;
+    for (const auto& run : ds.runs)
+      for (double i : run.i_A) peak = std::max(peak, std::abs(i));
+    d.measurement_noise_A = std::max(peak, 1e-3) * 1e-9;
+    d.warnings.push_back("the data shows no noise and the dataset declares none: the floor is set to " +
+                         FormatNumber(d.measurement_noise_A) + " A");
+  }
+  d.noise_floor_A = std::max(d.measurement_noise_A, d.has_reference ? d.reference.fit_rmse_A : 0.0);
   d.fit_rmse_A = fit_n > 0 ? std::sqrt(fit_e2 / static_cast<double>(fit_n)) : 0.0;
   d.holdout_rmse_A = hold_n > 0 ? std::sqrt(hold_e2 / static_cast<double>(hold_n)) : 0.0;
   d.significant = d.fit_rmse_A > kSignificance * d.noise_floor_A;
@@ -207,33 +293,48 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds, const model::PlantParams& nomina
   }
   std::sort(d.where.begin(), d.where.end(), [](const PhaseStat& a, const PhaseStat& b) { return a.share > b.share; });
 
-  // Landmarks and trends.
-  std::vector<double> rmse, t_start, supply, pressure, duty;
+  // Landmarks (waveforms) and trends.
+  std::vector<double> rmse, t_start, supply, pressure, duty, temperature, stroke;
   for (std::size_t r = 0; r < ds.runs.size(); ++r) {
     const RunData& run = ds.runs[r];
-    Landmarks lm;
-    lm.run = run.id;
-    const double thr = std::max(4.0 * d.noise_floor_A, 1e-3);
-    FindLandmarks(run.i_A, run.gate, run.sample_period_s, thr, 0, &lm);
-    FindLandmarks(nominal_i[r], run.gate, run.sample_period_s, thr, 1, &lm);
-    d.landmarks.push_back(lm);
+    if (run.kind == RunKind::kWaveform) {
+      Landmarks lm;
+      lm.run = run.id;
+      const double thr = std::max(4.0 * d.measurement_noise_A, 1e-3);
+      FindLandmarks(run.i_A, run.gate, run.sample_period_s, thr, 0, &lm);
+      FindLandmarks(nominal_i[r], run.gate, run.sample_period_s, thr, 1, &lm);
+      d.landmarks.push_back(lm);
+    }
     rmse.push_back(d.runs[r].rmse_A);
     t_start.push_back(run.t_start_s);
     supply.push_back(run.supply_V);
     pressure.push_back(run.supply_pressure_Pa);
-    double on = 0.0;
-    for (auto g : run.gate) on += g;
-    duty.push_back(on / static_cast<double>(run.gate.size()));
+    temperature.push_back(run.temperature_C());
+    stroke.push_back(run.stroke_m);
+    if (run.kind == RunKind::kPeriodic) {
+      duty.push_back(run.on_time_s * run.pwm_Hz);
+    } else if (run.kind == RunKind::kWaveform) {
+      double on = 0.0;
+      for (auto g : run.gate) on += g;
+      duty.push_back(on / static_cast<double>(run.gate.size()));
+    } else {
+      duty.push_back(NAN);
+    }
   }
   for (const auto& [name, v] : {std::pair<const char*, const std::vector<double>*>{"t_start_s", &t_start},
-                                {"supply_V", &supply}, {"supply_pressure_Pa", &pressure}, {"duty", &duty}}) {
+                                {"supply_V", &supply}, {"supply_pressure_Pa", &pressure}, {"duty", &duty},
+                                {"temperature_C", &temperature}, {"stroke_m", &stroke}}) {
+    bool finite = true;
+    for (double x : *v) finite = finite && std::isfinite(x);
+    if (!finite) continue;
     const double c = Pearson(*v, rmse);
     if (std::isfinite(c)) d.trends.emplace_back(name, c);
   }
 
   if (!d.significant) {
     d.verdict = "none";
-    d.verdict_reason = "the residual is within the noise floor";
+    d.verdict_reason = d.has_reference ? "the change from the reference is within its own fit error"
+                                       : "the residual is within the noise floor";
     return d;
   }
   if (!opt.attribute) {
@@ -245,7 +346,10 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds, const model::PlantParams& nomina
   // Which: every candidate fitted on the fit runs, scored on the holdout runs.
   std::vector<bool> fit_mask;
   for (const auto& s : split) fit_mask.push_back(s != "holdout");
-  d.candidates = opt.candidates.empty() ? DefaultCandidates(nominal) : opt.candidates;
+  d.candidates = !opt.candidates.empty() ? opt.candidates
+                 : ds.format == kFormatValveRuns1
+                     ? DefaultCandidates(nominal)
+                     : DefaultCandidates(nominal, ds, fit_mask, d.has_reference ? d.reference.temperature_C : NAN);
   auto ranked = Attribute(ds, fit_mask, nominal, d.candidates, d.noise_floor_A, opt.attribution);
   if (!ranked.ok()) return ranked.status();
   d.ranking = std::move(*ranked);
@@ -254,6 +358,7 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds, const model::PlantParams& nomina
       if (c.name == name) return &c;
     return nullptr;
   };
+  DisqualifyWhatRAloneExplains(&d, candidate_of);
   // Pairs of the three best structural effects when no single one explains the gap down to the noise: it
   // leaves more than a significant residual on the holdout runs, or closes less than kExplained.
   const CandidateResult single = d.ranking.empty() ? CandidateResult{} : d.ranking.front();
@@ -261,7 +366,8 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds, const model::PlantParams& nomina
       (single.closed < kExplained || single.holdout_rmse_after_A > kSignificance * d.noise_floor_A)) {
     std::vector<const Candidate*> top;
     for (const auto& row : d.ranking)
-      if (!IsParametric(row.name) && row.status.ok() && top.size() < 3) top.push_back(candidate_of(row.name));
+      if (!IsParametric(row.name) && row.status.ok() && row.disqualified.empty() && top.size() < 3)
+        top.push_back(candidate_of(row.name));
     std::vector<Candidate> pairs;
     for (std::size_t a = 0; a < top.size(); ++a)
       for (std::size_t b = a + 1; b < top.size(); ++b) pairs.push_back(PairCandidate(*top[a], *top[b]));
@@ -276,8 +382,7 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds, const model::PlantParams& nomina
         d.ranking.push_back(std::move(row));
       }
       d.candidates.insert(d.candidates.end(), pairs.begin(), pairs.end());
-      std::stable_sort(d.ranking.begin(), d.ranking.end(),
-                       [](const CandidateResult& a, const CandidateResult& b) { return a.score < b.score; });
+      SortRanking(&d.ranking);
     }
   }
   // Keep d.candidates in ranking order.
@@ -294,17 +399,19 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds, const model::PlantParams& nomina
 
   const CandidateResult& best = d.ranking.front();
   const double gap = best.holdout_rmse_before_A - d.noise_floor_A;
-  if (best.status.ok() && best.closed >= kExplained) {
+  if (best.status.ok() && best.disqualified.empty() && best.closed >= kExplained) {
     d.chosen = 0;
     d.verdict = best.name;
     char buf[160];
-    std::snprintf(buf, sizeof buf, "closes %.0f %% of the holdout gap above the noise floor", 100.0 * best.closed);
+    std::snprintf(buf, sizeof buf, "closes %.0f %% of the holdout gap above the %s", 100.0 * best.closed,
+                  d.has_reference ? "reference's own fit error" : "noise floor");
     d.verdict_reason = buf;
   } else {
     d.verdict = "unknown";
-    char buf[200];
-    std::snprintf(buf, sizeof buf, "no candidate in the catalog closes %.0f %% of the holdout gap (best: %s, %.0f %%)",
-                  100.0 * kExplained, best.name.c_str(), 100.0 * best.closed);
+    char buf[300];
+    std::snprintf(buf, sizeof buf, "no candidate in the catalog closes %.0f %% of the holdout gap (best: %s, %.0f %%%s%s)",
+                  100.0 * kExplained, best.name.c_str(), 100.0 * best.closed, best.disqualified.empty() ? "" : "; ",
+                  best.disqualified.c_str());
     d.verdict_reason = buf;
   }
   // Confusable: candidates whose holdout error is within a tenth of the gap of the best one's.
@@ -312,7 +419,7 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds, const model::PlantParams& nomina
   if (d.chosen >= 0) {
     for (std::size_t k = 1; k < d.ranking.size(); ++k) {
       const auto& row = d.ranking[k];
-      if (!row.status.ok() || row.name.find('+') != std::string::npos) continue;
+      if (!row.status.ok() || !row.disqualified.empty() || row.name.find('+') != std::string::npos) continue;
       // A structural candidate with the winning parameter free contains the parametric winner: it ties by
       // construction and is not an alternative explanation.
       if (IsParametric(best.name) && row.params.count(best.name.substr(6)) > 0) continue;
@@ -322,11 +429,11 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds, const model::PlantParams& nomina
 
   // Overlays: measured, nominal and the verdict's (or, when unknown, the best candidate's) fitted current.
   auto fitted = FittedPlant(nominal, d.candidates.front(), best);
-  if (fitted.ok()) {
-    std::vector<SessionRun> runs;
-    for (const auto& run : ds.runs)
-      runs.push_back({run.supply_V, run.supply_pressure_Pa, run.sample_period_s, run.t_start_s, &run.gate});
-    auto reps = ReplaySession(*fitted, model::DriverParams{}, runs, opt.attribution.solver);
+  auto fitted_driver = FittedDriver(ds.driver, d.candidates.front(), best);
+  if (fitted.ok() && fitted_driver.ok()) {
+    PredictOptions fopt = popt;
+    fopt.driver = &fitted_driver.value();
+    auto reps = Predict(ds, *fitted, fopt);
     if (reps.ok()) {
       for (std::size_t r = 0; r < ds.runs.size(); ++r) {
         const auto& run = ds.runs[r];
@@ -339,7 +446,7 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds, const model::PlantParams& nomina
           ov.t_s.push_back(run.t_s[k]);
           ov.measured_A.push_back(run.i_A[k]);
           ov.nominal_A.push_back(nominal_i[r][k]);
-          ov.fitted_A.push_back((*reps)[r].i_A[k]);
+          ov.fitted_A.push_back(reps->i_A[r][k]);
         }
         d.overlays.push_back(std::move(ov));
       }

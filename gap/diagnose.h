@@ -1,7 +1,9 @@
 // The sim-to-real gap diagnosis (issue 5; docs/gap.md):
 //   1. replay every run's recorded gate through the nominal model; residual = measured - simulated;
-//   2. the noise floor from the data itself: white-noise sigma from second differences,
-//      sqrt(mean(d2^2) / 6), which the smooth coil current barely contributes to at 50 kHz;
+//   2. the noise floor: for waveforms from the data itself, white-noise sigma from second differences,
+//      sqrt(mean(d2^2) / 6), which the smooth coil current barely contributes to at 50 kHz; for readings, their
+//      spread over repeats, the ADC step and the declared noise (gap/dataset.h DeclaredStandardErrors). Never 0;
+//      with a reference session, the floor is the reference's own fit error (the model-form floor);
 //   3. the gap is significant when the fit runs' residual RMS exceeds kSignificance x the noise floor;
 //   4. where: each model phase's share of the residual energy and its RMSE, and landmarks per run;
 //   5. which: every catalogued candidate fitted on the fit runs (gap/attribution.h), ranked by holdout error
@@ -11,12 +13,14 @@
 
 #include <array>
 #include <cmath>
+#include <map>
 #include <string>
 #include <vector>
 
 #include "common/status.h"
 #include "gap/attribution.h"
 #include "gap/dataset.h"
+#include "gap/identify.h"
 #include "gap/replay.h"
 #include "model/params.h"
 
@@ -58,14 +62,32 @@ struct Landmarks {
 
 struct DiagnoseOptions {
   bool attribute = true;                 // fit the catalog (off: stop at "where")
+  std::string model_name;                // the model's name in the report ("" : the dataset's)
+  // "What changed since the reference session": the parameters in reference_fit are identified on this
+  // session of the same device first; the diagnosis then asks what explains the difference, with the
+  // reference's own fit error as the floor, so that a model-form error common to both sessions does not
+  // masquerade as an effect.
+  const Dataset* reference = nullptr;
+  IdentifyOptions reference_fit;
   std::vector<Candidate> candidates;     // empty: DefaultCandidates(nominal)
   AttributionOptions attribution;
   bool try_pairs = true;                 // when no single candidate explains the gap
   std::size_t overlay_points = 600;      // per run
 };
 
+struct ReferenceFit {
+  std::string directory;
+  double temperature_C = NAN;       // the reference runs' temperature when they share one
+  double fit_rmse_A = 0.0;          // the reference's own fit error: the model-form floor
+  std::map<std::string, double> params;  // identified on the reference
+};
+
 struct Diagnosis {
   std::string model;
+  std::string device;
+  bool has_reference = false;
+  ReferenceFit reference;
+  double measurement_noise_A = 0.0;  // from the data or the declared chain (noise_floor_A unless a reference)
   std::string split_note;          // how the split was made when the manifest gave none
   double noise_floor_A = 0.0;
   double fit_rmse_A = 0.0;
@@ -93,6 +115,14 @@ struct Diagnosis {
 
 StatusOr<Diagnosis> Diagnose(const Dataset& dataset, const model::PlantParams& nominal,
                              const DiagnoseOptions& options = {});
+
+// The reference-session flow's fitted model (valid after Diagnose with options.reference), for --emit-model.
+struct FittedDevice {
+  model::PlantParams plant;
+  model::DriverParams driver;
+};
+StatusOr<FittedDevice> ReferenceDevice(const Dataset& reference, const model::PlantParams& nominal,
+                                       const IdentifyOptions& fit, ReferenceFit* out);
 
 // The diagnosis as JSON (the issue's output contract) and as a report for people.
 std::string DiagnosisJson(const Diagnosis& d);
