@@ -2,7 +2,15 @@
 
 #include <google/protobuf/util/json_util.h>
 
+#include <nlohmann/json.hpp>
+
 #include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <map>
+#include <optional>
+
+#include <unistd.h>
 #include <fstream>
 #include <iostream>
 #include <sstream>
@@ -12,6 +20,8 @@
 #include "experiment/spec.h"
 #include "gap/diagnose.h"
 #include "gap/identify.h"
+#include "gap/readings_csv.h"
+#include "model/driver.h"
 #include "model/params.h"
 
 namespace vb::benchctl {
@@ -20,6 +30,7 @@ namespace {
 struct Nominal {
   valvebench::v1::ModelSpec spec;  // what the improved model extends
   model::PlantParams plant;
+  std::optional<model::DriverParams> driver;  // the driver the model was identified with, if it says
 };
 
 // A preset name, or a model file (ModelSpec JSON, e.g. one written by --emit-model or identify --out).
@@ -40,8 +51,25 @@ StatusOr<Nominal> LoadNominal(const std::string& which) {
   auto plant = experiment::BuildPlant(n.spec);
   if (!plant.ok()) return plant.status().WithContext(which);
   n.plant = *plant;
+  if (n.spec.has_identified_driver()) {
+    auto d = experiment::BuildDriver(n.spec.identified_driver());
+    if (!d.ok()) return d.status().WithContext(which + ": identified_driver");
+    n.driver = *d;
+  }
   return n;
 }
+
+// The model a dataset is diagnosed against: --model, else the dataset's (a preset or its model file).
+StatusOr<Nominal> NominalFor(const gap::Dataset& ds, const std::string& model) {
+  if (!model.empty()) return LoadNominal(model);
+  return LoadNominal(ds.model_file.empty() ? ds.model : ds.model_file);
+}
+
+// Writes the identified values into a model spec: nominal ones as params, effect ones into their effect,
+// driver ones into identified_driver.
+valvebench::v1::ModelSpec WithValues(valvebench::v1::ModelSpec spec, const std::vector<std::string>& effects,
+                                     const std::map<std::string, double>& values,
+                                     const model::DriverParams& driver_base, const std::string& description);
 
 // The base spec plus fitted values: "R" -> params["R"], "eddy_currents.R_p" -> that effect's params.
 valvebench::v1::ModelSpec Improved(valvebench::v1::ModelSpec spec, const std::vector<std::string>& effects,
@@ -55,6 +83,7 @@ valvebench::v1::ModelSpec Improved(valvebench::v1::ModelSpec spec, const std::ve
   };
   for (const auto& e : effects) effect_entry(e);
   for (const auto& [name, v] : fitted) {
+    if (name.rfind("driver.", 0) == 0) continue;  // WithValues writes the driver
     const auto dot = name.find('.');
     if (dot == std::string::npos)
       (*spec.mutable_params())[name] = v;
@@ -78,42 +107,115 @@ Status WriteSpec(const valvebench::v1::ModelSpec& spec, const std::string& path)
   return Status::Ok();
 }
 
-StatusOr<gap::Dataset> Load(const std::string& dir) { return gap::LoadDataset(dir, model::PresetNames()); }
+valvebench::v1::ModelSpec WithValues(valvebench::v1::ModelSpec spec, const std::vector<std::string>& effects,
+                                     const std::map<std::string, double>& values,
+                                     const model::DriverParams& driver_base, const std::string& description) {
+  spec = Improved(std::move(spec), effects, values, description);
+  bool driver_fitted = false;
+  for (const auto& [name, v] : values) driver_fitted = driver_fitted || name.rfind("driver.", 0) == 0;
+  if (driver_fitted || spec.has_identified_driver()) {
+    auto* d = spec.mutable_identified_driver();
+    d->set_kind(std::string(model::DriverKindName(driver_base.kind)));
+    (*d->mutable_params())["diode_drop_V"] = driver_base.diode_drop_V;
+    for (const auto& [name, v] : values)
+      if (name.rfind("driver.", 0) == 0) (*d->mutable_params())[name.substr(7)] = v;
+  }
+  return spec;
+}
+
+StatusOr<gap::Dataset> Load(const std::string& dir) {
+  auto ds = gap::LoadDataset(dir, model::PresetNames());
+  if (ds.ok())
+    for (const auto& w : ds->warnings) std::fprintf(stderr, "benchctl: warning: %s\n", w.c_str());
+  return ds;
+}
+
+// Parses --params / --reference-params SPEC lists and --fix NAME=V lists.
+StatusOr<gap::IdentifyOptions> IdentifyOptionsFrom(const std::vector<std::string>& params,
+                                                   const std::vector<std::string>& fixed, bool global,
+                                                   const std::string& flag) {
+  gap::IdentifyOptions o;
+  for (const auto& p : params) {
+    auto spec = gap::ParseParamSpec(p, flag);
+    if (!spec.ok()) return spec.status();
+    o.params.push_back(*spec);
+  }
+  for (const auto& f : fixed) {
+    auto v = gap::ParseFixed(f, "--fix");
+    if (!v.ok()) return v.status();
+    o.fixed.push_back(*v);
+  }
+  o.global = global;
+  return o;
+}
+
+// What a reference session is fitted for when the user names nothing: R, the inductance of a coil with one
+// (held or constant-law), and the sense chain's offset.
+std::vector<std::string> DefaultReferenceParams(const gap::Dataset& ds, const model::PlantParams& plant) {
+  std::vector<std::string> out = {"R"};
+  bool held = !ds.runs.empty();
+  for (const auto& r : ds.runs) held = held && std::isfinite(r.stroke_m);
+  if ((plant.law == model::InductanceLaw::kConstant || held) && plant.inductance_stroke_m.empty()) out.push_back("L");
+  out.push_back("sensor_offset.offset_A");
+  return out;
+}
 
 }  // namespace
 
 namespace {
 
-int DiagnoseAndReport(const gap::Dataset& ds, const Nominal& nominal, const std::string& source,
-                      const std::string& json_path, const std::string& emit_model) {
-  auto d = gap::Diagnose(ds, nominal.plant);
-  if (!d.ok()) return Fail(d.status().WithContext(source));
-  if (!emit_model.empty()) {
-    if (d->verdict == "unknown")
-      return Fail(Status::FailedPrecondition("--emit-model: no candidate in the catalog explains the gap (verdict "
-                                             "unknown); not writing a model that claims one"));
-    std::vector<std::string> effects;
-    std::map<std::string, double> fitted;
-    std::string desc = "the nominal model: no significant gap in " + source;
-    if (d->chosen >= 0) {
-      const auto& row = d->ranking[static_cast<std::size_t>(d->chosen)];
-      effects = d->candidates[static_cast<std::size_t>(d->chosen)].effects;
-      fitted = row.params;
-      desc = "nominal + " + d->verdict + ", fitted by benchctl diagnose on " + source;
-    }
-    if (auto st = WriteSpec(Improved(nominal.spec, effects, fitted, desc), emit_model); !st.ok()) return Fail(st);
+int DiagnoseAndReport(const gap::Dataset& ds_in, const Nominal& nominal, const std::string& source,
+                      const std::string& json_path, const std::string& emit_model, gap::DiagnoseOptions options) {
+  gap::Dataset ds_copy;
+  const gap::Dataset* ds = &ds_in;
+  if (nominal.driver) {  // the model's identified driver replaces the dataset's declared one
+    ds_copy = ds_in;
+    ds_copy.driver = *nominal.driver;
+    ds = &ds_copy;
   }
+  if (isatty(STDERR_FILENO))  // progress is for people at a terminal; scripts get stdout alone
+    std::fprintf(stderr, "benchctl: diagnosing %zu runs of %s against %s ...\n", ds->runs.size(), source.c_str(),
+                 options.model_name.c_str());
+  auto d = gap::Diagnose(*ds, nominal.plant, options);
+  if (!d.ok()) return Fail(d.status().WithContext(source));
   if (json_path == "-") {
     std::cout << gap::DiagnosisJson(*d) << "\n";
-    return kExitOk;
+  } else {
+    if (!json_path.empty()) {
+      std::ofstream out(json_path);
+      out << gap::DiagnosisJson(*d) << "\n";
+      if (!out) return Fail(Status::Unavailable(json_path + ": cannot write"));
+    }
+    std::cout << gap::DiagnosisReport(*d);
   }
-  if (!json_path.empty()) {
-    std::ofstream out(json_path);
-    out << gap::DiagnosisJson(*d) << "\n";
-    if (!out) return Fail(Status::Unavailable(json_path + ": cannot write"));
+  if (emit_model.empty()) return kExitOk;
+  if (d->verdict == "unknown")
+    return Fail(Status::FailedPrecondition("--emit-model: no candidate in the catalog explains the gap (verdict "
+                                           "unknown); the diagnosis is above, no model written"));
+  // The model the diagnosis started from (with a reference: as identified there), plus the verdict.
+  valvebench::v1::ModelSpec base = nominal.spec;
+  model::DriverParams driver = ds->driver;
+  if (d->has_reference) {
+    std::vector<std::string> ref_effects;
+    for (const auto& [name, v] : d->reference.params) {
+      const auto dot = name.find('.');
+      if (dot != std::string::npos && name.rfind("driver.", 0) != 0) ref_effects.push_back(name.substr(0, dot));
+      if (name == "driver.diode_drop_V") driver.diode_drop_V = v;
+    }
+    base = WithValues(base, ref_effects, d->reference.params, ds->driver, "");
   }
-  std::cout << gap::DiagnosisReport(*d);
-  if (!emit_model.empty()) std::cout << "improved model written to " << emit_model << "\n";
+  std::vector<std::string> effects;
+  std::map<std::string, double> fitted;
+  std::string desc = "the nominal model: no significant gap in " + source;
+  if (d->chosen >= 0) {
+    const auto& row = d->ranking[static_cast<std::size_t>(d->chosen)];
+    effects = d->candidates[static_cast<std::size_t>(d->chosen)].effects;
+    fitted = row.params;
+    for (const auto& [name, v] : d->candidates[static_cast<std::size_t>(d->chosen)].fixed) fitted[name] = v;
+    desc = "nominal + " + d->verdict + ", fitted by benchctl diagnose on " + source;
+  }
+  if (auto st = WriteSpec(WithValues(base, effects, fitted, driver, desc), emit_model); !st.ok()) return Fail(st);
+  if (json_path != "-") std::cout << "improved model written to " << emit_model << "\n";
   return kExitOk;
 }
 
@@ -125,14 +227,7 @@ std::string TagValue(const valvebench::v1::Run& run, const std::string& key) {
 
 }  // namespace
 
-int CmdDiagnose(const std::string& dataset_dir, const std::string& model, const std::string& json_path,
-                const std::string& emit_model) {
-  auto ds = Load(dataset_dir);
-  if (!ds.ok()) return Fail(ds.status());
-  auto nominal = LoadNominal(model.empty() ? ds->model : model);
-  if (!nominal.ok()) return Fail(nominal.status());
-  return DiagnoseAndReport(*ds, *nominal, dataset_dir, json_path, emit_model);
-}
+namespace {
 
 int RemoteDiagnose(client::Client& c, const std::vector<std::int64_t>& run_ids, const std::string& model,
                    const std::string& json_path, const std::string& emit_model) {
@@ -179,12 +274,21 @@ int RemoteDiagnose(client::Client& c, const std::vector<std::int64_t>& run_ids, 
     for (auto& r : ds.runs) r.split.clear();
   auto nominal = LoadNominal(model.empty() ? ds.model : model);
   if (!nominal.ok()) return Fail(nominal.status());
-  return DiagnoseAndReport(ds, *nominal, "server runs", json_path, emit_model);
+  gap::DiagnoseOptions options;
+  options.model_name = model.empty() ? ds.model : model;
+  return DiagnoseAndReport(ds, *nominal, "server runs", json_path, emit_model, options);
 }
 
 int RemoteImport(client::Client& c, const std::string& dataset_dir, bool json) {
   auto ds = Load(dataset_dir);
   if (!ds.ok()) return Fail(ds.status());
+  for (std::size_t k = 0; k < ds->runs.size(); ++k)
+    if (ds->runs[k].kind != gap::RunKind::kWaveform || std::isfinite(ds->runs[k].stroke_m))
+      return Fail(Status::InvalidArgument(
+          "import: runs[" + std::to_string(k) + "] '" + ds->runs[k].id + "' is a " +
+          std::string(gap::RunKindName(ds->runs[k].kind)) +
+          (std::isfinite(ds->runs[k].stroke_m) ? " run with a held stroke" : " run") +
+          "; the server stores waveform runs only: diagnose this dataset locally (benchctl diagnose DIR)"));
   valvebench::v1::ImportRunsRequest req;
   std::string name = dataset_dir;
   while (!name.empty() && name.back() == '/') name.pop_back();
@@ -222,25 +326,160 @@ int RemoteImport(client::Client& c, const std::string& dataset_dir, bool json) {
   return kExitOk;
 }
 
-int CmdIdentify(const std::string& dataset_dir, const std::string& model, const std::vector<std::string>& params,
-                const std::string& out_path, bool json) {
-  auto ds = Load(dataset_dir);
-  if (!ds.ok()) return Fail(ds.status());
-  auto nominal = LoadNominal(model.empty() ? ds->model : model);
-  if (!nominal.ok()) return Fail(nominal.status());
-  auto id = gap::Identify(*ds, nominal->plant, params);
-  if (!id.ok()) return Fail(id.status());
-  if (!out_path.empty()) {
-    auto st = WriteSpec(Improved(nominal->spec, {}, id->fit.params, {}), out_path);
-    if (!st.ok()) return Fail(st);
+}  // namespace
+
+GapCli::GapCli(CLI::App* app, SharedOptions shared) : shared_(shared) {
+  auto server_opts = [&](CLI::App* sub) {
+    sub->add_option("--server", *shared_.server, "bench server address host:port (or VALVEBENCH_SERVER)");
+    sub->add_option("--token", *shared_.token, "bearer token (or VALVEBENCH_TOKEN)");
+    sub->add_option("--tls-ca", *shared_.tls_ca_file, "PEM file of the CA that signed the server's certificate");
+  };
+  diagnose_ = app->add_subcommand("diagnose", "where and why measured runs differ from the model (valve-runs/1, /2)");
+  diagnose_->add_option("dataset", dataset_dir_, "dataset directory (manifest.json and its files)");
+  diagnose_->add_option("--runs", runs_, "server: diagnose these stored runs instead")->delimiter(',');
+  server_opts(diagnose_);
+  diagnose_->add_option("--model", model_, "preset name or model file (ModelSpec JSON); default: the dataset's");
+  diagnose_->add_option("--reference", reference_dir_,
+                        "a reference session of the same device: diagnose what changed since it");
+  diagnose_->add_option("--reference-params", reference_params_,
+                        "parameters identified on the reference (default: R, L of a coil, sensor_offset.offset_A)")
+      ->delimiter(',');
+  diagnose_->add_option("--json", json_path_, "write the diagnosis as JSON to FILE ('-' or no FILE: stdout)")
+      ->expected(0, 1)
+      ->default_str("-");
+  diagnose_->add_option("--emit-model", emit_model_, "write the improved model (ModelSpec JSON an emulated bench loads)");
+
+  identify_ = app->add_subcommand("identify", "fit a device's parameters to measured runs (seed 000 sec. 4)");
+  identify_->add_option("dataset", dataset_dir_, "dataset directory (valve-runs/1 or /2)")->required();
+  identify_->add_option("--params", params_,
+                        "parameters to fit: NAME[=LO:HI][@START], e.g. R=5:200,L=0.01:2,sensor_offset.offset_A")
+      ->delimiter(',')
+      ->required();
+  identify_->add_option("--fix", fixed_, "parameters held at a value: NAME=VALUE,...")->delimiter(',');
+  identify_->add_flag("--no-global", no_global_, "local fit only (from the start values), no global search first");
+  identify_->add_option("--model", model_, "preset name or model file (ModelSpec JSON); default: the dataset's");
+  identify_->add_option("--out", out_path_, "write the identified model (ModelSpec JSON)");
+  identify_->add_flag("--json", *shared_.json, "machine-readable output on stdout");
+
+  convert_ = app->add_subcommand("convert", "readings CSV (one periodic steady-state reading per row) -> valve-runs/2 datasets");
+  convert_->add_option("csv", csv_path_, "the readings file (docs/real-data.md gives its columns)")->required();
+  convert_->add_option("outdir", out_dir_, "where the datasets go, one directory per session")->required();
+  convert_->add_option("--shunt-ohm", shunt_ohm_, "sense resistor in the switch's source path [ohm]")->capture_default_str();
+  convert_->add_option("--amp-ref-ohm", amp_ref_ohm_, "amplifier gain = 1 + amp_feedback_ohm / this [ohm]")->capture_default_str();
+  convert_->add_option("--adc-lsb-V", adc_lsb_V_, "the ADC's step at its input [V]")->capture_default_str();
+  convert_->add_option("--averaged", averaged_, "PWM periods averaged into one reading")->capture_default_str();
+  convert_->add_option("--model", convert_model_, "model the datasets name (preset, or NAME.json beside them)")->capture_default_str();
+  convert_->add_flag("--json", *shared_.json, "machine-readable output on stdout");
+
+  import_ = app->add_subcommand("import", "store a dataset's waveform runs on the server");
+  import_->add_option("dataset", dataset_dir_, "dataset directory (manifest.json and its files)")->required();
+  import_->add_flag("--json", *shared_.json, "machine-readable output on stdout");
+  server_opts(import_);
+}
+
+bool GapCli::parsed() const {
+  return diagnose_->parsed() || identify_->parsed() || convert_->parsed() || import_->parsed();
+}
+
+int GapCli::Run(const ClientFactory& make_client) {
+  if (diagnose_->parsed()) return Diagnose(make_client);
+  if (identify_->parsed()) return Identify();
+  if (convert_->parsed()) return Convert();
+  return Import(make_client);
+}
+
+int GapCli::Diagnose(const ClientFactory& make_client) {
+  const bool json_given = diagnose_->count("--json") > 0;
+  const std::string json_to = json_given ? (json_path_.empty() ? "-" : json_path_) : "";
+  if (!runs_.empty()) {
+    if (!dataset_dir_.empty()) return Fail(Status::InvalidArgument("diagnose: give a dataset directory or --runs, not both"));
+    if (!reference_dir_.empty()) return Fail(Status::InvalidArgument("--reference: works on dataset directories, not --runs"));
+    if (shared_.server->empty())
+      return Fail(Status::FailedPrecondition("no server given: --server ADDR or VALVEBENCH_SERVER"));
+    auto c = make_client();
+    return RemoteDiagnose(*c, runs_, model_, json_to, emit_model_);
   }
-  if (json) {
+  if (dataset_dir_.empty()) return Fail(Status::InvalidArgument("diagnose: give a dataset directory or --runs ID,..."));
+  auto ds = Load(dataset_dir_);
+  if (!ds.ok()) return Fail(ds.status());
+  auto nominal = NominalFor(*ds, model_);
+  if (!nominal.ok()) return Fail(nominal.status());
+  gap::DiagnoseOptions options;
+  options.model_name = !model_.empty() ? model_ : ds->model;
+  gap::Dataset reference;
+  if (!reference_dir_.empty()) {
+    auto ref = Load(reference_dir_);
+    if (!ref.ok()) return Fail(ref.status().WithContext("--reference"));
+    reference = std::move(*ref);
+    if (nominal->driver) reference.driver = *nominal->driver;
+    const auto names = reference_params_.empty() ? DefaultReferenceParams(reference, nominal->plant) : reference_params_;
+    auto fit = IdentifyOptionsFrom(names, {}, true, "--reference-params");
+    if (!fit.ok()) return Fail(fit.status());
+    options.reference = &reference;
+    options.reference_fit = *fit;
+  }
+  return DiagnoseAndReport(*ds, *nominal, dataset_dir_, json_to, emit_model_, options);
+}
+
+int GapCli::Identify() {
+  auto ds = Load(dataset_dir_);
+  if (!ds.ok()) return Fail(ds.status());
+  auto nominal = NominalFor(*ds, model_);
+  if (!nominal.ok()) return Fail(nominal.status());
+  if (nominal->driver) ds->driver = *nominal->driver;
+  auto options = IdentifyOptionsFrom(params_, fixed_, !no_global_, "--params");
+  if (!options.ok()) return Fail(options.status());
+  if (isatty(STDERR_FILENO))
+    std::fprintf(stderr, "benchctl: identifying %zu parameters on %zu runs of %s%s ...\n", options->params.size(),
+               ds->runs.size(), dataset_dir_.c_str(), options->global ? " (global search, then local)" : "");
+  auto id = gap::Identify(*ds, nominal->plant, *options);
+  if (!id.ok()) return Fail(id.status());
+  if (!out_path_.empty()) {
+    std::map<std::string, double> values = id->fit.params;
+    for (const auto& [name, v] : id->fixed) values[name] = v;
+    auto spec = WithValues(nominal->spec, id->candidate.effects, values, ds->driver,
+                           "identified by benchctl identify on " + dataset_dir_);
+    if (auto st = WriteSpec(spec, out_path_); !st.ok()) return Fail(st);
+  }
+  if (*shared_.json) {
     std::cout << gap::IdentificationJson(*id) << "\n";
   } else {
     std::cout << gap::IdentificationReport(*id);
-    if (!out_path.empty()) std::cout << "identified model written to " << out_path << "\n";
+    if (!out_path_.empty()) std::cout << "identified model written to " << out_path_ << "\n";
   }
   return kExitOk;
+}
+
+int GapCli::Convert() {
+  gap::ReadingsCsvOptions o;
+  o.shunt_ohm = shunt_ohm_;
+  o.amp_ref_ohm = amp_ref_ohm_;
+  o.adc_lsb_V = adc_lsb_V_;
+  o.averaged = averaged_;
+  o.model = convert_model_;
+  auto sessions = gap::ConvertReadingsCsv(csv_path_, out_dir_, o);
+  if (!sessions.ok()) return Fail(sessions.status());
+  if (*shared_.json) {
+    nlohmann::ordered_json j = nlohmann::ordered_json::array();
+    for (const auto& s : *sessions)
+      j.push_back({{"directory", s.directory}, {"device", s.device}, {"supply_V", s.supply_V}, {"temp_C", s.temp_C},
+                   {"stroke_m", s.stroke_m}, {"runs", s.runs}, {"readings", s.readings}});
+    std::cout << j.dump(2) << "\n";
+    return kExitOk;
+  }
+  std::printf("%-44s %-12s %8s %9s %5s %9s\n", "dataset", "device", "temp [C]", "stroke[mm]", "runs", "readings");
+  for (const auto& s : *sessions)
+    std::printf("%-44s %-12s %8.1f %9.2f %5d %9d\n", s.directory.c_str(), s.device.c_str(), s.temp_C, s.stroke_m * 1e3,
+                s.runs, s.readings);
+  std::printf("%zu sessions written to %s\n", sessions->size(), out_dir_.c_str());
+  return kExitOk;
+}
+
+int GapCli::Import(const ClientFactory& make_client) {
+  if (shared_.server->empty())
+    return Fail(Status::FailedPrecondition("no server given: --server ADDR or VALVEBENCH_SERVER"));
+  auto c = make_client();
+  return RemoteImport(*c, dataset_dir_, *shared_.json);
 }
 
 }  // namespace vb::benchctl

@@ -1,35 +1,46 @@
-// benchctl's sim-to-real gap commands (issue 5): diagnose and identify, locally on a valve-runs/1 dataset.
+// benchctl's sim-to-real gap commands (docs/gap.md, docs/real-data.md), declared and run here:
+//   diagnose DATASET [--model M] [--reference DIR [--reference-params SPEC,...]] [--json [FILE]] [--emit-model FILE]
+//   diagnose --runs ID,...                 (runs stored on a server)
+//   identify DATASET --params SPEC,... [--fix NAME=V,...] [--no-global] [--model M] [--out FILE] [--json]
+//   convert READINGS.csv OUTDIR [--shunt-ohm R] [--amp-ref-ohm R] [--adc-lsb-V V] [--averaged N] [--model M]
+//   import DATASET                         (store a dataset's waveform runs on a server)
+// SPEC is NAME, NAME=LO:HI, NAME@START or NAME=LO:HI@START (gap/identify.h).
 #pragma once
+
+#include <CLI/CLI.hpp>
 
 #include <cstdint>
 #include <string>
 #include <vector>
 
-namespace vb::client {
-class Client;
-}
+#include "benchctl/regress_commands.h"
 
 namespace vb::benchctl {
 
-// diagnose DATASET_DIR: the gap of a dataset against a model (a preset name or a model file in ModelSpec
-// JSON; default: the dataset's own). json_path: "" = a report for people, "-" = JSON on stdout, else JSON into
-// that file (and the report on stdout). emit_model: write the improved model (the model plus the verdict's
-// effects and fitted values) as ModelSpec JSON that an emulated bench or --model loads.
-int CmdDiagnose(const std::string& dataset_dir, const std::string& model, const std::string& json_path,
-                const std::string& emit_model);
+class GapCli {
+ public:
+  GapCli(CLI::App* app, SharedOptions shared);
+  bool parsed() const;
+  int Run(const ClientFactory& make_client);
 
-// identify DATASET_DIR --params R,mu_r,...: a bounded fit of those nominal parameters; out: the identified
-// model as ModelSpec JSON.
-int CmdIdentify(const std::string& dataset_dir, const std::string& model, const std::vector<std::string>& params,
-                const std::string& out_path, bool json);
+ private:
+  int Diagnose(const ClientFactory& make_client);
+  int Identify();
+  int Convert();
+  int Import(const ClientFactory& make_client);
 
-// diagnose --runs ID,...: runs stored on the server (imported datasets, or runs of a low-side bench).
-// Imported runs keep their t_start_s and split (tags); other runs take t_start_s from their start times
-// and the diagnosis makes its own split.
-int RemoteDiagnose(client::Client& c, const std::vector<std::int64_t>& run_ids, const std::string& model,
-                   const std::string& json_path, const std::string& emit_model);
-
-// import DATASET_DIR: validates the dataset locally, then stores its runs on the server as one batch.
-int RemoteImport(client::Client& c, const std::string& dataset_dir, bool json);
+  SharedOptions shared_;
+  CLI::App* diagnose_ = nullptr;
+  CLI::App* identify_ = nullptr;
+  CLI::App* convert_ = nullptr;
+  CLI::App* import_ = nullptr;
+  std::string dataset_dir_, model_, json_path_, emit_model_, reference_dir_, out_path_, csv_path_, out_dir_;
+  std::vector<std::int64_t> runs_;
+  std::vector<std::string> params_, reference_params_, fixed_;
+  bool no_global_ = false;
+  double shunt_ohm_ = 0.2, amp_ref_ohm_ = 1000.0, adc_lsb_V_ = 1e-3;
+  int averaged_ = 16;
+  std::string convert_model_ = "ts98_coil";
+};
 
 }  // namespace vb::benchctl

@@ -99,33 +99,6 @@ int main(int argc, char** argv) {
   benches->add_flag("--local", local, "the embedded emulator and the USB devices this machine sees, no server");
   common(benches, false);
 
-  std::string dataset_dir, diag_model, diag_json;
-  auto* diagnose = app.add_subcommand("diagnose", "where and why measured runs (valve-runs/1) differ from the model");
-  std::vector<std::int64_t> diag_runs;
-  diagnose->add_option("dataset", dataset_dir, "dataset directory (manifest.json + one CSV per run)");
-  diagnose->add_option("--runs", diag_runs, "server: diagnose these stored runs instead")->delimiter(',');
-  diagnose->add_option("--server", server, "bench server address host:port (or VALVEBENCH_SERVER)");
-  diagnose->add_option("--token", token, "bearer token (or VALVEBENCH_TOKEN)");
-  diagnose->add_option("--tls-ca", tls_ca_file, "PEM file of the CA that signed the server's certificate");
-  diagnose->add_option("--model", diag_model, "preset name or model file (ModelSpec JSON); default: the dataset's");
-  diagnose->add_option("--json", diag_json, "write the diagnosis as JSON to FILE ('-' or no FILE: stdout)")
-      ->expected(0, 1)
-      ->default_str("-");
-  std::string emit_model;
-  diagnose->add_option("--emit-model", emit_model, "write the improved model (ModelSpec JSON an emulated bench loads)");
-  auto* import = app.add_subcommand("import", "store a dataset's runs (valve-runs/1) on the server");
-  import->add_option("dataset", dataset_dir, "dataset directory (manifest.json + one CSV per run)")->required();
-  common(import, false);
-  std::vector<std::string> identify_params;
-  std::string identify_out;
-  bool identify_json = false;
-  auto* identify = app.add_subcommand("identify", "fit chosen nominal parameters to measured runs (seed 000 sec. 4)");
-  identify->add_option("dataset", dataset_dir, "dataset directory (valve-runs/1)")->required();
-  identify->add_option("--params", identify_params, "parameters to fit, e.g. R,mu_r,b,x_t")->delimiter(',')->required();
-  identify->add_option("--model", diag_model, "preset name or model file (ModelSpec JSON); default: the dataset's");
-  identify->add_option("--out", identify_out, "write the identified model (ModelSpec JSON)");
-  identify->add_flag("--json", identify_json, "machine-readable output on stdout");
-
   std::string compare_input;
   bool compare_local = false;
   std::vector<std::int64_t> run_ids;
@@ -140,6 +113,8 @@ int main(int argc, char** argv) {
   // baseline, regress, nights (benchctl/regress_commands.cc).
   vb::benchctl::RegressCli regress_cli(&app, {&json, &server, &token, &tls_ca_file, &store_path});
   vb::benchctl::ReportCli report_cli(&app, {&json, &server, &token, &tls_ca_file, &store_path});
+  // diagnose, identify, convert, import (benchctl/gap_commands.cc).
+  vb::benchctl::GapCli gap_cli(&app, {&json, &server, &token, &tls_ca_file, &store_path});
 
   try {
     app.parse(argc, argv);
@@ -167,6 +142,7 @@ int main(int argc, char** argv) {
   if (no_store) store_path.clear();
   if (regress_cli.parsed()) return regress_cli.Run(make_client);
   if (report_cli.parsed()) return report_cli.Run(make_client);
+  if (gap_cli.parsed()) return gap_cli.Run(make_client);
   if (run->parsed()) {
     if (local || server.empty()) return vb::benchctl::CmdRun(spec_path, local, store_path, trace_csv, json, csv, realtime);
     if (!trace_csv.empty() || realtime)
@@ -174,20 +150,6 @@ int main(int argc, char** argv) {
     auto c = make_client();
     return vb::benchctl::RemoteRun(*c, spec_path, wait, out);
   }
-  if (diagnose->parsed()) {
-    const bool json_given = diagnose->count("--json") > 0;
-    const std::string json_to = json_given ? (diag_json.empty() ? "-" : diag_json) : "";
-    if (!diag_runs.empty()) {
-      if (!dataset_dir.empty()) return Fail(Status::InvalidArgument("diagnose: give a dataset directory or --runs, not both"));
-      if (server.empty()) return need_server();
-      auto c = make_client();
-      return vb::benchctl::RemoteDiagnose(*c, diag_runs, diag_model, json_to, emit_model);
-    }
-    if (dataset_dir.empty()) return Fail(Status::InvalidArgument("diagnose: give a dataset directory or --runs ID,..."));
-    return vb::benchctl::CmdDiagnose(dataset_dir, diag_model, json_to, emit_model);
-  }
-  if (identify->parsed()) return vb::benchctl::CmdIdentify(dataset_dir, diag_model, identify_params, identify_out,
-                                                           identify_json || json);
   if (compare->parsed()) {
     if (compare_local && batch != 0) {
       if (store_path.empty()) return Fail(Status::InvalidArgument("--batch with --local needs the local store (--db)"));
@@ -218,6 +180,5 @@ int main(int argc, char** argv) {
   if (cancel->parsed()) return vb::benchctl::RemoteCancel(*c, run_id, reason, out);
   if (exp->parsed()) return vb::benchctl::RemoteExport(*c, run_id, export_csv);
   if (benches->parsed()) return vb::benchctl::RemoteBenches(*c, out);
-  if (import->parsed()) return vb::benchctl::RemoteImport(*c, dataset_dir, json);
   return kExitBadInput;
 }
