@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -20,14 +21,19 @@ int main(int argc, char** argv) {
   namespace fs = std::filesystem;
   std::vector<std::string> dirs;
   for (int k = 1; k < argc; ++k) dirs.push_back(argv[k]);
-  const fs::path practice = fs::path(VB_SHARED_DIR) / "gapbench" / "practice";
+  const fs::path practice = fs::path(VB_SHARED_DIR) / "gapbench" / "practice";  // the default sets
   if (dirs.empty()) {
     for (const auto& e : fs::directory_iterator(practice))
       if (e.is_directory()) dirs.push_back(e.path().string());
     std::sort(dirs.begin(), dirs.end());
   }
-  nlohmann::json labels;
-  if (std::ifstream in(practice / "labels.json"); in) labels = nlohmann::json::parse(in, nullptr, false);
+  // Labels: labels.json beside each dataset (practice/, practice2/, or any set laid out the same way).
+  auto labels_of = [](const fs::path& dataset_dir) {
+    nlohmann::json labels;
+    const fs::path parent = fs::absolute(dataset_dir).lexically_normal().parent_path();
+    if (std::ifstream in(parent / "labels.json"); in) labels = nlohmann::json::parse(in, nullptr, false);
+    return labels;
+  };
   std::printf("%-6s %-22s %-40s %7s %7s %6s %7s  %s\n", "data", "label", "verdict", "before", "after", "closed",
               "time_s", "runner-up / confusable");
   int right = 0, labelled = 0;
@@ -51,10 +57,29 @@ int main(int argc, char** argv) {
       continue;
     }
     std::string label = "?";
-    if (labels.is_object() && labels.contains(name)) label = labels[name].value("effect", "?");
+    const nlohmann::json labels = labels_of(fs::path(dir));
+    std::set<std::string> want;  // several effects at once: any order
+    if (labels.is_object() && labels.contains(name) && labels[name].is_object() && labels[name].contains("effect")) {
+      const auto& e = labels[name]["effect"];
+      if (e.is_string()) want.insert(e.get<std::string>());
+      if (e.is_array())
+        for (const auto& x : e)
+          if (x.is_string()) want.insert(x.get<std::string>());
+      if (!want.empty()) {
+        label.clear();
+        for (const auto& w : want) label += (label.empty() ? "" : "+") + w;
+      }
+    }
+    std::set<std::string> got;
+    for (std::size_t a = 0, b; a <= d->verdict.size(); a = b + 1) {
+      b = d->verdict.find('+', a);
+      if (b == std::string::npos) b = d->verdict.size();
+      got.insert(d->verdict.substr(a, b - a));
+    }
+    const bool is_right = !want.empty() && got == want;
     if (label != "?") {
       ++labelled;
-      right += d->verdict == label;
+      right += is_right;
     }
     std::string others;
     if (d->ranking.size() > 1) others = d->ranking[1].name;
@@ -63,7 +88,7 @@ int main(int argc, char** argv) {
     const double after = d->ranking.empty() ? d->holdout_rmse_A : d->ranking.front().holdout_rmse_after_A;
     const double closed = d->ranking.empty() ? 0.0 : d->ranking.front().closed;
     std::printf("%-6s %-22s %-40s %7.2f %7.2f %5.0f%% %7.1f  %s\n", name.c_str(), label.c_str(),
-                (d->verdict + (d->verdict == label ? "" : label == "?" ? "" : "  (WRONG)")).c_str(), before * 1e3,
+                (d->verdict + (is_right || label == "?" ? "" : "  (WRONG)")).c_str(), before * 1e3,
                 after * 1e3, 100.0 * closed, secs, others.c_str());
     std::fflush(stdout);
   }
