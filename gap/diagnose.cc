@@ -385,6 +385,20 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds_in, const model::PlantParams& nom
       SortRanking(&d.ranking);
     }
   }
+  // The model-form floor. When the nominal model already fits the fit runs as well as any candidate (within
+  // 10 %: it was identified on them, e.g. the cold runs of a fit-cold/hold-out-hot dataset), what it leaves
+  // there is its own form error, and no holdout run can be asked to fit better. When candidates do fit the
+  // fit runs better, the residual there is (part of) an effect, and the floor stays the noise: an effect
+  // outside the catalog must not pass for form error.
+  double best_fit = INFINITY;
+  for (const auto& row : d.ranking)
+    if (row.status.ok() && row.fit_rmse_A > 0.0) best_fit = std::min(best_fit, row.fit_rmse_A);
+  d.form_floor_A = std::isfinite(best_fit) && d.fit_rmse_A <= 1.1 * best_fit ? d.fit_rmse_A : 0.0;
+  const double floor = std::max(d.noise_floor_A, d.form_floor_A);
+  for (auto& row : d.ranking) {
+    const double denom = row.holdout_rmse_before_A - floor;
+    row.closed = denom > 0.0 ? std::clamp((row.holdout_rmse_before_A - row.holdout_rmse_after_A) / denom, 0.0, 1.0) : 0.0;
+  }
   // Keep d.candidates in ranking order.
   {
     std::vector<Candidate> ordered;
@@ -398,13 +412,15 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds_in, const model::PlantParams& nom
     }
 
   const CandidateResult& best = d.ranking.front();
-  const double gap = best.holdout_rmse_before_A - d.noise_floor_A;
+  const double gap = best.holdout_rmse_before_A - floor;
   if (best.status.ok() && best.disqualified.empty() && best.closed >= kExplained) {
     d.chosen = 0;
     d.verdict = best.name;
     char buf[160];
     std::snprintf(buf, sizeof buf, "closes %.0f %% of the holdout gap above the %s", 100.0 * best.closed,
-                  d.has_reference ? "reference's own fit error" : "noise floor");
+                  d.form_floor_A > d.noise_floor_A ? "model's form floor (its own error on the fit runs)"
+                  : d.has_reference                ? "reference's own fit error"
+                                                   : "noise floor");
     d.verdict_reason = buf;
   } else {
     d.verdict = "unknown";
@@ -473,6 +489,7 @@ nlohmann::ordered_json RowJson(const CandidateResult& r) {
   row["score"] = std::isfinite(r.score) ? nlohmann::ordered_json(r.score) : nlohmann::ordered_json(nullptr);
   row["evaluations"] = r.evaluations;
   if (!r.status.ok()) row["error"] = r.status.message();
+  if (!r.disqualified.empty()) row["disqualified"] = r.disqualified;
   return row;
 }
 
@@ -483,7 +500,18 @@ nlohmann::ordered_json NumOrNull(double v) { return std::isfinite(v) ? nlohmann:
 std::string DiagnosisJson(const Diagnosis& d) {
   nlohmann::ordered_json j;
   j["model"] = d.model;
+  if (!d.device.empty()) j["device"] = d.device;
   j["noise_floor_A"] = d.noise_floor_A;
+  j["measurement_noise_A"] = d.measurement_noise_A;
+  j["form_floor_A"] = d.form_floor_A;
+  if (d.has_reference) {
+    nlohmann::ordered_json params = nlohmann::ordered_json::object();
+    for (const auto& [k, v] : d.reference.params) params[k] = v;
+    j["reference"] = {{"directory", d.reference.directory},
+                      {"temperature_C", NumOrNull(d.reference.temperature_C)},
+                      {"fit_rmse_A", d.reference.fit_rmse_A},
+                      {"params", params}};
+  }
   j["gap"] = {{"fit_rmse_A", d.fit_rmse_A}, {"holdout_rmse_A", d.holdout_rmse_A}, {"significant", d.significant}};
   nlohmann::ordered_json where = nlohmann::ordered_json::array();
   for (const auto& w : d.where)
@@ -539,13 +567,34 @@ std::string DiagnosisJson(const Diagnosis& d) {
 std::string DiagnosisReport(const Diagnosis& d) {
   std::ostringstream os;
   char buf[320];
-  std::snprintf(buf, sizeof buf, "model %s; noise floor %.2f mA (from the data)\n", d.model.c_str(), d.noise_floor_A * 1e3);
-  os << buf;
-  std::snprintf(buf, sizeof buf, "gap: fit runs %.2f mA RMS, holdout %.2f mA RMS: %s (threshold %.1fx noise)\n",
+  if (d.has_reference) {
+    std::snprintf(buf, sizeof buf, "model %s%s%s; floor %.3f mA: the reference session's own fit error (measurement "
+                  "noise %.3f mA)\n", d.model.c_str(), d.device.empty() ? "" : ", device ", d.device.c_str(),
+                  d.noise_floor_A * 1e3, d.measurement_noise_A * 1e3);
+    os << buf;
+    os << "reference " << d.reference.directory;
+    if (std::isfinite(d.reference.temperature_C)) os << " at " << FormatNumber(d.reference.temperature_C) << " C";
+    os << ", identified there:";
+    for (const auto& [k, v] : d.reference.params) {
+      std::snprintf(buf, sizeof buf, " %s=%.5g", k.c_str(), v);
+      os << buf;
+    }
+    os << "\n";
+  } else {
+    std::snprintf(buf, sizeof buf, "model %s%s%s; noise floor %.3f mA (from the data and the declared sense chain)\n",
+                  d.model.c_str(), d.device.empty() ? "" : ", device ", d.device.c_str(), d.noise_floor_A * 1e3);
+    os << buf;
+  }
+  std::snprintf(buf, sizeof buf, "gap: fit runs %.2f mA RMS, holdout %.2f mA RMS: %s (threshold %.1fx the floor)\n",
                 d.fit_rmse_A * 1e3, d.holdout_rmse_A * 1e3, d.significant ? "SIGNIFICANT" : "not significant",
                 kSignificance);
   os << buf;
   if (!d.split_note.empty()) os << d.split_note << "\n";
+  if (d.form_floor_A > d.noise_floor_A) {
+    std::snprintf(buf, sizeof buf, "model form floor %.3f mA: the model fits the fit runs as well as any candidate; closure is "
+                  "measured above it\n", d.form_floor_A * 1e3);
+    os << buf;
+  }
   os << "where (share of residual energy, RMSE):\n";
   for (const auto& w : d.where) {
     std::snprintf(buf, sizeof buf, "  %-8s %5.1f %%  %7.2f mA  (%zu samples)\n", std::string(PhaseName(w.phase)).c_str(),
@@ -587,6 +636,7 @@ std::string DiagnosisReport(const Diagnosis& d) {
         params += pb;
       }
       if (!r.status.ok()) params = "failed: " + r.status.message();
+      if (!r.disqualified.empty()) params += "  [not the verdict: " + r.disqualified + "]";
       std::snprintf(buf, sizeof buf, "  %4zu  %-38s %7.2f -> %7.2f mA  %5.0f %%  %8.2f  %s\n", k + 1, r.name.c_str(),
                     r.holdout_rmse_before_A * 1e3, r.holdout_rmse_after_A * 1e3, 100.0 * r.closed, r.signature_match,
                     params.c_str());

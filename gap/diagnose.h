@@ -88,6 +88,10 @@ struct Diagnosis {
   bool has_reference = false;
   ReferenceFit reference;
   double measurement_noise_A = 0.0;  // from the data or the declared chain (noise_floor_A unless a reference)
+  // The nominal model's error on the fit runs when no candidate fits them better (it was identified on them):
+  // its own form error. `closed` is measured above max(noise_floor_A, form_floor_A); 0 when candidates do fit
+  // the fit runs better (the residual there is an effect, not form).
+  double form_floor_A = 0.0;
   std::string split_note;          // how the split was made when the manifest gave none
   double noise_floor_A = 0.0;
   double fit_rmse_A = 0.0;

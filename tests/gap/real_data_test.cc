@@ -270,6 +270,30 @@ TEST(DiagnoseAgainstAReference, TheSameDeviceTwiceIsNone) {
   EXPECT_EQ(d->verdict, "none") << DiagnosisReport(*d);
 }
 
+TEST(DiagnoseOneDataset, FitColdHoldOutHotCarriesRWithCoppersCoefficient) {
+  // One dataset: the cold session's runs to fit, the hot session's held out, the model identified on the cold
+  // ones. Only a temperature law can say anything about runs at a temperature it was never fitted at.
+  Device cold, hot;
+  cold.alpha_per_K = hot.alpha_per_K = 3.93e-3;
+  hot.temp_C = 45.0;
+  Dataset ds = Session(cold, 41), hot_runs = Session(hot, 42);
+  for (auto& r : ds.runs) r.split = "fit";
+  for (auto r : hot_runs.runs) {
+    r.id = "hot_" + r.id;
+    r.split = "holdout";
+    ds.runs.push_back(r);
+  }
+  auto plant = *model::Preset("ts98_coil");
+  plant.R_ohm = cold.R_ohm;
+  plant.L_H = cold.L_H;
+  plant.effects.sensor_offset_A = cold.offset_A;
+  ds.driver.diode_drop_V = cold.diode_V;
+  auto d = Diagnose(ds, plant);
+  ASSERT_TRUE(d.ok()) << d.status().message();
+  EXPECT_EQ(d->verdict, "resistance_temperature") << DiagnosisReport(*d);
+  EXPECT_GE(d->ranking.front().closed, 0.9);
+}
+
 TEST(DiagnoseCandidates, NothingMechanicalWhereNothingMovesAndNoSampledLagOnReadings) {
   Device dev;
   const Dataset ds = Session(dev, 5);
