@@ -22,6 +22,8 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev
   # the foreign-client integration test (a gRPC client built only from our .proto files)
   python3 python3-grpcio python3-protobuf
+  # benchctl export --hdf5/--mat (export/)
+  libhdf5-dev libmatio-dev
   # the HTML report test: the page must render without errors in a headless browser
   chromium
 )
