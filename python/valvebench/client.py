@@ -607,5 +607,19 @@ class Diagnosis:
         df = pd.DataFrame.from_records(self.data.get("ranking", []))
         return df.set_index("effect") if "effect" in df.columns else df
 
+    def overlay(self, run=None):
+        """Measured vs nominal vs fitted current of one run (default: the first overlay, a holdout run):
+        DataFrame indexed by t_s with columns measured_A, nominal_A, fitted_A; attrs run and split."""
+        pd = _pandas()
+        overlays = self.data.get("overlays", [])
+        chosen = [o for o in overlays if run is None or o["run"] == run]
+        if not chosen:
+            raise KeyError("diagnosis: no overlay for run '%s' (has: %s)" % (run, ", ".join(o["run"] for o in overlays)))
+        o = chosen[0]
+        df = pd.DataFrame({k: o[k] for k in ("measured_A", "nominal_A", "fitted_A") if k in o},
+                          index=pd.Index(o["t_s"], name="t_s"))
+        df.attrs.update(run=o["run"], split=o.get("split", ""), units={c: "A" for c in df.columns})
+        return df
+
     def __repr__(self):
         return "Diagnosis(verdict=%r)" % self.verdict
