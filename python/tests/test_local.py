@@ -177,3 +177,20 @@ def test_import_dataset_and_diagnose_stored_runs(local_client, shared):
                                                                                   "holdout_rmse_before_A"]
     with pytest.raises(valvebench.InvalidArgument, match="does not exist"):
         local_client.diagnose(dataset="/nonexistent/dataset")
+
+
+def test_benchctl_local_runs_share_the_store(local_client, repo):
+    """benchctl run --local and the Python local mode record into the same store and see each other's runs."""
+    import json
+    import subprocess
+    out = subprocess.run([valvebench.find_tool("benchctl"), "run", "--local",
+                          os.path.join(repo, "examples", "compare-current-controllers.json"),
+                          "--db", local_client.db, "--json"], capture_output=True, text=True, check=True).stdout
+    made = json.loads(out)
+    made = made if isinstance(made, list) else made.get("runs", made)
+    batch_id = made[0]["batch_id"]
+    batch = local_client.get_batch(batch_id)
+    assert [r.label for r in batch] == ["hysteresis", "pi", "predictive", "fuzzy"]
+    assert batch["pi"].metrics["rmse"] == pytest.approx(made[1]["metrics"]["rmse"])
+    assert batch.channel("i_A").shape == (5001, 4)
+    assert batch.compare().to_dataframe().loc["pi", "runs"] == 1

@@ -427,8 +427,8 @@ class Client:
         """Queues a spec (dict, JSON file path, or ExperimentSpec); variants, sweeps and repeats expand into a
         batch. Returns the Batch without waiting (Batch.wait, Client.watch)."""
         msg = self._prepare(load_spec(spec))
-        resp = self._call(self._stub.SubmitRun, api_pb2.SubmitRunRequest(spec=msg, batch_name=batch_name),
-                          context=msg.name or "spec")
+        # The server's message as it words it: the field path first (docs/server.md).
+        resp = self._call(self._stub.SubmitRun, api_pb2.SubmitRunRequest(spec=msg, batch_name=batch_name))
         return Batch(self, resp.batch_id, resp.run_ids)
 
     def run(self, spec, progress=None, timeout_s=None, batch_name=""):
