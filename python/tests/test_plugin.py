@@ -57,3 +57,15 @@ def test_failing_check_names_the_run_metric_unit_and_bound(repo, tmp_path):
     assert "valvebench runs" in out and "valvebench_run = 1 e1 done" in out, out
     failure = ET.parse(xml).getroot().find(".//testcase/failure")
     assert "run 1 (e1) in local store" in failure.get("message"), failure.get("message")
+
+
+def test_example_suite_on_a_server_given_on_the_command_line(repo, remote_server, tmp_path):
+    from conftest import OPERATOR
+    xml = tmp_path / "remote.xml"
+    proc = pytest_run([os.path.join(repo, "examples", "pytest"), "--junitxml", str(xml),
+                       "--valvebench-server", remote_server, "--valvebench-token", OPERATOR],
+                      tmp_path, str(tmp_path / "unused.db"))
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    runs = [v for p in properties(xml).values() for k, v in p if k == "valvebench_run"]
+    assert len(runs) == 5 and all(v.endswith("(server %s)" % remote_server) for v in runs), runs
+    assert not os.path.exists(tmp_path / "unused.db")

@@ -42,3 +42,9 @@ def test_unreachable_server_is_unavailable():
     with valvebench.Client("127.0.0.1:1", "t", timeout_s=1.0) as c:
         with pytest.raises(valvebench.Unavailable):
             c.list_runs()
+
+
+def test_local_false_without_a_server_is_refused(monkeypatch):
+    monkeypatch.delenv("VALVEBENCH_SERVER", raising=False)
+    with pytest.raises(valvebench.InvalidArgument, match="server: none given"):
+        valvebench.Client(local=False)

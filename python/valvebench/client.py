@@ -338,6 +338,8 @@ class Client:
             token = os.environ.get("VALVEBENCH_TOKEN", "")
         self.timeout_s = timeout_s
         self._local = None
+        if local is False and server is None:
+            raise InvalidArgument("server: none given (argument or VALVEBENCH_SERVER) and local=False")
         if local or server is None:
             self._local = LocalServer(db=db)
             server, token = self._local.address, self._local.token
