@@ -194,3 +194,35 @@ def test_benchctl_local_runs_share_the_store(local_client, repo):
     assert batch["pi"].metrics["rmse"] == pytest.approx(made[1]["metrics"]["rmse"])
     assert batch.channel("i_A").shape == (5001, 4)
     assert batch.compare().to_dataframe().loc["pi", "runs"] == 1
+
+
+def test_one_private_server_per_store(local_client):
+    with pytest.raises(valvebench.Unavailable, match="another process's private valvebench-server"):
+        valvebench.Client.local(db=local_client.db)
+    local_client.list_runs(limit=1)                   # the first one is untouched
+
+
+def test_start_waits_for_benchctl_local_runs(tmp_path):
+    """A server start re-queues the runs marked running; benchctl's in-flight run must not be one of them."""
+    import json
+    import subprocess
+    db = str(tmp_path / "shared.db")
+    spec = tmp_path / "slow.json"
+    spec.write_text(json.dumps({"name": "slow", "controller": {"pi_current": {}},
+                                "reference": {"constant": {"value": 0.5}}, "conditions": {"supply_V": 24},
+                                "duration_s": 1.0, "realtime": True, "recording": {"rate_Hz": 1000}}))
+    bc = subprocess.Popen([valvebench.find_tool("benchctl"), "run", "--local", str(spec), "--db", db],
+                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline:               # until benchctl's run is executing
+        if os.path.exists(db) and valvebench.local.LocalServer._benchctl_running(type("S", (), {"db": db})()):
+            break
+        time.sleep(0.02)
+    t0 = time.monotonic()
+    with valvebench.Client.local(db=db) as c:
+        waited = time.monotonic() - t0
+        out, err = bc.communicate(timeout=20)
+        assert bc.returncode == 0, err                # benchctl finished its run undisturbed
+        run = c.list_runs(limit=1)[0]
+        assert run.status == "done" and run.name == "slow", (run, run.reason)
+    assert 0.2 < waited < 5, waited

@@ -9,9 +9,15 @@ in, or PATH. The store is the one ``benchctl run --local`` uses: ``db`` if given
 On an emulated bench the server runs the bench's configured model (docs/server.md); the private server
 therefore gets one bench per preset and, on demand, one bench per distinct model a spec asks for (a preset with
 params or effects), and the spec is pinned to that bench by name.
+
+Sharing the store: a server start re-queues every run the store marks running (its crash recovery), which
+would break a run that benchctl --local or another private server is executing at that moment. So one store
+has at most one private server (an flock on <db>.server-lock; a second one is refused, naming the store), and
+a start waits for runs benchctl --local is executing (bench kind "local") to finish.
 """
 import atexit
 import ctypes
+import fcntl
 import hashlib
 import json
 import os
@@ -19,9 +25,11 @@ import re
 import secrets
 import shutil
 import signal
+import sqlite3
 import subprocess
 import tempfile
 import time
+import urllib.parse
 
 from .errors import InvalidArgument, Unavailable
 
@@ -80,10 +88,20 @@ class LocalServer:
     Not a Unix socket: the server accepts ``unix:PATH``, but with Debian's gRPC 1.51 its shutdown then stalls
     for seconds after trace streams (docs/decisions.md)."""
 
-    def __init__(self, db=None, server_bin=None, start_timeout_s=20.0):
+    def __init__(self, db=None, server_bin=None, start_timeout_s=20.0, benchctl_wait_s=30.0):
         self.db = os.path.abspath(db or default_store_path())
         os.makedirs(os.path.dirname(self.db), exist_ok=True)
         self.server_bin = server_bin or find_tool("valvebench-server")
+        self.benchctl_wait_s = benchctl_wait_s
+        self._lock = open(self.db + ".server-lock", "a+")
+        try:
+            fcntl.flock(self._lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            self._lock.close()
+            raise Unavailable("local store %s: another process's private valvebench-server is using it (one per "
+                              "store: its start would re-queue that server's running runs); pass db= another "
+                              "file (or VALVEBENCH_DB), or share a valvebench-server via VALVEBENCH_SERVER"
+                              % self.db) from None
         self.dir = tempfile.mkdtemp(prefix="valvebench-")
         self.address = None
         self.token = secrets.token_urlsafe(24)
@@ -92,7 +110,11 @@ class LocalServer:
         self._models = {}
         self._proc = None
         self._log = None
-        self._start()
+        try:
+            self._start()
+        except BaseException:
+            self.stop()
+            raise
         atexit.register(self.stop)
 
     def _config(self):
@@ -105,7 +127,30 @@ class LocalServer:
                         "token_sha256": hashlib.sha256(self.token.encode()).hexdigest()}],
         }
 
+    def _benchctl_running(self):
+        """Ids of runs benchctl --local is executing in the store now (read-only peek; [] without a store)."""
+        if not os.path.exists(self.db):
+            return []
+        try:
+            con = sqlite3.connect("file:%s?mode=ro" % urllib.parse.quote(self.db), uri=True, timeout=5)
+            try:
+                rows = con.execute("SELECT id FROM runs WHERE status = 'running' AND bench_kind = 'local'").fetchall()
+            finally:
+                con.close()
+        except sqlite3.Error:  # an empty file or another schema: nothing of benchctl's to protect
+            return []
+        return [r[0] for r in rows]
+
     def _start(self):
+        deadline = time.monotonic() + self.benchctl_wait_s
+        busy = self._benchctl_running()
+        while busy and time.monotonic() < deadline:
+            time.sleep(0.05)
+            busy = self._benchctl_running()
+        if busy:
+            raise Unavailable("local store %s: benchctl --local is still executing run(s) %s after %g s; starting "
+                              "the private server now would re-queue them. Wait for them, or pass db= another file"
+                              % (self.db, ", ".join(map(str, busy)), self.benchctl_wait_s))
         path = os.path.join(self.dir, "server.json")
         with open(path, "w") as f:
             json.dump(self._config(), f)
@@ -170,6 +215,9 @@ class LocalServer:
         self._stop_process()
         self._proc = None
         shutil.rmtree(self.dir, ignore_errors=True)
+        if self._lock is not None:
+            self._lock.close()  # releases the flock
+            self._lock = None
 
     def running(self):
         return self._proc is not None and self._proc.poll() is None
