@@ -64,3 +64,16 @@ def test_export_needs_a_format(local_client):
     proc = subprocess.run([valvebench.find_tool("benchctl"), "export", "1", "--server", local_client.server,
                            "--token", local_client.token], capture_output=True, text=True)
     assert proc.returncode == 2 and "--hdf5" in proc.stderr
+
+
+def test_client_export_writes_the_same_files(local_client, exported, tmp_path):
+    run, trace, _, _, _ = exported
+    h5, mat = tmp_path / "c.h5", tmp_path / "c.mat"
+    assert local_client.export(run.id, hdf5=h5, mat=mat) == [str(h5), str(mat)]
+    with h5py.File(h5, "r") as f:
+        np.testing.assert_array_equal(f["channels/i_A"][()], trace["i_A"])
+    assert scipy_io.loadmat(str(mat), simplify_cells=True)["vbrun"]["run_id"] == run.id
+    with pytest.raises(valvebench.InvalidArgument, match="give hdf5="):
+        local_client.export(run.id)
+    with pytest.raises(valvebench.InvalidArgument, match="run 987654"):
+        local_client.export(987654, hdf5=tmp_path / "none.h5")

@@ -99,8 +99,10 @@ def test_errors_name_the_field(local_client):
     with pytest.raises(valvebench.InvalidArgument) as e:
         local_client.submit(bad)
     assert "conditions.supply_V" in str(e.value) and e.value.code == "INVALID_ARGUMENT"
-    with pytest.raises(valvebench.InvalidArgument, match="supply_volts"):
+    with pytest.raises(valvebench.InvalidArgument, match="^spec: conditions.supply_volts: unknown field$"):
         local_client.submit({"name": "typo", "conditions": {"supply_volts": 24}})
+    with pytest.raises(valvebench.InvalidArgument, match=r"^spec: sweep\[0\].values\[0\]: Couldn't parse float: a$"):
+        local_client.submit({"name": "typo", "sweep": [{"field": "duration_s", "values": ["a"]}]})
     with pytest.raises(valvebench.InvalidArgument, match="cannot read the spec"):
         local_client.submit("/nonexistent/spec.json")
     with pytest.raises(valvebench.NotFound):
@@ -129,9 +131,12 @@ def test_model_with_params_runs_on_its_own_bench(local_client):
     base = {"controller": {"open_loop_pwm": {"segments": [{"frequency_Hz": 0, "duty": 1}]}},
             "conditions": {"supply_V": 24}, "duration_s": 0.005, "recording": {"rate_Hz": 20000}}
     nominal = local_client.run(dict(base, name="R-nominal"))[0]
+    other = valvebench.Client.local(db=local_client.db)   # shares the private server ...
     high_r = local_client.run(dict(base, name="R-high", bench={"model": {"preset": "taghizadeh2009",
                                                                        "params": {"R": 26.0}}}))[0]
     assert nominal.ok and high_r.ok
+    assert other.get_run(high_r.id).ok                    # ... and follows it to its new port after the restart
+    other.close()
     # Twice the resistance: the current rises more slowly, so less current at 5 ms.
     assert high_r.trace()["i_A"][-1] < 0.8 * nominal.trace()["i_A"][-1]
     with pytest.raises(valvebench.InvalidArgument, match=r"variants\[0\].bench.model"):
@@ -197,9 +202,17 @@ def test_benchctl_local_runs_share_the_store(local_client, repo):
 
 
 def test_one_private_server_per_store(local_client):
-    with pytest.raises(valvebench.Unavailable, match="another process's private valvebench-server"):
-        valvebench.Client.local(db=local_client.db)
-    local_client.list_runs(limit=1)                   # the first one is untouched
+    """Clients of one process share the store's private server; another process is refused, naming the store."""
+    import subprocess
+    import sys
+    with valvebench.Client.local(db=local_client.db) as second:
+        assert second.server == local_client.server
+        assert second.list_runs(limit=1)[0].id == local_client.list_runs(limit=1)[0].id
+    local_client.list_runs(limit=1)                   # closing the second client left the server running
+    proc = subprocess.run([sys.executable, "-c", "import valvebench; valvebench.Client.local(db=%r)" % local_client.db],
+                          capture_output=True, text=True)
+    assert proc.returncode != 0
+    assert "local store %s: another process's private valvebench-server" % local_client.db in proc.stderr
 
 
 def test_start_waits_for_benchctl_local_runs(tmp_path):

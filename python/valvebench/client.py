@@ -6,6 +6,7 @@ valvebench.Error whose message names the field (``conditions.supply_V: must be >
 """
 import json
 import os
+import re
 import subprocess
 import time
 
@@ -15,7 +16,8 @@ from google.protobuf import json_format
 
 from . import units
 from .errors import Error, InvalidArgument, RunFailed, Unavailable, from_grpc
-from .local import LocalServer, find_tool
+from . import local as _local
+from .local import find_tool
 from .v1 import api_pb2, api_pb2_grpc, spec_pb2
 
 STATUS_NAMES = {api_pb2.QUEUED: "queued", api_pb2.RUNNING: "running", api_pb2.DONE: "done",
@@ -31,6 +33,18 @@ def _pandas():
         raise Unavailable("pandas is not installed (Debian: apt-get install python3-pandas); "
                           "the numpy forms (Trace.channels, Comparison.rows) work without it") from e
     return pandas
+
+
+def _field_message(text):
+    """protobuf's JSON parse error as 'field.path: what is wrong' (the field path first, as the server says it)."""
+    m = re.search(r'has no field named "([^"]+)" at "([^"]+)"', text)
+    if m:
+        path = m.group(2).split(".", 1)[1] + "." if "." in m.group(2) else ""
+        return "%s%s: unknown field" % (path, m.group(1))
+    m = re.search(r"([^:]+: [^\n]*?) at ([A-Za-z]+\.[\w.\[\]]+?)\.*$", text.splitlines()[-1])
+    if m and "." in m.group(2):
+        return "%s: %s" % (m.group(2).split(".", 1)[1], m.group(1).rsplit("field: ", 1)[-1])
+    return text
 
 
 def load_spec(spec):
@@ -57,7 +71,7 @@ def load_spec(spec):
             raise InvalidArgument("spec: expected a dict, a JSON file path or an ExperimentSpec, got %s"
                                   % type(spec).__name__)
     except json_format.ParseError as e:
-        raise InvalidArgument("%s: %s" % (where, e)) from e
+        raise InvalidArgument("%s: %s" % (where, _field_message(str(e)))) from e
     return msg
 
 
@@ -341,7 +355,7 @@ class Client:
         if local is False and server is None:
             raise InvalidArgument("server: none given (argument or VALVEBENCH_SERVER) and local=False")
         if local or server is None:
-            self._local = LocalServer(db=db)
+            self._local = _local.acquire(db)
             server, token = self._local.address, self._local.token
         self.token = token
         self.tls_ca = tls_ca
@@ -381,9 +395,11 @@ class Client:
         return ("local store " + self._local.db) if self._local else ("server " + self.server)
 
     def close(self):
+        """Closes the channel; in local mode the private server stops when the process's last client on that
+        store closes (or at exit)."""
         self._channel.close()
         if self._local is not None:
-            self._local.stop()
+            _local.release(self._local)
             self._local = None
 
     def __enter__(self):
@@ -393,6 +409,14 @@ class Client:
         self.close()
 
     # -- calls -------------------------------------------------------------------------------------------
+
+    @property
+    def _api(self):
+        """The stub, reconnected if the private server restarted on another port (a bench for a new model,
+        possibly added through another client of the same store)."""
+        if self._local is not None and self._local.address != self.server:
+            self._connect(self._local.address)
+        return self._stub
 
     def _call(self, method, request, context="", timeout_s=None):
         try:
@@ -417,9 +441,7 @@ class Client:
         if spec.bench.kind not in ("", "emulated") or spec.bench.name:
             return spec
         model = json_format.MessageToDict(spec.bench.model, preserving_proto_field_name=True)
-        name = self._local.bench_for_model(model)
-        if self._local.address != self.server:  # restarted with a bench for a new model: a new port
-            self._connect(self._local.address)
+        name = self._local.bench_for_model(model)  # may restart the server on a new port: _api follows
         if name.startswith("model-"):
             spec = spec_pb2.ExperimentSpec.FromString(spec.SerializeToString())
             spec.bench.name = name
@@ -430,7 +452,7 @@ class Client:
         batch. Returns the Batch without waiting (Batch.wait, Client.watch)."""
         msg = self._prepare(load_spec(spec))
         # The server's message as it words it: the field path first (docs/server.md).
-        resp = self._call(self._stub.SubmitRun, api_pb2.SubmitRunRequest(spec=msg, batch_name=batch_name))
+        resp = self._call(self._api.SubmitRun, api_pb2.SubmitRunRequest(spec=msg, batch_name=batch_name))
         return Batch(self, resp.batch_id, resp.run_ids)
 
     def run(self, spec, progress=None, timeout_s=None, batch_name=""):
@@ -442,7 +464,7 @@ class Client:
         """Follows a run until it ends (progress(Progress) on each event); returns the finished Run. With
         sample_rate_Hz > 0 the events carry live downsampled samples."""
         req = api_pb2.WatchRunRequest(run_id=run_id, sample_rate_Hz=sample_rate_Hz)
-        call = self._stub.WatchRun(req, metadata=self._md, timeout=timeout_s or 24 * 3600.0)
+        call = self._api.WatchRun(req, metadata=self._md, timeout=timeout_s or 24 * 3600.0)
         try:
             for ev in call:
                 p = Progress(ev)
@@ -457,7 +479,7 @@ class Client:
         return self.get_run(run_id)
 
     def get_run(self, run_id):
-        return Run(self, self._call(self._stub.GetRun, api_pb2.GetRunRequest(run_id=run_id)))
+        return Run(self, self._call(self._api.GetRun, api_pb2.GetRunRequest(run_id=run_id)))
 
     def get_batch(self, batch_id):
         """A stored batch with its runs (e.g. one made by benchctl run --local or another client)."""
@@ -480,14 +502,14 @@ class Client:
             page = 1000 if limit is None else min(1000, max(1, limit - len(out)))
             req = api_pb2.ListRunsRequest(status=code, tag=tag, batch_id=batch_id, controller=controller,
                                           bench=bench, submitter=submitter, page_size=page, page_token=token)
-            resp = self._call(self._stub.ListRuns, req)
+            resp = self._call(self._api.ListRuns, req)
             out.extend(Run(self, r) for r in resp.runs)
             token = resp.next_page_token
             if not token or (limit is not None and len(out) >= limit):
                 return out
 
     def cancel(self, run_id, reason=""):
-        return Run(self, self._call(self._stub.CancelRun, api_pb2.CancelRunRequest(run_id=run_id, reason=reason),
+        return Run(self, self._call(self._api.CancelRun, api_pb2.CancelRunRequest(run_id=run_id, reason=reason),
                                     context="run %d" % run_id))
 
     def trace(self, run_id, run=None):
@@ -496,7 +518,7 @@ class Client:
             run = self.get_run(run_id)
         channels, parts, t0, dt, total = None, [], 0.0, 0.0, 0
         try:
-            for chunk in self._stub.GetTrace(api_pb2.GetTraceRequest(run_id=run_id), metadata=self._md,
+            for chunk in self._api.GetTrace(api_pb2.GetTraceRequest(run_id=run_id), metadata=self._md,
                                              timeout=max(60.0, self.timeout_s)):
                 if channels is None:
                     channels, t0, dt, total = list(chunk.channels), chunk.t0_s, chunk.sample_period_s, chunk.total_samples
@@ -518,11 +540,11 @@ class Client:
     def compare(self, batch_id=0, run_ids=()):
         """CompareRuns on a batch or on runs: valvebench.Comparison (to_dataframe() with units)."""
         req = api_pb2.CompareRunsRequest(batch_id=batch_id or 0, run_ids=list(run_ids))
-        return Comparison(self._call(self._stub.CompareRuns, req))
+        return Comparison(self._call(self._api.CompareRuns, req))
 
     def benches(self):
         """The server's benches as dicts (name, kind, driver, model, max_supply_V, busy, ...)."""
-        resp = self._call(self._stub.ListBenches, api_pb2.ListBenchesRequest())
+        resp = self._call(self._api.ListBenches, api_pb2.ListBenchesRequest())
         return [json_format.MessageToDict(b, preserving_proto_field_name=True, including_default_value_fields=True)
                 for b in resp.benches]
 
@@ -546,12 +568,13 @@ class Client:
                 else:
                     raise InvalidArgument("runs[%d].%s: unknown field (known: id, supply_V, supply_pressure_Pa, "
                                           "t_start_s, split, sample_period_s, gate, i_A, x_m, v_coil_V)" % (k, key))
-        resp = self._call(self._stub.ImportRuns, req, context="import " + dataset, timeout_s=300.0)
+        resp = self._call(self._api.ImportRuns, req, context="import " + dataset, timeout_s=300.0)
         return self.get_batch(resp.batch_id)
 
     # -- through benchctl: the dataset reader and the diagnosis are C++ (gap/), one implementation ----------
 
     def _benchctl(self, args, what):
+        self._api  # follows a restarted private server, so self.server is current
         cmd = [find_tool("benchctl")] + args + ["--server", self.server]
         env = dict(os.environ, VALVEBENCH_TOKEN=self.token)
         if self.tls_ca:
@@ -562,6 +585,19 @@ class Client:
             cls = InvalidArgument if proc.returncode == 2 else Error
             raise cls("%s: %s" % (what, msg))
         return proc.stdout
+
+    def export(self, run_id, hdf5=None, mat=None, csv=None):
+        """Writes a stored run as HDF5 and/or MATLAB .mat (and/or CSV) through benchctl export: channels with
+        units, spec, conditions and metrics (docs/python.md "HDF5 and MATLAB files"). Returns the paths written."""
+        args, paths = [], []
+        for flag, path in (("--hdf5", hdf5), ("--mat", mat), ("--csv", csv)):
+            if path is not None:
+                args += [flag, os.fspath(path)]
+                paths.append(os.fspath(path))
+        if not args:
+            raise InvalidArgument("export: give hdf5=, mat= or csv=")
+        self._benchctl(["export", str(int(run_id))] + args, "export run %d" % run_id)
+        return paths
 
     def import_dataset(self, directory):
         """Stores a valve-runs/1 dataset (manifest.json + CSV files) as batch 'import:<name>' through benchctl

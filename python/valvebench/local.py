@@ -28,6 +28,7 @@ import signal
 import sqlite3
 import subprocess
 import tempfile
+import threading
 import time
 import urllib.parse
 
@@ -64,6 +65,36 @@ def default_store_path():
     if home:
         return os.path.join(home, ".local", "share", "valvebench", "local.db")
     return os.path.abspath("valvebench-local.db")
+
+
+_SHARED = {}  # store path -> [LocalServer, number of clients]: one private server per store in a process
+_SHARED_LOCK = threading.Lock()
+
+
+def acquire(db=None):
+    """The private server of a store for one more client of this process: started on first use, shared by
+    every Client of the process on that store (re-running a notebook cell reuses it)."""
+    path = os.path.abspath(db or default_store_path())
+    with _SHARED_LOCK:
+        entry = _SHARED.get(path)
+        if entry is not None and entry[0].running():
+            entry[1] += 1
+            return entry[0]
+        server = LocalServer(path)
+        _SHARED[path] = [server, 1]
+        return server
+
+
+def release(server):
+    """One client fewer; the last one stops the server."""
+    with _SHARED_LOCK:
+        entry = _SHARED.get(server.db)
+        if entry is not None and entry[0] is server:
+            entry[1] -= 1
+            if entry[1] > 0:
+                return
+            del _SHARED[server.db]
+    server.stop()
 
 
 def _die_with_parent():
