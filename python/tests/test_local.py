@@ -143,7 +143,7 @@ def test_model_with_params_runs_on_its_own_bench(local_client):
         local_client.submit(dict(base, name="v", variants=[{"name": "a", "bench": {"model": {"params": {"R": 1}}}}]))
 
 
-def test_import_arrays_and_diagnose(local_client, shared):
+def test_import_runs_from_arrays(local_client, shared):
     import csv
     import json
     p07 = os.path.join(shared, "gapbench", "practice", "p07")

@@ -346,6 +346,8 @@ class Client:
     """
 
     def __init__(self, server=None, token=None, *, local=None, db=None, tls_ca=None, timeout_s=30.0):
+        if db is not None and server is None and local is None:
+            local = True  # a store file only means something in local mode
         if server is None and local is not True:
             server = os.environ.get("VALVEBENCH_SERVER") or None
         if token is None:
