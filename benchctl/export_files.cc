@@ -17,20 +17,27 @@ namespace {
 
 const char* StatusText(v1::RunStatus s) {
   switch (s) {
-    case v1::QUEUED: return "queued";
-    case v1::RUNNING: return "running";
-    case v1::DONE: return "done";
-    case v1::FAILED: return "failed";
-    case v1::CANCELLED: return "cancelled";
-    case v1::INTERRUPTED: return "interrupted";
-    default: return "unspecified";
+    case v1::QUEUED:
+      return "queued";
+    case v1::RUNNING:
+      return "running";
+    case v1::DONE:
+      return "done";
+    case v1::FAILED:
+      return "failed";
+    case v1::CANCELLED:
+      return "cancelled";
+    case v1::INTERRUPTED:
+      return "interrupted";
+    default:
+      return "unspecified";
   }
 }
 
 }  // namespace
 
-int RemoteExportFiles(client::Client& c, std::int64_t run_id, const std::string& csv_path,
-                      const std::string& hdf5_path, const std::string& mat_path) {
+int RemoteExportFiles(client::Client& c, std::int64_t run_id, const std::string& csv_path, const std::string& hdf5_path,
+                      const std::string& mat_path) {
   if (csv_path.empty() && hdf5_path.empty() && mat_path.empty())
     return Fail(Status::InvalidArgument("export: give --csv FILE, --hdf5 FILE or --mat FILE"));
   if (!csv_path.empty()) {

@@ -79,8 +79,7 @@ bool Channels(hid_t file, const std::vector<Channel>& channels) {
     Hid d(H5Dcreate2(g.get(), c.name.c_str(), H5T_IEEE_F64LE, space.get(), H5P_DEFAULT, props.get(), H5P_DEFAULT),
           H5Dclose);
     if (!d.ok()) return false;
-    if (n > 0 && H5Dwrite(d.get(), H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, c.values.data()) < 0)
-      return false;
+    if (n > 0 && H5Dwrite(d.get(), H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, c.values.data()) < 0) return false;
     if (!StringAttr(d.get(), "units", c.unit)) return false;
   }
   return true;

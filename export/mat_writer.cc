@@ -33,8 +33,8 @@ Var Struct(const char* name, const std::vector<std::string>& fields) {
   std::vector<const char*> names;
   for (const auto& f : fields) names.push_back(f.c_str());
   size_t dims[2] = {1, 1};
-  return Var(Mat_VarCreateStruct(name, 2, dims, names.empty() ? nullptr : names.data(),
-                                 static_cast<unsigned>(names.size())));
+  return Var(
+      Mat_VarCreateStruct(name, 2, dims, names.empty() ? nullptr : names.data(), static_cast<unsigned>(names.size())));
 }
 
 // Sets a field; the struct takes ownership of the value.
@@ -70,9 +70,9 @@ Status WriteMat(const RunFile& run, const std::string& path) {
   for (const auto& c : run.channels) {
     ok = ok && Set(channels.get(), c.name, Column(c.values)) && Set(channel_units.get(), c.name, Text(c.unit));
   }
-  const std::vector<std::string> fields = {"run_id", "name", "controller", "bench", "status", "reason",
-                                           "spec_json", "t0_s", "sample_period_s", "channels", "units",
-                                           "conditions", "metrics", "metric_units"};
+  const std::vector<std::string> fields = {"run_id", "name",       "controller", "bench",           "status",
+                                           "reason", "spec_json",  "t0_s",       "sample_period_s", "channels",
+                                           "units",  "conditions", "metrics",    "metric_units"};
   Var top = Struct("vbrun", fields);
   ok = ok && top && Set(top.get(), "run_id", Number(static_cast<double>(run.run_id))) &&
        Set(top.get(), "name", Text(run.name)) && Set(top.get(), "controller", Text(run.controller)) &&

@@ -26,8 +26,8 @@
 namespace vb::exportfile {
 
 struct Channel {
-  std::string name;            // t_s, gate, v_coil_V, i_A, ... (docs/spec.md recording channels)
-  std::string unit;            // SI unit text: "A", "m/s", "1" for dimensionless
+  std::string name;  // t_s, gate, v_coil_V, i_A, ... (docs/spec.md recording channels)
+  std::string unit;  // SI unit text: "A", "m/s", "1" for dimensionless
   std::vector<double> values;
 };
 
@@ -42,10 +42,10 @@ struct RunFile {
   std::string name, controller, bench, status, reason;
   double t0_s = 0.0;
   double sample_period_s = 0.0;
-  std::vector<Channel> channels;   // all the same length
-  std::string spec_json;           // the exact single-run spec (protobuf JSON)
-  std::vector<Value> conditions;   // supply_V, supply_pressure_Pa
-  std::vector<Value> metrics;      // finite metrics (docs/metrics.md)
+  std::vector<Channel> channels;  // all the same length
+  std::string spec_json;          // the exact single-run spec (protobuf JSON)
+  std::vector<Value> conditions;  // supply_V, supply_pressure_Pa
+  std::vector<Value> metrics;     // finite metrics (docs/metrics.md)
 };
 
 // The unit of a trace channel by its name; `ref` takes the controlled variable's unit (A for current laws, m for

@@ -22,16 +22,31 @@ std::string ControlledUnit(const std::string& controller) {
 }  // namespace
 
 std::string ChannelUnit(const std::string& channel, const std::string& controller) {
-  static const std::array<std::pair<std::string_view, std::string_view>, 11> kNamed = {{
-      {"t_s", "s"}, {"gate", "1"}, {"v_coil_V", "V"}, {"i_A", "A"}, {"x_m", "m"}, {"v_mps", "m/s"},
-      {"x_avg_m", "m"}, {"flow_kg_per_s", "kg/s"}, {"v2_int_V2s", "V^2 s"}, {"energy_int_J", "J"},
-      {"switch_count", "1"}}};
+  static const std::array<std::pair<std::string_view, std::string_view>, 11> kNamed = {{{"t_s", "s"},
+                                                                                        {"gate", "1"},
+                                                                                        {"v_coil_V", "V"},
+                                                                                        {"i_A", "A"},
+                                                                                        {"x_m", "m"},
+                                                                                        {"v_mps", "m/s"},
+                                                                                        {"x_avg_m", "m"},
+                                                                                        {"flow_kg_per_s", "kg/s"},
+                                                                                        {"v2_int_V2s", "V^2 s"},
+                                                                                        {"energy_int_J", "J"},
+                                                                                        {"switch_count", "1"}}};
   for (const auto& [name, unit] : kNamed)
     if (channel == name) return std::string(unit);
   if (channel == "ref") return ControlledUnit(controller);
-  static const std::array<std::pair<std::string_view, std::string_view>, 11> kSuffix = {{
-      {"_kg_per_s", "kg/s"}, {"_mps", "m/s"}, {"_V2s", "V^2 s"}, {"_pct", "%"}, {"_Pa", "Pa"}, {"_Hz", "Hz"},
-      {"_J", "J"}, {"_V", "V"}, {"_A", "A"}, {"_m", "m"}, {"_s", "s"}}};
+  static const std::array<std::pair<std::string_view, std::string_view>, 11> kSuffix = {{{"_kg_per_s", "kg/s"},
+                                                                                         {"_mps", "m/s"},
+                                                                                         {"_V2s", "V^2 s"},
+                                                                                         {"_pct", "%"},
+                                                                                         {"_Pa", "Pa"},
+                                                                                         {"_Hz", "Hz"},
+                                                                                         {"_J", "J"},
+                                                                                         {"_V", "V"},
+                                                                                         {"_A", "A"},
+                                                                                         {"_m", "m"},
+                                                                                         {"_s", "s"}}};
   for (const auto& [suffix, unit] : kSuffix)
     if (EndsWith(channel, suffix)) return std::string(unit);
   return "";

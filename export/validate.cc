@@ -20,7 +20,8 @@ Status Names(const std::vector<Value>& values, const std::string& field) {
   for (size_t k = 0; k < values.size(); ++k) {
     const auto where = field + "[" + std::to_string(k) + "].name";
     if (!Identifier(values[k].name))
-      return Status::InvalidArgument(where + ": '" + values[k].name + "' is not an identifier (letter first, "
+      return Status::InvalidArgument(where + ": '" + values[k].name +
+                                     "' is not an identifier (letter first, "
                                      "then letters, digits or _, at most 63)");
     if (!seen.insert(values[k].name).second)
       return Status::InvalidArgument(where + ": '" + values[k].name + "' appears twice");
@@ -36,10 +37,10 @@ Status Validate(const RunFile& run) {
     const auto& c = run.channels[k];
     const auto where = "channels[" + std::to_string(k) + "]";
     if (!Identifier(c.name))
-      return Status::InvalidArgument(where + ".name: '" + c.name + "' is not an identifier (letter first, then "
+      return Status::InvalidArgument(where + ".name: '" + c.name +
+                                     "' is not an identifier (letter first, then "
                                      "letters, digits or _, at most 63)");
-    if (!seen.insert(c.name).second)
-      return Status::InvalidArgument(where + ".name: '" + c.name + "' appears twice");
+    if (!seen.insert(c.name).second) return Status::InvalidArgument(where + ".name: '" + c.name + "' appears twice");
     if (c.values.size() != run.channels[0].values.size())
       return Status::InvalidArgument(where + ".values: " + std::to_string(c.values.size()) + " samples, but " +
                                      run.channels[0].name + " has " + std::to_string(run.channels[0].values.size()));
