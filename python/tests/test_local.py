@@ -239,3 +239,20 @@ def test_start_waits_for_benchctl_local_runs(tmp_path):
         run = c.list_runs(limit=1)[0]
         assert run.status == "done" and run.name == "slow", (run, run.reason)
     assert 0.2 < waited < 5, waited
+
+
+def test_pandas_is_optional(local_client, repo):
+    """Without pandas, numpy traces work and the DataFrame methods say what to install."""
+    import subprocess
+    import sys
+    code = ("import sys; sys.modules['pandas'] = None\n"
+            "import valvebench\n"
+            "c = valvebench.Client(%r, %r)\n"
+            "run = c.run(%r)[0]\n"
+            "print(len(run.trace()['i_A']))\n"
+            "try:\n    run.trace().to_dataframe()\nexcept valvebench.Unavailable as e:\n    print(e)\n"
+            % (local_client.server, local_client.token, os.path.join(repo, "examples", "standard", "e1.json")))
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stdout.splitlines()
+    assert int(lines[0]) > 1000 and "apt-get install python3-pandas" in lines[1], proc.stdout
