@@ -98,7 +98,9 @@ def release(server):
 
 
 def _die_with_parent():
-    # PR_SET_PDEATHSIG: the private server gets SIGTERM (safe state, exit) if this Python process dies.
+    # PR_SET_PDEATHSIG: the private server gets SIGTERM (safe state, exit) if this Python process dies. Linux
+    # sends it when the *thread* that started the server ends, so a Client made in a short-lived worker thread
+    # loses its private server with that thread (make local clients in a thread that lives as long as they do).
     try:
         ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)
     except Exception:
