@@ -11,6 +11,7 @@
 #include <iostream>
 
 #include "benchctl/cli_common.h"
+#include "benchctl/export_files.h"
 #include "benchctl/gap_commands.h"
 #include "benchctl/hw_commands.h"
 #include "benchctl/local_commands.h"
@@ -90,10 +91,12 @@ int main(int argc, char** argv) {
   cancel->add_option("run_id", run_id, "run id")->required();
   cancel->add_option("--reason", reason, "recorded with the run");
   common(cancel, false);
-  std::string export_csv;
-  auto* exp = app.add_subcommand("export", "a stored run's trace as CSV");
+  std::string export_csv, export_hdf5, export_mat;
+  auto* exp = app.add_subcommand("export", "a stored run's trace as CSV, HDF5 or MATLAB .mat (units, spec, conditions)");
   exp->add_option("run_id", run_id, "run id")->required();
-  exp->add_option("--csv", export_csv, "output file ('-' = stdout)")->required();
+  exp->add_option("--csv", export_csv, "CSV file ('-' = stdout)");
+  exp->add_option("--hdf5", export_hdf5, "HDF5 file: channels with units, spec and conditions (export/run_file.h)");
+  exp->add_option("--mat", export_mat, "MATLAB .mat file (level 5): struct vbrun (export/run_file.h)");
   common(exp, false);
   auto* benches = app.add_subcommand("benches", "the server's benches and attached USB devices (--local: this machine's)");
   benches->add_flag("--local", local, "the embedded emulator and the USB devices this machine sees, no server");
@@ -178,7 +181,7 @@ int main(int argc, char** argv) {
   if (show->parsed()) return vb::benchctl::RemoteShow(*c, run_id, out);
   if (watch->parsed()) return vb::benchctl::RemoteWatch(*c, run_id, out);
   if (cancel->parsed()) return vb::benchctl::RemoteCancel(*c, run_id, reason, out);
-  if (exp->parsed()) return vb::benchctl::RemoteExport(*c, run_id, export_csv);
+  if (exp->parsed()) return vb::benchctl::RemoteExportFiles(*c, run_id, export_csv, export_hdf5, export_mat);
   if (benches->parsed()) return vb::benchctl::RemoteBenches(*c, out);
   return kExitBadInput;
 }

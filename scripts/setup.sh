@@ -22,6 +22,10 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev
   # the foreign-client integration test (a gRPC client built only from our .proto files)
   python3 python3-grpcio python3-protobuf
+  # the Python package (python/), its pytest plugin, notebooks, HDF5/MAT export (docs/python.md)
+  python3-numpy python3-pandas python3-pytest python3-matplotlib python3-h5py python3-scipy
+  jupyter-nbconvert python3-nbformat python3-nbclient python3-ipykernel python3-venv python3-pip
+  python3-setuptools libhdf5-dev libmatio-dev
   # the HTML report test: the page must render without errors in a headless browser
   chromium
 )

@@ -105,7 +105,7 @@ int main(int argc, char** argv) {
   }
   // The address with the port actually bound (a config may ask for port 0: any free port).
   std::string bound = settings->listen_address;
-  if (const size_t colon = bound.rfind(':'); colon != std::string::npos)
+  if (const size_t colon = bound.rfind(':'); colon != std::string::npos && bound.rfind("unix:", 0) != 0)
     bound = bound.substr(0, colon + 1) + std::to_string(port);
   std::fprintf(stderr, "valvebench-server: listening on %s (%s), %zu bench(es), database %s\n", bound.c_str(),
                settings->tls_cert_pem.empty() ? "insecure" : "TLS", workers.size(),
