@@ -5,6 +5,8 @@
 #include <Eigen/Dense>
 
 #include <algorithm>
+#include <chrono>
+#include <cstdio>
 #include <atomic>
 #include <cmath>
 #include <functional>
@@ -135,9 +137,21 @@ namespace {
 
 CandidateResult Fit(const Dataset& ds, const std::vector<bool>& fit_mask, const model::PlantParams& nominal,
                     const NominalReference& ref, const Candidate& c, double holdout_before, double noise,
-                    const AttributionOptions& opt) {
+                    const AttributionOptions& options) {
   CandidateResult res;
   res.name = c.name;
+  // The fit's own wall-time budget, within the caller's deadline: every simulation it runs stops there.
+  using Clock = std::chrono::steady_clock;
+  const auto fit_start = Clock::now();
+  const auto budget = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(options.candidate_budget_s));
+  const auto fit_deadline = std::min(options.deadline, fit_start + budget);
+  if (fit_start >= fit_deadline) {
+    res.status = Status::Aborted("not fitted: the diagnosis's time budget had run out");
+    res.score = kInf;
+    return res;
+  }
+  AttributionOptions opt = options;
+  opt.solver.deadline = fit_deadline;
   const std::size_t k = c.params.size();
   std::vector<double> u(k);
   for (std::size_t j = 0; j < k; ++j) u[j] = std::clamp(ToUnit(c.params[j], c.params[j].initial), 0.0, 1.0);
@@ -243,6 +257,20 @@ CandidateResult Fit(const Dataset& ds, const std::vector<bool>& fit_mask, const 
     u = best_u;
   }
   res.evaluations = ctx.evaluations;
+  if (Clock::now() >= fit_deadline) {
+    char buf[160];
+    std::snprintf(buf, sizeof buf, "the fit stopped after %.1f s, its wall-time budget (%d evaluations)",
+                  std::chrono::duration<double>(Clock::now() - fit_start).count(), ctx.evaluations);
+    res.status = Status::Aborted(buf);
+    res.score = kInf;
+    return res;
+  }
+  // The scoring and the uncertainty get half a budget of their own.
+  // (options.deadline may be time_point::max(): never add to it.)
+  const auto half = Clock::now() + budget / 2;
+  opt.solver.deadline = options.deadline == Clock::time_point::max() || options.deadline - Clock::now() > budget / 2
+                            ? half
+                            : options.deadline + budget / 2;
   const std::vector<double> best = values_of(u);
   auto plant = ApplyCandidate(nominal, c, best);
   auto driver = ApplyCandidateDriver(ds.driver, c, best);

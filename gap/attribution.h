@@ -9,6 +9,7 @@
 #pragma once
 
 #include <array>
+#include <chrono>
 #include <cmath>
 #include <limits>
 #include <map>
@@ -75,6 +76,10 @@ struct AttributionOptions {
   // mutation, seeded): for identification far from the starting values. 0: local fit only.
   int global_evaluations = 0;
   unsigned seed = 1;
+  // Bounded fits: a candidate whose fit has not finished after candidate_budget_s of wall time, or when the
+  // deadline (the whole diagnosis's) passes, is reported as failed with the reason; the others go on.
+  double candidate_budget_s = 30.0;
+  std::chrono::steady_clock::time_point deadline = std::chrono::steady_clock::time_point::max();
   model::SolverOptions solver = FastSolver();
   static model::SolverOptions FastSolver() {
     model::SolverOptions s;

@@ -6,6 +6,7 @@
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <map>
@@ -350,7 +351,13 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds_in, const model::PlantParams& nom
                  : ds.format == kFormatValveRuns1
                      ? DefaultCandidates(nominal)
                      : DefaultCandidates(nominal, ds, fit_mask, d.has_reference ? d.reference.temperature_C : NAN);
-  auto ranked = Attribute(ds, fit_mask, nominal, d.candidates, d.noise_floor_A, opt.attribution);
+  AttributionOptions attribution = opt.attribution;
+  {
+    using Clock = std::chrono::steady_clock;
+    const auto end = Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(opt.budget_s));
+    attribution.deadline = std::min(attribution.deadline, end);
+  }
+  auto ranked = Attribute(ds, fit_mask, nominal, d.candidates, d.noise_floor_A, attribution);
   if (!ranked.ok()) return ranked.status();
   d.ranking = std::move(*ranked);
   auto candidate_of = [&](const std::string& name) -> const Candidate* {
@@ -372,7 +379,7 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds_in, const model::PlantParams& nom
     for (std::size_t a = 0; a < top.size(); ++a)
       for (std::size_t b = a + 1; b < top.size(); ++b) pairs.push_back(PairCandidate(*top[a], *top[b]));
     if (!pairs.empty()) {
-      auto pr = Attribute(ds, fit_mask, nominal, pairs, d.noise_floor_A, opt.attribution);
+      auto pr = Attribute(ds, fit_mask, nominal, pairs, d.noise_floor_A, attribution);
       if (!pr.ok()) return pr.status();
       for (auto& row : *pr) {
         // A pair must be decisive: close at least half of what the best single effect leaves above the noise.

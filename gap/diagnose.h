@@ -72,6 +72,7 @@ struct DiagnoseOptions {
   std::vector<Candidate> candidates;     // empty: DefaultCandidates(nominal)
   AttributionOptions attribution;
   bool try_pairs = true;                 // when no single candidate explains the gap
+  double budget_s = 50.0;                // wall time for the whole attribution (singles, then pairs)
   std::size_t overlay_points = 600;      // per run
 };
 

@@ -33,6 +33,7 @@ Status PredictSamples(const model::PlantParams& plant, const model::DriverParams
       ++edge;
     }
     sim.AdvanceTo(t, nullptr);
+    if (sim.failed()) return SimulationFailed(sim);
     i_A->push_back(sim.measured_current_A());
     phase->push_back(PhaseOf(sim));
   }
@@ -64,6 +65,7 @@ Status PredictPeriodic(const model::PlantParams& plant, const model::DriverParam
   for (int k = 0; k < opt.max_periods && !steady; ++k) {
     const double x = sim.i_A();
     one_period();
+    if (sim.failed()) return SimulationFailed(sim);
     const double g = sim.i_A() - x;
     if (std::abs(g) <= opt.periodic_tol_A + 1e-7 * std::abs(x)) {
       steady = true;
@@ -104,6 +106,7 @@ Status PredictPeriodic(const model::PlantParams& plant, const model::DriverParam
       off = true;
     }
     sim.AdvanceTo(at, nullptr);
+    if (sim.failed()) return SimulationFailed(sim);
     (*i_A)[k] = sim.measured_current_A();
     (*phase)[k] = PhaseOf(sim);
   }

@@ -47,6 +47,10 @@ class Collector final : public model::SimObserver {
 
 }  // namespace
 
+Status SimulationFailed(const model::Simulator& sim) {
+  return Status::Aborted("the simulation stopped at t = " + std::to_string(sim.failure_t_s()) + " s: " + sim.failure());
+}
+
 StatusOr<Replay> ReplayRun(const model::PlantParams& plant, const model::DriverParams& driver,
                            const ReplayInput& in, const model::SolverOptions& solver) {
   if (!(in.sample_period_s > 0.0)) return Status::InvalidArgument("sample_period_s: must be > 0");
@@ -68,9 +72,11 @@ StatusOr<Replay> ReplayRun(const model::PlantParams& plant, const model::DriverP
     if (g != 0 && g != 1) return Status::InvalidArgument("gate[" + std::to_string(k) + "]: must be 0 or 1");
     const double t = static_cast<double>(k) * in.sample_period_s;
     sim.AdvanceTo(t, &col);  // emits the samples before t
+    if (sim.failed()) return SimulationFailed(sim);
     sim.SetGate(g);          // the gate of sample k holds from t
   }
   sim.AdvanceTo(static_cast<double>(n - 1) * in.sample_period_s, &col);
+  if (sim.failed()) return SimulationFailed(sim);
   sim.EmitPendingSample(&col);
   out.final_dT_K = sim.coil_temperature_rise_K();
   out.final_im_A = sim.play_state_A();

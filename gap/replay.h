@@ -39,6 +39,9 @@ struct Replay {
   double final_im_A = 0.0;    // core magnetisation state at the end (residual_magnetism)
 };
 
+// The status of a simulation the watchdog stopped (model::SolverOptions): Aborted, with when and why.
+Status SimulationFailed(const model::Simulator& sim);
+
 // Simulates the input from rest with the given plant and driver.
 StatusOr<Replay> ReplayRun(const model::PlantParams& plant, const model::DriverParams& driver,
                            const ReplayInput& input, const model::SolverOptions& solver = {});

@@ -116,7 +116,7 @@ Status EmulatedBench::Apply(const SwitchCommand& command) {
 }
 
 void EmulatedBench::RunPwmTo(double t_s) {
-  while (sim_.t_s() < t_s) {
+  while (sim_.t_s() < t_s && !sim_.failed()) {
     if (!pwm_mode_) {
       sim_.AdvanceTo(t_s, &forwarder_);
       return;
@@ -144,6 +144,11 @@ void EmulatedBench::RunPwmTo(double t_s) {
 Status EmulatedBench::AdvanceTo(double t_s, Measurement* m) {
   if (!running_) return Status::FailedPrecondition("bench " + opt_.name + " is not running");
   RunPwmTo(t_s);
+  if (sim_.failed()) {
+    // The emulator's watchdog stopped the plant (docs/model.md): the run fails with the reason, as a real
+    // bench's fault would; nothing hangs.
+    return Status::Aborted("emulator stopped at t = " + std::to_string(sim_.failure_t_s()) + " s: " + sim_.failure());
+  }
   if (config_.realtime) {
     const auto deadline = wall_start_ + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
                                             std::chrono::duration<double>(t_s));

@@ -71,6 +71,38 @@ void Simulator::Reset() {
   dt_guess_s_ = 1e-6;
   ode_steps_ = 0;
   restarts_ = 0;
+  failure_ = nullptr;
+  failure_t_s_ = 0.0;
+  work_ = 0;
+  tiny_steps_ = 0;
+  stalled_pieces_ = 0;
+}
+
+void Simulator::SetWatchdog(std::uint64_t max_work, std::chrono::steady_clock::time_point deadline) {
+  opt_.max_work = max_work;
+  opt_.deadline = deadline;
+  work_ = 0;
+}
+
+void Simulator::Fail(const char* why) {
+  if (failure_ != nullptr) return;
+  failure_ = why;
+  failure_t_s_ = t_;
+}
+
+bool Simulator::CheckWatchdog() {
+  ++work_;
+  if (opt_.max_work > 0 && work_ > opt_.max_work) {
+    Fail("the step budget ran out (SolverOptions::max_work)");
+    return false;
+  }
+  // The clock is read at the first unit of work and every 256 after: a vDSO call, cheap, no allocation.
+  if ((work_ & 255u) == 1 && opt_.deadline != std::chrono::steady_clock::time_point::max() &&
+      std::chrono::steady_clock::now() > opt_.deadline) {
+    Fail("the wall-clock deadline passed");
+    return false;
+  }
+  return true;
 }
 
 void Simulator::SetSamplePeriod(double period_s) {
@@ -442,7 +474,8 @@ void Simulator::CheckStopRelease(SimObserver* obs) {
 }
 
 void Simulator::AdvanceTo(double t_end_s, SimObserver* observer) {
-  while (t_ < t_end_s) {
+  while (t_ < t_end_s && failure_ == nullptr) {
+    const double t_before = t_;
     CheckStopRelease(observer);
     const Segment seg = CurrentSegment();
     const double t_stop = std::min(t_end_s, seg.t_end_s);
@@ -456,6 +489,16 @@ void Simulator::AdvanceTo(double t_end_s, SimObserver* observer) {
       stepper_valid_ = false;
       if (observer) observer->OnEvent(EventKind::kDriverSwitch, t_, i_, x_, v_);
     }
+    if (!std::isfinite(i_) || !std::isfinite(x_) || !std::isfinite(v_) || !std::isfinite(dT_) || !std::isfinite(t_)) {
+      Fail("the state is not finite (a non-physical parameter or input?)");
+      return;
+    }
+    stalled_pieces_ = t_ > t_before ? 0 : stalled_pieces_ + 1;
+    if (stalled_pieces_ > 100000) {
+      Fail("events repeat at one instant (the simulation cannot advance)");
+      return;
+    }
+    if (!CheckWatchdog()) return;
   }
 }
 
@@ -661,8 +704,29 @@ void Simulator::AdvanceOde(const Segment& seg, double t_stop, SimObserver* obs) 
 
   for (;;) {
     if (stepper_.current_time() <= t_ + kSameInstant_s) {
-      stepper_.do_step(rhs);
+      try {
+        stepper_.do_step(rhs);
+      } catch (const std::exception&) {
+        // Boost.Odeint gives up after 500 rejected step-size adjustments (a NaN or an exploding derivative).
+        Fail("the step-size control failed (the state or its derivative is not finite)");
+        return;
+      }
       ++ode_steps_;
+      for (double y : stepper_.current_state()) {
+        if (!std::isfinite(y)) {
+          Fail("the state is not finite (a non-physical parameter or input?)");
+          return;
+        }
+      }
+      // A step that collapses to nothing (a force of 1e308 N, a stiff non-physical parameter) would never reach
+      // the end: stop with the reason instead of hanging.
+      const double scale = std::max(1e-6, std::abs(stepper_.current_time()));
+      tiny_steps_ = stepper_.current_time_step() < 1e-15 * scale ? tiny_steps_ + 1 : 0;
+      if (tiny_steps_ > 1000) {
+        Fail("the integration stalled: steps below 1e-15 of the time scale (a non-physical input?)");
+        return;
+      }
+      if (!CheckWatchdog()) return;
     }
     const double a = t_;
     const double b = std::min(stepper_.current_time(), t_stop);

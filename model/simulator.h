@@ -15,6 +15,7 @@
 #pragma once
 
 #include <array>
+#include <chrono>
 #include <vector>
 #include <cstdint>
 #include <limits>
@@ -80,6 +81,12 @@ struct SolverOptions {
   double abs_tol = 1e-10;          // absolute tolerance on the scaled states (i in A, x and v in units of travel)
   double max_step_s = 2e-4;        // a step never spans more than this (guards against missed grazing contacts)
   double event_time_tol_s = 1e-14; // events are located to this
+  // Watchdogs (docs/model.md, "When the simulation stops"): work (ODE steps + pieces) allowed since the last
+  // Reset (0: no limit) and a wall-clock deadline (max(): none). Independently of both, a state that is not
+  // finite, steps that shrink below 1e-15 of the time scale for 1000 steps in a row, and 100000 pieces at one
+  // instant stop the simulation with the reason (Simulator::failed).
+  std::uint64_t max_work = 0;
+  std::chrono::steady_clock::time_point deadline = std::chrono::steady_clock::time_point::max();
 };
 
 class Simulator {
@@ -104,6 +111,15 @@ class Simulator {
   void AdvanceTo(double t_end_s, SimObserver* observer);
   // Emits the sample at the current time if it lies on the grid and has not been emitted (end of a run).
   void EmitPendingSample(SimObserver* observer);
+
+  // The watchdog stopped the simulation: AdvanceTo then does nothing until Reset. failure() says why
+  // (a static string; no allocation on the real-time path), failure_t_s() when.
+  bool failed() const { return failure_ != nullptr; }
+  const char* failure() const { return failure_; }
+  double failure_t_s() const { return failure_t_s_; }
+  // Replaces the watchdog's budget and deadline for the following AdvanceTo calls and restarts its count (a
+  // bench sets one per control tick).
+  void SetWatchdog(std::uint64_t max_work, std::chrono::steady_clock::time_point deadline);
 
   double t_s() const { return t_; }
   double i_A() const { return i_; }  // the magnetising current (the force current)
@@ -231,6 +247,14 @@ class Simulator {
 
   double sample_period_s_ = 0.0;
   std::int64_t next_sample_ = 0;
+  // Watchdog (SolverOptions): work since Reset/SetWatchdog, consecutive collapsed steps and stalled pieces.
+  void Fail(const char* why);
+  bool CheckWatchdog();  // false (and failed) when a limit is reached
+  const char* failure_ = nullptr;
+  double failure_t_s_ = 0.0;
+  std::uint64_t work_ = 0;
+  int tiny_steps_ = 0;
+  int stalled_pieces_ = 0;
 
   Stepper stepper_;
   bool stepper_valid_ = false;

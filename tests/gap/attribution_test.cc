@@ -182,5 +182,32 @@ TEST(Attribution, PracticeSensorLagWithTheFullCatalog) {
   EXPECT_GT(d->ranking.front().closed, 0.9);
 }
 
+
+// Bounded fits: a candidate that runs out of its wall-time budget is reported as failed with the reason, and
+// the diagnosis goes on with the others.
+TEST(Attribution, ACandidateOutOfTimeFailsWithItsReasonAndTheOthersGoOn) {
+  const model::PlantParams nominal = *model::Preset("taghizadeh2009");
+  const Dataset ds = Session(With("supply_resistance", {{"R_s", 0.8}}), 3);
+  std::vector<Candidate> cands = Pick({"supply_resistance", "param:R", "eddy_currents"});
+  AttributionOptions opt;
+  opt.candidate_budget_s = 1e-6;  // nothing can be fitted in a microsecond
+  std::vector<bool> mask;
+  for (const auto& r : ds.runs) mask.push_back(r.split != "holdout");
+  auto rows = Attribute(ds, mask, nominal, cands, 0.002, opt);
+  ASSERT_TRUE(rows.ok()) << rows.status().message();
+  ASSERT_EQ(rows->size(), cands.size());
+  for (const auto& row : *rows) {
+    EXPECT_FALSE(row.status.ok()) << row.name;
+    EXPECT_NE(row.status.message().find("wall-time budget"), std::string::npos) << row.status.message();
+  }
+  // A whole diagnosis with its deadline already gone still answers, saying why nothing was fitted.
+  DiagnoseOptions dopt;
+  dopt.budget_s = 0.0;
+  auto d = Diagnose(ds, nominal, dopt);
+  ASSERT_TRUE(d.ok()) << d.status().message();
+  EXPECT_EQ(d->verdict, "unknown");
+  EXPECT_NE(d->ranking.front().status.message().find("time budget"), std::string::npos);
+}
+
 }  // namespace
 }  // namespace vb::gap

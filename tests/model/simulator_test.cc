@@ -1,7 +1,9 @@
 // The emulator against an independent high-accuracy solver (../shared/perfref: CVODE Adams, rtol 1e-11).
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <cmath>
+#include <string>
 
 #include "model/simulator.h"
 #include "perfref.h"
@@ -201,6 +203,50 @@ TEST(Disturbance, ForceAloneOpensTheValveWithoutCurrent) {
   EXPECT_EQ(rec.events[1].kind, EventKind::kOpen);
   EXPECT_EQ(sim.i_A(), 0.0);
   EXPECT_EQ(sim.contact(), Contact::kUpper);
+}
+
+
+// The watchdog (docs/model.md): inputs no valve can see stop the simulation with a reason instead of hanging.
+TEST(Watchdog, AHugeDisturbanceForceStopsWithAReasonInsteadOfHanging) {
+  Plant plant(*Preset("taghizadeh2009"));
+  Simulator sim(plant, DriverParams{}, Conditions{24.0, 0.0});
+  sim.SetDisturbance(Disturbance{0.0, -1e308, 50.0});
+  sim.SetGate(1);
+  const auto t0 = std::chrono::steady_clock::now();
+  sim.AdvanceTo(0.05, nullptr);
+  const double wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  ASSERT_TRUE(sim.failed());
+  EXPECT_NE(std::string(sim.failure()).find("not finite"), std::string::npos) << sim.failure();
+  EXPECT_LT(sim.failure_t_s(), 0.05);
+  EXPECT_LT(wall_s, 5.0);
+  // Nothing more happens until Reset, which clears it.
+  sim.AdvanceTo(0.1, nullptr);
+  EXPECT_LT(sim.t_s(), 0.05);
+  sim.Reset();
+  EXPECT_FALSE(sim.failed());
+}
+
+TEST(Watchdog, TheStepBudgetAndTheDeadlineStopALongSimulation) {
+  Plant plant(*Preset("taghizadeh2009"));
+  SolverOptions budget;
+  budget.max_work = 20;  // the opening alone takes more ODE steps than this
+  Simulator sim(plant, DriverParams{}, Conditions{24.0, 0.0}, budget);
+  sim.SetGate(1);
+  sim.AdvanceTo(1.0, nullptr);
+  ASSERT_TRUE(sim.failed());
+  EXPECT_NE(std::string(sim.failure()).find("step budget"), std::string::npos);
+  sim.Reset();
+  sim.SetWatchdog(0, std::chrono::steady_clock::now() - std::chrono::seconds(1));
+  sim.SetGate(1);
+  sim.AdvanceTo(1.0, nullptr);
+  ASSERT_TRUE(sim.failed());
+  EXPECT_NE(std::string(sim.failure()).find("deadline"), std::string::npos);
+  // Without limits the same run finishes.
+  Simulator free_run(plant, DriverParams{}, Conditions{24.0, 0.0});
+  free_run.SetGate(1);
+  free_run.AdvanceTo(1.0, nullptr);
+  EXPECT_FALSE(free_run.failed());
+  EXPECT_EQ(free_run.t_s(), 1.0);
 }
 
 }  // namespace
