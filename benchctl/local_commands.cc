@@ -27,6 +27,12 @@ using Json = nlohmann::ordered_json;
 
 Json Number(double v) { return std::isfinite(v) ? Json(v) : Json(nullptr); }
 
+Json KeyJson(const RunKey& key) {
+  Json sweep = Json::array();
+  for (const auto& c : key.sweep) sweep.push_back({{"field", c.field}, {"value", c.value}});
+  return {{"name", key.name}, {"sweep", sweep}, {"repeat", key.repeat}};
+}
+
 Json SummaryJson(const vb::benchctl::LocalRunResult& r) {
   const auto& s = r.summary;
   Json j;
@@ -34,7 +40,8 @@ Json SummaryJson(const vb::benchctl::LocalRunResult& r) {
     j["run_id"] = r.run_id;
     j["batch_id"] = r.batch_id;
   }
-  j["name"] = r.name;
+  j["name"] = r.key.DisplayName();
+  j["key"] = KeyJson(r.key);
   j["controller"] = r.controller;
   j["tags"] = r.tags;
   j["status"] = vb::experiment::TerminationName(s.termination);
@@ -60,11 +67,11 @@ Json SummaryJson(const vb::benchctl::LocalRunResult& r) {
 void PrintHuman(const vb::benchctl::LocalRunResult& r) {
   const auto& s = r.summary;
   if (r.run_id != 0) {
-    std::printf("run %s [%s] (local run %lld, batch %lld): %s\n", r.name.c_str(), r.controller.c_str(),
+    std::printf("run %s [%s] (local run %lld, batch %lld): %s\n", r.key.DisplayName().c_str(), r.controller.c_str(),
                 static_cast<long long>(r.run_id), static_cast<long long>(r.batch_id),
                 vb::experiment::TerminationName(s.termination));
   } else {
-    std::printf("run %s [%s]: %s\n", r.name.c_str(), r.controller.c_str(), vb::experiment::TerminationName(s.termination));
+    std::printf("run %s [%s]: %s\n", r.key.DisplayName().c_str(), r.controller.c_str(), vb::experiment::TerminationName(s.termination));
   }
   if (!s.message.empty()) std::printf("  reason: %s\n", s.message.c_str());
   std::printf("  %.6g s simulated, %zu samples, %llu control ticks, %.3g s wall, %.0fx real time\n", s.duration_s,
@@ -87,18 +94,11 @@ std::string IndexedPath(const std::string& path, size_t k, size_t n) {
   return out;
 }
 
-// Strips the repeat tag so that repeats of one configuration share a name.
-std::string GroupName(const vb::benchctl::LocalRunResult& r) {
-  std::string name = r.name;
-  const size_t pos = name.find(" repeat:");
-  return pos == std::string::npos ? name : name.substr(0, pos);
-}
-
 std::vector<vb::experiment::RunRecord> Records(const std::vector<vb::benchctl::LocalRunResult>& results) {
   std::vector<vb::experiment::RunRecord> out;
   for (const auto& r : results) {
     vb::experiment::RunRecord rec;
-    rec.name = GroupName(r);
+    rec.name = r.key.CaseName();
     rec.controller = r.controller;
     rec.ok = r.summary.ok();
     for (const auto& [name, value] : vb::experiment::MetricList(r.summary.metrics)) rec.metrics[name] = value;
@@ -152,7 +152,7 @@ int CmdCompareLocalBatch(const std::string& store_path, std::int64_t batch, bool
     if (!page.ok()) return Fail(page.status());
     for (const auto& r : *page) {
       vb::experiment::RunRecord rec;
-      rec.name = r.name.substr(0, r.name.find(" repeat:"));
+      rec.name = r.key.CaseName();
       rec.controller = r.controller;
       rec.ok = r.status == vb::db::RunStatus::kDone;
       auto metrics = (*store)->GetMetrics(r.id);
@@ -173,10 +173,10 @@ int CmdCompare(const std::string& input, bool local, const std::string& store_pa
   if (local) {
     auto spec = vb::experiment::LoadSpecFile(input);
     if (!spec.ok()) return Fail(spec.status());
-    auto results = vb::benchctl::RunLocal(*spec, false, false, store_path);
+    auto results = vb::benchctl::RunLocal({{*spec}, {}, spec->name(), "", false, false, store_path});
     if (!results.ok()) return Fail(results.status().WithContext(input));
     for (const auto& r : *results)
-      std::fprintf(stderr, "%s [%s]: %s\n", r.name.c_str(), r.controller.c_str(), r.summary.BriefReport().c_str());
+      std::fprintf(stderr, "%s [%s]: %s\n", r.key.DisplayName().c_str(), r.controller.c_str(), r.summary.BriefReport().c_str());
     return PrintComparison(vb::experiment::Compare(Records(*results)), json, csv);
   }
   std::ifstream in(input);
@@ -196,9 +196,16 @@ int CmdCompare(const std::string& input, bool local, const std::string& store_pa
         !r["metrics"].is_object())
       return Fail(Status::InvalidArgument(where + ": expected a run summary with 'name' and 'metrics'"));
     vb::experiment::RunRecord rec;
+    // Repeats group on the run's key (written by `run --json`); a summary without one is its own case.
     rec.name = r["name"].get<std::string>();
-    const size_t pos = rec.name.find(" repeat:");
-    if (pos != std::string::npos) rec.name = rec.name.substr(0, pos);
+    if (r.contains("key") && r["key"].is_object()) {
+      const Json& k = r["key"];
+      RunKey key{k.value("name", rec.name), {}, k.value("repeat", -1)};
+      if (k.contains("sweep") && k["sweep"].is_array())
+        for (const auto& c : k["sweep"])
+          if (c.is_object()) key.sweep.push_back({c.value("field", ""), c.value("value", 0.0)});
+      rec.name = key.CaseName();
+    }
     rec.controller = r.value("controller", "");
     rec.ok = r.value("status", "done") == "done";
     for (const auto& [key, value] : r["metrics"].items()) {
@@ -220,7 +227,7 @@ void PrintCsv(const std::vector<vb::benchctl::LocalRunResult>& results) {
   for (const auto& [name, value] : vb::experiment::MetricList(vb::experiment::Metrics{})) std::printf(",%s", name.c_str());
   std::printf("\n");
   for (const auto& r : results) {
-    std::printf("\"%s\",%s,%s,%.9g,%zu,%.6g", r.name.c_str(), r.controller.c_str(),
+    std::printf("\"%s\",%s,%s,%.9g,%zu,%.6g", r.key.DisplayName().c_str(), r.controller.c_str(),
                 vb::experiment::TerminationName(r.summary.termination), r.summary.duration_s, r.summary.samples,
                 r.summary.wall_s);
     for (const auto& [name, value] : vb::experiment::MetricList(r.summary.metrics)) {
@@ -242,7 +249,7 @@ int CmdRun(const std::string& spec_path, bool local, const std::string& store_pa
   }
   auto spec = vb::experiment::LoadSpecFile(spec_path);
   if (!spec.ok()) return Fail(spec.status());
-  auto results = vb::benchctl::RunLocal(*spec, realtime, !trace_csv.empty(), store_path);
+  auto results = vb::benchctl::RunLocal({{*spec}, {}, spec->name(), "", realtime, !trace_csv.empty(), store_path});
   if (!results.ok()) return Fail(results.status().WithContext(spec_path));
   int exit_code = kExitOk;
   Json all = Json::array();

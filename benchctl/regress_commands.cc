@@ -11,6 +11,7 @@
 
 #include "benchctl/cli_common.h"
 #include "benchctl/local_run.h"
+#include "proto/api_convert.h"
 #include "db/store.h"
 #include "experiment/spec.h"
 #include "regress/compare.h"
@@ -50,7 +51,8 @@ StatusOr<std::vector<regress::RunMetrics>> BatchRunsLocal(db::Store& store, std:
     for (const auto& r : *page) {
       regress::RunMetrics m;
       m.run_id = r.id;
-      m.name = r.name;
+      m.name = r.key.DisplayName();
+      m.case_name = r.key.CaseName();
       m.ok = r.status == db::RunStatus::kDone;
       m.reason = m.ok ? "" : std::string(db::RunStatusName(r.status)) + (r.reason.empty() ? "" : ": " + r.reason);
       auto metrics = store.GetMetrics(r.id);
@@ -77,6 +79,7 @@ StatusOr<std::vector<regress::RunMetrics>> BatchRunsRemote(client::Client& c, st
       regress::RunMetrics m;
       m.run_id = r.id();
       m.name = r.name();
+      m.case_name = api::FromProto(r.key()).CaseName();
       m.ok = r.status() == v1::DONE;
       if (!m.ok) m.reason = v1::RunStatus_Name(r.status()) + (r.reason().empty() ? "" : ": " + r.reason());
       for (const auto& [k, v] : r.metrics()) m.metrics[k] = v;
@@ -101,7 +104,11 @@ StatusOr<SuiteOutcome> RunSuite(const regress::LoadedSuite& suite, std::uint64_t
   auto runs = regress::ExpandSuite(suite.suite, seed);
   if (!runs.ok()) return runs.status();
   std::vector<v1::ExperimentSpec> specs;
-  for (auto& r : *runs) specs.push_back(r.spec);
+  std::vector<RunKey> keys;
+  for (auto& r : *runs) {
+    specs.push_back(r.spec);
+    keys.push_back(r.key);
+  }
   SuiteOutcome out;
   if (server.empty()) {
     for (const auto& r : *runs)
@@ -112,23 +119,26 @@ StatusOr<SuiteOutcome> RunSuite(const regress::LoadedSuite& suite, std::uint64_t
     google::protobuf::util::JsonPrintOptions o;
     o.preserve_proto_field_names = true;
     (void)google::protobuf::util::MessageToJsonString(suite.suite, &suite_json, o);
-    auto results = RunLocalPoints(specs, suite.suite.name(), suite_json, false, false, store_path);
+    auto results = RunLocal({std::move(specs), std::move(keys), suite.suite.name(), suite_json, false, false, store_path});
     if (!results.ok()) return results.status();
     for (const auto& r : *results) {
       regress::RunMetrics m;
       m.run_id = r.run_id;
-      m.name = r.name;
+      m.name = r.key.DisplayName();
+      m.case_name = r.key.CaseName();
       m.ok = r.summary.ok();
       m.reason = r.summary.message;
       for (const auto& [k, v] : experiment::MetricList(r.summary.metrics)) m.metrics[k] = v;
       out.batch_id = r.batch_id;
+      std::fprintf(stderr, "  %s: %s\n", m.name.c_str(), r.summary.BriefReport().c_str());
       out.runs.push_back(std::move(m));
-      std::fprintf(stderr, "  %s: %s\n", r.name.c_str(), r.summary.BriefReport().c_str());
     }
     return out;
   }
   auto c = make_client();
-  auto resp = c->SubmitBatch(specs, suite.suite.name());
+  std::vector<v1::RunKey> key_protos;
+  for (const auto& k : keys) key_protos.push_back(api::ToProto(k));
+  auto resp = c->SubmitBatch(specs, suite.suite.name(), key_protos);
   if (!resp.ok()) return resp.status().WithContext(suite.path.empty() ? suite.suite.name() : suite.path);
   out.batch_id = resp->batch_id();
   std::fprintf(stderr, "suite %s: batch %lld, %d runs on %s\n", suite.suite.name().c_str(),

@@ -9,6 +9,7 @@
 
 #include "benchctl/cli_common.h"
 #include "db/store.h"
+#include "proto/api_convert.h"
 #include "experiment/compare.h"
 #include "experiment/metrics.h"
 #include "report/report.h"
@@ -32,12 +33,11 @@ std::string Controlled(const std::string& controller) {
 // What a report needs of one run, wherever it came from.
 struct RunInfo {
   std::int64_t id = 0;
-  std::string name, controller;
+  RunKey key;
+  std::string controller;
   bool ok = true;
   std::map<std::string, double> metrics;
 };
-
-std::string Case(const std::string& name) { return name.substr(0, name.find(" repeat:")); }
 
 Json BatchSections(const std::string& where, std::int64_t batch, const std::vector<RunInfo>& runs,
                    const std::vector<report::TraceData>& traces) {
@@ -45,9 +45,9 @@ Json BatchSections(const std::string& where, std::int64_t batch, const std::vect
   std::vector<experiment::RunRecord> recs;
   std::vector<report::MapPoint> map;
   for (const auto& r : runs) {
-    recs.push_back({Case(r.name), r.controller, r.ok, r.metrics});
+    recs.push_back({r.key.CaseName(), r.controller, r.ok, r.metrics});
     auto it = r.metrics.find("mean_position_pct");
-    if (r.ok && it != r.metrics.end()) map.push_back({r.name, it->second});
+    if (r.ok && it != r.metrics.end()) map.push_back({r.key, it->second});
   }
   sections.push_back({{"kind", "note"},
                       {"text", "Batch " + std::to_string(batch) + " (" + where + "): " + std::to_string(runs.size()) +
@@ -108,7 +108,7 @@ StatusOr<std::vector<RunInfo>> LocalRuns(db::Store& store, std::int64_t batch, s
   }
   std::vector<RunInfo> out;
   for (const auto& r : recs) {
-    RunInfo i{r.id, r.name, r.controller, r.status == db::RunStatus::kDone, {}};
+    RunInfo i{r.id, r.key, r.controller, r.status == db::RunStatus::kDone, {}};
     auto m = store.GetMetrics(r.id);
     if (!m.ok()) return m.status();
     for (const auto& x : *m) i.metrics[x.name] = x.value;
@@ -120,7 +120,7 @@ StatusOr<std::vector<RunInfo>> LocalRuns(db::Store& store, std::int64_t batch, s
 StatusOr<std::vector<RunInfo>> RemoteRuns(client::Client& c, std::int64_t batch, std::int64_t run) {
   std::vector<RunInfo> out;
   auto add = [&](const v1::Run& r) {
-    RunInfo i{r.id(), r.name(), r.controller(), r.status() == v1::DONE, {}};
+    RunInfo i{r.id(), api::FromProto(r.key()), r.controller(), r.status() == v1::DONE, {}};
     for (const auto& [k, v] : r.metrics()) i.metrics[k] = v;
     out.push_back(std::move(i));
   };
@@ -216,7 +216,7 @@ int ReportCli::Run(const ClientFactory& make_client) {
       for (std::size_t k = 0; k < runs.size() && static_cast<int>(k) < max_traces_; ++k) {
         auto chunks = (*store)->ReadTrace(runs[k].id);
         if (!chunks.ok()) return Fail(chunks.status());
-        traces.push_back(FromChunks("run " + std::to_string(runs[k].id) + ": " + runs[k].name,
+        traces.push_back(FromChunks("run " + std::to_string(runs[k].id) + ": " + runs[k].key.DisplayName(),
                                     Controlled(runs[k].controller), *chunks));
       }
       where = "local store";
@@ -229,13 +229,13 @@ int ReportCli::Run(const ClientFactory& make_client) {
         if (!runs[k].ok) continue;
         auto t = c->GetTrace(runs[k].id);
         if (!t.ok()) return Fail(t.status());
-        traces.push_back(FromFetched("run " + std::to_string(runs[k].id) + ": " + runs[k].name,
+        traces.push_back(FromFetched("run " + std::to_string(runs[k].id) + ": " + runs[k].key.DisplayName(),
                                      Controlled(runs[k].controller), *t));
       }
       where = "server " + server;
     }
     if (run_ != 0) {
-      title = "Run " + std::to_string(run_) + ": " + runs.front().name;
+      title = "Run " + std::to_string(run_) + ": " + runs.front().key.DisplayName();
       std::vector<std::pair<std::string, double>> m(runs.front().metrics.begin(), runs.front().metrics.end());
       sections.push_back(report::TraceSection(traces));
       sections.push_back(report::MetricsSection("Metrics (docs/metrics.md)", m));

@@ -8,11 +8,13 @@
 
 #include <cstdint>
 #include <functional>
+#include <limits>
 #include <memory>
 #include <optional>
 #include <string>
 #include <vector>
 
+#include "common/run_key.h"
 #include "common/status.h"
 
 namespace vb::db {
@@ -24,7 +26,7 @@ StatusOr<RunStatus> ParseRunStatus(const std::string& name);
 struct RunRecord {
   std::int64_t id = 0;
   std::int64_t batch_id = 0;
-  std::string name;                 // spec name + sweep/repeat tags
+  RunKey key;                       // spec name, sweep point, repeat (columns since schema v3)
   std::string controller;           // law name, e.g. "pi_current"
   std::string bench_kind;           // spec's bench selector kind ("emulated", ...)
   std::string bench_name;           // spec's requested bench ("" = any); after claiming: the bench that ran it
@@ -37,6 +39,10 @@ struct RunRecord {
   double submitted_unix_s = 0.0, started_unix_s = 0.0, finished_unix_s = 0.0;
   double progress = 0.0;            // 0..1, last reported
   std::vector<std::string> tags;
+  // Imported (measured) runs only, schema v3: the dataset's split ("fit", "holdout"; "" = none) and the run's
+  // start time within its dataset session (NaN = not an imported run).
+  std::string split;
+  double t_start_s = std::numeric_limits<double>::quiet_NaN();
 };
 
 struct StatusChange {

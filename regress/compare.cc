@@ -101,7 +101,7 @@ Measured Summarise(const std::vector<RunMetrics>& runs) {
   Measured m;
   std::map<std::string, std::map<std::string, std::vector<double>>> values;
   for (const auto& r : runs) {
-    const std::string c = CaseOfRunName(r.name);
+    const std::string& c = r.case_name;
     auto& per = values[c];
     if (!r.ok) {
       m.failures[c].push_back("run " + std::to_string(r.run_id) + " (" + r.name + "): " +

@@ -19,7 +19,6 @@
 #include "server/config.h"
 #include "server/nights.h"
 #include "server/service.h"
-#include "server/workers.h"
 
 int main(int argc, char** argv) {
   CLI::App app{"valvebench-server: the bench server"};
@@ -64,10 +63,9 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "valvebench-server: %d run(s) were running when the server stopped: marked interrupted\n",
                  *recovered);
 
-  vb::server::Registry registry;
-  std::vector<std::unique_ptr<vb::server::Worker>> workers;
-  for (const auto& b : settings->benches)
-    workers.push_back(std::make_unique<vb::server::Worker>(b, settings->database_path, &registry));
+  vb::runs::Registry registry;
+  std::vector<std::unique_ptr<vb::runs::Worker>> workers;
+  for (const auto& b : settings->benches) workers.push_back(std::make_unique<vb::runs::Worker>(b, &registry));
   vb::server::StorePool pool(settings->database_path);
   vb::server::BenchServiceImpl service(&settings.value(), &pool, &registry, &workers);
 
@@ -92,15 +90,11 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "valvebench-server: cannot listen on %s\n", settings->listen_address.c_str());
     return 3;
   }
-  for (auto& w : workers) w->Start();
+  for (auto& w : workers) w->Start(settings->database_path);
   std::unique_ptr<vb::server::NightScheduler> nights;
   if (settings->nights.enabled) {
     nights = std::make_unique<vb::server::NightScheduler>(
-        settings->nights, &pool,
-        [&service](const std::string& user, const std::vector<valvebench::v1::ExperimentSpec>& specs,
-                   const std::string& batch, valvebench::v1::SubmitRunResponse* resp) {
-          return service.SubmitAs(user, specs, batch, resp);
-        });
+        settings->nights, &pool, [&service](const vb::runs::Submission& s) { return service.Queue(s); });
     nights->Start(run_night_now);
   }
   // The address with the port actually bound (a config may ask for port 0: any free port).

@@ -134,16 +134,18 @@ StatusOr<std::int64_t> NightScheduler::RunNight(double fire_unix_s) {
   auto runs = regress::ExpandSuite(suite->suite, seed);
   if (!runs.ok()) return error(runs.status());
   std::vector<v1::ExperimentSpec> specs;
+  std::vector<RunKey> keys;
   for (auto& r : *runs) {
+    keys.push_back(r.key);
     r.spec.add_tags("night");
     r.spec.add_tags("night:" + date);
     specs.push_back(std::move(r.spec));
   }
-  v1::SubmitRunResponse resp;
-  if (auto st = submit_("nights", specs, "night:" + date, &resp); !st.ok()) return error(st.WithContext("submit"));
-  batch_id = resp.batch_id();
+  auto queued = submit_(runs::Submission{"nights", "night:" + date, std::move(specs), std::move(keys), ""});
+  if (!queued.ok()) return error(queued.status().WithContext("submit"));
+  batch_id = queued->batch_id;
   std::fprintf(stderr, "valvebench-server: night %s: suite %s, batch %lld, %d runs\n", date.c_str(), suite_name.c_str(),
-               static_cast<long long>(batch_id), resp.run_ids_size());
+               static_cast<long long>(batch_id), static_cast<int>(queued->run_ids.size()));
   std::fflush(stderr);
 
   // Wait for every run of the batch to end; collect what regress compares.
@@ -174,7 +176,8 @@ StatusOr<std::int64_t> NightScheduler::RunNight(double fire_unix_s) {
       for (const auto& r : all) {
         regress::RunMetrics m;
         m.run_id = r.id;
-        m.name = r.name;
+        m.name = r.key.DisplayName();
+        m.case_name = r.key.CaseName();
         m.ok = r.status == db::RunStatus::kDone;
         m.reason = m.ok ? "" : std::string(db::RunStatusName(r.status)) + (r.reason.empty() ? "" : ": " + r.reason);
         auto metrics = (*store)->GetMetrics(r.id);

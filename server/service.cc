@@ -7,10 +7,10 @@
 #include <cmath>
 #include <thread>
 
-#include "experiment/capabilities.h"
 #include "experiment/compare.h"
 #include "experiment/spec.h"
 #include "hw/usb/list_attached.h"
+#include "proto/api_convert.h"
 #include "server/grpc_status.h"
 
 namespace vb::server {
@@ -55,18 +55,6 @@ bool Finished(db::RunStatus s) {
   return s == db::RunStatus::kDone || s == db::RunStatus::kFailed || s == db::RunStatus::kCancelled;
 }
 
-std::string LawName(const v1::ExperimentSpec& spec) {
-  const auto* f = spec.controller().GetDescriptor()->FindFieldByNumber(spec.controller().law_case());
-  return f != nullptr ? f->name() : "";
-}
-
-std::string RunName(const v1::ExperimentSpec& spec) {
-  std::string name = spec.name();
-  for (const auto& tag : spec.tags())
-    if (tag.rfind("sweep:", 0) == 0 || tag.rfind("repeat:", 0) == 0) name += " " + tag;
-  return name;
-}
-
 }  // namespace
 
 grpc::Status BenchServiceImpl::Authorize(grpc::ServerContext* ctx, Role need, Principal* who) const {
@@ -86,7 +74,8 @@ grpc::Status BenchServiceImpl::SubmitRun(grpc::ServerContext* ctx, const v1::Sub
                                          v1::SubmitRunResponse* resp) {
   Principal who;
   if (auto st = Authorize(ctx, Role::kOperator, &who); !st.ok()) return st;
-  return Submit(who, {req->spec()}, req->batch_name().empty() ? req->spec().name() : req->batch_name(), resp);
+  return Submit({who.user, req->batch_name().empty() ? req->spec().name() : req->batch_name(), {req->spec()}, {}, ""},
+                resp);
 }
 
 grpc::Status BenchServiceImpl::SubmitBatch(grpc::ServerContext* ctx, const v1::SubmitBatchRequest* req,
@@ -94,103 +83,36 @@ grpc::Status BenchServiceImpl::SubmitBatch(grpc::ServerContext* ctx, const v1::S
   Principal who;
   if (auto st = Authorize(ctx, Role::kOperator, &who); !st.ok()) return st;
   if (req->specs_size() == 0) return ToGrpcStatus(Status::InvalidArgument("specs: at least one spec is needed"));
-  std::vector<v1::ExperimentSpec> specs(req->specs().begin(), req->specs().end());
-  return Submit(who, specs, req->batch_name(), resp);
+  runs::Submission sub{who.user, req->batch_name(), {req->specs().begin(), req->specs().end()}, {}, ""};
+  for (const auto& k : req->keys()) sub.keys.push_back(api::FromProto(k));
+  return Submit(sub, resp);
 }
 
-grpc::Status BenchServiceImpl::Submit(const Principal& who, const std::vector<v1::ExperimentSpec>& specs,
-                                      const std::string& batch_name, v1::SubmitRunResponse* resp) {
-  const v1::Limits& lim = settings_->limits;
-  std::vector<db::RunRecord> runs;
-  for (size_t s = 0; s < specs.size(); ++s) {
-    const std::string where = specs.size() > 1 ? "specs[" + std::to_string(s) + "]" : "spec";
-    if (specs[s].ByteSizeLong() > lim.max_spec_bytes())
-      return ToGrpcStatus(Status::ResourceExhausted(where + ": " + std::to_string(specs[s].ByteSizeLong()) +
-                                                    " bytes exceed the server limit of " +
-                                                    std::to_string(lim.max_spec_bytes())));
-    auto points = experiment::ExpandSweep(specs[s], lim.max_runs_per_submission());
-    if (!points.ok()) return ToGrpcStatus(points.status());
-    for (size_t k = 0; k < points->size(); ++k) {
-      const v1::ExperimentSpec& p = (*points)[k];
-      const std::string run_where = points->size() > 1 ? "run " + std::to_string(k) + " (" + RunName(p) + ")" : "";
-      auto ctxt = [&](const Status& st) { return run_where.empty() ? st : st.WithContext(run_where); };
-      auto e = experiment::BuildExperiment(p);
-      if (!e.ok()) return ToGrpcStatus(ctxt(e.status()));
-      if (e->duration_s > lim.max_duration_s())
-        return ToGrpcStatus(ctxt(Status::ResourceExhausted("duration_s: " + FormatNumber(e->duration_s) +
-                                                           " s exceeds the server limit of " +
-                                                           FormatNumber(lim.max_duration_s()) + " s")));
-      if (e->run.sample_rate_Hz > lim.max_record_rate_hz())
-        return ToGrpcStatus(ctxt(Status::ResourceExhausted("recording.rate_Hz: " + FormatNumber(e->run.sample_rate_Hz) +
-                                                           " Hz exceeds the server limit of " +
-                                                           FormatNumber(lim.max_record_rate_hz()) + " Hz")));
-      // Capabilities decide at submission, not at run time.
-      const std::string cls = SpecBenchClass(p);
-      bool compatible = false;
-      std::string available, refusals;
-      for (const auto& b : settings_->benches) {
-        available += (available.empty() ? "" : ", ") + b.name + " (" + b.bench_class + ")";
-        if (b.bench_class != cls) continue;
-        if (!p.bench().name().empty() && p.bench().name() != b.name) continue;
-        if (Status why = experiment::CheckCapabilities(*e, b.caps); !why.ok()) {
-          refusals += "; " + b.name + ": " + why.message();
-          continue;
-        }
-        compatible = true;
-      }
-      if (!compatible)
-        return ToGrpcStatus(ctxt(Status::FailedPrecondition(
-            "bench: no configured bench can run it (needs " + cls +
-            (p.bench().name().empty() ? "" : " named " + p.bench().name()) + " at " + FormatNumber(e->run.supply_V) +
-            " V; configured: " + available + ")" + refusals)));
-      db::RunRecord r;
-      r.name = RunName(p);
-      r.controller = LawName(p);
-      r.bench_kind = cls;
-      r.bench_name = p.bench().name();
-      r.spec_json = experiment::SpecToJson(p, false);
-      r.submitter = who.user;
-      r.priority = p.priority();
-      r.requeue_on_interrupt = !p.never_requeue();
-      r.tags.assign(p.tags().begin(), p.tags().end());
-      runs.push_back(std::move(r));
-      if (runs.size() > lim.max_runs_per_submission())
-        return ToGrpcStatus(Status::ResourceExhausted("submission expands to more than " +
-                                                      std::to_string(lim.max_runs_per_submission()) + " runs"));
-    }
-  }
+StatusOr<runs::Queued> BenchServiceImpl::Queue(const runs::Submission& submission) {
+  auto admitted = runs::Admit(submission, policy_);
+  if (!admitted.ok()) return admitted.status();
   auto store = pool_->Acquire();
-  if (!store.ok()) return ToGrpcStatus(store.status());
-  auto queued = (*store)->CountQueued(who.user);
-  if (!queued.ok()) return ToGrpcStatus(queued.status());
-  if (static_cast<std::uint64_t>(*queued) + runs.size() > lim.max_queued_runs_per_user())
-    return ToGrpcStatus(Status::ResourceExhausted(
-        "user " + who.user + " has " + std::to_string(*queued) + " queued runs; " + std::to_string(runs.size()) +
-        " more would exceed the limit of " + std::to_string(lim.max_queued_runs_per_user())));
-  std::string batch_json;
-  if (specs.size() == 1) batch_json = experiment::SpecToJson(specs[0], false);
-  std::vector<std::int64_t> ids;
-  auto batch = (*store)->SubmitBatch(who.user, batch_name, batch_json, std::move(runs), &ids);
-  if (!batch.ok()) return ToGrpcStatus(batch.status());
-  resp->set_batch_id(*batch);
-  for (auto id : ids) resp->add_run_ids(id);
-  registry_->NotifyWork();
-  return grpc::Status::OK;
+  if (!store.ok()) return store.status();
+  auto queued = runs::Enqueue(store->get(), std::move(admitted.value()), policy_);
+  if (queued.ok()) registry_->NotifyWork();
+  return queued;
 }
 
-Status BenchServiceImpl::SubmitAs(const std::string& user, const std::vector<v1::ExperimentSpec>& specs,
-                                  const std::string& batch_name, v1::SubmitRunResponse* resp) {
-  const grpc::Status st = Submit(Principal{user, Role::kOperator}, specs, batch_name, resp);
-  if (st.ok()) return Status::Ok();
-  if (st.error_code() == grpc::StatusCode::UNAVAILABLE || st.error_code() == grpc::StatusCode::INTERNAL)
-    return Status::Unavailable(st.error_message());
-  return Status::FailedPrecondition(st.error_message());
+grpc::Status BenchServiceImpl::Submit(const runs::Submission& submission, v1::SubmitRunResponse* resp) {
+  auto queued = Queue(submission);
+  if (!queued.ok()) return ToGrpcStatus(queued.status());
+  resp->set_batch_id(queued->batch_id);
+  for (auto id : queued->run_ids) resp->add_run_ids(id);
+  return grpc::Status::OK;
 }
 
 grpc::Status BenchServiceImpl::FillRun(db::Store* store, const db::RunRecord& r, bool full, v1::Run* out) {
   out->set_id(r.id);
   out->set_batch_id(r.batch_id);
-  out->set_name(r.name);
+  out->set_name(r.key.DisplayName());
+  *out->mutable_key() = api::ToProto(r.key);
+  out->set_split(r.split);
+  if (std::isfinite(r.t_start_s)) out->set_t_start_s(r.t_start_s);
   out->set_controller(r.controller);
   out->set_bench(r.bench_name);
   out->set_submitter(r.submitter);
@@ -332,7 +254,7 @@ grpc::Status BenchServiceImpl::WatchRun(grpc::ServerContext* ctx, const v1::Watc
     if (r->status == db::RunStatus::kRunning) {
       registry_->Progress(r->id, &progress);
       if (req->sample_rate_hz() >= 0.0) {
-        std::vector<LiveSample> samples;
+        std::vector<runs::LiveSample> samples;
         registry_->SamplesSince(r->id, &seq, &samples);
         for (const auto& s : samples) {
           auto* ls = ev.add_samples();
@@ -427,7 +349,7 @@ grpc::Status BenchServiceImpl::CompareRuns(grpc::ServerContext* ctx, const v1::C
   std::vector<experiment::RunRecord> records;
   for (const auto& r : runs) {
     experiment::RunRecord rec;
-    rec.name = r.name.substr(0, r.name.find(" repeat:"));
+    rec.name = r.key.CaseName();
     rec.controller = r.controller;
     rec.ok = r.status == db::RunStatus::kDone;
     auto metrics = (*store)->GetMetrics(r.id);
