@@ -107,28 +107,11 @@ std::vector<vb::experiment::RunRecord> Records(const std::vector<vb::benchctl::L
   return out;
 }
 
-Json ComparisonJson(const vb::experiment::Comparison& c) {
-  Json rows = Json::array();
-  for (const auto& r : c.rows) {
-    Json m = Json::object();
-    for (const auto& col : c.columns) {
-      const auto& s = r.metrics.at(col);
-      m[col] = s.n == 0 ? Json(nullptr) : Json{{"mean", s.mean}, {"spread", s.spread}, {"n", s.n}};
-    }
-    rows.push_back({{"rank", r.rank},
-                    {"name", r.name},
-                    {"controller", r.controller},
-                    {"runs", r.runs},
-                    {"failed", r.failed},
-                    {"pareto", r.pareto},
-                    {"metrics", m}});
-  }
-  return {{"rank_metric", c.rank_metric}, {"effort_metric", c.effort_metric}, {"rows", rows}};
-}
+}  // namespace
 
 int PrintComparison(const vb::experiment::Comparison& c, bool json, bool csv) {
   if (json) {
-    std::cout << ComparisonJson(c).dump(2) << "\n";
+    std::cout << vb::experiment::ComparisonJson(c);
   } else if (csv) {
     std::cout << vb::experiment::ComparisonCsv(c);
   } else {
@@ -137,35 +120,11 @@ int PrintComparison(const vb::experiment::Comparison& c, bool json, bool csv) {
   return kExitOk;
 }
 
-// compare --local --batch B: a batch recorded in the local store.
-}  // namespace
-
-int CmdCompareLocalBatch(const std::string& store_path, std::int64_t batch, bool json, bool csv) {
-  auto store = vb::db::Store::Open(store_path);
-  if (!store.ok()) return Fail(store.status().WithContext("local store " + store_path));
-  vb::db::RunFilter f;
-  f.batch_id = batch;
-  f.limit = 1000;
-  std::vector<vb::experiment::RunRecord> records;
-  for (;;) {
-    auto page = (*store)->ListRuns(f);
-    if (!page.ok()) return Fail(page.status());
-    for (const auto& r : *page) {
-      vb::experiment::RunRecord rec;
-      rec.name = r.key.CaseName();
-      rec.controller = r.controller;
-      rec.ok = r.status == vb::db::RunStatus::kDone;
-      auto metrics = (*store)->GetMetrics(r.id);
-      if (!metrics.ok()) return Fail(metrics.status());
-      for (const auto& m : *metrics) rec.metrics[m.name] = m.value;
-      records.push_back(std::move(rec));
-    }
-    if (static_cast<int>(page->size()) < f.limit) break;
-    f.after_id = page->back().id;
-  }
-  if (records.empty())
-    return Fail(Status::NotFound("batch " + std::to_string(batch) + " not found in the local store " + store_path));
-  return PrintComparison(vb::experiment::Compare(records), json, csv);
+int CmdCompareStored(Backend& backend, std::int64_t batch, const std::vector<std::int64_t>& run_ids, bool json,
+                     bool csv) {
+  auto c = backend.Compare(batch, run_ids);
+  if (!c.ok()) return Fail(c.status());
+  return PrintComparison(*c, json, csv);
 }
 
 // compare RESULTS.json (the output of `run --json`) or compare --local SPEC (runs it first).

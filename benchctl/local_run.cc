@@ -42,7 +42,7 @@ Status CancelLeftOvers(db::Store* store, const std::string& bench_class) {
 
 }  // namespace
 
-StatusOr<std::vector<LocalRunResult>> RunLocal(LocalSubmission sub) {
+StatusOr<std::vector<LocalRunResult>> RunLocal(LocalSubmission sub, db::Store* given) {
   const runs::BenchSetup bench = runs::LocalEmulatorSetup();
   runs::Policy policy;
   policy.benches = {bench};
@@ -55,27 +55,33 @@ StatusOr<std::vector<LocalRunResult>> RunLocal(LocalSubmission sub) {
 
   const bool stored = !sub.store_path.empty();
   const std::string where = stored ? "local store " + sub.store_path : "in-memory store";
-  if (stored) {
-    if (const auto parent = std::filesystem::path(sub.store_path).parent_path(); !parent.empty()) {
-      std::error_code ec;
-      std::filesystem::create_directories(parent, ec);
+  std::unique_ptr<db::Store> opened;
+  db::Store* store = given;
+  if (store == nullptr) {
+    if (stored) {
+      if (const auto parent = std::filesystem::path(sub.store_path).parent_path(); !parent.empty()) {
+        std::error_code ec;
+        std::filesystem::create_directories(parent, ec);
+      }
     }
+    auto s = db::Store::Open(stored ? sub.store_path : ":memory:");
+    if (!s.ok()) return s.status().WithContext(where);
+    opened = std::move(s.value());
+    store = opened.get();
   }
-  auto store = db::Store::Open(stored ? sub.store_path : ":memory:");
-  if (!store.ok()) return store.status().WithContext(where);
-  VB_RETURN_IF_ERROR(CancelLeftOvers(store->get(), bench.bench_class).WithContext(where));
+  VB_RETURN_IF_ERROR(CancelLeftOvers(store, bench.bench_class).WithContext(where));
 
   std::map<std::int64_t, LocalRunResult> pending;
   std::vector<LocalRunResult> shapes;
   for (const auto& r : admitted->runs) shapes.push_back({0, 0, r.key, r.tags, r.controller, {}, {}});
-  auto queued = runs::Enqueue(store->get(), std::move(admitted.value()), policy);
+  auto queued = runs::Enqueue(store, std::move(admitted.value()), policy);
   if (!queued.ok()) return queued.status().WithContext(where);
   for (size_t k = 0; k < queued->run_ids.size(); ++k) pending[queued->run_ids[k]] = std::move(shapes[k]);
 
   runs::Worker worker(bench, nullptr);
   std::vector<LocalRunResult> out;
   while (!pending.empty()) {
-    auto done = worker.ClaimAndExecute(store->get());
+    auto done = worker.ClaimAndExecute(store);
     if (!done.ok()) return done.status().WithContext(where);
     if (!done->has_value()) return Status::Internal(where + ": a submitted run was not there to claim");
     runs::Outcome& o = **done;
@@ -84,8 +90,8 @@ StatusOr<std::vector<LocalRunResult>> RunLocal(LocalSubmission sub) {
     if (!o.recorded) return Status::Unavailable(where + ": cannot record run " + std::to_string(o.run_id));
     LocalRunResult r = std::move(it->second);
     pending.erase(it);
-    r.run_id = stored ? o.run_id : 0;
-    r.batch_id = stored ? queued->batch_id : 0;
+    r.run_id = stored || given != nullptr ? o.run_id : 0;
+    r.batch_id = stored || given != nullptr ? queued->batch_id : 0;
     r.summary = std::move(o.summary);
     if (sub.keep_traces) r.trace = std::move(o.trace);
     out.push_back(std::move(r));

@@ -7,6 +7,7 @@
 
 #include "common/run_key.h"
 #include "common/status.h"
+#include "db/store.h"
 #include "experiment/runner.h"
 #include "experiment/spec.h"
 
@@ -35,7 +36,8 @@ struct LocalSubmission {
 // runs::Admit with the local emulator as the only bench and no limits, runs::Enqueue into the local store,
 // then a runs::Worker on the calling thread until the batch is done (in the store's claim order: priority,
 // then age). Runs of the local bench left queued by an interrupted invocation are cancelled first.
-StatusOr<std::vector<LocalRunResult>> RunLocal(LocalSubmission submission);
+// `store` (optional): an open store to use instead of opening store_path (the local backend keeps one).
+StatusOr<std::vector<LocalRunResult>> RunLocal(LocalSubmission submission, db::Store* store = nullptr);
 
 // Where local runs are recorded: $VALVEBENCH_DB, else ~/.local/share/valvebench/local.db, else ./valvebench-local.db.
 std::string DefaultLocalStorePath();

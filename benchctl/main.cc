@@ -154,14 +154,12 @@ int main(int argc, char** argv) {
     return vb::benchctl::RemoteRun(*c, spec_path, wait, out);
   }
   if (compare->parsed()) {
-    if (compare_local && batch != 0) {
-      if (store_path.empty()) return Fail(Status::InvalidArgument("--batch with --local needs the local store (--db)"));
-      return vb::benchctl::CmdCompareLocalBatch(store_path, batch, json, csv);
-    }
     if (batch != 0 || !run_ids.empty()) {
-      if (server.empty()) return need_server();
-      auto c = make_client();
-      return vb::benchctl::RemoteCompare(*c, batch, run_ids, out);
+      if (compare_local && store_path.empty())
+        return Fail(Status::InvalidArgument("--batch/--runs with --local need the local store (--db)"));
+      if (!compare_local && server.empty()) return need_server();
+      auto backend = vb::benchctl::ChooseBackend(compare_local ? "" : server, store_path, make_client);
+      return vb::benchctl::CmdCompareStored(*backend, batch, run_ids, json, csv);
     }
     if (compare_input.empty())
       return Fail(Status::InvalidArgument("compare: give --batch/--runs (server), or a results file or --local SPEC"));

@@ -7,6 +7,7 @@
 #include <iostream>
 #include <memory>
 
+#include "benchctl/backend.h"
 #include "benchctl/cli_common.h"
 #include "benchctl/hw_commands.h"
 #include "experiment/compare.h"
@@ -40,31 +41,6 @@ const char* StatusWord(v1::RunStatus s) {
 }
 
 bool Ended(v1::RunStatus s) { return s == v1::DONE || s == v1::FAILED || s == v1::CANCELLED; }
-
-// The server's comparison in the local form, so both render through the same table and CSV code.
-experiment::Comparison FromProto(const v1::CompareRunsResponse& cmp) {
-  experiment::Comparison local;
-  local.rank_metric = cmp.rank_metric();
-  local.effort_metric = cmp.effort_metric();
-  local.columns.assign(cmp.columns().begin(), cmp.columns().end());
-  for (const auto& r : cmp.rows()) {
-    experiment::CompareRow row;
-    row.name = r.name();
-    row.controller = r.controller();
-    row.runs = r.runs();
-    row.failed = r.failed();
-    row.rank = r.rank();
-    row.pareto = r.pareto();
-    for (const auto& col : local.columns) {
-      experiment::MetricStat st;
-      auto it = r.metrics().find(col);
-      if (it != r.metrics().end()) st = {it->second.mean(), it->second.spread(), it->second.n()};
-      row.metrics[col] = st;
-    }
-    local.rows.push_back(row);
-  }
-  return local;
-}
 
 int ExitForRun(const v1::Run& r) { return r.status() == v1::DONE ? kExitOk : kExitRunFailed; }
 
@@ -129,8 +105,8 @@ int RemoteRun(client::Client& c, const std::string& spec_path, bool wait, const 
   }
   if (out.json) std::cout << all << "]\n";
   if (!out.json && resp->run_ids_size() > 1) {
-    auto cmp = c.Compare(resp->batch_id(), {});
-    if (cmp.ok()) std::cout << "\n" << experiment::ComparisonTable(FromProto(*cmp));
+    auto cmp = RemoteComparison(c, resp->batch_id(), {});
+    if (cmp.ok()) std::cout << "\n" << experiment::ComparisonTable(*cmp);
   }
   return code;
 }
@@ -232,18 +208,6 @@ int RemoteExport(client::Client& c, std::int64_t run_id, const std::string& csv_
     std::fputc('\n', f.get());
   }
   if (std::ferror(f.get())) return Fail(Status::DataLoss(csv_path + ": write failed"));
-  return kExitOk;
-}
-
-int RemoteCompare(client::Client& c, std::int64_t batch, const std::vector<std::int64_t>& run_ids, const Output& out) {
-  auto cmp = c.Compare(batch, run_ids);
-  if (!cmp.ok()) return Fail(cmp.status());
-  if (out.json) {
-    std::cout << ToJson(*cmp) << "\n";
-    return kExitOk;
-  }
-  const experiment::Comparison local = FromProto(*cmp);
-  std::cout << (out.csv ? experiment::ComparisonCsv(local) : experiment::ComparisonTable(local));
   return kExitOk;
 }
 

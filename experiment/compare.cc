@@ -1,5 +1,7 @@
 #include "experiment/compare.h"
 
+#include <nlohmann/json.hpp>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -161,6 +163,29 @@ std::string ComparisonCsv(const Comparison& c) {
     os << "\n";
   }
   return os.str();
+}
+
+std::string ComparisonJson(const Comparison& c) {
+  using Json = nlohmann::ordered_json;
+  Json rows = Json::array();
+  for (const auto& r : c.rows) {
+    Json m = Json::object();
+    for (const auto& col : c.columns) {
+      auto it = r.metrics.find(col);
+      m[col] = it == r.metrics.end() || it->second.n == 0
+                   ? Json(nullptr)
+                   : Json{{"mean", it->second.mean}, {"spread", it->second.spread}, {"n", it->second.n}};
+    }
+    rows.push_back({{"rank", r.rank},
+                    {"name", r.name},
+                    {"controller", r.controller},
+                    {"runs", r.runs},
+                    {"failed", r.failed},
+                    {"pareto", r.pareto},
+                    {"metrics", m}});
+  }
+  return Json{{"rank_metric", c.rank_metric}, {"effort_metric", c.effort_metric}, {"columns", c.columns}, {"rows", rows}}
+             .dump(2) + "\n";
 }
 
 }  // namespace vb::experiment

@@ -7,6 +7,7 @@
 #include "regress/compare.h"
 #include "regress/cron.h"
 #include "regress/suite.h"
+#include "runs/query.h"
 
 namespace vb::server {
 
@@ -159,17 +160,9 @@ StatusOr<std::int64_t> NightScheduler::RunNight(double fire_unix_s) {
     }
     auto store = pool_->Acquire();
     if (!store.ok()) return error(store.status());
-    db::RunFilter f;
-    f.batch_id = batch_id;
-    f.limit = 1000;
-    std::vector<db::RunRecord> all;
-    for (;;) {
-      auto page = (*store)->ListRuns(f);
-      if (!page.ok()) return error(page.status());
-      all.insert(all.end(), page->begin(), page->end());
-      if (static_cast<int>(page->size()) < f.limit) break;
-      f.after_id = page->back().id;
-    }
+    auto listed = runs::ListBatch(store->get(), batch_id);
+    if (!listed.ok()) return error(listed.status());
+    const std::vector<db::RunRecord>& all = *listed;
     bool done = !all.empty();
     for (const auto& r : all) done = done && Final(r.status);
     if (done) {

@@ -11,6 +11,7 @@
 #include "experiment/spec.h"
 #include "hw/usb/list_attached.h"
 #include "proto/api_convert.h"
+#include "runs/query.h"
 #include "server/grpc_status.h"
 
 namespace vb::server {
@@ -326,38 +327,13 @@ grpc::Status BenchServiceImpl::CompareRuns(grpc::ServerContext* ctx, const v1::C
     return ToGrpcStatus(Status::InvalidArgument("batch_id, run_ids: give a batch or a list of runs"));
   auto store = pool_->Acquire();
   if (!store.ok()) return ToGrpcStatus(store.status());
-  std::vector<db::RunRecord> runs;
-  if (req->batch_id() != 0) {
-    db::RunFilter f;
-    f.batch_id = req->batch_id();
-    f.limit = 1000;
-    for (;;) {
-      auto page = (*store)->ListRuns(f);
-      if (!page.ok()) return ToGrpcStatus(page.status());
-      for (auto& r : *page) runs.push_back(r);
-      if (static_cast<std::int32_t>(page->size()) < f.limit) break;
-      f.after_id = page->back().id;
-    }
-    if (runs.empty()) return ToGrpcStatus(Status::NotFound("batch " + std::to_string(req->batch_id()) + " not found"));
-  } else {
-    for (auto id : req->run_ids()) {
-      auto r = (*store)->GetRun(id);
-      if (!r.ok()) return ToGrpcStatus(r.status());
-      runs.push_back(*r);
-    }
-  }
-  std::vector<experiment::RunRecord> records;
-  for (const auto& r : runs) {
-    experiment::RunRecord rec;
-    rec.name = r.key.CaseName();
-    rec.controller = r.controller;
-    rec.ok = r.status == db::RunStatus::kDone;
-    auto metrics = (*store)->GetMetrics(r.id);
-    if (!metrics.ok()) return ToGrpcStatus(metrics.status());
-    for (const auto& m : *metrics) rec.metrics[m.name] = m.value;
-    records.push_back(std::move(rec));
-  }
-  const experiment::Comparison c = experiment::Compare(records);
+  auto runs = req->batch_id() != 0
+                  ? runs::ListBatch(store->get(), req->batch_id())
+                  : runs::GetRuns(store->get(), {req->run_ids().begin(), req->run_ids().end()});
+  if (!runs.ok()) return ToGrpcStatus(runs.status());
+  auto compared = runs::CompareStored(store->get(), *runs);
+  if (!compared.ok()) return ToGrpcStatus(compared.status());
+  const experiment::Comparison& c = *compared;
   resp->set_rank_metric(c.rank_metric);
   resp->set_effort_metric(c.effort_metric);
   for (const auto& col : c.columns) resp->add_columns(col);

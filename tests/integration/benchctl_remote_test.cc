@@ -66,6 +66,15 @@ TEST(BenchctlRemote, RunWaitQueueShowExportCompareBenches) {
   Result cmp = Benchctl("compare --batch 1 --csv " + op);
   ASSERT_EQ(cmp.exit_code, 0) << cmp.out;
   EXPECT_NE(cmp.out.find("fuzzy_current"), std::string::npos) << cmp.out;
+  // The one comparison renderer, whichever backend: the same JSON shape as `compare --local --batch --json`.
+  Result cmp_json = Benchctl("compare --batch 1 --json " + op);
+  ASSERT_EQ(cmp_json.exit_code, 0) << cmp_json.out;
+  const auto j = nlohmann::json::parse(cmp_json.out, nullptr, false);
+  ASSERT_TRUE(j.is_object()) << cmp_json.out;
+  EXPECT_EQ(j["columns"][0], "rmse");
+  ASSERT_EQ(j["rows"].size(), 4u);
+  EXPECT_EQ(j["rows"][0]["failed"], 0);  // written out, not left to proto3's "default means absent"
+  EXPECT_TRUE(j["rows"][0]["metrics"]["rmse"].contains("spread")) << cmp_json.out;
 
   Result benches = Benchctl("benches " + op);
   ASSERT_EQ(benches.exit_code, 0) << benches.out;
