@@ -5,6 +5,8 @@
 // Exit codes (benchctl/cli_common.h): 0 success; 1 a run failed or was cancelled; 2 the request was refused
 // (bad input naming the field, not found, no capable bench, limits, permissions); 3 environment.
 #include <CLI/CLI.hpp>
+#include <spdlog/sinks/stdout_sinks.h>
+#include <spdlog/spdlog.h>
 
 #include <cmath>
 #include <cstdio>
@@ -33,6 +35,9 @@ using vb::benchctl::kExitOk;
 }  // namespace
 
 int main(int argc, char** argv) {
+  // What the in-process run pipeline (runs/) logs goes to stderr, next to benchctl's own messages; stdout is data.
+  spdlog::set_default_logger(spdlog::stderr_logger_mt("benchctl"));
+  spdlog::set_pattern("benchctl: %v");
   CLI::App app{"benchctl: run, watch and compare experiments on valvebench benches"};
   app.require_subcommand(1);
   bool json = false, csv = false;

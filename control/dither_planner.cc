@@ -1,8 +1,9 @@
 #include "control/dither_planner.h"
 
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <cmath>
-#include <cstdarg>
 #include <cstdio>
 #include <limits>
 #include <string>
@@ -10,27 +11,17 @@
 namespace vb::control {
 namespace {
 
-// printf-style formatting into a std::string (error paths only); the attribute lets the compiler check formats.
-[[gnu::format(printf, 1, 2)]] std::string Format(const char* fmt, ...) {
-  char buf[512];
-  std::va_list args;
-  va_start(args, fmt);
-  std::vsnprintf(buf, sizeof buf, fmt, args);
-  va_end(args);
-  return std::string(buf);
-}
-
 bool FinitePositive(double v) { return std::isfinite(v) && v > 0.0; }
 
 Status ValidateCoil(const RlCoil& coil) {
   if (!FinitePositive(coil.R_ohm)) {
-    return Status::InvalidArgument(Format("coil.R_ohm: must be a finite resistance > 0 ohm, got %g", coil.R_ohm));
+    return Status::InvalidArgument(fmt::format("coil.R_ohm: must be a finite resistance > 0 ohm, got {:.10g}", coil.R_ohm));
   }
   if (!FinitePositive(coil.L_H)) {
-    return Status::InvalidArgument(Format("coil.L_H: must be a finite inductance > 0 H, got %g", coil.L_H));
+    return Status::InvalidArgument(fmt::format("coil.L_H: must be a finite inductance > 0 H, got {:.10g}", coil.L_H));
   }
   if (!FinitePositive(coil.supply_V)) {
-    return Status::InvalidArgument(Format("coil.supply_V: must be a finite voltage > 0 V, got %g", coil.supply_V));
+    return Status::InvalidArgument(fmt::format("coil.supply_V: must be a finite voltage > 0 V, got {:.10g}", coil.supply_V));
   }
   return Status::Ok();
 }
@@ -38,21 +29,21 @@ Status ValidateCoil(const RlCoil& coil) {
 Status ValidateOptions(const DitherPlannerOptions& o) {
   if (!FinitePositive(o.frequency_min_Hz)) {
     return Status::InvalidArgument(
-        Format("options.frequency_min_Hz: must be a finite frequency > 0 Hz, got %g", o.frequency_min_Hz));
+        fmt::format("options.frequency_min_Hz: must be a finite frequency > 0 Hz, got {:.10g}", o.frequency_min_Hz));
   }
   if (!std::isfinite(o.frequency_max_Hz) || !(o.frequency_max_Hz > o.frequency_min_Hz)) {
     return Status::InvalidArgument(
-        Format("options.frequency_max_Hz: must be finite and > options.frequency_min_Hz (%g Hz), got %g",
+        fmt::format("options.frequency_max_Hz: must be finite and > options.frequency_min_Hz ({:.10g} Hz), got {:.10g}",
                o.frequency_min_Hz, o.frequency_max_Hz));
   }
   if (!(o.duty_min >= 0.0 && o.duty_min <= 1.0)) {
-    return Status::InvalidArgument(Format("options.duty_min: must be in [0, 1], got %g", o.duty_min));
+    return Status::InvalidArgument(fmt::format("options.duty_min: must be in [0, 1], got {:.10g}", o.duty_min));
   }
   if (!(o.duty_max >= 0.0 && o.duty_max <= 1.0)) {
-    return Status::InvalidArgument(Format("options.duty_max: must be in [0, 1], got %g", o.duty_max));
+    return Status::InvalidArgument(fmt::format("options.duty_max: must be in [0, 1], got {:.10g}", o.duty_max));
   }
   if (!(o.duty_min < o.duty_max)) {
-    return Status::InvalidArgument(Format("options.duty_min: %g must be < options.duty_max (%g)", o.duty_min,
+    return Status::InvalidArgument(fmt::format("options.duty_min: {:.10g} must be < options.duty_max ({:.10g})", o.duty_min,
                                           o.duty_max));
   }
   return Status::Ok();
@@ -61,11 +52,11 @@ Status ValidateOptions(const DitherPlannerOptions& o) {
 Status ValidateRequest(const DitherRequest& r) {
   if (!FinitePositive(r.average_current_A)) {
     return Status::InvalidArgument(
-        Format("dither.average_current_A: must be a finite current > 0 A, got %g", r.average_current_A));
+        fmt::format("dither.average_current_A: must be a finite current > 0 A, got {:.10g}", r.average_current_A));
   }
   if (!FinitePositive(r.amplitude_A)) {
     return Status::InvalidArgument(
-        Format("dither.amplitude_A: must be a finite peak-to-peak current > 0 A, got %g", r.amplitude_A));
+        fmt::format("dither.amplitude_A: must be a finite peak-to-peak current > 0 A, got {:.10g}", r.amplitude_A));
   }
   return Status::Ok();
 }
@@ -178,8 +169,8 @@ StatusOr<Band> FeasibleBand(const RlCoil& coil, double i_avg_A, const DitherPlan
     const double lo = std::min(Eval(coil, f_min, o.duty_min).i_avg_A, Eval(coil, f_max, o.duty_min).i_avg_A);
     const double hi = std::max(Eval(coil, f_min, o.duty_max).i_avg_A, Eval(coil, f_max, o.duty_max).i_avg_A);
     return Status::InvalidArgument(
-        Format("dither.average_current_A: %.6g A is not reachable with duty in [%g, %g] and f in [%g, %g] Hz "
-               "(reachable %.4g..%.4g A; supply_V/R_ohm = %.4g A)",
+        fmt::format("dither.average_current_A: {:.6g} A is not reachable with duty in [{:.10g}, {:.10g}] and f in [{:.10g}, {:.10g}] Hz "
+               "(reachable {:.4g}..{:.4g} A; supply_V/R_ohm = {:.4g} A)",
                i_avg_A, o.duty_min, o.duty_max, f_min, f_max, lo, hi, i_inf_A));
   };
   if (!(i_avg_A < i_inf_A)) return unreachable();
@@ -232,10 +223,10 @@ Status ValidateAll(const RlCoil& coil, const DitherPlannerOptions& o) {
 StatusOr<RlPwmSteadyStateResult> RlPwmSteadyState(const RlCoil& coil, double frequency_Hz, double duty) {
   VB_RETURN_IF_ERROR(ValidateCoil(coil));
   if (!FinitePositive(frequency_Hz)) {
-    return Status::InvalidArgument(Format("frequency_Hz: must be a finite frequency > 0 Hz, got %g", frequency_Hz));
+    return Status::InvalidArgument(fmt::format("frequency_Hz: must be a finite frequency > 0 Hz, got {:.10g}", frequency_Hz));
   }
   if (!(duty >= 0.0 && duty <= 1.0)) {
-    return Status::InvalidArgument(Format("duty: must be in [0, 1], got %g", duty));
+    return Status::InvalidArgument(fmt::format("duty: must be in [0, 1], got {:.10g}", duty));
   }
   return Eval(coil, frequency_Hz, duty);
 }
@@ -245,7 +236,7 @@ StatusOr<DitherAmplitudeRange> DitherAmplitudeRangeAt(const RlCoil& coil, double
   VB_RETURN_IF_ERROR(ValidateAll(coil, options));
   if (!FinitePositive(average_current_A)) {
     return Status::InvalidArgument(
-        Format("dither.average_current_A: must be a finite current > 0 A, got %g", average_current_A));
+        fmt::format("dither.average_current_A: must be a finite current > 0 A, got {:.10g}", average_current_A));
   }
   StatusOr<Band> band = FeasibleBand(coil, average_current_A, options);
   if (!band.ok()) return band.status();
@@ -272,15 +263,15 @@ StatusOr<DitherPlan> PlanDitherExact(const RlCoil& coil, const DitherRequest& re
   constexpr double kAmpSlack = 1e-12;
   if (i_amp_A > range->max_amplitude_A * (1.0 + kAmpSlack)) {
     return Status::InvalidArgument(
-        Format("dither.amplitude_A: %.6g A is not reachable at average %.6g A within f in [%g, %g] Hz and duty "
-               "in [%g, %g] (max %.4g A, at %.4g Hz)",
+        fmt::format("dither.amplitude_A: {:.6g} A is not reachable at average {:.6g} A within f in [{:.10g}, {:.10g}] Hz and duty "
+               "in [{:.10g}, {:.10g}] (max {:.4g} A, at {:.4g} Hz)",
                i_amp_A, i_avg_A, options.frequency_min_Hz, options.frequency_max_Hz, options.duty_min,
                options.duty_max, range->max_amplitude_A, range->frequency_at_max_Hz));
   }
   if (i_amp_A < range->min_amplitude_A * (1.0 - kAmpSlack)) {
     return Status::InvalidArgument(
-        Format("dither.amplitude_A: %.6g A is not reachable at average %.6g A within f in [%g, %g] Hz and duty "
-               "in [%g, %g] (min %.4g A, at %.4g Hz; a smaller ripple needs a higher frequency)",
+        fmt::format("dither.amplitude_A: {:.6g} A is not reachable at average {:.6g} A within f in [{:.10g}, {:.10g}] Hz and duty "
+               "in [{:.10g}, {:.10g}] (min {:.4g} A, at {:.4g} Hz; a smaller ripple needs a higher frequency)",
                i_amp_A, i_avg_A, options.frequency_min_Hz, options.frequency_max_Hz, options.duty_min,
                options.duty_max, range->min_amplitude_A, range->frequency_at_min_Hz));
   }
@@ -307,24 +298,24 @@ StatusOr<ApproxDitherModel> FitApproxDitherModel(const RlCoil& coil, const Dithe
   VB_RETURN_IF_ERROR(ValidateAll(coil, options));
   if (!(options.duty_min > 0.0 && options.duty_max < 1.0)) {
     return Status::InvalidArgument(
-        Format("options.duty_min: the approximate model needs duty bounds inside (0, 1) (k2 is infinite where "
-               "there is no ripple), got [%g, %g]",
+        fmt::format("options.duty_min: the approximate model needs duty bounds inside (0, 1) (k2 is infinite where "
+               "there is no ripple), got [{:.10g}, {:.10g}]",
                options.duty_min, options.duty_max));
   }
   const double f1 = fit.k1_fit_frequency_Hz.value_or(options.frequency_max_Hz);
   if (!FinitePositive(f1)) {
     return Status::InvalidArgument(
-        Format("fit.k1_fit_frequency_Hz: must be a finite frequency > 0 Hz, got %g", f1));
+        fmt::format("fit.k1_fit_frequency_Hz: must be a finite frequency > 0 Hz, got {:.10g}", f1));
   }
   if (fit.k1_duty_points < 2) {
-    return Status::InvalidArgument(Format("fit.k1_duty_points: must be >= 2, got %d", fit.k1_duty_points));
+    return Status::InvalidArgument(fmt::format("fit.k1_duty_points: must be >= 2, got {}", fit.k1_duty_points));
   }
   if (fit.k2_duty_points < 2) {
-    return Status::InvalidArgument(Format("fit.k2_duty_points: must be >= 2, got %d", fit.k2_duty_points));
+    return Status::InvalidArgument(fmt::format("fit.k2_duty_points: must be >= 2, got {}", fit.k2_duty_points));
   }
   if (fit.k2_frequency_points < 2) {
     return Status::InvalidArgument(
-        Format("fit.k2_frequency_points: must be >= 2, got %d", fit.k2_frequency_points));
+        fmt::format("fit.k2_frequency_points: must be >= 2, got {}", fit.k2_frequency_points));
   }
   auto grid = [](double lo, double hi, int n, int i) { return lo + (hi - lo) * i / (n - 1); };
 
@@ -387,15 +378,15 @@ StatusOr<DitherPlan> PlanDitherApprox(const ApproxDitherModel& model, const Dith
   const double duty = request.average_current_A / model.k1_A;  // eq. (12)
   if (duty < o.duty_min || duty > o.duty_max) {
     return Status::InvalidArgument(
-        Format("dither.average_current_A: %.6g A needs duty %.4g by eq. (12) (k1 = %.6g A), outside [%g, %g]",
+        fmt::format("dither.average_current_A: {:.6g} A needs duty {:.4g} by eq. (12) (k1 = {:.6g} A), outside [{:.10g}, {:.10g}]",
                request.average_current_A, duty, model.k1_A, o.duty_min, o.duty_max));
   }
   const double k2 = ApproxK2PerAHz(model, duty);
   const double f = 1.0 / (k2 * request.amplitude_A);  // eq. (13)
   if (f < o.frequency_min_Hz || f > o.frequency_max_Hz) {
     return Status::InvalidArgument(
-        Format("dither.amplitude_A: %.6g A at average %.6g A needs f = %.4g Hz by eq. (13) (k2 = %.6g 1/(A Hz) "
-               "at duty %.4g), outside [%g, %g] Hz",
+        fmt::format("dither.amplitude_A: {:.6g} A at average {:.6g} A needs f = {:.4g} Hz by eq. (13) (k2 = {:.6g} 1/(A Hz) "
+               "at duty {:.4g}), outside [{:.10g}, {:.10g}] Hz",
                request.amplitude_A, request.average_current_A, f, k2, duty, o.frequency_min_Hz,
                o.frequency_max_Hz));
   }

@@ -1,5 +1,6 @@
 // The SQLite implementation of db/store.h. Schema and migrations: db/schema.cc; trace BLOB layout:
 // db/trace_codec.h; the why of both: docs/store.md.
+#include "common/format.h"
 #include "db/store.h"
 
 #include <chrono>
@@ -65,12 +66,6 @@ double NowUnixS() {
   return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
 }
 
-std::string Num(double v) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.17g", v);
-  return buf;
-}
-
 Status RunNotFound(std::int64_t id) { return Status::NotFound(Cat("run ", id, " not found")); }
 
 // Output-only RunRecord fields (id, batch_id, status, reason, times, progress) are ignored on submit, as
@@ -116,11 +111,11 @@ Status ValidateFilter(const RunFilter& f) {
   if (f.batch_id < 0) return Status::InvalidArgument(Cat("filter.batch_id: must be >= 0, got ", f.batch_id));
   if (!std::isfinite(f.submitted_after_unix_s) || f.submitted_after_unix_s < 0) {
     return Status::InvalidArgument(
-        Cat("filter.submitted_after_unix_s: must be finite and >= 0, got ", Num(f.submitted_after_unix_s)));
+        Cat("filter.submitted_after_unix_s: must be finite and >= 0, got ", FormatExact(f.submitted_after_unix_s)));
   }
   if (!std::isfinite(f.submitted_before_unix_s) || f.submitted_before_unix_s < 0) {
     return Status::InvalidArgument(
-        Cat("filter.submitted_before_unix_s: must be finite and >= 0, got ", Num(f.submitted_before_unix_s)));
+        Cat("filter.submitted_before_unix_s: must be finite and >= 0, got ", FormatExact(f.submitted_before_unix_s)));
   }
   return Status::Ok();
 }
@@ -356,7 +351,7 @@ StatusOr<std::optional<RunRecord>> SqliteStore::ClaimNext(const std::string& ben
 
 Status SqliteStore::SetProgress(std::int64_t run_id, double progress) {
   if (!(progress >= 0.0 && progress <= 1.0)) {
-    return Status::InvalidArgument(Cat("progress: must be in [0, 1], got ", Num(progress)));
+    return Status::InvalidArgument(Cat("progress: must be in [0, 1], got ", FormatExact(progress)));
   }
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kWrite));

@@ -4,6 +4,8 @@
 #include <cmath>
 #include <cstdio>
 
+#include <spdlog/spdlog.h>
+
 #include "db/trace_writer.h"
 #include "experiment/spec.h"
 #include "hw/safety.h"
@@ -39,7 +41,7 @@ Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& se
     auto st = store->Finish(run.id, status, out.reason, metrics);
     out.recorded = st.ok();
     if (!st.ok())
-      std::fprintf(stderr, "valvebench: run %lld: cannot record the result: %s\n", static_cast<long long>(run.id),
+      spdlog::error("run {}: cannot record the result: {}", static_cast<long long>(run.id),
                    st.message().c_str());
     return std::move(out);
   };

@@ -2,6 +2,8 @@
 
 #include <cstdio>
 
+#include <spdlog/spdlog.h>
+
 namespace vb::runs {
 
 Worker::Worker(BenchSetup setup, Registry* registry) : setup_(std::move(setup)), registry_(registry) {}
@@ -36,14 +38,14 @@ void Worker::Stop() {
 void Worker::Loop(const std::string& db_path) {
   auto store = db::Store::Open(db_path);
   if (!store.ok()) {
-    std::fprintf(stderr, "valvebench-server: bench %s: cannot open the store: %s\n", setup_.name.c_str(),
+    spdlog::error("bench {}: cannot open the store: {}", setup_.name.c_str(),
                  store.status().message().c_str());
     return;
   }
   while (!stop_.load()) {
     auto done = ClaimAndExecute(store->get());
     if (!done.ok())
-      std::fprintf(stderr, "valvebench-server: bench %s: claim failed: %s\n", setup_.name.c_str(),
+      spdlog::error("bench {}: claim failed: {}", setup_.name.c_str(),
                    done.status().message().c_str());
     if (!done.ok() || !done->has_value()) registry_->WaitForWork(200);
   }

@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <chrono>
+
+#include <spdlog/spdlog.h>
 #include <cstdio>
 
 #include "regress/compare.h"
@@ -61,13 +63,12 @@ bool NightScheduler::SleepUntil(double t_unix_s) {
 void NightScheduler::Loop(bool run_now) {
   auto cron = regress::Cron::Parse(setup_.cron);
   if (!cron.ok()) {  // validated with the config; kept as a guard
-    std::fprintf(stderr, "valvebench-server: nights.cron: %s\n", cron.status().message().c_str());
+    spdlog::error("nights.cron: {}", cron.status().message().c_str());
     return;
   }
   auto night = [this](double fire_unix_s) {
     auto id = RunNight(fire_unix_s);
-    if (!id.ok()) std::fprintf(stderr, "valvebench-server: night: %s\n", id.status().message().c_str());
-    std::fflush(stderr);
+    if (!id.ok()) spdlog::error("night: {}", id.status().message().c_str());
   };
   if (run_now) night(clock_());
   for (;;) {
@@ -103,7 +104,7 @@ StatusOr<std::int64_t> NightScheduler::SaveNight(const std::string& date, std::i
   }
   auto id = (*store)->SaveRegression(rec);
   if (!id.ok()) return id.status().WithContext("night " + date);
-  std::fprintf(stderr, "valvebench-server: night %s: %s (batch %lld, regression %lld)\n", date.c_str(), verdict.c_str(),
+  spdlog::info("night {}: {} (batch {}, regression {})", date.c_str(), verdict.c_str(),
                static_cast<long long>(batch_id), static_cast<long long>(*id));
   return id;
 }
@@ -145,9 +146,8 @@ StatusOr<std::int64_t> NightScheduler::RunNight(double fire_unix_s) {
   auto queued = submit_(runs::Submission{"nights", "night:" + date, std::move(specs), std::move(keys), ""});
   if (!queued.ok()) return error(queued.status().WithContext("submit"));
   batch_id = queued->batch_id;
-  std::fprintf(stderr, "valvebench-server: night %s: suite %s, batch %lld, %d runs\n", date.c_str(), suite_name.c_str(),
+  spdlog::info("night {}: suite {}, batch {}, {} runs", date.c_str(), suite_name.c_str(),
                static_cast<long long>(batch_id), static_cast<int>(queued->run_ids.size()));
-  std::fflush(stderr);
 
   // Wait for every run of the batch to end; collect what regress compares.
   std::vector<regress::RunMetrics> measured;
