@@ -10,6 +10,7 @@
 #include <sstream>
 
 #include "benchctl/cli_common.h"
+#include "common/csv.h"
 #include "benchctl/local_run.h"
 #include "db/store.h"
 #include "experiment/compare.h"
@@ -186,7 +187,7 @@ void PrintCsv(const std::vector<vb::benchctl::LocalRunResult>& results) {
   for (const auto& [name, value] : vb::experiment::MetricList(vb::experiment::Metrics{})) std::printf(",%s", name.c_str());
   std::printf("\n");
   for (const auto& r : results) {
-    std::printf("\"%s\",%s,%s,%.9g,%zu,%.6g", r.key.DisplayName().c_str(), r.controller.c_str(),
+    std::printf("%s,%s,%s,%.9g,%zu,%.6g", CsvQuoted(r.key.DisplayName()).c_str(), r.controller.c_str(),
                 vb::experiment::TerminationName(r.summary.termination), r.summary.duration_s, r.summary.samples,
                 r.summary.wall_s);
     for (const auto& [name, value] : vb::experiment::MetricList(r.summary.metrics)) {

@@ -9,6 +9,7 @@
 
 #include "benchctl/backend.h"
 #include "benchctl/cli_common.h"
+#include "common/csv.h"
 #include "benchctl/hw_commands.h"
 #include "experiment/compare.h"
 #include "experiment/spec.h"
@@ -135,9 +136,9 @@ int RemoteQueue(client::Client& c, const std::string& status, std::int64_t batch
   if (out.csv) std::printf("id,batch,status,priority,progress,controller,submitter,name\n");
   for (const auto& r : resp->runs()) {
     if (out.csv) {
-      std::printf("%lld,%lld,%s,%d,%.3f,%s,%s,\"%s\"\n", static_cast<long long>(r.id()),
+      std::printf("%lld,%lld,%s,%d,%.3f,%s,%s,%s\n", static_cast<long long>(r.id()),
                   static_cast<long long>(r.batch_id()), StatusWord(r.status()), r.priority(), r.progress(),
-                  r.controller().c_str(), r.submitter().c_str(), r.name().c_str());
+                  r.controller().c_str(), r.submitter().c_str(), CsvQuoted(r.name()).c_str());
     } else {
       std::printf("%6lld  batch %-5lld %-11s prio %-3d %4.0f%%  %-22s %-10s %s\n", static_cast<long long>(r.id()),
                   static_cast<long long>(r.batch_id()), StatusWord(r.status()), r.priority(), 100.0 * r.progress(),

@@ -2,6 +2,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include "common/csv.h"
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -150,7 +152,7 @@ std::string ComparisonCsv(const Comparison& c) {
   os << "\n";
   os.precision(10);
   for (const auto& r : c.rows) {
-    os << r.rank << ",\"" << r.name << "\"," << r.controller << "," << r.runs << "," << r.failed << ","
+    os << r.rank << "," << CsvQuoted(r.name) << "," << r.controller << "," << r.runs << "," << r.failed << ","
        << (r.pareto ? 1 : 0);
     for (const auto& col : c.columns) {
       const MetricStat& s = r.metrics.at(col);
