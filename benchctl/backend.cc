@@ -12,12 +12,6 @@ namespace {
 
 namespace v1 = valvebench::v1;
 
-std::string StatusWord(v1::RunStatus s) {
-  std::string w = v1::RunStatus_Name(s);
-  for (char& c : w) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  return w;
-}
-
 class Local final : public Backend {
  public:
   explicit Local(std::string path) : path_(std::move(path)) {}
@@ -42,7 +36,7 @@ class Local final : public Backend {
     if (!recs.ok()) return recs.status();
     std::vector<RunView> out;
     for (const auto& r : *recs) {
-      RunView v{r.id, r.batch_id, r.key, r.controller, db::RunStatusName(r.status), r.reason, {}};
+      RunView v{r.id, r.batch_id, r.key, r.controller, r.status, r.reason, {}};
       auto m = (*store)->GetMetrics(r.id);
       if (!m.ok()) return m.status();
       for (const auto& x : *m) v.metrics[x.name] = x.value;
@@ -117,7 +111,8 @@ class Remote final : public Backend {
                  resp->run_ids_size(), address_.c_str());
     for (auto id : resp->run_ids()) {
       auto st = c_->Watch(id, kRunDeadline_s, 0.0, [](const v1::RunEvent& ev) {
-        return !(ev.status() == v1::DONE || ev.status() == v1::FAILED || ev.status() == v1::CANCELLED);
+        const auto status = api::FromProto(ev.status());
+        return !(status && Ended(*status));
       });
       if (!st.ok()) return st.WithContext("waiting for run " + std::to_string(id));
     }
@@ -127,7 +122,7 @@ class Remote final : public Backend {
   StatusOr<std::vector<RunView>> Runs(std::int64_t batch, const std::vector<std::int64_t>& run_ids) override {
     std::vector<RunView> out;
     auto add = [&](const v1::Run& r) {
-      RunView v{r.id(), r.batch_id(), api::FromProto(r.key()), r.controller(), StatusWord(r.status()), r.reason(), {}};
+      RunView v{r.id(), r.batch_id(), api::FromProto(r.key()), r.controller(), api::FromProto(r.status()).value_or(RunStatus::kQueued), r.reason(), {}};
       for (const auto& [k, x] : r.metrics()) v.metrics[k] = x;
       out.push_back(std::move(v));
     };

@@ -14,6 +14,7 @@
 
 #include "client/client.h"
 #include "common/run_key.h"
+#include "common/run_status.h"
 #include "common/status.h"
 #include "experiment/compare.h"
 #include "experiment/spec.h"
@@ -26,12 +27,12 @@ struct RunView {
   std::int64_t batch_id = 0;
   RunKey key;
   std::string controller;
-  std::string status;                    // db::RunStatusName vocabulary: "queued", ..., "done", "failed", ...
+  RunStatus status = RunStatus::kQueued;
   std::string reason;
   std::map<std::string, double> metrics;
 
-  bool ok() const { return status == "done"; }
-  bool ended() const { return status == "done" || status == "failed" || status == "cancelled"; }
+  bool ok() const { return status == RunStatus::kDone; }
+  bool ended() const { return Ended(status); }
 };
 
 using Trace = client::FetchedTrace;

@@ -47,7 +47,7 @@ std::vector<regress::RunMetrics> ToRunMetrics(const std::vector<RunView>& runs) 
     m.name = r.key.DisplayName();
     m.case_name = r.key.CaseName();
     m.ok = r.ok();
-    m.reason = m.ok ? "" : r.status + (r.reason.empty() ? "" : ": " + r.reason);
+    m.reason = m.ok ? "" : RunStatusName(r.status) + (r.reason.empty() ? std::string() : ": " + r.reason);
     m.metrics = r.metrics;
     out.push_back(std::move(m));
   }

@@ -9,6 +9,7 @@
 
 #include "benchctl/backend.h"
 #include "benchctl/cli_common.h"
+#include "proto/api_convert.h"
 #include "common/csv.h"
 #include "benchctl/hw_commands.h"
 #include "experiment/compare.h"
@@ -29,19 +30,16 @@ std::string ToJson(const google::protobuf::Message& m) {
   return out;
 }
 
+// The one status vocabulary (common/run_status.h) for whatever the server sends.
 const char* StatusWord(v1::RunStatus s) {
-  switch (s) {
-    case v1::QUEUED: return "queued";
-    case v1::RUNNING: return "running";
-    case v1::DONE: return "done";
-    case v1::FAILED: return "failed";
-    case v1::CANCELLED: return "cancelled";
-    case v1::INTERRUPTED: return "interrupted";
-    default: return "?";
-  }
+  const auto status = api::FromProto(s);
+  return status ? RunStatusName(*status) : "?";
 }
 
-bool Ended(v1::RunStatus s) { return s == v1::DONE || s == v1::FAILED || s == v1::CANCELLED; }
+bool Ended(v1::RunStatus s) {
+  const auto status = api::FromProto(s);
+  return status && vb::Ended(*status);
+}
 
 int ExitForRun(const v1::Run& r) { return r.status() == v1::DONE ? kExitOk : kExitRunFailed; }
 

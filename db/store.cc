@@ -18,27 +18,6 @@
 
 namespace vb::db {
 
-const char* RunStatusName(RunStatus s) {
-  switch (s) {
-    case RunStatus::kQueued: return "queued";
-    case RunStatus::kRunning: return "running";
-    case RunStatus::kDone: return "done";
-    case RunStatus::kFailed: return "failed";
-    case RunStatus::kCancelled: return "cancelled";
-    case RunStatus::kInterrupted: return "interrupted";
-  }
-  return "unknown";
-}
-
-StatusOr<RunStatus> ParseRunStatus(const std::string& name) {
-  for (RunStatus s : {RunStatus::kQueued, RunStatus::kRunning, RunStatus::kDone, RunStatus::kFailed,
-                      RunStatus::kCancelled, RunStatus::kInterrupted}) {
-    if (name == RunStatusName(s)) return s;
-  }
-  return Status::InvalidArgument(
-      Cat("unknown run status \"", name, "\" (expected queued, running, done, failed, cancelled or interrupted)"));
-}
-
 namespace {
 
 using sql::Stmt;

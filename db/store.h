@@ -15,13 +15,15 @@
 #include <vector>
 
 #include "common/run_key.h"
+#include "common/run_status.h"
 #include "common/status.h"
 
 namespace vb::db {
 
-enum class RunStatus { kQueued, kRunning, kDone, kFailed, kCancelled, kInterrupted };
-const char* RunStatusName(RunStatus s);  // "queued", "running", ...
-StatusOr<RunStatus> ParseRunStatus(const std::string& name);
+// The statuses and their names are common/run_status.h's (the store keeps the names in its status columns).
+using vb::ParseRunStatus;
+using vb::RunStatus;
+using vb::RunStatusName;
 
 struct RunRecord {
   std::int64_t id = 0;

@@ -20,4 +20,28 @@ RunKey FromProto(const valvebench::v1::RunKey& key) {
   return out;
 }
 
+valvebench::v1::RunStatus ToProto(RunStatus s) {
+  switch (s) {
+    case RunStatus::kQueued: return valvebench::v1::QUEUED;
+    case RunStatus::kRunning: return valvebench::v1::RUNNING;
+    case RunStatus::kDone: return valvebench::v1::DONE;
+    case RunStatus::kFailed: return valvebench::v1::FAILED;
+    case RunStatus::kCancelled: return valvebench::v1::CANCELLED;
+    case RunStatus::kInterrupted: return valvebench::v1::INTERRUPTED;
+  }
+  return valvebench::v1::RUN_STATUS_UNSPECIFIED;
+}
+
+std::optional<RunStatus> FromProto(valvebench::v1::RunStatus s) {
+  switch (s) {
+    case valvebench::v1::QUEUED: return RunStatus::kQueued;
+    case valvebench::v1::RUNNING: return RunStatus::kRunning;
+    case valvebench::v1::DONE: return RunStatus::kDone;
+    case valvebench::v1::FAILED: return RunStatus::kFailed;
+    case valvebench::v1::CANCELLED: return RunStatus::kCancelled;
+    case valvebench::v1::INTERRUPTED: return RunStatus::kInterrupted;
+    default: return std::nullopt;
+  }
+}
+
 }  // namespace vb::api

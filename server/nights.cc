@@ -24,11 +24,6 @@ double WallClock() {
   return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
 }
 
-bool Final(db::RunStatus s) {
-  return s == db::RunStatus::kDone || s == db::RunStatus::kFailed || s == db::RunStatus::kCancelled ||
-         s == db::RunStatus::kInterrupted;
-}
-
 }  // namespace
 
 NightScheduler::NightScheduler(NightsSetup setup, StorePool* pool, SubmitFn submit, ClockFn clock)
@@ -164,7 +159,7 @@ StatusOr<std::int64_t> NightScheduler::RunNight(double fire_unix_s) {
     if (!listed.ok()) return error(listed.status());
     const std::vector<db::RunRecord>& all = *listed;
     bool done = !all.empty();
-    for (const auto& r : all) done = done && Final(r.status);
+    for (const auto& r : all) done = done && (Ended(r.status) || r.status == RunStatus::kInterrupted);  // nothing more will come
     if (done) {
       for (const auto& r : all) {
         regress::RunMetrics m;

@@ -38,26 +38,6 @@ StatusOr<StorePool::Handle> StorePool::Acquire() {
   return Handle(this, std::move(s.value()));
 }
 
-v1::RunStatus ToProto(db::RunStatus s) {
-  switch (s) {
-    case db::RunStatus::kQueued: return v1::QUEUED;
-    case db::RunStatus::kRunning: return v1::RUNNING;
-    case db::RunStatus::kDone: return v1::DONE;
-    case db::RunStatus::kFailed: return v1::FAILED;
-    case db::RunStatus::kCancelled: return v1::CANCELLED;
-    case db::RunStatus::kInterrupted: return v1::INTERRUPTED;
-  }
-  return v1::RUN_STATUS_UNSPECIFIED;
-}
-
-namespace {
-
-bool Finished(db::RunStatus s) {
-  return s == db::RunStatus::kDone || s == db::RunStatus::kFailed || s == db::RunStatus::kCancelled;
-}
-
-}  // namespace
-
 grpc::Status BenchServiceImpl::Authorize(grpc::ServerContext* ctx, Role need, Principal* who) const {
   const auto& md = ctx->client_metadata();
   auto it = md.find("authorization");
@@ -118,7 +98,7 @@ grpc::Status BenchServiceImpl::FillRun(db::Store* store, const db::RunRecord& r,
   out->set_bench(r.bench_name);
   out->set_submitter(r.submitter);
   out->set_priority(r.priority);
-  out->set_status(ToProto(r.status));
+  out->set_status(api::ToProto(r.status));
   out->set_reason(r.reason);
   out->set_submitted_unix_s(r.submitted_unix_s);
   out->set_started_unix_s(r.started_unix_s);
@@ -137,7 +117,7 @@ grpc::Status BenchServiceImpl::FillRun(db::Store* store, const db::RunRecord& r,
   if (!history.ok()) return ToGrpcStatus(history.status());
   for (const auto& h : *history) {
     auto* c = out->add_history();
-    c->set_status(ToProto(h.status));
+    c->set_status(api::ToProto(h.status));
     c->set_at_unix_s(h.at_unix_s);
     c->set_reason(h.reason);
   }
@@ -159,15 +139,7 @@ grpc::Status BenchServiceImpl::ListRuns(grpc::ServerContext* ctx, const v1::List
   Principal who;
   if (auto st = Authorize(ctx, Role::kViewer, &who); !st.ok()) return st;
   db::RunFilter f;
-  switch (req->status()) {
-    case v1::QUEUED: f.status = db::RunStatus::kQueued; break;
-    case v1::RUNNING: f.status = db::RunStatus::kRunning; break;
-    case v1::DONE: f.status = db::RunStatus::kDone; break;
-    case v1::FAILED: f.status = db::RunStatus::kFailed; break;
-    case v1::CANCELLED: f.status = db::RunStatus::kCancelled; break;
-    case v1::INTERRUPTED: f.status = db::RunStatus::kInterrupted; break;
-    default: break;
-  }
+  f.status = api::FromProto(req->status());
   f.tag = req->tag();
   f.batch_id = req->batch_id();
   f.controller = req->controller();
@@ -212,7 +184,7 @@ grpc::Status BenchServiceImpl::CancelRun(grpc::ServerContext* ctx, const v1::Can
     // The loop stops within one control period; wait briefly so the answer shows the final state.
     for (int k = 0; k < 100; ++k) {
       auto now = (*store)->GetRun(r->id);
-      if (now.ok() && Finished(now->status)) break;
+      if (now.ok() && Ended(now->status)) break;
       std::this_thread::sleep_for(std::chrono::milliseconds(10));
     }
   }
@@ -249,7 +221,7 @@ grpc::Status BenchServiceImpl::WatchRun(grpc::ServerContext* ctx, const v1::Watc
     if (!r.ok()) return ToGrpcStatus(r.status());
     v1::RunEvent ev;
     ev.set_run_id(r->id);
-    ev.set_status(ToProto(r->status));
+    ev.set_status(api::ToProto(r->status));
     ev.set_reason(r->reason);
     double progress = r->status == db::RunStatus::kDone ? 1.0 : r->progress;
     if (r->status == db::RunStatus::kRunning) {
@@ -270,13 +242,13 @@ grpc::Status BenchServiceImpl::WatchRun(grpc::ServerContext* ctx, const v1::Watc
     const bool changed = first || r->status != last_status || std::abs(progress - last_progress) >= 0.01 ||
                          ev.samples_size() > 0;
     if (changed && !writer->Write(ev)) {  // the client went away
-      if (!Finished(r->status)) client_gone();
+      if (!Ended(r->status)) client_gone();
       return grpc::Status::OK;
     }
     first = false;
     last_status = r->status;
     last_progress = progress;
-    if (Finished(r->status) || r->status == db::RunStatus::kInterrupted) return grpc::Status::OK;
+    if (Ended(r->status) || r->status == db::RunStatus::kInterrupted) return grpc::Status::OK;
     std::this_thread::sleep_for(std::chrono::milliseconds(50));
   }
   client_gone();
@@ -291,7 +263,7 @@ grpc::Status BenchServiceImpl::GetTrace(grpc::ServerContext* ctx, const v1::GetT
   if (!store.ok()) return ToGrpcStatus(store.status());
   auto r = (*store)->GetRun(req->run_id());
   if (!r.ok()) return ToGrpcStatus(r.status());
-  if (!Finished(r->status))
+  if (!Ended(r->status))
     return ToGrpcStatus(Status::FailedPrecondition("run " + std::to_string(r->id) + " is " +
                                                    db::RunStatusName(r->status) +
                                                    "; its trace is stored when it ends"));

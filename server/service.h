@@ -87,7 +87,6 @@ class BenchServiceImpl final : public valvebench::v1::BenchService::Service {
   const std::vector<std::unique_ptr<runs::Worker>>* workers_;
 };
 
-valvebench::v1::RunStatus ToProto(db::RunStatus s);
 
 
 }  // namespace vb::server
