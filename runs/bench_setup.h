@@ -25,7 +25,7 @@ struct BenchSetup {
   valvebench::v1::BenchConfig config;  // as configured (hardware: which device)
   hw::Capabilities caps;        // what submissions are checked against
   hw::SafetyLimits safety;      // the interlocks every run on this bench goes through
-  bool interlocks = true;       // false: runs execute on the bare bench (the local emulator, as before issue 13)
+  bool interlocks = true;       // false: runs execute on the bare bench (the local emulator; docs/decisions.md)
   std::string device;           // hardware: "hid 2e8a:10c0 serial X", "u3 serial N"
   // The local emulator (benchctl run --local): the plant and driver are the spec's own, so every spec fits
   // it; admission matches it to any spec without class, name or capability checks.

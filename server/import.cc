@@ -1,4 +1,5 @@
-// BenchService::ImportRuns: measured runs stored as finished runs, for the gap diagnosis (issue 5).
+// BenchService::ImportRuns: measured runs stored as finished runs, for the gap diagnosis (docs/server.md,
+// "Imported runs").
 //
 // Each run becomes a run of batch "import:<dataset>" with an ExperimentSpec that records what a run has
 // (name, conditions, duration, the nominal model), its split and start time as the run's own fields (store
