@@ -2,6 +2,7 @@
 
 #include <cstdio>
 
+#include "benchctl/hw_commands.h"
 #include "benchctl/local_run.h"
 #include "db/store.h"
 #include "proto/api_convert.h"
@@ -71,6 +72,8 @@ class Local final : public Backend {
       }
     return t;
   }
+
+  StatusOr<v1::ListBenchesResponse> Benches() override { return LocalBenches(); }
 
  private:
   // The store, opened once: the file, or with --no-store one in memory that lives as long as this backend
@@ -153,6 +156,7 @@ class Remote final : public Backend {
   }
 
   StatusOr<Trace> GetTrace(std::int64_t run_id) override { return c_->GetTrace(run_id); }
+  StatusOr<v1::ListBenchesResponse> Benches() override { return c_->Benches(); }
 
  private:
   static constexpr double kRunDeadline_s = 6 * 3600.0;  // one run of a batch, waited for

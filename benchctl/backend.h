@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "client/client.h"
+#include "valvebench/v1/api.pb.h"
 #include "common/run_key.h"
 #include "common/run_status.h"
 #include "common/status.h"
@@ -54,6 +55,8 @@ class Backend {
   // The comparison of those runs (repeats grouped by case).
   virtual StatusOr<experiment::Comparison> Compare(std::int64_t batch, const std::vector<std::int64_t>& run_ids) = 0;
   virtual StatusOr<Trace> GetTrace(std::int64_t run_id) = 0;
+  // The benches runs go to here, and the USB devices this backend's machine sees.
+  virtual StatusOr<valvebench::v1::ListBenchesResponse> Benches() = 0;
 };
 
 // store_path "" (--no-store): an in-memory store that lives as long as the backend.

@@ -170,7 +170,11 @@ int main(int argc, char** argv) {
       return Fail(Status::InvalidArgument("compare: give --batch/--runs (server), or a results file or --local SPEC"));
     return vb::benchctl::CmdCompare(compare_input, compare_local, store_path, json, csv);
   }
-  if (benches->parsed() && local) return vb::benchctl::CmdBenchesLocal(json);
+  if (benches->parsed()) {
+    if (!local && server.empty()) return need_server();
+    auto backend = vb::benchctl::ChooseBackend(local ? "" : server, store_path, make_client);
+    return vb::benchctl::CmdBenches(*backend, json);
+  }
   if (server.empty()) return need_server();
   auto c = make_client();
   if (queue->parsed()) {
@@ -185,6 +189,5 @@ int main(int argc, char** argv) {
   if (watch->parsed()) return vb::benchctl::RemoteWatch(*c, run_id, out);
   if (cancel->parsed()) return vb::benchctl::RemoteCancel(*c, run_id, reason, out);
   if (exp->parsed()) return vb::benchctl::RemoteExportFiles(*c, run_id, export_csv, export_hdf5, export_mat);
-  if (benches->parsed()) return vb::benchctl::RemoteBenches(*c, out);
   return kExitBadInput;
 }

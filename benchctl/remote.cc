@@ -11,7 +11,6 @@
 #include "benchctl/cli_common.h"
 #include "proto/api_convert.h"
 #include "common/csv.h"
-#include "benchctl/hw_commands.h"
 #include "experiment/compare.h"
 #include "experiment/spec.h"
 
@@ -207,20 +206,6 @@ int RemoteExport(client::Client& c, std::int64_t run_id, const std::string& csv_
     std::fputc('\n', f.get());
   }
   if (std::ferror(f.get())) return Fail(Status::DataLoss(csv_path + ": write failed"));
-  return kExitOk;
-}
-
-int RemoteBenches(client::Client& c, const Output& out) {
-  auto b = c.Benches();
-  if (!b.ok()) return Fail(b.status());
-  if (out.json) {
-    std::cout << ToJson(*b) << "\n";
-    return kExitOk;
-  }
-  for (const auto& x : b->benches())
-    std::printf("%-16s %-9s %-18s %-16s %s\n", x.name().c_str(), x.kind().c_str(), x.driver().c_str(),
-                x.model().c_str(), x.busy() ? ("busy (run " + std::to_string(x.current_run_id()) + ")").c_str() : "idle");
-  PrintAttached(*b);
   return kExitOk;
 }
 
