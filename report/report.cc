@@ -1,5 +1,6 @@
 #include "report/report.h"
 
+#include <fmt/printf.h>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -10,11 +11,10 @@ namespace {
 
 Json Num(double v) { return std::isfinite(v) ? Json(v) : Json(nullptr); }
 
+// f is a printf-style spec for one double (callers choose the precision of each table column).
 std::string Fmt(double v, const char* f = "%.6g") {
   if (!std::isfinite(v)) return "n/a";
-  char buf[48];
-  std::snprintf(buf, sizeof buf, f, v);
-  return buf;
+  return fmt::sprintf(f, v);
 }
 
 // Indices kept by min/max decimation: per bucket the first sample and the min and max of every channel.

@@ -38,6 +38,12 @@ Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& se
   auto finish = [&](db::RunStatus status, std::string reason, const std::vector<db::Metric>& metrics) {
     out.status = status;
     out.reason = std::move(reason);
+    // A run that never started still reads as failed, with the reason, to whoever looks at the summary.
+    if (status == db::RunStatus::kFailed && out.summary.termination != experiment::RunSummary::Termination::kFailed &&
+        out.trace.size() == 0) {
+      out.summary.termination = experiment::RunSummary::Termination::kFailed;
+      out.summary.message = out.reason;
+    }
     auto st = store->Finish(run.id, status, out.reason, metrics);
     out.recorded = st.ok();
     if (!st.ok())

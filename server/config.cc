@@ -1,5 +1,6 @@
 #include "server/config.h"
 
+#include <fmt/format.h>
 #include <google/protobuf/util/json_util.h>
 
 #include <cstdio>
@@ -48,9 +49,7 @@ StatusOr<hw::SafetyLimits> SafetyFromConfig(const valvebench::v1::SafetyConfig& 
 }
 
 std::string Hex4(unsigned v) {
-  char buf[8];
-  std::snprintf(buf, sizeof buf, "%04x", v & 0xFFFF);
-  return buf;
+  return fmt::format("{:04x}", v & 0xFFFF);
 }
 
 // A hid or u3 bench: its declared capabilities (what submissions are checked against; the device's own

@@ -1,5 +1,6 @@
 #include "hw/u3/u3_protocol.h"
 
+#include <fmt/format.h>
 #include <cstdio>
 
 namespace vb::hw::u3 {
@@ -7,9 +8,7 @@ namespace vb::hw::u3 {
 namespace {
 
 std::string Hex(unsigned v) {
-  char buf[8];
-  std::snprintf(buf, sizeof buf, "0x%02X", v);
-  return buf;
+  return fmt::format("0x{:02X}", v);
 }
 
 Packet Extended(Cmd cmd, std::size_t size) {

@@ -150,6 +150,8 @@ TEST(Execute, AStoredSpecThatNoLongerParsesFailsTheRunWithTheReason) {
   auto o = worker.ClaimAndExecute(store->get());
   ASSERT_TRUE(o.ok() && o->has_value());
   EXPECT_EQ((*o)->status, db::RunStatus::kFailed);
+  EXPECT_EQ((*o)->summary.termination, experiment::RunSummary::Termination::kFailed);  // never started
+  EXPECT_NE((*o)->summary.message.find("stored spec does not parse"), std::string::npos);
   auto got = (*store)->GetRun(ids[0]);
   ASSERT_TRUE(got.ok());
   EXPECT_EQ(got->status, db::RunStatus::kFailed);
