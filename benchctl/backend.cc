@@ -1,6 +1,7 @@
 #include "benchctl/backend.h"
 
 #include <cstdio>
+#include <filesystem>
 
 #include "benchctl/hw_commands.h"
 #include "benchctl/local_run.h"
@@ -80,6 +81,10 @@ class Local final : public Backend {
   // (what this invocation ran can still be compared; nothing is kept).
   StatusOr<db::Store*> Open() {
     if (store_ == nullptr) {
+      if (const auto parent = std::filesystem::path(path_).parent_path(); !path_.empty() && !parent.empty()) {
+        std::error_code ec;  // a first run on a fresh machine: ~/.local/share/valvebench/ may not exist yet
+        std::filesystem::create_directories(parent, ec);
+      }
       auto s = db::Store::Open(path_.empty() ? ":memory:" : path_);
       if (!s.ok()) return s.status().WithContext(StoreName());
       store_ = std::move(s.value());

@@ -1,4 +1,3 @@
-#include "common/format.h"
 #include "db/trace_codec.h"
 
 #include <cmath>
@@ -7,6 +6,7 @@
 #include <cstring>
 #include <unordered_set>
 
+#include "common/format.h"
 #include "db/text.h"
 
 namespace vb::db::trace {
