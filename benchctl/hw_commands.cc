@@ -11,6 +11,8 @@
 
 namespace vb::benchctl {
 
+namespace {
+
 void PrintAttached(const valvebench::v1::ListBenchesResponse& r) {
   std::printf("attached USB devices:%s\n", r.attached().empty() ? " none" : "");
   for (const auto& a : r.attached())
@@ -19,7 +21,9 @@ void PrintAttached(const valvebench::v1::ListBenchesResponse& r) {
   if (!r.attached_note().empty()) std::printf("  (%s)\n", r.attached_note().c_str());
 }
 
-int CmdBenchesLocal(bool json) {
+}  // namespace
+
+valvebench::v1::ListBenchesResponse LocalBenches() {
   valvebench::v1::ListBenchesResponse r;
   {
     hw::EmulatedBenchOptions opts;  // what `run --local` drives
@@ -50,20 +54,26 @@ int CmdBenchesLocal(bool json) {
   std::string note = attached.note;
   for (const auto& err : attached.errors) note += (note.empty() ? "" : "; ") + err;
   r.set_attached_note(note);
+  return r;
+}
+
+int CmdBenches(Backend& backend, bool json) {
+  auto r = backend.Benches();
+  if (!r.ok()) return Fail(r.status());
   if (json) {
     std::string out;
     google::protobuf::util::JsonPrintOptions opts;
     opts.add_whitespace = true;
     opts.preserve_proto_field_names = true;
     opts.always_print_primitive_fields = true;
-    (void)google::protobuf::util::MessageToJsonString(r, &out, opts);
+    (void)google::protobuf::util::MessageToJsonString(*r, &out, opts);
     std::cout << out << "\n";
     return kExitOk;
   }
-  for (const auto& x : r.benches())
-    std::printf("%-16s %-9s %-18s %-16s idle\n", x.name().c_str(), x.kind().c_str(), x.driver().c_str(),
-                x.model().c_str());
-  PrintAttached(r);
+  for (const auto& x : r->benches())
+    std::printf("%-16s %-9s %-18s %-16s %s\n", x.name().c_str(), x.kind().c_str(), x.driver().c_str(),
+                x.model().c_str(), x.busy() ? ("busy (run " + std::to_string(x.current_run_id()) + ")").c_str() : "idle");
+  PrintAttached(*r);
   return kExitOk;
 }
 

@@ -1,13 +1,16 @@
-// benchctl's hardware commands: `benches --local` (the embedded emulator and the USB devices this machine
-// sees), and the attached-device table `benches` prints for a server too.
+// benchctl benches: the benches a backend offers and the USB devices its machine sees, one renderer for both
+// backends (the local one: the embedded emulator and this machine's devices; the remote one: the server's).
 #pragma once
 
+#include "benchctl/backend.h"
 #include "valvebench/v1/api.pb.h"
 
 namespace vb::benchctl {
 
-// Exit 0 also when there is no USB bus: that is a clean answer ("no USB bus on this machine").
-int CmdBenchesLocal(bool json);
-void PrintAttached(const valvebench::v1::ListBenchesResponse& r);
+// The local backend's answer: the embedded emulator `run --local` drives and the devices this machine sees.
+// No USB bus is a clean answer ("no USB bus on this machine"), not an error.
+valvebench::v1::ListBenchesResponse LocalBenches();
+// benches [--local]: the one rendering (a table, or protobuf JSON with every field written).
+int CmdBenches(Backend& backend, bool json);
 
 }  // namespace vb::benchctl

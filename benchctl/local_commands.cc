@@ -10,6 +10,7 @@
 #include <sstream>
 
 #include "benchctl/cli_common.h"
+#include "common/csv.h"
 #include "benchctl/local_run.h"
 #include "db/store.h"
 #include "experiment/compare.h"
@@ -27,6 +28,12 @@ using Json = nlohmann::ordered_json;
 
 Json Number(double v) { return std::isfinite(v) ? Json(v) : Json(nullptr); }
 
+Json KeyJson(const RunKey& key) {
+  Json sweep = Json::array();
+  for (const auto& c : key.sweep) sweep.push_back({{"field", c.field}, {"value", c.value}});
+  return {{"name", key.name}, {"sweep", sweep}, {"repeat", key.repeat}};
+}
+
 Json SummaryJson(const vb::benchctl::LocalRunResult& r) {
   const auto& s = r.summary;
   Json j;
@@ -34,7 +41,8 @@ Json SummaryJson(const vb::benchctl::LocalRunResult& r) {
     j["run_id"] = r.run_id;
     j["batch_id"] = r.batch_id;
   }
-  j["name"] = r.name;
+  j["name"] = r.key.DisplayName();
+  j["key"] = KeyJson(r.key);
   j["controller"] = r.controller;
   j["tags"] = r.tags;
   j["status"] = vb::experiment::TerminationName(s.termination);
@@ -60,11 +68,11 @@ Json SummaryJson(const vb::benchctl::LocalRunResult& r) {
 void PrintHuman(const vb::benchctl::LocalRunResult& r) {
   const auto& s = r.summary;
   if (r.run_id != 0) {
-    std::printf("run %s [%s] (local run %lld, batch %lld): %s\n", r.name.c_str(), r.controller.c_str(),
+    std::printf("run %s [%s] (local run %lld, batch %lld): %s\n", r.key.DisplayName().c_str(), r.controller.c_str(),
                 static_cast<long long>(r.run_id), static_cast<long long>(r.batch_id),
                 vb::experiment::TerminationName(s.termination));
   } else {
-    std::printf("run %s [%s]: %s\n", r.name.c_str(), r.controller.c_str(), vb::experiment::TerminationName(s.termination));
+    std::printf("run %s [%s]: %s\n", r.key.DisplayName().c_str(), r.controller.c_str(), vb::experiment::TerminationName(s.termination));
   }
   if (!s.message.empty()) std::printf("  reason: %s\n", s.message.c_str());
   std::printf("  %.6g s simulated, %zu samples, %llu control ticks, %.3g s wall, %.0fx real time\n", s.duration_s,
@@ -87,18 +95,11 @@ std::string IndexedPath(const std::string& path, size_t k, size_t n) {
   return out;
 }
 
-// Strips the repeat tag so that repeats of one configuration share a name.
-std::string GroupName(const vb::benchctl::LocalRunResult& r) {
-  std::string name = r.name;
-  const size_t pos = name.find(" repeat:");
-  return pos == std::string::npos ? name : name.substr(0, pos);
-}
-
 std::vector<vb::experiment::RunRecord> Records(const std::vector<vb::benchctl::LocalRunResult>& results) {
   std::vector<vb::experiment::RunRecord> out;
   for (const auto& r : results) {
     vb::experiment::RunRecord rec;
-    rec.name = GroupName(r);
+    rec.name = r.key.CaseName();
     rec.controller = r.controller;
     rec.ok = r.summary.ok();
     for (const auto& [name, value] : vb::experiment::MetricList(r.summary.metrics)) rec.metrics[name] = value;
@@ -107,28 +108,11 @@ std::vector<vb::experiment::RunRecord> Records(const std::vector<vb::benchctl::L
   return out;
 }
 
-Json ComparisonJson(const vb::experiment::Comparison& c) {
-  Json rows = Json::array();
-  for (const auto& r : c.rows) {
-    Json m = Json::object();
-    for (const auto& col : c.columns) {
-      const auto& s = r.metrics.at(col);
-      m[col] = s.n == 0 ? Json(nullptr) : Json{{"mean", s.mean}, {"spread", s.spread}, {"n", s.n}};
-    }
-    rows.push_back({{"rank", r.rank},
-                    {"name", r.name},
-                    {"controller", r.controller},
-                    {"runs", r.runs},
-                    {"failed", r.failed},
-                    {"pareto", r.pareto},
-                    {"metrics", m}});
-  }
-  return {{"rank_metric", c.rank_metric}, {"effort_metric", c.effort_metric}, {"rows", rows}};
-}
+}  // namespace
 
 int PrintComparison(const vb::experiment::Comparison& c, bool json, bool csv) {
   if (json) {
-    std::cout << ComparisonJson(c).dump(2) << "\n";
+    std::cout << vb::experiment::ComparisonJson(c);
   } else if (csv) {
     std::cout << vb::experiment::ComparisonCsv(c);
   } else {
@@ -137,35 +121,11 @@ int PrintComparison(const vb::experiment::Comparison& c, bool json, bool csv) {
   return kExitOk;
 }
 
-// compare --local --batch B: a batch recorded in the local store.
-}  // namespace
-
-int CmdCompareLocalBatch(const std::string& store_path, std::int64_t batch, bool json, bool csv) {
-  auto store = vb::db::Store::Open(store_path);
-  if (!store.ok()) return Fail(store.status().WithContext("local store " + store_path));
-  vb::db::RunFilter f;
-  f.batch_id = batch;
-  f.limit = 1000;
-  std::vector<vb::experiment::RunRecord> records;
-  for (;;) {
-    auto page = (*store)->ListRuns(f);
-    if (!page.ok()) return Fail(page.status());
-    for (const auto& r : *page) {
-      vb::experiment::RunRecord rec;
-      rec.name = r.name.substr(0, r.name.find(" repeat:"));
-      rec.controller = r.controller;
-      rec.ok = r.status == vb::db::RunStatus::kDone;
-      auto metrics = (*store)->GetMetrics(r.id);
-      if (!metrics.ok()) return Fail(metrics.status());
-      for (const auto& m : *metrics) rec.metrics[m.name] = m.value;
-      records.push_back(std::move(rec));
-    }
-    if (static_cast<int>(page->size()) < f.limit) break;
-    f.after_id = page->back().id;
-  }
-  if (records.empty())
-    return Fail(Status::NotFound("batch " + std::to_string(batch) + " not found in the local store " + store_path));
-  return PrintComparison(vb::experiment::Compare(records), json, csv);
+int CmdCompareStored(Backend& backend, std::int64_t batch, const std::vector<std::int64_t>& run_ids, bool json,
+                     bool csv) {
+  auto c = backend.Compare(batch, run_ids);
+  if (!c.ok()) return Fail(c.status());
+  return PrintComparison(*c, json, csv);
 }
 
 // compare RESULTS.json (the output of `run --json`) or compare --local SPEC (runs it first).
@@ -173,10 +133,10 @@ int CmdCompare(const std::string& input, bool local, const std::string& store_pa
   if (local) {
     auto spec = vb::experiment::LoadSpecFile(input);
     if (!spec.ok()) return Fail(spec.status());
-    auto results = vb::benchctl::RunLocal(*spec, false, false, store_path);
+    auto results = vb::benchctl::RunLocal({{*spec}, {}, spec->name(), "", false, false, store_path});
     if (!results.ok()) return Fail(results.status().WithContext(input));
     for (const auto& r : *results)
-      std::fprintf(stderr, "%s [%s]: %s\n", r.name.c_str(), r.controller.c_str(), r.summary.BriefReport().c_str());
+      std::fprintf(stderr, "%s [%s]: %s\n", r.key.DisplayName().c_str(), r.controller.c_str(), r.summary.BriefReport().c_str());
     return PrintComparison(vb::experiment::Compare(Records(*results)), json, csv);
   }
   std::ifstream in(input);
@@ -196,9 +156,16 @@ int CmdCompare(const std::string& input, bool local, const std::string& store_pa
         !r["metrics"].is_object())
       return Fail(Status::InvalidArgument(where + ": expected a run summary with 'name' and 'metrics'"));
     vb::experiment::RunRecord rec;
+    // Repeats group on the run's key (written by `run --json`); a summary without one is its own case.
     rec.name = r["name"].get<std::string>();
-    const size_t pos = rec.name.find(" repeat:");
-    if (pos != std::string::npos) rec.name = rec.name.substr(0, pos);
+    if (r.contains("key") && r["key"].is_object()) {
+      const Json& k = r["key"];
+      RunKey key{k.value("name", rec.name), {}, k.value("repeat", -1)};
+      if (k.contains("sweep") && k["sweep"].is_array())
+        for (const auto& c : k["sweep"])
+          if (c.is_object()) key.sweep.push_back({c.value("field", ""), c.value("value", 0.0)});
+      rec.name = key.CaseName();
+    }
     rec.controller = r.value("controller", "");
     rec.ok = r.value("status", "done") == "done";
     for (const auto& [key, value] : r["metrics"].items()) {
@@ -220,7 +187,7 @@ void PrintCsv(const std::vector<vb::benchctl::LocalRunResult>& results) {
   for (const auto& [name, value] : vb::experiment::MetricList(vb::experiment::Metrics{})) std::printf(",%s", name.c_str());
   std::printf("\n");
   for (const auto& r : results) {
-    std::printf("\"%s\",%s,%s,%.9g,%zu,%.6g", r.name.c_str(), r.controller.c_str(),
+    std::printf("%s,%s,%s,%.9g,%zu,%.6g", CsvQuoted(r.key.DisplayName()).c_str(), r.controller.c_str(),
                 vb::experiment::TerminationName(r.summary.termination), r.summary.duration_s, r.summary.samples,
                 r.summary.wall_s);
     for (const auto& [name, value] : vb::experiment::MetricList(r.summary.metrics)) {
@@ -242,7 +209,7 @@ int CmdRun(const std::string& spec_path, bool local, const std::string& store_pa
   }
   auto spec = vb::experiment::LoadSpecFile(spec_path);
   if (!spec.ok()) return Fail(spec.status());
-  auto results = vb::benchctl::RunLocal(*spec, realtime, !trace_csv.empty(), store_path);
+  auto results = vb::benchctl::RunLocal({{*spec}, {}, spec->name(), "", realtime, !trace_csv.empty(), store_path});
   if (!results.ok()) return Fail(results.status().WithContext(spec_path));
   int exit_code = kExitOk;
   Json all = Json::array();

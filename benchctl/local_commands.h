@@ -3,6 +3,10 @@
 
 #include <cstdint>
 #include <string>
+#include <vector>
+
+#include "benchctl/backend.h"
+#include "experiment/compare.h"
 
 namespace vb::benchctl {
 
@@ -12,7 +16,11 @@ int CmdRun(const std::string& spec_path, bool local, const std::string& store_pa
 // compare RESULTS.json (from run --json), or compare --local SPEC (runs it first).
 int CmdCompare(const std::string& input, bool local, const std::string& store_path, bool json, bool csv);
 
-// compare --local --batch B: a batch recorded in the local store.
-int CmdCompareLocalBatch(const std::string& store_path, std::int64_t batch, bool json, bool csv);
+// compare --batch B / --runs A,B,...: stored runs on either backend (--local: the local store), rendered by
+// the comparison's one renderer.
+int CmdCompareStored(Backend& backend, std::int64_t batch, const std::vector<std::int64_t>& run_ids, bool json,
+                     bool csv);
+// The comparison as a table, CSV or JSON on stdout (experiment/compare.h renderers).
+int PrintComparison(const experiment::Comparison& c, bool json, bool csv);
 
 }  // namespace vb::benchctl

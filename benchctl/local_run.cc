@@ -9,8 +9,8 @@
 #include <map>
 
 #include "db/store.h"
-#include "db/trace_writer.h"
-#include "hw/emulated_bench.h"
+#include "runs/admit.h"
+#include "runs/worker.h"
 
 namespace vb::benchctl {
 
@@ -23,107 +23,77 @@ std::string DefaultLocalStorePath() {
 
 namespace {
 
-constexpr const char* kLocalBenchKind = "local";
-constexpr const char* kLocalBenchName = "local-emulator";
+constexpr const char* kLeftOverReason = "left over from an interrupted local run";
 
-std::string RunName(const experiment::ExperimentSpec& spec) {
-  std::string name = spec.name();
-  for (const auto& tag : spec.tags())
-    if (tag.rfind("sweep:", 0) == 0 || tag.rfind("repeat:", 0) == 0) name += " " + tag;
-  return name;
-}
-
-LocalRunResult Execute(const experiment::Experiment& e, bool keep_traces) {
-  hw::EmulatedBench bench(experiment::EmulatedBenchFor(e));
-  LocalRunResult r;
-  r.name = RunName(e.spec);
-  r.tags.assign(e.spec.tags().begin(), e.spec.tags().end());
-  r.controller = std::string(e.controller->name());
-  r.summary = experiment::Runner::Run(e, bench, &r.trace);
-  if (!keep_traces) r.trace = experiment::Trace{};
-  return r;
+// Runs of the local bench still queued from an invocation that was interrupted before it ran them.
+Status CancelLeftOvers(db::Store* store, const std::string& bench_class) {
+  db::RunFilter f;
+  f.status = db::RunStatus::kQueued;
+  f.limit = 1000;
+  for (;;) {
+    auto page = store->ListRuns(f);
+    if (!page.ok()) return page.status();
+    for (const auto& r : *page)
+      if (r.bench_kind == bench_class) VB_RETURN_IF_ERROR(store->RequestCancel(r.id, kLeftOverReason).status());
+    if (static_cast<int>(page->size()) < f.limit) return Status::Ok();
+    f.after_id = page->back().id;
+  }
 }
 
 }  // namespace
 
-StatusOr<std::vector<LocalRunResult>> RunLocal(const experiment::ExperimentSpec& spec, bool realtime, bool keep_traces,
-                                               const std::string& store_path) {
-  auto points = experiment::ExpandSweep(spec);
-  if (!points.ok()) return points.status();
-  return RunLocalPoints(*points, spec.name(), experiment::SpecToJson(spec, false), realtime, keep_traces, store_path);
-}
-
-StatusOr<std::vector<LocalRunResult>> RunLocalPoints(const std::vector<experiment::ExperimentSpec>& points,
-                                                     const std::string& batch_name, const std::string& batch_json,
-                                                     bool realtime, bool keep_traces, const std::string& store_path) {
-  // Build everything first: a bad point fails the whole submission before anything runs or is stored.
-  std::vector<experiment::Experiment> exps;
-  for (size_t k = 0; k < points.size(); ++k) {
-    auto e = experiment::BuildExperiment(points[k]);
-    if (!e.ok()) return points.size() > 1 ? e.status().WithContext("run " + std::to_string(k)) : e.status();
-    if (realtime) e->run.realtime = true;
-    exps.push_back(std::move(e.value()));
-  }
-  std::vector<LocalRunResult> out;
-  if (store_path.empty()) {
-    for (const auto& e : exps) out.push_back(Execute(e, keep_traces));
-    return out;
-  }
-
-  if (const auto parent = std::filesystem::path(store_path).parent_path(); !parent.empty()) {
-    std::error_code ec;
-    std::filesystem::create_directories(parent, ec);
-  }
-  auto store = db::Store::Open(store_path);
-  if (!store.ok()) return store.status().WithContext("local store " + store_path);
+StatusOr<std::vector<LocalRunResult>> RunLocal(LocalSubmission sub, db::Store* given) {
+  const runs::BenchSetup bench = runs::LocalEmulatorSetup();
+  runs::Policy policy;
+  policy.benches = {bench};
+  if (sub.realtime)
+    for (auto& s : sub.specs) s.set_realtime(true);
   const char* user = std::getenv("USER");
   const std::string submitter = user != nullptr && *user != '\0' ? user : "local";
-  std::vector<db::RunRecord> records;
-  for (const auto& e : exps) {
-    db::RunRecord rec;
-    rec.name = RunName(e.spec);
-    rec.controller = std::string(e.controller->name());
-    rec.bench_kind = kLocalBenchKind;
-    rec.spec_json = experiment::SpecToJson(e.spec, false);
-    rec.submitter = submitter;
-    rec.priority = e.spec.priority();
-    rec.tags.assign(e.spec.tags().begin(), e.spec.tags().end());
-    records.push_back(std::move(rec));
+  auto admitted = runs::Admit({submitter, sub.batch_name, std::move(sub.specs), std::move(sub.keys), sub.batch_json}, policy);
+  if (!admitted.ok()) return admitted.status();
+
+  const bool stored = !sub.store_path.empty();
+  const std::string where = stored ? "local store " + sub.store_path : "in-memory store";
+  std::unique_ptr<db::Store> opened;
+  db::Store* store = given;
+  if (store == nullptr) {
+    if (stored) {
+      if (const auto parent = std::filesystem::path(sub.store_path).parent_path(); !parent.empty()) {
+        std::error_code ec;
+        std::filesystem::create_directories(parent, ec);
+      }
+    }
+    auto s = db::Store::Open(stored ? sub.store_path : ":memory:");
+    if (!s.ok()) return s.status().WithContext(where);
+    opened = std::move(s.value());
+    store = opened.get();
   }
-  std::vector<std::int64_t> ids;
-  auto batch = (*store)->SubmitBatch(submitter, batch_name, batch_json, std::move(records), &ids);
-  if (!batch.ok()) return batch.status().WithContext("local store " + store_path);
-  std::map<std::int64_t, size_t> index_of;
-  for (size_t k = 0; k < ids.size(); ++k) index_of[ids[k]] = k;
-  for (size_t n = 0; n < exps.size(); ++n) {
-    auto claimed = (*store)->ClaimNext(kLocalBenchKind, kLocalBenchName);
-    if (!claimed.ok()) return claimed.status().WithContext("local store " + store_path);
-    if (!claimed->has_value()) return Status::Internal("local store: a submitted run was not there to claim");
-    const auto it = index_of.find((*claimed)->id);
-    if (it == index_of.end()) {
-      // A run left queued by an earlier, interrupted local invocation: mark it so and move on.
-      (void)(*store)->Finish((*claimed)->id, db::RunStatus::kCancelled, "left over from an interrupted local run", {});
-      --n;
-      continue;
-    }
-    LocalRunResult r = Execute(exps[it->second], true);
-    r.run_id = (*claimed)->id;
-    r.batch_id = *batch;
-    Status st = db::AppendRecordedTrace(store->get(), r.run_id, r.trace);
-    std::vector<db::Metric> metrics;
-    for (const auto& [name, value] : experiment::MetricList(r.summary.metrics))
-      if (std::isfinite(value)) metrics.push_back({name, value});
-    db::RunStatus status = r.summary.ok() ? db::RunStatus::kDone
-                           : r.summary.termination == experiment::RunSummary::Termination::kCancelled
-                               ? db::RunStatus::kCancelled
-                               : db::RunStatus::kFailed;
-    std::string reason = r.summary.message;
-    if (!st.ok() && status == db::RunStatus::kDone) {
-      status = db::RunStatus::kFailed;
-      reason = "storing the trace failed: " + st.message();
-    }
-    VB_RETURN_IF_ERROR((*store)->Finish(r.run_id, status, reason, metrics).WithContext("local store " + store_path));
-    if (!keep_traces) r.trace = experiment::Trace{};
+  VB_RETURN_IF_ERROR(CancelLeftOvers(store, bench.bench_class).WithContext(where));
+
+  std::map<std::int64_t, LocalRunResult> pending;
+  std::vector<LocalRunResult> shapes;
+  for (const auto& r : admitted->runs) shapes.push_back({0, 0, r.key, r.tags, r.controller, {}, {}});
+  auto queued = runs::Enqueue(store, std::move(admitted.value()), policy);
+  if (!queued.ok()) return queued.status().WithContext(where);
+  for (size_t k = 0; k < queued->run_ids.size(); ++k) pending[queued->run_ids[k]] = std::move(shapes[k]);
+
+  runs::Worker worker(bench, nullptr);
+  std::vector<LocalRunResult> out;
+  while (!pending.empty()) {
+    auto done = worker.ClaimAndExecute(store);
+    if (!done.ok()) return done.status().WithContext(where);
+    if (!done->has_value()) return Status::Internal(where + ": a submitted run was not there to claim");
+    runs::Outcome& o = **done;
+    auto it = pending.find(o.run_id);
+    if (it == pending.end()) return Status::Internal(where + ": claimed run " + std::to_string(o.run_id) + ", not ours");
+    if (!o.recorded) return Status::Unavailable(where + ": cannot record run " + std::to_string(o.run_id));
+    LocalRunResult r = std::move(it->second);
+    pending.erase(it);
+    r.run_id = stored || given != nullptr ? o.run_id : 0;
+    r.batch_id = stored || given != nullptr ? queued->batch_id : 0;
+    r.summary = std::move(o.summary);
+    if (sub.keep_traces) r.trace = std::move(o.trace);
     out.push_back(std::move(r));
   }
   return out;

@@ -1,35 +1,43 @@
-// benchctl's local mode: run specs on the embedded emulator, no server.
+// benchctl's local mode: the run pipeline (runs/) in process, on the local emulator bench, no server.
 #pragma once
 
 #include <cstdint>
 #include <string>
 #include <vector>
 
+#include "common/run_key.h"
 #include "common/status.h"
+#include "db/store.h"
 #include "experiment/runner.h"
+#include "experiment/spec.h"
 
 namespace vb::benchctl {
 
 struct LocalRunResult {
-  std::int64_t run_id = 0;            // in the local store (0 when not stored)
+  std::int64_t run_id = 0;            // in the local store (0 when not stored: --no-store)
   std::int64_t batch_id = 0;
-  std::string name;                   // spec name + sweep/repeat tags
+  RunKey key;
   std::vector<std::string> tags;
   std::string controller;
   experiment::RunSummary summary;
-  experiment::Trace trace;
+  experiment::Trace trace;            // empty unless asked for
 };
 
-// Expands, builds and runs every point of the spec on a fresh EmulatedBench built from the spec's model.
-// With a store path, the batch is recorded there exactly as a server records it (spec, status history,
-// metrics, trace), and the runs execute in the store's claim order (priority, then age).
-StatusOr<std::vector<LocalRunResult>> RunLocal(const experiment::ExperimentSpec& spec, bool realtime, bool keep_traces,
-                                               const std::string& store_path = "");
+struct LocalSubmission {
+  std::vector<experiment::ExperimentSpec> specs;
+  std::vector<RunKey> keys;           // empty, or one per already expanded spec (runs::Submission::keys)
+  std::string batch_name;
+  std::string batch_json;             // "" = the spec, when there is one
+  bool realtime = false;              // pace every run to the wall clock (sets the specs' `realtime`)
+  bool keep_traces = false;
+  std::string store_path;             // "" = --no-store: an in-memory store, nothing kept
+};
 
-// The same for points already expanded (single-run specs, e.g. a regression suite's runs), recorded as one batch.
-StatusOr<std::vector<LocalRunResult>> RunLocalPoints(const std::vector<experiment::ExperimentSpec>& points,
-                                                     const std::string& batch_name, const std::string& batch_json,
-                                                     bool realtime, bool keep_traces, const std::string& store_path);
+// runs::Admit with the local emulator as the only bench and no limits, runs::Enqueue into the local store,
+// then a runs::Worker on the calling thread until the batch is done (in the store's claim order: priority,
+// then age). Runs of the local bench left queued by an interrupted invocation are cancelled first.
+// `store` (optional): an open store to use instead of opening store_path (the local backend keeps one).
+StatusOr<std::vector<LocalRunResult>> RunLocal(LocalSubmission submission, db::Store* store = nullptr);
 
 // Where local runs are recorded: $VALVEBENCH_DB, else ~/.local/share/valvebench/local.db, else ./valvebench-local.db.
 std::string DefaultLocalStorePath();

@@ -5,6 +5,8 @@
 // Exit codes (benchctl/cli_common.h): 0 success; 1 a run failed or was cancelled; 2 the request was refused
 // (bad input naming the field, not found, no capable bench, limits, permissions); 3 environment.
 #include <CLI/CLI.hpp>
+#include <spdlog/sinks/stdout_sinks.h>
+#include <spdlog/spdlog.h>
 
 #include <cmath>
 #include <cstdio>
@@ -33,6 +35,9 @@ using vb::benchctl::kExitOk;
 }  // namespace
 
 int main(int argc, char** argv) {
+  // What the in-process run pipeline (runs/) logs goes to stderr, next to benchctl's own messages; stdout is data.
+  spdlog::set_default_logger(spdlog::stderr_logger_mt("benchctl"));
+  spdlog::set_pattern("benchctl: %v");
   CLI::App app{"benchctl: run, watch and compare experiments on valvebench benches"};
   app.require_subcommand(1);
   bool json = false, csv = false;
@@ -154,20 +159,22 @@ int main(int argc, char** argv) {
     return vb::benchctl::RemoteRun(*c, spec_path, wait, out);
   }
   if (compare->parsed()) {
-    if (compare_local && batch != 0) {
-      if (store_path.empty()) return Fail(Status::InvalidArgument("--batch with --local needs the local store (--db)"));
-      return vb::benchctl::CmdCompareLocalBatch(store_path, batch, json, csv);
-    }
     if (batch != 0 || !run_ids.empty()) {
-      if (server.empty()) return need_server();
-      auto c = make_client();
-      return vb::benchctl::RemoteCompare(*c, batch, run_ids, out);
+      if (compare_local && store_path.empty())
+        return Fail(Status::InvalidArgument("--batch/--runs with --local need the local store (--db)"));
+      if (!compare_local && server.empty()) return need_server();
+      auto backend = vb::benchctl::ChooseBackend(compare_local ? "" : server, store_path, make_client);
+      return vb::benchctl::CmdCompareStored(*backend, batch, run_ids, json, csv);
     }
     if (compare_input.empty())
       return Fail(Status::InvalidArgument("compare: give --batch/--runs (server), or a results file or --local SPEC"));
     return vb::benchctl::CmdCompare(compare_input, compare_local, store_path, json, csv);
   }
-  if (benches->parsed() && local) return vb::benchctl::CmdBenchesLocal(json);
+  if (benches->parsed()) {
+    if (!local && server.empty()) return need_server();
+    auto backend = vb::benchctl::ChooseBackend(local ? "" : server, store_path, make_client);
+    return vb::benchctl::CmdBenches(*backend, json);
+  }
   if (server.empty()) return need_server();
   auto c = make_client();
   if (queue->parsed()) {
@@ -182,6 +189,5 @@ int main(int argc, char** argv) {
   if (watch->parsed()) return vb::benchctl::RemoteWatch(*c, run_id, out);
   if (cancel->parsed()) return vb::benchctl::RemoteCancel(*c, run_id, reason, out);
   if (exp->parsed()) return vb::benchctl::RemoteExportFiles(*c, run_id, export_csv, export_hdf5, export_mat);
-  if (benches->parsed()) return vb::benchctl::RemoteBenches(*c, out);
   return kExitBadInput;
 }

@@ -9,8 +9,9 @@
 #include <iostream>
 #include <sstream>
 
+#include "benchctl/backend.h"
 #include "benchctl/cli_common.h"
-#include "benchctl/local_run.h"
+#include "proto/api_convert.h"
 #include "db/store.h"
 #include "experiment/spec.h"
 #include "regress/compare.h"
@@ -22,7 +23,6 @@ namespace {
 namespace v1 = valvebench::v1;
 using regress::Json;
 
-constexpr double kRunDeadline_s = 6 * 3600.0;  // one run of a suite, waited for on the server
 
 std::string Where(const std::string& server) { return server.empty() ? "local" : "server " + server; }
 
@@ -38,54 +38,19 @@ StatusOr<std::unique_ptr<db::Store>> OpenStore(const std::string& path) {
   return s;
 }
 
-// Runs of a batch with their metrics, from the local store or the server.
-StatusOr<std::vector<regress::RunMetrics>> BatchRunsLocal(db::Store& store, std::int64_t batch) {
-  db::RunFilter f;
-  f.batch_id = batch;
-  f.limit = 1000;
+// What regress compares, from the runs of a batch wherever they are stored.
+std::vector<regress::RunMetrics> ToRunMetrics(const std::vector<RunView>& runs) {
   std::vector<regress::RunMetrics> out;
-  for (;;) {
-    auto page = store.ListRuns(f);
-    if (!page.ok()) return page.status();
-    for (const auto& r : *page) {
-      regress::RunMetrics m;
-      m.run_id = r.id;
-      m.name = r.name;
-      m.ok = r.status == db::RunStatus::kDone;
-      m.reason = m.ok ? "" : std::string(db::RunStatusName(r.status)) + (r.reason.empty() ? "" : ": " + r.reason);
-      auto metrics = store.GetMetrics(r.id);
-      if (!metrics.ok()) return metrics.status();
-      for (const auto& x : *metrics) m.metrics[x.name] = x.value;
-      out.push_back(std::move(m));
-    }
-    if (static_cast<int>(page->size()) < f.limit) break;
-    f.after_id = page->back().id;
+  for (const auto& r : runs) {
+    regress::RunMetrics m;
+    m.run_id = r.id;
+    m.name = r.key.DisplayName();
+    m.case_name = r.key.CaseName();
+    m.ok = r.ok();
+    m.reason = m.ok ? "" : RunStatusName(r.status) + (r.reason.empty() ? std::string() : ": " + r.reason);
+    m.metrics = r.metrics;
+    out.push_back(std::move(m));
   }
-  if (out.empty()) return Status::NotFound("batch " + std::to_string(batch) + " not found (or has no runs)");
-  return out;
-}
-
-StatusOr<std::vector<regress::RunMetrics>> BatchRunsRemote(client::Client& c, std::int64_t batch) {
-  v1::ListRunsRequest req;
-  req.set_batch_id(batch);
-  req.set_page_size(1000);
-  std::vector<regress::RunMetrics> out;
-  for (;;) {
-    auto resp = c.ListRuns(req);
-    if (!resp.ok()) return resp.status();
-    for (const auto& r : resp->runs()) {
-      regress::RunMetrics m;
-      m.run_id = r.id();
-      m.name = r.name();
-      m.ok = r.status() == v1::DONE;
-      if (!m.ok) m.reason = v1::RunStatus_Name(r.status()) + (r.reason().empty() ? "" : ": " + r.reason());
-      for (const auto& [k, v] : r.metrics()) m.metrics[k] = v;
-      out.push_back(std::move(m));
-    }
-    if (resp->next_page_token().empty()) break;
-    req.set_page_token(resp->next_page_token());
-  }
-  if (out.empty()) return Status::NotFound("batch " + std::to_string(batch) + " not found on the server");
   return out;
 }
 
@@ -94,54 +59,30 @@ struct SuiteOutcome {
   std::vector<regress::RunMetrics> runs;
 };
 
-// Runs the expanded suite: on the embedded emulator (recorded in the local store unless --no-store) or on the
-// server as one batch, waiting for every run.
-StatusOr<SuiteOutcome> RunSuite(const regress::LoadedSuite& suite, std::uint64_t seed, const std::string& server,
-                                const std::string& store_path, const ClientFactory& make_client) {
+// Runs the expanded suite as one batch on the backend, waits for every run, and reads the runs back.
+StatusOr<SuiteOutcome> RunSuite(const regress::LoadedSuite& suite, std::uint64_t seed, Backend& backend) {
   auto runs = regress::ExpandSuite(suite.suite, seed);
   if (!runs.ok()) return runs.status();
   std::vector<v1::ExperimentSpec> specs;
-  for (auto& r : *runs) specs.push_back(r.spec);
+  std::vector<RunKey> keys;
+  for (auto& r : *runs) {
+    if (!backend.serves_hardware() && regress::BenchClassOf(r.spec).rfind("emulated", 0) != 0)
+      return Status::FailedPrecondition("experiments[" + std::to_string(r.entry) + "].bench_class: '" +
+                                        regress::BenchClassOf(r.spec) + "' needs a server (--server ADDR)");
+    specs.push_back(r.spec);
+    keys.push_back(r.key);
+  }
+  std::string suite_json;
+  google::protobuf::util::JsonPrintOptions o;
+  o.preserve_proto_field_names = true;
+  (void)google::protobuf::util::MessageToJsonString(suite.suite, &suite_json, o);
+  auto batch = backend.RunBatch(specs, keys, suite.suite.name(), suite_json);
+  if (!batch.ok()) return batch.status().WithContext(suite.path.empty() ? suite.suite.name() : suite.path);
   SuiteOutcome out;
-  if (server.empty()) {
-    for (const auto& r : *runs)
-      if (regress::BenchClassOf(r.spec).rfind("emulated", 0) != 0)
-        return Status::FailedPrecondition("experiments[" + std::to_string(r.entry) + "].bench_class: '" +
-                                          regress::BenchClassOf(r.spec) + "' needs a server (--server ADDR)");
-    std::string suite_json;
-    google::protobuf::util::JsonPrintOptions o;
-    o.preserve_proto_field_names = true;
-    (void)google::protobuf::util::MessageToJsonString(suite.suite, &suite_json, o);
-    auto results = RunLocalPoints(specs, suite.suite.name(), suite_json, false, false, store_path);
-    if (!results.ok()) return results.status();
-    for (const auto& r : *results) {
-      regress::RunMetrics m;
-      m.run_id = r.run_id;
-      m.name = r.name;
-      m.ok = r.summary.ok();
-      m.reason = r.summary.message;
-      for (const auto& [k, v] : experiment::MetricList(r.summary.metrics)) m.metrics[k] = v;
-      out.batch_id = r.batch_id;
-      out.runs.push_back(std::move(m));
-      std::fprintf(stderr, "  %s: %s\n", r.name.c_str(), r.summary.BriefReport().c_str());
-    }
-    return out;
-  }
-  auto c = make_client();
-  auto resp = c->SubmitBatch(specs, suite.suite.name());
-  if (!resp.ok()) return resp.status().WithContext(suite.path.empty() ? suite.suite.name() : suite.path);
-  out.batch_id = resp->batch_id();
-  std::fprintf(stderr, "suite %s: batch %lld, %d runs on %s\n", suite.suite.name().c_str(),
-               static_cast<long long>(out.batch_id), resp->run_ids_size(), server.c_str());
-  for (auto id : resp->run_ids()) {
-    auto st = c->Watch(id, kRunDeadline_s, 0.0, [](const v1::RunEvent& ev) {
-      return !(ev.status() == v1::DONE || ev.status() == v1::FAILED || ev.status() == v1::CANCELLED);
-    });
-    if (!st.ok()) return st.WithContext("waiting for run " + std::to_string(id));
-  }
-  auto fetched = BatchRunsRemote(*c, out.batch_id);
-  if (!fetched.ok()) return fetched.status();
-  out.runs = std::move(*fetched);
+  out.batch_id = *batch;
+  auto stored = backend.Runs(*batch, {});
+  if (!stored.ok()) return stored.status();
+  out.runs = ToRunMetrics(*stored);
   return out;
 }
 
@@ -271,24 +212,19 @@ int RegressCli::Run(const ClientFactory& make_client) {
       auto suite = regress::LoadSuite(suite_path_);
       if (!suite.ok()) return Fail(suite.status());
       const std::uint64_t seed = seed_ != 0 ? seed_ : (suite->suite.seed() != 0 ? suite->suite.seed() : 1);
-      auto out = RunSuite(*suite, seed, server, store_path, make_client);
+      auto backend = ChooseBackend(server, store_path, make_client);
+      auto out = RunSuite(*suite, seed, *backend);
       if (!out.ok()) return Fail(out.status());
       runs = std::move(out->runs);
       source = "suite " + suite->suite.name() + " (" + Where(server) + " batch " + std::to_string(out->batch_id) +
                ", seed " + std::to_string(seed) + ")";
-    } else if (server.empty()) {
-      auto store = OpenStore(store_path);
-      if (!store.ok()) return Fail(store.status());
-      auto r = BatchRunsLocal(**store, batch_);
-      if (!r.ok()) return Fail(r.status().WithContext("--batch"));
-      runs = std::move(*r);
-      source = "local batch " + std::to_string(batch_);
     } else {
-      auto c = make_client();
-      auto r = BatchRunsRemote(*c, batch_);
+      if (server.empty() && store_path.empty()) return Fail(OpenStore(store_path).status());
+      auto backend = ChooseBackend(server, store_path, make_client);
+      auto r = backend->Runs(batch_, {});
       if (!r.ok()) return Fail(r.status().WithContext("--batch"));
-      runs = std::move(*r);
-      source = "server " + server + " batch " + std::to_string(batch_);
+      runs = ToRunMetrics(*r);
+      source = (server.empty() ? "local" : "server " + server) + " batch " + std::to_string(batch_);
     }
     const regress::Measured m = regress::Summarise(runs);
     if (!m.failures.empty()) {
@@ -364,7 +300,8 @@ int RegressCli::Run(const ClientFactory& make_client) {
       std::fprintf(stderr, "regress: suite %s (%d entries) on %s vs baseline %s v%d, seed %llu\n",
                    suite->suite.name().c_str(), suite->suite.experiments_size(), Where(server).c_str(),
                    baseline->name.c_str(), baseline->version, static_cast<unsigned long long>(seed));
-    auto out = RunSuite(*suite, seed, server, store_path, make_client);
+    auto backend = ChooseBackend(server, store_path, make_client);
+    auto out = RunSuite(*suite, seed, *backend);
     if (!out.ok()) return Fail(out.status());
     regress::RegressResult r = regress::Compare(suite->suite, *baseline, regress::Summarise(out->runs));
     r.batch_id = out->batch_id;

@@ -7,8 +7,10 @@
 #include <iostream>
 #include <memory>
 
+#include "benchctl/backend.h"
 #include "benchctl/cli_common.h"
-#include "benchctl/hw_commands.h"
+#include "proto/api_convert.h"
+#include "common/csv.h"
 #include "experiment/compare.h"
 #include "experiment/spec.h"
 
@@ -27,43 +29,15 @@ std::string ToJson(const google::protobuf::Message& m) {
   return out;
 }
 
+// The one status vocabulary (common/run_status.h) for whatever the server sends.
 const char* StatusWord(v1::RunStatus s) {
-  switch (s) {
-    case v1::QUEUED: return "queued";
-    case v1::RUNNING: return "running";
-    case v1::DONE: return "done";
-    case v1::FAILED: return "failed";
-    case v1::CANCELLED: return "cancelled";
-    case v1::INTERRUPTED: return "interrupted";
-    default: return "?";
-  }
+  const auto status = api::FromProto(s);
+  return status ? RunStatusName(*status) : "?";
 }
 
-bool Ended(v1::RunStatus s) { return s == v1::DONE || s == v1::FAILED || s == v1::CANCELLED; }
-
-// The server's comparison in the local form, so both render through the same table and CSV code.
-experiment::Comparison FromProto(const v1::CompareRunsResponse& cmp) {
-  experiment::Comparison local;
-  local.rank_metric = cmp.rank_metric();
-  local.effort_metric = cmp.effort_metric();
-  local.columns.assign(cmp.columns().begin(), cmp.columns().end());
-  for (const auto& r : cmp.rows()) {
-    experiment::CompareRow row;
-    row.name = r.name();
-    row.controller = r.controller();
-    row.runs = r.runs();
-    row.failed = r.failed();
-    row.rank = r.rank();
-    row.pareto = r.pareto();
-    for (const auto& col : local.columns) {
-      experiment::MetricStat st;
-      auto it = r.metrics().find(col);
-      if (it != r.metrics().end()) st = {it->second.mean(), it->second.spread(), it->second.n()};
-      row.metrics[col] = st;
-    }
-    local.rows.push_back(row);
-  }
-  return local;
+bool Ended(v1::RunStatus s) {
+  const auto status = api::FromProto(s);
+  return status && vb::Ended(*status);
 }
 
 int ExitForRun(const v1::Run& r) { return r.status() == v1::DONE ? kExitOk : kExitRunFailed; }
@@ -129,8 +103,8 @@ int RemoteRun(client::Client& c, const std::string& spec_path, bool wait, const 
   }
   if (out.json) std::cout << all << "]\n";
   if (!out.json && resp->run_ids_size() > 1) {
-    auto cmp = c.Compare(resp->batch_id(), {});
-    if (cmp.ok()) std::cout << "\n" << experiment::ComparisonTable(FromProto(*cmp));
+    auto cmp = RemoteComparison(c, resp->batch_id(), {});
+    if (cmp.ok()) std::cout << "\n" << experiment::ComparisonTable(*cmp);
   }
   return code;
 }
@@ -159,9 +133,9 @@ int RemoteQueue(client::Client& c, const std::string& status, std::int64_t batch
   if (out.csv) std::printf("id,batch,status,priority,progress,controller,submitter,name\n");
   for (const auto& r : resp->runs()) {
     if (out.csv) {
-      std::printf("%lld,%lld,%s,%d,%.3f,%s,%s,\"%s\"\n", static_cast<long long>(r.id()),
+      std::printf("%lld,%lld,%s,%d,%.3f,%s,%s,%s\n", static_cast<long long>(r.id()),
                   static_cast<long long>(r.batch_id()), StatusWord(r.status()), r.priority(), r.progress(),
-                  r.controller().c_str(), r.submitter().c_str(), r.name().c_str());
+                  r.controller().c_str(), r.submitter().c_str(), CsvQuoted(r.name()).c_str());
     } else {
       std::printf("%6lld  batch %-5lld %-11s prio %-3d %4.0f%%  %-22s %-10s %s\n", static_cast<long long>(r.id()),
                   static_cast<long long>(r.batch_id()), StatusWord(r.status()), r.priority(), 100.0 * r.progress(),
@@ -232,32 +206,6 @@ int RemoteExport(client::Client& c, std::int64_t run_id, const std::string& csv_
     std::fputc('\n', f.get());
   }
   if (std::ferror(f.get())) return Fail(Status::DataLoss(csv_path + ": write failed"));
-  return kExitOk;
-}
-
-int RemoteCompare(client::Client& c, std::int64_t batch, const std::vector<std::int64_t>& run_ids, const Output& out) {
-  auto cmp = c.Compare(batch, run_ids);
-  if (!cmp.ok()) return Fail(cmp.status());
-  if (out.json) {
-    std::cout << ToJson(*cmp) << "\n";
-    return kExitOk;
-  }
-  const experiment::Comparison local = FromProto(*cmp);
-  std::cout << (out.csv ? experiment::ComparisonCsv(local) : experiment::ComparisonTable(local));
-  return kExitOk;
-}
-
-int RemoteBenches(client::Client& c, const Output& out) {
-  auto b = c.Benches();
-  if (!b.ok()) return Fail(b.status());
-  if (out.json) {
-    std::cout << ToJson(*b) << "\n";
-    return kExitOk;
-  }
-  for (const auto& x : b->benches())
-    std::printf("%-16s %-9s %-18s %-16s %s\n", x.name().c_str(), x.kind().c_str(), x.driver().c_str(),
-                x.model().c_str(), x.busy() ? ("busy (run " + std::to_string(x.current_run_id()) + ")").c_str() : "idle");
-  PrintAttached(*b);
   return kExitOk;
 }
 

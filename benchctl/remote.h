@@ -21,7 +21,5 @@ int RemoteShow(client::Client& c, std::int64_t run_id, const Output& out);
 int RemoteWatch(client::Client& c, std::int64_t run_id, const Output& out);
 int RemoteCancel(client::Client& c, std::int64_t run_id, const std::string& reason, const Output& out);
 int RemoteExport(client::Client& c, std::int64_t run_id, const std::string& csv_path);
-int RemoteCompare(client::Client& c, std::int64_t batch, const std::vector<std::int64_t>& run_ids, const Output& out);
-int RemoteBenches(client::Client& c, const Output& out);
 
 }  // namespace vb::benchctl

@@ -7,6 +7,7 @@
 #include <iostream>
 #include <sstream>
 
+#include "benchctl/backend.h"
 #include "benchctl/cli_common.h"
 #include "db/store.h"
 #include "experiment/compare.h"
@@ -29,25 +30,15 @@ std::string Controlled(const std::string& controller) {
   return "";
 }
 
-// What a report needs of one run, wherever it came from.
-struct RunInfo {
-  std::int64_t id = 0;
-  std::string name, controller;
-  bool ok = true;
-  std::map<std::string, double> metrics;
-};
-
-std::string Case(const std::string& name) { return name.substr(0, name.find(" repeat:")); }
-
-Json BatchSections(const std::string& where, std::int64_t batch, const std::vector<RunInfo>& runs,
+Json BatchSections(const std::string& where, std::int64_t batch, const std::vector<RunView>& runs,
                    const std::vector<report::TraceData>& traces) {
   Json sections = Json::array();
   std::vector<experiment::RunRecord> recs;
   std::vector<report::MapPoint> map;
   for (const auto& r : runs) {
-    recs.push_back({Case(r.name), r.controller, r.ok, r.metrics});
+    recs.push_back({r.key.CaseName(), r.controller, r.ok(), r.metrics});
     auto it = r.metrics.find("mean_position_pct");
-    if (r.ok && it != r.metrics.end()) map.push_back({r.name, it->second});
+    if (r.ok() && it != r.metrics.end()) map.push_back({r.key, it->second});
   }
   sections.push_back({{"kind", "note"},
                       {"text", "Batch " + std::to_string(batch) + " (" + where + "): " + std::to_string(runs.size()) +
@@ -60,23 +51,6 @@ Json BatchSections(const std::string& where, std::int64_t batch, const std::vect
   return sections;
 }
 
-report::TraceData FromChunks(const std::string& label, const std::string& controlled,
-                             const std::vector<db::TraceChunk>& chunks) {
-  report::TraceData t;
-  t.label = label;
-  t.controlled = controlled;
-  if (chunks.empty()) return t;
-  t.t0_s = chunks.front().t0_s;
-  t.sample_period_s = chunks.front().sample_period_s;
-  for (const auto& c : chunks)
-    for (std::size_t ch = 0; ch < c.channels.size(); ++ch) {
-      auto& col = t.channels[c.channels[ch]];
-      col.insert(col.end(), c.data.begin() + static_cast<std::ptrdiff_t>(ch * c.samples),
-                 c.data.begin() + static_cast<std::ptrdiff_t>((ch + 1) * c.samples));
-    }
-  return t;
-}
-
 report::TraceData FromFetched(const std::string& label, const std::string& controlled, const client::FetchedTrace& f) {
   report::TraceData t;
   t.label = label;
@@ -85,63 +59,6 @@ report::TraceData FromFetched(const std::string& label, const std::string& contr
   t.sample_period_s = f.sample_period_s;
   t.channels = f.columns;
   return t;
-}
-
-StatusOr<std::vector<RunInfo>> LocalRuns(db::Store& store, std::int64_t batch, std::int64_t run) {
-  std::vector<db::RunRecord> recs;
-  if (run != 0) {
-    auto r = store.GetRun(run);
-    if (!r.ok()) return r.status();
-    recs.push_back(*r);
-  } else {
-    db::RunFilter f;
-    f.batch_id = batch;
-    f.limit = 1000;
-    for (;;) {
-      auto page = store.ListRuns(f);
-      if (!page.ok()) return page.status();
-      recs.insert(recs.end(), page->begin(), page->end());
-      if (static_cast<int>(page->size()) < f.limit) break;
-      f.after_id = page->back().id;
-    }
-    if (recs.empty()) return Status::NotFound("batch " + std::to_string(batch) + " not found in the local store");
-  }
-  std::vector<RunInfo> out;
-  for (const auto& r : recs) {
-    RunInfo i{r.id, r.name, r.controller, r.status == db::RunStatus::kDone, {}};
-    auto m = store.GetMetrics(r.id);
-    if (!m.ok()) return m.status();
-    for (const auto& x : *m) i.metrics[x.name] = x.value;
-    out.push_back(std::move(i));
-  }
-  return out;
-}
-
-StatusOr<std::vector<RunInfo>> RemoteRuns(client::Client& c, std::int64_t batch, std::int64_t run) {
-  std::vector<RunInfo> out;
-  auto add = [&](const v1::Run& r) {
-    RunInfo i{r.id(), r.name(), r.controller(), r.status() == v1::DONE, {}};
-    for (const auto& [k, v] : r.metrics()) i.metrics[k] = v;
-    out.push_back(std::move(i));
-  };
-  if (run != 0) {
-    auto r = c.GetRun(run);
-    if (!r.ok()) return r.status();
-    add(*r);
-    return out;
-  }
-  v1::ListRunsRequest req;
-  req.set_batch_id(batch);
-  req.set_page_size(1000);
-  for (;;) {
-    auto resp = c.ListRuns(req);
-    if (!resp.ok()) return resp.status();
-    for (const auto& r : resp->runs()) add(r);
-    if (resp->next_page_token().empty()) break;
-    req.set_page_token(resp->next_page_token());
-  }
-  if (out.empty()) return Status::NotFound("batch " + std::to_string(batch) + " not found on the server");
-  return out;
 }
 
 StatusOr<Json> ReadJsonFile(const std::string& path, const std::string& flag) {
@@ -203,39 +120,23 @@ int ReportCli::Run(const ClientFactory& make_client) {
             (rec->night.empty() ? "" : ", night " + rec->night);
     sections = report::RegressionSections(r);
   } else {
-    std::vector<RunInfo> runs;
+    if (server.empty() && store_path.empty())
+      return Fail(Status::InvalidArgument("--batch/--run locally need the local store (--db)"));
+    auto backend = ChooseBackend(server, store_path, make_client);
+    auto fetched = run_ != 0 ? backend->Runs(0, {run_}) : backend->Runs(batch_, {});
+    if (!fetched.ok()) return Fail(fetched.status());
+    const std::vector<RunView>& runs = *fetched;
     std::vector<report::TraceData> traces;
-    std::string where;
-    if (server.empty()) {
-      if (store_path.empty()) return Fail(Status::InvalidArgument("--batch/--run locally need the local store (--db)"));
-      auto store = db::Store::Open(store_path);
-      if (!store.ok()) return Fail(store.status().WithContext("local store " + store_path));
-      auto r = LocalRuns(**store, batch_, run_);
-      if (!r.ok()) return Fail(r.status());
-      runs = std::move(*r);
-      for (std::size_t k = 0; k < runs.size() && static_cast<int>(k) < max_traces_; ++k) {
-        auto chunks = (*store)->ReadTrace(runs[k].id);
-        if (!chunks.ok()) return Fail(chunks.status());
-        traces.push_back(FromChunks("run " + std::to_string(runs[k].id) + ": " + runs[k].name,
-                                    Controlled(runs[k].controller), *chunks));
-      }
-      where = "local store";
-    } else {
-      auto c = make_client();
-      auto r = RemoteRuns(*c, batch_, run_);
-      if (!r.ok()) return Fail(r.status());
-      runs = std::move(*r);
-      for (std::size_t k = 0; k < runs.size() && static_cast<int>(k) < max_traces_; ++k) {
-        if (!runs[k].ok) continue;
-        auto t = c->GetTrace(runs[k].id);
-        if (!t.ok()) return Fail(t.status());
-        traces.push_back(FromFetched("run " + std::to_string(runs[k].id) + ": " + runs[k].name,
-                                     Controlled(runs[k].controller), *t));
-      }
-      where = "server " + server;
+    for (std::size_t k = 0; k < runs.size() && static_cast<int>(k) < max_traces_; ++k) {
+      if (!runs[k].ended()) continue;  // no trace is stored before a run ends
+      auto t = backend->GetTrace(runs[k].id);
+      if (!t.ok()) return Fail(t.status());
+      traces.push_back(FromFetched("run " + std::to_string(runs[k].id) + ": " + runs[k].key.DisplayName(),
+                                   Controlled(runs[k].controller), *t));
     }
+    const std::string where = server.empty() ? "local store" : "server " + server;
     if (run_ != 0) {
-      title = "Run " + std::to_string(run_) + ": " + runs.front().name;
+      title = "Run " + std::to_string(run_) + ": " + runs.front().key.DisplayName();
       std::vector<std::pair<std::string, double>> m(runs.front().metrics.begin(), runs.front().metrics.end());
       sections.push_back(report::TraceSection(traces));
       sections.push_back(report::MetricsSection("Metrics (docs/metrics.md)", m));

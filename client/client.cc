@@ -63,11 +63,13 @@ StatusOr<v1::SubmitRunResponse> Client::Submit(const v1::ExperimentSpec& spec, c
 }
 
 StatusOr<v1::SubmitRunResponse> Client::SubmitBatch(const std::vector<v1::ExperimentSpec>& specs,
-                                                   const std::string& batch_name) {
+                                                   const std::string& batch_name,
+                                                   const std::vector<v1::RunKey>& keys) {
   grpc::ClientContext ctx;
   Prepare(&ctx, opt_.deadline_s);
   v1::SubmitBatchRequest req;
   for (const auto& s : specs) *req.add_specs() = s;
+  for (const auto& k : keys) *req.add_keys() = k;
   req.set_batch_name(batch_name);
   v1::SubmitRunResponse resp;
   auto st = stub_->SubmitBatch(&ctx, req, &resp);

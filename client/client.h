@@ -37,9 +37,10 @@ class Client {
 
   StatusOr<valvebench::v1::SubmitRunResponse> Submit(const valvebench::v1::ExperimentSpec& spec,
                                                      const std::string& batch_name = "");
-  // Several specs as one batch (all queued or none).
+  // Several specs as one batch (all queued or none); keys: empty, or one per already expanded spec.
   StatusOr<valvebench::v1::SubmitRunResponse> SubmitBatch(const std::vector<valvebench::v1::ExperimentSpec>& specs,
-                                                          const std::string& batch_name = "");
+                                                          const std::string& batch_name = "",
+                                                          const std::vector<valvebench::v1::RunKey>& keys = {});
   StatusOr<valvebench::v1::Run> GetRun(std::int64_t run_id);
   StatusOr<valvebench::v1::ListRunsResponse> ListRuns(const valvebench::v1::ListRunsRequest& request);
   StatusOr<valvebench::v1::Run> Cancel(std::int64_t run_id, const std::string& reason = "");

@@ -1,8 +1,9 @@
 #include "control/dither_planner.h"
 
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <cmath>
-#include <cstdarg>
 #include <cstdio>
 #include <limits>
 #include <string>
@@ -10,50 +11,40 @@
 namespace vb::control {
 namespace {
 
-// printf-style formatting into a std::string (error paths only); the attribute lets the compiler check formats.
-[[gnu::format(printf, 1, 2)]] std::string Format(const char* fmt, ...) {
-  char buf[512];
-  std::va_list args;
-  va_start(args, fmt);
-  std::vsnprintf(buf, sizeof buf, fmt, args);
-  va_end(args);
-  return std::string(buf);
-}
-
 bool FinitePositive(double v) { return std::isfinite(v) && v > 0.0; }
 
 Status ValidateCoil(const RlCoil& coil) {
   if (!FinitePositive(coil.R_ohm)) {
-    return Status::InvalidArgument(Format("coil.R_ohm: must be a finite resistance > 0 ohm, got %g", coil.R_ohm));
+    return Status::InvalidArgument(fmt::format("coil.R_ohm: must be a finite resistance > 0 ohm, got {:.10g}", coil.R_ohm));
   }
   if (!FinitePositive(coil.L_H)) {
-    return Status::InvalidArgument(Format("coil.L_H: must be a finite inductance > 0 H, got %g", coil.L_H));
+    return Status::InvalidArgument(fmt::format("coil.L_H: must be a finite inductance > 0 H, got {:.10g}", coil.L_H));
   }
   if (!FinitePositive(coil.supply_V)) {
-    return Status::InvalidArgument(Format("coil.supply_V: must be a finite voltage > 0 V, got %g", coil.supply_V));
+    return Status::InvalidArgument(fmt::format("coil.supply_V: must be a finite voltage > 0 V, got {:.10g}", coil.supply_V));
   }
   return Status::Ok();
 }
 
 Status ValidateOptions(const DitherPlannerOptions& o) {
-  if (!FinitePositive(o.frequency_min_Hz)) {
+  if (!FinitePositive(o.min_frequency_Hz)) {
     return Status::InvalidArgument(
-        Format("options.frequency_min_Hz: must be a finite frequency > 0 Hz, got %g", o.frequency_min_Hz));
+        fmt::format("options.min_frequency_Hz: must be a finite frequency > 0 Hz, got {:.10g}", o.min_frequency_Hz));
   }
-  if (!std::isfinite(o.frequency_max_Hz) || !(o.frequency_max_Hz > o.frequency_min_Hz)) {
+  if (!std::isfinite(o.max_frequency_Hz) || !(o.max_frequency_Hz > o.min_frequency_Hz)) {
     return Status::InvalidArgument(
-        Format("options.frequency_max_Hz: must be finite and > options.frequency_min_Hz (%g Hz), got %g",
-               o.frequency_min_Hz, o.frequency_max_Hz));
+        fmt::format("options.max_frequency_Hz: must be finite and > options.min_frequency_Hz ({:.10g} Hz), got {:.10g}",
+               o.min_frequency_Hz, o.max_frequency_Hz));
   }
-  if (!(o.duty_min >= 0.0 && o.duty_min <= 1.0)) {
-    return Status::InvalidArgument(Format("options.duty_min: must be in [0, 1], got %g", o.duty_min));
+  if (!(o.min_duty >= 0.0 && o.min_duty <= 1.0)) {
+    return Status::InvalidArgument(fmt::format("options.min_duty: must be in [0, 1], got {:.10g}", o.min_duty));
   }
-  if (!(o.duty_max >= 0.0 && o.duty_max <= 1.0)) {
-    return Status::InvalidArgument(Format("options.duty_max: must be in [0, 1], got %g", o.duty_max));
+  if (!(o.max_duty >= 0.0 && o.max_duty <= 1.0)) {
+    return Status::InvalidArgument(fmt::format("options.max_duty: must be in [0, 1], got {:.10g}", o.max_duty));
   }
-  if (!(o.duty_min < o.duty_max)) {
-    return Status::InvalidArgument(Format("options.duty_min: %g must be < options.duty_max (%g)", o.duty_min,
-                                          o.duty_max));
+  if (!(o.min_duty < o.max_duty)) {
+    return Status::InvalidArgument(fmt::format("options.min_duty: {:.10g} must be < options.max_duty ({:.10g})", o.min_duty,
+                                          o.max_duty));
   }
   return Status::Ok();
 }
@@ -61,11 +52,11 @@ Status ValidateOptions(const DitherPlannerOptions& o) {
 Status ValidateRequest(const DitherRequest& r) {
   if (!FinitePositive(r.average_current_A)) {
     return Status::InvalidArgument(
-        Format("dither.average_current_A: must be a finite current > 0 A, got %g", r.average_current_A));
+        fmt::format("dither.average_current_A: must be a finite current > 0 A, got {:.10g}", r.average_current_A));
   }
-  if (!FinitePositive(r.amplitude_A)) {
+  if (!FinitePositive(r.dither_amplitude_A)) {
     return Status::InvalidArgument(
-        Format("dither.amplitude_A: must be a finite peak-to-peak current > 0 A, got %g", r.amplitude_A));
+        fmt::format("dither.dither_amplitude_A: must be a finite peak-to-peak current > 0 A, got {:.10g}", r.dither_amplitude_A));
   }
   return Status::Ok();
 }
@@ -171,16 +162,16 @@ struct Band {
 };
 
 StatusOr<Band> FeasibleBand(const RlCoil& coil, double i_avg_A, const DitherPlannerOptions& o) {
-  const double f_min = o.frequency_min_Hz, f_max = o.frequency_max_Hz;
+  const double f_min = o.min_frequency_Hz, f_max = o.max_frequency_Hz;
   const double i_inf_A = coil.supply_V / coil.R_ohm;
   auto unreachable = [&]() {
     // I_avg(f, D) is monotone in f at fixed D, so the reachable range is spanned by the box corners.
-    const double lo = std::min(Eval(coil, f_min, o.duty_min).i_avg_A, Eval(coil, f_max, o.duty_min).i_avg_A);
-    const double hi = std::max(Eval(coil, f_min, o.duty_max).i_avg_A, Eval(coil, f_max, o.duty_max).i_avg_A);
+    const double lo = std::min(Eval(coil, f_min, o.min_duty).i_avg_A, Eval(coil, f_max, o.min_duty).i_avg_A);
+    const double hi = std::max(Eval(coil, f_min, o.max_duty).i_avg_A, Eval(coil, f_max, o.max_duty).i_avg_A);
     return Status::InvalidArgument(
-        Format("dither.average_current_A: %.6g A is not reachable with duty in [%g, %g] and f in [%g, %g] Hz "
-               "(reachable %.4g..%.4g A; supply_V/R_ohm = %.4g A)",
-               i_avg_A, o.duty_min, o.duty_max, f_min, f_max, lo, hi, i_inf_A));
+        fmt::format("dither.average_current_A: {:.6g} A is not reachable with duty in [{:.10g}, {:.10g}] and f in [{:.10g}, {:.10g}] Hz "
+               "(reachable {:.4g}..{:.4g} A; supply_V/R_ohm = {:.4g} A)",
+               i_avg_A, o.min_duty, o.max_duty, f_min, f_max, lo, hi, i_inf_A));
   };
   if (!(i_avg_A < i_inf_A)) return unreachable();
 
@@ -189,8 +180,8 @@ StatusOr<Band> FeasibleBand(const RlCoil& coil, double i_avg_A, const DitherPlan
   // A duty within kDutySlack of a bound counts as on it (a request computed from a plan on the boundary must
   // plan again); the reported duties are clamped into the box.
   constexpr double kDutySlack = 1e-12;
-  auto below = [&](double d) { return d < o.duty_min - kDutySlack; };
-  auto above = [&](double d) { return d > o.duty_max + kDutySlack; };
+  auto below = [&](double d) { return d < o.min_duty - kDutySlack; };
+  auto above = [&](double d) { return d > o.max_duty + kDutySlack; };
   const bool a_in = !below(duty_a) && !above(duty_a);
   const bool b_in = !below(duty_b) && !above(duty_b);
   // D_f is monotone in f: if both ends violate the same bound, no frequency in the box works.
@@ -207,15 +198,15 @@ StatusOr<Band> FeasibleBand(const RlCoil& coil, double i_avg_A, const DitherPlan
     }
     return BrentRoot(h, f_min, f_max, h_min, h_max, 1e-12 * f_max);
   };
-  auto clamp_duty = [&](double d) { return std::clamp(d, o.duty_min, o.duty_max); };
+  auto clamp_duty = [&](double d) { return std::clamp(d, o.min_duty, o.max_duty); };
   Band band{f_min, f_max, clamp_duty(duty_a), clamp_duty(duty_b)};
   if (!a_in) {
-    const double bound = below(duty_a) ? o.duty_min : o.duty_max;
+    const double bound = below(duty_a) ? o.min_duty : o.max_duty;
     band.f_lo_Hz = crossing(bound);
     band.duty_at_lo = bound;
   }
   if (!b_in) {
-    const double bound = below(duty_b) ? o.duty_min : o.duty_max;
+    const double bound = below(duty_b) ? o.min_duty : o.max_duty;
     band.f_hi_Hz = crossing(bound);
     band.duty_at_hi = bound;
   }
@@ -232,10 +223,10 @@ Status ValidateAll(const RlCoil& coil, const DitherPlannerOptions& o) {
 StatusOr<RlPwmSteadyStateResult> RlPwmSteadyState(const RlCoil& coil, double frequency_Hz, double duty) {
   VB_RETURN_IF_ERROR(ValidateCoil(coil));
   if (!FinitePositive(frequency_Hz)) {
-    return Status::InvalidArgument(Format("frequency_Hz: must be a finite frequency > 0 Hz, got %g", frequency_Hz));
+    return Status::InvalidArgument(fmt::format("frequency_Hz: must be a finite frequency > 0 Hz, got {:.10g}", frequency_Hz));
   }
   if (!(duty >= 0.0 && duty <= 1.0)) {
-    return Status::InvalidArgument(Format("duty: must be in [0, 1], got %g", duty));
+    return Status::InvalidArgument(fmt::format("duty: must be in [0, 1], got {:.10g}", duty));
   }
   return Eval(coil, frequency_Hz, duty);
 }
@@ -245,7 +236,7 @@ StatusOr<DitherAmplitudeRange> DitherAmplitudeRangeAt(const RlCoil& coil, double
   VB_RETURN_IF_ERROR(ValidateAll(coil, options));
   if (!FinitePositive(average_current_A)) {
     return Status::InvalidArgument(
-        Format("dither.average_current_A: must be a finite current > 0 A, got %g", average_current_A));
+        fmt::format("dither.average_current_A: must be a finite current > 0 A, got {:.10g}", average_current_A));
   }
   StatusOr<Band> band = FeasibleBand(coil, average_current_A, options);
   if (!band.ok()) return band.status();
@@ -263,7 +254,7 @@ StatusOr<DitherPlan> PlanDitherExact(const RlCoil& coil, const DitherRequest& re
                                      const DitherPlannerOptions& options) {
   VB_RETURN_IF_ERROR(ValidateAll(coil, options));
   VB_RETURN_IF_ERROR(ValidateRequest(request));
-  const double i_avg_A = request.average_current_A, i_amp_A = request.amplitude_A;
+  const double i_avg_A = request.average_current_A, i_amp_A = request.dither_amplitude_A;
   StatusOr<DitherAmplitudeRange> range = DitherAmplitudeRangeAt(coil, i_avg_A, options);
   if (!range.ok()) return range.status();
 
@@ -272,17 +263,17 @@ StatusOr<DitherPlan> PlanDitherExact(const RlCoil& coil, const DitherRequest& re
   constexpr double kAmpSlack = 1e-12;
   if (i_amp_A > range->max_amplitude_A * (1.0 + kAmpSlack)) {
     return Status::InvalidArgument(
-        Format("dither.amplitude_A: %.6g A is not reachable at average %.6g A within f in [%g, %g] Hz and duty "
-               "in [%g, %g] (max %.4g A, at %.4g Hz)",
-               i_amp_A, i_avg_A, options.frequency_min_Hz, options.frequency_max_Hz, options.duty_min,
-               options.duty_max, range->max_amplitude_A, range->frequency_at_max_Hz));
+        fmt::format("dither.dither_amplitude_A: {:.6g} A is not reachable at average {:.6g} A within f in [{:.10g}, {:.10g}] Hz and duty "
+               "in [{:.10g}, {:.10g}] (max {:.4g} A, at {:.4g} Hz)",
+               i_amp_A, i_avg_A, options.min_frequency_Hz, options.max_frequency_Hz, options.min_duty,
+               options.max_duty, range->max_amplitude_A, range->frequency_at_max_Hz));
   }
   if (i_amp_A < range->min_amplitude_A * (1.0 - kAmpSlack)) {
     return Status::InvalidArgument(
-        Format("dither.amplitude_A: %.6g A is not reachable at average %.6g A within f in [%g, %g] Hz and duty "
-               "in [%g, %g] (min %.4g A, at %.4g Hz; a smaller ripple needs a higher frequency)",
-               i_amp_A, i_avg_A, options.frequency_min_Hz, options.frequency_max_Hz, options.duty_min,
-               options.duty_max, range->min_amplitude_A, range->frequency_at_min_Hz));
+        fmt::format("dither.dither_amplitude_A: {:.6g} A is not reachable at average {:.6g} A within f in [{:.10g}, {:.10g}] Hz and duty "
+               "in [{:.10g}, {:.10g}] (min {:.4g} A, at {:.4g} Hz; a smaller ripple needs a higher frequency)",
+               i_amp_A, i_avg_A, options.min_frequency_Hz, options.max_frequency_Hz, options.min_duty,
+               options.max_duty, range->min_amplitude_A, range->frequency_at_min_Hz));
   }
 
   // Step 3: g(f) = I_amp(f, D_f(f)) decreases strictly in f; bracket [f_lo, f_hi] holds the root.
@@ -297,7 +288,7 @@ StatusOr<DitherPlan> PlanDitherExact(const RlCoil& coil, const DitherRequest& re
     f = BrentRoot(g, f_lo, f_hi, range->max_amplitude_A - i_amp_A, range->min_amplitude_A - i_amp_A, 1e-13 * f_hi);
   }
   // D_f(f) is inside the duty box for f in [f_lo, f_hi]; the clamp only removes last-bit rounding.
-  const double duty = std::clamp(DutyForAverage(coil, f, i_avg_A), options.duty_min, options.duty_max);
+  const double duty = std::clamp(DutyForAverage(coil, f, i_avg_A), options.min_duty, options.max_duty);
   const RlPwmSteadyStateResult ss = Eval(coil, f, duty);
   return DitherPlan{f, duty, ss.i_avg_A, ss.i_amp_A, ss.i_mean_A};
 }
@@ -305,26 +296,26 @@ StatusOr<DitherPlan> PlanDitherExact(const RlCoil& coil, const DitherRequest& re
 StatusOr<ApproxDitherModel> FitApproxDitherModel(const RlCoil& coil, const DitherPlannerOptions& options,
                                                  const ApproxFitOptions& fit) {
   VB_RETURN_IF_ERROR(ValidateAll(coil, options));
-  if (!(options.duty_min > 0.0 && options.duty_max < 1.0)) {
+  if (!(options.min_duty > 0.0 && options.max_duty < 1.0)) {
     return Status::InvalidArgument(
-        Format("options.duty_min: the approximate model needs duty bounds inside (0, 1) (k2 is infinite where "
-               "there is no ripple), got [%g, %g]",
-               options.duty_min, options.duty_max));
+        fmt::format("options.min_duty: the approximate model needs duty bounds inside (0, 1) (k2 is infinite where "
+               "there is no ripple), got [{:.10g}, {:.10g}]",
+               options.min_duty, options.max_duty));
   }
-  const double f1 = fit.k1_fit_frequency_Hz.value_or(options.frequency_max_Hz);
+  const double f1 = fit.k1_fit_frequency_Hz.value_or(options.max_frequency_Hz);
   if (!FinitePositive(f1)) {
     return Status::InvalidArgument(
-        Format("fit.k1_fit_frequency_Hz: must be a finite frequency > 0 Hz, got %g", f1));
+        fmt::format("fit.k1_fit_frequency_Hz: must be a finite frequency > 0 Hz, got {:.10g}", f1));
   }
   if (fit.k1_duty_points < 2) {
-    return Status::InvalidArgument(Format("fit.k1_duty_points: must be >= 2, got %d", fit.k1_duty_points));
+    return Status::InvalidArgument(fmt::format("fit.k1_duty_points: must be >= 2, got {}", fit.k1_duty_points));
   }
   if (fit.k2_duty_points < 2) {
-    return Status::InvalidArgument(Format("fit.k2_duty_points: must be >= 2, got %d", fit.k2_duty_points));
+    return Status::InvalidArgument(fmt::format("fit.k2_duty_points: must be >= 2, got {}", fit.k2_duty_points));
   }
   if (fit.k2_frequency_points < 2) {
     return Status::InvalidArgument(
-        Format("fit.k2_frequency_points: must be >= 2, got %d", fit.k2_frequency_points));
+        fmt::format("fit.k2_frequency_points: must be >= 2, got {}", fit.k2_frequency_points));
   }
   auto grid = [](double lo, double hi, int n, int i) { return lo + (hi - lo) * i / (n - 1); };
 
@@ -336,7 +327,7 @@ StatusOr<ApproxDitherModel> FitApproxDitherModel(const RlCoil& coil, const Dithe
   // k1, eq. (12): minimise sum_j (I_avg(f1, D_j) - k1 D_j)^2  =>  k1 = sum D_j I_avg_j / sum D_j^2.
   double s_xy = 0.0, s_xx = 0.0;
   for (int j = 0; j < fit.k1_duty_points; ++j) {
-    const double d = grid(options.duty_min, options.duty_max, fit.k1_duty_points, j);
+    const double d = grid(options.min_duty, options.max_duty, fit.k1_duty_points, j);
     s_xy += d * Eval(coil, f1, d).i_avg_A;
     s_xx += d * d;
   }
@@ -345,10 +336,10 @@ StatusOr<ApproxDitherModel> FitApproxDitherModel(const RlCoil& coil, const Dithe
   // k2(D_j), eq. (13): minimise sum_i (1/I_amp(f_i, D_j) - k2 f_i)^2  =>  k2 = sum f_i / I_amp_i / sum f_i^2.
   m.k2_per_A_Hz.resize(static_cast<std::size_t>(fit.k2_duty_points));
   for (int j = 0; j < fit.k2_duty_points; ++j) {
-    const double d = grid(options.duty_min, options.duty_max, fit.k2_duty_points, j);
+    const double d = grid(options.min_duty, options.max_duty, fit.k2_duty_points, j);
     double f_y = 0.0, f_f = 0.0;
     for (int i = 0; i < fit.k2_frequency_points; ++i) {
-      const double f = grid(options.frequency_min_Hz, options.frequency_max_Hz, fit.k2_frequency_points, i);
+      const double f = grid(options.min_frequency_Hz, options.max_frequency_Hz, fit.k2_frequency_points, i);
       f_y += f / Eval(coil, f, d).i_amp_A;
       f_f += f * f;
     }
@@ -362,18 +353,18 @@ double ApproxK2PerAHz(const ApproxDitherModel& model, double duty) {
   if (k2.empty()) return std::numeric_limits<double>::quiet_NaN();
   if (k2.size() == 1) return k2[0];
   const double last = static_cast<double>(k2.size() - 1);
-  const double span = model.options.duty_max - model.options.duty_min;
-  const double pos = std::clamp((duty - model.options.duty_min) / span * last, 0.0, last);
+  const double span = model.options.max_duty - model.options.min_duty;
+  const double pos = std::clamp((duty - model.options.min_duty) / span * last, 0.0, last);
   const std::size_t j = std::min(static_cast<std::size_t>(pos), k2.size() - 2);
   const double t = pos - static_cast<double>(j);
   // 1/k2 ~ (supply_V / L_H) D (1 - D) (the high-frequency limit of eq. 11), so the normalised slope
   // s = 1 / (k2 D (1-D)) is nearly constant in D: interpolate s linearly, then undo the normalisation.
-  auto grid_duty = [&](std::size_t i) { return model.options.duty_min + span * static_cast<double>(i) / last; };
+  auto grid_duty = [&](std::size_t i) { return model.options.min_duty + span * static_cast<double>(i) / last; };
   auto s = [&](std::size_t i) {
     const double d = grid_duty(i);
     return 1.0 / (k2[i] * d * (1.0 - d));
   };
-  const double d = model.options.duty_min + span * pos / last;
+  const double d = model.options.min_duty + span * pos / last;
   const double s_d = (1.0 - t) * s(j) + t * s(j + 1);
   return 1.0 / (s_d * d * (1.0 - d));
 }
@@ -385,19 +376,19 @@ StatusOr<DitherPlan> PlanDitherApprox(const ApproxDitherModel& model, const Dith
   VB_RETURN_IF_ERROR(ValidateRequest(request));
   const DitherPlannerOptions& o = model.options;
   const double duty = request.average_current_A / model.k1_A;  // eq. (12)
-  if (duty < o.duty_min || duty > o.duty_max) {
+  if (duty < o.min_duty || duty > o.max_duty) {
     return Status::InvalidArgument(
-        Format("dither.average_current_A: %.6g A needs duty %.4g by eq. (12) (k1 = %.6g A), outside [%g, %g]",
-               request.average_current_A, duty, model.k1_A, o.duty_min, o.duty_max));
+        fmt::format("dither.average_current_A: {:.6g} A needs duty {:.4g} by eq. (12) (k1 = {:.6g} A), outside [{:.10g}, {:.10g}]",
+               request.average_current_A, duty, model.k1_A, o.min_duty, o.max_duty));
   }
   const double k2 = ApproxK2PerAHz(model, duty);
-  const double f = 1.0 / (k2 * request.amplitude_A);  // eq. (13)
-  if (f < o.frequency_min_Hz || f > o.frequency_max_Hz) {
+  const double f = 1.0 / (k2 * request.dither_amplitude_A);  // eq. (13)
+  if (f < o.min_frequency_Hz || f > o.max_frequency_Hz) {
     return Status::InvalidArgument(
-        Format("dither.amplitude_A: %.6g A at average %.6g A needs f = %.4g Hz by eq. (13) (k2 = %.6g 1/(A Hz) "
-               "at duty %.4g), outside [%g, %g] Hz",
-               request.amplitude_A, request.average_current_A, f, k2, duty, o.frequency_min_Hz,
-               o.frequency_max_Hz));
+        fmt::format("dither.dither_amplitude_A: {:.6g} A at average {:.6g} A needs f = {:.4g} Hz by eq. (13) (k2 = {:.6g} 1/(A Hz) "
+               "at duty {:.4g}), outside [{:.10g}, {:.10g}] Hz",
+               request.dither_amplitude_A, request.average_current_A, f, k2, duty, o.min_frequency_Hz,
+               o.max_frequency_Hz));
   }
   const RlPwmSteadyStateResult ss = Eval(model.coil, f, duty);
   return DitherPlan{f, duty, ss.i_avg_A, ss.i_amp_A, ss.i_mean_A};

@@ -59,16 +59,16 @@ StatusOr<RlPwmSteadyStateResult> RlPwmSteadyState(const RlCoil& coil, double fre
 // What the user wants: the paper's two "desired values" (Table I).
 struct DitherRequest {
   double average_current_A = 0.0;  // I_avg of eq. (10) (mid-range of the ripple), > 0
-  double amplitude_A = 0.0;        // I_amp of eq. (11) (peak-to-peak ripple), > 0
+  double dither_amplitude_A = 0.0;        // I_amp of eq. (11) (peak-to-peak ripple), > 0
 };
 
 // Search box for (f, D): the paper's Fig. 7(a). Defaults are the paper's ("generally within 50 Hz to 1000 Hz";
 // duty "commonly within 5 % to 95 % to avoid the dead zone").
 struct DitherPlannerOptions {
-  double frequency_min_Hz = 50.0;    // > 0; lowest PWM frequency the valve tolerates (spool follows the ripple)
-  double frequency_max_Hz = 1000.0;  // > frequency_min_Hz
-  double duty_min = 0.05;            // dimensionless, in [0, 1]
-  double duty_max = 0.95;            // dimensionless, in (duty_min, 1]
+  double min_frequency_Hz = 50.0;    // > 0; lowest PWM frequency the valve tolerates (spool follows the ripple)
+  double max_frequency_Hz = 1000.0;  // > min_frequency_Hz
+  double min_duty = 0.05;            // dimensionless, in [0, 1]
+  double max_duty = 0.95;            // dimensionless, in (min_duty, 1]
 };
 
 // The answer: what to program into the PWM peripheral, and what the model (eqs. 10, 11) predicts it gives.
@@ -85,15 +85,15 @@ struct DitherPlan {
 // Method (all steps are bracketed Brent root solves, so the result is as accurate as double allows):
 //   1. For a frequency f, D_f(f) is the duty with I_avg(f, D) = average_current_A (I_avg is strictly increasing
 //      in D at fixed f: a larger duty gives a pointwise larger periodic current).
-//   2. D_f is monotone in f, so the frequencies with D_f(f) inside [duty_min, duty_max] form an interval
+//   2. D_f is monotone in f, so the frequencies with D_f(f) inside [min_duty, max_duty] form an interval
 //      [f_lo, f_hi]; its ends are found by solving I_avg(f, duty bound) = average_current_A in f.
-//   3. g(f) = I_amp(f, D_f(f)) is strictly decreasing in f; solve g(f) = amplitude_A on [f_lo, f_hi].
+//   3. g(f) = I_amp(f, D_f(f)) is strictly decreasing in f; solve g(f) = dither_amplitude_A on [f_lo, f_hi].
 // The monotonicity facts are checked numerically by the tests over a wide range of T/tau.
 //
 // Errors (InvalidArgument): a non-finite or non-positive request field; an average current that no duty in the
 // box reaches ("dither.average_current_A: ... (reachable ...)"); an amplitude outside the controllable area of
-// the paper's Fig. 7(b) at that average ("dither.amplitude_A: 0.2 A is not reachable at average 0.1 A within f in
-// [50, 1000] Hz and duty in [0.05, 0.95] (max 0.1234 A)"); a bad coil ("coil.R_ohm") or box ("options.duty_min").
+// the paper's Fig. 7(b) at that average ("dither.dither_amplitude_A: 0.2 A is not reachable at average 0.1 A within f in
+// [50, 1000] Hz and duty in [0.05, 0.95] (max 0.1234 A)"); a bad coil ("coil.R_ohm") or box ("options.min_duty").
 StatusOr<DitherPlan> PlanDitherExact(const RlCoil& coil, const DitherRequest& request,
                                      const DitherPlannerOptions& options = {});
 
@@ -116,15 +116,15 @@ StatusOr<DitherAmplitudeRange> DitherAmplitudeRangeAt(const RlCoil& coil, double
 // How the slopes of the approximate method are fitted from the model (the paper does not give them).
 struct ApproxFitOptions {
   // k1 (eq. 12): least squares through the origin of I_avg(f, D) (eq. 10) against D over `k1_duty_points`
-  // evenly spaced duties in [duty_min, duty_max], at this one frequency. Unset = options.frequency_max_Hz.
+  // evenly spaced duties in [min_duty, max_duty], at this one frequency. Unset = options.max_frequency_Hz.
   // Any fit frequency >= ~600 Hz (and the f -> infinity limit k1 = V/R) reproduces the paper's Table I duty
   // column to its printed digits on the paper's coil; the band middle (525 Hz) gets one digit wrong.
   std::optional<double> k1_fit_frequency_Hz;
   int k1_duty_points = 91;  // >= 2; 91 = 1 % steps on the default 5..95 % box
   // k2 (eq. 13) depends on the duty (with one k2 every row of Table I would get the same frequency). For each of
-  // `k2_duty_points` evenly spaced duties D_j in [duty_min, duty_max]: least squares through the origin of
+  // `k2_duty_points` evenly spaced duties D_j in [min_duty, max_duty]: least squares through the origin of
   // 1/I_amp(f, D_j) (eq. 11) against f over `k2_frequency_points` evenly spaced frequencies in
-  // [frequency_min_Hz, frequency_max_Hz] (the paper's Fig. 8(c) line, one per duty).
+  // [min_frequency_Hz, max_frequency_Hz] (the paper's Fig. 8(c) line, one per duty).
   int k2_duty_points = 91;        // >= 2; the table a stand-alone controller would store
   int k2_frequency_points = 96;   // >= 2; 96 = 10 Hz steps on the default 50..1000 Hz box
 };
@@ -135,7 +135,7 @@ struct ApproxDitherModel {
   DitherPlannerOptions options;     // the box the slopes were fitted on; plans outside it are rejected
   double k1_A = 0.0;                // eq. (12): I_avg = k1_A * D                         [A per unit duty]
   double k1_fit_frequency_Hz = 0.0; // where k1 was fitted
-  // eq. (13): 1/I_amp = k2(D) * f. Table of k2 at duty_grid[j] = duty_min + j*(duty_max-duty_min)/(n-1),
+  // eq. (13): 1/I_amp = k2(D) * f. Table of k2 at duty_grid[j] = min_duty + j*(max_duty-min_duty)/(n-1),
   // in 1/(A*Hz). Between grid duties the normalised slope 1/(k2 D (1-D)) (~ supply_V/L_H, nearly constant) is
   // interpolated linearly.
   std::vector<double> k2_per_A_Hz;

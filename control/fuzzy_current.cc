@@ -24,7 +24,7 @@ Status FuzzyCurrent::Validate(const Params& p) {
   VB_RETURN_IF_ERROR(CheckPositive("fuzzy.", "error_scale_A", p.error_scale_A));
   VB_RETURN_IF_ERROR(CheckPositive("fuzzy.", "rate_scale_A_per_s", p.rate_scale_A_per_s));
   VB_RETURN_IF_ERROR(CheckNonNegative("fuzzy.", "rate_filter_tau_s", p.rate_filter_tau_s));
-  VB_RETURN_IF_ERROR(CheckPositive("fuzzy.", "output_step_V", p.output_step_V));
+  VB_RETURN_IF_ERROR(CheckPositive("fuzzy.", "output_scale_V", p.output_scale_V));
   VB_RETURN_IF_ERROR(CheckNonNegative("fuzzy.", "feedforward_R_ohm", p.feedforward_R_ohm));
   VB_RETURN_IF_ERROR(CheckPositive("fuzzy.", "carrier_Hz", p.carrier_Hz));
   return Status::Ok();
@@ -130,7 +130,7 @@ SwitchCommand FuzzyCurrent::Step(const Measurement& m, const Reference& r, Contr
 
   const double e = i - r.value;  // eq. (21): E = A - D
   const double u = Infer(e / p_.error_scale_A, rate / p_.rate_scale_A_per_s);
-  double v = p_.feedforward_R_ohm * r.value + p_.output_step_V * u;
+  double v = p_.feedforward_R_ohm * r.value + p_.output_scale_V * u;
   v = Clamp(v, 0.0, supply);
   state->x[kLastOutput] = u;
   state->x[kLastVoltage] = v;

@@ -15,7 +15,7 @@
 // Output sets: VS S M L VL, triangles centred at -1, 0, 1, 2, 3 output steps with half-width 1 (universe [-2, 4]).
 // Inference: AND = min, rule consequent clipped (min implication), aggregation = max, defuzzification = centroid,
 //   computed exactly (piecewise-linear integration with all kink points; no grid, no allocation).
-// Output voltage: v = feedforward_R_ohm * i_d + output_step_V * u, u = centroid; clamped to [0, supply] and turned
+// Output voltage: v = feedforward_R_ohm * i_d + output_scale_V * u, u = centroid; clamped to [0, supply] and turned
 //   into a duty with VoltageToPwm(). The law runs once per carrier period.
 //
 // Sign convention: Table 1 gives the largest voltage (VL) for error NL and rate NL and the smallest (VS) for
@@ -28,7 +28,7 @@
 // which is why the paper's table puts S (not M) at the centre. Row ZE reads L M S S VS, so u(e, 0) is flat (= 0)
 // for 0 <= e_n <= 0.5: if the feedforward over-estimates the needed voltage the current can rest anywhere in
 // [0, +error_scale_A/2] above the reference; if it under-estimates, it settles just below i_d on the NM-ZE slope
-// (error = -dV / (2 output_step_V / error_scale_A)). The ~0.7 V freewheel-diode loss makes the second case the
+// (error = -dV / (2 output_scale_V / error_scale_A)). The ~0.7 V freewheel-diode loss makes the second case the
 // usual one with R_ff = R.
 //
 // Release: when Reference::command_on is false the law outputs Gate(0) and resets its state.
@@ -53,7 +53,7 @@ namespace vb::control {
 
 struct FuzzyCurrentParams {
   // Error gain: e_n = (i - i_d) / error_scale_A, so the sets NM/PM sit at -/+25 mA and NL/PL saturate at 50 mA.
-  // With output_step_V this gives a small-signal slope of 2*10 V / 0.05 A = 400 V/A near the set point (the
+  // With output_scale_V this gives a small-signal slope of 2*10 V / 0.05 A = 400 V/A near the set point (the
   // PI's kp is 377 V/A): loop bandwidth ~400/L = 3.3e3 rad/s on a 0.12 H coil.
   double error_scale_A = 0.05;
   // Error-rate gain: rate_n = (de/dt) / rate_scale_A_per_s. 1000 A/s makes the full-voltage rise of
@@ -65,7 +65,7 @@ struct FuzzyCurrentParams {
   double rate_filter_tau_s = 50e-6;
   // Output gain [V per output step]: distance between adjacent output set centres (VS=-1 ... VL=+3 steps around
   // the feedforward). 10 V: VS drives the demand to 0 V (fast decay), L/VL saturate at the 24 V supply.
-  double output_step_V = 10.0;
+  double output_scale_V = 10.0;
   // Feedforward resistance [ohm]: the S set (hold) is placed at R_ff * i_d; 0 disables the feedforward.
   double feedforward_R_ohm = 13.0;
   // PWM carrier frequency [Hz]; the law runs once per carrier period (period_s = 1/carrier_Hz).

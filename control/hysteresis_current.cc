@@ -8,7 +8,7 @@
 namespace vb::control {
 Status HysteresisCurrent::Validate(const Params& p) {
   VB_RETURN_IF_ERROR(CheckPositive("hysteresis.", "band_A", p.band_A));
-  VB_RETURN_IF_ERROR(CheckPositive("hysteresis.", "period_s", p.period_s));
+  VB_RETURN_IF_ERROR(CheckPositive("hysteresis.", "sample_period_s", p.sample_period_s));
   return Status::Ok();
 }
 

@@ -1,7 +1,7 @@
 // Hysteresis (relay, bang-bang) coil-current controller.
 //
 // Implements Najjari, Fotuhi, Vaezipour (2021), section 3.1, eq. (2): a relay with hysteresis band H centred on
-// the desired current i_d, evaluated every period_s seconds on the measured current i:
+// the desired current i_d, evaluated every sample_period_s seconds on the measured current i:
 //
 //     gate = 1          if i <= i_d - H/2
 //     gate = 0          if i >= i_d + H/2
@@ -35,7 +35,7 @@ struct HysteresisCurrentParams {
   double band_A = 0.02;
   // Sampling period [s] at which the relay is evaluated. 10 us (100 kHz) adds at most ~1.5 mA of overshoot
   // beyond each threshold (di/dt <= (24 V - R i)/L ~ 150 A/s on taghizadeh2009).
-  double period_s = 10e-6;
+  double sample_period_s = 10e-6;
 };
 
 class HysteresisCurrent final : public Controller {
@@ -51,7 +51,7 @@ class HysteresisCurrent final : public Controller {
   explicit HysteresisCurrent(const Params& p = Params()) : p_(p) {}
 
   std::string_view name() const override { return "hysteresis_current"; }
-  double period_s() const override { return p_.period_s; }
+  double period_s() const override { return p_.sample_period_s; }
   ControllerState InitialState() const override { return {}; }
   SwitchCommand Step(const Measurement& m, const Reference& r, ControllerState* state) const override;
 

@@ -1,15 +1,8 @@
 #include "control/param_check.h"
 
 #include <cmath>
-#include <cstdio>
 
 namespace vb::control {
-
-std::string FormatNumber(double v) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%g", v);
-  return buf;
-}
 
 Status CheckPositive(std::string_view prefix, std::string_view field, double v) {
   if (std::isfinite(v) && v > 0.0) return Status::Ok();

@@ -4,12 +4,11 @@
 #include <string>
 #include <string_view>
 
+#include "common/format.h"
 #include "common/status.h"
 
 namespace vb::control {
 
-// Shortest round-trip-ish form of a number for messages ("-1", "2e-05").
-std::string FormatNumber(double v);
 // InvalidArgument "<prefix><field>: must be > 0, got <v>" unless v is finite and > 0.
 Status CheckPositive(std::string_view prefix, std::string_view field, double v);
 // InvalidArgument "<prefix><field>: must be >= 0, got <v>" unless v is finite and >= 0.

@@ -11,15 +11,15 @@ Status PeakAndHold::Validate(const Params& p) {
   VB_RETURN_IF_ERROR(CheckPositive("", "switching_current_A", p.switching_current_A));
   VB_RETURN_IF_ERROR(CheckPositive("", "peak_time_max_s", p.peak_time_max_s));
   VB_RETURN_IF_ERROR(CheckPositive("", "holding_current_A", p.holding_current_A));
-  VB_RETURN_IF_ERROR(CheckPositive("", "hold_band_A", p.hold_band_A));
+  VB_RETURN_IF_ERROR(CheckPositive("", "band_A", p.band_A));
   if (!(p.switching_current_A > p.holding_current_A)) {
     return Status::InvalidArgument("switching_current_A: must be > holding_current_A (" +
                                    std::to_string(p.holding_current_A) + "), got " +
                                    std::to_string(p.switching_current_A));
   }
-  if (!(0.5 * p.hold_band_A < p.holding_current_A)) {
-    return Status::InvalidArgument("hold_band_A: half the band must be < holding_current_A (" +
-                                   std::to_string(p.holding_current_A) + "), got " + std::to_string(p.hold_band_A));
+  if (!(0.5 * p.band_A < p.holding_current_A)) {
+    return Status::InvalidArgument("band_A: half the band must be < holding_current_A (" +
+                                   std::to_string(p.holding_current_A) + "), got " + std::to_string(p.band_A));
   }
   if (!(std::isfinite(p.release_current_A) && p.release_current_A >= 0.0 &&
         p.release_current_A < p.holding_current_A)) {
@@ -66,7 +66,7 @@ SwitchCommand PeakAndHold::Step(const Measurement& m, const Reference& r, Contro
   }
 
   // Hold: hysteresis chopper.
-  const double half_band = 0.5 * p_.hold_band_A;
+  const double half_band = 0.5 * p_.band_A;
   if (i < p_.holding_current_A - half_band) {
     st.x[kChopperGate] = 1.0;
   } else if (i > p_.holding_current_A + half_band) {

@@ -45,7 +45,7 @@ class PeakAndHold final : public Controller {
     double peak_time_max_s = 0.02;     // peak phase ends at the latest this long after command_on (a weak supply
                                        // that never reaches the switching current still gets to hold)
     double holding_current_A = 0.5;    // hold phase current (the seed's 0.5 A)
-    double hold_band_A = 0.05;         // full width of the hysteresis band around holding_current_A
+    double band_A = 0.05;         // full width of the hysteresis band around holding_current_A
     bool reverse_on_release = false;   // the bench has an H-bridge: apply -supply at release (fast decay)
     double release_current_A = 0.02;   // reverse voltage stops once the current is below this (then gate 0)
   };

@@ -18,9 +18,9 @@ Status Check(bool ok, const char* field, const char* problem, double v) {
 Status PiCurrent::Validate(const Params& p) {
   VB_RETURN_IF_ERROR(Check(std::isfinite(p.kp_V_per_A) && p.kp_V_per_A >= 0.0, "kp_V_per_A", "must be >= 0",
                            p.kp_V_per_A));
-  VB_RETURN_IF_ERROR(Check(std::isfinite(p.ki_V_per_As) && p.ki_V_per_As >= 0.0, "ki_V_per_As", "must be >= 0",
-                           p.ki_V_per_As));
-  VB_RETURN_IF_ERROR(Check(p.kp_V_per_A > 0.0 || p.ki_V_per_As > 0.0, "kp_V_per_A",
+  VB_RETURN_IF_ERROR(Check(std::isfinite(p.ki_V_per_A_s) && p.ki_V_per_A_s >= 0.0, "ki_V_per_A_s", "must be >= 0",
+                           p.ki_V_per_A_s));
+  VB_RETURN_IF_ERROR(Check(p.kp_V_per_A > 0.0 || p.ki_V_per_A_s > 0.0, "kp_V_per_A",
                            "kp and ki must not both be 0", p.kp_V_per_A));
   VB_RETURN_IF_ERROR(Check(std::isfinite(p.feedforward_R_ohm) && p.feedforward_R_ohm >= 0.0, "feedforward_R_ohm",
                            "must be >= 0", p.feedforward_R_ohm));
@@ -38,7 +38,7 @@ StatusOr<PiCurrent> PiCurrent::Create(const Params& p) {
 PiCurrent::Params PiCurrent::FromPoles(double L_H, double R_ohm, double pole1_rad_s, double pole2_rad_s) {
   Params p;
   p.kp_V_per_A = L_H * (pole1_rad_s + pole2_rad_s) - R_ohm;
-  p.ki_V_per_As = L_H * pole1_rad_s * pole2_rad_s;
+  p.ki_V_per_A_s = L_H * pole1_rad_s * pole2_rad_s;
   return p;
 }
 
@@ -66,7 +66,7 @@ SwitchCommand PiCurrent::Step(const Measurement& m, const Reference& r, Controll
   }
   // Conditional integration: integrate unless saturated with the error pushing further into the limit.
   const bool winding_up = (v_unsat > supply && e > 0.0) || (v_unsat < 0.0 && e < 0.0);
-  if (!winding_up) integ += p_.ki_V_per_As * T * e;
+  if (!winding_up) integ += p_.ki_V_per_A_s * T * e;
 
   state->x[kLastVoltage] = v;
   state->x[kLastDemand] = v_unsat;

@@ -49,7 +49,7 @@ struct PiCurrentParams {
   // Proportional gain [V/A]: L * w2 with L = 0.12 H and w2 = 2 pi * 500 rad/s (see header).
   double kp_V_per_A = 0.12 * 2.0 * 3.14159265358979323846 * 500.0;
   // Integral gain [V/(A s)]: R * w2 with R = 13 ohm (zero at R/L cancels the coil pole).
-  double ki_V_per_As = 13.0 * 2.0 * 3.14159265358979323846 * 500.0;
+  double ki_V_per_A_s = 13.0 * 2.0 * 3.14159265358979323846 * 500.0;
   // Resistance used for the feedforward voltage R_ff * i_ref [ohm]; 0 disables the feedforward.
   double feedforward_R_ohm = 13.0;
   // PWM carrier frequency [Hz]; the law runs once per carrier period (period_s = 1/carrier_Hz).

@@ -13,7 +13,7 @@ constexpr double kMu0 = 4.0e-7 * 3.14159265358979323846;  // [H/m]
 }  // namespace
 
 Status PredictiveCurrent::Validate(const Params& p) {
-  VB_RETURN_IF_ERROR(CheckPositive("predictive.", "h_s", p.h_s));
+  VB_RETURN_IF_ERROR(CheckPositive("predictive.", "horizon_s", p.horizon_s));
   VB_RETURN_IF_ERROR(CheckPositive("predictive.", "w_I_per_A2", p.w_I_per_A2));
   VB_RETURN_IF_ERROR(CheckNonNegative("predictive.", "w_v_per_V2", p.w_v_per_V2));
   VB_RETURN_IF_ERROR(CheckNonNegative("predictive.", "R_ohm", p.R_ohm));
@@ -54,7 +54,7 @@ PredictiveCurrent::Terms PredictiveCurrent::Compute(const Measurement& m, const 
   t.L_H = have_x ? InductanceAt(m.position_m) : p_.L_H;
   t.back_emf_V = (have_x && std::isfinite(m.velocity_mps)) ? InductanceSlopeAt(m.position_m) * m.velocity_mps * i
                                                             : 0.0;
-  const double h = p_.h_s;
+  const double h = p_.horizon_s;
   const double L = t.L_H;
   t.k = h * h / (h * h + (p_.w_v_per_V2 / p_.w_I_per_A2) * L * L);
   const double target = r.value + h * r.rate;  // i*(t+h)

@@ -34,7 +34,7 @@
 // Residual error (no integrator): with w_v > 0 (k < 1) the effort weight leaves a steady error of about
 // (1 - k) R h i / (k L); the defaults give 0.06 % (0.3 mA at 0.5 A, L = 0.12 H). A voltage the model misses
 // (resistance error dR i, the ~0.7 V (1 - duty) freewheel-diode loss, ...) leaves about dV h / (k L): 1 mA per
-// 0.5 V. A smaller h shrinks both but the carrier delay bounds it (see h_s).
+// 0.5 V. A smaller h shrinks both but the carrier delay bounds it (see horizon_s).
 //
 // Release: when Reference::command_on is false the law outputs Gate(0) and resets its state.
 // A non-finite current measurement is treated as a fault: Gate(0), state unchanged.
@@ -57,7 +57,7 @@ struct PredictiveCurrentParams {
   // Prediction horizon h [s]. 5 carrier periods: the loop then behaves like a first-order lag of time constant
   // ~h/k (bandwidth ~640 Hz), which tolerates the 1.5-period sampling + shadow-register delay (phase margin
   // ~73 deg at L = 0.12 H). h close to one carrier period would be dead-beat and ring with that delay.
-  double h_s = 250e-6;
+  double horizon_s = 250e-6;
   // Weight of the predicted current error w_I [1/A^2] (> 0).
   double w_I_per_A2 = 1.0;
   // Weight of the control effort w_v [1/V^2] (>= 0). With w_I = 1: k = h^2/(h^2 + 1e-7 L^2) = 0.977 at L = 0.12 H,
@@ -85,7 +85,7 @@ class PredictiveCurrent final : public Controller {
  public:
   using Params = PredictiveCurrentParams;
 
-  // Names the offending field, e.g. "predictive.h_s: must be > 0, got 0".
+  // Names the offending field, e.g. "predictive.horizon_s: must be > 0, got 0".
   static Status Validate(const Params& p);
   static StatusOr<PredictiveCurrent> Create(const Params& p);
 

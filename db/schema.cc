@@ -117,10 +117,49 @@ CREATE TABLE regressions (
 CREATE INDEX regressions_night ON regressions (night, id);
 )sql";
 
+// Version 3. A run's identity as fields (common/run_key.h) instead of text: the spec name (`key_name`), the
+// repeat (`repeat_index`, -1 = not repeated) and the sweep point as typed rows of `run_sweep`; imported runs'
+// `split` and `t_start_s` (NULL for other runs). `name` stays as the run's display name for readers of the
+// file. Rows written before version 3 are filled in from the tags that carried these ("sweep:<field>=<value>",
+// "repeat:<k>", "split:<s>", "t_start_s:<t>"): the one place that tag text is ever read, once.
+constexpr const char* kV3 = R"sql(
+ALTER TABLE runs ADD COLUMN key_name TEXT NOT NULL DEFAULT '';
+ALTER TABLE runs ADD COLUMN repeat_index INTEGER NOT NULL DEFAULT -1 CHECK (repeat_index >= -1);
+ALTER TABLE runs ADD COLUMN split TEXT NOT NULL DEFAULT '' CHECK (split IN ('', 'fit', 'holdout'));
+ALTER TABLE runs ADD COLUMN t_start_s REAL;
+
+CREATE TABLE run_sweep (
+  run_id INTEGER NOT NULL REFERENCES runs (id) ON DELETE CASCADE,
+  axis   INTEGER NOT NULL CHECK (axis >= 0),
+  field  TEXT NOT NULL,
+  value  REAL NOT NULL,
+  PRIMARY KEY (run_id, axis)
+) WITHOUT ROWID;
+
+UPDATE runs SET key_name = CASE
+  WHEN instr(name, ' sweep:') > 0 THEN substr(name, 1, instr(name, ' sweep:') - 1)
+  WHEN instr(name, ' repeat:') > 0 THEN substr(name, 1, instr(name, ' repeat:') - 1)
+  ELSE name END;
+UPDATE runs SET repeat_index = (SELECT CAST(substr(tag, 8) AS INTEGER) FROM run_tags
+                                WHERE run_tags.run_id = runs.id AND substr(tag, 1, 7) = 'repeat:' LIMIT 1)
+  WHERE EXISTS (SELECT 1 FROM run_tags WHERE run_tags.run_id = runs.id AND substr(tag, 1, 7) = 'repeat:');
+INSERT INTO run_sweep (run_id, axis, field, value)
+  SELECT run_id, ROW_NUMBER() OVER (PARTITION BY run_id ORDER BY rowid) - 1,
+         substr(tag, 7, instr(tag, '=') - 7), CAST(substr(tag, instr(tag, '=') + 1) AS REAL)
+  FROM run_tags WHERE substr(tag, 1, 6) = 'sweep:' AND instr(tag, '=') > 0;
+UPDATE runs SET split = (SELECT substr(tag, 7) FROM run_tags
+                         WHERE run_tags.run_id = runs.id AND tag IN ('split:fit', 'split:holdout') LIMIT 1)
+  WHERE EXISTS (SELECT 1 FROM run_tags WHERE run_tags.run_id = runs.id AND tag IN ('split:fit', 'split:holdout'));
+UPDATE runs SET t_start_s = (SELECT CAST(substr(tag, 11) AS REAL) FROM run_tags
+                             WHERE run_tags.run_id = runs.id AND substr(tag, 1, 10) = 't_start_s:' LIMIT 1)
+  WHERE bench_kind = 'imported';
+)sql";
+
 constexpr Migration kMigrations[] = {
     {1, "initial schema: batches, runs, run_tags, status_history, metrics, trace_chunks", kV1},
     {2, "baselines, baseline_metrics, regressions (benchctl baseline / regress / nights)",
      kV2},
+    {3, "runs: key_name, repeat_index, split, t_start_s; run_sweep (a run's identity as fields)", kV3},
 };
 
 }  // namespace

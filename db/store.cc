@@ -1,5 +1,6 @@
 // The SQLite implementation of db/store.h. Schema and migrations: db/schema.cc; trace BLOB layout:
 // db/trace_codec.h; the why of both: docs/store.md.
+#include "common/format.h"
 #include "db/store.h"
 
 #include <chrono>
@@ -16,27 +17,6 @@
 #include "db/trace_codec.h"
 
 namespace vb::db {
-
-const char* RunStatusName(RunStatus s) {
-  switch (s) {
-    case RunStatus::kQueued: return "queued";
-    case RunStatus::kRunning: return "running";
-    case RunStatus::kDone: return "done";
-    case RunStatus::kFailed: return "failed";
-    case RunStatus::kCancelled: return "cancelled";
-    case RunStatus::kInterrupted: return "interrupted";
-  }
-  return "unknown";
-}
-
-StatusOr<RunStatus> ParseRunStatus(const std::string& name) {
-  for (RunStatus s : {RunStatus::kQueued, RunStatus::kRunning, RunStatus::kDone, RunStatus::kFailed,
-                      RunStatus::kCancelled, RunStatus::kInterrupted}) {
-    if (name == RunStatusName(s)) return s;
-  }
-  return Status::InvalidArgument(
-      Cat("unknown run status \"", name, "\" (expected queued, running, done, failed, cancelled or interrupted)"));
-}
 
 namespace {
 
@@ -59,16 +39,10 @@ constexpr const char* kRecoverReason = "server restarted while running";
 // Column list shared by every query that builds a RunRecord (ReadRun() reads them in this order).
 constexpr const char* kRunColumns =
     "id, batch_id, name, controller, bench_kind, bench_name, spec_json, submitter, priority, status, reason, "
-    "requeue_on_interrupt, submitted, started, finished, progress";
+    "requeue_on_interrupt, submitted, started, finished, progress, key_name, repeat_index, split, t_start_s";
 
 double NowUnixS() {
   return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
-}
-
-std::string Num(double v) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.17g", v);
-  return buf;
 }
 
 Status RunNotFound(std::int64_t id) { return Status::NotFound(Cat("run ", id, " not found")); }
@@ -81,7 +55,16 @@ Status ValidateBatch(const std::string& submitter, const std::vector<RunRecord>&
   for (std::size_t k = 0; k < runs.size(); ++k) {
     const RunRecord& r = runs[k];
     const std::string field = Cat("runs[", k, "]");
-    if (r.name.empty()) return Status::InvalidArgument(field + ".name: must not be empty");
+    if (r.key.name.empty()) return Status::InvalidArgument(field + ".key.name: must not be empty");
+    if (r.key.repeat < -1) return Status::InvalidArgument(Cat(field, ".key.repeat: must be >= -1, got ", r.key.repeat));
+    for (std::size_t a = 0; a < r.key.sweep.size(); ++a) {
+      if (r.key.sweep[a].field.empty())
+        return Status::InvalidArgument(Cat(field, ".key.sweep[", a, "].field: must not be empty"));
+      if (!std::isfinite(r.key.sweep[a].value))
+        return Status::InvalidArgument(Cat(field, ".key.sweep[", a, "].value: must be finite"));
+    }
+    if (!r.split.empty() && r.split != "fit" && r.split != "holdout")
+      return Status::InvalidArgument(Cat(field, ".split: must be \"fit\", \"holdout\" or empty, got \"", r.split, "\""));
     if (r.spec_json.empty()) return Status::InvalidArgument(field + ".spec_json: must not be empty");
     if (!r.submitter.empty() && r.submitter != submitter) {
       return Status::InvalidArgument(
@@ -107,11 +90,11 @@ Status ValidateFilter(const RunFilter& f) {
   if (f.batch_id < 0) return Status::InvalidArgument(Cat("filter.batch_id: must be >= 0, got ", f.batch_id));
   if (!std::isfinite(f.submitted_after_unix_s) || f.submitted_after_unix_s < 0) {
     return Status::InvalidArgument(
-        Cat("filter.submitted_after_unix_s: must be finite and >= 0, got ", Num(f.submitted_after_unix_s)));
+        Cat("filter.submitted_after_unix_s: must be finite and >= 0, got ", FormatExact(f.submitted_after_unix_s)));
   }
   if (!std::isfinite(f.submitted_before_unix_s) || f.submitted_before_unix_s < 0) {
     return Status::InvalidArgument(
-        Cat("filter.submitted_before_unix_s: must be finite and >= 0, got ", Num(f.submitted_before_unix_s)));
+        Cat("filter.submitted_before_unix_s: must be finite and >= 0, got ", FormatExact(f.submitted_before_unix_s)));
   }
   return Status::Ok();
 }
@@ -198,7 +181,6 @@ StatusOr<RunRecord> SqliteStore::ReadRun(const Stmt& row) {
   RunRecord r;
   r.id = row.Int(0);
   r.batch_id = row.Int(1);
-  r.name = row.Text(2);
   r.controller = row.Text(3);
   r.bench_kind = row.Text(4);
   r.bench_name = row.Text(5);
@@ -214,6 +196,19 @@ StatusOr<RunRecord> SqliteStore::ReadRun(const Stmt& row) {
   r.started_unix_s = row.Double(13);
   r.finished_unix_s = row.Double(14);
   r.progress = row.Double(15);
+  r.key.name = row.Text(16);
+  r.key.repeat = static_cast<int>(row.Int(17));
+  r.split = row.Text(18);
+  if (!row.IsNull(19)) r.t_start_s = row.Double(19);
+
+  VB_DB_ASSIGN_OR_RETURN(Stmt sweep,
+                         conn_.Prepare("SELECT field, value FROM run_sweep WHERE run_id = ?1 ORDER BY axis"));
+  sweep.Bind(1, r.id);
+  while (true) {
+    VB_DB_ASSIGN_OR_RETURN(const bool more, sweep.Step());
+    if (!more) break;
+    r.key.sweep.push_back({sweep.Text(0), sweep.Double(1)});
+  }
 
   // Tags come back in submission order (rowid order).
   VB_DB_ASSIGN_OR_RETURN(Stmt tags, conn_.Prepare("SELECT tag FROM run_tags WHERE run_id = ?1 ORDER BY rowid"));
@@ -259,10 +254,11 @@ StatusOr<std::int64_t> SqliteStore::SubmitBatch(const std::string& submitter, co
     VB_DB_ASSIGN_OR_RETURN(
         Stmt run,
         conn_.Prepare("INSERT INTO runs (batch_id, name, controller, bench_kind, requested_bench, bench_name, "
-                      "spec_json, submitter, priority, status, requeue_on_interrupt, submitted) "
-                      "VALUES (?1, ?2, ?3, ?4, ?5, ?5, ?6, ?7, ?8, 'queued', ?9, ?10)"));
+                      "spec_json, submitter, priority, status, requeue_on_interrupt, submitted, key_name, "
+                      "repeat_index, split, t_start_s) "
+                      "VALUES (?1, ?2, ?3, ?4, ?5, ?5, ?6, ?7, ?8, 'queued', ?9, ?10, ?11, ?12, ?13, ?14)"));
     run.Bind(1, batch_id);
-    run.Bind(2, r.name);
+    run.Bind(2, r.key.DisplayName());
     run.Bind(3, r.controller);
     run.Bind(4, r.bench_kind);
     run.Bind(5, r.bench_name);
@@ -271,9 +267,22 @@ StatusOr<std::int64_t> SqliteStore::SubmitBatch(const std::string& submitter, co
     run.Bind(8, static_cast<std::int64_t>(r.priority));
     run.Bind(9, r.requeue_on_interrupt);
     run.Bind(10, now);
+    run.Bind(11, r.key.name);
+    run.Bind(12, r.key.repeat);
+    run.Bind(13, r.split);
+    run.Bind(14, r.t_start_s);  // NaN binds as NULL
     VB_RETURN_IF_ERROR(run.Run());
     const std::int64_t id = sqlite3_last_insert_rowid(conn_.raw());
     ids.push_back(id);
+    for (std::size_t a = 0; a < r.key.sweep.size(); ++a) {
+      VB_DB_ASSIGN_OR_RETURN(Stmt sw, conn_.Prepare("INSERT INTO run_sweep (run_id, axis, field, value) "
+                                                    "VALUES (?1, ?2, ?3, ?4)"));
+      sw.Bind(1, id);
+      sw.Bind(2, static_cast<std::int64_t>(a));
+      sw.Bind(3, r.key.sweep[a].field);
+      sw.Bind(4, r.key.sweep[a].value);
+      VB_RETURN_IF_ERROR(sw.Run());
+    }
     for (const std::string& tag : r.tags) {
       VB_DB_ASSIGN_OR_RETURN(Stmt t, conn_.Prepare("INSERT INTO run_tags (run_id, tag) VALUES (?1, ?2)"));
       t.Bind(1, id);
@@ -321,7 +330,7 @@ StatusOr<std::optional<RunRecord>> SqliteStore::ClaimNext(const std::string& ben
 
 Status SqliteStore::SetProgress(std::int64_t run_id, double progress) {
   if (!(progress >= 0.0 && progress <= 1.0)) {
-    return Status::InvalidArgument(Cat("progress: must be in [0, 1], got ", Num(progress)));
+    return Status::InvalidArgument(Cat("progress: must be in [0, 1], got ", FormatExact(progress)));
   }
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kWrite));

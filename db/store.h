@@ -8,23 +8,27 @@
 
 #include <cstdint>
 #include <functional>
+#include <limits>
 #include <memory>
 #include <optional>
 #include <string>
 #include <vector>
 
+#include "common/run_key.h"
+#include "common/run_status.h"
 #include "common/status.h"
 
 namespace vb::db {
 
-enum class RunStatus { kQueued, kRunning, kDone, kFailed, kCancelled, kInterrupted };
-const char* RunStatusName(RunStatus s);  // "queued", "running", ...
-StatusOr<RunStatus> ParseRunStatus(const std::string& name);
+// The statuses and their names are common/run_status.h's (the store keeps the names in its status columns).
+using vb::ParseRunStatus;
+using vb::RunStatus;
+using vb::RunStatusName;
 
 struct RunRecord {
   std::int64_t id = 0;
   std::int64_t batch_id = 0;
-  std::string name;                 // spec name + sweep/repeat tags
+  RunKey key;                       // spec name, sweep point, repeat (columns since schema v3)
   std::string controller;           // law name, e.g. "pi_current"
   std::string bench_kind;           // spec's bench selector kind ("emulated", ...)
   std::string bench_name;           // spec's requested bench ("" = any); after claiming: the bench that ran it
@@ -37,6 +41,10 @@ struct RunRecord {
   double submitted_unix_s = 0.0, started_unix_s = 0.0, finished_unix_s = 0.0;
   double progress = 0.0;            // 0..1, last reported
   std::vector<std::string> tags;
+  // Imported (measured) runs only, schema v3: the dataset's split ("fit", "holdout"; "" = none) and the run's
+  // start time within its dataset session (NaN = not an imported run).
+  std::string split;
+  double t_start_s = std::numeric_limits<double>::quiet_NaN();
 };
 
 struct StatusChange {

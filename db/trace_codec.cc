@@ -6,18 +6,13 @@
 #include <cstring>
 #include <unordered_set>
 
+#include "common/format.h"
 #include "db/text.h"
 
 namespace vb::db::trace {
 namespace {
 
 std::uint64_t Swap(std::uint64_t v) { return __builtin_bswap64(v); }
-
-std::string Num(double v) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.17g", v);
-  return buf;
-}
 
 }  // namespace
 
@@ -39,9 +34,9 @@ Status ValidateChunk(const TraceChunk& c) {
     return Status::InvalidArgument(Cat(where, "channels.size() * samples != data.size() (", c.channels.size(), " * ",
                                        c.samples, " = ", expected, ", data has ", c.data.size(), " values)"));
   }
-  if (!std::isfinite(c.t0_s)) return Status::InvalidArgument(Cat(where, "t0_s must be finite, got ", Num(c.t0_s)));
+  if (!std::isfinite(c.t0_s)) return Status::InvalidArgument(Cat(where, "t0_s must be finite, got ", FormatExact(c.t0_s)));
   if (!std::isfinite(c.sample_period_s) || c.sample_period_s <= 0) {
-    return Status::InvalidArgument(Cat(where, "sample_period_s must be finite and > 0, got ", Num(c.sample_period_s)));
+    return Status::InvalidArgument(Cat(where, "sample_period_s must be finite and > 0, got ", FormatExact(c.sample_period_s)));
   }
   return Status::Ok();
 }

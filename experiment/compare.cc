@@ -1,5 +1,10 @@
 #include "experiment/compare.h"
 
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#include "common/csv.h"
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -109,30 +114,23 @@ Comparison Compare(const std::vector<RunRecord>& runs) {
 
 std::string ComparisonTable(const Comparison& c) {
   std::ostringstream os;
-  char buf[256];
   size_t name_w = 4;
   for (const auto& r : c.rows) name_w = std::max(name_w, r.name.size());
-  std::snprintf(buf, sizeof buf, "%-4s %-*s %-20s %4s", "rank", static_cast<int>(name_w), "name", "controller", "n");
-  os << buf;
-  for (const auto& col : c.columns) {
-    std::snprintf(buf, sizeof buf, " %15s", col.c_str());
-    os << buf;
-  }
+  os << fmt::format("{:<4} {:<{}} {:<20} {:>4}", "rank", "name", name_w, "controller", "n");
+  for (const auto& col : c.columns) os << fmt::format(" {:>15}", col);
   os << "  pareto\n";
   for (const auto& r : c.rows) {
-    std::snprintf(buf, sizeof buf, "%-4s %-*s %-20s %4d", r.rank > 0 ? std::to_string(r.rank).c_str() : "-",
-                  static_cast<int>(name_w), r.name.c_str(), r.controller.c_str(), r.runs);
-    os << buf;
+    os << fmt::format("{:<4} {:<{}} {:<20} {:>4}", r.rank > 0 ? std::to_string(r.rank) : "-", r.name, name_w,
+                      r.controller, r.runs);
     for (const auto& col : c.columns) {
       const MetricStat& s = r.metrics.at(col);
       if (s.n == 0) {
-        std::snprintf(buf, sizeof buf, " %15s", "-");
+        os << fmt::format(" {:>15}", "-");
       } else if (s.n > 1) {
-        std::snprintf(buf, sizeof buf, " %8.4g±%-6.2g", s.mean, s.spread);
+        os << fmt::format(" {:8.4g}±{:<6.2g}", s.mean, s.spread);
       } else {
-        std::snprintf(buf, sizeof buf, " %15.6g", s.mean);
+        os << fmt::format(" {:15.6g}", s.mean);
       }
-      os << buf;
     }
     os << (r.pareto ? "  *" : "") << (r.failed > 0 ? "  (" + std::to_string(r.failed) + " failed)" : "") << "\n";
   }
@@ -148,7 +146,7 @@ std::string ComparisonCsv(const Comparison& c) {
   os << "\n";
   os.precision(10);
   for (const auto& r : c.rows) {
-    os << r.rank << ",\"" << r.name << "\"," << r.controller << "," << r.runs << "," << r.failed << ","
+    os << r.rank << "," << CsvQuoted(r.name) << "," << r.controller << "," << r.runs << "," << r.failed << ","
        << (r.pareto ? 1 : 0);
     for (const auto& col : c.columns) {
       const MetricStat& s = r.metrics.at(col);
@@ -161,6 +159,29 @@ std::string ComparisonCsv(const Comparison& c) {
     os << "\n";
   }
   return os.str();
+}
+
+std::string ComparisonJson(const Comparison& c) {
+  using Json = nlohmann::ordered_json;
+  Json rows = Json::array();
+  for (const auto& r : c.rows) {
+    Json m = Json::object();
+    for (const auto& col : c.columns) {
+      auto it = r.metrics.find(col);
+      m[col] = it == r.metrics.end() || it->second.n == 0
+                   ? Json(nullptr)
+                   : Json{{"mean", it->second.mean}, {"spread", it->second.spread}, {"n", it->second.n}};
+    }
+    rows.push_back({{"rank", r.rank},
+                    {"name", r.name},
+                    {"controller", r.controller},
+                    {"runs", r.runs},
+                    {"failed", r.failed},
+                    {"pareto", r.pareto},
+                    {"metrics", m}});
+  }
+  return Json{{"rank_metric", c.rank_metric}, {"effort_metric", c.effort_metric}, {"columns", c.columns}, {"rows", rows}}
+             .dump(2) + "\n";
 }
 
 }  // namespace vb::experiment

@@ -9,7 +9,7 @@
 namespace vb::experiment {
 
 struct RunRecord {
-  std::string name;                      // includes sweep tags; repeats share a name
+  std::string name;                      // the case (RunKey::CaseName): repeats share it
   std::string controller;
   bool ok = true;
   std::map<std::string, double> metrics;
@@ -40,8 +40,11 @@ struct Comparison {
 
 Comparison Compare(const std::vector<RunRecord>& runs);
 
-// Renderings for people (fixed-width table) and scripts (CSV).
+// The renderings every command uses, local or remote: people (fixed-width table), scripts (CSV, JSON:
+// {rank_metric, effort_metric, columns, rows: [{rank, name, controller, runs, failed, pareto,
+// metrics: {column: {mean, spread, n} or null}}]}).
 std::string ComparisonTable(const Comparison& c);
 std::string ComparisonCsv(const Comparison& c);
+std::string ComparisonJson(const Comparison& c);
 
 }  // namespace vb::experiment

@@ -36,19 +36,27 @@ StatusOr<control::LungeSolenoidModel> LungeNominal(const model::PlantParams& pla
   return m;
 }
 
+using FieldNames = std::initializer_list<std::string_view>;
 using FieldMap = std::initializer_list<std::pair<std::string_view, std::string_view>>;
 
-// A law validates its own C++ parameters ("pi.carrier_Hz: must be > 0"); the user wrote the spec. Rewrites the
-// message to the spec's field path ("controller.pi_current.carrier_Hz: must be > 0").
-Status InSpec(const Status& st, std::string_view law, std::string_view law_prefix, FieldMap fields) {
+// A law validates its own parameters ("pi.carrier_Hz: must be > 0"); the user wrote the spec. Puts the message
+// at the spec's field path ("controller.pi_current.carrier_Hz: must be > 0"). The laws' parameter names are the
+// spec's (`fields`); only where the spec's name carries no unit does the C++ name differ (`renamed`: the
+// position laws' gains and the predictive weights, whose spec names predate the unit rule and stay for
+// existing spec files). A message about anything else stays at the law.
+Status InSpec(const Status& st, std::string_view law, std::string_view law_prefix, FieldNames fields,
+              FieldMap renamed = {}) {
   if (st.ok()) return st;
   std::string msg = st.message();
   if (!law_prefix.empty() && msg.rfind(law_prefix, 0) == 0) msg = msg.substr(law_prefix.size());
   const size_t colon = msg.find(':');
   const std::string param = msg.substr(0, colon);
   const std::string rest = colon == std::string::npos ? "" : msg.substr(colon);
-  for (const auto& [cpp, spec] : fields)
-    if (param == cpp) return Status::InvalidArgument("controller." + std::string(law) + "." + std::string(spec) + rest);
+  const std::string at = "controller." + std::string(law) + ".";
+  for (const auto& name : fields)
+    if (param == name) return Status::InvalidArgument(at + param + rest);
+  for (const auto& [cpp, spec] : renamed)
+    if (param == cpp) return Status::InvalidArgument(at + std::string(spec) + rest);
   return Status::InvalidArgument("controller." + std::string(law) + ": " + msg);
 }
 
@@ -89,10 +97,10 @@ StatusOr<BuiltController> BuildController(const valvebench::v1::ExperimentSpec& 
             "controller.dither_pwm.coil_L_H: required for a coil whose inductance depends on the spool position");
       }
       control::DitherPlannerOptions opt;
-      if (d.min_frequency_hz() > 0.0) opt.frequency_min_Hz = d.min_frequency_hz();
-      if (d.max_frequency_hz() > 0.0) opt.frequency_max_Hz = d.max_frequency_hz();
-      if (d.min_duty() > 0.0) opt.duty_min = d.min_duty();
-      if (d.max_duty() > 0.0) opt.duty_max = d.max_duty();
+      if (d.min_frequency_hz() > 0.0) opt.min_frequency_Hz = d.min_frequency_hz();
+      if (d.max_frequency_hz() > 0.0) opt.max_frequency_Hz = d.max_frequency_hz();
+      if (d.min_duty() > 0.0) opt.min_duty = d.min_duty();
+      if (d.max_duty() > 0.0) opt.max_duty = d.max_duty();
       const control::DitherRequest req{d.average_current_a(), d.dither_amplitude_a()};
       StatusOr<control::DitherPlan> plan = Status::Internal("unset");
       if (d.method().empty() || d.method() == "exact") {
@@ -107,9 +115,8 @@ StatusOr<BuiltController> BuildController(const valvebench::v1::ExperimentSpec& 
       }
       if (!plan.ok())
         return InSpec(plan.status(), "dither_pwm", "dither.",
-                      {{"amplitude_A", "dither_amplitude_A"}, {"average_current_A", "average_current_A"},
-                       {"frequency_min_Hz", "min_frequency_Hz"}, {"frequency_max_Hz", "max_frequency_Hz"},
-                       {"duty_min", "min_duty"}, {"duty_max", "max_duty"}});
+                      {"dither_amplitude_A", "average_current_A", "min_frequency_Hz", "max_frequency_Hz", "min_duty",
+                       "max_duty"});
       std::vector<control::PwmSegment> segs = {{0.0, plan->frequency_Hz, plan->duty}};
       out.breakpoints_s.push_back(0.0);
       out.pwm_period_s = 1.0 / plan->frequency_Hz;
@@ -121,9 +128,9 @@ StatusOr<BuiltController> BuildController(const valvebench::v1::ExperimentSpec& 
       const auto& h = cs.hysteresis_current();
       control::HysteresisCurrentParams p;
       if (h.band_a() != 0.0) p.band_A = h.band_a();
-      if (h.sample_period_s() != 0.0) p.period_s = h.sample_period_s();
+      if (h.sample_period_s() != 0.0) p.sample_period_s = h.sample_period_s();
       VB_RETURN_IF_ERROR(InSpec(control::HysteresisCurrent::Validate(p), "hysteresis_current", "hysteresis.",
-                                {{"band_A", "band_A"}, {"period_s", "sample_period_s"}}));
+                                {"band_A", "sample_period_s"}));
       out.controller = std::make_unique<control::HysteresisCurrent>(p);
       out.controlled = ControlledVariable::kCurrent;
       return out;
@@ -132,12 +139,11 @@ StatusOr<BuiltController> BuildController(const valvebench::v1::ExperimentSpec& 
       const auto& c = cs.pi_current();
       control::PiCurrentParams p;
       if (c.kp_v_per_a() != 0.0) p.kp_V_per_A = c.kp_v_per_a();
-      if (c.ki_v_per_a_s() != 0.0) p.ki_V_per_As = c.ki_v_per_a_s();
+      if (c.ki_v_per_a_s() != 0.0) p.ki_V_per_A_s = c.ki_v_per_a_s();
       if (c.carrier_hz() != 0.0) p.carrier_Hz = c.carrier_hz();
       if (c.has_feedforward_r_ohm()) p.feedforward_R_ohm = c.feedforward_r_ohm();
       VB_RETURN_IF_ERROR(InSpec(control::PiCurrent::Validate(p), "pi_current", "pi.",
-                                {{"kp_V_per_A", "kp_V_per_A"}, {"ki_V_per_As", "ki_V_per_A_s"},
-                                 {"carrier_Hz", "carrier_Hz"}, {"feedforward_R_ohm", "feedforward_R_ohm"}}));
+                                {"kp_V_per_A", "ki_V_per_A_s", "carrier_Hz", "feedforward_R_ohm"}));
       out.controller = std::make_unique<control::PiCurrent>(p);
       out.controlled = ControlledVariable::kCurrent;
       return out;
@@ -145,15 +151,15 @@ StatusOr<BuiltController> BuildController(const valvebench::v1::ExperimentSpec& 
     case ControllerSpec::kPredictiveCurrent: {
       const auto& c = cs.predictive_current();
       control::PredictiveCurrentParams p;
-      if (c.horizon_s() != 0.0) p.h_s = c.horizon_s();
+      if (c.horizon_s() != 0.0) p.horizon_s = c.horizon_s();
       if (c.w_current() != 0.0) p.w_I_per_A2 = c.w_current();
       if (c.has_w_voltage()) p.w_v_per_V2 = c.w_voltage();
       if (c.r_ohm() != 0.0) p.R_ohm = c.r_ohm();
       if (c.l_h() != 0.0) p.L_H = c.l_h();
       if (c.carrier_hz() != 0.0) p.carrier_Hz = c.carrier_hz();
       VB_RETURN_IF_ERROR(InSpec(control::PredictiveCurrent::Validate(p), "predictive_current", "predictive.",
-                                {{"h_s", "horizon_s"}, {"w_I_per_A2", "w_current"}, {"w_v_per_V2", "w_voltage"},
-                                 {"R_ohm", "R_ohm"}, {"L_H", "L_H"}, {"carrier_Hz", "carrier_Hz"}}));
+                                {"horizon_s", "R_ohm", "L_H", "carrier_Hz"},
+                                {{"w_I_per_A2", "w_current"}, {"w_v_per_V2", "w_voltage"}}));
       out.controller = std::make_unique<control::PredictiveCurrent>(p);
       out.controlled = ControlledVariable::kCurrent;
       return out;
@@ -163,13 +169,12 @@ StatusOr<BuiltController> BuildController(const valvebench::v1::ExperimentSpec& 
       control::FuzzyCurrentParams p;
       if (c.error_scale_a() != 0.0) p.error_scale_A = c.error_scale_a();
       if (c.rate_scale_a_per_s() != 0.0) p.rate_scale_A_per_s = c.rate_scale_a_per_s();
-      if (c.output_scale_v() != 0.0) p.output_step_V = c.output_scale_v();
+      if (c.output_scale_v() != 0.0) p.output_scale_V = c.output_scale_v();
       if (c.carrier_hz() != 0.0) p.carrier_Hz = c.carrier_hz();
       if (c.has_feedforward_r_ohm()) p.feedforward_R_ohm = c.feedforward_r_ohm();
       VB_RETURN_IF_ERROR(InSpec(control::FuzzyCurrent::Validate(p), "fuzzy_current", "fuzzy.",
-                                {{"error_scale_A", "error_scale_A"}, {"rate_scale_A_per_s", "rate_scale_A_per_s"},
-                                 {"output_step_V", "output_scale_V"}, {"carrier_Hz", "carrier_Hz"},
-                                 {"feedforward_R_ohm", "feedforward_R_ohm"}}));
+                                {"error_scale_A", "rate_scale_A_per_s", "output_scale_V", "carrier_Hz",
+                                 "feedforward_R_ohm"}));
       out.controller = std::make_unique<control::FuzzyCurrent>(p);
       out.controlled = ControlledVariable::kCurrent;
       return out;
@@ -189,9 +194,9 @@ StatusOr<BuiltController> BuildController(const valvebench::v1::ExperimentSpec& 
       if (c.ki_current() != 0.0) p.current_ki_V_per_A_s = c.ki_current();
       if (c.carrier_hz() != 0.0) p.carrier_Hz = c.carrier_hz();
       VB_RETURN_IF_ERROR(InSpec(control::CascadePiPosition::Validate(p), "cascade_pi_position", "",
+                                {"carrier_Hz"},
                                 {{"position_kp_N_per_m", "kp_position"}, {"position_ki_N_per_m_s", "ki_position"},
-                                 {"current_kp_V_per_A", "kp_current"}, {"current_ki_V_per_A_s", "ki_current"},
-                                 {"carrier_Hz", "carrier_Hz"}}));
+                                 {"current_kp_V_per_A", "kp_current"}, {"current_ki_V_per_A_s", "ki_current"}}));
       out.controller = std::make_unique<control::CascadePiPosition>(p);
       out.controlled = ControlledVariable::kPosition;
       return out;
@@ -212,9 +217,10 @@ StatusOr<BuiltController> BuildController(const valvebench::v1::ExperimentSpec& 
       if (c.sigmoid_delta() != 0.0) p.current_boundary_layer_A = c.sigmoid_delta();
       if (c.carrier_hz() != 0.0) p.carrier_Hz = c.carrier_hz();
       VB_RETURN_IF_ERROR(InSpec(control::SlidingModePosition::Validate(p), "sliding_mode_position", "",
+                                {"carrier_Hz"},
                                 {{"surface_slope_per_s", "c_position"}, {"reaching_gain_SI", "k_position"},
                                  {"reaching_exponent", "alpha"}, {"current_reaching_rate_A_per_s", "k_current"},
-                                 {"current_boundary_layer_A", "sigmoid_delta"}, {"carrier_Hz", "carrier_Hz"}}));
+                                 {"current_boundary_layer_A", "sigmoid_delta"}}));
       out.controller = std::make_unique<control::SlidingModePosition>(p);
       out.controlled = ControlledVariable::kPosition;
       return out;
@@ -224,16 +230,14 @@ StatusOr<BuiltController> BuildController(const valvebench::v1::ExperimentSpec& 
       control::PeakAndHold::Params p;
       if (c.switching_current_a() != 0.0) p.switching_current_A = c.switching_current_a();
       if (c.holding_current_a() != 0.0) p.holding_current_A = c.holding_current_a();
-      if (c.band_a() != 0.0) p.hold_band_A = c.band_a();
+      if (c.band_a() != 0.0) p.band_A = c.band_a();
       if (c.peak_time_max_s() != 0.0) p.peak_time_max_s = c.peak_time_max_s();
       p.reverse_on_release = c.reverse_on_release();
       if (p.reverse_on_release && driver.kind != model::DriverKind::kHBridge)
         return Status::InvalidArgument(
             "controller.peak_and_hold.reverse_on_release: needs an H-bridge driver (bench.driver.kind = h_bridge)");
       VB_RETURN_IF_ERROR(InSpec(control::PeakAndHold::Validate(p), "peak_and_hold", "",
-                                {{"switching_current_A", "switching_current_A"},
-                                 {"holding_current_A", "holding_current_A"}, {"hold_band_A", "band_A"},
-                                 {"peak_time_max_s", "peak_time_max_s"}}));
+                                {"switching_current_A", "holding_current_A", "band_A", "peak_time_max_s"}));
       out.controller = std::make_unique<control::PeakAndHold>(p);
       out.controlled = spec.reference().shape_case() == valvebench::v1::ReferenceSpec::SHAPE_NOT_SET
                            ? ControlledVariable::kNone

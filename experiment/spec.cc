@@ -7,6 +7,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "common/format.h"
 #include "control/open_loop_pwm.h"
 #include "experiment/controllers.h"
 
@@ -193,13 +194,6 @@ Status WalkPath(pb::Message* msg, std::string_view path, double* value, bool set
   return Status::InvalidArgument(where + ": empty");
 }
 
-std::string FormatValue(double v) {
-  std::ostringstream os;
-  os.precision(10);
-  os << v;
-  return os.str();
-}
-
 }  // namespace
 
 Status SetFieldByPath(ExperimentSpec* spec, std::string_view path, double value) {
@@ -214,8 +208,17 @@ StatusOr<double> GetFieldByPath(const ExperimentSpec& spec, std::string_view pat
 }
 
 StatusOr<std::vector<ExperimentSpec>> ExpandSweep(const ExperimentSpec& spec, size_t max_runs) {
+  auto runs = ExpandRuns(spec, max_runs);
+  if (!runs.ok()) return runs.status();
+  std::vector<ExperimentSpec> out;
+  out.reserve(runs->size());
+  for (auto& r : *runs) out.push_back(std::move(r.spec));
+  return out;
+}
+
+StatusOr<std::vector<RunPoint>> ExpandRuns(const ExperimentSpec& spec, size_t max_runs) {
   if (spec.variants_size() > 0) {
-    std::vector<ExperimentSpec> out;
+    std::vector<RunPoint> out;
     for (int v = 0; v < spec.variants_size(); ++v) {
       const ExperimentSpec& overlay = spec.variants(v);
       if (overlay.variants_size() > 0)
@@ -225,7 +228,7 @@ StatusOr<std::vector<ExperimentSpec>> ExpandSweep(const ExperimentSpec& spec, si
       if (overlay.has_controller()) merged.clear_controller();  // a variant's law replaces the base law
       merged.MergeFrom(overlay);
       merged.set_name(spec.name() + "/" + (overlay.name().empty() ? std::to_string(v) : overlay.name()));
-      auto runs = ExpandSweep(merged, max_runs - out.size());
+      auto runs = ExpandRuns(merged, max_runs - out.size());
       if (!runs.ok()) return runs.status().WithContext("variants[" + std::to_string(v) + "]");
       for (auto& r : *runs) out.push_back(std::move(r));
     }
@@ -261,21 +264,26 @@ StatusOr<std::vector<ExperimentSpec>> ExpandSweep(const ExperimentSpec& spec, si
     if (total > max_runs)
       return Status::ResourceExhausted("sweep: expands to more than " + std::to_string(max_runs) + " runs");
   }
-  std::vector<ExperimentSpec> out;
+  std::vector<RunPoint> out;
   out.reserve(total);
   std::vector<size_t> idx(axes.size(), 0);
   for (size_t n = 0; n < total / repeats; ++n) {
     ExperimentSpec point = spec;
     point.clear_sweep();
     point.set_repeats(1);
+    RunKey key{spec.name(), {}, -1};
     for (size_t a = 0; a < axes.size(); ++a) {
       const double v = axes[a].second[idx[a]];
       VB_RETURN_IF_ERROR(SetFieldByPath(&point, axes[a].first, v));
-      point.add_tags("sweep:" + axes[a].first + "=" + FormatValue(v));
+      key.sweep.push_back({axes[a].first, v});
+      point.add_tags("sweep:" + axes[a].first + "=" + FormatNumber(v));
     }
     for (uint32_t r = 0; r < repeats; ++r) {
-      ExperimentSpec run = point;
-      if (repeats > 1) run.add_tags("repeat:" + std::to_string(r));
+      RunPoint run{point, key};
+      if (repeats > 1) {
+        run.key.repeat = static_cast<int>(r);
+        run.spec.add_tags("repeat:" + std::to_string(r));
+      }
       out.push_back(std::move(run));
     }
     for (size_t a = axes.size(); a-- > 0;) {  // odometer, last axis fastest
@@ -363,7 +371,7 @@ StatusOr<Experiment> BuildExperiment(const ExperimentSpec& spec) {
   if (spec.sweep_size() > 0 || spec.repeats() > 1 || spec.variants_size() > 0)
     return Status::InvalidArgument("sweep: expand variants, sweeps and repeats before building a single run");
   if (!(spec.duration_s() > 0.0) || !std::isfinite(spec.duration_s()))
-    return Status::InvalidArgument("duration_s: must be > 0, got " + FormatValue(spec.duration_s()));
+    return Status::InvalidArgument("duration_s: must be > 0, got " + FormatNumber(spec.duration_s()));
   e.duration_s = spec.duration_s();
   const std::string& kind = spec.bench().kind();
   if (!kind.empty() && kind != "emulated" && kind != "hid" && kind != "u3")
@@ -388,14 +396,14 @@ StatusOr<Experiment> BuildExperiment(const ExperimentSpec& spec) {
   const auto& c = spec.conditions();
   e.run.supply_V = c.supply_v() == 0.0 ? kDefaultSupply_V : c.supply_v();
   if (!(e.run.supply_V > 0.0) || !std::isfinite(e.run.supply_V))
-    return Status::InvalidArgument("conditions.supply_V: must be > 0, got " + FormatValue(c.supply_v()));
+    return Status::InvalidArgument("conditions.supply_V: must be > 0, got " + FormatNumber(c.supply_v()));
   if (!(c.supply_pressure_pa() >= 0.0) || !std::isfinite(c.supply_pressure_pa()))
     return Status::InvalidArgument("conditions.supply_pressure_Pa: must be >= 0 (gauge), got " +
-                                   FormatValue(c.supply_pressure_pa()));
+                                   FormatNumber(c.supply_pressure_pa()));
   e.run.supply_pressure_Pa = c.supply_pressure_pa();
   const double rate = spec.recording().rate_hz() == 0.0 ? kDefaultRecordRate_Hz : spec.recording().rate_hz();
   if (!(rate > 0.0) || !std::isfinite(rate))
-    return Status::InvalidArgument("recording.rate_Hz: must be > 0, got " + FormatValue(rate));
+    return Status::InvalidArgument("recording.rate_Hz: must be > 0, got " + FormatNumber(rate));
   if (e.duration_s * rate > 50e6)
     return Status::ResourceExhausted("recording.rate_Hz: duration_s * rate_Hz exceeds 50 million samples");
   e.run.sample_rate_Hz = rate;

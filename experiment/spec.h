@@ -7,6 +7,7 @@
 #include <string_view>
 #include <vector>
 
+#include "common/run_key.h"
 #include "common/status.h"
 #include "control/controller.h"
 #include "experiment/metrics.h"
@@ -30,8 +31,17 @@ std::string SpecToJson(const ExperimentSpec& spec, bool pretty = true);
 inline constexpr double kDefaultRecordRate_Hz = 50'000.0;
 inline constexpr double kDefaultSupply_V = 24.0;
 
-// Expands sweep axes (a full grid, first axis slowest) and repeats into single-run specs. Each result has no
-// sweep, repeats = 1, and tags "sweep:<field>=<value>" and "repeat:<k>". The count is bounded by max_runs.
+// One run of an expanded spec: the single-run spec (no variants, no sweep, repeats = 1) and its identity.
+struct RunPoint {
+  ExperimentSpec spec;
+  RunKey key;
+};
+// Expands variants (name "<name>/<variant>"), sweep axes (a full grid, first axis slowest) and repeats into
+// single runs. The key carries the sweep point and repeat as fields; the spec also gets the tags
+// "sweep:<field>=<value>" and "repeat:<k>" (for people and tag filters; nothing reads them back). The count
+// is bounded by max_runs.
+StatusOr<std::vector<RunPoint>> ExpandRuns(const ExperimentSpec& spec, size_t max_runs = 100'000);
+// The specs of ExpandRuns alone.
 StatusOr<std::vector<ExperimentSpec>> ExpandSweep(const ExperimentSpec& spec, size_t max_runs = 100'000);
 // Sets a numeric field by path ("conditions.supply_V", "controller.open_loop_pwm.segments[0].duty",
 // "bench.model.params[R]").

@@ -1,6 +1,7 @@
 // Bench-server figures on loopback: submit-to-done latency of a 0.1 s emulated run, runs per second for tiny
 // runs, time to fetch a 1 M-sample trace, and 64 concurrent clients. Starts the real valvebench-server.
-// Targets (issue 4): a 1 M-sample trace back to the client in < 100 ms; 64 concurrent clients without errors.
+// Targets (docs/perf.md, "Bench server"): a 1 M-sample trace back to the client in < 100 ms; 64 concurrent
+// clients without errors.
 #include <algorithm>
 #include <atomic>
 #include <chrono>

@@ -72,7 +72,7 @@ std::vector<vb::db::TraceChunk> MakeTrace(int chunk_samples) {
 
 std::int64_t NewRunningRun(vb::db::Store& store) {
   vb::db::RunRecord r;
-  r.name = "perf";
+  r.key = vb::NamedRun("perf");
   r.controller = "pi_current";
   r.bench_kind = "emulated";
   r.spec_json = "{}";
@@ -167,7 +167,7 @@ void MeasureQueue(const std::string& path) {
   constexpr int kQueueRuns = 2000;
   auto store = OpenFresh(path);
   vb::db::RunRecord r;
-  r.name = "q";
+  r.key = vb::NamedRun("q");
   r.controller = "pi_current";
   r.bench_kind = "emulated";
   r.spec_json = "{\"name\": \"q\"}";

@@ -1,5 +1,6 @@
 #include "regress/compare.h"
 
+#include <fmt/format.h>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -16,16 +17,12 @@ constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
 std::string Num(double v) {
   if (!std::isfinite(v)) return std::isnan(v) ? "n/a" : (v > 0 ? "inf" : "-inf");
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.6g", v);
-  return buf;
+  return fmt::format("{:.6g}", v);
 }
 
 std::string Pct(double delta, double base) {
   if (!std::isfinite(delta) || base == 0.0) return "";
-  char buf[32];
-  std::snprintf(buf, sizeof buf, " (%+.1f %%)", 100.0 * delta / std::fabs(base));
-  return buf;
+  return fmt::format(" ({:+.1f} %)", 100.0 * delta / std::fabs(base));
 }
 
 Json NumJson(double v) { return std::isfinite(v) ? Json(v) : Json(nullptr); }
@@ -101,7 +98,7 @@ Measured Summarise(const std::vector<RunMetrics>& runs) {
   Measured m;
   std::map<std::string, std::map<std::string, std::vector<double>>> values;
   for (const auto& r : runs) {
-    const std::string c = CaseOfRunName(r.name);
+    const std::string& c = r.case_name;
     auto& per = values[c];
     if (!r.ok) {
       m.failures[c].push_back("run " + std::to_string(r.run_id) + " (" + r.name + "): " +
@@ -202,10 +199,9 @@ Finding Judge(const std::string& case_name, const ResolvedTolerance& tol, double
   } else {
     f.verdict = Verdict::kUnchanged;
   }
-  char buf[160];
-  std::snprintf(buf, sizeof buf, "; allowed %s%s (tolerance %s + noise %s)",
-                tol.direction == v1::BOTH ? "+/-" : "", Num(f.allowed).c_str(), Num(f.tolerance).c_str(),
-                Num(f.noise).c_str());
+  const std::string buf = fmt::format("; allowed {}{} (tolerance {} + noise {})",
+                                      tol.direction == v1::BOTH ? "+/-" : "", Num(f.allowed), Num(f.tolerance),
+                                      Num(f.noise));
   f.message = tol.metric + " " + VerdictName(f.verdict) + ": baseline " + Num(baseline->mean) + " -> now " +
               Num(now->mean) + Pct(f.delta, baseline->mean) + " [" + DirectionName(tol.direction) +
               " is better]" + buf;
@@ -372,8 +368,7 @@ std::string ResultTable(const RegressResult& r) {
       if (f.verdict != v) continue;
       std::string word = VerdictName(v);
       for (char& ch : word) ch = static_cast<char>(std::toupper(static_cast<unsigned char>(ch)));
-      char head[16];
-      std::snprintf(head, sizeof head, "%-10s", word.c_str());
+      const std::string head = fmt::format("{:<10}", word);
       os << "  " << head << " " << f.case_name << "  " << f.message << "\n";
     }
   }

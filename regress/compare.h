@@ -30,7 +30,8 @@ using CaseStats = std::map<std::string, std::map<std::string, Stat>>;
 // One executed run, as the local runner or the server reports it.
 struct RunMetrics {
   std::int64_t run_id = 0;
-  std::string name;                       // run name: spec name + sweep/repeat tags
+  std::string name;                       // run name for people (RunKey::DisplayName)
+  std::string case_name;                  // the case it belongs to (RunKey::CaseName): repeats share it
   bool ok = true;                         // done (not failed/cancelled)
   std::string reason;                     // why not
   std::map<std::string, double> metrics;  // NaN/absent = not applicable

@@ -1,5 +1,6 @@
 #include "regress/cron.h"
 
+#include <fmt/format.h>
 #include <cstdio>
 #include <ctime>
 #include <sstream>
@@ -219,9 +220,7 @@ std::string DateOf(double unix_s, bool utc) {
   } else {
     localtime_r(&t, &tm);
   }
-  char buf[48];
-  std::snprintf(buf, sizeof buf, "%04d-%02d-%02d", tm.tm_year + 1900, tm.tm_mon + 1, tm.tm_mday);
-  return buf;
+  return fmt::format("{:04}-{:02}-{:02}", tm.tm_year + 1900, tm.tm_mon + 1, tm.tm_mday);
 }
 
 }  // namespace vb::regress

@@ -109,11 +109,6 @@ std::string BenchClassOf(const v1::ExperimentSpec& spec) {
   return kind + ":" + (spec.bench().model().preset().empty() ? "taghizadeh2009" : spec.bench().model().preset());
 }
 
-std::string CaseOfRunName(const std::string& run_name) {
-  const size_t pos = run_name.find(" repeat:");
-  return pos == std::string::npos ? run_name : run_name.substr(0, pos);
-}
-
 double NoiseSigmas(const Suite& suite) {
   return suite.has_noise_sigmas() ? suite.noise_sigmas() : kDefaultNoiseSigmas;
 }
@@ -214,18 +209,16 @@ StatusOr<std::vector<SuiteRun>> ExpandSuite(const Suite& suite, std::uint64_t se
   std::vector<SuiteRun> out;
   for (int e = 0; e < suite.experiments_size(); ++e) {
     const auto& entry = suite.experiments(e);
-    auto points = experiment::ExpandSweep(entry.spec());
+    auto points = experiment::ExpandRuns(entry.spec());
     if (!points.ok()) return points.status().WithContext(Idx("experiments", e));
     for (auto& p : *points) {
       SuiteRun r;
       r.entry = e;
-      r.spec = std::move(p);
+      r.spec = std::move(p.spec);
+      r.key = std::move(p.key);
       SplitMix rng{seed * 0x100000001B3ull + out.size() * 0x9E3779B97F4A7C15ull + 1};
       VB_RETURN_IF_ERROR(ApplyJitter(entry, &rng, &r.spec).WithContext(Idx("experiments", e)));
-      std::string name = r.spec.name();
-      for (const auto& tag : r.spec.tags())
-        if (tag.rfind("sweep:", 0) == 0) name += " " + tag;
-      r.case_name = name;
+      r.case_name = r.key.CaseName();
       out.push_back(std::move(r));
     }
   }

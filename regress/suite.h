@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "common/run_key.h"
 #include "common/status.h"
 #include "valvebench/v1/spec.pb.h"
 #include "valvebench/v1/suite.pb.h"
@@ -29,20 +30,18 @@ StatusOr<LoadedSuite> LoadSuite(const std::string& path);
 // "emulated:<preset>" (the server's bench classes; docs/server.md), or the kind for non-emulated benches.
 std::string BenchClassOf(const valvebench::v1::ExperimentSpec& spec);
 
-// One run to execute: the single-run spec (tags sweep:... and repeat:k as ExpandSweep gives them) and the case
-// it belongs to (entry name + its sweep tags: repeats of one configuration share a case).
+// One run to execute: the single-run spec, its identity (RunKey as ExpandRuns gives it) and the case it
+// belongs to (key.CaseName(): entry name + sweep point; repeats of one configuration share a case).
 struct SuiteRun {
   int entry = 0;                                      // index into suite.experiments
   std::string case_name;
+  RunKey key;
   valvebench::v1::ExperimentSpec spec;
 };
 
 // Expands every entry (variants, sweeps, repeats), then applies the entry's jitter with a generator seeded by
 // (seed, run index): the same seed gives the same runs, bit for bit.
 StatusOr<std::vector<SuiteRun>> ExpandSuite(const Suite& suite, std::uint64_t seed);
-
-// The case a run belongs to, from its run name (spec name + sweep/repeat tags): drops " repeat:<k>".
-std::string CaseOfRunName(const std::string& run_name);
 
 // The metrics compared for an entry (its tolerances over the suite's), in order, and the tolerance of each.
 struct ResolvedTolerance {

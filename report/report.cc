@@ -1,5 +1,6 @@
 #include "report/report.h"
 
+#include <fmt/printf.h>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -10,11 +11,10 @@ namespace {
 
 Json Num(double v) { return std::isfinite(v) ? Json(v) : Json(nullptr); }
 
+// f is a printf-style spec for one double (callers choose the precision of each table column).
 std::string Fmt(double v, const char* f = "%.6g") {
   if (!std::isfinite(v)) return "n/a";
-  char buf[48];
-  std::snprintf(buf, sizeof buf, f, v);
-  return buf;
+  return fmt::sprintf(f, v);
 }
 
 // Indices kept by min/max decimation: per bucket the first sample and the min and max of every channel.
@@ -45,29 +45,6 @@ std::vector<std::size_t> DecimationIndices(const std::map<std::string, std::vect
   }
   if (keep.back() != n - 1) keep.push_back(n - 1);
   return keep;
-}
-
-// Splits "name sweep:a=1 sweep:b=2" into the name with all but the last sweep tag, and the last axis/value.
-bool SplitLastSweep(const std::string& run, std::string* series, std::string* axis, double* x) {
-  const std::size_t at = run.rfind(" sweep:");
-  if (at == std::string::npos) return false;
-  std::string tag = run.substr(at + 7);
-  const std::size_t sp = tag.find(' ');
-  std::string rest;
-  if (sp != std::string::npos) {
-    rest = tag.substr(sp);  // e.g. " repeat:1"
-    tag = tag.substr(0, sp);
-  }
-  const std::size_t eq = tag.rfind('=');
-  if (eq == std::string::npos) return false;
-  *axis = tag.substr(0, eq);
-  try {
-    *x = std::stod(tag.substr(eq + 1));
-  } catch (...) {
-    return false;
-  }
-  *series = run.substr(0, at);
-  return true;
 }
 
 }  // namespace
@@ -141,9 +118,11 @@ Json StaticMapSection(const std::vector<MapPoint>& points, const std::string& me
   std::vector<std::string> order;
   std::string axis;
   for (const auto& p : points) {
-    std::string s, a;
-    double x = 0;
-    if (!std::isfinite(p.value) || !SplitLastSweep(p.run_name, &s, &a, &x)) continue;
+    if (!std::isfinite(p.value) || p.key.sweep.empty()) continue;
+    const std::string& a = p.key.sweep.back().field;
+    const double x = p.key.sweep.back().value;
+    const std::string s =
+        RunKey{p.key.name, {p.key.sweep.begin(), p.key.sweep.end() - 1}, -1}.CaseName();
     if (axis.empty()) axis = a;
     if (a != axis) continue;
     if (!series.count(s)) order.push_back(s);

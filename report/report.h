@@ -11,6 +11,8 @@
 
 #include <map>
 #include <string>
+
+#include "common/run_key.h"
 #include <vector>
 
 #include "experiment/compare.h"
@@ -34,10 +36,10 @@ Json ComparisonSections(const experiment::Comparison& c, const std::string& titl
 // A run's metrics as a two-column table.
 Json MetricsSection(const std::string& title, const std::vector<std::pair<std::string, double>>& metrics);
 
-// Static map (seed 000 Figs. 8-9): runs named "<name> sweep:a=.. sweep:b=.." with mean_position_pct; x is the
-// last sweep axis, one line per combination of the others. Returns null when the runs are not a sweep.
+// Static map (seed 000 Figs. 8-9): swept runs with mean_position_pct; x is the last sweep axis of their key,
+// one line per combination of the others (repeats averaged). Returns null when the runs are not a sweep.
 struct MapPoint {
-  std::string run_name;
+  RunKey key;
   double value = 0.0;  // mean_position_pct
 };
 Json StaticMapSection(const std::vector<MapPoint>& points, const std::string& metric_label);

@@ -1,5 +1,6 @@
 #include "server/config.h"
 
+#include <fmt/format.h>
 #include <google/protobuf/util/json_util.h>
 
 #include <cstdio>
@@ -48,9 +49,7 @@ StatusOr<hw::SafetyLimits> SafetyFromConfig(const valvebench::v1::SafetyConfig& 
 }
 
 std::string Hex4(unsigned v) {
-  char buf[8];
-  std::snprintf(buf, sizeof buf, "%04x", v & 0xFFFF);
-  return buf;
+  return fmt::format("{:04x}", v & 0xFFFF);
 }
 
 // A hid or u3 bench: its declared capabilities (what submissions are checked against; the device's own
@@ -132,11 +131,15 @@ StatusOr<regress::Baseline> LoadBaselineFile(const std::string& path) {
   return b;
 }
 
-std::string SpecBenchClass(const valvebench::v1::ExperimentSpec& spec) {
-  const std::string kind = spec.bench().kind().empty() ? "emulated" : spec.bench().kind();
-  if (kind != "emulated") return kind;
-  const std::string preset = spec.bench().model().preset().empty() ? "taghizadeh2009" : spec.bench().model().preset();
-  return kind + ":" + preset;
+runs::Policy Settings::AdmitPolicy() const {
+  runs::Policy p;
+  p.limits.max_spec_bytes = limits.max_spec_bytes();
+  p.limits.max_duration_s = limits.max_duration_s();
+  p.limits.max_record_rate_Hz = limits.max_record_rate_hz();
+  p.limits.max_queued_runs_per_user = limits.max_queued_runs_per_user();
+  p.limits.max_runs_per_submission = limits.max_runs_per_submission();
+  p.benches = benches;
+  return p;
 }
 
 StatusOr<Settings> SettingsFromConfig(const valvebench::v1::ServerConfig& c, const std::string& base_dir) {

@@ -6,26 +6,15 @@
 #include <vector>
 
 #include "common/status.h"
-#include "hw/emulated_bench.h"
-#include "hw/safety.h"
+#include "runs/admit.h"
+#include "runs/bench_setup.h"
 #include "regress/compare.h"
 #include "server/auth.h"
 #include "valvebench/v1/config.pb.h"
 
 namespace vb::server {
 
-struct BenchSetup {
-  std::string name;
-  std::string kind;             // "emulated", "hid", "u3"
-  std::string bench_class;      // what runs are matched on: "emulated:<preset>", "hid", "u3"
-  std::string preset;
-  valvebench::v1::ModelSpec model;
-  hw::EmulatedBenchOptions emulated;
-  valvebench::v1::BenchConfig config;  // as configured (hardware: which device)
-  hw::Capabilities caps;        // what submissions are checked against
-  hw::SafetyLimits safety;      // the interlocks every run on this bench goes through
-  std::string device;           // hardware: "hid 2e8a:10c0 serial X", "u3 serial N"
-};
+using runs::BenchSetup;
 
 // The nightly regression (config "nights"; docs/regress.md). Paths resolved against the config's directory.
 struct NightsSetup {
@@ -43,6 +32,8 @@ struct Settings {
   Authenticator auth;
   std::string tls_cert_pem, tls_key_pem;  // both set = TLS
   valvebench::v1::Limits limits;          // defaults filled in
+  // What submissions are admitted with (runs/admit.h): the limits above and the configured benches.
+  runs::Policy AdmitPolicy() const;
   NightsSetup nights;
 };
 
@@ -51,8 +42,5 @@ StatusOr<Settings> SettingsFromConfig(const valvebench::v1::ServerConfig& config
 
 // A baseline JSON file as `benchctl baseline show --json` writes it (nights.baseline_file).
 StatusOr<regress::Baseline> LoadBaselineFile(const std::string& path);
-
-// The bench class a spec asks for ("emulated:<preset>"), as matched against BenchSetup::bench_class.
-std::string SpecBenchClass(const valvebench::v1::ExperimentSpec& spec);
 
 }  // namespace vb::server

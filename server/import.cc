@@ -1,8 +1,11 @@
-// BenchService::ImportRuns: measured runs stored as finished runs, for the gap diagnosis (issue 5).
+// BenchService::ImportRuns: measured runs stored as finished runs, for the gap diagnosis (docs/server.md,
+// "Imported runs").
 //
 // Each run becomes a run of batch "import:<dataset>" with an ExperimentSpec that records what a run has
-// (name, conditions, duration, the nominal model) and tags for the rest ("imported", "dataset:<name>",
-// "split:<split>", "t_start_s:<t>"); its bench kind "imported" matches no bench, so no worker ever claims it.
+// (name, conditions, duration, the nominal model), its split and start time as the run's own fields (store
+// columns, Run.split and Run.t_start_s), and tags for people and filters ("imported", "dataset:<name>", and
+// "split:<split>", "t_start_s:<t>" which benchctl diagnose still reads until it takes the fields); its bench
+// kind "imported" matches no bench, so no worker ever claims it.
 // The whole request is validated before anything is stored: a bad run stores nothing.
 #include <google/protobuf/util/json_util.h>
 
@@ -92,7 +95,9 @@ grpc::Status BenchServiceImpl::ImportRuns(grpc::ServerContext* ctx, const v1::Im
                                    "t_start_s:" + FormatNumber(r.t_start_s())})
       spec.add_tags(tag);
     db::RunRecord rec;
-    rec.name = r.id();
+    rec.key = NamedRun(r.id());
+    rec.split = r.split();
+    rec.t_start_s = r.t_start_s();
     rec.controller = "imported";
     rec.bench_kind = kImportedKind;
     rec.requeue_on_interrupt = false;

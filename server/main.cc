@@ -12,6 +12,9 @@
 
 #include <csignal>
 #include <cstdio>
+
+#include <spdlog/sinks/stdout_sinks.h>
+#include <spdlog/spdlog.h>
 #include <memory>
 #include <pthread.h>
 #include <thread>
@@ -19,7 +22,6 @@
 #include "server/config.h"
 #include "server/nights.h"
 #include "server/service.h"
-#include "server/workers.h"
 
 int main(int argc, char** argv) {
   CLI::App app{"valvebench-server: the bench server"};
@@ -33,6 +35,12 @@ int main(int argc, char** argv) {
     return app.exit(e) == 0 ? 0 : 2;
   }
 
+  // The log: stderr, UTC time stamps, level, one line per event, flushed at once (supervisors and tests read it
+  // as it is written).
+  spdlog::set_default_logger(spdlog::stderr_logger_mt("valvebench-server"));
+  spdlog::set_pattern("%Y-%m-%dT%H:%M:%S.%eZ %l valvebench-server: %v", spdlog::pattern_time_type::utc);
+  spdlog::flush_on(spdlog::level::info);
+
   // Block the shutdown signals in every thread; one thread waits for them.
   sigset_t signals;
   sigemptyset(&signals);
@@ -42,32 +50,31 @@ int main(int argc, char** argv) {
 
   auto settings = vb::server::LoadSettings(config_path);
   if (!settings.ok()) {
-    std::fprintf(stderr, "valvebench-server: %s\n", settings.status().message().c_str());
+    spdlog::error("{}", settings.status().message().c_str());
     return 2;
   }
   if (run_night_now && !settings->nights.enabled) {
-    std::fprintf(stderr, "valvebench-server: --run-night-now: the config has no \"nights\" block\n");
+    spdlog::error("--run-night-now: the config has no \"nights\" block");
     return 2;
   }
   auto store = vb::db::Store::Open(settings->database_path);
   if (!store.ok()) {
-    std::fprintf(stderr, "valvebench-server: %s: %s\n", settings->database_path.c_str(),
+    spdlog::error("{}: {}", settings->database_path.c_str(),
                  store.status().message().c_str());
     return 3;
   }
   auto recovered = (*store)->RecoverAfterCrash();
   if (!recovered.ok()) {
-    std::fprintf(stderr, "valvebench-server: recovery failed: %s\n", recovered.status().message().c_str());
+    spdlog::error("recovery failed: {}", recovered.status().message().c_str());
     return 3;
   }
   if (*recovered > 0)
-    std::fprintf(stderr, "valvebench-server: %d run(s) were running when the server stopped: marked interrupted\n",
+    spdlog::warn("{} run(s) were running when the server stopped: marked interrupted",
                  *recovered);
 
-  vb::server::Registry registry;
-  std::vector<std::unique_ptr<vb::server::Worker>> workers;
-  for (const auto& b : settings->benches)
-    workers.push_back(std::make_unique<vb::server::Worker>(b, settings->database_path, &registry));
+  vb::runs::Registry registry;
+  std::vector<std::unique_ptr<vb::runs::Worker>> workers;
+  for (const auto& b : settings->benches) workers.push_back(std::make_unique<vb::runs::Worker>(b, &registry));
   vb::server::StorePool pool(settings->database_path);
   vb::server::BenchServiceImpl service(&settings.value(), &pool, &registry, &workers);
 
@@ -89,34 +96,29 @@ int main(int argc, char** argv) {
   builder.SetMaxSendMessageSize(64 << 20);
   std::unique_ptr<grpc::Server> server = builder.BuildAndStart();
   if (server == nullptr || port == 0) {
-    std::fprintf(stderr, "valvebench-server: cannot listen on %s\n", settings->listen_address.c_str());
+    spdlog::error("cannot listen on {}", settings->listen_address.c_str());
     return 3;
   }
-  for (auto& w : workers) w->Start();
+  for (auto& w : workers) w->Start(settings->database_path);
   std::unique_ptr<vb::server::NightScheduler> nights;
   if (settings->nights.enabled) {
     nights = std::make_unique<vb::server::NightScheduler>(
-        settings->nights, &pool,
-        [&service](const std::string& user, const std::vector<valvebench::v1::ExperimentSpec>& specs,
-                   const std::string& batch, valvebench::v1::SubmitRunResponse* resp) {
-          return service.SubmitAs(user, specs, batch, resp);
-        });
+        settings->nights, &pool, [&service](const vb::runs::Submission& s) { return service.Queue(s); });
     nights->Start(run_night_now);
   }
   // The address with the port actually bound (a config may ask for port 0: any free port).
   std::string bound = settings->listen_address;
   if (const size_t colon = bound.rfind(':'); colon != std::string::npos && bound.rfind("unix:", 0) != 0)
     bound = bound.substr(0, colon + 1) + std::to_string(port);
-  std::fprintf(stderr, "valvebench-server: listening on %s (%s), %zu bench(es), database %s\n", bound.c_str(),
+  spdlog::info("listening on {} ({}), {} bench(es), database {}", bound.c_str(),
                settings->tls_cert_pem.empty() ? "insecure" : "TLS", workers.size(),
                settings->database_path.c_str());
-  if (nights) std::fprintf(stderr, "valvebench-server: nights: '%s' (UTC), suite %s\n",
+  if (nights) spdlog::info("nights: '{}' (UTC), suite {}",
                            settings->nights.cron.c_str(), settings->nights.suite_path.c_str());
-  std::fflush(stderr);
 
   int sig = 0;
   sigwait(&signals, &sig);
-  std::fprintf(stderr, "valvebench-server: %s: shutting down\n", sig == SIGTERM ? "SIGTERM" : "SIGINT");
+  spdlog::info("{}: shutting down", sig == SIGTERM ? "SIGTERM" : "SIGINT");
   if (nights) nights->Stop();
   server->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(2));
   for (auto& w : workers) w->Stop();

@@ -2,11 +2,14 @@
 
 #include <algorithm>
 #include <chrono>
+
+#include <spdlog/spdlog.h>
 #include <cstdio>
 
 #include "regress/compare.h"
 #include "regress/cron.h"
 #include "regress/suite.h"
+#include "runs/query.h"
 
 namespace vb::server {
 
@@ -19,11 +22,6 @@ constexpr double kPollPeriod_s = 0.2;             // how often the batch's runs 
 
 double WallClock() {
   return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
-}
-
-bool Final(db::RunStatus s) {
-  return s == db::RunStatus::kDone || s == db::RunStatus::kFailed || s == db::RunStatus::kCancelled ||
-         s == db::RunStatus::kInterrupted;
 }
 
 }  // namespace
@@ -60,13 +58,12 @@ bool NightScheduler::SleepUntil(double t_unix_s) {
 void NightScheduler::Loop(bool run_now) {
   auto cron = regress::Cron::Parse(setup_.cron);
   if (!cron.ok()) {  // validated with the config; kept as a guard
-    std::fprintf(stderr, "valvebench-server: nights.cron: %s\n", cron.status().message().c_str());
+    spdlog::error("nights.cron: {}", cron.status().message().c_str());
     return;
   }
   auto night = [this](double fire_unix_s) {
     auto id = RunNight(fire_unix_s);
-    if (!id.ok()) std::fprintf(stderr, "valvebench-server: night: %s\n", id.status().message().c_str());
-    std::fflush(stderr);
+    if (!id.ok()) spdlog::error("night: {}", id.status().message().c_str());
   };
   if (run_now) night(clock_());
   for (;;) {
@@ -102,7 +99,7 @@ StatusOr<std::int64_t> NightScheduler::SaveNight(const std::string& date, std::i
   }
   auto id = (*store)->SaveRegression(rec);
   if (!id.ok()) return id.status().WithContext("night " + date);
-  std::fprintf(stderr, "valvebench-server: night %s: %s (batch %lld, regression %lld)\n", date.c_str(), verdict.c_str(),
+  spdlog::info("night {}: {} (batch {}, regression {})", date.c_str(), verdict.c_str(),
                static_cast<long long>(batch_id), static_cast<long long>(*id));
   return id;
 }
@@ -134,17 +131,18 @@ StatusOr<std::int64_t> NightScheduler::RunNight(double fire_unix_s) {
   auto runs = regress::ExpandSuite(suite->suite, seed);
   if (!runs.ok()) return error(runs.status());
   std::vector<v1::ExperimentSpec> specs;
+  std::vector<RunKey> keys;
   for (auto& r : *runs) {
+    keys.push_back(r.key);
     r.spec.add_tags("night");
     r.spec.add_tags("night:" + date);
     specs.push_back(std::move(r.spec));
   }
-  v1::SubmitRunResponse resp;
-  if (auto st = submit_("nights", specs, "night:" + date, &resp); !st.ok()) return error(st.WithContext("submit"));
-  batch_id = resp.batch_id();
-  std::fprintf(stderr, "valvebench-server: night %s: suite %s, batch %lld, %d runs\n", date.c_str(), suite_name.c_str(),
-               static_cast<long long>(batch_id), resp.run_ids_size());
-  std::fflush(stderr);
+  auto queued = submit_(runs::Submission{"nights", "night:" + date, std::move(specs), std::move(keys), ""});
+  if (!queued.ok()) return error(queued.status().WithContext("submit"));
+  batch_id = queued->batch_id;
+  spdlog::info("night {}: suite {}, batch {}, {} runs", date.c_str(), suite_name.c_str(),
+               static_cast<long long>(batch_id), static_cast<int>(queued->run_ids.size()));
 
   // Wait for every run of the batch to end; collect what regress compares.
   std::vector<regress::RunMetrics> measured;
@@ -157,24 +155,17 @@ StatusOr<std::int64_t> NightScheduler::RunNight(double fire_unix_s) {
     }
     auto store = pool_->Acquire();
     if (!store.ok()) return error(store.status());
-    db::RunFilter f;
-    f.batch_id = batch_id;
-    f.limit = 1000;
-    std::vector<db::RunRecord> all;
-    for (;;) {
-      auto page = (*store)->ListRuns(f);
-      if (!page.ok()) return error(page.status());
-      all.insert(all.end(), page->begin(), page->end());
-      if (static_cast<int>(page->size()) < f.limit) break;
-      f.after_id = page->back().id;
-    }
+    auto listed = runs::ListBatch(store->get(), batch_id);
+    if (!listed.ok()) return error(listed.status());
+    const std::vector<db::RunRecord>& all = *listed;
     bool done = !all.empty();
-    for (const auto& r : all) done = done && Final(r.status);
+    for (const auto& r : all) done = done && (Ended(r.status) || r.status == RunStatus::kInterrupted);  // nothing more will come
     if (done) {
       for (const auto& r : all) {
         regress::RunMetrics m;
         m.run_id = r.id;
-        m.name = r.name;
+        m.name = r.key.DisplayName();
+        m.case_name = r.key.CaseName();
         m.ok = r.status == db::RunStatus::kDone;
         m.reason = m.ok ? "" : std::string(db::RunStatusName(r.status)) + (r.reason.empty() ? "" : ": " + r.reason);
         auto metrics = (*store)->GetMetrics(r.id);

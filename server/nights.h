@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "common/status.h"
+#include "runs/admit.h"
 #include "server/config.h"
 #include "server/service.h"
 
@@ -20,9 +21,9 @@ namespace vb::server {
 
 class NightScheduler {
  public:
-  // Submits specs as one batch for the user; returns the batch and run ids (BenchServiceImpl::SubmitAs).
-  using SubmitFn = std::function<Status(const std::string& user, const std::vector<valvebench::v1::ExperimentSpec>&,
-                                        const std::string& batch_name, valvebench::v1::SubmitRunResponse*)>;
+  // Admits and queues a submission (BenchServiceImpl::Queue: runs::Admit and runs::Enqueue, the checks and
+  // limits of SubmitBatch); returns the batch and run ids.
+  using SubmitFn = std::function<StatusOr<runs::Queued>(const runs::Submission&)>;
   // Wall clock in unix seconds; injectable for tests.
   using ClockFn = std::function<double()>;
 

@@ -7,10 +7,11 @@
 #include <cmath>
 #include <thread>
 
-#include "experiment/capabilities.h"
 #include "experiment/compare.h"
 #include "experiment/spec.h"
 #include "hw/usb/list_attached.h"
+#include "proto/api_convert.h"
+#include "runs/query.h"
 #include "server/grpc_status.h"
 
 namespace vb::server {
@@ -37,38 +38,6 @@ StatusOr<StorePool::Handle> StorePool::Acquire() {
   return Handle(this, std::move(s.value()));
 }
 
-v1::RunStatus ToProto(db::RunStatus s) {
-  switch (s) {
-    case db::RunStatus::kQueued: return v1::QUEUED;
-    case db::RunStatus::kRunning: return v1::RUNNING;
-    case db::RunStatus::kDone: return v1::DONE;
-    case db::RunStatus::kFailed: return v1::FAILED;
-    case db::RunStatus::kCancelled: return v1::CANCELLED;
-    case db::RunStatus::kInterrupted: return v1::INTERRUPTED;
-  }
-  return v1::RUN_STATUS_UNSPECIFIED;
-}
-
-namespace {
-
-bool Finished(db::RunStatus s) {
-  return s == db::RunStatus::kDone || s == db::RunStatus::kFailed || s == db::RunStatus::kCancelled;
-}
-
-std::string LawName(const v1::ExperimentSpec& spec) {
-  const auto* f = spec.controller().GetDescriptor()->FindFieldByNumber(spec.controller().law_case());
-  return f != nullptr ? f->name() : "";
-}
-
-std::string RunName(const v1::ExperimentSpec& spec) {
-  std::string name = spec.name();
-  for (const auto& tag : spec.tags())
-    if (tag.rfind("sweep:", 0) == 0 || tag.rfind("repeat:", 0) == 0) name += " " + tag;
-  return name;
-}
-
-}  // namespace
-
 grpc::Status BenchServiceImpl::Authorize(grpc::ServerContext* ctx, Role need, Principal* who) const {
   const auto& md = ctx->client_metadata();
   auto it = md.find("authorization");
@@ -86,7 +55,8 @@ grpc::Status BenchServiceImpl::SubmitRun(grpc::ServerContext* ctx, const v1::Sub
                                          v1::SubmitRunResponse* resp) {
   Principal who;
   if (auto st = Authorize(ctx, Role::kOperator, &who); !st.ok()) return st;
-  return Submit(who, {req->spec()}, req->batch_name().empty() ? req->spec().name() : req->batch_name(), resp);
+  return Submit({who.user, req->batch_name().empty() ? req->spec().name() : req->batch_name(), {req->spec()}, {}, ""},
+                resp);
 }
 
 grpc::Status BenchServiceImpl::SubmitBatch(grpc::ServerContext* ctx, const v1::SubmitBatchRequest* req,
@@ -94,108 +64,41 @@ grpc::Status BenchServiceImpl::SubmitBatch(grpc::ServerContext* ctx, const v1::S
   Principal who;
   if (auto st = Authorize(ctx, Role::kOperator, &who); !st.ok()) return st;
   if (req->specs_size() == 0) return ToGrpcStatus(Status::InvalidArgument("specs: at least one spec is needed"));
-  std::vector<v1::ExperimentSpec> specs(req->specs().begin(), req->specs().end());
-  return Submit(who, specs, req->batch_name(), resp);
+  runs::Submission sub{who.user, req->batch_name(), {req->specs().begin(), req->specs().end()}, {}, ""};
+  for (const auto& k : req->keys()) sub.keys.push_back(api::FromProto(k));
+  return Submit(sub, resp);
 }
 
-grpc::Status BenchServiceImpl::Submit(const Principal& who, const std::vector<v1::ExperimentSpec>& specs,
-                                      const std::string& batch_name, v1::SubmitRunResponse* resp) {
-  const v1::Limits& lim = settings_->limits;
-  std::vector<db::RunRecord> runs;
-  for (size_t s = 0; s < specs.size(); ++s) {
-    const std::string where = specs.size() > 1 ? "specs[" + std::to_string(s) + "]" : "spec";
-    if (specs[s].ByteSizeLong() > lim.max_spec_bytes())
-      return ToGrpcStatus(Status::ResourceExhausted(where + ": " + std::to_string(specs[s].ByteSizeLong()) +
-                                                    " bytes exceed the server limit of " +
-                                                    std::to_string(lim.max_spec_bytes())));
-    auto points = experiment::ExpandSweep(specs[s], lim.max_runs_per_submission());
-    if (!points.ok()) return ToGrpcStatus(points.status());
-    for (size_t k = 0; k < points->size(); ++k) {
-      const v1::ExperimentSpec& p = (*points)[k];
-      const std::string run_where = points->size() > 1 ? "run " + std::to_string(k) + " (" + RunName(p) + ")" : "";
-      auto ctxt = [&](const Status& st) { return run_where.empty() ? st : st.WithContext(run_where); };
-      auto e = experiment::BuildExperiment(p);
-      if (!e.ok()) return ToGrpcStatus(ctxt(e.status()));
-      if (e->duration_s > lim.max_duration_s())
-        return ToGrpcStatus(ctxt(Status::ResourceExhausted("duration_s: " + FormatNumber(e->duration_s) +
-                                                           " s exceeds the server limit of " +
-                                                           FormatNumber(lim.max_duration_s()) + " s")));
-      if (e->run.sample_rate_Hz > lim.max_record_rate_hz())
-        return ToGrpcStatus(ctxt(Status::ResourceExhausted("recording.rate_Hz: " + FormatNumber(e->run.sample_rate_Hz) +
-                                                           " Hz exceeds the server limit of " +
-                                                           FormatNumber(lim.max_record_rate_hz()) + " Hz")));
-      // Capabilities decide at submission, not at run time.
-      const std::string cls = SpecBenchClass(p);
-      bool compatible = false;
-      std::string available, refusals;
-      for (const auto& b : settings_->benches) {
-        available += (available.empty() ? "" : ", ") + b.name + " (" + b.bench_class + ")";
-        if (b.bench_class != cls) continue;
-        if (!p.bench().name().empty() && p.bench().name() != b.name) continue;
-        if (Status why = experiment::CheckCapabilities(*e, b.caps); !why.ok()) {
-          refusals += "; " + b.name + ": " + why.message();
-          continue;
-        }
-        compatible = true;
-      }
-      if (!compatible)
-        return ToGrpcStatus(ctxt(Status::FailedPrecondition(
-            "bench: no configured bench can run it (needs " + cls +
-            (p.bench().name().empty() ? "" : " named " + p.bench().name()) + " at " + FormatNumber(e->run.supply_V) +
-            " V; configured: " + available + ")" + refusals)));
-      db::RunRecord r;
-      r.name = RunName(p);
-      r.controller = LawName(p);
-      r.bench_kind = cls;
-      r.bench_name = p.bench().name();
-      r.spec_json = experiment::SpecToJson(p, false);
-      r.submitter = who.user;
-      r.priority = p.priority();
-      r.requeue_on_interrupt = !p.never_requeue();
-      r.tags.assign(p.tags().begin(), p.tags().end());
-      runs.push_back(std::move(r));
-      if (runs.size() > lim.max_runs_per_submission())
-        return ToGrpcStatus(Status::ResourceExhausted("submission expands to more than " +
-                                                      std::to_string(lim.max_runs_per_submission()) + " runs"));
-    }
-  }
+StatusOr<runs::Queued> BenchServiceImpl::Queue(const runs::Submission& submission) {
+  auto admitted = runs::Admit(submission, policy_);
+  if (!admitted.ok()) return admitted.status();
   auto store = pool_->Acquire();
-  if (!store.ok()) return ToGrpcStatus(store.status());
-  auto queued = (*store)->CountQueued(who.user);
-  if (!queued.ok()) return ToGrpcStatus(queued.status());
-  if (static_cast<std::uint64_t>(*queued) + runs.size() > lim.max_queued_runs_per_user())
-    return ToGrpcStatus(Status::ResourceExhausted(
-        "user " + who.user + " has " + std::to_string(*queued) + " queued runs; " + std::to_string(runs.size()) +
-        " more would exceed the limit of " + std::to_string(lim.max_queued_runs_per_user())));
-  std::string batch_json;
-  if (specs.size() == 1) batch_json = experiment::SpecToJson(specs[0], false);
-  std::vector<std::int64_t> ids;
-  auto batch = (*store)->SubmitBatch(who.user, batch_name, batch_json, std::move(runs), &ids);
-  if (!batch.ok()) return ToGrpcStatus(batch.status());
-  resp->set_batch_id(*batch);
-  for (auto id : ids) resp->add_run_ids(id);
-  registry_->NotifyWork();
-  return grpc::Status::OK;
+  if (!store.ok()) return store.status();
+  auto queued = runs::Enqueue(store->get(), std::move(admitted.value()), policy_);
+  if (queued.ok()) registry_->NotifyWork();
+  return queued;
 }
 
-Status BenchServiceImpl::SubmitAs(const std::string& user, const std::vector<v1::ExperimentSpec>& specs,
-                                  const std::string& batch_name, v1::SubmitRunResponse* resp) {
-  const grpc::Status st = Submit(Principal{user, Role::kOperator}, specs, batch_name, resp);
-  if (st.ok()) return Status::Ok();
-  if (st.error_code() == grpc::StatusCode::UNAVAILABLE || st.error_code() == grpc::StatusCode::INTERNAL)
-    return Status::Unavailable(st.error_message());
-  return Status::FailedPrecondition(st.error_message());
+grpc::Status BenchServiceImpl::Submit(const runs::Submission& submission, v1::SubmitRunResponse* resp) {
+  auto queued = Queue(submission);
+  if (!queued.ok()) return ToGrpcStatus(queued.status());
+  resp->set_batch_id(queued->batch_id);
+  for (auto id : queued->run_ids) resp->add_run_ids(id);
+  return grpc::Status::OK;
 }
 
 grpc::Status BenchServiceImpl::FillRun(db::Store* store, const db::RunRecord& r, bool full, v1::Run* out) {
   out->set_id(r.id);
   out->set_batch_id(r.batch_id);
-  out->set_name(r.name);
+  out->set_name(r.key.DisplayName());
+  *out->mutable_key() = api::ToProto(r.key);
+  out->set_split(r.split);
+  if (std::isfinite(r.t_start_s)) out->set_t_start_s(r.t_start_s);
   out->set_controller(r.controller);
   out->set_bench(r.bench_name);
   out->set_submitter(r.submitter);
   out->set_priority(r.priority);
-  out->set_status(ToProto(r.status));
+  out->set_status(api::ToProto(r.status));
   out->set_reason(r.reason);
   out->set_submitted_unix_s(r.submitted_unix_s);
   out->set_started_unix_s(r.started_unix_s);
@@ -214,7 +117,7 @@ grpc::Status BenchServiceImpl::FillRun(db::Store* store, const db::RunRecord& r,
   if (!history.ok()) return ToGrpcStatus(history.status());
   for (const auto& h : *history) {
     auto* c = out->add_history();
-    c->set_status(ToProto(h.status));
+    c->set_status(api::ToProto(h.status));
     c->set_at_unix_s(h.at_unix_s);
     c->set_reason(h.reason);
   }
@@ -236,15 +139,7 @@ grpc::Status BenchServiceImpl::ListRuns(grpc::ServerContext* ctx, const v1::List
   Principal who;
   if (auto st = Authorize(ctx, Role::kViewer, &who); !st.ok()) return st;
   db::RunFilter f;
-  switch (req->status()) {
-    case v1::QUEUED: f.status = db::RunStatus::kQueued; break;
-    case v1::RUNNING: f.status = db::RunStatus::kRunning; break;
-    case v1::DONE: f.status = db::RunStatus::kDone; break;
-    case v1::FAILED: f.status = db::RunStatus::kFailed; break;
-    case v1::CANCELLED: f.status = db::RunStatus::kCancelled; break;
-    case v1::INTERRUPTED: f.status = db::RunStatus::kInterrupted; break;
-    default: break;
-  }
+  f.status = api::FromProto(req->status());
   f.tag = req->tag();
   f.batch_id = req->batch_id();
   f.controller = req->controller();
@@ -289,7 +184,7 @@ grpc::Status BenchServiceImpl::CancelRun(grpc::ServerContext* ctx, const v1::Can
     // The loop stops within one control period; wait briefly so the answer shows the final state.
     for (int k = 0; k < 100; ++k) {
       auto now = (*store)->GetRun(r->id);
-      if (now.ok() && Finished(now->status)) break;
+      if (now.ok() && Ended(now->status)) break;
       std::this_thread::sleep_for(std::chrono::milliseconds(10));
     }
   }
@@ -326,13 +221,13 @@ grpc::Status BenchServiceImpl::WatchRun(grpc::ServerContext* ctx, const v1::Watc
     if (!r.ok()) return ToGrpcStatus(r.status());
     v1::RunEvent ev;
     ev.set_run_id(r->id);
-    ev.set_status(ToProto(r->status));
+    ev.set_status(api::ToProto(r->status));
     ev.set_reason(r->reason);
     double progress = r->status == db::RunStatus::kDone ? 1.0 : r->progress;
     if (r->status == db::RunStatus::kRunning) {
       registry_->Progress(r->id, &progress);
       if (req->sample_rate_hz() >= 0.0) {
-        std::vector<LiveSample> samples;
+        std::vector<runs::LiveSample> samples;
         registry_->SamplesSince(r->id, &seq, &samples);
         for (const auto& s : samples) {
           auto* ls = ev.add_samples();
@@ -347,13 +242,13 @@ grpc::Status BenchServiceImpl::WatchRun(grpc::ServerContext* ctx, const v1::Watc
     const bool changed = first || r->status != last_status || std::abs(progress - last_progress) >= 0.01 ||
                          ev.samples_size() > 0;
     if (changed && !writer->Write(ev)) {  // the client went away
-      if (!Finished(r->status)) client_gone();
+      if (!Ended(r->status)) client_gone();
       return grpc::Status::OK;
     }
     first = false;
     last_status = r->status;
     last_progress = progress;
-    if (Finished(r->status) || r->status == db::RunStatus::kInterrupted) return grpc::Status::OK;
+    if (Ended(r->status) || r->status == db::RunStatus::kInterrupted) return grpc::Status::OK;
     std::this_thread::sleep_for(std::chrono::milliseconds(50));
   }
   client_gone();
@@ -368,7 +263,7 @@ grpc::Status BenchServiceImpl::GetTrace(grpc::ServerContext* ctx, const v1::GetT
   if (!store.ok()) return ToGrpcStatus(store.status());
   auto r = (*store)->GetRun(req->run_id());
   if (!r.ok()) return ToGrpcStatus(r.status());
-  if (!Finished(r->status))
+  if (!Ended(r->status))
     return ToGrpcStatus(Status::FailedPrecondition("run " + std::to_string(r->id) + " is " +
                                                    db::RunStatusName(r->status) +
                                                    "; its trace is stored when it ends"));
@@ -404,38 +299,13 @@ grpc::Status BenchServiceImpl::CompareRuns(grpc::ServerContext* ctx, const v1::C
     return ToGrpcStatus(Status::InvalidArgument("batch_id, run_ids: give a batch or a list of runs"));
   auto store = pool_->Acquire();
   if (!store.ok()) return ToGrpcStatus(store.status());
-  std::vector<db::RunRecord> runs;
-  if (req->batch_id() != 0) {
-    db::RunFilter f;
-    f.batch_id = req->batch_id();
-    f.limit = 1000;
-    for (;;) {
-      auto page = (*store)->ListRuns(f);
-      if (!page.ok()) return ToGrpcStatus(page.status());
-      for (auto& r : *page) runs.push_back(r);
-      if (static_cast<std::int32_t>(page->size()) < f.limit) break;
-      f.after_id = page->back().id;
-    }
-    if (runs.empty()) return ToGrpcStatus(Status::NotFound("batch " + std::to_string(req->batch_id()) + " not found"));
-  } else {
-    for (auto id : req->run_ids()) {
-      auto r = (*store)->GetRun(id);
-      if (!r.ok()) return ToGrpcStatus(r.status());
-      runs.push_back(*r);
-    }
-  }
-  std::vector<experiment::RunRecord> records;
-  for (const auto& r : runs) {
-    experiment::RunRecord rec;
-    rec.name = r.name.substr(0, r.name.find(" repeat:"));
-    rec.controller = r.controller;
-    rec.ok = r.status == db::RunStatus::kDone;
-    auto metrics = (*store)->GetMetrics(r.id);
-    if (!metrics.ok()) return ToGrpcStatus(metrics.status());
-    for (const auto& m : *metrics) rec.metrics[m.name] = m.value;
-    records.push_back(std::move(rec));
-  }
-  const experiment::Comparison c = experiment::Compare(records);
+  auto runs = req->batch_id() != 0
+                  ? runs::ListBatch(store->get(), req->batch_id())
+                  : runs::GetRuns(store->get(), {req->run_ids().begin(), req->run_ids().end()});
+  if (!runs.ok()) return ToGrpcStatus(runs.status());
+  auto compared = runs::CompareStored(store->get(), *runs);
+  if (!compared.ok()) return ToGrpcStatus(compared.status());
+  const experiment::Comparison& c = *compared;
   resp->set_rank_metric(c.rank_metric);
   resp->set_effort_metric(c.effort_metric);
   for (const auto& col : c.columns) resp->add_columns(col);

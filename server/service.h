@@ -8,7 +8,9 @@
 
 #include "db/store.h"
 #include "server/config.h"
-#include "server/workers.h"
+#include "runs/admit.h"
+#include "runs/monitor.h"
+#include "runs/worker.h"
 #include "valvebench/v1/api.grpc.pb.h"
 
 namespace vb::server {
@@ -40,9 +42,9 @@ class StorePool {
 
 class BenchServiceImpl final : public valvebench::v1::BenchService::Service {
  public:
-  BenchServiceImpl(const Settings* settings, StorePool* pool, Registry* registry,
-                   const std::vector<std::unique_ptr<Worker>>* workers)
-      : settings_(settings), pool_(pool), registry_(registry), workers_(workers) {}
+  BenchServiceImpl(const Settings* settings, StorePool* pool, runs::Registry* registry,
+                   const std::vector<std::unique_ptr<runs::Worker>>* workers)
+      : settings_(settings), policy_(settings->AdmitPolicy()), pool_(pool), registry_(registry), workers_(workers) {}
 
   grpc::Status SubmitRun(grpc::ServerContext* ctx, const valvebench::v1::SubmitRunRequest* req,
                          valvebench::v1::SubmitRunResponse* resp) override;
@@ -69,23 +71,22 @@ class BenchServiceImpl final : public valvebench::v1::BenchService::Service {
   grpc::Status ListNights(grpc::ServerContext* ctx, const valvebench::v1::ListNightsRequest* req,
                           valvebench::v1::ListNightsResponse* resp) override;
 
-  // For the server's own submissions (the nights scheduler): the same checks and limits as SubmitBatch, as
-  // operator `user`.
-  Status SubmitAs(const std::string& user, const std::vector<valvebench::v1::ExperimentSpec>& specs,
-                  const std::string& batch_name, valvebench::v1::SubmitRunResponse* resp);
+  // Admits and queues a submission (runs::Admit, runs::Enqueue) and wakes the workers: what SubmitRun and
+  // SubmitBatch do after authorising, and what the nights scheduler calls directly.
+  StatusOr<runs::Queued> Queue(const runs::Submission& submission);
 
  private:
   grpc::Status Authorize(grpc::ServerContext* ctx, Role need, Principal* who) const;
-  grpc::Status Submit(const Principal& who, const std::vector<valvebench::v1::ExperimentSpec>& specs,
-                      const std::string& batch_name, valvebench::v1::SubmitRunResponse* resp);
+  grpc::Status Submit(const runs::Submission& submission, valvebench::v1::SubmitRunResponse* resp);
   grpc::Status FillRun(db::Store* store, const db::RunRecord& r, bool full, valvebench::v1::Run* out);
 
   const Settings* settings_;
+  const runs::Policy policy_;
   StorePool* pool_;
-  Registry* registry_;
-  const std::vector<std::unique_ptr<Worker>>* workers_;
+  runs::Registry* registry_;
+  const std::vector<std::unique_ptr<runs::Worker>>* workers_;
 };
 
-valvebench::v1::RunStatus ToProto(db::RunStatus s);
+
 
 }  // namespace vb::server

@@ -1,5 +1,6 @@
 #include "hw/hid/hidapi_transport.h"
 
+#include <fmt/format.h>
 #include <hidapi.h>
 
 #include <array>
@@ -29,9 +30,7 @@ std::string Narrow(const wchar_t* w) {
 }
 
 std::string Hex4(unsigned v) {
-  char buf[8];
-  std::snprintf(buf, sizeof buf, "%04x", v & 0xFFFF);
-  return buf;
+  return fmt::format("{:04x}", v & 0xFFFF);
 }
 
 class HidapiTransport final : public Transport {

@@ -155,12 +155,12 @@ Status U3Bench::Configure(const RunConfig& config) {
   if (st.ok()) {
     u3::Watchdog back;
     st = u3::DecodeWatchdog(resp.data(), resp.size(), &back);
-    if (st.ok() && resp[6] != 0) st = Status::Internal("Watchdog: device errorcode " + u3::ErrorcodeName(resp[6]));
+    if (st.ok() && resp[6] != 0) st = Status::FailedPrecondition("Watchdog: device errorcode " + u3::ErrorcodeName(resp[6]));
   }
   if (!st.ok()) return Lost(st.WithContext("bench " + opt_.name));
   st = Transact(u3::Encode(sc), u3::kStreamConfigResponseSize, &resp, "StreamConfig");
   if (st.ok()) st = u3::CheckExtended(resp.data(), resp.size(), 0xF8, 0x11, u3::kStreamConfigResponseSize);
-  if (st.ok() && resp[6] != 0) st = Status::Internal("StreamConfig: device errorcode " + u3::ErrorcodeName(resp[6]));
+  if (st.ok() && resp[6] != 0) st = Status::FailedPrecondition("StreamConfig: device errorcode " + u3::ErrorcodeName(resp[6]));
   if (!st.ok()) return Lost(st.WithContext("bench " + opt_.name));
   stream_ = sc;
   rate_Hz_ = rate;
@@ -179,9 +179,9 @@ Status U3Bench::SetTimers(int enabled) {
   VB_RETURN_IF_ERROR(Transact(u3::Encode(c), u3::kConfigIOSize, &resp, "ConfigIO"));
   u3::ConfigIO back;
   VB_RETURN_IF_ERROR(u3::DecodeConfigIO(resp.data(), resp.size(), &back));
-  if (resp[6] != 0) return Status::Internal("ConfigIO: device errorcode " + u3::ErrorcodeName(resp[6]));
+  if (resp[6] != 0) return Status::FailedPrecondition("ConfigIO: device errorcode " + u3::ErrorcodeName(resp[6]));
   if (back.timers_enabled != c.timers_enabled)
-    return Status::Internal("ConfigIO: the device kept " + std::to_string(back.timers_enabled) + " timer(s)");
+    return Status::FailedPrecondition("ConfigIO: the device kept " + std::to_string(back.timers_enabled) + " timer(s)");
   timers_on_ = enabled;
   return Status::Ok();
 }
@@ -247,7 +247,7 @@ Status U3Bench::ReadStream() {
                             std::to_string(next_packet_) + ")");
   }
   if (d.errorcode != 0)
-    return Status::Internal(transport_->Describe() + ": stream errorcode " + u3::ErrorcodeName(d.errorcode) +
+    return Status::Aborted(transport_->Describe() + ": stream errorcode " + u3::ErrorcodeName(d.errorcode) +
                             " (backlog " + std::to_string(d.backlog) + ")");
   have_packet_number_ = true;
   next_packet_ = static_cast<std::uint8_t>(d.packet_number + 1);
@@ -305,7 +305,7 @@ Status U3Bench::Apply(const SwitchCommand& c) {
       u3::TimerClock back;
       if (st.ok()) st = u3::DecodeTimerClock(resp.data(), resp.size(), &back, nullptr);
       if (st.ok() && resp[6] != 0)
-        st = Status::Internal("ConfigTimerClock: device errorcode " + u3::ErrorcodeName(resp[6]));
+        st = Status::FailedPrecondition("ConfigTimerClock: device errorcode " + u3::ErrorcodeName(resp[6]));
       if (!st.ok()) return Lost(st);
       pwm_ = *pwm;
       have_clock_ = true;

@@ -1,5 +1,6 @@
 #include "hw/u3/u3_protocol.h"
 
+#include <fmt/format.h>
 #include <cstdio>
 
 namespace vb::hw::u3 {
@@ -7,9 +8,7 @@ namespace vb::hw::u3 {
 namespace {
 
 std::string Hex(unsigned v) {
-  char buf[8];
-  std::snprintf(buf, sizeof buf, "0x%02X", v);
-  return buf;
+  return fmt::format("0x{:02X}", v);
 }
 
 Packet Extended(Cmd cmd, std::size_t size) {
@@ -81,7 +80,7 @@ Status CheckNormal(const std::uint8_t* d, std::size_t size, std::uint8_t respons
   if (d[0] != Checksum8(d, size))
     return Status::DataLoss("bad Checksum8: packet says " + std::to_string(d[0]) + ", computed " +
                             std::to_string(Checksum8(d, size)));
-  if (d[2] != 0) return Status::Internal("device errorcode " + ErrorcodeName(d[2]));
+  if (d[2] != 0) return Status::FailedPrecondition("device errorcode " + ErrorcodeName(d[2]));
   return Status::Ok();
 }
 
@@ -94,7 +93,7 @@ Packet EncodeConfigU3Read() {
 Status DecodeConfigU3Response(const std::uint8_t* d, std::size_t size, DeviceInfo* info) {
   VB_RETURN_IF_ERROR(CheckExtended(d, size, 0xF8, static_cast<std::uint8_t>(Cmd::kConfigU3), kConfigU3ResponseSize)
                          .WithContext("ConfigU3"));
-  if (d[6] != 0) return Status::Internal("ConfigU3: device errorcode " + ErrorcodeName(d[6]));
+  if (d[6] != 0) return Status::FailedPrecondition("ConfigU3: device errorcode " + ErrorcodeName(d[6]));
   info->firmware_x100 = static_cast<std::uint16_t>(d[10] * 100 + d[9]);
   info->hardware_x100 = static_cast<std::uint16_t>(d[14] * 100 + d[13]);
   info->serial = static_cast<std::uint32_t>(d[15]) | (static_cast<std::uint32_t>(d[16]) << 8) |
@@ -223,7 +222,7 @@ Status CheckFeedbackResponse(const std::uint8_t* d, std::size_t size, std::size_
   VB_RETURN_IF_ERROR(CheckExtended(d, size, 0xF8, static_cast<std::uint8_t>(Cmd::kFeedback), expected_size)
                          .WithContext("Feedback"));
   if (d[6] != 0)
-    return Status::Internal("Feedback: device errorcode " + ErrorcodeName(d[6]) + " at IOType frame " +
+    return Status::FailedPrecondition("Feedback: device errorcode " + ErrorcodeName(d[6]) + " at IOType frame " +
                             std::to_string(d[7]));
   return Status::Ok();
 }

@@ -9,6 +9,10 @@
 // packets arrive on their own bulk endpoint, framed like extended responses with byte 1 = 0xF9.
 //
 // USB: VID 0x0CD5, PID 0x0003; commands out on endpoint 0x01, responses in on 0x82, stream data in on 0x83.
+//
+// Errors: a device errorcode in a command response is FailedPrecondition (the device refused the request, as a
+// HID bench reports a NAK); an errorcode in stream data is Aborted (as a HID device fault). Internal is kept for
+// our own bugs (docs/hw-protocol.md).
 #pragma once
 
 #include <array>

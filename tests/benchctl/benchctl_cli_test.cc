@@ -64,6 +64,14 @@ TEST(BenchctlCli, CompareAndCsvOutputs) {
   const std::string results = ::testing::TempDir() + "/runs.json";
   Result json = RunBenchctl("run --local " + Example("dither.json") + " --json > " + results);
   ASSERT_EQ(json.exit_code, 0) << json.out;
+  {
+    std::ifstream in(results);
+    std::stringstream ss;
+    ss << in.rdbuf();
+    // Each run's identity travels as fields: the comparison groups on them, never on the name.
+    EXPECT_NE(ss.str().find("\"key\": {"), std::string::npos) << ss.str().substr(0, 400);
+    EXPECT_NE(ss.str().find("\"field\": \""), std::string::npos) << ss.str().substr(0, 400);
+  }
   Result cmp = RunBenchctl("compare " + results + " --csv");
   ASSERT_EQ(cmp.exit_code, 0) << cmp.out;
   EXPECT_EQ(cmp.out.rfind("rank,name,controller", 0), 0u) << cmp.out;
@@ -83,6 +91,10 @@ TEST(BenchctlCli, LocalRunsAreRecordedAndComparableByBatch) {
   ASSERT_EQ(cmp.exit_code, 0) << cmp.out;
   EXPECT_NE(cmp.out.find("fuzzy_current"), std::string::npos) << cmp.out;
   EXPECT_NE(cmp.out.find("hysteresis_current"), std::string::npos) << cmp.out;
+  Result cmp_json = RunBenchctl("compare --local --batch " + batch + " --json");
+  ASSERT_EQ(cmp_json.exit_code, 0) << cmp_json.out;
+  EXPECT_NE(cmp_json.out.find("\"columns\": ["), std::string::npos) << cmp_json.out;
+  EXPECT_NE(cmp_json.out.find("\"failed\": 0"), std::string::npos) << cmp_json.out;
   Result missing = RunBenchctl("compare --local --batch 999999");
   EXPECT_EQ(missing.exit_code, 2) << missing.out;
   Result unstored = RunBenchctl("run --local " + Example("standard/e3.json") + " --json --no-store");

@@ -68,8 +68,8 @@ TEST(Validate, MessagesNameFieldAndProblem) {
   EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
   EXPECT_EQ(s.message(), "hysteresis.band_A: must be > 0, got -0.1");
   h = {};
-  h.period_s = 0.0;
-  EXPECT_EQ(HysteresisCurrent::Validate(h).message(), "hysteresis.period_s: must be > 0, got 0");
+  h.sample_period_s = 0.0;
+  EXPECT_EQ(HysteresisCurrent::Validate(h).message(), "hysteresis.sample_period_s: must be > 0, got 0");
   EXPECT_FALSE(HysteresisCurrent::Create(h).ok());
 
   PiCurrent::Params pi;
@@ -80,12 +80,12 @@ TEST(Validate, MessagesNameFieldAndProblem) {
   EXPECT_EQ(PiCurrent::Validate(pi).message(), "pi.carrier_Hz: must be > 0, got nan");
   pi = {};
   pi.kp_V_per_A = 0.0;
-  pi.ki_V_per_As = 0.0;
+  pi.ki_V_per_A_s = 0.0;
   EXPECT_FALSE(PiCurrent::Validate(pi).ok());
 
   PredictiveCurrent::Params pr;
-  pr.h_s = 0.0;
-  EXPECT_EQ(PredictiveCurrent::Validate(pr).message(), "predictive.h_s: must be > 0, got 0");
+  pr.horizon_s = 0.0;
+  EXPECT_EQ(PredictiveCurrent::Validate(pr).message(), "predictive.horizon_s: must be > 0, got 0");
   pr = {};
   pr.w_v_per_V2 = -1e-3;
   EXPECT_EQ(PredictiveCurrent::Validate(pr).message(), "predictive.w_v_per_V2: must be >= 0, got -0.001");
@@ -158,21 +158,21 @@ TEST(Pi, DefaultGainsArePolePlacementOnTheCoil) {
   const PiCurrent::Params d;
   const double w2 = 2.0 * kPi * 500.0;
   EXPECT_NEAR(d.kp_V_per_A, 0.12 * w2, 1e-9);
-  EXPECT_NEAR(d.ki_V_per_As, 13.0 * w2, 1e-6);
+  EXPECT_NEAR(d.ki_V_per_A_s, 13.0 * w2, 1e-6);
   const PiCurrent::Params fp = PiCurrent::FromPoles(0.12, 13.0, 13.0 / 0.12, w2);
   EXPECT_NEAR(fp.kp_V_per_A, d.kp_V_per_A, 1e-9);
-  EXPECT_NEAR(fp.ki_V_per_As, d.ki_V_per_As, 1e-6);
+  EXPECT_NEAR(fp.ki_V_per_A_s, d.ki_V_per_A_s, 1e-6);
   // Closed-loop polynomial L s^2 + (R + kp) s + ki has the requested roots.
   const PiCurrent::Params g = PiCurrent::FromPoles(0.1, 10.0, 1000.0, 3000.0);
   for (double s : {-1000.0, -3000.0}) {
-    EXPECT_NEAR(0.1 * s * s + (10.0 + g.kp_V_per_A) * s + g.ki_V_per_As, 0.0, 1e-6);
+    EXPECT_NEAR(0.1 * s * s + (10.0 + g.kp_V_per_A) * s + g.ki_V_per_A_s, 0.0, 1e-6);
   }
 }
 
 TEST(Pi, HandComputedSequenceWithAntiWindup) {
   PiCurrent::Params p;
   p.kp_V_per_A = 100.0;
-  p.ki_V_per_As = 20000.0;  // ki * T = 2 V/A at 10 kHz
+  p.ki_V_per_A_s = 20000.0;  // ki * T = 2 V/A at 10 kHz
   p.feedforward_R_ohm = 10.0;
   p.carrier_Hz = 10e3;
   const PiCurrent law(p);
@@ -213,7 +213,7 @@ TEST(Pi, IntegratorFrozenWhileSaturatedButUnwinds) {
   const SwitchCommand c = law.Step(Meas(0.51), Ref(0.5), &st);
   EXPECT_DOUBLE_EQ(c.duty, 1.0);
   EXPECT_LT(st.x[PiCurrent::kIntegrator], 40.0);
-  EXPECT_NEAR(st.x[PiCurrent::kIntegrator], 40.0 - law.params().ki_V_per_As * law.period_s() * 0.01, 1e-9);
+  EXPECT_NEAR(st.x[PiCurrent::kIntegrator], 40.0 - law.params().ki_V_per_A_s * law.period_s() * 0.01, 1e-9);
 }
 
 TEST(Pi, ReleaseResetsIntegrator) {
@@ -248,7 +248,7 @@ TEST(Predictive, ClosedFormWithoutPosition) {
   const PredictiveCurrent law;  // defaults: h = 250 us, w_I = 1, w_v = 1e-7, R = 13, L = 0.12
   const auto& p = law.params();
   const double i = 0.49, id = 0.5;
-  const double h = p.h_s, L = p.L_H, R = p.R_ohm;
+  const double h = p.horizon_s, L = p.L_H, R = p.R_ohm;
   // v* = -w_I h b (e + h a) / (w_I h^2 b^2 + w_v), b = 1/L, a = -R i / L, e = i - i_d.
   const double b = 1.0 / L, a = -R * i / L, e = i - id;
   const double v_star = -p.w_I_per_A2 * h * b * (e + h * a) / (p.w_I_per_A2 * h * h * b * b + p.w_v_per_V2);
@@ -291,7 +291,7 @@ TEST(Predictive, UsesMeasuredPositionAndBackEmf) {
   const double x = m.position_m, L = L_of(x);
   const double dLdx = (L_of(x + 1e-9) - L_of(x - 1e-9)) / 2e-9;
   const double E = dLdx * m.velocity_mps * m.current_A;
-  const double h = p.h_s, R = p.R_ohm, wI = p.w_I_per_A2, wv = p.w_v_per_V2;
+  const double h = p.horizon_s, R = p.R_ohm, wI = p.w_I_per_A2, wv = p.w_v_per_V2;
   const double target = r.value + h * r.rate;
   const double b = 1.0 / L, a = -(R * m.current_A + E) / L, e = m.current_A - target;
   const double v_star = -wI * h * b * (e + h * a) / (wI * h * h * b * b + wv);

@@ -367,8 +367,8 @@ TEST(PlanDitherExact, RoundTripsOnOtherCoilsAndBoxes) {
   for (const Case& c : cases) {
     for (int i = 0; i <= 8; ++i) {
       for (int j = 0; j <= 8; ++j) {
-        const double f = c.box.frequency_min_Hz * std::pow(c.box.frequency_max_Hz / c.box.frequency_min_Hz, i / 8.0);
-        const double d = std::max(0.01, std::min(0.99, c.box.duty_min + (c.box.duty_max - c.box.duty_min) * j / 8.0));
+        const double f = c.box.min_frequency_Hz * std::pow(c.box.max_frequency_Hz / c.box.min_frequency_Hz, i / 8.0);
+        const double d = std::max(0.01, std::min(0.99, c.box.min_duty + (c.box.max_duty - c.box.min_duty) * j / 8.0));
         const auto fwd = *RlPwmSteadyState(c.coil, f, d);
         StatusOr<DitherPlan> plan = PlanDitherExact(c.coil, {fwd.i_avg_A, fwd.i_amp_A}, c.box);
         ASSERT_TRUE(plan.ok()) << plan.status().ToString() << " f=" << f << " D=" << d;
@@ -444,10 +444,10 @@ void ExpectInvalid(const Status& s, const std::string& field) {
 
 TEST(Errors, InfeasibleRequestsNameTheField) {
   Status too_big = PlanDitherExact(kPaperCoil, {0.1, 0.2}).status();
-  ExpectInvalid(too_big, "dither.amplitude_A: 0.2 A is not reachable at average 0.1 A within f in [50, 1000] Hz");
+  ExpectInvalid(too_big, "dither.dither_amplitude_A: 0.2 A is not reachable at average 0.1 A within f in [50, 1000] Hz");
   ExpectInvalid(too_big, "(max 0.1301 A");
   Status too_small = PlanDitherExact(kPaperCoil, {0.1, 0.001}).status();
-  ExpectInvalid(too_small, "dither.amplitude_A: 0.001 A");
+  ExpectInvalid(too_small, "dither.dither_amplitude_A: 0.001 A");
   ExpectInvalid(too_small, "(min 0.007608 A");
   ExpectInvalid(PlanDitherExact(kPaperCoil, {0.02, 0.01}).status(), "dither.average_current_A: 0.02 A");
   ExpectInvalid(PlanDitherExact(kPaperCoil, {0.9, 0.01}).status(), "dither.average_current_A: 0.9 A");
@@ -458,19 +458,19 @@ TEST(Errors, BadInputs) {
   ExpectInvalid(PlanDitherExact(kPaperCoil, {-0.1, 0.05}).status(), "dither.average_current_A");
   ExpectInvalid(PlanDitherExact(kPaperCoil, {0.0, 0.05}).status(), "dither.average_current_A");
   ExpectInvalid(PlanDitherExact(kPaperCoil, {NAN, 0.05}).status(), "dither.average_current_A");
-  ExpectInvalid(PlanDitherExact(kPaperCoil, {0.3, -0.05}).status(), "dither.amplitude_A");
-  ExpectInvalid(PlanDitherExact(kPaperCoil, {0.3, INFINITY}).status(), "dither.amplitude_A");
+  ExpectInvalid(PlanDitherExact(kPaperCoil, {0.3, -0.05}).status(), "dither.dither_amplitude_A");
+  ExpectInvalid(PlanDitherExact(kPaperCoil, {0.3, INFINITY}).status(), "dither.dither_amplitude_A");
   ExpectInvalid(PlanDitherExact({0.0, 0.33, 24.0}, {0.3, 0.05}).status(), "coil.R_ohm");
   ExpectInvalid(PlanDitherExact({-28.5, 0.33, 24.0}, {0.3, 0.05}).status(), "coil.R_ohm");
   ExpectInvalid(PlanDitherExact({28.5, 0.0, 24.0}, {0.3, 0.05}).status(), "coil.L_H");
   ExpectInvalid(PlanDitherExact({28.5, 0.33, -24.0}, {0.3, 0.05}).status(), "coil.supply_V");
-  ExpectInvalid(PlanDitherExact(kPaperCoil, {0.3, 0.05}, {50.0, 1000.0, 0.95, 0.05}).status(), "options.duty_min");
-  ExpectInvalid(PlanDitherExact(kPaperCoil, {0.3, 0.05}, {50.0, 1000.0, -0.1, 0.9}).status(), "options.duty_min");
-  ExpectInvalid(PlanDitherExact(kPaperCoil, {0.3, 0.05}, {50.0, 1000.0, 0.1, 1.5}).status(), "options.duty_max");
+  ExpectInvalid(PlanDitherExact(kPaperCoil, {0.3, 0.05}, {50.0, 1000.0, 0.95, 0.05}).status(), "options.min_duty");
+  ExpectInvalid(PlanDitherExact(kPaperCoil, {0.3, 0.05}, {50.0, 1000.0, -0.1, 0.9}).status(), "options.min_duty");
+  ExpectInvalid(PlanDitherExact(kPaperCoil, {0.3, 0.05}, {50.0, 1000.0, 0.1, 1.5}).status(), "options.max_duty");
   ExpectInvalid(PlanDitherExact(kPaperCoil, {0.3, 0.05}, {1000.0, 50.0, 0.05, 0.95}).status(),
-                "options.frequency_max_Hz");
+                "options.max_frequency_Hz");
   ExpectInvalid(PlanDitherExact(kPaperCoil, {0.3, 0.05}, {0.0, 1000.0, 0.05, 0.95}).status(),
-                "options.frequency_min_Hz");
+                "options.min_frequency_Hz");
   ExpectInvalid(RlPwmSteadyState(kPaperCoil, 0.0, 0.5).status(), "frequency_Hz");
   ExpectInvalid(RlPwmSteadyState(kPaperCoil, 100.0, 1.5).status(), "duty");
   ExpectInvalid(RlPwmSteadyState({28.5, -0.33, 24.0}, 100.0, 0.5).status(), "coil.L_H");
@@ -478,7 +478,7 @@ TEST(Errors, BadInputs) {
 
 TEST(Errors, ApproxModel) {
   ExpectInvalid(PlanDitherApprox(ApproxDitherModel{}, {0.3, 0.05}).status(), "model");
-  ExpectInvalid(FitApproxDitherModel(kPaperCoil, {50.0, 1000.0, 0.0, 0.95}).status(), "options.duty_min");
+  ExpectInvalid(FitApproxDitherModel(kPaperCoil, {50.0, 1000.0, 0.0, 0.95}).status(), "options.min_duty");
   ExpectInvalid(FitApproxDitherModel({28.5, 0.33, 0.0}).status(), "coil.supply_V");
   ApproxFitOptions bad;
   bad.k2_frequency_points = 1;
@@ -489,9 +489,9 @@ TEST(Errors, ApproxModel) {
   StatusOr<ApproxDitherModel> m = FitApproxDitherModel(kPaperCoil);
   ASSERT_TRUE(m.ok());
   ExpectInvalid(PlanDitherApprox(*m, {0.02, 0.05}).status(), "dither.average_current_A");  // D < 5 %
-  ExpectInvalid(PlanDitherApprox(*m, {0.3, 0.001}).status(), "dither.amplitude_A");        // f > 1000 Hz
-  ExpectInvalid(PlanDitherApprox(*m, {0.3, 0.5}).status(), "dither.amplitude_A");          // f < 50 Hz
-  ExpectInvalid(PlanDitherApprox(*m, {0.3, -0.05}).status(), "dither.amplitude_A");
+  ExpectInvalid(PlanDitherApprox(*m, {0.3, 0.001}).status(), "dither.dither_amplitude_A");        // f > 1000 Hz
+  ExpectInvalid(PlanDitherApprox(*m, {0.3, 0.5}).status(), "dither.dither_amplitude_A");          // f < 50 Hz
+  ExpectInvalid(PlanDitherApprox(*m, {0.3, -0.05}).status(), "dither.dither_amplitude_A");
 }
 
 }  // namespace

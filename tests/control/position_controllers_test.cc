@@ -423,9 +423,9 @@ TEST(PeakAndHoldTest, ValidateNamesTheFieldAndProblem) {
   EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
   EXPECT_NE(s.message().find("switching_current_A"), std::string::npos) << s.message();
   p = {};
-  p.hold_band_A = 1.2;
+  p.band_A = 1.2;
   s = PeakAndHold::Validate(p);
-  EXPECT_NE(s.message().find("hold_band_A"), std::string::npos) << s.message();
+  EXPECT_NE(s.message().find("band_A"), std::string::npos) << s.message();
   p = {};
   p.release_current_A = -0.1;
   s = PeakAndHold::Validate(p);

@@ -155,7 +155,7 @@ TEST(BaselineStoreTest, AVersion1FileMigratesKeepingItsData) {
   {
     auto store = Store::Open(path);
     ASSERT_TRUE(store.ok()) << store.status().ToString();
-    EXPECT_EQ((*store)->schema_version(), 2);
+    EXPECT_EQ((*store)->schema_version(), schema::CurrentVersion());
     ASSERT_TRUE((*store)->SaveBaseline("main", "", "", Entries(1.0)).ok());
   }
   auto conn = sql::Connection::Open(path);

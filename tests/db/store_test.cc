@@ -74,7 +74,7 @@ std::unique_ptr<Store> OpenOrDie(const std::string& path) {
 RunRecord MakeRun(const std::string& name, std::int32_t priority = 0, const std::string& bench_kind = "emulated",
                   const std::string& bench_name = "", std::vector<std::string> tags = {}) {
   RunRecord r;
-  r.name = name;
+  r.key = NamedRun(name);
   r.controller = "pi_current";
   r.bench_kind = bench_kind;
   r.bench_name = bench_name;
@@ -178,7 +178,7 @@ TEST(StoreSchemaTest, NewDatabaseIsAtTheCurrentVersionInWalMode) {
     auto store = OpenOrDie(path);
     ASSERT_NE(store, nullptr);
     EXPECT_EQ(store->schema_version(), schema::CurrentVersion());
-    EXPECT_EQ(schema::CurrentVersion(), 2);  // v2: baselines and regressions
+    EXPECT_EQ(schema::CurrentVersion(), 3);  // v2: baselines and regressions; v3: run keys as fields
   }
   RawDb raw(path);
   EXPECT_EQ(raw.Int("PRAGMA user_version"), schema::CurrentVersion());
@@ -213,7 +213,7 @@ TEST(StoreSchemaTest, ReopeningKeepsDataAndVersion) {
   EXPECT_EQ(store->schema_version(), schema::CurrentVersion());
   auto run = store->GetRun(ids[1]);
   ASSERT_TRUE(run.ok());
-  EXPECT_EQ(run->name, "b");
+  EXPECT_EQ(run->key.name, "b");
 }
 
 TEST(StoreSchemaTest, MigrationsApplyInOrderAndKeepData) {
@@ -239,6 +239,80 @@ TEST(StoreSchemaTest, MigrationsApplyInOrderAndKeepData) {
   auto again = schema::Migrate(&*conn, list, path);
   ASSERT_TRUE(again.ok());
   EXPECT_EQ(*again, next);
+}
+
+TEST(StoreRunKeyTest, KeySplitAndStartTimeAreStoredAsFields) {
+  auto store = OpenOrDie(":memory:");
+  ASSERT_NE(store, nullptr);
+  RunRecord swept = MakeRun("m/pi");
+  swept.key.sweep = {{"conditions.supply_V", 24.0}, {"bench.model.params[R]", 3.0000000001}};
+  swept.key.repeat = 2;
+  RunRecord imported = MakeRun("r07");
+  imported.split = "holdout";
+  imported.t_start_s = 12.5;
+  auto ids = Submit(*store, {swept, imported});
+  auto a = store->GetRun(ids[0]);
+  ASSERT_TRUE(a.ok()) << a.status().ToString();
+  EXPECT_EQ(a->key, swept.key);  // values exact, not re-read from 10-digit text
+  EXPECT_EQ(a->split, "");
+  EXPECT_TRUE(std::isnan(a->t_start_s));
+  auto b = store->GetRun(ids[1]);
+  ASSERT_TRUE(b.ok());
+  EXPECT_EQ(b->key, NamedRun("r07"));
+  EXPECT_EQ(b->split, "holdout");
+  EXPECT_EQ(b->t_start_s, 12.5);
+  RunFilter f;
+  auto listed = store->ListRuns(f);
+  ASSERT_TRUE(listed.ok());
+  ASSERT_EQ(listed->size(), 2u);
+  EXPECT_EQ((*listed)[0].key, swept.key);
+  // The display name column is there for people reading the file.
+  RunRecord bad = MakeRun("x");
+  bad.split = "train";
+  std::vector<std::int64_t> none;
+  auto refused = store->SubmitBatch("alice", "b", "{}", {bad}, &none);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.status().message().find("runs[0].split"), std::string::npos) << refused.status().message();
+}
+
+TEST(StoreSchemaTest, Version3FillsRunKeysOfOlderDatabasesFromTheirTags) {
+  const std::string path = TempDb("v2_to_v3");
+  {
+    auto conn = sql::Connection::Open(path);
+    ASSERT_TRUE(conn.ok());
+    std::vector<schema::Migration> v2(schema::Migrations().begin(), schema::Migrations().begin() + 2);
+    auto v = schema::Migrate(&*conn, v2, path);
+    ASSERT_TRUE(v.ok()) << v.status().ToString();
+    ASSERT_EQ(*v, 2);
+  }
+  {
+    RawDb raw(path);
+    raw.Exec("INSERT INTO batches (id, submitter, name, spec_json, created) VALUES (1, 'u', 'b', '{}', 0)");
+    const char* insert =
+        "INSERT INTO runs (id, batch_id, name, controller, bench_kind, requested_bench, bench_name, spec_json, "
+        "submitter, priority, status, requeue_on_interrupt, submitted) VALUES ";
+    raw.Exec(Cat(insert, "(1, 1, 'm/pi sweep:conditions.supply_V=24 sweep:x=0.5 repeat:3', 'pi_current', "
+                         "'emulated', '', '', '{}', 'u', 0, 'done', 1, 0)"));
+    raw.Exec(Cat(insert, "(2, 1, 'r07', 'imported', 'imported', '', '', '{}', 'u', 0, 'done', 0, 0)"));
+    raw.Exec(Cat(insert, "(3, 1, 'plain', 'pi_current', 'emulated', '', '', '{}', 'u', 0, 'queued', 1, 0)"));
+    raw.Exec("INSERT INTO run_tags (run_id, tag) VALUES (1, 'sweep:conditions.supply_V=24'), (1, 'sweep:x=0.5'), "
+             "(1, 'repeat:3'), (2, 'imported'), (2, 'split:fit'), (2, 't_start_s:7.25')");
+  }
+  auto store = OpenOrDie(path);
+  ASSERT_NE(store, nullptr);
+  EXPECT_EQ(store->schema_version(), 3);
+  auto a = store->GetRun(1);
+  ASSERT_TRUE(a.ok()) << a.status().ToString();
+  EXPECT_EQ(a->key, (RunKey{"m/pi", {{"conditions.supply_V", 24.0}, {"x", 0.5}}, 3}));
+  auto b = store->GetRun(2);
+  ASSERT_TRUE(b.ok());
+  EXPECT_EQ(b->key, NamedRun("r07"));
+  EXPECT_EQ(b->split, "fit");
+  EXPECT_EQ(b->t_start_s, 7.25);
+  auto c = store->GetRun(3);
+  ASSERT_TRUE(c.ok());
+  EXPECT_EQ(c->key, NamedRun("plain"));
+  EXPECT_TRUE(std::isnan(c->t_start_s));
 }
 
 TEST(StoreSchemaTest, AFailingMigrationChangesNothing) {
@@ -346,7 +420,7 @@ TEST(StoreSubmitTest, StoresEveryFieldAndAQueuedHistoryRow) {
   ASSERT_TRUE(got.ok()) << got.status().ToString();
   EXPECT_EQ(got->id, ids[0]);
   EXPECT_EQ(got->batch_id, batch_id);
-  EXPECT_EQ(got->name, r.name);
+  EXPECT_EQ(got->key, r.key);
   EXPECT_EQ(got->controller, "pi_current");
   EXPECT_EQ(got->bench_kind, "emulated");
   EXPECT_EQ(got->bench_name, "bench-a");
@@ -382,7 +456,7 @@ TEST(StoreSubmitTest, BadInputNamesTheFieldAndStoresNothing) {
   const std::vector<Case> cases = {
       {"", {MakeRun("a")}, "submitter: must not be empty"},
       {"alice", {}, "runs: a batch needs at least one run"},
-      {"alice", {MakeRun("a"), no_name}, "runs[1].name: must not be empty"},
+      {"alice", {MakeRun("a"), no_name}, "runs[1].key.name: must not be empty"},
       {"alice", {no_spec}, "runs[0].spec_json"},
       {"alice", {other_user}, "runs[0].submitter"},
       {"alice", {MakeRun("a", 0, "emulated", "", {"x", ""})}, "runs[0].tags[1]: must not be empty"},

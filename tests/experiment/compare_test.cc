@@ -56,5 +56,11 @@ TEST(Compare, FailedRunsAreCountedNotAveraged) {
   EXPECT_NE(ComparisonTable(c).find("Pareto"), std::string::npos);
 }
 
+TEST(Compare, CsvQuotesNamesSoCommasAndQuotesStayInTheirColumn) {
+  const Comparison c = Compare({R("say \"hi\", then go", 1.0, 1.0)});
+  const std::string csv = ComparisonCsv(c);
+  EXPECT_NE(csv.find(",\"say \"\"hi\"\", then go\","), std::string::npos) << csv;
+}
+
 }  // namespace
 }  // namespace vb::experiment

@@ -120,6 +120,10 @@ TEST(Spec, ControllerErrorsNameTheSpecField) {
   const std::pair<std::string, std::string> cases[] = {
       {coil + R"(, "controller": {"hysteresis_current": {"band_A": -1}})", "controller.hysteresis_current.band_A"},
       {coil + R"(, "controller": {"pi_current": {"carrier_Hz": -5}})", "controller.pi_current.carrier_Hz"},
+      {coil + R"(, "controller": {"hysteresis_current": {"sample_period_s": -1}})",
+       "controller.hysteresis_current.sample_period_s"},
+      {coil + R"(, "controller": {"pi_current": {"ki_V_per_A_s": -1}})", "controller.pi_current.ki_V_per_A_s"},
+      {coil + R"(, "controller": {"fuzzy_current": {"output_scale_V": -1}})", "controller.fuzzy_current.output_scale_V"},
       {coil + R"(, "controller": {"predictive_current": {"horizon_s": -1}})", "controller.predictive_current.horizon_s"},
       {coil + R"(, "controller": {"fuzzy_current": {"error_scale_A": -1}})", "controller.fuzzy_current.error_scale_A"},
       {coil + R"(, "controller": {"peak_and_hold": {"holding_current_A": -1}})",

@@ -32,6 +32,15 @@ TEST(U3Protocol, FeedbackBitStateWriteMatchesTheGuideExample) {
   for (size_t k = 0; k < sizeof(reply); ++k) EXPECT_EQ(ours[k], reply[k]) << "byte " << k;
 }
 
+TEST(U3Protocol, ADeviceErrorcodeIsARefusalNotAnInternalError) {
+  // A normal response [Checksum8, response byte, errorcode, 0] with errorcode 1 (SCRATCH_WRT_FAIL).
+  std::uint8_t d[4] = {0, 0xA9, 1, 0};
+  d[0] = u3::Checksum8(d, sizeof d);
+  const Status st = u3::CheckNormal(d, sizeof d, 0xA9);
+  EXPECT_EQ(st.code(), StatusCode::kFailedPrecondition) << st.ToString();
+  EXPECT_NE(st.message().find("device errorcode"), std::string::npos) << st.message();
+}
+
 TEST(U3Protocol, ChecksumsAndFraming) {
   // Checksum8 folds the carry twice: 0xF8 + 0x02 + 0x10 = 0x10A -> 0x0A + 0x01 = 0x0B.
   const std::uint8_t head[] = {0x00, 0xF8, 0x02, 0x00, 0x10, 0x00};

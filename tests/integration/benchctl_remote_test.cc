@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <fstream>
 #include <memory>
+#include <set>
 
 #include "../common/run_command.h"
 #include "server_process.h"
@@ -66,6 +67,15 @@ TEST(BenchctlRemote, RunWaitQueueShowExportCompareBenches) {
   Result cmp = Benchctl("compare --batch 1 --csv " + op);
   ASSERT_EQ(cmp.exit_code, 0) << cmp.out;
   EXPECT_NE(cmp.out.find("fuzzy_current"), std::string::npos) << cmp.out;
+  // The one comparison renderer, whichever backend: the same JSON shape as `compare --local --batch --json`.
+  Result cmp_json = Benchctl("compare --batch 1 --json " + op);
+  ASSERT_EQ(cmp_json.exit_code, 0) << cmp_json.out;
+  const auto j = nlohmann::json::parse(cmp_json.out, nullptr, false);
+  ASSERT_TRUE(j.is_object()) << cmp_json.out;
+  EXPECT_EQ(j["columns"][0], "rmse");
+  ASSERT_EQ(j["rows"].size(), 4u);
+  EXPECT_EQ(j["rows"][0]["failed"], 0);  // written out, not left to proto3's "default means absent"
+  EXPECT_TRUE(j["rows"][0]["metrics"]["rmse"].contains("spread")) << cmp_json.out;
 
   Result benches = Benchctl("benches " + op);
   ASSERT_EQ(benches.exit_code, 0) << benches.out;
@@ -85,6 +95,40 @@ TEST(BenchctlRemote, RunWaitQueueShowExportCompareBenches) {
   server.Kill(SIGTERM);
   Result gone = Benchctl("benches " + op);
   EXPECT_EQ(gone.exit_code, 3) << gone.out;
+}
+
+// One spec, run locally and on the server, goes through the same admission: the same runs, with the same
+// identities (typed sweep point and repeat) and the same controller.
+TEST(BenchctlRemote, LocalAndServerRunsOfASpecHaveTheSameIdentities) {
+  const std::string dir = ::testing::TempDir() + "/vb-cli-same-" + std::to_string(::getpid());
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  testing::ServerProcess server(dir + "/server");
+  const std::string addr = server.Start();
+  ASSERT_FALSE(addr.empty()) << server.Log();
+  const std::string op = "--server " + addr + " --token " + testing::kOperatorToken;
+  const std::string spec = dir + "/swept.json";
+  std::ofstream(spec) << R"({"name": "swept", "duration_s": 0.02, "repeats": 2,
+      "sweep": [{"field": "conditions.supply_V", "values": [12, 15]}],
+      "controller": {"open_loop_pwm": {"segments": [{"start_s": 0, "frequency_Hz": 500, "duty": 0.5}]}}})";
+  Result local = Benchctl("run --local " + spec + " --json --no-store");
+  ASSERT_EQ(local.exit_code, 0) << local.out;
+  Result remote = Benchctl("run " + spec + " --wait --json " + op);
+  ASSERT_EQ(remote.exit_code, 0) << remote.out;
+  const auto l = nlohmann::json::parse(local.out, nullptr, false);
+  const auto r = nlohmann::json::parse(remote.out, nullptr, false);
+  ASSERT_TRUE(l.is_array() && r.is_array()) << local.out << remote.out;
+  ASSERT_EQ(l.size(), 4u);
+  ASSERT_EQ(r.size(), 4u);
+  std::multiset<std::string> local_runs, remote_runs;
+  for (const auto& x : l) local_runs.insert(x["name"].get<std::string>() + " | " + x["controller"].get<std::string>());
+  for (const auto& x : r) remote_runs.insert(x["name"].get<std::string>() + " | " + x["controller"].get<std::string>());
+  EXPECT_EQ(local_runs, remote_runs);
+  EXPECT_EQ(local_runs.count("swept sweep:conditions.supply_V=15 repeat:1 | open_loop_pwm"), 1u);
+  for (const auto& x : r) {
+    ASSERT_TRUE(x.contains("key")) << x.dump();
+    EXPECT_EQ(x["key"]["sweep"][0]["field"], "conditions.supply_V");
+  }
 }
 
 // A measured dataset stored on the server and diagnosed from there: the same verdict as from the directory,

@@ -113,7 +113,10 @@ TEST(SuiteTest, CaseNamesKeepVariantsAndSweepsApart) {
   EXPECT_EQ((*runs)[0].case_name, "m sweep:conditions.supply_V=20");
   EXPECT_EQ((*runs)[1].case_name, "m sweep:conditions.supply_V=20");
   EXPECT_EQ((*runs)[2].case_name, "m sweep:conditions.supply_V=24");
-  EXPECT_EQ(CaseOfRunName("m sweep:conditions.supply_V=24 repeat:1"), "m sweep:conditions.supply_V=24");
+  // The identity is fields: repeats share the case, the display name adds the repeat.
+  EXPECT_EQ((*runs)[3].key.sweep, (std::vector<SweepCoordinate>{{"conditions.supply_V", 24.0}}));
+  EXPECT_EQ((*runs)[3].key.repeat, 1);
+  EXPECT_EQ((*runs)[3].key.DisplayName(), "m sweep:conditions.supply_V=24 repeat:1");
 }
 
 ResolvedTolerance Tol(const std::string& metric, double abs, double rel, v1::Direction d = v1::LOWER_IS_BETTER) {
@@ -178,9 +181,9 @@ TEST(CompareTest, SummarisesRepeatsAndFindsTheRegression) {
   b.cases["hy"]["rmse"] = {0.006, 0.0, 1};
   b.cases["other-suite-case"]["rmse"] = {1, 0, 1};  // not this suite's: ignored
   std::vector<RunMetrics> runs = {
-      {1, "pi repeat:0", true, "", {{"rmse", 0.0010}, {"switches", 100}}},
-      {2, "pi repeat:1", true, "", {{"rmse", 0.0030}, {"switches", 101}}},  // mean rmse 0.002: doubled
-      {3, "hy", true, "", {{"rmse", 0.006}, {"switches", 7}}},
+      {1, "pi repeat:0", "pi", true, "", {{"rmse", 0.0010}, {"switches", 100}}},
+      {2, "pi repeat:1", "pi", true, "", {{"rmse", 0.0030}, {"switches", 101}}},  // mean rmse 0.002: doubled
+      {3, "hy", "hy", true, "", {{"rmse", 0.006}, {"switches", 7}}},
   };
   const Measured m = Summarise(runs);
   EXPECT_NEAR(m.stats.at("pi").at("rmse").mean, 0.002, 1e-15);
@@ -213,8 +216,8 @@ TEST(CompareTest, FailedRunsFailTheirCaseOnce) {
   b.name = "main";
   b.cases["pi"]["rmse"] = {0.001, 0.0, 1};
   b.cases["hy"]["rmse"] = {0.006, 0.0, 1};
-  std::vector<RunMetrics> runs = {{1, "pi", false, "interlock: current above 3 A", {}},
-                                  {2, "hy", true, "", {{"rmse", 0.006}}}};
+  std::vector<RunMetrics> runs = {{1, "pi", "pi", false, "interlock: current above 3 A", {}},
+                                  {2, "hy", "hy", true, "", {{"rmse", 0.006}}}};
   RegressResult r = Compare(s.suite, b, Summarise(runs));
   EXPECT_TRUE(r.regressed());
   EXPECT_EQ(r.Count(Verdict::kRegressed), 0);
@@ -241,7 +244,7 @@ TEST(CompareTest, ResultAndBaselineJsonRoundTrip) {
   ASSERT_FALSE(refused.ok());
   EXPECT_NE(refused.status().message().find("cases.pi.rmse.spread"), std::string::npos);
 
-  std::vector<RunMetrics> runs = {{1, "pi", true, "", {{"rmse", 0.01}}}};
+  std::vector<RunMetrics> runs = {{1, "pi", "pi", true, "", {{"rmse", 0.01}}}};
   RegressResult r = Compare(s.suite, b, Summarise(runs));
   r.id = 5;
   auto rr = ResultFromJson(ResultToJson(r));

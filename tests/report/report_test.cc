@@ -90,16 +90,18 @@ TEST(ReportTraces, DecimationBoundsPointsAndKeepsPeaks) {
 }
 
 TEST(ReportMaps, StaticMapGroupsBySweepAndIgnoresNonSweeps) {
-  std::vector<MapPoint> pts = {{"m/fig8 sweep:p=0 sweep:duty=0.2", 10}, {"m/fig8 sweep:p=0 sweep:duty=0.6", 60},
-                               {"m/fig8 sweep:p=4 sweep:duty=0.2", 5},  {"m/fig8 sweep:p=4 sweep:duty=0.6 repeat:1", 50},
-                               {"m/fig8 sweep:p=4 sweep:duty=0.6 repeat:0", 52}};
+  auto key = [](double p, double duty, int repeat) {
+    return RunKey{"m/fig8", {{"p", p}, {"duty", duty}}, repeat};
+  };
+  std::vector<MapPoint> pts = {{key(0, 0.2, -1), 10}, {key(0, 0.6, -1), 60}, {key(4, 0.2, -1), 5},
+                               {key(4, 0.6, 1), 50},  {key(4, 0.6, 0), 52}};
   const Json s = StaticMapSection(pts, "pct");
   ASSERT_FALSE(s.is_null());
   EXPECT_EQ(s["x_label"], "duty");
   ASSERT_EQ(s["series"].size(), 2u);
   EXPECT_EQ(s["series"][1]["name"], "m/fig8 sweep:p=4");
   EXPECT_DOUBLE_EQ(s["series"][1]["y"][1].get<double>(), 51.0);  // repeats averaged
-  EXPECT_TRUE(StaticMapSection({{"a", 1}, {"b", 2}, {"c", 3}}, "pct").is_null());
+  EXPECT_TRUE(StaticMapSection({{NamedRun("a"), 1}, {NamedRun("b"), 2}, {NamedRun("c"), 3}}, "pct").is_null());
 }
 
 TEST(ReportPage, DataCannotCloseTheScriptElement) {

@@ -1,11 +1,23 @@
-#include "server/benches.h"
+#include "runs/bench_setup.h"
 
+#include "experiment/runner.h"
 #include "hw/hid/hid_bench.h"
 #include "hw/hid/hidapi_transport.h"
 #include "hw/u3/libusb_transport.h"
 #include "hw/u3/u3_bench.h"
 
-namespace vb::server {
+namespace vb::runs {
+
+BenchSetup LocalEmulatorSetup() {
+  BenchSetup b;
+  b.name = "local-emulator";
+  b.kind = "emulated";
+  b.bench_class = "local";
+  b.interlocks = false;
+  b.plant_from_spec = true;
+  return b;
+}
+
 
 StatusOr<std::unique_ptr<hw::Bench>> OpenBench(const BenchSetup& setup, const experiment::Experiment& e) {
   const auto& c = setup.config;
@@ -39,10 +51,11 @@ StatusOr<std::unique_ptr<hw::Bench>> OpenBench(const BenchSetup& setup, const ex
     if (!b.ok()) return b.status();
     return std::unique_ptr<hw::Bench>(std::move(b.value()));
   }
+  if (setup.plant_from_spec) return std::unique_ptr<hw::Bench>(std::make_unique<hw::EmulatedBench>(experiment::EmulatedBenchFor(e)));
   hw::EmulatedBenchOptions opts = setup.emulated;
   opts.plant = e.plant;
   opts.disturbance = e.disturbance;
   return std::unique_ptr<hw::Bench>(std::make_unique<hw::EmulatedBench>(opts));
 }
 
-}  // namespace vb::server
+}  // namespace vb::runs

@@ -1,9 +1,7 @@
-// One worker thread per bench: claims the next compatible queued run from the store (priority, then age),
-// runs it on its bench, stores trace and metrics, and leaves the bench in its safe state.
-//
-// The Registry is how request handlers reach running runs without touching the real-time loop: cancelling
-// sets the run's RunMonitor flag (the loop stops within one control period); watchers read the monitor's
-// progress atomic and drain the run's LiveTap, a lock-free single-producer ring the loop writes into.
+// How request handlers reach running runs without touching the real-time loop (Registry): cancelling sets
+// the run's RunMonitor flag (the loop stops within one control period); watchers read the monitor's progress
+// atomic and drain the run's LiveTap, a lock-free single-producer ring the loop writes into. Work signalling
+// between whoever queues runs and idle workers goes through it too.
 #pragma once
 
 #include <array>
@@ -13,15 +11,12 @@
 #include <deque>
 #include <map>
 #include <mutex>
-#include <string>
-#include <thread>
 #include <vector>
 
-#include "db/store.h"
 #include "experiment/runner.h"
-#include "server/config.h"
+#include "hw/bench.h"
 
-namespace vb::server {
+namespace vb::runs {
 
 struct LiveSample {
   double t_s;
@@ -74,32 +69,4 @@ class Registry {
   std::uint64_t work_generation_ = 0;
 };
 
-class Worker {
- public:
-  Worker(BenchSetup setup, std::string db_path, Registry* registry);
-  ~Worker();
-  Worker(const Worker&) = delete;
-  Worker& operator=(const Worker&) = delete;
-
-  void Start();
-  // Stops claiming, stops a running experiment (safe state), joins. A run stopped this way stays marked
-  // running in the store, so the next start marks it interrupted and re-queues it.
-  void Stop();
-  const BenchSetup& setup() const { return setup_; }
-  std::int64_t current_run() const { return current_run_.load(); }
-
- private:
-  void Loop();
-  void Execute(db::Store* store, const db::RunRecord& run);
-
-  BenchSetup setup_;
-  std::string db_path_;
-  Registry* registry_;
-  std::thread thread_;
-  std::atomic<bool> stop_{false};
-  std::atomic<std::int64_t> current_run_{0};
-  std::atomic<experiment::RunMonitor*> monitor_{nullptr};
-};
-
-
-}  // namespace vb::server
+}  // namespace vb::runs

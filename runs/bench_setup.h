@@ -1,0 +1,41 @@
+// A bench as configured, and the bench a run executes on, opened from that configuration: an EmulatedBench
+// (the configured plant, or the spec's own plant for the local emulator), or a hardware bench (HidBench over
+// hidapi, U3Bench over libusb) opened for the run, so an unplugged and replugged device is found again by
+// the next run. Execute() wraps it in the safety interlocks.
+#pragma once
+
+#include <memory>
+#include <string>
+
+#include "experiment/spec.h"
+#include "hw/bench.h"
+#include "hw/emulated_bench.h"
+#include "hw/safety.h"
+#include "valvebench/v1/config.pb.h"
+
+namespace vb::runs {
+
+struct BenchSetup {
+  std::string name;
+  std::string kind;             // "emulated", "hid", "u3"
+  std::string bench_class;      // what runs are matched on: "emulated:<preset>", "hid", "u3"
+  std::string preset;
+  valvebench::v1::ModelSpec model;
+  hw::EmulatedBenchOptions emulated;
+  valvebench::v1::BenchConfig config;  // as configured (hardware: which device)
+  hw::Capabilities caps;        // what submissions are checked against
+  hw::SafetyLimits safety;      // the interlocks every run on this bench goes through
+  bool interlocks = true;       // false: runs execute on the bare bench (the local emulator; docs/decisions.md)
+  std::string device;           // hardware: "hid 2e8a:10c0 serial X", "u3 serial N"
+  // The local emulator (benchctl run --local): the plant and driver are the spec's own, so every spec fits
+  // it; admission matches it to any spec without class, name or capability checks.
+  bool plant_from_spec = false;
+};
+
+// The local emulator bench of `benchctl run --local`: class "local", the spec's own plant, no interlocks.
+BenchSetup LocalEmulatorSetup();
+
+// Unavailable naming the device when it cannot be opened (not attached, no permission, no USB bus).
+StatusOr<std::unique_ptr<hw::Bench>> OpenBench(const BenchSetup& setup, const experiment::Experiment& e);
+
+}  // namespace vb::runs

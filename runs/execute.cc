@@ -1,0 +1,109 @@
+#include "runs/execute.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+
+#include <spdlog/spdlog.h>
+
+#include "db/trace_writer.h"
+#include "experiment/spec.h"
+#include "hw/safety.h"
+
+namespace vb::runs {
+
+std::vector<db::Metric> RecordedMetrics(const experiment::Metrics& metrics) {
+  std::vector<db::Metric> out;
+  for (const auto& [name, value] : experiment::MetricList(metrics))
+    if (std::isfinite(value)) out.push_back({name, value});
+  return out;
+}
+
+namespace {
+
+// The final state a run's summary maps to; the one place that decides it.
+db::RunStatus StatusOf(experiment::RunSummary::Termination t) {
+  switch (t) {
+    case experiment::RunSummary::Termination::kCancelled: return db::RunStatus::kCancelled;
+    case experiment::RunSummary::Termination::kFailed: return db::RunStatus::kFailed;
+    default: return db::RunStatus::kDone;
+  }
+}
+
+}  // namespace
+
+Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& setup, const ExecuteContext& ctx) {
+  Outcome out;
+  out.run_id = run.id;
+  auto finish = [&](db::RunStatus status, std::string reason, const std::vector<db::Metric>& metrics) {
+    out.status = status;
+    out.reason = std::move(reason);
+    // A run that never started still reads as failed, with the reason, to whoever looks at the summary.
+    if (status == db::RunStatus::kFailed && out.summary.termination != experiment::RunSummary::Termination::kFailed &&
+        out.trace.size() == 0) {
+      out.summary.termination = experiment::RunSummary::Termination::kFailed;
+      out.summary.message = out.reason;
+    }
+    auto st = store->Finish(run.id, status, out.reason, metrics);
+    out.recorded = st.ok();
+    if (!st.ok())
+      spdlog::error("run {}: cannot record the result: {}", static_cast<long long>(run.id),
+                   st.message().c_str());
+    return std::move(out);
+  };
+  const bool stopping = ctx.stop != nullptr && ctx.stop->load();
+
+  // 1. The stored spec, with the bench's configured model as the plant.
+  auto spec = experiment::ParseSpecJson(run.spec_json);
+  if (!spec.ok()) return finish(db::RunStatus::kFailed, "stored spec does not parse: " + spec.status().message(), {});
+  if (setup.kind == "emulated" && !setup.plant_from_spec) *spec->mutable_bench()->mutable_model() = setup.model;
+
+  // 2. The experiment and the bench.
+  auto e = experiment::BuildExperiment(*spec);
+  if (!e.ok()) return finish(db::RunStatus::kFailed, e.status().message(), {});
+  auto opened = OpenBench(setup, *e);
+  if (!opened.ok())
+    return finish(db::RunStatus::kFailed, "bench " + setup.name + ": " + opened.status().message(), {});
+  // A trip puts the bench in its safe state and fails the run with the reason, keeping the samples up to it.
+  std::unique_ptr<hw::SafetyBench> safety;
+  hw::Bench* bench = opened->get();
+  if (setup.interlocks) {
+    safety = std::make_unique<hw::SafetyBench>(opened->get(), setup.safety);
+    bench = safety.get();
+  }
+
+  // 3. Run it, visible to watchers.
+  experiment::RunMonitor monitor;
+  const int decimation = std::max(1, static_cast<int>(std::lround(e->run.sample_rate_Hz / 1000.0)));
+  LiveTap tap(decimation);
+  if (ctx.registry != nullptr) ctx.registry->Add(run.id, &monitor, &tap, e->duration_s);
+  if (ctx.current_monitor != nullptr) ctx.current_monitor->store(&monitor);
+  auto cancel_requested = store->CancelRequested(run.id);
+  if (stopping || (cancel_requested.ok() && *cancel_requested)) monitor.cancel.store(true);
+  if (safety) safety->set_cancel_flag(&monitor.cancel);  // cancel and shutdown act within a check period
+  out.summary = experiment::Runner::Run(*e, *bench, &out.trace, &monitor, ctx.registry != nullptr ? &tap : nullptr);
+  bench->SafeState();
+  if (ctx.current_monitor != nullptr) ctx.current_monitor->store(nullptr);
+  if (ctx.registry != nullptr) ctx.registry->Remove(run.id);
+
+  if (ctx.stop != nullptr && ctx.stop->load() &&
+      out.summary.termination == experiment::RunSummary::Termination::kCancelled) {
+    out.status = db::RunStatus::kRunning;  // left for RecoverAfterCrash on the next start
+    return out;
+  }
+
+  // 4. Record.
+  const Status stored = db::AppendRecordedTrace(store, run.id, out.trace);
+  db::RunStatus status = StatusOf(out.summary.termination);
+  std::string reason = out.summary.message;
+  if (status == db::RunStatus::kCancelled) {
+    // Keep why it was cancelled (the request's reason, stored by RequestCancel), not only when.
+    if (auto row = store->GetRun(run.id); row.ok() && !row->reason.empty()) reason = row->reason + "; " + reason;
+  } else if (status == db::RunStatus::kDone && !stored.ok()) {
+    status = db::RunStatus::kFailed;
+    reason = "storing the trace failed: " + stored.message();
+  }
+  return finish(status, std::move(reason), RecordedMetrics(out.summary.metrics));
+}
+
+}  // namespace vb::runs

@@ -1,0 +1,44 @@
+// Execute: one claimed run from its stored spec to its final state in the store, on the bench its setup
+// describes. The same function for the server's workers and benchctl's local mode:
+//   1. parse the stored spec; on an emulated bench with a configured model, that model is the plant (it
+//      stands in for hardware, and a spec cannot change hardware); the spec's perturbations still apply;
+//   2. build the experiment and open the bench, behind the safety interlocks (current, duty, on-time, coil
+//      temperature, watchdog) unless the setup has none;
+//   3. run it (Runner), with cancel and progress through a RunMonitor registered for watchers;
+//   4. append the trace, then finish the run with its status, reason and finite metrics.
+// A run stopped by `stop` (server shutdown) is not finished: it stays running in the store, and the next
+// start marks it interrupted and re-queues it (docs/decisions.md, "A server stopped mid-run").
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <string>
+
+#include "db/store.h"
+#include "experiment/runner.h"
+#include "runs/bench_setup.h"
+#include "runs/monitor.h"
+
+namespace vb::runs {
+
+struct Outcome {
+  std::int64_t run_id = 0;
+  db::RunStatus status = db::RunStatus::kFailed;  // as recorded
+  std::string reason;
+  bool recorded = false;             // false: left running for recovery (stopped), or the store refused
+  experiment::RunSummary summary;    // empty when the run never started (bad spec, bench not there)
+  experiment::Trace trace;           // what was recorded (also appended to the store)
+};
+
+struct ExecuteContext {
+  Registry* registry = nullptr;                 // where watchers find the run; nullptr: nobody watches
+  const std::atomic<bool>* stop = nullptr;      // shutdown: stop the run and leave it for recovery
+  std::atomic<experiment::RunMonitor*>* current_monitor = nullptr;  // published while the run executes
+};
+
+Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& setup, const ExecuteContext& ctx);
+
+// The metrics a run records: the finite ones of experiment::MetricList, in its order.
+std::vector<db::Metric> RecordedMetrics(const experiment::Metrics& metrics);
+
+}  // namespace vb::runs

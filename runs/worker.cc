@@ -1,0 +1,54 @@
+#include "runs/worker.h"
+
+#include <cstdio>
+
+#include <spdlog/spdlog.h>
+
+namespace vb::runs {
+
+Worker::Worker(BenchSetup setup, Registry* registry) : setup_(std::move(setup)), registry_(registry) {}
+
+Worker::~Worker() { Stop(); }
+
+StatusOr<std::optional<Outcome>> Worker::ClaimAndExecute(db::Store* store) {
+  auto claimed = store->ClaimNext(setup_.bench_class, setup_.name);
+  if (!claimed.ok()) return claimed.status();
+  if (!claimed->has_value()) return std::optional<Outcome>();
+  current_run_.store((*claimed)->id);
+  ExecuteContext ctx;
+  ctx.registry = registry_;
+  ctx.stop = &stop_;
+  ctx.current_monitor = &monitor_;
+  Outcome out = Execute(store, **claimed, setup_, ctx);
+  current_run_.store(0);
+  return std::optional<Outcome>(std::move(out));
+}
+
+void Worker::Start(std::string db_path) {
+  thread_ = std::thread([this, path = std::move(db_path)] { Loop(path); });
+}
+
+void Worker::Stop() {
+  stop_.store(true);
+  if (auto* m = monitor_.load()) m->cancel.store(true);
+  if (registry_ != nullptr) registry_->NotifyWork();
+  if (thread_.joinable()) thread_.join();
+}
+
+void Worker::Loop(const std::string& db_path) {
+  auto store = db::Store::Open(db_path);
+  if (!store.ok()) {
+    spdlog::error("bench {}: cannot open the store: {}", setup_.name.c_str(),
+                 store.status().message().c_str());
+    return;
+  }
+  while (!stop_.load()) {
+    auto done = ClaimAndExecute(store->get());
+    if (!done.ok())
+      spdlog::error("bench {}: claim failed: {}", setup_.name.c_str(),
+                   done.status().message().c_str());
+    if (!done.ok() || !done->has_value()) registry_->WaitForWork(200);
+  }
+}
+
+}  // namespace vb::runs

@@ -1,0 +1,50 @@
+// A worker: one bench and the queue. ClaimAndExecute() claims the next compatible queued run from the store
+// (priority, then age) and executes it (runs/execute.h). The server starts one thread per bench that loops
+// on it; benchctl's local mode is the same worker, in process, called until its batch is done.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <thread>
+
+#include "db/store.h"
+#include "runs/bench_setup.h"
+#include "runs/execute.h"
+#include "runs/monitor.h"
+
+namespace vb::runs {
+
+class Worker {
+ public:
+  // registry may be nullptr (nobody watches, nobody signals work: Start() is then not useful).
+  Worker(BenchSetup setup, Registry* registry);
+  ~Worker();
+  Worker(const Worker&) = delete;
+  Worker& operator=(const Worker&) = delete;
+
+  // One step on the calling thread: nullopt when no run is waiting for this bench.
+  StatusOr<std::optional<Outcome>> ClaimAndExecute(db::Store* store);
+
+  // A thread that opens the store at db_path and loops on ClaimAndExecute until Stop().
+  void Start(std::string db_path);
+  // Stops claiming, stops a running experiment (safe state), joins. A run stopped this way stays marked
+  // running in the store, so the next start marks it interrupted and re-queues it.
+  void Stop();
+
+  const BenchSetup& setup() const { return setup_; }
+  std::int64_t current_run() const { return current_run_.load(); }
+
+ private:
+  void Loop(const std::string& db_path);
+
+  BenchSetup setup_;
+  Registry* registry_;
+  std::thread thread_;
+  std::atomic<bool> stop_{false};
+  std::atomic<std::int64_t> current_run_{0};
+  std::atomic<experiment::RunMonitor*> monitor_{nullptr};
+};
+
+}  // namespace vb::runs

@@ -1,0 +1,162 @@
+// runs/: Admit and Execute, the one pipeline behind the server, the nights and benchctl's local mode.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "db/store.h"
+#include "runs/admit.h"
+#include "runs/worker.h"
+
+namespace vb::runs {
+namespace {
+
+std::string Example(const std::string& rel) { return std::string(VB_SOURCE_DIR) + "/examples/" + rel; }
+
+experiment::ExperimentSpec E3() {
+  auto spec = experiment::LoadSpecFile(Example("standard/e3.json"));
+  EXPECT_TRUE(spec.ok()) << spec.status().ToString();
+  return *spec;
+}
+
+// A server-like policy: one emulated bench of the default preset, and limits.
+Policy ServerPolicy() {
+  Policy p;
+  BenchSetup b;
+  b.name = "emu-1";
+  b.kind = "emulated";
+  b.bench_class = "emulated:taghizadeh2009";
+  b.caps.max_supply_V = 48;
+  b.caps.max_carrier_Hz = 1e6;
+  b.caps.max_sample_rate_Hz = 1e6;
+  b.caps.max_control_rate_Hz = 1e6;
+  b.caps.measures_position = true;
+  b.caps.driver = "low_side_flyback";
+  p.benches = {b};
+  p.limits.max_duration_s = 1.0;
+  p.limits.max_runs_per_submission = 10;
+  return p;
+}
+
+TEST(Admit, SweepAndRepeatsBecomeTypedKeysAndTags) {
+  auto spec = E3();
+  auto* ax = spec.add_sweep();
+  ax->set_field("conditions.supply_V");
+  ax->add_values(12);
+  ax->add_values(15);
+  spec.set_repeats(2);
+  auto a = Admit({"alice", "b", {spec}, {}, ""}, ServerPolicy());
+  ASSERT_TRUE(a.ok()) << a.status().ToString();
+  ASSERT_EQ(a->runs.size(), 4u);
+  const db::RunRecord& r = a->runs[3];
+  EXPECT_EQ(r.key, (RunKey{"e3", {{"conditions.supply_V", 15.0}}, 1}));
+  EXPECT_EQ(r.bench_kind, "emulated:taghizadeh2009");
+  EXPECT_EQ(r.controller, "open_loop_pwm");
+  EXPECT_EQ(r.submitter, "alice");
+  EXPECT_NE(std::find(r.tags.begin(), r.tags.end(), "repeat:1"), r.tags.end());
+  EXPECT_FALSE(a->batch_json.empty());  // one spec: recorded verbatim
+}
+
+TEST(Admit, RefusalsNameTheRunAndTheField) {
+  auto spec = E3();
+  auto* ax = spec.add_sweep();
+  ax->set_field("duration_s");
+  ax->add_values(0.1);
+  ax->add_values(5);
+  auto a = Admit({"alice", "b", {spec}, {}, ""}, ServerPolicy());
+  ASSERT_FALSE(a.ok());
+  EXPECT_EQ(a.status().code(), StatusCode::kResourceExhausted);
+  EXPECT_NE(a.status().message().find("run 1 (e3 sweep:duration_s=5): duration_s: 5 s exceeds"), std::string::npos)
+      << a.status().message();
+
+  auto hid = E3();
+  hid.mutable_bench()->set_kind("hid");
+  auto b = Admit({"alice", "b", {hid}, {}, ""}, ServerPolicy());
+  ASSERT_FALSE(b.ok());
+  EXPECT_EQ(b.status().code(), StatusCode::kFailedPrecondition);
+  EXPECT_NE(b.status().message().find("bench: no configured bench can run it (needs hid"), std::string::npos)
+      << b.status().message();
+
+  auto keys = Admit({"alice", "b", {E3(), E3()}, {NamedRun("a")}, ""}, ServerPolicy());
+  ASSERT_FALSE(keys.ok());
+  EXPECT_NE(keys.status().message().find("keys: 1 keys for 2 specs"), std::string::npos) << keys.status().message();
+}
+
+TEST(Admit, GivenKeysReplaceTheSpecsOwnIdentity) {
+  const RunKey key{"suite-case", {{"conditions.supply_V", 15.0}}, 0};
+  auto a = Admit({"nights", "night:x", {E3()}, {key}, ""}, ServerPolicy());
+  ASSERT_TRUE(a.ok()) << a.status().ToString();
+  EXPECT_EQ(a->runs[0].key, key);
+}
+
+TEST(Admit, TheLocalEmulatorTakesAnySpecWithoutLimits) {
+  Policy local;
+  local.benches = {LocalEmulatorSetup()};
+  auto spec = E3();
+  spec.mutable_bench()->set_kind("hid");   // no hid bench here: the local emulator plays it
+  spec.mutable_bench()->set_name("rig-3");
+  spec.set_duration_s(5);
+  auto a = Admit({"me", "b", {spec}, {}, ""}, local);
+  ASSERT_TRUE(a.ok()) << a.status().ToString();
+  EXPECT_EQ(a->runs[0].bench_kind, "local");
+  EXPECT_EQ(a->runs[0].bench_name, "");
+}
+
+TEST(Execute, AWorkerRunsTheQueueAndRecordsEveryRun) {
+  auto store = db::Store::Open(":memory:");
+  ASSERT_TRUE(store.ok());
+  Policy local;
+  local.benches = {LocalEmulatorSetup()};
+  auto spec = E3();
+  spec.set_repeats(2);
+  auto a = Admit({"me", "b", {spec}, {}, ""}, local);
+  ASSERT_TRUE(a.ok());
+  auto q = Enqueue(store->get(), std::move(*a), local);
+  ASSERT_TRUE(q.ok()) << q.status().ToString();
+  Worker worker(LocalEmulatorSetup(), nullptr);
+  for (int k = 0; k < 2; ++k) {
+    auto o = worker.ClaimAndExecute(store->get());
+    ASSERT_TRUE(o.ok()) << o.status().ToString();
+    ASSERT_TRUE(o->has_value());
+    EXPECT_EQ((*o)->status, db::RunStatus::kDone);
+    EXPECT_TRUE((*o)->recorded);
+    EXPECT_EQ((*o)->trace.size(), 5001u);
+  }
+  auto none = worker.ClaimAndExecute(store->get());
+  ASSERT_TRUE(none.ok());
+  EXPECT_FALSE(none->has_value());
+  for (auto id : q->run_ids) {
+    auto r = (*store)->GetRun(id);
+    ASSERT_TRUE(r.ok());
+    EXPECT_EQ(r->status, db::RunStatus::kDone);
+    auto m = (*store)->GetMetrics(id);
+    ASSERT_TRUE(m.ok());
+    EXPECT_FALSE(m->empty());
+    auto t = (*store)->ReadTrace(id);
+    ASSERT_TRUE(t.ok());
+    EXPECT_FALSE(t->empty());
+  }
+}
+
+TEST(Execute, AStoredSpecThatNoLongerParsesFailsTheRunWithTheReason) {
+  auto store = db::Store::Open(":memory:");
+  ASSERT_TRUE(store.ok());
+  db::RunRecord r;
+  r.key = NamedRun("broken");
+  r.bench_kind = "local";
+  r.spec_json = "{\"no_such_field\": 1}";
+  std::vector<std::int64_t> ids;
+  ASSERT_TRUE((*store)->SubmitBatch("me", "b", "{}", {r}, &ids).ok());
+  Worker worker(LocalEmulatorSetup(), nullptr);
+  auto o = worker.ClaimAndExecute(store->get());
+  ASSERT_TRUE(o.ok() && o->has_value());
+  EXPECT_EQ((*o)->status, db::RunStatus::kFailed);
+  EXPECT_EQ((*o)->summary.termination, experiment::RunSummary::Termination::kFailed);  // never started
+  EXPECT_NE((*o)->summary.message.find("stored spec does not parse"), std::string::npos);
+  auto got = (*store)->GetRun(ids[0]);
+  ASSERT_TRUE(got.ok());
+  EXPECT_EQ(got->status, db::RunStatus::kFailed);
+  EXPECT_NE(got->reason.find("stored spec does not parse"), std::string::npos) << got->reason;
+}
+
+}  // namespace
+}  // namespace vb::runs
