@@ -219,11 +219,6 @@ int DiagnoseAndReport(const gap::Dataset& ds_in, const Nominal& nominal, const s
   return kExitOk;
 }
 
-std::string TagValue(const valvebench::v1::Run& run, const std::string& key) {
-  for (const auto& t : run.tags())
-    if (t.rfind(key + ":", 0) == 0) return t.substr(key.size() + 1);
-  return "";
-}
 
 }  // namespace
 
@@ -248,11 +243,11 @@ int RemoteDiagnose(client::Client& c, const std::vector<std::int64_t>& run_ids, 
     r.file = where;
     r.supply_V = run->spec().conditions().supply_v();
     r.supply_pressure_Pa = run->spec().conditions().supply_pressure_pa();
-    const std::string t_start = TagValue(*run, "t_start_s");
+    // Imported runs carry their session's start time and split as fields (docs/server.md); other runs take
+    // the start from when they ran.
     if (first_start_unix < 0.0) first_start_unix = run->started_unix_s();
-    r.t_start_s = !t_start.empty() ? std::stod(t_start) : run->started_unix_s() - first_start_unix;
-    const std::string split = TagValue(*run, "split");
-    r.split = split == "fit" || split == "holdout" ? split : "";
+    r.t_start_s = run->has_t_start_s() ? run->t_start_s() : run->started_unix_s() - first_start_unix;
+    r.split = run->split() == "fit" || run->split() == "holdout" ? run->split() : "";
     r.sample_period_s = trace->sample_period_s;
     r.i_A = trace->columns.at("i_A");
     for (std::size_t j = 0; j < r.i_A.size(); ++j) {
