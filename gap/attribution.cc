@@ -41,17 +41,6 @@ Status SetNamed(model::PlantParams* p, const std::string& name, double value) {
   return Status::InvalidArgument(name + ": unknown effect parameter");
 }
 
-double FromUnit(const FreeParam& f, double u) {
-  u = std::clamp(u, 0.0, 1.0);
-  if (f.log_scale) return std::exp(std::log(f.lower) + u * (std::log(f.upper) - std::log(f.lower)));
-  return f.lower + u * (f.upper - f.lower);
-}
-
-double ToUnit(const FreeParam& f, double v) {
-  if (f.log_scale) return (std::log(v) - std::log(f.lower)) / (std::log(f.upper) - std::log(f.lower));
-  return (v - f.lower) / (f.upper - f.lower);
-}
-
 // The session's replay, compared with the measurement: squared errors of the fit runs and of the holdout runs,
 // and (with a nominal reference) the holdout errors and the change from the nominal model by nominal phase.
 struct Sse {
@@ -154,10 +143,10 @@ CandidateResult Fit(const Dataset& ds, const std::vector<bool>& fit_mask, const 
   opt.solver.deadline = fit_deadline;
   const std::size_t k = c.params.size();
   std::vector<double> u(k);
-  for (std::size_t j = 0; j < k; ++j) u[j] = std::clamp(ToUnit(c.params[j], c.params[j].initial), 0.0, 1.0);
+  for (std::size_t j = 0; j < k; ++j) u[j] = std::clamp(Normalised(c.params[j], c.params[j].initial), 0.0, 1.0);
   auto values_of = [&](const std::vector<double>& uu) {
     std::vector<double> v(k);
-    for (std::size_t j = 0; j < k; ++j) v[j] = FromUnit(c.params[j], uu[j]);
+    for (std::size_t j = 0; j < k; ++j) v[j] = ValueAt(c.params[j], uu[j]);
     return v;
   };
   struct Ctx {
@@ -307,7 +296,7 @@ CandidateResult Fit(const Dataset& ds, const std::vector<bool>& fit_mask, const 
     const FreeParam& f = c.params[j];
     if (!std::isfinite(f.absent)) continue;
     has_effect_param = true;
-    if (std::abs(ToUnit(f, best[j]) - ToUnit(f, f.absent)) > 0.02) all_absent = false;
+    if (std::abs(Normalised(f, best[j]) - Normalised(f, f.absent)) > 0.02) all_absent = false;
   }
   if (has_effect_param && all_absent)
     res.disqualified = "fitted at the value where the effect vanishes: no such effect in the data";
@@ -362,6 +351,17 @@ CandidateResult Fit(const Dataset& ds, const std::vector<bool>& fit_mask, const 
 }
 
 }  // namespace
+
+double ValueAt(const FreeParam& f, double u) {
+  u = std::clamp(u, 0.0, 1.0);
+  if (f.log_scale) return std::exp(std::log(f.lower) + u * (std::log(f.upper) - std::log(f.lower)));
+  return f.lower + u * (f.upper - f.lower);
+}
+
+double Normalised(const FreeParam& f, double v) {
+  if (f.log_scale) return (std::log(v) - std::log(f.lower)) / (std::log(f.upper) - std::log(f.lower));
+  return (v - f.lower) / (f.upper - f.lower);
+}
 
 void SortRanking(std::vector<CandidateResult>* rows) {
   std::stable_sort(rows->begin(), rows->end(), [](const CandidateResult& a, const CandidateResult& b) {

@@ -34,6 +34,10 @@ struct FreeParam {
   double absent = std::numeric_limits<double>::quiet_NaN();
 };
 
+// A parameter's value at normalised coordinate u in [0, 1] of its box (log-scaled where log_scale), and back.
+double ValueAt(const FreeParam& f, double u);
+double Normalised(const FreeParam& f, double v);
+
 struct Candidate {
   std::string name;                  // the output name: "eddy_currents", "param:R", "a+b"
   std::vector<std::string> effects;  // effects switched on

@@ -3,6 +3,7 @@
 #include "common/format.h"
 #include "gap/predict.h"
 
+#include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
@@ -332,6 +333,22 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds_in, const model::PlantParams& nom
     if (std::isfinite(c)) d.trends.emplace_back(name, c);
   }
 
+  std::vector<bool> fit_mask;
+  for (const auto& sp : split) fit_mask.push_back(sp != "holdout");
+  const std::vector<Candidate> catalog =
+      !opt.candidates.empty() ? opt.candidates
+      : ds.format == kFormatValveRuns1
+          ? DefaultCandidates(nominal)
+          : DefaultCandidates(nominal, ds, fit_mask, d.has_reference ? d.reference.temperature_C : NAN);
+  if (opt.detection_limits) {
+    auto limits = DetectionLimits(ds, nominal, catalog, d.noise_floor_A, opt.attribution);
+    if (limits.ok()) {
+      d.detection_limits = std::move(*limits);
+    } else {
+      d.warnings.push_back("detection limits not computed: " + limits.status().message());
+    }
+  }
+
   if (!d.significant) {
     d.verdict = "none";
     d.verdict_reason = d.has_reference ? "the change from the reference is within its own fit error"
@@ -345,12 +362,7 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds_in, const model::PlantParams& nom
   }
 
   // Which: every candidate fitted on the fit runs, scored on the holdout runs.
-  std::vector<bool> fit_mask;
-  for (const auto& s : split) fit_mask.push_back(s != "holdout");
-  d.candidates = !opt.candidates.empty() ? opt.candidates
-                 : ds.format == kFormatValveRuns1
-                     ? DefaultCandidates(nominal)
-                     : DefaultCandidates(nominal, ds, fit_mask, d.has_reference ? d.reference.temperature_C : NAN);
+  d.candidates = catalog;
   AttributionOptions attribution = opt.attribution;
   {
     using Clock = std::chrono::steady_clock;
@@ -420,7 +432,13 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds_in, const model::PlantParams& nom
 
   const CandidateResult& best = d.ranking.front();
   const double gap = best.holdout_rmse_before_A - floor;
-  if (best.status.ok() && best.disqualified.empty() && best.closed >= kExplained) {
+  if (d.form_floor_A > d.noise_floor_A && best.holdout_rmse_before_A <= kSignificance * floor) {
+    // Nothing fits the fit runs better than the model, and the holdout runs are no worse than that: what is
+    // left is the model's own form error, not an effect.
+    d.verdict = "none";
+    d.verdict_reason = "what is left is the model's own form error: no candidate fits better, and the holdout "
+                       "runs are within " + FormatNumber(kSignificance) + "x of it";
+  } else if (best.status.ok() && best.disqualified.empty() && best.closed >= kExplained) {
     d.chosen = 0;
     d.verdict = best.name;
     char buf[160];
@@ -546,6 +564,14 @@ std::string DiagnosisJson(const Diagnosis& d) {
   if (d.parametric >= 0) j["parametric"] = RowJson(d.ranking[static_cast<std::size_t>(d.parametric)]);
   j["verdict"] = d.verdict;
   j["verdict_reason"] = d.verdict_reason;
+  nlohmann::ordered_json limits = nlohmann::ordered_json::array();
+  for (const auto& l : d.detection_limits) {
+    nlohmann::ordered_json params = nlohmann::ordered_json::object();
+    for (const auto& [k, v] : l.params) params[k] = v;
+    limits.push_back({{"effect", l.effect}, {"detectable", l.detectable}, {"below_range", l.below_range}, {"params", params},
+                      {"residual_at_limit_A", l.residual_at_limit_A}});
+  }
+  j["detection_limits"] = limits;
   if (!d.ranking.empty()) {
     j["confusable"] = d.confusable;
     j["margin_A"] = d.margin_A;
@@ -667,6 +693,23 @@ std::string DiagnosisReport(const Diagnosis& d) {
       os << "confusable with the verdict (the data cannot separate them):";
       for (const auto& c : d.confusable) os << " " << c;
       os << "\n";
+    }
+  }
+  if (!d.detection_limits.empty()) {
+    os << "detection limits (the smallest of each effect these runs would show at " << kSignificance
+       << "x the floor):\n";
+    for (const auto& l : d.detection_limits) {
+      std::string what;
+      for (const auto& [k, v] : l.params) {
+        const auto u = l.units.find(k);
+        what += (what.empty() ? "" : ", ") + k + " " + fmt::format("{:.3g}", v) +
+                (u != l.units.end() && !u->second.empty() && u->second != "1" ? " " + u->second : "");
+      }
+      os << "  " << l.effect << ": "
+         << (!l.detectable    ? "not detectable even at " + what + " (the range's end)"
+             : l.below_range ? "shown even at " + what + " (the range's weakest)"
+                             : what)
+         << "\n";
     }
   }
   os << "verdict: " << d.verdict << (d.verdict_reason.empty() ? "" : " (" + d.verdict_reason + ")") << "\n";

@@ -20,6 +20,7 @@
 #include "common/status.h"
 #include "gap/attribution.h"
 #include "gap/dataset.h"
+#include "gap/detection.h"
 #include "gap/identify.h"
 #include "gap/replay.h"
 #include "model/params.h"
@@ -73,6 +74,7 @@ struct DiagnoseOptions {
   AttributionOptions attribution;
   bool try_pairs = true;                 // when no single candidate explains the gap
   double budget_s = 50.0;                // wall time for the whole attribution (singles, then pairs)
+  bool detection_limits = true;          // the smallest magnitude of each effect the data would show
   std::size_t overlay_points = 600;      // per run
 };
 
@@ -113,6 +115,9 @@ struct Diagnosis {
   double margin_A = 0.0;                 // runner-up's holdout RMSE minus the best's
   std::array<double, kPhaseCount> phase_holdout_before_A{};
   std::vector<Overlay> overlays;
+  // The smallest magnitude of each catalogued effect this dataset would have shown (gap/detection.h): "none"
+  // means nothing above these.
+  std::vector<DetectionLimit> detection_limits;
   std::string verdict;             // "none", an effect name, "a+b", or "unknown"
   std::string verdict_reason;
   std::vector<std::string> warnings;

@@ -186,8 +186,7 @@ StatusOr<Identification> Identify(const Dataset& ds, const model::PlantParams& n
     ParamVerdict v;
     v.name = f.name;
     const double x = id.fit.params.at(f.name);
-    const double u = f.log_scale ? (std::log(x) - std::log(f.lower)) / (std::log(f.upper) - std::log(f.lower))
-                                 : (x - f.lower) / (f.upper - f.lower);
+    const double u = Normalised(f, x);
     v.at_bound = u < 0.005 || u > 0.995;
     const auto sig = id.fit.uncertainty.find(f.name);
     v.determined = sig != id.fit.uncertainty.end() && sig->second < 0.5 * (f.upper - f.lower);

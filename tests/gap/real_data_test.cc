@@ -294,6 +294,41 @@ TEST(DiagnoseOneDataset, FitColdHoldOutHotCarriesRWithCoppersCoefficient) {
   EXPECT_GE(d->ranking.front().closed, 0.9);
 }
 
+TEST(DetectionLimits, SayTheSmallestEffectTheseRunsWouldShow) {
+  // The same device at another temperature, with nothing changed: "none", with limits. A resistance that
+  // follows the temperature faster than the limit is then found; one well below it is not.
+  Device dev, warm_same = dev;
+  warm_same.temp_C = dev.temp_C + 15.0;  // 15 K warmer, and a resistance that does not follow it
+  const Dataset ref = Session(dev, 51), same = Session(warm_same, 52);
+  DiagnoseOptions opt;
+  opt.reference = &ref;
+  opt.reference_fit = ReferenceFit();
+  auto d = Diagnose(same, *model::Preset("ts98_coil"), opt);
+  ASSERT_TRUE(d.ok()) << d.status().message();
+  EXPECT_EQ(d->verdict, "none");
+  double alpha_limit = NAN;
+  for (const auto& l : d->detection_limits)
+    if (l.effect == "resistance_temperature") {
+      EXPECT_TRUE(l.detectable);
+      alpha_limit = l.params.at("resistance_temperature.alpha");
+    }
+  ASSERT_TRUE(std::isfinite(alpha_limit)) << DiagnosisReport(*d);
+  // Below and above the limit, 15 K warmer.
+  for (const double factor : {0.3, 3.0}) {
+    Device hot = dev;
+    hot.temp_C = dev.temp_C + 15.0;
+    hot.alpha_per_K = factor * alpha_limit;
+    const Dataset warm = Session(hot, 53);
+    auto dw = Diagnose(warm, *model::Preset("ts98_coil"), opt);
+    ASSERT_TRUE(dw.ok());
+    if (factor < 1.0) {
+      EXPECT_EQ(dw->verdict, "none") << factor << "\n" << DiagnosisReport(*dw);
+    } else {
+      EXPECT_TRUE(dw->verdict == "param:R" || dw->verdict == "resistance_temperature") << DiagnosisReport(*dw);
+    }
+  }
+}
+
 TEST(DiagnoseCandidates, NothingMechanicalWhereNothingMovesAndNoSampledLagOnReadings) {
   Device dev;
   const Dataset ds = Session(dev, 5);
