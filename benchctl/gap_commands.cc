@@ -132,8 +132,8 @@ StatusOr<gap::Dataset> Load(const std::string& dir) {
 
 // Parses --params / --reference-params SPEC lists and --fix NAME=V lists.
 StatusOr<gap::IdentifyOptions> IdentifyOptionsFrom(const std::vector<std::string>& params,
-                                                   const std::vector<std::string>& fixed, bool global,
-                                                   const std::string& flag) {
+                                                   const std::vector<std::string>& fixed,
+                                                   gap::IdentifyOptions::Global global, const std::string& flag) {
   gap::IdentifyOptions o;
   for (const auto& p : params) {
     auto spec = gap::ParseParamSpec(p, flag);
@@ -351,6 +351,7 @@ GapCli::GapCli(CLI::App* app, SharedOptions shared) : shared_(shared) {
       ->delimiter(',')
       ->required();
   identify_->add_option("--fix", fixed_, "parameters held at a value: NAME=VALUE,...")->delimiter(',');
+  identify_->add_flag("--global", global_, "a global search before the local fit (default: when a box spans > 3.5x or crosses 0)");
   identify_->add_flag("--no-global", no_global_, "local fit only (from the start values), no global search first");
   identify_->add_option("--model", model_, "preset name or model file (ModelSpec JSON); default: the dataset's");
   identify_->add_option("--out", out_path_, "write the identified model (ModelSpec JSON)");
@@ -408,7 +409,7 @@ int GapCli::Diagnose(const ClientFactory& make_client) {
     reference = std::move(*ref);
     if (nominal->driver) reference.driver = *nominal->driver;
     const auto names = reference_params_.empty() ? DefaultReferenceParams(reference, nominal->plant) : reference_params_;
-    auto fit = IdentifyOptionsFrom(names, {}, true, "--reference-params");
+    auto fit = IdentifyOptionsFrom(names, {}, gap::IdentifyOptions::Global::kAuto, "--reference-params");
     if (!fit.ok()) return Fail(fit.status());
     options.reference = &reference;
     options.reference_fit = *fit;
@@ -422,11 +423,16 @@ int GapCli::Identify() {
   auto nominal = NominalFor(*ds, model_);
   if (!nominal.ok()) return Fail(nominal.status());
   if (nominal->driver) ds->driver = *nominal->driver;
-  auto options = IdentifyOptionsFrom(params_, fixed_, !no_global_, "--params");
+  if (global_ && no_global_) return Fail(Status::InvalidArgument("identify: --global and --no-global exclude each other"));
+  auto options = IdentifyOptionsFrom(params_, fixed_,
+                                     global_      ? gap::IdentifyOptions::Global::kOn
+                                     : no_global_ ? gap::IdentifyOptions::Global::kOff
+                                                  : gap::IdentifyOptions::Global::kAuto,
+                                     "--params");
   if (!options.ok()) return Fail(options.status());
   if (isatty(STDERR_FILENO))
     std::fprintf(stderr, "benchctl: identifying %zu parameters on %zu runs of %s%s ...\n", options->params.size(),
-               ds->runs.size(), dataset_dir_.c_str(), options->global ? " (global search, then local)" : "");
+               ds->runs.size(), dataset_dir_.c_str(), "");
   auto id = gap::Identify(*ds, nominal->plant, *options);
   if (!id.ok()) return Fail(id.status());
   if (!out_path_.empty()) {

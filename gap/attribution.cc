@@ -329,10 +329,19 @@ CandidateResult Fit(const Dataset& ds, const std::vector<bool>& fit_mask, const 
       Eigen::FullPivLU<Eigen::MatrixXd> lu(JtJ);
       // A parameter the residuals do not move (a zero column) or a near-singular J^T J: not determined, and
       // no uncertainty is reported for any parameter (0 would read as "exactly known").
-      const double cond_limit = 1e12;
-      Eigen::JacobiSVD<Eigen::MatrixXd> svd(JtJ);
-      const auto& sv = svd.singularValues();
-      const bool well_posed = lu.isInvertible() && sv(0) > 0.0 && sv(sv.size() - 1) > sv(0) / cond_limit;
+      // Judged on J^T J with its columns scaled to unit norm (a correlation-like matrix), so that units (ohm
+      // against metres) do not pass for ill-conditioning.
+      const double cond_limit = 1e10;
+      Eigen::VectorXd d = JtJ.diagonal().cwiseSqrt();
+      bool zero_column = false;
+      for (Eigen::Index j = 0; j < d.size(); ++j) zero_column = zero_column || !(d(j) > 0.0);
+      bool well_posed = lu.isInvertible() && !zero_column;
+      if (well_posed) {
+        const Eigen::MatrixXd scaled = d.cwiseInverse().asDiagonal() * JtJ * d.cwiseInverse().asDiagonal();
+        Eigen::JacobiSVD<Eigen::MatrixXd> svd(scaled);
+        const auto& sv = svd.singularValues();
+        well_posed = sv(0) > 0.0 && sv(sv.size() - 1) > sv(0) / cond_limit;
+      }
       if (well_posed) {
         const Eigen::MatrixXd cov = s2 * lu.inverse();
         for (std::size_t j = 0; j < k; ++j)

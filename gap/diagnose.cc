@@ -432,9 +432,10 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds_in, const model::PlantParams& nom
 
   const CandidateResult& best = d.ranking.front();
   const double gap = best.holdout_rmse_before_A - floor;
-  if (d.form_floor_A > d.noise_floor_A && best.holdout_rmse_before_A <= kSignificance * floor) {
-    // Nothing fits the fit runs better than the model, and the holdout runs are no worse than that: what is
-    // left is the model's own form error, not an effect.
+  if (d.has_reference && d.form_floor_A > d.noise_floor_A && best.holdout_rmse_before_A <= kSignificance * floor) {
+    // Against a reference: nothing fits this session's fit runs better than the device as identified there,
+    // and the holdout runs are no worse: nothing changed but the model's own form error. (Without a
+    // reference the same picture is also what an effect outside the catalog looks like: that stays unknown.)
     d.verdict = "none";
     d.verdict_reason = "what is left is the model's own form error: no candidate fits better, and the holdout "
                        "runs are within " + FormatNumber(kSignificance) + "x of it";

@@ -123,7 +123,7 @@ StatusOr<Identification> Identify(const Dataset& ds, const model::PlantParams& n
     return Status::InvalidArgument("--params: name at least one parameter (e.g. R,L or R=5:100,L=0.01:2)");
   Identification id;
   id.model = ds.model;
-  id.global = options.global;
+
   id.fixed = options.fixed;
   Candidate c{"identify", {}, {}, options.fixed};
   auto add_effect = [&](const std::string& name) {
@@ -159,6 +159,9 @@ StatusOr<Identification> Identify(const Dataset& ds, const model::PlantParams& n
     add_effect(spec.name);
   }
   id.free = c.params;
+  bool wide = false;
+  for (const auto& f : c.params) wide = wide || (f.lower > 0.0 ? f.upper / f.lower > 3.5 : true);
+  id.global = options.global == IdentifyOptions::Global::kOn || (options.global == IdentifyOptions::Global::kAuto && wide);
   // The split and the noise floor, as the diagnosis makes them.
   DiagnoseOptions where_only;
   where_only.attribute = false;
@@ -174,7 +177,8 @@ StatusOr<Identification> Identify(const Dataset& ds, const model::PlantParams& n
   // in periodic steady state costs microseconds; waveform sessions cost more and keep their own budget).
   opt.max_evaluations = std::max(opt.max_evaluations, 200 * k);
   opt.xtol_rel = std::min(opt.xtol_rel, 1e-6);
-  opt.global_evaluations = options.global ? options.global_evaluations_per_param * k : 0;
+  opt.global_evaluations = id.global ? options.global_evaluations_per_param * k : 0;
+  opt.candidate_budget_s = options.budget_s;
   auto res = Attribute(ds, mask, nominal, {c}, d->noise_floor_A, opt);
   if (!res.ok()) return res.status();
   id.fit = res->front();
@@ -203,7 +207,7 @@ StatusOr<Identification> Identify(const Dataset& ds, const model::PlantParams& n
                                   const std::vector<std::string>& names, const AttributionOptions& options) {
   IdentifyOptions o;
   for (const auto& n : names) o.params.push_back({n});
-  o.global = false;
+  o.global = IdentifyOptions::Global::kOff;
   o.attribution = options;
   return Identify(ds, nominal, o);
 }

@@ -33,7 +33,11 @@ StatusOr<std::pair<std::string, double>> ParseFixed(const std::string& text, con
 struct IdentifyOptions {
   std::vector<ParamSpec> params;
   std::vector<std::pair<std::string, double>> fixed;  // set before the fit and kept
-  bool global = true;                 // global search before the local fit
+  // Global search before the local fit: kAuto runs it when some box spans more than 3.5x (or crosses 0) (a device from
+  // scratch); the default boxes (nominal x [0.5, 1.5]) are for a local re-fit.
+  enum class Global { kAuto, kOn, kOff };
+  Global global = Global::kAuto;
+  double budget_s = 600.0;            // wall time for the whole identification
   int global_evaluations_per_param = 150;
   AttributionOptions attribution;
 };
