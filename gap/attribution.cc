@@ -394,15 +394,26 @@ StatusOr<model::DriverParams> ApplyCandidateDriver(const model::DriverParams& dr
   return d;
 }
 
-StatusOr<model::DriverParams> FittedDriver(const model::DriverParams& driver, const Candidate& c,
-                                           const CandidateResult& r) {
+namespace {
+
+// A result's fitted values in the candidate's parameter order.
+StatusOr<std::vector<double>> FittedValues(const Candidate& c, const CandidateResult& r) {
   std::vector<double> values;
   for (const auto& p : c.params) {
     auto it = r.params.find(p.name);
     if (it == r.params.end()) return Status::Internal("candidate " + c.name + ": no fitted " + p.name);
     values.push_back(it->second);
   }
-  return ApplyCandidateDriver(driver, c, values);
+  return values;
+}
+
+}  // namespace
+
+StatusOr<model::DriverParams> FittedDriver(const model::DriverParams& driver, const Candidate& c,
+                                           const CandidateResult& r) {
+  auto values = FittedValues(c, r);
+  if (!values.ok()) return values.status();
+  return ApplyCandidateDriver(driver, c, *values);
 }
 
 StatusOr<model::PlantParams> ApplyCandidate(const model::PlantParams& nominal, const Candidate& c,
@@ -565,13 +576,9 @@ Candidate PairCandidate(const Candidate& a, const Candidate& b) {
 
 StatusOr<model::PlantParams> FittedPlant(const model::PlantParams& nominal, const Candidate& c,
                                          const CandidateResult& r) {
-  std::vector<double> values;
-  for (const auto& p : c.params) {
-    auto it = r.params.find(p.name);
-    if (it == r.params.end()) return Status::Internal("candidate " + c.name + ": no fitted " + p.name);
-    values.push_back(it->second);
-  }
-  return ApplyCandidate(nominal, c, values);
+  auto values = FittedValues(c, r);
+  if (!values.ok()) return values.status();
+  return ApplyCandidate(nominal, c, *values);
 }
 
 }  // namespace vb::gap

@@ -698,17 +698,6 @@ double StartCurrent(const RunData& run, std::size_t n) {
   return n > 0 ? sum / static_cast<double>(n) : 0.0;
 }
 
-// White-noise sigma from second differences (the smooth current barely contributes at dense sampling).
-double NoiseSigmaOf(const std::vector<double>& i) {
-  if (i.size() < 3) return 0.0;
-  double s = 0.0;
-  for (std::size_t k = 2; k < i.size(); ++k) {
-    const double d2 = i[k] - 2.0 * i[k - 1] + i[k - 2];
-    s += d2 * d2;
-  }
-  return std::sqrt(s / static_cast<double>(i.size() - 2) / 6.0);
-}
-
 }  // namespace
 
 std::vector<std::string> DefaultKnownModels() { return {"taghizadeh2009"}; }
@@ -748,7 +737,7 @@ StatusOr<Dataset> LoadDataset(const std::string& directory, const std::vector<st
       while (idle < run.gate.size() && run.gate[idle] == 0) ++idle;
       idle = std::min<std::size_t>(idle, 20);
       const double first = StartCurrent(run, idle) - ds.sensor.offset_A;
-      const double noise = std::max(NoiseSigmaOf(run.i_A), std::isfinite(ds.sensor.noise_A) ? ds.sensor.noise_A : 0.0);
+      const double noise = std::max(SecondDifferenceSigma(run.i_A), std::isfinite(ds.sensor.noise_A) ? ds.sensor.noise_A : 0.0);
       double peak = 0.0;
       for (double i : run.i_A) peak = std::max(peak, std::abs(i - ds.sensor.offset_A));
       if (idle >= 3 && std::abs(first) > std::max(6.0 * noise, 0.02 * peak)) {
@@ -764,6 +753,16 @@ StatusOr<Dataset> LoadDataset(const std::string& directory, const std::vector<st
     }
   }
   return ds;
+}
+
+double SecondDifferenceSigma(const std::vector<double>& i) {
+  if (i.size() < 3) return 0.0;
+  double s = 0.0;
+  for (std::size_t k = 2; k < i.size(); ++k) {
+    const double d2 = i[k] - 2.0 * i[k - 1] + i[k - 2];
+    s += d2 * d2;
+  }
+  return std::sqrt(s / static_cast<double>(i.size() - 2) / 6.0);
 }
 
 std::string_view RunKindName(RunKind k) {

@@ -99,6 +99,10 @@ struct Dataset {
 // presets pass them instead (e.g. model::PresetNames()).
 std::vector<std::string> DefaultKnownModels();
 
+// White-noise sigma of a densely sampled current from its second differences, sqrt(mean(d2^2) / 6): the
+// smooth coil current barely contributes at 50 kHz.
+double SecondDifferenceSigma(const std::vector<double>& i);
+
 // The standard error of each measured value from what the dataset says: a reading's spread over its repeats,
 // the ADC step and the declared noise (per raw reading, divided by averaging and repeats). Empty when the
 // dataset says nothing of its noise (waveforms estimate it from the data instead).

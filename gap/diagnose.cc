@@ -17,16 +17,6 @@ namespace vb::gap {
 
 namespace {
 
-double NoiseSigma(const std::vector<double>& i) {
-  if (i.size() < 3) return 0.0;
-  double s = 0.0;
-  for (std::size_t k = 2; k < i.size(); ++k) {
-    const double d2 = i[k] - 2.0 * i[k - 1] + i[k - 2];
-    s += d2 * d2;
-  }
-  return std::sqrt(s / static_cast<double>(i.size() - 2) / 6.0);
-}
-
 // Without a split in the manifest: hold out the runs at the supply voltage seen least often (ties: the
 // highest), so that holdout conditions differ from fit conditions, and say so.
 std::vector<std::string> MakeSplit(const Dataset& ds, std::string* note) {
@@ -247,7 +237,7 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds_in, const model::PlantParams& nom
     // The noise of each value: declared (spread over repeats, ADC step, declared noise) and, for waveforms,
     // estimated from the data; the larger of the two.
     const std::vector<double> se = DeclaredStandardErrors(ds, run);
-    const double sigma = run.kind == RunKind::kWaveform ? NoiseSigma(run.i_A) : 0.0;
+    const double sigma = run.kind == RunKind::kWaveform ? SecondDifferenceSigma(run.i_A) : 0.0;
     if (se.empty() && run.kind != RunKind::kWaveform) {
       return Status::InvalidArgument("run " + run.id + ": no noise level: its readings carry no spread (sd_A with "
                                      "repeats) and the dataset declares none (sensor.noise_A or sensor.adc_lsb_V)");
