@@ -35,6 +35,9 @@ constexpr std::int64_t kWalLimitBytes =
     static_cast<std::int64_t>(kWalWaitAbovePages + kCheckpointEveryPages) * kPageSizeBytes;
 constexpr std::int32_t kMaxListLimit = 1000;  // RunFilter::limit upper bound
 constexpr const char* kRecoverReason = "server restarted while running";
+// A run interrupted by a server stop this many times is failed, not re-queued again: whatever it does (a spec
+// that exhausts memory, a bench that crashes the process) would take the server down at every start.
+constexpr int kMaxInterruptions = 3;
 
 // Column list shared by every query that builds a RunRecord (ReadRun() reads them in this order).
 constexpr const char* kRunColumns =
@@ -151,6 +154,7 @@ class SqliteStore final : public Store {
   Status AddHistory(std::int64_t run_id, RunStatus status, double at, const std::string& reason);
   StatusOr<RunRecord> ReadRun(const Stmt& row);  // a row of kRunColumns, with its tags
   StatusOr<RunRecord> LoadRun(std::int64_t run_id);
+  StatusOr<std::int64_t> InterruptionsOfRun(std::int64_t run_id);  // 'interrupted' entries in its history
 
   sql::Connection conn_;
   int version_;
@@ -432,6 +436,14 @@ StatusOr<bool> SqliteStore::CancelRequested(std::int64_t run_id) {
   return requested;
 }
 
+StatusOr<std::int64_t> SqliteStore::InterruptionsOfRun(std::int64_t run_id) {
+  VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT COUNT(*) FROM status_history WHERE run_id = ?1 AND "
+                                                "status = 'interrupted'"));
+  st.Bind(1, run_id);
+  VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+  return row ? st.Int(0) : 0;
+}
+
 StatusOr<int> SqliteStore::RecoverAfterCrash() {
   struct Running {
     std::int64_t id;
@@ -452,6 +464,12 @@ StatusOr<int> SqliteStore::RecoverAfterCrash() {
     }
   }
   const double now = NowUnixS();
+  Status count_error;
+  auto InterruptionsOf = [&](std::int64_t id) -> std::int64_t {
+    auto n = InterruptionsOfRun(id);
+    if (!n.ok()) count_error = n.status();
+    return n.ok() ? *n : 0;
+  };
   for (const Running& r : running) {
     VB_DB_ASSIGN_OR_RETURN(Stmt stop, conn_.Prepare("UPDATE runs SET status = 'interrupted', reason = ?2, "
                                                     "finished = ?3 WHERE id = ?1"));
@@ -471,6 +489,14 @@ StatusOr<int> SqliteStore::RecoverAfterCrash() {
       cancel.Bind(2, reason);
       VB_RETURN_IF_ERROR(cancel.Run());
       VB_RETURN_IF_ERROR(AddHistory(r.id, RunStatus::kCancelled, now, reason));
+    } else if (std::int64_t times = 0; r.requeue && (times = InterruptionsOf(r.id)) >= kMaxInterruptions) {
+      const std::string reason = Cat("the server stopped ", times, " times while this run ran: not re-queued again "
+                                     "(a run that takes the server down; see the server's log)");
+      VB_DB_ASSIGN_OR_RETURN(Stmt fail, conn_.Prepare("UPDATE runs SET status = 'failed', reason = ?2 WHERE id = ?1"));
+      fail.Bind(1, r.id);
+      fail.Bind(2, reason);
+      VB_RETURN_IF_ERROR(fail.Run());
+      VB_RETURN_IF_ERROR(AddHistory(r.id, RunStatus::kFailed, now, reason));
     } else if (r.requeue) {
       // Back in the queue with its id, priority and age; the bench it asked for (not the one that was running
       // it); the partial trace of the interrupted attempt is dropped, the rerun writes its own from chunk 0.
@@ -485,6 +511,7 @@ StatusOr<int> SqliteStore::RecoverAfterCrash() {
       VB_RETURN_IF_ERROR(AddHistory(r.id, RunStatus::kQueued, now, kRecoverReason));
     }
   }
+  VB_RETURN_IF_ERROR(count_error);
   VB_RETURN_IF_ERROR(txn.Commit());
   return static_cast<int>(running.size());
 }

@@ -139,7 +139,9 @@ class Store {
   virtual StatusOr<RunStatus> RequestCancel(std::int64_t run_id, const std::string& reason) = 0;
   virtual StatusOr<bool> CancelRequested(std::int64_t run_id) = 0;
   // On server start: every run still marked running becomes interrupted; those with requeue_on_interrupt
-  // are queued again (keeping their id, priority and age). Returns how many were interrupted.
+  // are queued again (keeping their id, priority and age), unless this was their third interruption: a run
+  // that keeps taking the server down is failed with the reason (a poison run). Returns how many were
+  // interrupted.
   virtual StatusOr<int> RecoverAfterCrash() = 0;
 
   virtual StatusOr<RunRecord> GetRun(std::int64_t run_id) = 0;

@@ -827,6 +827,31 @@ TEST(StoreRecoveryTest, RecoverAfterCrashRequeuesOrInterrupts) {
   EXPECT_EQ(*store->RecoverAfterCrash(), 0);
 }
 
+// A run that takes the server down at every attempt is re-queued twice, then failed with the reason.
+TEST(StoreRecoveryTest, APoisonRunIsFailedAtItsThirdInterruption) {
+  const std::string path = TempDb("poison");
+  std::int64_t id = 0;
+  {
+    auto store = OpenOrDie(path);
+    id = Submit(*store, {MakeRun("poison", 1)})[0];
+  }
+  for (int attempt = 1; attempt <= 3; ++attempt) {
+    auto store = OpenOrDie(path);
+    ASSERT_EQ(ClaimId(*store, "emulated", "bench-x"), id) << attempt;
+    // ... and the "server" dies while it runs.
+    auto reopened = OpenOrDie(path);
+    ASSERT_EQ(*reopened->RecoverAfterCrash(), 1);
+    const auto run = reopened->GetRun(id);
+    if (attempt < 3) {
+      EXPECT_EQ(run->status, RunStatus::kQueued) << attempt;
+    } else {
+      EXPECT_EQ(run->status, RunStatus::kFailed);
+      EXPECT_NE(run->reason.find("stopped 3 times while this run ran"), std::string::npos) << run->reason;
+      EXPECT_EQ(*reopened->RecoverAfterCrash(), 0) << "a clean start after it";
+    }
+  }
+}
+
 // Runs `child` in a forked process (it must end with _exit) and returns its pid.
 template <typename F>
 pid_t Fork(F child) {
