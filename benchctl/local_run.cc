@@ -46,6 +46,7 @@ StatusOr<std::vector<LocalRunResult>> RunLocal(LocalSubmission sub, db::Store* g
   const runs::BenchSetup bench = runs::LocalEmulatorSetup();
   runs::Policy policy;
   policy.benches = {bench};
+  policy.limits.max_trace_bytes_per_run = runs::LocalTraceBudgetBytes();
   if (sub.realtime)
     for (auto& s : sub.specs) s.set_realtime(true);
   const char* user = std::getenv("USER");

@@ -84,7 +84,19 @@ RunSummary RunImpl(const Experiment& e, hw::Bench& bench, Trace* trace, const st
   const auto wall0 = std::chrono::steady_clock::now();
   trace->Clear();
   const double dt_sample = e.run.sample_rate_Hz > 0.0 ? 1.0 / e.run.sample_rate_Hz : 0.0;
-  trace->Reserve(dt_sample > 0.0 ? static_cast<size_t>(std::floor(e.duration_s / dt_sample + 1e-9)) + 2 : 0);
+  const double samples = dt_sample > 0.0 ? std::floor(e.duration_s / dt_sample + 1e-9) + 2.0 : 0.0;
+  try {
+    trace->Reserve(static_cast<size_t>(samples));
+  } catch (const std::exception&) {
+    // Admission budgets traces (runs/admit.h); a memory cap it cannot see (a cgroup) still must not end the
+    // process: the run fails with the reason, before the bench is touched.
+    trace->Clear();
+    sum.termination = RunSummary::Termination::kFailed;
+    sum.message = "recording: cannot reserve memory for " + std::to_string(static_cast<long long>(samples)) +
+                  " samples (" + std::to_string(static_cast<long long>(samples * Trace::kBytesPerSample / 1e6)) +
+                  " MB); lower recording.rate_Hz or duration_s";
+    return sum;
+  }
   Recorder recorder(trace, &e.reference, &e.plant, e.run.supply_pressure_Pa, dt_sample, e.average_window_s);
 
   auto fail = [&](const Status& st, RunSummary::Termination term) {

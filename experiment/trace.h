@@ -26,6 +26,8 @@ struct Trace {
   std::vector<double> switch_count;     // gate transitions so far
   std::uint64_t dropped = 0;            // samples that did not fit the reserved capacity
 
+  // Memory one sample takes in every channel: 11 doubles and the gate byte (admission budgets runs by it).
+  static constexpr std::size_t kBytesPerSample = 11 * sizeof(double) + sizeof(std::int8_t);
   size_t size() const { return t_s.size(); }
   void Reserve(size_t n);
   void Clear();

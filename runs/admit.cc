@@ -1,5 +1,9 @@
 #include "runs/admit.h"
 
+#include <unistd.h>
+
+#include <cmath>
+
 #include "common/format.h"
 #include "experiment/capabilities.h"
 
@@ -48,6 +52,12 @@ StatusOr<const BenchSetup*> Match(const experiment::RunPoint& p, const experimen
 
 }  // namespace
 
+double LocalTraceBudgetBytes() {
+  const long pages = sysconf(_SC_PHYS_PAGES), page = sysconf(_SC_PAGE_SIZE);
+  if (pages <= 0 || page <= 0) return 1e9;
+  return 0.25 * static_cast<double>(pages) * static_cast<double>(page);
+}
+
 StatusOr<Admitted> Admit(const Submission& submission, const Policy& policy) {
   const Limits& lim = policy.limits;
   const auto& specs = submission.specs;
@@ -92,6 +102,16 @@ StatusOr<Admitted> Admit(const Submission& submission, const Policy& policy) {
         return ctxt(Status::ResourceExhausted("recording.rate_Hz: " + FormatNumber(e->run.sample_rate_Hz) +
                                               " Hz exceeds the server limit of " + FormatNumber(lim.max_record_rate_Hz) +
                                               " Hz"));
+      // The trace's memory, computed in double (no overflow): samples as the Runner reserves them.
+      const double samples = e->run.sample_rate_Hz > 0.0 ? std::floor(e->duration_s * e->run.sample_rate_Hz) + 2.0 : 0.0;
+      const double bytes = samples * static_cast<double>(experiment::Trace::kBytesPerSample);
+      if (bytes > lim.max_trace_bytes_per_run)
+        return ctxt(Status::ResourceExhausted(
+            "recording: the trace would take " + FormatNumber(std::round(bytes / 1e6)) + " MB (" +
+            FormatNumber(samples) + " samples at " + FormatNumber(e->run.sample_rate_Hz) + " Hz over " +
+            FormatNumber(e->duration_s) + " s), over the per-run budget of " +
+            FormatNumber(std::round(lim.max_trace_bytes_per_run / 1e6)) +
+            " MB; lower recording.rate_Hz or duration_s"));
       // 4. A bench.
       auto bench = Match(p, *e, policy.benches);
       if (!bench.ok()) return ctxt(bench.status());

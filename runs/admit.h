@@ -3,7 +3,8 @@
 // server's configured limits and benches; the local emulator, which takes any spec).
 //   1. each spec within the size limit;
 //   2. expanded (variants, sweeps, repeats) into runs with their RunKey, within the run-count limit;
-//   3. each run built (every field validated, errors name it), within the duration and recording-rate limits;
+//   3. each run built (every field validated, errors name it), within the duration and recording-rate limits
+//      and the trace's memory budget;
 //   4. each run matched to a bench that can run it (class, requested name, capabilities): decided here, at
 //      submission, never at run time;
 // then Enqueue() checks the submitter's queued-run limit and stores the batch in one transaction.
@@ -28,7 +29,13 @@ struct Limits {
   double max_record_rate_Hz = std::numeric_limits<double>::infinity();
   std::uint64_t max_queued_runs_per_user = std::numeric_limits<std::uint64_t>::max();
   std::uint64_t max_runs_per_submission = 100'000;
+  // Memory a run's trace takes while it runs (samples x experiment::Trace::kBytesPerSample): a run that would
+  // not fit is refused at submission instead of taking the process down when it starts.
+  double max_trace_bytes_per_run = std::numeric_limits<double>::infinity();
 };
+
+// The local mode's trace budget: a quarter of this machine's physical memory.
+double LocalTraceBudgetBytes();
 
 struct Policy {
   Limits limits;

@@ -75,6 +75,21 @@ TEST(Runner, CancelStopsTheRunAndLeavesTheBenchSafe) {
   EXPECT_EQ(bench.simulator().gate(), 0);
 }
 
+// A trace no memory can hold fails the run with the reason; it does not end the process (std::bad_alloc).
+TEST(Runner, ATraceThatCannotBeReservedFailsTheRunWithTheReason) {
+  auto spec = LoadSpecFile(Example("standard/e1.json"));
+  ASSERT_TRUE(spec.ok());
+  auto e = BuildExperiment(*spec);
+  ASSERT_TRUE(e.ok());
+  e->duration_s = 1e9;  // 1e9 s at the spec's rate: beyond any vector's max_size
+  e->run.sample_rate_Hz = 1e6;
+  hw::EmulatedBench bench(EmulatedBenchFor(*e));
+  Trace trace;
+  RunSummary s = Runner::Run(*e, bench, &trace);
+  EXPECT_EQ(s.termination, RunSummary::Termination::kFailed);
+  EXPECT_NE(s.message.find("recording: cannot reserve memory"), std::string::npos) << s.message;
+}
+
 TEST(Runner, RealtimeRunReportsJitter) {
   auto spec = LoadSpecFile(Example("standard/e3.json"));
   ASSERT_TRUE(spec.ok());

@@ -37,6 +37,23 @@ Policy ServerPolicy() {
   return p;
 }
 
+// A run whose trace would not fit the per-run memory budget is refused at submission, naming what to lower.
+TEST(Admit, ATraceOverTheMemoryBudgetIsRefusedAtSubmission) {
+  Policy p = ServerPolicy();
+  p.limits.max_trace_bytes_per_run = 10e6;  // 10 MB
+  auto spec = E3();
+  spec.set_duration_s(1.0);
+  spec.mutable_recording()->set_rate_hz(1e6);  // 1e6 samples x 89 bytes = 89 MB
+  auto a = Admit({"alice", "big", {spec}, {}, ""}, p);
+  ASSERT_FALSE(a.ok());
+  EXPECT_EQ(a.status().code(), StatusCode::kResourceExhausted);
+  EXPECT_NE(a.status().message().find("recording: the trace would take 89 MB"), std::string::npos)
+      << a.status().message();
+  EXPECT_NE(a.status().message().find("over the per-run budget of 10 MB"), std::string::npos);
+  spec.mutable_recording()->set_rate_hz(1e5);  // 8.9 MB: within it
+  EXPECT_TRUE(Admit({"alice", "small", {spec}, {}, ""}, p).ok());
+}
+
 TEST(Admit, SweepAndRepeatsBecomeTypedKeysAndTags) {
   auto spec = E3();
   auto* ax = spec.add_sweep();
