@@ -138,6 +138,9 @@ StatusOr<std::vector<ReadingsSession>> ConvertReadingsCsv(const std::string& csv
     if (!(v[11] >= 1.0) || v[11] > 1e9 || v[11] != std::floor(v[11])) return bad(11, "is not a whole number >= 1");
     const double gain = 1.0 + v[2] / opt.amp_ref_ohm;
     const double A_per_mV = 1e-3 / (opt.shunt_ohm * gain);
+    // The dataset reader takes currents in [-1000, 1000] A: refuse here what it would refuse there.
+    if (std::abs(v[9] * A_per_mV) > 1e3)
+      return bad(9, "mV is " + FormatNumber(v[9] * A_per_mV) + " A through the shunt and amplifier, outside [-1000, 1000] A");
     const std::string device(f[static_cast<std::size_t>(col[0])]);
     if (device.empty()) return Status::InvalidArgument(at + " column device: empty");
     if (!IsUtf8(device)) return Status::InvalidArgument(at + " column device: not valid UTF-8");
