@@ -3,12 +3,14 @@
 #include <google/protobuf/descriptor.h>
 #include <google/protobuf/util/json_util.h>
 
+#include <charconv>
 #include <cmath>
 #include <fstream>
 #include <sstream>
 
 #include "common/format.h"
 #include "control/open_loop_pwm.h"
+#include "experiment/bounds.h"
 #include "experiment/controllers.h"
 
 namespace vb::experiment {
@@ -70,7 +72,10 @@ StatusOr<std::vector<PathToken>> ParsePath(std::string_view path) {
       std::string inner(part.substr(br + 1, part.size() - br - 2));
       if (!inner.empty() && inner.find_first_not_of("0123456789") == std::string::npos) {
         tok.has_index = true;
-        tok.index = std::stoi(inner);
+        // from_chars, not stoi: an index too large for int is an error, not an exception.
+        const auto [end, ec] = std::from_chars(inner.data(), inner.data() + inner.size(), tok.index);
+        if (ec != std::errc() || end != inner.data() + inner.size())
+          return Status::InvalidArgument("field path '" + std::string(path) + "': index " + inner + " is too large");
       } else {
         tok.has_key = true;
         tok.key = inner;
@@ -167,6 +172,19 @@ Status WalkPath(pb::Message* msg, std::string_view path, double* value, bool set
       continue;
     }
     if (!last || !IsNumeric(f)) return Status::InvalidArgument(where + ": '" + tok.name + "' is not a number");
+    if (set && f->cpp_type() != pb::FieldDescriptor::CPPTYPE_DOUBLE &&
+        f->cpp_type() != pb::FieldDescriptor::CPPTYPE_FLOAT) {
+      // An integer field takes whole values of its type only; a cast of anything else would be undefined.
+      const bool is_signed = f->cpp_type() == pb::FieldDescriptor::CPPTYPE_INT32 ||
+                             f->cpp_type() == pb::FieldDescriptor::CPPTYPE_INT64;
+      const bool wide = f->cpp_type() == pb::FieldDescriptor::CPPTYPE_INT64 ||
+                        f->cpp_type() == pb::FieldDescriptor::CPPTYPE_UINT64;
+      const double lo = is_signed ? (wide ? -0x1p63 : -0x1p31) : 0.0;
+      const double hi = is_signed ? (wide ? 0x1p63 : 0x1p31) : (wide ? 0x1p64 : 0x1p32);
+      if (!(*value >= lo && *value < hi) || *value != std::floor(*value))
+        return Status::InvalidArgument(where + ": " + FormatNumber(*value) + " is not a whole number in the range of " +
+                                       f->type_name());
+    }
     if (set) {
       const double v = *value;
       switch (f->cpp_type()) {
@@ -217,6 +235,11 @@ StatusOr<std::vector<ExperimentSpec>> ExpandSweep(const ExperimentSpec& spec, si
 }
 
 StatusOr<std::vector<RunPoint>> ExpandRuns(const ExperimentSpec& spec, size_t max_runs) {
+  // Bounds first, and the count before any copy: 4294967295 repeats is a field-named error, not a bad_alloc.
+  VB_RETURN_IF_ERROR(CheckSpecBounds(spec));
+  if (const std::uint64_t count = CountRuns(spec); count > max_runs)
+    return Status::ResourceExhausted("sweep: expands to " + std::to_string(count) + " runs, more than " +
+                                     std::to_string(max_runs) + " runs");
   if (spec.variants_size() > 0) {
     std::vector<RunPoint> out;
     for (int v = 0; v < spec.variants_size(); ++v) {
@@ -255,6 +278,15 @@ StatusOr<std::vector<RunPoint>> ExpandRuns(const ExperimentSpec& spec, size_t ma
     ExperimentSpec probe = spec;
     auto st = SetFieldByPath(&probe, ax.field(), values[0]);
     if (!st.ok()) return st.WithContext(field + ".field");
+    // Every value within the swept field's bound (a grid is linear: its ends suffice).
+    for (size_t k = 0; k < values.size(); ++k) {
+      if (ax.has_grid() && k != 0 && k + 1 != values.size()) continue;
+      st = SetFieldByPath(&probe, ax.field(), values[k]);
+      if (st.ok()) st = CheckSpecBounds(probe);
+      if (!st.ok())
+        return st.WithContext(ax.has_grid() ? field + ".grid." + (k == 0 ? "start" : "stop")
+                                            : field + ".values[" + std::to_string(k) + "]");
+    }
     axes.emplace_back(ax.field(), std::move(values));
   }
   const uint32_t repeats = spec.repeats() == 0 ? 1 : spec.repeats();
@@ -370,6 +402,7 @@ StatusOr<Experiment> BuildExperiment(const ExperimentSpec& spec) {
   e.spec = spec;
   if (spec.sweep_size() > 0 || spec.repeats() > 1 || spec.variants_size() > 0)
     return Status::InvalidArgument("sweep: expand variants, sweeps and repeats before building a single run");
+  VB_RETURN_IF_ERROR(CheckSpecBounds(spec));
   if (!(spec.duration_s() > 0.0) || !std::isfinite(spec.duration_s()))
     return Status::InvalidArgument("duration_s: must be > 0, got " + FormatNumber(spec.duration_s()));
   e.duration_s = spec.duration_s();
@@ -394,7 +427,7 @@ StatusOr<Experiment> BuildExperiment(const ExperimentSpec& spec) {
   if (e.disturbance.active() && !kind.empty() && kind != "emulated")
     return Status::InvalidArgument("perturbation: disturbances can only be injected on an emulated bench");
   const auto& c = spec.conditions();
-  e.run.supply_V = c.supply_v() == 0.0 ? kDefaultSupply_V : c.supply_v();
+  e.run.supply_V = c.has_supply_v() ? c.supply_v() : kDefaultSupply_V;
   if (!(e.run.supply_V > 0.0) || !std::isfinite(e.run.supply_V))
     return Status::InvalidArgument("conditions.supply_V: must be > 0, got " + FormatNumber(c.supply_v()));
   if (!(c.supply_pressure_pa() >= 0.0) || !std::isfinite(c.supply_pressure_pa()))
@@ -405,7 +438,9 @@ StatusOr<Experiment> BuildExperiment(const ExperimentSpec& spec) {
   if (!(rate > 0.0) || !std::isfinite(rate))
     return Status::InvalidArgument("recording.rate_Hz: must be > 0, got " + FormatNumber(rate));
   if (e.duration_s * rate > 50e6)
-    return Status::ResourceExhausted("recording.rate_Hz: duration_s * rate_Hz exceeds 50 million samples");
+    return Status::ResourceExhausted("duration_s: " + FormatNumber(e.duration_s) + " s at recording.rate_Hz = " +
+                                     FormatNumber(rate) + " Hz is " + FormatNumber(e.duration_s * rate) +
+                                     " samples, more than 50 million; shorten the run or lower recording.rate_Hz");
   e.run.sample_rate_Hz = rate;
   e.run.realtime = spec.realtime();
   for (int k = 0; k < spec.recording().channels_size(); ++k) {

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <charconv>
 #include <cmath>
+#include <cstdint>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -50,6 +51,25 @@ std::string Tag(double v) {
   std::replace(s.begin(), s.end(), '.', 'p');
   std::replace(s.begin(), s.end(), '-', 'm');
   return s;
+}
+
+// Well-formed UTF-8 (no overlong forms, surrogates or code points above U+10FFFF): what a JSON manifest can hold.
+bool IsUtf8(std::string_view s) {
+  for (std::size_t k = 0; k < s.size();) {
+    const auto c = static_cast<unsigned char>(s[k]);
+    std::size_t n = c < 0x80 ? 1 : (c >> 5) == 0x6 ? 2 : (c >> 4) == 0xE ? 3 : (c >> 3) == 0x1E ? 4 : 0;
+    if (n == 0 || k + n > s.size()) return false;
+    std::uint32_t cp = n == 1 ? c : c & (0x7F >> n);
+    for (std::size_t j = 1; j < n; ++j) {
+      const auto cc = static_cast<unsigned char>(s[k + j]);
+      if ((cc >> 6) != 0x2) return false;
+      cp = (cp << 6) | (cc & 0x3F);
+    }
+    static constexpr std::uint32_t kMin[] = {0, 0, 0x80, 0x800, 0x10000};
+    if (cp < kMin[n] || cp > 0x10FFFF || (cp >= 0xD800 && cp <= 0xDFFF)) return false;
+    k += n;
+  }
+  return true;
 }
 
 std::string SafeName(std::string s) {
@@ -118,8 +138,12 @@ StatusOr<std::vector<ReadingsSession>> ConvertReadingsCsv(const std::string& csv
     if (!(v[11] >= 1.0) || v[11] > 1e9 || v[11] != std::floor(v[11])) return bad(11, "is not a whole number >= 1");
     const double gain = 1.0 + v[2] / opt.amp_ref_ohm;
     const double A_per_mV = 1e-3 / (opt.shunt_ohm * gain);
+    // The dataset reader takes currents in [-1000, 1000] A: refuse here what it would refuse there.
+    if (std::abs(v[9] * A_per_mV) > 1e3)
+      return bad(9, "mV is " + FormatNumber(v[9] * A_per_mV) + " A through the shunt and amplifier, outside [-1000, 1000] A");
     const std::string device(f[static_cast<std::size_t>(col[0])]);
     if (device.empty()) return Status::InvalidArgument(at + " column device: empty");
+    if (!IsUtf8(device)) return Status::InvalidArgument(at + " column device: not valid UTF-8");
     Reading r{std::string(f[static_cast<std::size_t>(col[7])]), v[8], v[9] * A_per_mV, v[10] * A_per_mV,
               static_cast<int>(v[11])};
     sessions[{device, v[1], v[2], v[3], v[4]}][{v[5], v[6]}].push_back(r);
@@ -172,7 +196,7 @@ StatusOr<std::vector<ReadingsSession>> ConvertReadingsCsv(const std::string& csv
     fs::create_directories(s.directory, ec);
     if (ec) return Status::Unavailable(s.directory + ": cannot create: " + ec.message());
     std::ofstream o(fs::path(s.directory) / "manifest.json");
-    o << m.dump(1) << "\n";
+    o << m.dump(1, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";  // the file name may be any bytes
     if (!o) return Status::Unavailable(s.directory + "/manifest.json: cannot write");
     out.push_back(s);
   }

@@ -30,6 +30,8 @@ packages=(
   python3-setuptools libhdf5-dev libmatio-dev
   # the HTML report test: the page must render without errors in a headless browser
   chromium
+  # fuzzing (fuzz/, scripts/fuzz.sh): clang with libFuzzer and the sanitizer runtimes
+  clang libclang-rt-14-dev
 )
 
 missing=()

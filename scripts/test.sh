@@ -6,3 +6,5 @@ here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 bash "$here/scripts/setup.sh"
 cd "$here/build"
 ctest --output-on-failure -j "$(nproc)" --output-junit test-results.xml "$@"
+# The fuzz targets, a short bounded run each (VB_FUZZ_SECONDS, default 12 s per target): any crash fails CI.
+bash "$here/scripts/fuzz.sh" "${VB_FUZZ_SECONDS:-12}"

@@ -405,6 +405,14 @@ TEST(ReadingsCsv, ErrorsNameTheLineAndTheColumn) {
             "r.csv:2: column on_time_s: 0.02 s is outside (0, period]");
   EXPECT_EQ(convert(header + "X,5,19400,26,0,100,0.001,v0,0.0001,91,0,2.5\n").status().message(),
             "r.csv:2: column repeats: 2.5 is not a whole number >= 1");
+  // Found by fuzz/readings_csv_fuzz.cc: a device name that is not UTF-8 made nlohmann::json::dump throw
+  // (std::terminate: `benchctl convert` aborted).
+  EXPECT_EQ(convert(header + "X\xC0,5,19400,26,0,100,0.001,v0,0.0001,91,0,10\n").status().message(),
+            "r.csv:2: column device: not valid UTF-8");
+  // Found by the same target's round trip: 583 mV through a 0.2 ohm shunt at gain 1 is 2915 A, which the
+  // converter wrote and LoadDataset then refused (|i_A| <= 1000 A).
+  EXPECT_EQ(convert(header + "X,5,0,26,0,100,0.001,v0,0.0001,583000,0,10\n").status().message(),
+            "r.csv:2: column v_mV_mean: 583000 mV is 2915 A through the shunt and amplifier, outside [-1000, 1000] A");
   auto ok = convert(header + "X,5,19400,26,0,100,0.001,v0,0.0001,91,0,10\nX,5,19400,26,0,100,0.001,v1,0.0007,205.8,0.4216,10\n");
   ASSERT_TRUE(ok.ok()) << ok.status().message();
   ASSERT_EQ(ok->size(), 1u);
