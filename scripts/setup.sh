@@ -8,7 +8,7 @@ set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 packages=(
   # toolchain
-  g++ cmake ninja-build make pkg-config git ca-certificates
+  g++ cmake ninja-build make pkg-config git ca-certificates ccache
   # RPC and specs
   libgrpc++-dev libprotobuf-dev protobuf-compiler protobuf-compiler-grpc libssl-dev
   # numerics: Eigen for small linear algebra, Boost.Odeint for the dense-output Runge-Kutta stepper,
