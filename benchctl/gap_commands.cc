@@ -356,7 +356,7 @@ GapCli::GapCli(CLI::App* app, SharedOptions shared) : shared_(shared) {
                         "parameters identified on the reference (default: R, L of a coil, sensor_offset.offset_A)")
       ->delimiter(',');
   // --json takes an optional value only so that the old `--json FILE` keeps working (Diagnose()).
-  diagnose_->add_option("--json", json_path_, "the diagnosis as JSON on stdout")->expected(0, 1);
+  diagnose_->add_option("--json", json_path_, "the diagnosis as JSON on stdout")->expected(0, 1)->type_name("");
   diagnose_->add_option("--json-out", json_out_, "also write the diagnosis as JSON to FILE (for report --diagnosis)");
   diagnose_->add_option("--model-out", model_out_,
                         "write the improved model (ModelSpec JSON: --model and an emulated bench load it)");

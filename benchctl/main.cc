@@ -106,7 +106,7 @@ int main(int argc, char** argv) {
   std::string export_csv_old;  // `--csv FILE`, the spelling before --trace-csv
   auto* exp = app.add_subcommand("export", "a stored run's trace as CSV, HDF5 or MATLAB .mat (units, spec, conditions)");
   exp->add_option("run_id", run_id, "run id")->required();
-  exp->add_option("--csv", export_csv_old, "the trace as CSV on stdout")->expected(0, 1);
+  exp->add_option("--csv", export_csv_old, "the trace as CSV on stdout")->expected(0, 1)->type_name("");
   exp->add_option("--trace-csv", export_opts.trace_csv, "the trace as CSV in FILE (as run --trace-csv)");
   exp->add_option("--hdf5", export_opts.hdf5, "HDF5 file: channels with units, spec and conditions (export/run_file.h)");
   exp->add_option("--mat", export_opts.mat, "MATLAB .mat file (level 5): struct vbrun (export/run_file.h)");
