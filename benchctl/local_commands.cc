@@ -26,75 +26,6 @@ using vb::StatusCode;
 using Json = nlohmann::ordered_json;
 
 
-Json Number(double v) { return std::isfinite(v) ? Json(v) : Json(nullptr); }
-
-Json KeyJson(const RunKey& key) {
-  Json sweep = Json::array();
-  for (const auto& c : key.sweep) sweep.push_back({{"field", c.field}, {"value", c.value}});
-  return {{"name", key.name}, {"sweep", sweep}, {"repeat", key.repeat}};
-}
-
-Json SummaryJson(const vb::benchctl::LocalRunResult& r) {
-  const auto& s = r.summary;
-  Json j;
-  if (r.run_id != 0) {
-    j["run_id"] = r.run_id;
-    j["batch_id"] = r.batch_id;
-  }
-  j["name"] = r.key.DisplayName();
-  j["key"] = KeyJson(r.key);
-  j["controller"] = r.controller;
-  j["tags"] = r.tags;
-  j["status"] = vb::experiment::TerminationName(s.termination);
-  if (!s.message.empty()) j["message"] = s.message;
-  j["duration_s"] = s.duration_s;
-  j["samples"] = s.samples;
-  j["ticks"] = s.ticks;
-  j["wall_s"] = s.wall_s;
-  j["realtime_factor"] = s.realtime_factor;
-  if (s.loop.ticks > 0) {
-    j["loop"] = {{"paced_ticks", s.loop.ticks},
-                 {"overruns", s.loop.overruns},
-                 {"jitter_p50_s", s.loop.jitter_p50_s},
-                 {"jitter_p99_s", s.loop.jitter_p99_s},
-                 {"jitter_max_s", s.loop.jitter_max_s}};
-  }
-  Json m = Json::object();
-  for (const auto& [name, value] : vb::experiment::MetricList(s.metrics)) m[name] = Number(value);
-  j["metrics"] = m;
-  return j;
-}
-
-void PrintHuman(const vb::benchctl::LocalRunResult& r) {
-  const auto& s = r.summary;
-  if (r.run_id != 0) {
-    std::printf("run %s [%s] (local run %lld, batch %lld): %s\n", r.key.DisplayName().c_str(), r.controller.c_str(),
-                static_cast<long long>(r.run_id), static_cast<long long>(r.batch_id),
-                vb::experiment::TerminationName(s.termination));
-  } else {
-    std::printf("run %s [%s]: %s\n", r.key.DisplayName().c_str(), r.controller.c_str(), vb::experiment::TerminationName(s.termination));
-  }
-  if (!s.message.empty()) std::printf("  reason: %s\n", s.message.c_str());
-  std::printf("  %.6g s simulated, %zu samples, %llu control ticks, %.3g s wall, %.0fx real time\n", s.duration_s,
-              s.samples, static_cast<unsigned long long>(s.ticks), s.wall_s, s.realtime_factor);
-  if (s.loop.ticks > 0)
-    std::printf("  loop: %llu paced ticks, %llu overruns, jitter p50 %.1f us, p99 %.1f us, max %.1f us\n",
-                static_cast<unsigned long long>(s.loop.ticks), static_cast<unsigned long long>(s.loop.overruns),
-                s.loop.jitter_p50_s * 1e6, s.loop.jitter_p99_s * 1e6, s.loop.jitter_max_s * 1e6);
-  for (const auto& [name, value] : vb::experiment::MetricList(s.metrics))
-    if (std::isfinite(value)) std::printf("  %-20s %.6g\n", name.c_str(), value);
-}
-
-std::string IndexedPath(const std::string& path, size_t k, size_t n) {
-  if (n <= 1) return path;
-  // Built by append: GCC 12 -O3 reports a false -Wrestrict on `"-" + std::to_string(k)` chains.
-  const size_t dot = path.find_last_of('.');
-  std::string out = dot == std::string::npos ? path : path.substr(0, dot);
-  out.append("-").append(std::to_string(k));
-  if (dot != std::string::npos) out.append(path, dot, std::string::npos);
-  return out;
-}
-
 std::vector<vb::experiment::RunRecord> Records(const std::vector<vb::benchctl::LocalRunResult>& results) {
   std::vector<vb::experiment::RunRecord> out;
   for (const auto& r : results) {
@@ -179,61 +110,6 @@ int CmdCompare(const std::string& input, bool local, const std::string& store_pa
   }
   if (records.empty()) return Fail(Status::InvalidArgument(input + ": no runs to compare"));
   return PrintComparison(vb::experiment::Compare(records), json, csv);
-}
-
-// One CSV row per run: identity, status, and every metric (empty where not applicable).
-void PrintCsv(const std::vector<vb::benchctl::LocalRunResult>& results) {
-  std::printf("name,controller,status,duration_s,samples,wall_s");
-  for (const auto& [name, value] : vb::experiment::MetricList(vb::experiment::Metrics{})) std::printf(",%s", name.c_str());
-  std::printf("\n");
-  for (const auto& r : results) {
-    std::printf("%s,%s,%s,%.9g,%zu,%.6g", CsvQuoted(r.key.DisplayName()).c_str(), r.controller.c_str(),
-                vb::experiment::TerminationName(r.summary.termination), r.summary.duration_s, r.summary.samples,
-                r.summary.wall_s);
-    for (const auto& [name, value] : vb::experiment::MetricList(r.summary.metrics)) {
-      if (std::isfinite(value)) {
-        std::printf(",%.10g", value);
-      } else {
-        std::printf(",");
-      }
-    }
-    std::printf("\n");
-  }
-}
-
-int CmdRun(const std::string& spec_path, bool local, const std::string& store_path, const std::string& trace_csv,
-           bool json, bool csv, bool realtime) {
-  if (!local) {
-    return Fail(Status::FailedPrecondition(
-        "no server given: use --local for the embedded emulator, or --server ADDR (or VALVEBENCH_SERVER)"));
-  }
-  auto spec = vb::experiment::LoadSpecFile(spec_path);
-  if (!spec.ok()) return Fail(spec.status());
-  auto results = vb::benchctl::RunLocal({{*spec}, {}, spec->name(), "", realtime, !trace_csv.empty(), store_path});
-  if (!results.ok()) return Fail(results.status().WithContext(spec_path));
-  int exit_code = kExitOk;
-  Json all = Json::array();
-  for (size_t k = 0; k < results->size(); ++k) {
-    const auto& r = (*results)[k];
-    if (!r.summary.ok()) exit_code = kExitRunFailed;
-    if (!trace_csv.empty()) {
-      auto st = vb::benchctl::WriteTraceCsv(r.trace, IndexedPath(trace_csv, k, results->size()));
-      if (!st.ok()) return Fail(st);
-    }
-    if (json) {
-      all.push_back(SummaryJson(r));
-    } else if (!csv) {
-      PrintHuman(r);
-    }
-  }
-  if (csv && !json) {
-    PrintCsv(*results);
-  } else if (json) {
-    std::cout << (all.size() == 1 ? all[0] : all).dump(2) << "\n";
-  } else if (results->size() > 1) {
-    std::cout << "\n" << vb::experiment::ComparisonTable(vb::experiment::Compare(Records(*results)));
-  }
-  return exit_code;
 }
 
 }  // namespace vb::benchctl

@@ -78,7 +78,7 @@ ReportCli::ReportCli(CLI::App* app, SharedOptions shared) : shared_(shared) {
   report_->add_option("--batch", batch_, "the runs of this batch: comparison, Pareto scatter, static map, traces");
   report_->add_option("--run", run_, "one run: its traces and metrics");
   report_->add_option("--regress", regress_, "a regression result stored by benchctl regress (local store)");
-  report_->add_option("--diagnosis", diagnosis_, "a gap diagnosis JSON file (benchctl diagnose --json FILE)");
+  report_->add_option("--diagnosis", diagnosis_, "a gap diagnosis JSON file (benchctl diagnose --json-out FILE, or --json > FILE)");
   report_->add_option("--html", html_, "output HTML file")->required();
   report_->add_option("--max-traces", max_traces_, "traces of at most this many runs (default 4)")
       ->check(CLI::Range(0, 100));
