@@ -21,6 +21,7 @@
 #include "client/client.h"
 #include "experiment/spec.h"
 #include "gap/diagnose.h"
+#include "gap/suggest.h"
 #include "gap/identify.h"
 #include "gap/readings_csv.h"
 #include "model/driver.h"
@@ -172,6 +173,7 @@ struct DiagnoseOutput {
   bool json_stdout = false;
   std::string json_out;
   std::string model_out;
+  std::string suggest_out;  // the next experiment's spec (docs/gap.md, "The next experiment")
 };
 
 int DiagnoseAndReport(const gap::Dataset& ds_in, const Nominal& nominal, const std::string& source,
@@ -186,8 +188,28 @@ int DiagnoseAndReport(const gap::Dataset& ds_in, const Nominal& nominal, const s
   if (isatty(STDERR_FILENO))  // progress is for people at a terminal; scripts get stdout alone
     std::fprintf(stderr, "benchctl: diagnosing %zu runs of %s against %s ...\n", ds->runs.size(), source.c_str(),
                  options.model_name.c_str());
+  if (isatty(STDERR_FILENO)) {
+    // Honest progress: one line per fitted candidate, overwritten in place.
+    options.attribution.progress = [](const std::string& name, int done, int total) {
+      std::fprintf(stderr, "\rbenchctl: fitted %d of %d candidates (%s)\033[K", done, total, name.c_str());
+      if (done == total) std::fprintf(stderr, "\n");
+    };
+  }
   auto d = gap::Diagnose(*ds, nominal.plant, options);
   if (!d.ok()) return Fail(d.status().WithContext(source));
+  std::optional<gap::Suggestion> suggestion;
+  if (!o.suggest_out.empty()) {
+    auto s = gap::SuggestNextRuns(*ds, nominal.plant, *d);
+    if (!s.ok()) return Fail(s.status().WithContext("--suggest"));
+    suggestion = std::move(*s);
+    if (!suggestion->runs.empty()) {
+      std::ofstream out(o.suggest_out);
+      out << gap::SuggestionSpecJson(*suggestion, "next-experiment", nominal.spec.preset().empty() ? "taghizadeh2009"
+                                                                                                   : nominal.spec.preset());
+      out.close();
+      if (!out) return Fail(Status::Unavailable(o.suggest_out + ": cannot write"));
+    }
+  }
   if (!o.json_out.empty()) {
     std::ofstream out(o.json_out);
     out << gap::DiagnosisJson(*d) << "\n";
@@ -195,9 +217,20 @@ int DiagnoseAndReport(const gap::Dataset& ds_in, const Nominal& nominal, const s
     if (!out) return Fail(Status::Unavailable(o.json_out + ": cannot write"));
   }
   if (o.json_stdout) {
-    std::cout << gap::DiagnosisJson(*d) << "\n";
+    if (suggestion) {
+      auto j = nlohmann::ordered_json::parse(gap::DiagnosisJson(*d));
+      j["suggestion"] = nlohmann::ordered_json::parse(gap::SuggestionJson(*suggestion));
+      std::cout << j.dump(2) << "\n";
+    } else {
+      std::cout << gap::DiagnosisJson(*d) << "\n";
+    }
   } else {
     std::cout << gap::DiagnosisReport(*d);
+    if (suggestion) {
+      std::cout << gap::SuggestionReport(*suggestion);
+      if (!suggestion->runs.empty())
+        std::cout << "  spec written to " << o.suggest_out << " (benchctl run " << o.suggest_out << ")\n";
+    }
   }
   if (o.model_out.empty()) return kExitOk;
   if (d->verdict == "unknown")
@@ -361,6 +394,9 @@ GapCli::GapCli(CLI::App* app, SharedOptions shared) : shared_(shared) {
   diagnose_->add_option("--model-out", model_out_,
                         "write the improved model (ModelSpec JSON: --model and an emulated bench load it)");
   diagnose_->add_option("--emit-model", emit_model_, "old name of --model-out");
+  diagnose_->add_option("--suggest", suggest_out_,
+                        "when the leading candidates are confusable, write the runs that would separate them best "
+                        "(an experiment spec: benchctl run FILE) and list them");
 
   identify_ = app->add_subcommand("identify", "fit a device's parameters to measured runs (seed 000 sec. 4)");
   identify_->add_option("dataset", dataset_dir_, "dataset directory (valve-runs/1 or /2)")->required();
@@ -428,6 +464,7 @@ int GapCli::Diagnose(const ClientFactory& make_client) {
     }
   }
   out.model_out = ModelOut(emit_model_, "--emit-model");
+  out.suggest_out = suggest_out_;
   if (!runs_.empty()) {
     if (!dataset_dir_.empty()) return Fail(Status::InvalidArgument("diagnose: give a dataset directory or --runs, not both"));
     if (!reference_dir_.empty()) return Fail(Status::InvalidArgument("--reference: works on dataset directories, not --runs"));

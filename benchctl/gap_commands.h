@@ -40,7 +40,7 @@ class GapCli {
   CLI::App* identify_ = nullptr;
   CLI::App* convert_ = nullptr;
   CLI::App* import_ = nullptr;
-  std::string dataset_dir_, model_, json_path_, json_out_, model_out_, emit_model_, reference_dir_, out_path_,
+  std::string dataset_dir_, model_, json_path_, json_out_, model_out_, suggest_out_, emit_model_, reference_dir_, out_path_,
       csv_path_, out_dir_;
   bool local_ = false;
   std::vector<std::int64_t> runs_;
