@@ -78,6 +78,7 @@ struct DiagnoseOptions {
   bool try_combinations = true;
   int max_effects = 3;
   int combination_pool = 4;
+  bool fit_nuisance = true;              // re-fit drifted nominal parameters beside a structural verdict
   double budget_s = 50.0;                // wall time for the whole attribution (singles, then pairs)
   bool detection_limits = true;          // the smallest magnitude of each effect the data would show
   std::size_t overlay_points = 600;      // per run
@@ -126,6 +127,15 @@ struct Diagnosis {
   std::string verdict;             // "none", an effect name, "a+b", or "unknown"
   std::string verdict_reason;
   std::vector<std::string> warnings;
+  // Nuisance drift (docs/gap.md, "Nuisance drift"): nominal parameters re-fitted beside the verdict's effect
+  // because that was decisive on the holdout runs. They are not part of the verdict (the effect is the cause);
+  // the verdict's row then carries them, and verdict_alone_holdout_A is its holdout RMSE without them.
+  struct Drift {
+    std::string param;
+    double value = 0.0, nominal = 0.0;
+  };
+  std::vector<Drift> nuisance;
+  double verdict_alone_holdout_A = NAN;
 };
 
 StatusOr<Diagnosis> Diagnose(const Dataset& dataset, const model::PlantParams& nominal,

@@ -143,3 +143,27 @@ TEST(Attribution, ACandidateOutOfTimeFailsWithItsReasonAndTheOthersGoOn) {
 
 }  // namespace
 }  // namespace vb::gap
+
+namespace vb::gap {
+namespace {
+
+// Nuisance drift: a session with eddy currents whose spring is also 10 % soft. The verdict names the effect;
+// the drift is re-fitted beside it and reported as drift, not as a second cause.
+TEST(Attribution, DriftBesideTheEffectIsReportedAsDriftNotAsTheCause) {
+  model::PlantParams truth = With("eddy_currents", {{"R_p", 300.0}});
+  truth.k_N_per_m *= 0.9;
+  const auto ds = Session(truth);
+  DiagnoseOptions o = Options({"param:R", "param:k", "param:m", "eddy_currents", "supply_resistance"}, true);
+  o.detection_limits = false;
+  auto d = Diagnose(ds, *model::Preset("taghizadeh2009"), o);
+  ASSERT_TRUE(d.ok()) << d.status().message();
+  EXPECT_EQ(d->verdict, "eddy_currents");
+  ASSERT_EQ(d->nuisance.size(), 1u) << DiagnosisReport(*d);
+  EXPECT_EQ(d->nuisance.front().param, "k");
+  EXPECT_NEAR(d->nuisance.front().value, 9000.0, 300.0);
+  EXPECT_LT(d->ranking.front().holdout_rmse_after_A, d->verdict_alone_holdout_A);
+  EXPECT_NE(DiagnosisJson(*d).find("\"nuisance\""), std::string::npos);
+}
+
+}  // namespace
+}  // namespace vb::gap
