@@ -1,4 +1,5 @@
-// The sim-to-real gap diagnosis (issue 5; docs/gap.md):
+// The sim-to-real gap diagnosis (docs/gap.md); each numbered step is one function in diagnose.cc, the printers are
+// in diagnosis_report.cc:
 //   1. replay every run's recorded gate through the nominal model; residual = measured - simulated;
 //   2. the noise floor: for waveforms from the data itself, white-noise sigma from second differences,
 //      sqrt(mean(d2^2) / 6), which the smooth coil current barely contributes to at 50 kHz; for readings, their
@@ -7,8 +8,11 @@
 //   3. the gap is significant when the fit runs' residual RMS exceeds kSignificance x the noise floor;
 //   4. where: each model phase's share of the residual energy and its RMSE, and landmarks per run;
 //   5. which: every catalogued candidate fitted on the fit runs (gap/attribution.h), ranked by holdout error
-//      and phase signature; pairs when no single effect closes the gap; confusable candidates named;
+//      and phase signature (the singles); two or three effects at once (SelectCombination: a beam over pairs and
+//      triples, taken only when decisive on the holdout runs); the verdict and what it is confusable with
+//      (Decide); drifted nominal parameters beside a structural verdict (FitNuisance);
 //   6. how far: holdout RMSE before and after, overall and per phase, and the fraction of the gap closed.
+// The next experiment, when candidates stay confusable, is gap/suggest.h.
 #pragma once
 
 #include <array>
