@@ -552,6 +552,12 @@ void Decide(Diagnosis* out) {
                   100.0 * kExplained, best.name.c_str(), 100.0 * best.closed, best.disqualified.empty() ? "" : "; ",
                   best.disqualified.c_str());
     d.verdict_reason = buf;
+    // An effect outside the catalog: say where it lies, which is what the user can act on.
+    std::string where;
+    for (std::size_t k = 0; k < d.where.size() && k < 2; ++k)
+      where += (where.empty() ? "" : ", ") + std::string(PhaseName(d.where[k].phase)) + " " +
+               FormatNumber(std::round(100.0 * d.where[k].share)) + " %";
+    if (!where.empty()) d.verdict_reason += "; the gap lies in " + where + " of the residual energy";
   }
   // Confusable: candidates whose holdout error is within a tenth of the gap of the best one's.
   if (d.ranking.size() > 1) d.margin_A = d.ranking[1].holdout_rmse_after_A - best.holdout_rmse_after_A;

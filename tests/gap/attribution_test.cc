@@ -79,6 +79,9 @@ TEST(Attribution, UnknownWhenNoCandidateClosesTheGap) {
   ASSERT_TRUE(d.ok());
   ASSERT_TRUE(d->significant);
   EXPECT_EQ(d->verdict, "unknown");
+  // Where the gap lies (its largest phase), which is what the user can act on.
+  EXPECT_NE(d->verdict_reason.find("the gap lies in " + std::string(PhaseName(d->where.front().phase))), std::string::npos)
+      << d->verdict_reason;
   EXPECT_LT(d->ranking.front().closed, kExplained);
   EXPECT_NE(DiagnosisReport(*d).find("verdict: unknown"), std::string::npos);
 }
