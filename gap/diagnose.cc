@@ -231,13 +231,14 @@ Status SelectCombination(const Dataset& ds, const std::vector<bool>& fit_mask, c
   if (!(base_row.holdout_rmse_after_A > kSignificance * floor)) return Status::Ok();  // nothing significant left
 
   // 1. The pool.
-  std::vector<const CandidateResult*> structural;
+  std::vector<const CandidateResult*> structural, all_structural;
   for (const auto& row : d->ranking) {
     if (IsParametric(row.name) || !row.status.ok() || row.name.find('+') != std::string::npos) continue;
     if (row.disqualified.rfind("as many free parameters", 0) == 0) continue;
     const Candidate* c = candidate_of(row.name);
-    if (c == nullptr || c->effects.size() != 1 || EffectVanished(*c, row, c->effects.front())) continue;
-    structural.push_back(&row);
+    if (c == nullptr || c->effects.size() != 1) continue;
+    all_structural.push_back(&row);
+    if (!EffectVanished(*c, row, c->effects.front())) structural.push_back(&row);
   }
   std::vector<const CandidateResult*> by_fit = structural, by_holdout = structural;
   std::stable_sort(by_fit.begin(), by_fit.end(),
@@ -295,10 +296,14 @@ Status SelectCombination(const Dataset& ds, const std::vector<bool>& fit_mask, c
     std::vector<std::string> names;
     for (std::size_t g = 0; g < std::min<std::size_t>(good.size(), 2); ++g) {
       const Candidate& pc = tried_c[good[g]];
-      for (const CandidateResult* e : structural) {
+      // The best pair is extended with every structural effect, also those whose single fit found nothing (a
+      // weak third effect is masked by the two strong ones when fitted alone; it starts from its defaults then);
+      // the second-best pair with those whose single fit found something.
+      for (const CandidateResult* e : g == 0 ? all_structural : structural) {
         const Candidate* ec = candidate_of(e->name);
         if (std::find(pc.effects.begin(), pc.effects.end(), ec->effects.front()) != pc.effects.end()) continue;
-        Candidate t = PairCandidate(WarmStarted(pc, tried[good[g]]), WarmStarted(*ec, *e));
+        const bool vanished = std::find(structural.begin(), structural.end(), e) == structural.end();
+        Candidate t = PairCandidate(WarmStarted(pc, tried[good[g]]), vanished ? *ec : WarmStarted(*ec, *e));
         std::vector<std::string> key = t.effects;
         std::sort(key.begin(), key.end());
         std::string joined;

@@ -170,3 +170,31 @@ TEST(Attribution, DriftBesideTheEffectIsReportedAsDriftNotAsTheCause) {
 
 }  // namespace
 }  // namespace vb::gap
+
+namespace vb::gap {
+namespace {
+
+// Three effects at once: no single one and no pair explains the session; the beam finds all three.
+TEST(Attribution, FindsThreeSimultaneousEffects) {
+  model::PlantParams truth = With("supply_resistance", {{"R_s", 0.8}});
+  ASSERT_TRUE(model::AddEffect(&truth.effects, "eddy_currents", {{"R_p", 300.0}}).ok());
+  ASSERT_TRUE(model::AddEffect(&truth.effects, "sensor_lag", {{"tau_s", 2e-4}}).ok());
+  const auto ds = Session(truth);
+  DiagnoseOptions o = Options({"param:R", "supply_resistance", "eddy_currents", "sensor_lag", "end_stop_bounce",
+                               "coulomb_friction"}, true);
+  o.detection_limits = false;
+  auto d = Diagnose(ds, *model::Preset("taghizadeh2009"), o);
+  ASSERT_TRUE(d.ok()) << d.status().message();
+  std::vector<std::string> got;
+  for (std::size_t a = 0, b; a <= d->verdict.size(); a = b + 1) {
+    b = d->verdict.find('+', a);
+    if (b == std::string::npos) b = d->verdict.size();
+    got.push_back(d->verdict.substr(a, b - a));
+  }
+  std::sort(got.begin(), got.end());
+  EXPECT_EQ(got, (std::vector<std::string>{"eddy_currents", "sensor_lag", "supply_resistance"})) << DiagnosisReport(*d);
+  EXPECT_GT(d->ranking.front().closed, 0.9);
+}
+
+}  // namespace
+}  // namespace vb::gap
