@@ -85,6 +85,19 @@ void PrintHuman(const vb::benchctl::LocalRunResult& r) {
     if (std::isfinite(value)) std::printf("  %-20s %.6g\n", name.c_str(), value);
 }
 
+// "static-map/fig8 duty=0.35 supply_pressure_Pa=200000": the sweep fields' last component.
+std::string ShortName(const RunKey& key) {
+  std::string out = key.name;
+  char v[32];
+  for (const auto& c : key.sweep) {
+    std::snprintf(v, sizeof v, "%.10g", c.value);
+    // Built by append: GCC 12 -O3 reports a false -Wrestrict on `" " + ...` chains.
+    out.append(" ").append(c.field, c.field.rfind('.') == std::string::npos ? 0 : c.field.rfind('.') + 1).append("=").append(v);
+  }
+  if (key.repeat >= 0) out.append(" repeat ").append(std::to_string(key.repeat));
+  return out;
+}
+
 std::string IndexedPath(const std::string& path, size_t k, size_t n) {
   if (n <= 1) return path;
   // Built by append: GCC 12 -O3 reports a false -Wrestrict on `"-" + std::to_string(k)` chains.
@@ -110,26 +123,29 @@ std::vector<vb::experiment::RunRecord> Records(const std::vector<vb::benchctl::L
 
 }  // namespace
 
-int PrintComparison(const vb::experiment::Comparison& c, bool json, bool csv) {
+int PrintComparison(const vb::experiment::Comparison& c, bool json, bool csv, const vb::experiment::TableOptions& table) {
+  if (const std::string bad = vb::experiment::CheckTableOptions(c, table); !bad.empty())
+    return Fail(Status::InvalidArgument(bad));
   if (json) {
     std::cout << vb::experiment::ComparisonJson(c);
   } else if (csv) {
     std::cout << vb::experiment::ComparisonCsv(c);
   } else {
-    std::cout << vb::experiment::ComparisonTable(c);
+    std::cout << vb::experiment::ComparisonTable(c, table);
   }
   return kExitOk;
 }
 
 int CmdCompareStored(Backend& backend, std::int64_t batch, const std::vector<std::int64_t>& run_ids, bool json,
-                     bool csv) {
+                     bool csv, const vb::experiment::TableOptions& table) {
   auto c = backend.Compare(batch, run_ids);
   if (!c.ok()) return Fail(c.status());
-  return PrintComparison(*c, json, csv);
+  return PrintComparison(*c, json, csv, table);
 }
 
 // compare RESULTS.json (the output of `run --json`) or compare --local SPEC (runs it first).
-int CmdCompare(const std::string& input, bool local, const std::string& store_path, bool json, bool csv) {
+int CmdCompare(const std::string& input, bool local, const std::string& store_path, bool json, bool csv,
+               const vb::experiment::TableOptions& table) {
   if (local) {
     auto spec = vb::experiment::LoadSpecFile(input);
     if (!spec.ok()) return Fail(spec.status());
@@ -137,7 +153,7 @@ int CmdCompare(const std::string& input, bool local, const std::string& store_pa
     if (!results.ok()) return Fail(results.status().WithContext(input));
     for (const auto& r : *results)
       std::fprintf(stderr, "%s [%s]: %s\n", r.key.DisplayName().c_str(), r.controller.c_str(), r.summary.BriefReport().c_str());
-    return PrintComparison(vb::experiment::Compare(Records(*results)), json, csv);
+    return PrintComparison(vb::experiment::Compare(Records(*results)), json, csv, table);
   }
   std::ifstream in(input);
   if (!in) return Fail(Status::NotFound(input + ": cannot open the results file"));
@@ -178,7 +194,7 @@ int CmdCompare(const std::string& input, bool local, const std::string& store_pa
     records.push_back(std::move(rec));
   }
   if (records.empty()) return Fail(Status::InvalidArgument(input + ": no runs to compare"));
-  return PrintComparison(vb::experiment::Compare(records), json, csv);
+  return PrintComparison(vb::experiment::Compare(records), json, csv, table);
 }
 
 // One CSV row per run: identity, status, and every metric (empty where not applicable).
@@ -202,7 +218,7 @@ void PrintCsv(const std::vector<vb::benchctl::LocalRunResult>& results) {
 }
 
 int CmdRun(const std::string& spec_path, bool local, const std::string& store_path, const std::string& trace_csv,
-           bool json, bool csv, bool realtime) {
+           bool json, bool csv, bool realtime, const vb::experiment::TableOptions& table) {
   if (!local) {
     return Fail(Status::FailedPrecondition(
         "no server given: use --local for the embedded emulator, or --server ADDR (or VALVEBENCH_SERVER)"));
@@ -222,8 +238,11 @@ int CmdRun(const std::string& spec_path, bool local, const std::string& store_pa
     }
     if (json) {
       all.push_back(SummaryJson(r));
-    } else if (!csv) {
+    } else if (!csv && results->size() == 1) {
       PrintHuman(r);
+    } else if (!csv) {  // a batch: one line per run, the metrics are in the comparison below
+      std::printf("run %s%s: %s\n", r.run_id != 0 ? (std::to_string(r.run_id) + " ").c_str() : "",
+                  ShortName(r.key).c_str(), vb::experiment::TerminationName(r.summary.termination));
     }
   }
   if (csv && !json) {
@@ -231,7 +250,10 @@ int CmdRun(const std::string& spec_path, bool local, const std::string& store_pa
   } else if (json) {
     std::cout << (all.size() == 1 ? all[0] : all).dump(2) << "\n";
   } else if (results->size() > 1) {
-    std::cout << "\n" << vb::experiment::ComparisonTable(vb::experiment::Compare(Records(*results)));
+    const auto c = vb::experiment::Compare(Records(*results));
+    if (const std::string bad = vb::experiment::CheckTableOptions(c, table); !bad.empty())
+      return Fail(Status::InvalidArgument(bad));
+    std::cout << "\n" << vb::experiment::ComparisonTable(c, table);
   }
   return exit_code;
 }

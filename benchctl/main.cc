@@ -65,6 +65,11 @@ int main(int argc, char** argv) {
                                         "~/.local/share/valvebench/local.db)");
     sub->add_flag("--no-store", no_store, "local: do not record the runs");
   };
+  vb::experiment::TableOptions table;  // comparison tables: --metrics, --wide (docs/comparison.md)
+  auto table_flags = [&](CLI::App* sub) {
+    sub->add_option("--metrics", table.metrics, "table: these metrics (full names, as in --json)")->delimiter(',');
+    sub->add_flag("--wide", table.wide, "table: every metric, not only the experiment kind's");
+  };
   auto* run = app.add_subcommand("run", "run an experiment spec (a single run or a batch)");
   run->add_option("spec", spec_path, "experiment spec (protobuf JSON)")->required();
   run->add_flag("--local", local, "run on the embedded emulator, no server");
@@ -73,6 +78,7 @@ int main(int argc, char** argv) {
   run->add_flag("--realtime", realtime, "local: pace the run to the wall clock and report loop jitter");
   common(run, true);
   local_store(run);
+  table_flags(run);
 
   std::string status_filter, tag_filter;
   std::int64_t batch = 0;
@@ -117,6 +123,7 @@ int main(int argc, char** argv) {
   compare->add_option("--runs", run_ids, "server: compare these runs")->delimiter(',');
   common(compare, true);
   local_store(compare);
+  table_flags(compare);
 
   // baseline, regress, nights (benchctl/regress_commands.cc).
   vb::benchctl::RegressCli regress_cli(&app, {&json, &server, &token, &tls_ca_file, &store_path});
@@ -152,7 +159,7 @@ int main(int argc, char** argv) {
   if (report_cli.parsed()) return report_cli.Run(make_client);
   if (gap_cli.parsed()) return gap_cli.Run(make_client);
   if (run->parsed()) {
-    if (local || server.empty()) return vb::benchctl::CmdRun(spec_path, local, store_path, trace_csv, json, csv, realtime);
+    if (local || server.empty()) return vb::benchctl::CmdRun(spec_path, local, store_path, trace_csv, json, csv, realtime, table);
     if (!trace_csv.empty() || realtime)
       return Fail(Status::InvalidArgument("--trace-csv and --realtime are local options; use `export` remotely"));
     auto c = make_client();
@@ -164,11 +171,11 @@ int main(int argc, char** argv) {
         return Fail(Status::InvalidArgument("--batch/--runs with --local need the local store (--db)"));
       if (!compare_local && server.empty()) return need_server();
       auto backend = vb::benchctl::ChooseBackend(compare_local ? "" : server, store_path, make_client);
-      return vb::benchctl::CmdCompareStored(*backend, batch, run_ids, json, csv);
+      return vb::benchctl::CmdCompareStored(*backend, batch, run_ids, json, csv, table);
     }
     if (compare_input.empty())
       return Fail(Status::InvalidArgument("compare: give --batch/--runs (server), or a results file or --local SPEC"));
-    return vb::benchctl::CmdCompare(compare_input, compare_local, store_path, json, csv);
+    return vb::benchctl::CmdCompare(compare_input, compare_local, store_path, json, csv, table);
   }
   if (benches->parsed()) {
     if (!local && server.empty()) return need_server();

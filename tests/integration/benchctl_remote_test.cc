@@ -33,7 +33,7 @@ TEST(BenchctlRemote, RunWaitQueueShowExportCompareBenches) {
   Result run = Benchctl("run " + Example("compare-current-controllers.json") + " --wait " + op);
   ASSERT_EQ(run.exit_code, 0) << run.out;
   EXPECT_NE(run.out.find("done"), std::string::npos) << run.out;
-  EXPECT_NE(run.out.find("rank by rmse"), std::string::npos) << "a batch ends with the comparison";
+  EXPECT_NE(run.out.find("rank by RMSE"), std::string::npos) << "a batch ends with the comparison";
 
   Result submitted = Benchctl("run " + Example("standard/e3.json") + " --json " + op);
   ASSERT_EQ(submitted.exit_code, 0) << submitted.out;
