@@ -38,7 +38,8 @@ class Local final : public Backend {
     if (!recs.ok()) return recs.status();
     std::vector<RunView> out;
     for (const auto& r : *recs) {
-      RunView v{r.id, r.batch_id, r.key, r.controller, r.status, r.reason, {}};
+      RunView v{r.id, r.batch_id, r.key, r.controller, r.status, r.reason, {}, r.spec_json, r.submitted_unix_s,
+                r.started_unix_s, r.finished_unix_s};
       auto m = (*store)->GetMetrics(r.id);
       if (!m.ok()) return m.status();
       for (const auto& x : *m) v.metrics[x.name] = x.value;
@@ -130,7 +131,8 @@ class Remote final : public Backend {
   StatusOr<std::vector<RunView>> Runs(std::int64_t batch, const std::vector<std::int64_t>& run_ids) override {
     std::vector<RunView> out;
     auto add = [&](const v1::Run& r) {
-      RunView v{r.id(), r.batch_id(), api::FromProto(r.key()), r.controller(), api::FromProto(r.status()).value_or(RunStatus::kQueued), r.reason(), {}};
+      RunView v{r.id(), r.batch_id(), api::FromProto(r.key()), r.controller(), api::FromProto(r.status()).value_or(RunStatus::kQueued), r.reason(), {},
+                experiment::SpecToJson(r.spec(), false), r.submitted_unix_s(), r.started_unix_s(), r.finished_unix_s()};
       for (const auto& [k, x] : r.metrics()) v.metrics[k] = x;
       out.push_back(std::move(v));
     };

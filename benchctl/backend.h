@@ -31,6 +31,8 @@ struct RunView {
   RunStatus status = RunStatus::kQueued;
   std::string reason;
   std::map<std::string, double> metrics;
+  std::string spec_json;  // the single-run spec (reports show it with the run)
+  double submitted_unix_s = 0.0, started_unix_s = 0.0, finished_unix_s = 0.0;
 
   bool ok() const { return status == RunStatus::kDone; }
   bool ended() const { return Ended(status); }
