@@ -82,7 +82,8 @@ void PrintHuman(const vb::benchctl::LocalRunResult& r) {
                 static_cast<unsigned long long>(s.loop.ticks), static_cast<unsigned long long>(s.loop.overruns),
                 s.loop.jitter_p50_s * 1e6, s.loop.jitter_p99_s * 1e6, s.loop.jitter_max_s * 1e6);
   for (const auto& [name, value] : vb::experiment::MetricList(s.metrics))
-    if (std::isfinite(value)) std::printf("  %-20s %.6g\n", name.c_str(), value);
+    if (const std::string unit = vb::experiment::SiUnit(name, r.controller); std::isfinite(value))
+      std::printf("  %-20s %.6g%s%s\n", name.c_str(), value, unit == "1" ? "" : " ", unit == "1" ? "" : unit.c_str());
 }
 
 // "static-map/fig8 duty=0.35 supply_pressure_Pa=200000": the sweep fields' last component.

@@ -387,6 +387,14 @@ const char* KindName(ExperimentKind kind) {
   return "generic";
 }
 
+std::string SiUnit(const std::string& metric, const std::string& controller) {
+  const MetricView v = ViewOf(metric, KindOf({controller}));
+  if (v.unit == "%" && v.factor == 100) return "1";  // a ratio shown in %
+  if (v.unit.empty()) return "1";
+  if (v.unit == "g/s") return "kg/s";
+  return v.unit;
+}
+
 RunKey SplitCaseName(const std::string& case_name) {
   RunKey key;
   const std::string tag = " sweep:";

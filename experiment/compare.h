@@ -58,6 +58,10 @@ struct Comparison {
 
 Comparison Compare(const std::vector<RunRecord>& runs);
 
+// A metric's SI unit as its JSON value carries it ("A" or "m" for rmse by the law, "V s^0.5", "1" for ratios
+// and counts, "" when unknown): for listings that print SI values.
+std::string SiUnit(const std::string& metric, const std::string& controller);
+
 // A case name split into its spec name and sweep point ("m/fig8 sweep:a=1 sweep:b=2" -> "m/fig8", {a=1, b=2}).
 // RunKey::CaseName() is the only form a row carries through the server's comparison, so this reads it back.
 RunKey SplitCaseName(const std::string& case_name);

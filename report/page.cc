@@ -1,4 +1,5 @@
 // The HTML page of a report: CSS, the data as JSON, and the renderer (vanilla JS, inline SVG, no network).
+#include <ctime>
 #include <string>
 
 #include "report/report.h"
@@ -9,7 +10,7 @@ namespace {
 constexpr const char* kCss = R"css(
 body { font: 14px/1.4 system-ui, sans-serif; margin: 20px 28px; color: #222; background: #fff; max-width: 1320px; }
 section { max-width: 100%; }
-h1 { font-size: 20px; margin: 0 0 4px; } h2 { font-size: 16px; margin: 26px 0 8px; } h3 { font-size: 14px; margin: 14px 0 4px; }
+h1 { font-size: 20px; margin: 0 0 4px; } p.made { font-size: 12px; color: #666; margin: 0 0 6px; } h2 { font-size: 16px; margin: 26px 0 8px; } h3 { font-size: 14px; margin: 14px 0 4px; }
 #vb-status { display: none; } #vb-status.bad { display: block; color: #c00; font-weight: bold; font-size: 14px; }
 .scroll { overflow-x: auto; max-width: 100%; }
 table { border-collapse: collapse; font-size: 12px; margin: 4px 0 10px; }
@@ -424,6 +425,16 @@ constexpr const char* kJs = R"js(
 })();
 )js";
 
+// Every page says when it was made (docs/report.md): UTC, to the second.
+std::string MadeAt() {
+  const std::time_t t = std::time(nullptr);
+  std::tm tm{};
+  gmtime_r(&t, &tm);
+  char buf[32];
+  std::strftime(buf, sizeof buf, "%Y-%m-%d %H:%M:%S UTC", &tm);
+  return buf;
+}
+
 std::string EscapeHtml(const std::string& s) {
   std::string out;
   for (char c : s) {
@@ -463,7 +474,7 @@ std::string RenderHtml(const std::string& title, const Json& sections) {
   out += kCss;
   out += "</style>\n</head>\n<body>\n<h1>";
   out += EscapeHtml(title);
-  out += "</h1>\n<div id=\"vb-status\">rendering... (needs JavaScript)</div>\n<div id=\"vb-report\"></div>\n";
+  out += "</h1>\n<p class=\"made\">page made " + MadeAt() + " by benchctl report</p>\n<div id=\"vb-status\">rendering... (needs JavaScript)</div>\n<div id=\"vb-report\"></div>\n";
   out += "<script type=\"application/json\" id=\"vb-data\">";
   out += ScriptSafe(data.dump(-1, ' ', false, Json::error_handler_t::replace));
   out += "</script>\n<script>";

@@ -417,6 +417,9 @@ Json RegressionSections(const Json& r) {
   if (r.contains("baseline") && r["baseline"].is_object())
     head += " vs baseline " + str(r["baseline"], "name") + " v" + std::to_string(r["baseline"].value("version", 0));
   if (!str(r, "night").empty()) head += ", night " + str(r, "night");
+  if (r.contains("batch_id") && r["batch_id"].is_number() && r["batch_id"].get<double>() > 0)
+    head += ", batch " + r["batch_id"].dump() + " (benchctl report --batch " + r["batch_id"].dump() + ": its specs and conditions)";
+  if (const std::string when = Utc(num(r, "created_unix_s")); !when.empty()) head += ", run " + when;
   head += ": " + str(r, "verdict");
   if (r.contains("counts") && r["counts"].is_object()) {
     const Json& c = r["counts"];

@@ -228,6 +228,20 @@ TEST(CompareTable, DitherShowsSeed003TableIBesidePlannedAndAchieved) {
   EXPECT_LE(Widest(t), 120u) << t;
 }
 
+TEST(CompareTable, SiUnitsFollowTheLaw) {
+  EXPECT_EQ(SiUnit("rmse", "pi_current"), "A");
+  EXPECT_EQ(SiUnit("rmse", "sliding_mode_position"), "m");
+  EXPECT_EQ(SiUnit("iae", "sliding_mode_position"), "m s");
+  EXPECT_EQ(SiUnit("effort_l2", "pi_current"), "V s^0.5");
+  EXPECT_EQ(SiUnit("effort_u_l2", "cascade_pi_position"), "N s^0.5");
+  EXPECT_EQ(SiUnit("overshoot", "pi_current"), "1");
+  EXPECT_EQ(SiUnit("pwm_duty", "dither_pwm"), "1");
+  EXPECT_EQ(SiUnit("mean_position_pct", "open_loop_pwm"), "%");
+  EXPECT_EQ(SiUnit("mean_flow_kg_per_s", "open_loop_pwm"), "kg/s");
+  EXPECT_EQ(SiUnit("driver_loss_W", "pi_current"), "W");
+  EXPECT_EQ(SiUnit("switches", "pi_current"), "1");
+}
+
 TEST(CompareTable, CaseNamesSplitBackIntoTheirKey) {
   const RunKey key{"static-map/fig8", {{"controller.open_loop_pwm.segments[0].duty", 0.35}, {"conditions.supply_V", 24}}, -1};
   EXPECT_EQ(SplitCaseName(key.CaseName()), key);
