@@ -3,6 +3,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
@@ -198,15 +199,26 @@ int CmdCompare(const std::string& input, bool local, const std::string& store_pa
   return PrintComparison(vb::experiment::Compare(records), json, csv, table);
 }
 
-// One CSV row per run: identity, status, and every metric (empty where not applicable).
+// One CSV row per run: identity, the sweep point (a column per swept field), status, and every metric.
 void PrintCsv(const std::vector<vb::benchctl::LocalRunResult>& results) {
-  std::printf("name,controller,status,duration_s,samples,wall_s");
+  std::vector<std::string> axes;
+  for (const auto& r : results)
+    for (const auto& c : r.key.sweep)
+      if (std::find(axes.begin(), axes.end(), c.field) == axes.end()) axes.push_back(c.field);
+  std::printf("name,controller");
+  for (const auto& a : axes) std::printf(",%s", CsvQuoted(a).c_str());
+  std::printf(",status,duration_s,samples,wall_s");
   for (const auto& [name, value] : vb::experiment::MetricList(vb::experiment::Metrics{})) std::printf(",%s", name.c_str());
   std::printf("\n");
   for (const auto& r : results) {
-    std::printf("%s,%s,%s,%.9g,%zu,%.6g", CsvQuoted(r.key.DisplayName()).c_str(), r.controller.c_str(),
-                vb::experiment::TerminationName(r.summary.termination), r.summary.duration_s, r.summary.samples,
-                r.summary.wall_s);
+    std::printf("%s,%s", CsvQuoted(r.key.DisplayName()).c_str(), r.controller.c_str());
+    for (const auto& a : axes) {
+      std::printf(",");
+      for (const auto& c : r.key.sweep)
+        if (c.field == a) std::printf("%.10g", c.value);
+    }
+    std::printf(",%s,%.9g,%zu,%.6g", vb::experiment::TerminationName(r.summary.termination), r.summary.duration_s,
+                r.summary.samples, r.summary.wall_s);
     for (const auto& [name, value] : vb::experiment::MetricList(r.summary.metrics)) {
       if (std::isfinite(value)) {
         std::printf(",%.10g", value);

@@ -56,7 +56,8 @@ TEST(BenchctlCli, BadSpecExitsTwoAndNamesTheField) {
 TEST(BenchctlCli, CompareAndCsvOutputs) {
   Result run = RunBenchctl("run --local " + Example("dither.json") + " --csv");
   ASSERT_EQ(run.exit_code, 0) << run.out;
-  EXPECT_EQ(run.out.rfind("name,controller,status", 0), 0u) << run.out;
+  EXPECT_EQ(run.out.rfind("name,controller,\"controller.dither_pwm.average_current_A\",status", 0), 0u)
+      << "the sweep value is a column: " << run.out;
   size_t rows = 0;
   for (size_t p = run.out.find('\n'); p != std::string::npos; p = run.out.find('\n', p + 1)) ++rows;
   EXPECT_EQ(rows, 5u) << "header + 4 sweep points";
