@@ -11,14 +11,17 @@
 #include <optional>
 
 #include <unistd.h>
+#include <filesystem>
 #include <fstream>
 #include <iostream>
 #include <sstream>
 
 #include "benchctl/cli_common.h"
+#include "benchctl/backend.h"
 #include "client/client.h"
 #include "experiment/spec.h"
 #include "gap/diagnose.h"
+#include "gap/suggest.h"
 #include "gap/identify.h"
 #include "gap/readings_csv.h"
 #include "model/driver.h"
@@ -164,8 +167,17 @@ std::vector<std::string> DefaultReferenceParams(const gap::Dataset& ds, const mo
 
 namespace {
 
+// Where the diagnosis goes: JSON on stdout (json_stdout) or the text report; JSON also into json_out; the
+// improved model into model_out.
+struct DiagnoseOutput {
+  bool json_stdout = false;
+  std::string json_out;
+  std::string model_out;
+  std::string suggest_out;  // the next experiment's spec (docs/gap.md, "The next experiment")
+};
+
 int DiagnoseAndReport(const gap::Dataset& ds_in, const Nominal& nominal, const std::string& source,
-                      const std::string& json_path, const std::string& emit_model, gap::DiagnoseOptions options) {
+                      const DiagnoseOutput& o, gap::DiagnoseOptions options) {
   gap::Dataset ds_copy;
   const gap::Dataset* ds = &ds_in;
   if (nominal.driver) {  // the model's identified driver replaces the dataset's declared one
@@ -176,21 +188,53 @@ int DiagnoseAndReport(const gap::Dataset& ds_in, const Nominal& nominal, const s
   if (isatty(STDERR_FILENO))  // progress is for people at a terminal; scripts get stdout alone
     std::fprintf(stderr, "benchctl: diagnosing %zu runs of %s against %s ...\n", ds->runs.size(), source.c_str(),
                  options.model_name.c_str());
+  if (isatty(STDERR_FILENO)) {
+    // Honest progress: one line per fitted candidate, overwritten in place.
+    options.attribution.progress = [](const std::string& name, int done, int total) {
+      std::fprintf(stderr, "\rbenchctl: fitted %d of %d candidates (%s)\033[K", done, total, name.c_str());
+      if (done == total) std::fprintf(stderr, "\n");
+    };
+  }
   auto d = gap::Diagnose(*ds, nominal.plant, options);
   if (!d.ok()) return Fail(d.status().WithContext(source));
-  if (json_path == "-") {
-    std::cout << gap::DiagnosisJson(*d) << "\n";
-  } else {
-    if (!json_path.empty()) {
-      std::ofstream out(json_path);
-      out << gap::DiagnosisJson(*d) << "\n";
-      if (!out) return Fail(Status::Unavailable(json_path + ": cannot write"));
+  std::optional<gap::Suggestion> suggestion;
+  if (!o.suggest_out.empty()) {
+    auto s = gap::SuggestNextRuns(*ds, nominal.plant, *d);
+    if (!s.ok()) return Fail(s.status().WithContext("--suggest"));
+    suggestion = std::move(*s);
+    if (!suggestion->runs.empty()) {
+      std::ofstream out(o.suggest_out);
+      out << gap::SuggestionSpecJson(*suggestion, "next-experiment", nominal.spec.preset().empty() ? "taghizadeh2009"
+                                                                                                   : nominal.spec.preset());
+      out.close();
+      if (!out) return Fail(Status::Unavailable(o.suggest_out + ": cannot write"));
     }
-    std::cout << gap::DiagnosisReport(*d);
   }
-  if (emit_model.empty()) return kExitOk;
+  if (!o.json_out.empty()) {
+    std::ofstream out(o.json_out);
+    out << gap::DiagnosisJson(*d) << "\n";
+    out.close();
+    if (!out) return Fail(Status::Unavailable(o.json_out + ": cannot write"));
+  }
+  if (o.json_stdout) {
+    if (suggestion) {
+      auto j = nlohmann::ordered_json::parse(gap::DiagnosisJson(*d));
+      j["suggestion"] = nlohmann::ordered_json::parse(gap::SuggestionJson(*suggestion));
+      std::cout << j.dump(2) << "\n";
+    } else {
+      std::cout << gap::DiagnosisJson(*d) << "\n";
+    }
+  } else {
+    std::cout << gap::DiagnosisReport(*d);
+    if (suggestion) {
+      std::cout << gap::SuggestionReport(*suggestion);
+      if (!suggestion->runs.empty())
+        std::cout << "  spec written to " << o.suggest_out << " (benchctl run " << o.suggest_out << ")\n";
+    }
+  }
+  if (o.model_out.empty()) return kExitOk;
   if (d->verdict == "unknown")
-    return Fail(Status::FailedPrecondition("--emit-model: no candidate in the catalog explains the gap (verdict "
+    return Fail(Status::FailedPrecondition("--model-out: no candidate in the catalog explains the gap (verdict "
                                            "unknown); the diagnosis is above, no model written"));
   // The model the diagnosis started from (with a reference: as identified there), plus the verdict.
   valvebench::v1::ModelSpec base = nominal.spec;
@@ -214,8 +258,8 @@ int DiagnoseAndReport(const gap::Dataset& ds_in, const Nominal& nominal, const s
     for (const auto& [name, v] : d->candidates[static_cast<std::size_t>(d->chosen)].fixed) fitted[name] = v;
     desc = "nominal + " + d->verdict + ", fitted by benchctl diagnose on " + source;
   }
-  if (auto st = WriteSpec(WithValues(base, effects, fitted, driver, desc), emit_model); !st.ok()) return Fail(st);
-  if (json_path != "-") std::cout << "improved model written to " << emit_model << "\n";
+  if (auto st = WriteSpec(WithValues(base, effects, fitted, driver, desc), o.model_out); !st.ok()) return Fail(st);
+  if (!o.json_stdout) std::cout << "improved model written to " << o.model_out << "\n";
   return kExitOk;
 }
 
@@ -224,30 +268,32 @@ int DiagnoseAndReport(const gap::Dataset& ds_in, const Nominal& nominal, const s
 
 namespace {
 
-int RemoteDiagnose(client::Client& c, const std::vector<std::int64_t>& run_ids, const std::string& model,
-                   const std::string& json_path, const std::string& emit_model) {
+// The diagnosis of stored runs, from the local store or a server (the same fields either way).
+int StoredDiagnose(Backend& backend, const std::vector<std::int64_t>& run_ids, const std::string& model,
+                   const DiagnoseOutput& out) {
   gap::Dataset ds;
   ds.format = std::string(gap::kFormatValveRuns1);
   double first_start_unix = -1.0;
   for (std::size_t k = 0; k < run_ids.size(); ++k) {
     const std::string where = "run " + std::to_string(run_ids[k]);
-    auto run = c.GetRun(run_ids[k]);
+    auto run = backend.GetRun(run_ids[k]);
     if (!run.ok()) return Fail(run.status().WithContext(where));
-    if (run->status() != valvebench::v1::DONE) return Fail(Status::FailedPrecondition(where + ": not done"));
-    auto trace = c.GetTrace(run_ids[k]);
+    if (!run->ok()) return Fail(Status::FailedPrecondition(where + ": not done"));
+    const valvebench::v1::ExperimentSpec spec = run->spec.value_or(valvebench::v1::ExperimentSpec{});
+    auto trace = backend.GetTrace(run_ids[k]);
     if (!trace.ok()) return Fail(trace.status().WithContext(where));
     if (!trace->columns.count("gate") || !trace->columns.count("i_A"))
       return Fail(Status::InvalidArgument(where + ": the trace has no gate and i_A channels"));
     gap::RunData r;
-    r.id = std::to_string(run_ids[k]) + ":" + run->name();
+    r.id = std::to_string(run_ids[k]) + ":" + run->key.DisplayName();
     r.file = where;
-    r.supply_V = run->spec().conditions().supply_v();
-    r.supply_pressure_Pa = run->spec().conditions().supply_pressure_pa();
+    r.supply_V = spec.conditions().supply_v();
+    r.supply_pressure_Pa = spec.conditions().supply_pressure_pa();
     // Imported runs carry their session's start time and split as fields (docs/server.md); other runs take
     // the start from when they ran.
-    if (first_start_unix < 0.0) first_start_unix = run->started_unix_s();
-    r.t_start_s = run->has_t_start_s() ? run->t_start_s() : run->started_unix_s() - first_start_unix;
-    r.split = run->split() == "fit" || run->split() == "holdout" ? run->split() : "";
+    if (first_start_unix < 0.0) first_start_unix = run->started_unix_s;
+    r.t_start_s = run->t_start_s ? *run->t_start_s : run->started_unix_s - first_start_unix;
+    r.split = run->split == "fit" || run->split == "holdout" ? run->split : "";
     r.sample_period_s = trace->sample_period_s;
     r.i_A = trace->columns.at("i_A");
     for (std::size_t j = 0; j < r.i_A.size(); ++j) {
@@ -258,7 +304,7 @@ int RemoteDiagnose(client::Client& c, const std::vector<std::int64_t>& run_ids, 
       r.gate.push_back(static_cast<std::int8_t>(g));
       r.t_s.push_back(static_cast<double>(j) * r.sample_period_s);
     }
-    if (k == 0) ds.model = run->spec().bench().model().preset().empty() ? "taghizadeh2009" : run->spec().bench().model().preset();
+    if (k == 0) ds.model = spec.bench().model().preset().empty() ? "taghizadeh2009" : spec.bench().model().preset();
     ds.runs.push_back(std::move(r));
   }
   std::stable_sort(ds.runs.begin(), ds.runs.end(),
@@ -271,10 +317,10 @@ int RemoteDiagnose(client::Client& c, const std::vector<std::int64_t>& run_ids, 
   if (!nominal.ok()) return Fail(nominal.status());
   gap::DiagnoseOptions options;
   options.model_name = model.empty() ? ds.model : model;
-  return DiagnoseAndReport(ds, *nominal, "server runs", json_path, emit_model, options);
+  return DiagnoseAndReport(ds, *nominal, "stored runs (" + backend.Where() + ")", out, options);
 }
 
-int RemoteImport(client::Client& c, const std::string& dataset_dir, bool json) {
+int ImportDataset(Backend& backend, const std::string& dataset_dir, bool json) {
   auto ds = Load(dataset_dir);
   if (!ds.ok()) return Fail(ds.status());
   for (std::size_t k = 0; k < ds->runs.size(); ++k)
@@ -304,7 +350,7 @@ int RemoteImport(client::Client& c, const std::string& dataset_dir, bool json) {
     for (double x : r.x_m) out->add_x_m(x);
     for (double v : r.v_coil_V) out->add_v_coil_v(v);
   }
-  auto resp = c.ImportRuns(req);
+  auto resp = backend.Import(req);
   if (!resp.ok()) return Fail(resp.status().WithContext("import " + name));
   std::string ids;
   for (auto id : resp->run_ids()) {
@@ -331,7 +377,10 @@ GapCli::GapCli(CLI::App* app, SharedOptions shared) : shared_(shared) {
   };
   diagnose_ = app->add_subcommand("diagnose", "where and why measured runs differ from the model (valve-runs/1, /2)");
   diagnose_->add_option("dataset", dataset_dir_, "dataset directory (manifest.json and its files)");
-  diagnose_->add_option("--runs", runs_, "server: diagnose these stored runs instead")->delimiter(',');
+  diagnose_->add_option("--runs", runs_, "diagnose these stored runs instead (the server's, or the local store's)")
+      ->delimiter(',');
+  diagnose_->add_flag("--local", local_, "--runs: the local store, even if a server is configured");
+  diagnose_->add_option("--db", *shared_.store_path, "local store (default $VALVEBENCH_DB or ~/.local/share/valvebench/local.db)");
   server_opts(diagnose_);
   diagnose_->add_option("--model", model_, "preset name or model file (ModelSpec JSON); default: the dataset's");
   diagnose_->add_option("--reference", reference_dir_,
@@ -339,10 +388,15 @@ GapCli::GapCli(CLI::App* app, SharedOptions shared) : shared_(shared) {
   diagnose_->add_option("--reference-params", reference_params_,
                         "parameters identified on the reference (default: R, L of a coil, sensor_offset.offset_A)")
       ->delimiter(',');
-  diagnose_->add_option("--json", json_path_, "write the diagnosis as JSON to FILE ('-' or no FILE: stdout)")
-      ->expected(0, 1)
-      ->default_str("-");
-  diagnose_->add_option("--emit-model", emit_model_, "write the improved model (ModelSpec JSON an emulated bench loads)");
+  // --json takes an optional value only so that the old `--json FILE` keeps working (Diagnose()).
+  diagnose_->add_option("--json", json_path_, "the diagnosis as JSON on stdout")->expected(0, 1)->type_name("");
+  diagnose_->add_option("--json-out", json_out_, "also write the diagnosis as JSON to FILE (for report --diagnosis)");
+  diagnose_->add_option("--model-out", model_out_,
+                        "write the improved model (ModelSpec JSON: --model and an emulated bench load it)");
+  diagnose_->add_option("--emit-model", emit_model_, "old name of --model-out");
+  diagnose_->add_option("--suggest", suggest_out_,
+                        "when the leading candidates are confusable, write the runs that would separate them best "
+                        "(an experiment spec: benchctl run FILE) and list them");
 
   identify_ = app->add_subcommand("identify", "fit a device's parameters to measured runs (seed 000 sec. 4)");
   identify_->add_option("dataset", dataset_dir_, "dataset directory (valve-runs/1 or /2)")->required();
@@ -354,7 +408,8 @@ GapCli::GapCli(CLI::App* app, SharedOptions shared) : shared_(shared) {
   identify_->add_flag("--global", global_, "a global search before the local fit (default: when a box spans > 3.5x or crosses 0)");
   identify_->add_flag("--no-global", no_global_, "local fit only (from the start values), no global search first");
   identify_->add_option("--model", model_, "preset name or model file (ModelSpec JSON); default: the dataset's");
-  identify_->add_option("--out", out_path_, "write the identified model (ModelSpec JSON)");
+  identify_->add_option("--model-out", model_out_, "write the identified model (ModelSpec JSON: --model loads it)");
+  identify_->add_option("--out", out_path_, "old name of --model-out");
   identify_->add_flag("--json", *shared_.json, "machine-readable output on stdout");
 
   convert_ = app->add_subcommand("convert", "readings CSV (one periodic steady-state reading per row) -> valve-runs/2 datasets");
@@ -370,6 +425,8 @@ GapCli::GapCli(CLI::App* app, SharedOptions shared) : shared_(shared) {
   import_ = app->add_subcommand("import", "store a dataset's waveform runs on the server");
   import_->add_option("dataset", dataset_dir_, "dataset directory (manifest.json and its files)")->required();
   import_->add_flag("--json", *shared_.json, "machine-readable output on stdout");
+  import_->add_flag("--local", local_, "the local store, even if a server is configured");
+  import_->add_option("--db", *shared_.store_path, "local store");
   server_opts(import_);
 }
 
@@ -384,16 +441,35 @@ int GapCli::Run(const ClientFactory& make_client) {
   return Import(make_client);
 }
 
+std::string GapCli::ModelOut(const std::string& old, const char* old_flag) const {
+  if (old.empty()) return model_out_;
+  std::fprintf(stderr, "benchctl: note: %s FILE is now --model-out FILE\n", old_flag);
+  return model_out_.empty() ? old : model_out_;
+}
+
 int GapCli::Diagnose(const ClientFactory& make_client) {
-  const bool json_given = diagnose_->count("--json") > 0;
-  const std::string json_to = json_given ? (json_path_.empty() ? "-" : json_path_) : "";
+  DiagnoseOutput out;
+  out.json_stdout = diagnose_->count("--json") > 0 || *shared_.json;
+  out.json_out = json_out_;
+  if (!json_path_.empty() && json_path_ != "-") {
+    namespace fs = std::filesystem;
+    std::error_code ec;
+    if (dataset_dir_.empty() && runs_.empty() && fs::is_directory(json_path_, ec)) {
+      dataset_dir_ = json_path_;  // `diagnose --json DIR`: the flag took the dataset as its value
+    } else {  // the old spelling `--json FILE`: the file, and the report on stdout as before
+      std::fprintf(stderr, "benchctl: note: `diagnose --json FILE` is now `--json-out FILE` (--json alone: JSON on "
+                           "stdout, as everywhere)\n");
+      out.json_stdout = *shared_.json;
+      if (out.json_out.empty()) out.json_out = json_path_;
+    }
+  }
+  out.model_out = ModelOut(emit_model_, "--emit-model");
+  out.suggest_out = suggest_out_;
   if (!runs_.empty()) {
     if (!dataset_dir_.empty()) return Fail(Status::InvalidArgument("diagnose: give a dataset directory or --runs, not both"));
     if (!reference_dir_.empty()) return Fail(Status::InvalidArgument("--reference: works on dataset directories, not --runs"));
-    if (shared_.server->empty())
-      return Fail(Status::FailedPrecondition("no server given: --server ADDR or VALVEBENCH_SERVER"));
-    auto c = make_client();
-    return RemoteDiagnose(*c, runs_, model_, json_to, emit_model_);
+    auto backend = ChooseBackend(local_ ? "" : *shared_.server, *shared_.store_path, make_client);
+    return StoredDiagnose(*backend, runs_, model_, out);
   }
   if (dataset_dir_.empty()) return Fail(Status::InvalidArgument("diagnose: give a dataset directory or --runs ID,..."));
   auto ds = Load(dataset_dir_);
@@ -414,7 +490,7 @@ int GapCli::Diagnose(const ClientFactory& make_client) {
     options.reference = &reference;
     options.reference_fit = *fit;
   }
-  return DiagnoseAndReport(*ds, *nominal, dataset_dir_, json_to, emit_model_, options);
+  return DiagnoseAndReport(*ds, *nominal, dataset_dir_, out, options);
 }
 
 int GapCli::Identify() {
@@ -433,20 +509,21 @@ int GapCli::Identify() {
   if (isatty(STDERR_FILENO))
     std::fprintf(stderr, "benchctl: identifying %zu parameters on %zu runs of %s%s ...\n", options->params.size(),
                ds->runs.size(), dataset_dir_.c_str(), "");
+  const std::string model_out = ModelOut(out_path_, "identify --out");
   auto id = gap::Identify(*ds, nominal->plant, *options);
   if (!id.ok()) return Fail(id.status());
-  if (!out_path_.empty()) {
+  if (!model_out.empty()) {
     std::map<std::string, double> values = id->fit.params;
     for (const auto& [name, v] : id->fixed) values[name] = v;
     auto spec = WithValues(nominal->spec, id->candidate.effects, values, ds->driver,
                            "identified by benchctl identify on " + dataset_dir_);
-    if (auto st = WriteSpec(spec, out_path_); !st.ok()) return Fail(st);
+    if (auto st = WriteSpec(spec, model_out); !st.ok()) return Fail(st);
   }
   if (*shared_.json) {
     std::cout << gap::IdentificationJson(*id) << "\n";
   } else {
     std::cout << gap::IdentificationReport(*id);
-    if (!out_path_.empty()) std::cout << "identified model written to " << out_path_ << "\n";
+    if (!model_out.empty()) std::cout << "identified model written to " << model_out << "\n";
   }
   return kExitOk;
 }
@@ -477,10 +554,8 @@ int GapCli::Convert() {
 }
 
 int GapCli::Import(const ClientFactory& make_client) {
-  if (shared_.server->empty())
-    return Fail(Status::FailedPrecondition("no server given: --server ADDR or VALVEBENCH_SERVER"));
-  auto c = make_client();
-  return RemoteImport(*c, dataset_dir_, *shared_.json);
+  auto backend = ChooseBackend(local_ ? "" : *shared_.server, *shared_.store_path, make_client);
+  return ImportDataset(*backend, dataset_dir_, *shared_.json);
 }
 
 }  // namespace vb::benchctl

@@ -1,9 +1,13 @@
 // benchctl's sim-to-real gap commands (docs/gap.md, docs/real-data.md), declared and run here:
-//   diagnose DATASET [--model M] [--reference DIR [--reference-params SPEC,...]] [--json [FILE]] [--emit-model FILE]
-//   diagnose --runs ID,...                 (runs stored on a server)
-//   identify DATASET --params SPEC,... [--fix NAME=V,...] [--global | --no-global] [--model M] [--out FILE] [--json]
+//   diagnose DATASET [--model M] [--reference DIR [--reference-params SPEC,...]] [--json] [--json-out FILE]
+//            [--model-out FILE]
+//   diagnose --runs ID,...                 (stored runs: the server's, or the local store's)
+//   identify DATASET --params SPEC,... [--fix NAME=V,...] [--global | --no-global] [--model M] [--model-out FILE]
+//            [--json]
 //   convert READINGS.csv OUTDIR [--shunt-ohm R] [--amp-ref-ohm R] [--adc-lsb-V V] [--averaged N] [--model M]
 //   import DATASET                         (store a dataset's waveform runs on a server)
+// --json is JSON on stdout; files are --json-out and --model-out (the ModelSpec --model reads back). The old
+// spellings --json FILE, --emit-model FILE and identify --out FILE still work, with a note on stderr.
 // SPEC is NAME, NAME=LO:HI, NAME@START or NAME=LO:HI@START (gap/identify.h).
 #pragma once
 
@@ -28,13 +32,17 @@ class GapCli {
   int Identify();
   int Convert();
   int Import(const ClientFactory& make_client);
+  // --model-out, or its deprecated spelling `old` (with a note on stderr).
+  std::string ModelOut(const std::string& old, const char* old_flag) const;
 
   SharedOptions shared_;
   CLI::App* diagnose_ = nullptr;
   CLI::App* identify_ = nullptr;
   CLI::App* convert_ = nullptr;
   CLI::App* import_ = nullptr;
-  std::string dataset_dir_, model_, json_path_, emit_model_, reference_dir_, out_path_, csv_path_, out_dir_;
+  std::string dataset_dir_, model_, json_path_, json_out_, model_out_, suggest_out_, emit_model_, reference_dir_, out_path_,
+      csv_path_, out_dir_;
+  bool local_ = false;
   std::vector<std::int64_t> runs_;
   std::vector<std::string> params_, reference_params_, fixed_;
   bool no_global_ = false, global_ = false;

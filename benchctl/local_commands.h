@@ -1,4 +1,4 @@
-// benchctl's local commands (no server): run on the embedded emulator, compare, with the local store.
+// benchctl compare: results files from `run --json`, a spec run on the embedded emulator, or stored runs.
 #pragma once
 
 #include <cstdint>
@@ -10,9 +10,6 @@
 
 namespace vb::benchctl {
 
-// run --local SPEC: runs (and, with a store path, records) the batch; prints summaries, CSV or JSON.
-int CmdRun(const std::string& spec_path, bool local, const std::string& store_path, const std::string& trace_csv,
-           bool json, bool csv, bool realtime, const experiment::TableOptions& table = {});
 // compare RESULTS.json (from run --json), or compare --local SPEC (runs it first).
 int CmdCompare(const std::string& input, bool local, const std::string& store_path, bool json, bool csv,
                const experiment::TableOptions& table = {});

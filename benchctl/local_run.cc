@@ -1,7 +1,11 @@
 #include "benchctl/local_run.h"
 
+#include <chrono>
+#include <condition_variable>
 #include <cstdio>
 #include <memory>
+#include <mutex>
+#include <thread>
 
 #include <cmath>
 #include <cstdlib>
@@ -39,6 +43,50 @@ Status CancelLeftOvers(db::Store* store, const std::string& bench_class) {
     f.after_id = page->back().id;
   }
 }
+
+// Another benchctl (watch, cancel, queue) sees local runs only through the store file: while a run executes,
+// this thread copies the loop's progress (by simulated time, runs::Registry) into the store and a cancel
+// request found in the store into the loop, every 200 ms. It has its own connection to the file.
+class StoreRelay {
+ public:
+  StoreRelay(const std::string& path, runs::Registry* registry, const runs::Worker* worker)
+      : registry_(registry), worker_(worker) {
+    auto s = db::Store::Open(path);
+    if (!s.ok()) return;  // nobody else can watch then; the runs themselves are unaffected
+    store_ = std::move(s.value());
+    thread_ = std::thread([this] { Loop(); });
+  }
+  ~StoreRelay() {
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      stop_ = true;
+    }
+    cv_.notify_all();
+    if (thread_.joinable()) thread_.join();
+  }
+  StoreRelay(const StoreRelay&) = delete;
+  StoreRelay& operator=(const StoreRelay&) = delete;
+
+ private:
+  void Loop() {
+    std::unique_lock<std::mutex> lock(mu_);
+    while (!cv_.wait_for(lock, std::chrono::milliseconds(200), [this] { return stop_; })) {
+      const std::int64_t id = worker_->current_run();
+      if (id == 0) continue;
+      double progress = 0.0;
+      if (registry_->Progress(id, &progress)) (void)store_->SetProgress(id, progress);
+      if (auto c = store_->CancelRequested(id); c.ok() && *c) registry_->Cancel(id);
+    }
+  }
+
+  runs::Registry* registry_;
+  const runs::Worker* worker_;
+  std::unique_ptr<db::Store> store_;
+  std::mutex mu_;
+  std::condition_variable cv_;
+  bool stop_ = false;
+  std::thread thread_;
+};
 
 }  // namespace
 
@@ -79,12 +127,31 @@ StatusOr<std::vector<LocalRunResult>> RunLocal(LocalSubmission sub, db::Store* g
   if (!queued.ok()) return queued.status().WithContext(where);
   for (size_t k = 0; k < queued->run_ids.size(); ++k) pending[queued->run_ids[k]] = std::move(shapes[k]);
 
-  runs::Worker worker(bench, nullptr);
+  runs::Registry registry;
+  runs::Worker worker(bench, stored ? &registry : nullptr);
+  std::unique_ptr<StoreRelay> relay;
+  if (stored) relay = std::make_unique<StoreRelay>(sub.store_path, &registry, &worker);
   std::vector<LocalRunResult> out;
   while (!pending.empty()) {
     auto done = worker.ClaimAndExecute(store);
     if (!done.ok()) return done.status().WithContext(where);
-    if (!done->has_value()) return Status::Internal(where + ": a submitted run was not there to claim");
+    if (!done->has_value()) {
+      // Nothing left to claim: the rest of the batch was cancelled while queued (benchctl cancel from another
+      // shell). They are results too, with the state they reached.
+      for (auto& [id, r] : pending) {
+        auto row = store->GetRun(id);
+        if (!row.ok()) return row.status().WithContext(where);
+        if (row->status == RunStatus::kQueued)
+          return Status::Internal(where + ": run " + std::to_string(id) + " is queued but was not there to claim");
+        r.run_id = stored || given != nullptr ? id : 0;
+        r.batch_id = stored || given != nullptr ? queued->batch_id : 0;
+        r.summary.termination = row->status == RunStatus::kCancelled ? experiment::RunSummary::Termination::kCancelled
+                                                                     : experiment::RunSummary::Termination::kFailed;
+        r.summary.message = row->reason;
+        out.push_back(std::move(r));
+      }
+      break;
+    }
     runs::Outcome& o = **done;
     auto it = pending.find(o.run_id);
     if (it == pending.end()) return Status::Internal(where + ": claimed run " + std::to_string(o.run_id) + ", not ours");

@@ -13,14 +13,13 @@
 #include <iostream>
 
 #include "benchctl/cli_common.h"
-#include "benchctl/export_files.h"
 #include "benchctl/gap_commands.h"
 #include "benchctl/hw_commands.h"
 #include "benchctl/local_commands.h"
 #include "benchctl/local_run.h"
 #include "benchctl/regress_commands.h"
 #include "benchctl/report_commands.h"
-#include "benchctl/remote.h"
+#include "benchctl/run_commands.h"
 
 #include <fstream>
 #include <sstream>
@@ -70,6 +69,11 @@ int main(int argc, char** argv) {
     sub->add_option("--metrics", table.metrics, "table: these metrics (full names, as in --json)")->delimiter(',');
     sub->add_flag("--wide", table.wide, "table: every metric, not only the experiment kind's");
   };
+  // Commands on stored runs: the server when one is given (and no --local), else the local store.
+  auto stored_runs = [&](CLI::App* sub) {
+    sub->add_flag("--local", local, "the local store, even if a server is configured");
+    sub->add_option("--db", store_path, "local store (default $VALVEBENCH_DB or ~/.local/share/valvebench/local.db)");
+  };
   auto* run = app.add_subcommand("run", "run an experiment spec (a single run or a batch)");
   run->add_option("spec", spec_path, "experiment spec (protobuf JSON)")->required();
   run->add_flag("--local", local, "run on the embedded emulator, no server");
@@ -80,47 +84,53 @@ int main(int argc, char** argv) {
   local_store(run);
   table_flags(run);
 
-  std::string status_filter, tag_filter;
-  std::int64_t batch = 0;
-  int limit = 100;
-  auto* queue = app.add_subcommand("queue", "list runs on the server (default: queued and running)");
-  queue->add_option("--status", status_filter, "queued, running, done, failed, cancelled, interrupted");
-  queue->add_option("--batch", batch, "runs of one batch");
-  queue->add_option("--tag", tag_filter, "runs with this tag");
-  queue->add_option("--limit", limit, "at most this many (1-1000)")->check(CLI::Range(1, 1000));
+  vb::benchctl::QueueOptions queue_opts;
+  auto* queue = app.add_subcommand("queue", "runs queued and running (or matching --status/--batch/--tag), with ETA");
+  queue->add_option("--status", queue_opts.status, "queued, running, done, failed, cancelled, interrupted");
+  queue->add_option("--batch", queue_opts.batch, "runs of one batch");
+  queue->add_option("--tag", queue_opts.tag, "runs with this tag");
+  queue->add_option("--limit", queue_opts.limit, "at most this many (1-1000)")->check(CLI::Range(1, 1000));
   common(queue, true);
+  stored_runs(queue);
 
   std::int64_t run_id = 0;
-  auto* show = app.add_subcommand("show", "a run: status, metrics, history");
+  auto* show = app.add_subcommand("show", "a run: status, times, metrics, history");
   show->add_option("run_id", run_id, "run id")->required();
-  common(show, false);
+  common(show, true);
+  stored_runs(show);
   auto* watch = app.add_subcommand("watch", "follow a run until it ends (exit 1 if it did not succeed)");
   watch->add_option("run_id", run_id, "run id")->required();
   common(watch, false);
+  stored_runs(watch);
   std::string reason;
-  auto* cancel = app.add_subcommand("cancel", "cancel a queued or running run");
+  auto* cancel = app.add_subcommand("cancel", "cancel a queued or running run; reports the state it reached");
   cancel->add_option("run_id", run_id, "run id")->required();
   cancel->add_option("--reason", reason, "recorded with the run");
   common(cancel, false);
-  std::string export_csv, export_hdf5, export_mat;
+  stored_runs(cancel);
+  vb::benchctl::ExportOptions export_opts;
+  std::string export_csv_old;  // `--csv FILE`, the spelling before --trace-csv
   auto* exp = app.add_subcommand("export", "a stored run's trace as CSV, HDF5 or MATLAB .mat (units, spec, conditions)");
   exp->add_option("run_id", run_id, "run id")->required();
-  exp->add_option("--csv", export_csv, "CSV file ('-' = stdout)");
-  exp->add_option("--hdf5", export_hdf5, "HDF5 file: channels with units, spec and conditions (export/run_file.h)");
-  exp->add_option("--mat", export_mat, "MATLAB .mat file (level 5): struct vbrun (export/run_file.h)");
+  exp->add_option("--csv", export_csv_old, "the trace as CSV on stdout")->expected(0, 1)->type_name("");
+  exp->add_option("--trace-csv", export_opts.trace_csv, "the trace as CSV in FILE (as run --trace-csv)");
+  exp->add_option("--hdf5", export_opts.hdf5, "HDF5 file: channels with units, spec and conditions (export/run_file.h)");
+  exp->add_option("--mat", export_opts.mat, "MATLAB .mat file (level 5): struct vbrun (export/run_file.h)");
   common(exp, false);
+  stored_runs(exp);
   auto* benches = app.add_subcommand("benches", "the server's benches and attached USB devices (--local: this machine's)");
   benches->add_flag("--local", local, "the embedded emulator and the USB devices this machine sees, no server");
   common(benches, false);
 
   std::string compare_input;
-  bool compare_local = false;
+  std::int64_t batch = 0;
   std::vector<std::int64_t> run_ids;
   auto* compare = app.add_subcommand("compare", "compare runs: RMSE, effort and the other metrics side by side");
-  compare->add_option("input", compare_input, "local: results JSON from `run --json`, or a spec with --local");
-  compare->add_flag("--local", compare_local, "run the spec's batch on the embedded emulator, then compare");
-  compare->add_option("--batch", batch, "server: compare the runs of this batch");
-  compare->add_option("--runs", run_ids, "server: compare these runs")->delimiter(',');
+  compare->add_option("input", compare_input, "results JSON from `run --json`, or a spec with --local");
+  compare->add_flag("--local", local, "SPEC: run its batch on the embedded emulator, then compare; --batch/--runs: "
+                                      "the local store even if a server is configured");
+  compare->add_option("--batch", batch, "compare the runs of this batch (the server's, or the local store's)");
+  compare->add_option("--runs", run_ids, "compare these runs")->delimiter(',');
   common(compare, true);
   local_store(compare);
   table_flags(compare);
@@ -138,6 +148,9 @@ int main(int argc, char** argv) {
     return rc == 0 ? 0 : kExitBadInput;
   }
   const vb::benchctl::Output out{json, csv};
+  if (!tls_ca_file.empty() && !std::ifstream(tls_ca_file))
+    return Fail(Status::NotFound("--tls-ca: cannot read '" + tls_ca_file + "' (a PEM file of the CA that signed "
+                                 "the server's certificate)"));
   auto make_client = [&]() -> std::unique_ptr<vb::client::Client> {
     vb::client::ClientOptions opts;
     opts.address = server;
@@ -158,43 +171,45 @@ int main(int argc, char** argv) {
   if (regress_cli.parsed()) return regress_cli.Run(make_client);
   if (report_cli.parsed()) return report_cli.Run(make_client);
   if (gap_cli.parsed()) return gap_cli.Run(make_client);
+  // One decision per invocation: the server if one is given and --local is not, else the local store.
+  auto backend = [&]() { return vb::benchctl::ChooseBackend(local ? "" : server, store_path, make_client); };
   if (run->parsed()) {
-    if (local || server.empty()) return vb::benchctl::CmdRun(spec_path, local, store_path, trace_csv, json, csv, realtime, table);
-    if (!trace_csv.empty() || realtime)
+    if (!local && server.empty())
+      return Fail(Status::FailedPrecondition(
+          "no server given: use --local for the embedded emulator, or --server ADDR (or VALVEBENCH_SERVER)"));
+    if (!local && (!trace_csv.empty() || realtime))
       return Fail(Status::InvalidArgument("--trace-csv and --realtime are local options; use `export` remotely"));
-    auto c = make_client();
-    return vb::benchctl::RemoteRun(*c, spec_path, wait, out);
+    return vb::benchctl::CmdRun(*backend(), {spec_path, wait, trace_csv, realtime, table}, out);
   }
   if (compare->parsed()) {
     if (batch != 0 || !run_ids.empty()) {
-      if (compare_local && store_path.empty())
-        return Fail(Status::InvalidArgument("--batch/--runs with --local need the local store (--db)"));
-      if (!compare_local && server.empty()) return need_server();
-      auto backend = vb::benchctl::ChooseBackend(compare_local ? "" : server, store_path, make_client);
-      return vb::benchctl::CmdCompareStored(*backend, batch, run_ids, json, csv, table);
+      if (store_path.empty() && (local || server.empty()))
+        return Fail(Status::InvalidArgument("--batch/--runs with --no-store: nothing is stored to compare"));
+      return vb::benchctl::CmdCompareStored(*backend(), batch, run_ids, json, csv, table);
     }
     if (compare_input.empty())
-      return Fail(Status::InvalidArgument("compare: give --batch/--runs (server), or a results file or --local SPEC"));
-    return vb::benchctl::CmdCompare(compare_input, compare_local, store_path, json, csv, table);
+      return Fail(Status::InvalidArgument("compare: give --batch B or --runs A,B,..., a results file, or --local SPEC"));
+    return vb::benchctl::CmdCompare(compare_input, local, store_path, json, csv, table);
   }
   if (benches->parsed()) {
     if (!local && server.empty()) return need_server();
-    auto backend = vb::benchctl::ChooseBackend(local ? "" : server, store_path, make_client);
-    return vb::benchctl::CmdBenches(*backend, json);
+    return vb::benchctl::CmdBenches(*backend(), json);
   }
-  if (server.empty()) return need_server();
-  auto c = make_client();
-  if (queue->parsed()) {
-    if (status_filter.empty() && batch == 0 && tag_filter.empty()) {
-      const int a = vb::benchctl::RemoteQueue(*c, "running", 0, "", limit, out);
-      if (a != kExitOk) return a;
-      return vb::benchctl::RemoteQueue(*c, "queued", 0, "", limit, out);
+  if (queue->parsed()) return vb::benchctl::CmdQueue(*backend(), queue_opts, out);
+  if (show->parsed()) return vb::benchctl::CmdShow(*backend(), run_id, out);
+  if (watch->parsed()) return vb::benchctl::CmdWatch(*backend(), run_id, out);
+  if (cancel->parsed()) return vb::benchctl::CmdCancel(*backend(), run_id, reason, out);
+  if (exp->parsed()) {
+    if (exp->count("--csv") > 0) {
+      if (export_csv_old.empty() || export_csv_old == "-") {
+        export_opts.csv_stdout = true;
+      } else {  // the old spelling: still works, once more
+        std::fprintf(stderr, "benchctl: note: `export --csv FILE` is now `export --trace-csv FILE` "
+                             "(--csv alone: CSV on stdout, as everywhere)\n");
+        export_opts.trace_csv = export_csv_old;
+      }
     }
-    return vb::benchctl::RemoteQueue(*c, status_filter, batch, tag_filter, limit, out);
+    return vb::benchctl::CmdExport(*backend(), run_id, export_opts, json);
   }
-  if (show->parsed()) return vb::benchctl::RemoteShow(*c, run_id, out);
-  if (watch->parsed()) return vb::benchctl::RemoteWatch(*c, run_id, out);
-  if (cancel->parsed()) return vb::benchctl::RemoteCancel(*c, run_id, reason, out);
-  if (exp->parsed()) return vb::benchctl::RemoteExportFiles(*c, run_id, export_csv, export_hdf5, export_mat);
   return kExitBadInput;
 }

@@ -155,12 +155,12 @@ Status WriteFile(const std::string& path, const std::string& text) {
 }  // namespace
 
 RegressCli::RegressCli(CLI::App* app, SharedOptions shared) : shared_(shared) {
-  auto common = [this](CLI::App* sub) {
+  auto common = [this](CLI::App* sub, bool with_db = true) {
     sub->add_flag("--json", *shared_.json, "machine-readable output on stdout");
     sub->add_option("--server", *shared_.server, "bench server address host:port (or VALVEBENCH_SERVER)");
     sub->add_option("--token", *shared_.token, "bearer token (or VALVEBENCH_TOKEN)");
     sub->add_option("--tls-ca", *shared_.tls_ca_file, "PEM file of the CA that signed the server's certificate");
-    sub->add_option("--db", *shared_.store_path, "local store holding baselines and regression results");
+    if (with_db) sub->add_option("--db", *shared_.store_path, "local store holding baselines and regression results");
   };
   baseline_ = app->add_subcommand("baseline", "named, versioned metric baselines for regress");
   baseline_->require_subcommand(1);
@@ -193,7 +193,7 @@ RegressCli::RegressCli(CLI::App* app, SharedOptions shared) : shared_(shared) {
   nights_ = app->add_subcommand("nights", "the server's scheduled regression nights, newest first (exit 1 if the "
                                           "latest did not pass)");
   nights_->add_option("--limit", limit_, "how many nights (1-1000, default 10)");
-  common(nights_);
+  common(nights_, /*with_db=*/false);  // nights are the server's: its scheduler runs them into its own store
 }
 
 bool RegressCli::parsed() const { return baseline_->parsed() || regress_->parsed() || nights_->parsed(); }
@@ -340,7 +340,9 @@ int RegressCli::Run(const ClientFactory& make_client) {
   if (nights_->parsed()) {
     if (limit_ < 1 || limit_ > 1000) return Fail(Status::InvalidArgument("--limit: must be 1-1000"));
     if (server.empty())
-      return Fail(Status::InvalidArgument("nights: the nights run on a server (--server ADDR or VALVEBENCH_SERVER)"));
+      return Fail(Status::InvalidArgument("nights: the nights run on a server and are stored there; give it with "
+                                          "--server ADDR or VALVEBENCH_SERVER (local regressions: benchctl report "
+                                          "--regress ID)"));
     auto c = make_client();
     auto resp = c->ListNights(limit_);
     if (!resp.ok()) return Fail(resp.status());

@@ -12,6 +12,7 @@
 #include "db/store.h"
 #include "experiment/compare.h"
 #include "experiment/metrics.h"
+#include "experiment/spec.h"
 #include "report/report.h"
 
 namespace vb::benchctl {
@@ -47,7 +48,7 @@ ReportCli::ReportCli(CLI::App* app, SharedOptions shared) : shared_(shared) {
   report_->add_option("--batch", batch_, "the runs of this batch: comparison, Pareto scatter, static map, traces");
   report_->add_option("--run", run_, "one run: its traces and metrics");
   report_->add_option("--regress", regress_, "a regression result stored by benchctl regress (local store)");
-  report_->add_option("--diagnosis", diagnosis_, "a gap diagnosis JSON file (benchctl diagnose --json FILE)");
+  report_->add_option("--diagnosis", diagnosis_, "a gap diagnosis JSON file (benchctl diagnose --json-out FILE, or --json > FILE)");
   report_->add_option("--html", html_, "output HTML file")->required();
   report_->add_option("--max-traces", max_traces_, "traces of at most this many runs (default 100)")
       ->check(CLI::Range(0, 1000));
@@ -98,7 +99,8 @@ int ReportCli::Run(const ClientFactory& make_client) {
     if (!fetched.ok()) return Fail(fetched.status());
     std::vector<report::RunInfo> runs;
     for (const RunView& v : *fetched) {
-      report::RunInfo r{v.id, v.key, v.controller, RunStatusName(v.status), v.metrics, v.spec_json,
+      report::RunInfo r{v.id, v.key, v.controller, RunStatusName(v.status), v.metrics,
+                        v.spec ? experiment::SpecToJson(*v.spec, false) : std::string(),
                         v.submitted_unix_s, v.started_unix_s, v.finished_unix_s, {}};
       // No trace is stored before a run ends.
       if (v.ended() && static_cast<int>(runs.size()) < max_traces_) {

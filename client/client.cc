@@ -28,6 +28,28 @@ Status FromGrpc(const grpc::Status& st) {
   }
 }
 
+Status Client::Error(const grpc::Status& st) const {
+  switch (st.error_code()) {
+    case grpc::StatusCode::UNAVAILABLE:
+    case grpc::StatusCode::DEADLINE_EXCEEDED:
+      // Never connected: one line that says where we looked and how to point elsewhere, not gRPC's resolver
+      // and socket trace. A server that answered UNAVAILABLE itself keeps its message.
+      if (channel_->GetState(false) != GRPC_CHANNEL_READY)
+        return Status::Unavailable("cannot reach valvebench-server at " + opt_.address +
+                                   " (is it running? the address comes from --server or VALVEBENCH_SERVER)");
+      break;
+    case grpc::StatusCode::UNAUTHENTICATED:
+      if (opt_.token.empty())
+        return Status::FailedPrecondition("not authenticated: no token given; the server at " + opt_.address +
+                                          " needs one: set VALVEBENCH_TOKEN or pass --token TOKEN");
+      return Status::FailedPrecondition("not authenticated: " + st.error_message() +
+                                        " (the token comes from --token or VALVEBENCH_TOKEN)");
+    default:
+      break;
+  }
+  return FromGrpc(st);
+}
+
 Client::Client(const ClientOptions& options) : opt_(options) {
   std::shared_ptr<grpc::ChannelCredentials> creds;
   if (!opt_.tls_ca_pem.empty()) {
@@ -58,7 +80,7 @@ StatusOr<v1::SubmitRunResponse> Client::Submit(const v1::ExperimentSpec& spec, c
   req.set_batch_name(batch_name);
   v1::SubmitRunResponse resp;
   auto st = stub_->SubmitRun(&ctx, req, &resp);
-  if (!st.ok()) return FromGrpc(st);
+  if (!st.ok()) return Error(st);
   return resp;
 }
 
@@ -73,7 +95,7 @@ StatusOr<v1::SubmitRunResponse> Client::SubmitBatch(const std::vector<v1::Experi
   req.set_batch_name(batch_name);
   v1::SubmitRunResponse resp;
   auto st = stub_->SubmitBatch(&ctx, req, &resp);
-  if (!st.ok()) return FromGrpc(st);
+  if (!st.ok()) return Error(st);
   return resp;
 }
 
@@ -84,7 +106,7 @@ StatusOr<v1::Run> Client::GetRun(std::int64_t run_id) {
   req.set_run_id(run_id);
   v1::Run resp;
   auto st = stub_->GetRun(&ctx, req, &resp);
-  if (!st.ok()) return FromGrpc(st);
+  if (!st.ok()) return Error(st);
   return resp;
 }
 
@@ -93,7 +115,7 @@ StatusOr<v1::ListRunsResponse> Client::ListRuns(const v1::ListRunsRequest& reque
   Prepare(&ctx, opt_.deadline_s);
   v1::ListRunsResponse resp;
   auto st = stub_->ListRuns(&ctx, request, &resp);
-  if (!st.ok()) return FromGrpc(st);
+  if (!st.ok()) return Error(st);
   return resp;
 }
 
@@ -105,7 +127,7 @@ StatusOr<v1::Run> Client::Cancel(std::int64_t run_id, const std::string& reason)
   req.set_reason(reason);
   v1::Run resp;
   auto st = stub_->CancelRun(&ctx, req, &resp);
-  if (!st.ok()) return FromGrpc(st);
+  if (!st.ok()) return Error(st);
   return resp;
 }
 
@@ -126,7 +148,7 @@ Status Client::Watch(std::int64_t run_id, double deadline_s, double sample_rate_
   }
   auto st = reader->Finish();
   if (st.error_code() == grpc::StatusCode::CANCELLED) return Status::Ok();
-  return FromGrpc(st);
+  return Error(st);
 }
 
 StatusOr<FetchedTrace> Client::GetTrace(std::int64_t run_id, double deadline_s) {
@@ -160,7 +182,7 @@ StatusOr<FetchedTrace> Client::GetTrace(std::int64_t run_id, double deadline_s) 
     ++expected;
   }
   auto st = reader->Finish();
-  if (!st.ok()) return FromGrpc(st);
+  if (!st.ok()) return Error(st);
   return out;
 }
 
@@ -172,7 +194,7 @@ StatusOr<v1::CompareRunsResponse> Client::Compare(std::int64_t batch_id, const s
   for (auto id : run_ids) req.add_run_ids(id);
   v1::CompareRunsResponse resp;
   auto st = stub_->CompareRuns(&ctx, req, &resp);
-  if (!st.ok()) return FromGrpc(st);
+  if (!st.ok()) return Error(st);
   return resp;
 }
 
@@ -183,7 +205,7 @@ StatusOr<v1::ListNightsResponse> Client::ListNights(int limit) {
   req.set_limit(limit);
   v1::ListNightsResponse resp;
   auto st = stub_->ListNights(&ctx, req, &resp);
-  if (!st.ok()) return FromGrpc(st);
+  if (!st.ok()) return Error(st);
   return resp;
 }
 
@@ -192,7 +214,7 @@ StatusOr<v1::ListBenchesResponse> Client::Benches() {
   Prepare(&ctx, opt_.deadline_s);
   v1::ListBenchesResponse resp;
   auto st = stub_->ListBenches(&ctx, v1::ListBenchesRequest{}, &resp);
-  if (!st.ok()) return FromGrpc(st);
+  if (!st.ok()) return Error(st);
   return resp;
 }
 
@@ -201,7 +223,7 @@ StatusOr<v1::SubmitRunResponse> Client::ImportRuns(const v1::ImportRunsRequest& 
   Prepare(&ctx, deadline_s);
   v1::SubmitRunResponse resp;
   auto st = stub_->ImportRuns(&ctx, request, &resp);
-  if (!st.ok()) return FromGrpc(st);
+  if (!st.ok()) return Error(st);
   return resp;
 }
 

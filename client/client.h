@@ -56,6 +56,9 @@ class Client {
 
  private:
   void Prepare(grpc::ClientContext* ctx, double deadline_s) const;
+  // FromGrpc, plus what to do next where the client knows better than the server: a server that cannot be
+  // reached (the address, --server/VALVEBENCH_SERVER) and a missing token (--token/VALVEBENCH_TOKEN).
+  Status Error(const grpc::Status& st) const;
   ClientOptions opt_;
   std::shared_ptr<grpc::Channel> channel_;
   std::unique_ptr<valvebench::v1::BenchService::Stub> stub_;

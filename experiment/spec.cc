@@ -1,8 +1,11 @@
 #include "experiment/spec.h"
 
 #include <google/protobuf/descriptor.h>
+#include <google/protobuf/descriptor.pb.h>
 #include <google/protobuf/util/json_util.h>
 
+#include <algorithm>
+#include <cctype>
 #include <charconv>
 #include <cmath>
 #include <fstream>
@@ -18,12 +21,78 @@ namespace vb::experiment {
 namespace pb = google::protobuf;
 using valvebench::v1::ControllerSpec;
 
+namespace {
+
+// Edit distance, case-insensitive (a field differing only in case is the closest there is).
+std::size_t Distance(std::string_view a, std::string_view b) {
+  std::vector<std::size_t> row(b.size() + 1);
+  for (std::size_t j = 0; j <= b.size(); ++j) row[j] = j;
+  for (std::size_t i = 1; i <= a.size(); ++i) {
+    std::size_t diag = row[0];
+    row[0] = i;
+    for (std::size_t j = 1; j <= b.size(); ++j) {
+      const std::size_t up = row[j];
+      const bool same = std::tolower(static_cast<unsigned char>(a[i - 1])) == std::tolower(static_cast<unsigned char>(b[j - 1]));
+      row[j] = std::min({row[j] + 1, row[j - 1] + 1, diag + (same ? 0 : 1)});
+      diag = up;
+    }
+  }
+  return row[b.size()];
+}
+
+// protobuf's "(LOC) NAME: Cannot find field." for a misspelt field, rewritten as "LOC.NAME: unknown field; did
+// you mean 'X'?" with X the closest field of that message (docs/spec.md: specs reject unknown fields, so a
+// typo never falls back to a default). Other messages pass through unchanged.
+std::string ExplainUnknownField(const std::string& message) {
+  static constexpr std::string_view kTail = ": Cannot find field.";
+  const std::size_t tail = message.rfind(kTail);
+  if (tail == std::string::npos) return message;
+  std::string loc, name = message.substr(0, tail);
+  if (!name.empty() && name.front() == '(') {
+    const std::size_t close = name.find(") ");
+    if (close == std::string::npos) return message;
+    loc = name.substr(1, close - 1);
+    name = name.substr(close + 2);
+  }
+  const pb::Descriptor* d = ExperimentSpec::descriptor();
+  std::size_t start = 0;
+  while (d != nullptr && start < loc.size()) {
+    std::size_t end = loc.find('.', start);
+    if (end == std::string::npos) end = loc.size();
+    std::string part = loc.substr(start, end - start);
+    if (const std::size_t bracket = part.find('['); bracket != std::string::npos) part.resize(bracket);
+    const pb::FieldDescriptor* f = d->FindFieldByName(part);
+    for (int k = 0; f == nullptr && k < d->field_count(); ++k)
+      if (d->field(k)->json_name() == part) f = d->field(k);
+    d = f != nullptr ? f->message_type() : nullptr;
+    start = end + 1;
+  }
+  if (d == nullptr || d->options().map_entry()) return message;
+  std::string best;
+  std::size_t best_d = std::string::npos;
+  std::string known;
+  for (int k = 0; k < d->field_count(); ++k) {
+    const std::string& candidate = d->field(k)->name();
+    known += (k ? ", " : "") + candidate;
+    if (const std::size_t dist = Distance(name, candidate); dist < best_d) {
+      best_d = dist;
+      best = candidate;
+    }
+  }
+  const std::string path = loc.empty() ? name : loc + "." + name;
+  if (!best.empty() && best_d <= std::max<std::size_t>(2, name.size() / 3))
+    return path + ": unknown field; did you mean '" + best + "'?";
+  return path + ": unknown field (known here: " + known + ")";
+}
+
+}  // namespace
+
 StatusOr<ExperimentSpec> ParseSpecJson(std::string_view json) {
   ExperimentSpec spec;
   pb::util::JsonParseOptions opts;
   opts.ignore_unknown_fields = false;
   auto st = pb::util::JsonStringToMessage(pb::StringPiece(json.data(), json.size()), &spec, opts);
-  if (!st.ok()) return Status::InvalidArgument(std::string(st.message()));
+  if (!st.ok()) return Status::InvalidArgument(ExplainUnknownField(std::string(st.message())));
   return spec;
 }
 

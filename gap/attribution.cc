@@ -11,6 +11,7 @@
 #include <cmath>
 #include <functional>
 #include <limits>
+#include <mutex>
 #include <thread>
 
 #include "gap/predict.h"
@@ -447,12 +448,17 @@ std::vector<Candidate> DefaultCandidates(const model::PlantParams& nominal) {
   out.push_back({"sensor_lag", {"sensor_lag"},
                  {R, {"sensor_lag.tau_s", 1e-6, 5e-3, 1e-4, true, 1e-6}, {"sensor_lag.delay_s", 0.0, 1e-3, 2e-5, false, 0.0}}, {}});
   out.push_back({"magnetic_saturation", {"magnetic_saturation"},
-                 {R, {"magnetic_saturation.B_sat", 0.3, 20.0, 3.0, true, 20.0}}, {}});
+                 {R, {"magnetic_saturation.B_sat", 0.3, 300.0, 3.0, true, 300.0}}, {}});
   out.push_back({"residual_magnetism", {"residual_magnetism"},
                  {R, {"residual_magnetism.w", 0.002, 1.0, 0.05, true, 0.002}, {"residual_magnetism.alpha", 0.05, 1.0, 0.4, false}}, {}});
   out.push_back({"coulomb_friction", {"coulomb_friction"},
                  {R, {"coulomb_friction.F_c", 0.0, 10.0, 1.0, false, 0.0}, {"coulomb_friction.F_s", 0.0, 15.0, 1.5, false, 0.0}}, {}});
   out.push_back({"end_stop_bounce", {"end_stop_bounce"}, {R, {"end_stop_bounce.e", 0.0, 0.95, 0.4, false, 0.0}}, {}});
+  // The sense chain: a gain and an offset off their nominal values, each with R free. Not in the gapbench
+  // vocabulary, but a real chain has them, and naming them beats "unknown" (docs/gap.md).
+  const double gain0 = nominal.effects.sensor_gain, off0 = nominal.effects.sensor_offset_A;
+  out.push_back({"sensor_gain", {"sensor_gain"}, {R, {"sensor_gain.gain", gain0 * 0.7, gain0 * 1.4, gain0, false, gain0}}, {}});
+  out.push_back({"sensor_offset", {"sensor_offset"}, {R, {"sensor_offset.offset_A", off0 - 0.3, off0 + 0.3, off0, false, off0}}, {}});
   return out;
 }
 
@@ -478,6 +484,7 @@ std::vector<Candidate> DefaultCandidates(const model::PlantParams& nominal, cons
       continue;
     }
     const std::string& e = c.effects.front();
+    if (e == "sensor_gain" || e == "sensor_offset") continue;  // bounded by this dataset's currents below
     if ((e == "coulomb_friction" || e == "end_stop_bounce") && !moving) continue;
     // Sampled chains and within-run dynamics of slow states show on waveforms only.
     if ((e == "sensor_lag" || e == "coil_heating" || e == "residual_magnetism") && !waveforms) continue;
@@ -552,9 +559,16 @@ StatusOr<std::vector<CandidateResult>> Attribute(const Dataset& ds, const std::v
   const double holdout_before = Rms(hold_e2, hold_n);
   std::vector<CandidateResult> results(candidates.size());
   std::atomic<std::size_t> next{0};
+  std::mutex progress_mu;
+  int done = 0;
   auto worker = [&]() {
-    for (std::size_t i = next++; i < candidates.size(); i = next++)
+    for (std::size_t i = next++; i < candidates.size(); i = next++) {
       results[i] = Fit(ds, fit_mask, nominal, *ref, candidates[i], holdout_before, noise_floor_A, opt);
+      if (opt.progress) {
+        std::lock_guard<std::mutex> lock(progress_mu);
+        opt.progress(candidates[i].name, ++done, static_cast<int>(candidates.size()));
+      }
+    }
   };
   std::vector<std::thread> pool;
   const int threads = std::clamp(opt.threads, 1, static_cast<int>(std::max<std::size_t>(candidates.size(), 1)));

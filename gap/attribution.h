@@ -12,6 +12,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <functional>
 #include <map>
 #include <string>
 #include <vector>
@@ -85,6 +86,9 @@ struct AttributionOptions {
   double candidate_budget_s = 30.0;
   std::chrono::steady_clock::time_point deadline = std::chrono::steady_clock::time_point::max();
   model::SolverOptions solver = FastSolver();
+  // Called after each candidate's fit (from the fitting threads, one call at a time): its name, how many are done
+  // and how many there are in this round.
+  std::function<void(const std::string& name, int done, int total)> progress;
   static model::SolverOptions FastSolver() {
     model::SolverOptions s;
     s.rel_tol = 1e-7;                 // plenty at a 2 mA noise floor, and 2-3x fewer steps

@@ -162,6 +162,191 @@ void DisqualifyWhatRAloneExplains(Diagnosis* d, CandidateOf candidate_of) {
   if (changed) SortRanking(&d->ranking);
 }
 
+// An addition to a model is decisive on the holdout runs when (a) what the model leaves is itself significant,
+// (b) the addition removes at least half of what it leaves above the floor, and (c) the energy it removes would
+// by itself be a significant gap (kSignificance^2 - 1 floor^2). (c) is what keeps a weak single effect from being
+// answered with a pair: near the floor, halving a small remainder is easy for any second effect that patches the
+// first one's form, but it removes too little energy to count.
+bool Decisive(double before_A, double after_A, double floor_A) {
+  if (!(before_A > kSignificance * floor_A)) return false;
+  const double half_way = before_A - 0.5 * (before_A - floor_A);
+  const double removed2 = before_A * before_A - after_A * after_A;
+  return after_A <= half_way && removed2 >= (kSignificance * kSignificance - 1.0) * floor_A * floor_A;
+}
+
+// A copy of a candidate that starts from a fitted result's values (clamped into its box).
+Candidate WarmStarted(const Candidate& c, const CandidateResult& r) {
+  Candidate w = c;
+  for (auto& f : w.params) {
+    auto it = r.params.find(f.name);
+    if (it != r.params.end() && std::isfinite(it->second)) f.initial = std::clamp(it->second, f.lower, f.upper);
+  }
+  return w;
+}
+
+// True when every parameter of `effect` in a fitted combination ended where the effect vanishes.
+bool EffectVanished(const Candidate& c, const CandidateResult& r, const std::string& effect) {
+  bool any = false;
+  for (const auto& f : c.params) {
+    if (f.name.rfind(effect + ".", 0) != 0 || !std::isfinite(f.absent)) continue;
+    any = true;
+    auto it = r.params.find(f.name);
+    if (it == r.params.end()) continue;
+    if (std::abs(Normalised(f, it->second) - Normalised(f, f.absent)) > 0.02) return false;
+  }
+  return any;
+}
+
+// True when any effect of a fitted combination ended where it vanishes (the combination is then a smaller one).
+bool AnyEffectVanished(const Candidate& c, const CandidateResult& r) {
+  return std::any_of(c.effects.begin(), c.effects.end(),
+                     [&](const std::string& e) { return EffectVanished(c, r, e); });
+}
+
+// Several causes (docs/gap.md, "Several causes"): a small beam search, then a parsimonious choice on the
+// holdout runs.
+//   1. The pool: the structural effects whose single fits did best, on the fit runs (what the data asks for) or
+//      on the holdout runs (what generalises), combination_pool at most.
+//   2. Every pair of the pool, and every triple that extends the two best pairs (by fit error) with any effect
+//      whose single fit found it;
+//      each fit starts from its members' fitted values.
+//   3. The choice: from the best single, a larger combination is taken only when it is decisive against the one
+//      taken so far (Decisive), and none of its effects ended where it vanishes.
+Status SelectCombination(const Dataset& ds, const std::vector<bool>& fit_mask, const model::PlantParams& nominal,
+                         const DiagnoseOptions& opt, const AttributionOptions& attribution, Diagnosis* d) {
+  auto candidate_of = [&](const std::string& name) -> const Candidate* {
+    for (const auto& c : d->candidates)
+      if (c.name == name) return &c;
+    return nullptr;
+  };
+  int base = -1;
+  for (std::size_t k = 0; k < d->ranking.size(); ++k)
+    if (d->ranking[k].status.ok() && d->ranking[k].disqualified.empty()) {
+      base = static_cast<int>(k);
+      break;
+    }
+  if (base < 0 || opt.max_effects < 2) return Status::Ok();
+  const CandidateResult base_row = d->ranking[static_cast<std::size_t>(base)];
+  const double floor = d->noise_floor_A;
+  if (!(base_row.holdout_rmse_after_A > kSignificance * floor)) return Status::Ok();  // nothing significant left
+
+  // 1. The pool.
+  std::vector<const CandidateResult*> structural;
+  for (const auto& row : d->ranking) {
+    if (IsParametric(row.name) || !row.status.ok() || row.name.find('+') != std::string::npos) continue;
+    if (row.disqualified.rfind("as many free parameters", 0) == 0) continue;
+    const Candidate* c = candidate_of(row.name);
+    if (c == nullptr || c->effects.size() != 1 || EffectVanished(*c, row, c->effects.front())) continue;
+    structural.push_back(&row);
+  }
+  std::vector<const CandidateResult*> by_fit = structural, by_holdout = structural;
+  std::stable_sort(by_fit.begin(), by_fit.end(),
+                   [](const CandidateResult* a, const CandidateResult* b) { return a->fit_rmse_A < b->fit_rmse_A; });
+  std::stable_sort(by_holdout.begin(), by_holdout.end(),
+                   [](const CandidateResult* a, const CandidateResult* b) { return a->score < b->score; });
+  std::vector<const CandidateResult*> pool;
+  auto add_pool = [&](const CandidateResult* r) {
+    if (pool.size() < static_cast<std::size_t>(opt.combination_pool) && std::find(pool.begin(), pool.end(), r) == pool.end())
+      pool.push_back(r);
+  };
+  for (std::size_t k = 0; k < structural.size(); ++k) {
+    add_pool(by_fit[k]);
+    add_pool(by_holdout[k]);
+  }
+  if (pool.size() < 2) return Status::Ok();
+
+  // 2. Pairs, then triples around the two best pairs.
+  std::vector<CandidateResult> tried;
+  std::vector<Candidate> tried_c;
+  auto fit_all = [&](const std::vector<Candidate>& cs) -> Status {
+    if (cs.empty()) return Status::Ok();
+    AttributionOptions aopt = attribution;
+    aopt.max_evaluations = std::max(attribution.max_evaluations, 40 * static_cast<int>(cs.front().params.size()));
+    auto fitted = Attribute(ds, fit_mask, nominal, cs, floor, aopt);
+    if (!fitted.ok()) return fitted.status();
+    for (auto& row : *fitted)
+      for (const auto& c : cs)
+        if (c.name == row.name) {
+          if (row.status.ok() && row.disqualified.empty() && AnyEffectVanished(c, row))
+            row.disqualified = "one of its effects was fitted where it vanishes: a smaller combination";
+          tried.push_back(std::move(row));
+          tried_c.push_back(c);
+          break;
+        }
+    return Status::Ok();
+  };
+  std::vector<Candidate> pairs;
+  for (std::size_t a = 0; a < pool.size(); ++a)
+    for (std::size_t b = a + 1; b < pool.size(); ++b)
+      pairs.push_back(PairCandidate(WarmStarted(*candidate_of(pool[a]->name), *pool[a]),
+                                    WarmStarted(*candidate_of(pool[b]->name), *pool[b])));
+  VB_RETURN_IF_ERROR(fit_all(pairs));
+  std::vector<std::size_t> good;
+  for (std::size_t k = 0; k < tried.size(); ++k)
+    if (tried[k].status.ok() && tried[k].disqualified.empty()) good.push_back(k);
+  std::stable_sort(good.begin(), good.end(),
+                   [&](std::size_t a, std::size_t b) { return tried[a].fit_rmse_A < tried[b].fit_rmse_A; });
+  // Triples only where a pair still leaves a significant residual on the runs it was fitted to.
+  if (!good.empty() && tried[good.front()].fit_rmse_A <= kSignificance * floor) good.clear();
+  // The second-best pair is extended too only when it fits nearly as well as the best (within 25 %).
+  if (good.size() > 1 && tried[good[1]].fit_rmse_A > 1.25 * tried[good[0]].fit_rmse_A) good.erase(good.begin() + 1, good.end());
+  if (opt.max_effects >= 3) {
+    std::vector<Candidate> triples;
+    std::vector<std::string> names;
+    for (std::size_t g = 0; g < std::min<std::size_t>(good.size(), 2); ++g) {
+      const Candidate& pc = tried_c[good[g]];
+      for (const CandidateResult* e : structural) {
+        const Candidate* ec = candidate_of(e->name);
+        if (std::find(pc.effects.begin(), pc.effects.end(), ec->effects.front()) != pc.effects.end()) continue;
+        Candidate t = PairCandidate(WarmStarted(pc, tried[good[g]]), WarmStarted(*ec, *e));
+        std::vector<std::string> key = t.effects;
+        std::sort(key.begin(), key.end());
+        std::string joined;
+        for (const auto& x : key) joined += x + "+";
+        if (std::find(names.begin(), names.end(), joined) != names.end()) continue;
+        names.push_back(joined);
+        triples.push_back(std::move(t));
+      }
+    }
+    VB_RETURN_IF_ERROR(fit_all(triples));
+  }
+
+  // 3. The parsimonious choice: grow by one effect at a time while decisive (a size may be skipped when no
+  //    model of it is decisive but a larger one is).
+  const CandidateResult* current = &base_row;
+  std::size_t current_effects = 1;
+  std::vector<std::string> accepted;
+  for (std::size_t size = 2; size <= static_cast<std::size_t>(opt.max_effects); ++size) {
+    const CandidateResult* best = nullptr;
+    for (std::size_t k = 0; k < tried.size(); ++k) {
+      if (tried_c[k].effects.size() != size || !tried[k].status.ok() || !tried[k].disqualified.empty()) continue;
+      if (best == nullptr || tried[k].score < best->score) best = &tried[k];
+    }
+    if (best != nullptr && Decisive(current->holdout_rmse_after_A, best->holdout_rmse_after_A, floor)) {
+      current = best;
+      current_effects = size;
+      accepted.push_back(best->name);
+    }
+  }
+  (void)current_effects;
+  // The chosen combination ranks first; the others cannot be the verdict (their extra effects were not decisive).
+  const std::string chosen = current->name;
+  double lowest = base_row.score;
+  for (const auto& row : tried) lowest = std::min(lowest, row.score);
+  for (std::size_t k = 0; k < tried.size(); ++k) {
+    auto& row = tried[k];
+    const bool was_accepted = std::find(accepted.begin(), accepted.end(), row.name) != accepted.end();
+    if (!was_accepted && row.disqualified.empty() && row.status.ok())
+      row.disqualified = "not decisive: on the holdout runs it does not remove enough of what a smaller model "
+                         "leaves above the floor";
+    if (row.name == chosen) row.score = lowest * (1.0 - 1e-9);
+    d->ranking.push_back(row);
+    d->candidates.push_back(tried_c[k]);
+  }
+  SortRanking(&d->ranking);
+  return Status::Ok();
+}
+
 }  // namespace
 
 StatusOr<FittedDevice> ReferenceDevice(const Dataset& reference, const model::PlantParams& nominal,
@@ -368,31 +553,10 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds_in, const model::PlantParams& nom
     return nullptr;
   };
   DisqualifyWhatRAloneExplains(&d, candidate_of);
-  // Pairs of the three best structural effects when no single one explains the gap down to the noise: it
-  // leaves more than a significant residual on the holdout runs, or closes less than kExplained.
-  const CandidateResult single = d.ranking.empty() ? CandidateResult{} : d.ranking.front();
-  if (opt.try_pairs && !d.ranking.empty() &&
-      (single.closed < kExplained || single.holdout_rmse_after_A > kSignificance * d.noise_floor_A)) {
-    std::vector<const Candidate*> top;
-    for (const auto& row : d.ranking)
-      if (!IsParametric(row.name) && row.status.ok() && row.disqualified.empty() && top.size() < 3)
-        top.push_back(candidate_of(row.name));
-    std::vector<Candidate> pairs;
-    for (std::size_t a = 0; a < top.size(); ++a)
-      for (std::size_t b = a + 1; b < top.size(); ++b) pairs.push_back(PairCandidate(*top[a], *top[b]));
-    if (!pairs.empty()) {
-      auto pr = Attribute(ds, fit_mask, nominal, pairs, d.noise_floor_A, attribution);
-      if (!pr.ok()) return pr.status();
-      for (auto& row : *pr) {
-        // A pair must be decisive: close at least half of what the best single effect leaves above the noise.
-        // Otherwise its second effect is fitting the first one's imperfect form, and it ranks behind.
-        const double decisive = single.holdout_rmse_after_A - 0.5 * (single.holdout_rmse_after_A - d.noise_floor_A);
-        if (!(row.holdout_rmse_after_A <= decisive)) row.score = std::max(row.score, single.score * (1.0 + 1e-9));
-        d.ranking.push_back(std::move(row));
-      }
-      d.candidates.insert(d.candidates.end(), pairs.begin(), pairs.end());
-      SortRanking(&d.ranking);
-    }
+  // Several causes: greedy forward selection (docs/gap.md, "Several causes").
+  if (opt.try_combinations && !d.ranking.empty()) {
+    auto selected = SelectCombination(ds, fit_mask, nominal, opt, attribution, &d);
+    if (!selected.ok()) return selected;
   }
   // The model-form floor. When the nominal model already fits the fit runs as well as any candidate (within
   // 10 %: it was identified on them, e.g. the cold runs of a fit-cold/hold-out-hot dataset), what it leaves

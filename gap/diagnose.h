@@ -72,7 +72,12 @@ struct DiagnoseOptions {
   IdentifyOptions reference_fit;
   std::vector<Candidate> candidates;     // empty: DefaultCandidates(nominal)
   AttributionOptions attribution;
-  bool try_pairs = true;                 // when no single candidate explains the gap
+  // Several causes: greedy forward selection from the best single candidate, adding one structural effect at a
+  // time (from the combination_pool best single effects) while the addition is decisive on the holdout runs,
+  // up to max_effects effects (docs/gap.md, "Several causes").
+  bool try_combinations = true;
+  int max_effects = 3;
+  int combination_pool = 4;
   double budget_s = 50.0;                // wall time for the whole attribution (singles, then pairs)
   bool detection_limits = true;          // the smallest magnitude of each effect the data would show
   std::size_t overlay_points = 600;      // per run

@@ -6,6 +6,7 @@
 namespace vb::runs {
 
 void LiveTap::OnSample(const hw::BenchSample& s) {
+  last_t_s_.store(s.t_s, std::memory_order_relaxed);
   if (++count_ < decimation_) return;
   count_ = 0;
   const size_t head = head_.load(std::memory_order_relaxed);
@@ -50,7 +51,8 @@ bool Registry::Progress(std::int64_t run_id, double* progress) {
   std::lock_guard<std::mutex> lock(mu_);
   auto it = running_.find(run_id);
   if (it == running_.end()) return false;
-  const double t = it->second.monitor->t_s.load(std::memory_order_relaxed);
+  double t = it->second.monitor->t_s.load(std::memory_order_relaxed);
+  if (it->second.tap != nullptr) t = std::max(t, it->second.tap->last_t_s());  // between ticks: the samples
   *progress = it->second.duration_s > 0.0 ? std::min(1.0, t / it->second.duration_s) : 0.0;
   return true;
 }

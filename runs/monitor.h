@@ -32,11 +32,15 @@ class LiveTap final : public hw::SampleSink {
   void OnSample(const hw::BenchSample& s) override;
   // Consumer side; one consumer at a time (the Registry holds its mutex).
   size_t Drain(std::vector<LiveSample>* out);
+  // The newest sample's time, stored on every sample (not only the decimated ones): progress by simulated
+  // time for a loop that ticks rarely (open-loop PWM has no tick between its segment starts).
+  double last_t_s() const { return last_t_s_.load(std::memory_order_relaxed); }
 
  private:
   static constexpr size_t kCapacity = 8192;
   std::array<LiveSample, kCapacity> ring_{};
   std::atomic<size_t> head_{0}, tail_{0};
+  std::atomic<double> last_t_s_{0.0};
   int decimation_;
   int count_ = 0;
 };

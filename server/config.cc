@@ -31,6 +31,21 @@ std::string Resolve(const std::string& base_dir, const std::string& path) {
   return (std::filesystem::path(base_dir) / path).string();
 }
 
+// A file named in the config could not be used: for a relative path, say what it was relative to, since a
+// config copied elsewhere (or its files left behind) fails exactly here.
+Status WithPathNote(const Status& st, const std::string& base_dir, const std::string& given) {
+  if (st.ok() || given.empty() || std::filesystem::path(given).is_absolute()) return st;
+  std::error_code ec;
+  const std::string dir = base_dir.empty() ? std::filesystem::current_path(ec).string() : base_dir;
+  const std::string note = " ('" + given + "' is relative to the config file's directory, " + dir +
+                           "; copy the file along with the config, or give an absolute path)";
+  switch (st.code()) {
+    case StatusCode::kNotFound: return Status::NotFound(st.message() + note);
+    case StatusCode::kInvalidArgument: return Status::InvalidArgument(st.message() + note);
+    default: return st.WithContext(note.substr(2, note.size() - 3));
+  }
+}
+
 StatusOr<hw::SafetyLimits> SafetyFromConfig(const valvebench::v1::SafetyConfig& c, double max_current_A, bool hardware,
                                             const std::string& field) {
   hw::SafetyLimits l;
@@ -109,9 +124,11 @@ StatusOr<NightsSetup> NightsFromConfig(const valvebench::v1::NightsConfig& n, co
   out.suite_path = Resolve(base_dir, n.suite_file());
   out.baseline_path = Resolve(base_dir, n.baseline_file());
   auto suite = regress::LoadSuite(out.suite_path);
-  if (!suite.ok()) return suite.status().WithContext("nights.suite_file " + out.suite_path);
+  if (!suite.ok())
+    return WithPathNote(suite.status().WithContext("nights.suite_file " + out.suite_path), base_dir, n.suite_file());
   auto baseline = LoadBaselineFile(out.baseline_path);
-  if (!baseline.ok()) return baseline.status().WithContext("nights.baseline_file");
+  if (!baseline.ok())
+    return WithPathNote(baseline.status().WithContext("nights.baseline_file"), base_dir, n.baseline_file());
   return out;
 }
 
@@ -194,9 +211,9 @@ StatusOr<Settings> SettingsFromConfig(const valvebench::v1::ServerConfig& c, con
     return Status::InvalidArgument("tls: give both cert_file and key_file, or neither");
   if (!c.tls().cert_file().empty()) {
     auto cert = ReadFile(Resolve(base_dir, c.tls().cert_file()), "tls.cert_file");
-    if (!cert.ok()) return cert.status();
+    if (!cert.ok()) return WithPathNote(cert.status(), base_dir, c.tls().cert_file());
     auto key = ReadFile(Resolve(base_dir, c.tls().key_file()), "tls.key_file");
-    if (!key.ok()) return key.status();
+    if (!key.ok()) return WithPathNote(key.status(), base_dir, c.tls().key_file());
     s.tls_cert_pem = *cert;
     s.tls_key_pem = *key;
   }

@@ -592,7 +592,7 @@ class Client:
         """Writes a stored run as HDF5 and/or MATLAB .mat (and/or CSV) through benchctl export: channels with
         units, spec, conditions and metrics (docs/python.md "HDF5 and MATLAB files"). Returns the paths written."""
         args, paths = [], []
-        for flag, path in (("--hdf5", hdf5), ("--mat", mat), ("--csv", csv)):
+        for flag, path in (("--hdf5", hdf5), ("--mat", mat), ("--trace-csv", csv)):
             if path is not None:
                 args += [flag, os.fspath(path)]
                 paths.append(os.fspath(path))
@@ -616,13 +616,13 @@ class Client:
             raise InvalidArgument("diagnose: give run_ids (or batch) or dataset, not both and not neither")
         extra = ["--model", model] if model else []
         if dataset is not None:
-            cmd = [find_tool("benchctl"), "diagnose", os.fspath(dataset), "--json", "-"] + extra
+            cmd = [find_tool("benchctl"), "diagnose", os.fspath(dataset), "--json"] + extra
             proc = subprocess.run(cmd, capture_output=True, text=True)
             if proc.returncode != 0:
                 raise (InvalidArgument if proc.returncode == 2 else Error)(
                     proc.stderr.strip().replace("benchctl: ", "", 1))
             return Diagnosis(json.loads(proc.stdout))
-        out = self._benchctl(["diagnose", "--runs", ",".join(str(r) for r in run_ids), "--json", "-"] + extra,
+        out = self._benchctl(["diagnose", "--runs", ",".join(str(r) for r in run_ids), "--json"] + extra,
                              "diagnose")
         return Diagnosis(json.loads(out))
 

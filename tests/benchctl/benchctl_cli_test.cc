@@ -6,7 +6,13 @@
 #include "../common/run_command.h"
 
 #include <array>
+#include <chrono>
 #include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <regex>
+#include <thread>
+#include <vector>
 #include <fstream>
 #include <sstream>
 #include <memory>
@@ -51,12 +57,36 @@ TEST(BenchctlCli, BadSpecExitsTwoAndNamesTheField) {
   Result no_server = RunBenchctl("run " + Example("standard/e3.json"));
   EXPECT_EQ(no_server.exit_code, 2) << no_server.out;
   EXPECT_NE(no_server.out.find("--local"), std::string::npos);
+
+  // A misspelt field: refused (never a silent default), with the field's path and the closest real name.
+  const std::string typo = ::testing::TempDir() + "/typo.json";
+  std::ofstream(typo) << R"({"duration_s": 0.01, "conditions": {"suply_V": 24},
+    "controller": {"open_loop_pwm": {"segments": [{"start_s": 0, "frequency_Hz": 50, "duty": 0.4}]}}})";
+  Result misspelt = RunBenchctl("run --local " + typo);
+  EXPECT_EQ(misspelt.exit_code, 2) << misspelt.out;
+  EXPECT_NE(misspelt.out.find("conditions.suply_V: unknown field; did you mean 'supply_V'?"), std::string::npos)
+      << misspelt.out;
+  std::ofstream(typo) << R"({"duration_s": 0.01, "controller": {"open_loop_pwm": {"segments": [
+    {"start_s": 0, "frequency_Hz": 50, "dutty": 0.4}]}}})";
+  Result nested = RunBenchctl("run --local " + typo);
+  EXPECT_EQ(nested.exit_code, 2) << nested.out;
+  EXPECT_NE(nested.out.find("did you mean 'duty'?"), std::string::npos) << nested.out;
+}
+
+// An unreachable server: one short line naming the address and how to point elsewhere, exit 3 (environment).
+TEST(BenchctlCli, UnreachableServerSaysWhereItLookedInOneLine) {
+  Result r = RunBenchctl("show 1 --server 127.0.0.1:1 --token t");
+  EXPECT_EQ(r.exit_code, 3) << r.out;
+  EXPECT_NE(r.out.find("127.0.0.1:1"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("VALVEBENCH_SERVER"), std::string::npos) << r.out;
+  EXPECT_EQ(r.out.find('\n'), r.out.size() - 1) << "one line: " << r.out;
+  EXPECT_LT(r.out.size(), 140u) << r.out;
 }
 
 TEST(BenchctlCli, CompareAndCsvOutputs) {
   Result run = RunBenchctl("run --local " + Example("dither.json") + " --csv");
   ASSERT_EQ(run.exit_code, 0) << run.out;
-  EXPECT_EQ(run.out.rfind("name,controller,\"controller.dither_pwm.average_current_A\",status", 0), 0u)
+  EXPECT_EQ(run.out.rfind("id,batch_id,name,controller,\"controller.dither_pwm.average_current_A\",status", 0), 0u)
       << "the sweep value is a column: " << run.out;
   size_t rows = 0;
   for (size_t p = run.out.find('\n'); p != std::string::npos; p = run.out.find('\n', p + 1)) ++rows;
@@ -100,7 +130,130 @@ TEST(BenchctlCli, LocalRunsAreRecordedAndComparableByBatch) {
   EXPECT_EQ(missing.exit_code, 2) << missing.out;
   Result unstored = RunBenchctl("run --local " + Example("standard/e3.json") + " --json --no-store");
   ASSERT_EQ(unstored.exit_code, 0) << unstored.out;
-  EXPECT_EQ(unstored.out.find("run_id"), std::string::npos) << "--no-store records nothing";
+  EXPECT_EQ(unstored.out.find("\"id\": "), std::string::npos) << "--no-store records nothing";
+}
+
+std::int64_t FirstId(const std::string& run_json) {
+  const auto j = nlohmann::json::parse(run_json, nullptr, false);
+  if (!j.is_array() || j.empty() || !j[0].contains("id")) return 0;
+  return j[0]["id"].get<std::int64_t>();
+}
+
+// show, queue, export, compare --runs and watch work on the local store as on a server: the same commands,
+// the same run JSON (numeric ids, lower-case status), times in ISO 8601, metrics in one order.
+TEST(BenchctlCli, StoredRunCommandsWorkOnTheLocalStore) {
+  Result run = RunBenchctl("run --local " + Example("standard/e3.json") + " --json");
+  ASSERT_EQ(run.exit_code, 0) << run.out;
+  const std::int64_t id = FirstId(run.out);
+  ASSERT_GT(id, 0) << run.out;
+  const std::string ids = std::to_string(id);
+  const auto ran = nlohmann::ordered_json::parse(run.out)[0];
+  EXPECT_EQ(ran["status"], "done");
+  EXPECT_EQ(ran["summary"]["samples"], 5001);
+
+  Result show = RunBenchctl("show " + ids + " --json");
+  ASSERT_EQ(show.exit_code, 0) << show.out;
+  const auto shown = nlohmann::ordered_json::parse(show.out);
+  EXPECT_EQ(shown["id"], id);
+  EXPECT_EQ(shown["status"], "done");
+  EXPECT_EQ(shown["spec"]["name"], "e3");
+  EXPECT_EQ(shown["history"].back()["status"], "done");
+  std::vector<std::string> run_order, show_order;
+  for (const auto& [k, v] : ran["metrics"].items()) run_order.push_back(k);
+  for (const auto& [k, v] : shown["metrics"].items()) show_order.push_back(k);
+  EXPECT_EQ(run_order, show_order);
+  EXPECT_GT(show_order.size(), 3u);
+
+  Result text = RunBenchctl("show " + ids);
+  ASSERT_EQ(text.exit_code, 0) << text.out;
+  const std::regex iso(R"(\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d[+-]\d\d:\d\d)");
+  EXPECT_TRUE(std::regex_search(text.out, iso)) << text.out;
+  EXPECT_NE(text.out.find("history: done"), std::string::npos) << text.out;
+
+  Result queue = RunBenchctl("queue");
+  ASSERT_EQ(queue.exit_code, 0) << queue.out;
+  EXPECT_NE(queue.out.find("no runs queued or running on local store"), std::string::npos) << queue.out;
+  Result done = RunBenchctl("queue --status done --json");
+  ASSERT_EQ(done.exit_code, 0) << done.out;
+  EXPECT_NE(done.out.find("\"id\": " + ids), std::string::npos) << done.out;
+
+  const std::string csv = ::testing::TempDir() + "/local-export.csv";
+  Result exp = RunBenchctl("export " + ids + " --trace-csv " + csv);
+  ASSERT_EQ(exp.exit_code, 0) << exp.out;
+  std::ifstream in(csv);
+  std::string header;
+  std::getline(in, header);
+  EXPECT_EQ(header.rfind("t_s,gate,v_coil_V,i_A,x_m", 0), 0u) << header;
+  size_t lines = 0;
+  for (std::string line; std::getline(in, line);) ++lines;
+  EXPECT_EQ(lines, 5001u);
+  Result to_stdout = RunBenchctl("export " + ids + " --csv");
+  ASSERT_EQ(to_stdout.exit_code, 0) << to_stdout.out.substr(0, 300);
+  EXPECT_EQ(to_stdout.out.rfind("t_s,gate,", 0), 0u) << to_stdout.out.substr(0, 300);
+  const std::string old_csv = ::testing::TempDir() + "/local-export-old.csv";
+  Result old = RunBenchctl("export " + ids + " --csv " + old_csv);  // the old spelling, with a note
+  ASSERT_EQ(old.exit_code, 0) << old.out;
+  EXPECT_NE(old.out.find("--trace-csv"), std::string::npos) << old.out;
+  EXPECT_TRUE(std::ifstream(old_csv).good());
+
+  Result watch = RunBenchctl("watch " + ids);
+  EXPECT_EQ(watch.exit_code, 0) << watch.out;
+  Result cmp = RunBenchctl("compare --runs " + ids + "," + ids + " --csv");
+  ASSERT_EQ(cmp.exit_code, 0) << cmp.out;
+  EXPECT_EQ(cmp.out.rfind("rank,name,controller", 0), 0u) << cmp.out;
+  Result finished = RunBenchctl("cancel " + ids);
+  EXPECT_EQ(finished.exit_code, 2) << finished.out;
+  Result missing = RunBenchctl("show 99999999");
+  EXPECT_EQ(missing.exit_code, 2) << missing.out;
+  EXPECT_NE(missing.out.find("local store"), std::string::npos) << missing.out;
+}
+
+// A local run executing in one benchctl is seen by another through the store: queue lists it running with
+// its progress, cancel stops it and reports the state it reached; the running benchctl exits 1.
+TEST(BenchctlCli, LocalRunIsFollowedAndCancelledFromAnotherProcess) {
+  const std::string dir = ::testing::TempDir() + "/benchctl-cancel-" + std::to_string(::getpid());
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  const std::string env = "VALVEBENCH_DB=" + dir + "/local.db ";
+  auto cli = [&](const std::string& args) { return vb::testing::RunCommand(env + VB_BENCHCTL + " " + args); };
+  const std::string spec = dir + "/long.json";
+  std::ofstream(spec) << R"({"name": "long", "duration_s": 30, "recording": {"rate_Hz": 1000},
+      "reference": {"on_off_profile": {"switching_value": 0.9, "switching_time_s": 0.006, "holding_value": 0.5}},
+      "controller": {"pi_current": {}}})";
+  const std::string out = dir + "/run.out", rc = dir + "/run.rc";
+  ASSERT_EQ(std::system(("(" + env + VB_BENCHCTL + " run --local " + spec + " --realtime --json > " + out +
+                         " 2>&1; echo $? > " + rc + ".tmp; mv " + rc + ".tmp " + rc + ") &").c_str()), 0);
+  std::int64_t id = 0;
+  double progress = 0.0;
+  for (int k = 0; k < 150 && progress <= 0.0; ++k) {  // up to 15 s for the run to start and report progress
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    Result q = cli("queue --json");
+    const auto j = nlohmann::json::parse(q.out, nullptr, false);
+    if (!j.is_object() || j["runs"].empty()) continue;
+    id = j["runs"][0]["id"].get<std::int64_t>();
+    if (j["runs"][0]["status"] == "running") progress = j["runs"][0]["progress"].get<double>();
+  }
+  ASSERT_GT(id, 0);
+  EXPECT_GT(progress, 0.0) << "progress by simulated time, through the store";
+  Result text = cli("queue");
+  EXPECT_NE(text.out.find("1 running"), std::string::npos) << text.out;
+  EXPECT_NE(text.out.find("ETA"), std::string::npos) << text.out;
+
+  Result cancel = cli("cancel " + std::to_string(id) + " --json");
+  ASSERT_EQ(cancel.exit_code, 0) << cancel.out;
+  const auto c = nlohmann::json::parse(cancel.out, nullptr, false);
+  ASSERT_TRUE(c.is_object()) << cancel.out;
+  EXPECT_EQ(c["status"], "cancelled") << cancel.out;
+  EXPECT_EQ(c["cancel"], "done") << cancel.out;
+  for (int k = 0; k < 200 && !std::filesystem::exists(rc); ++k) std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  std::ifstream rc_in(rc);
+  int code = -1;
+  rc_in >> code;
+  EXPECT_EQ(code, 1) << "a cancelled run exits 1";
+  std::ifstream out_in(out);
+  std::stringstream ss;
+  ss << out_in.rdbuf();
+  EXPECT_NE(ss.str().find("\"status\": \"cancelled\""), std::string::npos) << ss.str();
 }
 
 TEST(BenchctlCli, DiagnoseReportsJsonAndRefusesBadData) {
@@ -111,7 +264,7 @@ TEST(BenchctlCli, DiagnoseReportsJsonAndRefusesBadData) {
   EXPECT_NE(none.out.find("\"verdict\": \"none\""), std::string::npos) << none.out;
   // A gap, its cause, and the improved model: with it, the same data shows no gap any more.
   const std::string file = ::testing::TempDir() + "/p07.json", improved = ::testing::TempDir() + "/p07-model.json";
-  Result gap = RunBenchctl("diagnose " + practice + "p07 --json " + file + " --emit-model " + improved);
+  Result gap = RunBenchctl("diagnose " + practice + "p07 --json-out " + file + " --model-out " + improved);
   ASSERT_EQ(gap.exit_code, 0) << gap.out;
   EXPECT_NE(gap.out.find("SIGNIFICANT"), std::string::npos) << gap.out;
   EXPECT_NE(gap.out.find("verdict: supply_resistance"), std::string::npos) << gap.out;
@@ -123,6 +276,17 @@ TEST(BenchctlCli, DiagnoseReportsJsonAndRefusesBadData) {
   Result after = RunBenchctl("diagnose " + practice + "p07 --model " + improved + " --json");
   ASSERT_EQ(after.exit_code, 0) << after.out;
   EXPECT_NE(after.out.find("\"verdict\": \"none\""), std::string::npos) << after.out;
+  // The old spellings still work, each with a note naming the new one.
+  const std::string old_file = ::testing::TempDir() + "/p12-old.json";
+  Result old = RunBenchctl("diagnose " + practice + "p12 --json " + old_file + " --emit-model " + improved + "-old");
+  ASSERT_EQ(old.exit_code, 0) << old.out;
+  EXPECT_NE(old.out.find("--json-out FILE"), std::string::npos) << old.out;
+  EXPECT_NE(old.out.find("--model-out FILE"), std::string::npos) << old.out;
+  EXPECT_TRUE(std::ifstream(old_file).good());
+  EXPECT_TRUE(std::ifstream(improved + "-old").good());
+  Result flag_first = RunBenchctl("diagnose --json " + practice + "p12");  // --json before the dataset
+  ASSERT_EQ(flag_first.exit_code, 0) << flag_first.out;
+  EXPECT_NE(flag_first.out.find("\"verdict\": \"none\""), std::string::npos) << flag_first.out;
   Result bad = RunBenchctl("diagnose /nonexistent/dataset");
   EXPECT_EQ(bad.exit_code, 2) << bad.out;
   Result bad_model = RunBenchctl("diagnose " + practice + "p12 --model nosuchmodel");
@@ -134,7 +298,7 @@ TEST(BenchctlCli, DiagnoseReportsJsonAndRefusesBadData) {
 TEST(BenchctlCli, IdentifyFitsNamedParametersAndWritesAModel) {
   const std::string practice = std::string(VB_SHARED_DIR) + "/gapbench/practice/";
   const std::string out = ::testing::TempDir() + "/p05-identified.json";
-  Result r = RunBenchctl("identify " + practice + "p05 --params R --out " + out + " --json");
+  Result r = RunBenchctl("identify " + practice + "p05 --params R --model-out " + out + " --json");
   if (r.out.find("does not exist") != std::string::npos) GTEST_SKIP() << "no practice data";
   ASSERT_EQ(r.exit_code, 0) << r.out;
   auto j = nlohmann::json::parse(r.out.substr(r.out.find('{')));

@@ -8,7 +8,10 @@
 #include <cstdio>
 #include <fstream>
 #include <memory>
+#include <chrono>
 #include <set>
+#include <thread>
+#include <vector>
 
 #include "../common/run_command.h"
 #include "server_process.h"
@@ -37,20 +40,31 @@ TEST(BenchctlRemote, RunWaitQueueShowExportCompareBenches) {
 
   Result submitted = Benchctl("run " + Example("standard/e3.json") + " --json " + op);
   ASSERT_EQ(submitted.exit_code, 0) << submitted.out;
-  // {"batch_id": "2", "run_ids": ["5"]}: protobuf JSON writes int64 as strings.
-  const size_t ids_at = submitted.out.find("\"run_ids\"");
-  ASSERT_NE(ids_at, std::string::npos) << submitted.out;
-  const size_t digit = submitted.out.find_first_of("0123456789", ids_at);
-  const std::string id = submitted.out.substr(digit, submitted.out.find_first_not_of("0123456789", digit) - digit);
+  // {"batch_id": 2, "run_ids": [5]}: numbers, as benchctl import writes them (not protobuf JSON's strings).
+  const auto sub = nlohmann::json::parse(submitted.out, nullptr, false);
+  ASSERT_TRUE(sub.is_object() && sub["run_ids"].is_array() && sub["run_ids"][0].is_number_integer()) << submitted.out;
+  const std::string id = std::to_string(sub["run_ids"][0].get<std::int64_t>());
   Result watch = Benchctl("watch " + id + " " + op);
   EXPECT_EQ(watch.exit_code, 0) << watch.out;
 
   Result show = Benchctl("show " + id + " --json " + op);
   ASSERT_EQ(show.exit_code, 0) << show.out;
-  EXPECT_NE(show.out.find("\"status\": \"DONE\""), std::string::npos) << show.out;
+  const auto shown = nlohmann::ordered_json::parse(show.out, nullptr, false);
+  ASSERT_TRUE(shown.is_object()) << show.out;
+  EXPECT_EQ(shown["status"], "done") << show.out;  // the one status vocabulary, as locally
+  EXPECT_EQ(std::to_string(shown["id"].get<std::int64_t>()), id);
+  // Metrics in one order on every call and in every output (a protobuf map has none).
+  Result again = Benchctl("show " + id + " --json " + op);
+  const auto shown_again = nlohmann::ordered_json::parse(again.out, nullptr, false);
+  ASSERT_TRUE(shown_again.is_object()) << again.out;
+  EXPECT_EQ(shown["metrics"].dump(), shown_again["metrics"].dump());
+  std::vector<std::string> order;
+  for (const auto& [k, v] : shown["metrics"].items()) order.push_back(k);
+  ASSERT_GE(order.size(), 2u);
+  EXPECT_EQ(order[0], "effort_l2") << show.out;  // experiment::MetricList's order, not alphabetical
 
   const std::string csv = dir + "/trace.csv";
-  Result exp = Benchctl("export " + id + " --csv " + csv + " " + op);
+  Result exp = Benchctl("export " + id + " --trace-csv " + csv + " " + op);
   ASSERT_EQ(exp.exit_code, 0) << exp.out;
   std::ifstream in(csv);
   std::string header;
@@ -62,7 +76,28 @@ TEST(BenchctlRemote, RunWaitQueueShowExportCompareBenches) {
 
   Result queue = Benchctl("queue --status done --csv " + op);
   ASSERT_EQ(queue.exit_code, 0) << queue.out;
-  EXPECT_NE(queue.out.find("id,batch,status"), std::string::npos);
+  EXPECT_NE(queue.out.find("id,batch_id,name,controller,status"), std::string::npos) << queue.out;
+  Result idle = Benchctl("queue " + op);
+  ASSERT_EQ(idle.exit_code, 0) << idle.out;
+  EXPECT_NE(idle.out.find("no runs queued or running on server " + addr), std::string::npos) << idle.out;
+
+  // cancel reports the state the run reached, not "running 0 %".
+  const std::string long_spec = dir + "/long.json";
+  std::ofstream(long_spec) << R"({"name": "long", "duration_s": 20, "realtime": true, "recording": {"rate_Hz": 1000},
+      "reference": {"on_off_profile": {"switching_value": 0.9, "switching_time_s": 0.006, "holding_value": 0.5}},
+      "controller": {"pi_current": {}}})";
+  Result long_run = Benchctl("run " + long_spec + " --json " + op);
+  ASSERT_EQ(long_run.exit_code, 0) << long_run.out;
+  const std::string long_id =
+      std::to_string(nlohmann::json::parse(long_run.out)["run_ids"][0].get<std::int64_t>());
+  for (int k = 0; k < 50; ++k) {  // until it runs
+    Result s = Benchctl("show " + long_id + " --json " + op);
+    if (s.out.find("\"status\": \"running\"") != std::string::npos) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  Result cancelled = Benchctl("cancel " + long_id + " " + op);
+  ASSERT_EQ(cancelled.exit_code, 0) << cancelled.out;
+  EXPECT_NE(cancelled.out.find("): cancelled"), std::string::npos) << cancelled.out;
 
   Result cmp = Benchctl("compare --batch 1 --csv " + op);
   ASSERT_EQ(cmp.exit_code, 0) << cmp.out;
@@ -84,6 +119,12 @@ TEST(BenchctlRemote, RunWaitQueueShowExportCompareBenches) {
   // Refusals exit 2 and say why; an unreachable server exits 3.
   Result bad_token = Benchctl("benches --server " + addr + " --token nope");
   EXPECT_EQ(bad_token.exit_code, 2) << bad_token.out;
+  EXPECT_NE(bad_token.out.find("VALVEBENCH_TOKEN"), std::string::npos) << bad_token.out;
+  Result no_token = testing::RunCommand("env -u VALVEBENCH_TOKEN " + std::string(VB_BENCHCTL) + " benches --server " + addr);
+  EXPECT_EQ(no_token.exit_code, 2) << no_token.out;
+  EXPECT_NE(no_token.out.find("no token given"), std::string::npos) << no_token.out;
+  EXPECT_NE(no_token.out.find("VALVEBENCH_TOKEN"), std::string::npos) << no_token.out;
+  EXPECT_NE(no_token.out.find("--token"), std::string::npos) << no_token.out;
   const std::string bad_spec = dir + "/bad.json";
   std::ofstream(bad_spec) << R"({"duration_s": 0.1, "recording": {"rate_Hz": -1},
       "controller": {"open_loop_pwm": {"segments": [{"start_s": 0, "frequency_Hz": 50, "duty": 0.5}]}}})";
@@ -95,6 +136,9 @@ TEST(BenchctlRemote, RunWaitQueueShowExportCompareBenches) {
   server.Kill(SIGTERM);
   Result gone = Benchctl("benches " + op);
   EXPECT_EQ(gone.exit_code, 3) << gone.out;
+  EXPECT_NE(gone.out.find("cannot reach valvebench-server at " + addr), std::string::npos) << gone.out;
+  EXPECT_NE(gone.out.find("VALVEBENCH_SERVER"), std::string::npos) << gone.out;
+  EXPECT_EQ(gone.out.find('\n'), gone.out.size() - 1) << "one line: " << gone.out;
 }
 
 // One spec, run locally and on the server, goes through the same admission: the same runs, with the same
@@ -111,7 +155,8 @@ TEST(BenchctlRemote, LocalAndServerRunsOfASpecHaveTheSameIdentities) {
   std::ofstream(spec) << R"({"name": "swept", "duration_s": 0.02, "repeats": 2,
       "sweep": [{"field": "conditions.supply_V", "values": [12, 15]}],
       "controller": {"open_loop_pwm": {"segments": [{"start_s": 0, "frequency_Hz": 500, "duty": 0.5}]}}})";
-  Result local = Benchctl("run --local " + spec + " --json --no-store");
+  Result local = testing::RunCommand("VALVEBENCH_DB=" + dir + "/local.db " + std::string(VB_BENCHCTL) + " run --local " +
+                                     spec + " --json");
   ASSERT_EQ(local.exit_code, 0) << local.out;
   Result remote = Benchctl("run " + spec + " --wait --json " + op);
   ASSERT_EQ(remote.exit_code, 0) << remote.out;
@@ -129,6 +174,15 @@ TEST(BenchctlRemote, LocalAndServerRunsOfASpecHaveTheSameIdentities) {
     ASSERT_TRUE(x.contains("key")) << x.dump();
     EXPECT_EQ(x["key"]["sweep"][0]["field"], "conditions.supply_V");
   }
+  // One JSON shape for a run from either side: the same fields (the local one adds its in-process "summary"),
+  // numeric ids, the same status words.
+  std::set<std::string> local_fields, remote_fields;
+  for (const auto& [k, v] : l[0].items())
+    if (k != "summary") local_fields.insert(k);
+  for (const auto& [k, v] : r[0].items()) remote_fields.insert(k);
+  EXPECT_EQ(local_fields, remote_fields);
+  EXPECT_TRUE(l[0]["id"].is_number_integer() && r[0]["id"].is_number_integer());
+  EXPECT_EQ(l[0]["status"], r[0]["status"]);
 }
 
 // A measured dataset stored on the server and diagnosed from there: the same verdict as from the directory,
@@ -193,6 +247,25 @@ TEST(BenchctlRemote, ImportThenDiagnoseStoredRuns) {
   Result refused = Benchctl("import " + bad + " " + op);
   EXPECT_EQ(refused.exit_code, 2) << refused.out;
   EXPECT_NE(refused.out.find("r.csv:3"), std::string::npos) << refused.out;
+}
+
+// A config copied without its files: the server names the field, the path it tried, and that a relative path
+// is relative to the config file's directory (which one).
+TEST(BenchctlRemote, ConfigSaysRelativePathsAreRelativeToTheConfigFile) {
+  const std::string dir = ::testing::TempDir() + "/vb-relative-" + std::to_string(::getpid());
+  std::filesystem::remove_all(dir);
+  testing::ServerProcess server(dir, R"("nights": {"cron": "0 2 * * *", "suite_file": "suites/ci.json",
+      "baseline_file": "suites/ci-baseline.json", "timezone": "UTC"})");
+  EXPECT_EQ(server.Start(), "");
+  const std::string log = server.Log();
+  EXPECT_NE(log.find("nights.suite_file"), std::string::npos) << log;
+  EXPECT_NE(log.find("'suites/ci.json' is relative to the config file's directory, " + dir), std::string::npos)
+      << log;
+
+  // nights are the server's: no --db to offer and then refuse.
+  Result nights_db = Benchctl("nights --db " + dir + "/x.db");
+  EXPECT_EQ(nights_db.exit_code, 2) << nights_db.out;
+  EXPECT_NE(nights_db.out.find("--db"), std::string::npos) << nights_db.out;  // CLI11: not an option of nights
 }
 
 }  // namespace

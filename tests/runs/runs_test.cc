@@ -175,5 +175,23 @@ TEST(Execute, AStoredSpecThatNoLongerParsesFailsTheRunWithTheReason) {
   EXPECT_NE(got->reason.find("stored spec does not parse"), std::string::npos) << got->reason;
 }
 
+// Progress is by simulated time even between the loop's ticks: an open-loop run (one tick per segment) moves
+// with its samples instead of sitting at 0 % until it ends.
+TEST(Registry, ProgressFollowsTheSamplesBetweenTicks) {
+  Registry registry;
+  experiment::RunMonitor monitor;
+  LiveTap tap(50);
+  registry.Add(7, &monitor, &tap, 2.0);
+  hw::BenchSample s{};
+  s.t_s = 0.5;
+  tap.OnSample(s);  // not a decimated one: the ring stays empty, the time still counts
+  double progress = -1.0;
+  ASSERT_TRUE(registry.Progress(7, &progress));
+  EXPECT_DOUBLE_EQ(progress, 0.25);
+  monitor.t_s.store(1.5);
+  ASSERT_TRUE(registry.Progress(7, &progress));
+  EXPECT_DOUBLE_EQ(progress, 0.75);
+}
+
 }  // namespace
 }  // namespace vb::runs

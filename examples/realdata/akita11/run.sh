@@ -48,7 +48,7 @@ while IFS=$'\t' read -r device stroke cold hot; do
   "$benchctl" identify "$cold" --params "$params" --json > "$out/$c.identify.json"
   "$benchctl" identify "$hot" --params "$params" --json > "$out/$h.identify.json"
   if [ "$cold" != "$hot" ]; then
-    "$benchctl" diagnose "$hot" --reference "$cold" --reference-params "$params" --json "$out/$h.diagnose.json" \
+    "$benchctl" diagnose "$hot" --reference "$cold" --reference-params "$params" --json-out "$out/$h.diagnose.json" \
       > "$out/$h.diagnose.txt"
   fi
 done < "$out/pairs.tsv"

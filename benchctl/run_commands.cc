@@ -1,0 +1,314 @@
+#include "benchctl/run_commands.h"
+
+#include <google/protobuf/util/json_util.h>
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <iostream>
+#include <map>
+#include <memory>
+#include <thread>
+
+#include "benchctl/cli_common.h"
+#include "export/run_file.h"
+
+namespace vb::benchctl {
+namespace {
+
+double NowUnix() {
+  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+}
+
+std::string IndexedPath(const std::string& path, size_t k, size_t n) {
+  if (n <= 1) return path;
+  // Built by append: GCC 12 -O3 reports a false -Wrestrict on `"-" + std::to_string(k)` chains.
+  const size_t dot = path.find_last_of('.');
+  std::string out = dot == std::string::npos ? path : path.substr(0, dot);
+  out.append("-").append(std::to_string(k));
+  if (dot != std::string::npos) out.append(path, dot, std::string::npos);
+  return out;
+}
+
+// A progress bar on stderr until the run ends (people at a terminal; `bar` false: silent).
+Status WaitFor(Backend& backend, std::int64_t run_id, bool bar) {
+  auto st = backend.Watch(run_id, [&](const RunView& ev) {
+    if (bar) {
+      const int filled = static_cast<int>(std::lround(30.0 * ev.progress));
+      std::fprintf(stderr, "\rrun %lld [%-30s] %3.0f%% %-11s", static_cast<long long>(run_id),
+                   std::string(static_cast<size_t>(std::clamp(filled, 0, 30)), '#').c_str(), 100.0 * ev.progress,
+                   RunStatusName(ev.status));
+      std::fflush(stderr);
+    }
+    return true;
+  });
+  if (bar) std::fprintf(stderr, "\n");
+  return st;
+}
+
+// "m:ss" or "h:mm:ss".
+std::string Duration(double s) {
+  if (!std::isfinite(s) || s < 0.0) return "-";
+  const long long t = std::llround(s);
+  if (t >= 3600) return fmt::format("{}:{:02}:{:02}", t / 3600, (t / 60) % 60, t % 60);
+  return fmt::format("{}:{:02}", t / 60, t % 60);
+}
+
+// A running run's remaining wall time, from its progress so far (by simulated time) and how long it has run.
+std::string Eta(const RunView& r, double now) {
+  if (r.status != RunStatus::kRunning || r.started_unix_s <= 0.0) return "-";
+  if (r.progress <= 0.0) return "?";
+  const double elapsed = std::max(0.0, now - r.started_unix_s);
+  return Duration(elapsed * (1.0 - r.progress) / r.progress);
+}
+
+Status WriteTraceCsv(const Trace& t, std::FILE* f, const std::string& what) {
+  for (size_t ch = 0; ch < t.channels.size(); ++ch) std::fprintf(f, "%s%s", ch ? "," : "", t.channels[ch].c_str());
+  std::fputc('\n', f);
+  std::vector<const std::vector<double>*> cols;
+  for (const auto& name : t.channels) cols.push_back(&t.columns.at(name));
+  for (size_t k = 0; k < t.samples(); ++k) {
+    for (size_t ch = 0; ch < cols.size(); ++ch) std::fprintf(f, "%s%.10g", ch ? "," : "", (*cols[ch])[k]);
+    std::fputc('\n', f);
+  }
+  if (std::ferror(f)) return Status::DataLoss(what + ": write failed");
+  return Status::Ok();
+}
+
+}  // namespace
+
+int CmdRun(Backend& backend, const RunOptions& o, const Output& out) {
+  auto spec = experiment::LoadSpecFile(o.spec_path);
+  if (!spec.ok()) return Fail(spec.status());
+  auto sub = backend.Submit(*spec, o.realtime, !o.trace_csv.empty());
+  if (!sub.ok()) return Fail(sub.status().WithContext(o.spec_path));
+  const bool executed = !sub->executed.empty();
+  if (!executed && !o.wait) {  // queued on the server; watch, show or compare them later
+    if (out.json) {
+      std::cout << Json{{"batch_id", sub->batch_id}, {"run_ids", sub->run_ids}}.dump(2) << "\n";
+    } else {
+      std::printf("batch %lld:", static_cast<long long>(sub->batch_id));
+      for (auto id : sub->run_ids) std::printf(" %lld", static_cast<long long>(id));
+      std::printf("\n");
+    }
+    return kExitOk;
+  }
+  if (executed && !o.trace_csv.empty())
+    for (size_t k = 0; k < sub->executed.size(); ++k) {
+      auto st = WriteTraceCsv(sub->executed[k].trace, IndexedPath(o.trace_csv, k, sub->executed.size()));
+      if (!st.ok()) return Fail(st);
+    }
+
+  int code = kExitOk;
+  std::vector<RunView> runs;
+  std::vector<const experiment::RunSummary*> summaries;
+  for (size_t k = 0; k < sub->run_ids.size(); ++k) {
+    const std::int64_t id = sub->run_ids[k];
+    if (!executed)
+      if (auto st = WaitFor(backend, id, !out.json && !out.csv); !st.ok())
+        return Fail(st.WithContext("waiting for run " + std::to_string(id)));
+    auto r = backend.GetRun(id);
+    if (!r.ok()) return Fail(r.status());
+    r->spec.reset();  // `show` has the spec and history; `run` lists what ran
+    r->history.clear();
+    if (!backend.keeps_runs()) r->id = r->batch_id = 0;
+    if (!r->ok()) code = kExitRunFailed;
+    runs.push_back(std::move(*r));
+    summaries.push_back(executed ? &sub->executed[k].summary : nullptr);
+  }
+  if (out.json) {
+    Json all = Json::array();
+    for (size_t k = 0; k < runs.size(); ++k) all.push_back(RunJson(runs[k], summaries[k]));
+    std::cout << all.dump(2) << "\n";
+  } else if (out.csv) {
+    std::cout << RunsCsv(runs, summaries);
+  } else {
+    if (runs.size() == 1) {
+      std::cout << RunText(runs[0], summaries[0], false);
+    } else {  // a batch: one line per run, the metrics are in the comparison below (docs/comparison.md)
+      for (const auto& r : runs) std::cout << RunLine(r);
+      auto cmp = backend.Compare(sub->batch_id, {});
+      if (!cmp.ok()) return Fail(cmp.status());
+      if (const std::string bad = experiment::CheckTableOptions(*cmp, o.table); !bad.empty())
+        return Fail(Status::InvalidArgument(bad));
+      std::cout << "\n" << experiment::ComparisonTable(*cmp, o.table);
+    }
+  }
+  return code;
+}
+
+int CmdQueue(Backend& backend, const QueueOptions& o, const Output& out) {
+  std::vector<RunView> runs;
+  bool more = false;
+  const bool default_view = o.status.empty() && o.batch == 0 && o.tag.empty();
+  if (default_view) {  // what is happening now: running runs first, then the queue in claim order
+    for (RunStatus s : {RunStatus::kRunning, RunStatus::kQueued}) {
+      bool m = false;
+      auto page = backend.ListRuns({s, 0, "", o.limit}, &m);
+      if (!page.ok()) return Fail(page.status());
+      more = more || m;
+      runs.insert(runs.end(), page->begin(), page->end());
+    }
+  } else {
+    RunFilter f{std::nullopt, o.batch, o.tag, o.limit};
+    if (!o.status.empty()) {
+      auto s = ParseRunStatus(o.status);
+      if (!s.ok()) return Fail(s.status().WithContext("--status"));
+      f.status = *s;
+    }
+    auto page = backend.ListRuns(f, &more);
+    if (!page.ok()) return Fail(page.status());
+    runs = std::move(*page);
+  }
+  if (out.json) {
+    Json a = Json::array();
+    for (const auto& r : runs) a.push_back(RunJson(r, nullptr));
+    std::cout << Json{{"where", backend.Where()}, {"runs", a}, {"more", more}}.dump(2) << "\n";
+    return kExitOk;
+  }
+  if (out.csv) {
+    std::cout << RunsCsv(runs, {});
+    return kExitOk;
+  }
+  if (runs.empty()) {
+    std::printf("%s on %s\n", default_view ? "no runs queued or running" : "no runs match", backend.Where().c_str());
+    return kExitOk;
+  }
+  std::map<RunStatus, int> count;
+  for (const auto& r : runs) ++count[r.status];
+  std::string counts;
+  for (const auto& [status, n] : count) counts += fmt::format("{}{} {}", counts.empty() ? "" : ", ", n, RunStatusName(status));
+  std::printf("%zu runs on %s: %s%s\n", runs.size(), backend.Where().c_str(), counts.c_str(),
+              count.count(RunStatus::kRunning) ? " (ETA: wall time left, from progress so far)" : "");
+  std::printf("%6s %6s  %-11s %8s %8s  %-16s %-20s %-10s %s\n", "id", "batch", "status", "progress", "ETA", "bench",
+              "controller", "submitter", "name");
+  const double now = NowUnix();
+  for (const auto& r : runs)
+    std::printf("%6lld %6lld  %-11s %6.0f %% %8s  %-16s %-20s %-10s %s\n", static_cast<long long>(r.id),
+                static_cast<long long>(r.batch_id), RunStatusName(r.status), 100.0 * r.progress, Eta(r, now).c_str(),
+                r.bench.empty() ? "any" : r.bench.c_str(), r.controller.c_str(), r.submitter.c_str(),
+                r.key.DisplayName().c_str());
+  if (more) std::fprintf(stderr, "(more runs: raise --limit)\n");
+  return kExitOk;
+}
+
+int CmdShow(Backend& backend, std::int64_t run_id, const Output& out) {
+  auto r = backend.GetRun(run_id);
+  if (!r.ok()) return Fail(r.status());
+  if (out.json) {
+    std::cout << RunJson(*r, nullptr).dump(2) << "\n";
+  } else if (out.csv) {
+    std::cout << RunsCsv({*r}, {});
+  } else {
+    std::cout << RunText(*r, nullptr, true);
+  }
+  return kExitOk;
+}
+
+int CmdWatch(Backend& backend, std::int64_t run_id, const Output& out) {
+  Status st;
+  if (out.json) {  // one JSON object per line and event: a script follows the run as it goes
+    st = backend.Watch(run_id, [&](const RunView& ev) {
+      std::cout << Json{{"id", run_id}, {"status", RunStatusName(ev.status)}, {"progress", ev.progress},
+                        {"reason", ev.reason}}.dump()
+                << "\n" << std::flush;
+      return true;
+    });
+  } else {
+    st = WaitFor(backend, run_id, true);
+  }
+  if (!st.ok()) return Fail(st);
+  auto r = backend.GetRun(run_id);
+  if (!r.ok()) return Fail(r.status());
+  if (!out.json) std::cout << RunText(*r, nullptr, false);
+  return r->ok() ? kExitOk : kExitRunFailed;
+}
+
+int CmdCancel(Backend& backend, std::int64_t run_id, const std::string& reason, const Output& out,
+              double cancel_wait_s) {
+  auto r = backend.Cancel(run_id, reason);
+  if (!r.ok()) return Fail(r.status());
+  // A running run stops at its loop's next check; report the state it reached, not the request.
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(cancel_wait_s);
+  while (!r->ended() && std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    auto now = backend.GetRun(run_id);
+    if (!now.ok()) return Fail(now.status());
+    r = std::move(now);
+  }
+  if (out.json) {
+    Json j = RunJson(*r, nullptr);
+    j["cancel"] = r->status == RunStatus::kCancelled ? "done" : r->ended() ? "too late" : "pending";
+    std::cout << j.dump(2) << "\n";
+    return kExitOk;
+  }
+  if (r->ended()) {
+    if (r->status != RunStatus::kCancelled)
+      std::printf("run %lld had already ended (%s) when the cancel arrived\n", static_cast<long long>(run_id),
+                  RunStatusName(r->status));
+    std::cout << RunText(*r, nullptr, false);
+  } else {
+    std::printf("run %lld: cancel requested, still %s at %.0f %% after %.0f s; it stops at its loop's next check "
+                "(benchctl watch %lld follows it)\n",
+                static_cast<long long>(run_id), RunStatusName(r->status), 100.0 * r->progress, cancel_wait_s,
+                static_cast<long long>(run_id));
+  }
+  return kExitOk;
+}
+
+int CmdExport(Backend& backend, std::int64_t run_id, const ExportOptions& o, bool json) {
+  if (json && o.csv_stdout) return Fail(Status::InvalidArgument("export: --json and --csv both want stdout; pick one"));
+  if (!o.csv_stdout && o.trace_csv.empty() && o.hdf5.empty() && o.mat.empty())
+    return Fail(Status::InvalidArgument("export: give --csv (stdout), --trace-csv FILE, --hdf5 FILE or --mat FILE"));
+  auto run = backend.GetRun(run_id);
+  if (!run.ok()) return Fail(run.status());
+  auto trace = backend.GetTrace(run_id);
+  if (!trace.ok()) return Fail(trace.status());
+  if (o.csv_stdout)
+    if (auto st = WriteTraceCsv(*trace, stdout, "stdout"); !st.ok()) return Fail(st);
+  if (!o.trace_csv.empty()) {
+    std::unique_ptr<std::FILE, int (*)(std::FILE*)> f(std::fopen(o.trace_csv.c_str(), "w"), &std::fclose);
+    if (!f) return Fail(Status::Unavailable(o.trace_csv + ": cannot open for writing"));
+    if (auto st = WriteTraceCsv(*trace, f.get(), o.trace_csv); !st.ok()) return Fail(st);
+  }
+  auto written = [&]() {
+    if (!json) return kExitOk;
+    Json files = Json::array();
+    if (!o.trace_csv.empty()) files.push_back({{"format", "csv"}, {"path", o.trace_csv}});
+    if (!o.hdf5.empty()) files.push_back({{"format", "hdf5"}, {"path", o.hdf5}});
+    if (!o.mat.empty()) files.push_back({{"format", "mat"}, {"path", o.mat}});
+    std::cout << Json{{"id", run_id}, {"files", files}}.dump(2) << "\n";
+    return kExitOk;
+  };
+  if (o.hdf5.empty() && o.mat.empty()) return written();
+
+  exportfile::RunFile f;
+  f.run_id = run->id;
+  f.name = run->key.DisplayName();
+  f.controller = run->controller;
+  f.bench = run->bench;
+  f.status = RunStatusName(run->status);
+  f.reason = run->reason;
+  f.t0_s = trace->t0_s;
+  f.sample_period_s = trace->sample_period_s;
+  const valvebench::v1::ExperimentSpec spec = run->spec.value_or(valvebench::v1::ExperimentSpec{});
+  google::protobuf::util::JsonPrintOptions opts;
+  opts.preserve_proto_field_names = true;
+  (void)google::protobuf::util::MessageToJsonString(spec, &f.spec_json, opts);
+  f.conditions = {{"supply_V", spec.conditions().supply_v(), "V"},
+                  {"supply_pressure_Pa", spec.conditions().supply_pressure_pa(), "Pa"}};
+  for (const auto& [name, value] : run->metrics)  // std::map: sorted, a stable file
+    f.metrics.push_back({name, value, exportfile::MetricUnit(name, f.controller)});
+  for (const auto& name : trace->channels)
+    f.channels.push_back({name, exportfile::ChannelUnit(name, f.controller), std::move(trace->columns.at(name))});
+  if (!o.hdf5.empty())
+    if (auto st = exportfile::WriteHdf5(f, o.hdf5); !st.ok()) return Fail(st);
+  if (!o.mat.empty())
+    if (auto st = exportfile::WriteMat(f, o.mat); !st.ok()) return Fail(st);
+  return written();
+}
+
+}  // namespace vb::benchctl
