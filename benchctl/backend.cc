@@ -26,8 +26,8 @@ std::string User() {
   return user != nullptr && *user != '\0' ? user : "local";
 }
 
-// A store row as commands see it; `full`: with the spec and the status history.
-StatusOr<RunView> FromRecord(db::Store* store, const db::RunRecord& r, bool full) {
+// A store row as commands see it; `spec`: with its spec; `history`: with the status history.
+StatusOr<RunView> FromRecord(db::Store* store, const db::RunRecord& r, bool with_spec, bool with_history) {
   RunView v;
   v.id = r.id;
   v.batch_id = r.batch_id;
@@ -48,11 +48,13 @@ StatusOr<RunView> FromRecord(db::Store* store, const db::RunRecord& r, bool full
   auto m = store->GetMetrics(r.id);
   if (!m.ok()) return m.status();
   for (const auto& x : *m) v.metrics[x.name] = x.value;
-  if (!full) return v;
-  v1::ExperimentSpec spec;
-  google::protobuf::util::JsonParseOptions o;
-  o.ignore_unknown_fields = true;
-  if (google::protobuf::util::JsonStringToMessage(r.spec_json, &spec, o).ok()) v.spec = std::move(spec);
+  if (with_spec) {
+    v1::ExperimentSpec spec;
+    google::protobuf::util::JsonParseOptions o;
+    o.ignore_unknown_fields = true;
+    if (google::protobuf::util::JsonStringToMessage(r.spec_json, &spec, o).ok()) v.spec = std::move(spec);
+  }
+  if (!with_history) return v;
   auto h = store->History(r.id);
   if (!h.ok()) return h.status();
   for (const auto& c : *h) v.history.push_back({c.status, c.at_unix_s, c.reason});
@@ -108,7 +110,7 @@ class Local final : public Backend {
     if (!recs.ok()) return recs.status();
     std::vector<RunView> out;
     for (const auto& r : *recs) {
-      auto v = FromRecord(*store, r, false);
+      auto v = FromRecord(*store, r, /*with_spec=*/true, /*with_history=*/false);  // reports show the spec
       if (!v.ok()) return v.status();
       out.push_back(std::move(*v));
     }
@@ -163,7 +165,7 @@ class Local final : public Backend {
     if (!store.ok()) return store.status();
     auto r = (*store)->GetRun(run_id);
     if (!r.ok()) return r.status().code() == StatusCode::kNotFound ? r.status().WithContext(StoreName()) : r.status();
-    return FromRecord(*store, *r, true);
+    return FromRecord(*store, *r, true, true);
   }
 
   StatusOr<std::vector<RunView>> ListRuns(const RunFilter& filter, bool* more) override {
@@ -180,7 +182,7 @@ class Local final : public Backend {
     if (*more) recs->resize(static_cast<std::size_t>(filter.limit));
     std::vector<RunView> out;
     for (const auto& r : *recs) {
-      auto v = FromRecord(*store, r, false);
+      auto v = FromRecord(*store, r, false, false);
       if (!v.ok()) return v.status();
       out.push_back(std::move(*v));
     }

@@ -55,7 +55,7 @@ class Backend {
   virtual StatusOr<std::int64_t> RunBatch(const std::vector<experiment::ExperimentSpec>& specs,
                                           const std::vector<RunKey>& keys, const std::string& batch_name,
                                           const std::string& batch_json) = 0;
-  // The runs of a batch (batch != 0) or the listed runs, with their metrics.
+  // The runs of a batch (batch != 0) or the listed runs, with their metrics, spec and times (no history).
   virtual StatusOr<std::vector<RunView>> Runs(std::int64_t batch, const std::vector<std::int64_t>& run_ids) = 0;
   // The comparison of those runs (repeats grouped by case).
   virtual StatusOr<experiment::Comparison> Compare(std::int64_t batch, const std::vector<std::int64_t>& run_ids) = 0;

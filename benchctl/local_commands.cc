@@ -3,6 +3,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
@@ -41,26 +42,29 @@ std::vector<vb::experiment::RunRecord> Records(const std::vector<vb::benchctl::L
 
 }  // namespace
 
-int PrintComparison(const vb::experiment::Comparison& c, bool json, bool csv) {
+int PrintComparison(const vb::experiment::Comparison& c, bool json, bool csv, const vb::experiment::TableOptions& table) {
+  if (const std::string bad = vb::experiment::CheckTableOptions(c, table); !bad.empty())
+    return Fail(Status::InvalidArgument(bad));
   if (json) {
     std::cout << vb::experiment::ComparisonJson(c);
   } else if (csv) {
     std::cout << vb::experiment::ComparisonCsv(c);
   } else {
-    std::cout << vb::experiment::ComparisonTable(c);
+    std::cout << vb::experiment::ComparisonTable(c, table);
   }
   return kExitOk;
 }
 
 int CmdCompareStored(Backend& backend, std::int64_t batch, const std::vector<std::int64_t>& run_ids, bool json,
-                     bool csv) {
+                     bool csv, const vb::experiment::TableOptions& table) {
   auto c = backend.Compare(batch, run_ids);
   if (!c.ok()) return Fail(c.status());
-  return PrintComparison(*c, json, csv);
+  return PrintComparison(*c, json, csv, table);
 }
 
 // compare RESULTS.json (the output of `run --json`) or compare --local SPEC (runs it first).
-int CmdCompare(const std::string& input, bool local, const std::string& store_path, bool json, bool csv) {
+int CmdCompare(const std::string& input, bool local, const std::string& store_path, bool json, bool csv,
+               const vb::experiment::TableOptions& table) {
   if (local) {
     auto spec = vb::experiment::LoadSpecFile(input);
     if (!spec.ok()) return Fail(spec.status());
@@ -68,7 +72,7 @@ int CmdCompare(const std::string& input, bool local, const std::string& store_pa
     if (!results.ok()) return Fail(results.status().WithContext(input));
     for (const auto& r : *results)
       std::fprintf(stderr, "%s [%s]: %s\n", r.key.DisplayName().c_str(), r.controller.c_str(), r.summary.BriefReport().c_str());
-    return PrintComparison(vb::experiment::Compare(Records(*results)), json, csv);
+    return PrintComparison(vb::experiment::Compare(Records(*results)), json, csv, table);
   }
   std::ifstream in(input);
   if (!in) return Fail(Status::NotFound(input + ": cannot open the results file"));
@@ -109,7 +113,7 @@ int CmdCompare(const std::string& input, bool local, const std::string& store_pa
     records.push_back(std::move(rec));
   }
   if (records.empty()) return Fail(Status::InvalidArgument(input + ": no runs to compare"));
-  return PrintComparison(vb::experiment::Compare(records), json, csv);
+  return PrintComparison(vb::experiment::Compare(records), json, csv, table);
 }
 
 }  // namespace vb::benchctl

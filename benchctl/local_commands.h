@@ -11,13 +11,15 @@
 namespace vb::benchctl {
 
 // compare RESULTS.json (from run --json), or compare --local SPEC (runs it first).
-int CmdCompare(const std::string& input, bool local, const std::string& store_path, bool json, bool csv);
+int CmdCompare(const std::string& input, bool local, const std::string& store_path, bool json, bool csv,
+               const experiment::TableOptions& table = {});
 
 // compare --batch B / --runs A,B,...: stored runs on either backend (--local: the local store), rendered by
 // the comparison's one renderer.
 int CmdCompareStored(Backend& backend, std::int64_t batch, const std::vector<std::int64_t>& run_ids, bool json,
-                     bool csv);
+                     bool csv, const experiment::TableOptions& table = {});
 // The comparison as a table, CSV or JSON on stdout (experiment/compare.h renderers).
-int PrintComparison(const experiment::Comparison& c, bool json, bool csv);
+// table: --metrics/--wide (an unknown metric name is refused, exit 2).
+int PrintComparison(const experiment::Comparison& c, bool json, bool csv, const experiment::TableOptions& table = {});
 
 }  // namespace vb::benchctl

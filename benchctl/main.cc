@@ -64,6 +64,11 @@ int main(int argc, char** argv) {
                                         "~/.local/share/valvebench/local.db)");
     sub->add_flag("--no-store", no_store, "local: do not record the runs");
   };
+  vb::experiment::TableOptions table;  // comparison tables: --metrics, --wide (docs/comparison.md)
+  auto table_flags = [&](CLI::App* sub) {
+    sub->add_option("--metrics", table.metrics, "table: these metrics (full names, as in --json)")->delimiter(',');
+    sub->add_flag("--wide", table.wide, "table: every metric, not only the experiment kind's");
+  };
   // Commands on stored runs: the server when one is given (and no --local), else the local store.
   auto stored_runs = [&](CLI::App* sub) {
     sub->add_flag("--local", local, "the local store, even if a server is configured");
@@ -77,6 +82,7 @@ int main(int argc, char** argv) {
   run->add_flag("--realtime", realtime, "local: pace the run to the wall clock and report loop jitter");
   common(run, true);
   local_store(run);
+  table_flags(run);
 
   vb::benchctl::QueueOptions queue_opts;
   auto* queue = app.add_subcommand("queue", "runs queued and running (or matching --status/--batch/--tag), with ETA");
@@ -127,6 +133,7 @@ int main(int argc, char** argv) {
   compare->add_option("--runs", run_ids, "compare these runs")->delimiter(',');
   common(compare, true);
   local_store(compare);
+  table_flags(compare);
 
   // baseline, regress, nights (benchctl/regress_commands.cc).
   vb::benchctl::RegressCli regress_cli(&app, {&json, &server, &token, &tls_ca_file, &store_path});
@@ -172,17 +179,17 @@ int main(int argc, char** argv) {
           "no server given: use --local for the embedded emulator, or --server ADDR (or VALVEBENCH_SERVER)"));
     if (!local && (!trace_csv.empty() || realtime))
       return Fail(Status::InvalidArgument("--trace-csv and --realtime are local options; use `export` remotely"));
-    return vb::benchctl::CmdRun(*backend(), {spec_path, wait, trace_csv, realtime}, out);
+    return vb::benchctl::CmdRun(*backend(), {spec_path, wait, trace_csv, realtime, table}, out);
   }
   if (compare->parsed()) {
     if (batch != 0 || !run_ids.empty()) {
       if (store_path.empty() && (local || server.empty()))
         return Fail(Status::InvalidArgument("--batch/--runs with --no-store: nothing is stored to compare"));
-      return vb::benchctl::CmdCompareStored(*backend(), batch, run_ids, json, csv);
+      return vb::benchctl::CmdCompareStored(*backend(), batch, run_ids, json, csv, table);
     }
     if (compare_input.empty())
       return Fail(Status::InvalidArgument("compare: give --batch B or --runs A,B,..., a results file, or --local SPEC"));
-    return vb::benchctl::CmdCompare(compare_input, local, store_path, json, csv);
+    return vb::benchctl::CmdCompare(compare_input, local, store_path, json, csv, table);
   }
   if (benches->parsed()) {
     if (!local && server.empty()) return need_server();

@@ -12,6 +12,7 @@
 #include "db/store.h"
 #include "experiment/compare.h"
 #include "experiment/metrics.h"
+#include "experiment/spec.h"
 #include "report/report.h"
 
 namespace vb::benchctl {
@@ -19,37 +20,6 @@ namespace {
 
 namespace v1 = valvebench::v1;
 using report::Json;
-
-std::string Controlled(const std::string& controller) {
-  auto ends = [&](const char* s) {
-    const std::string suf(s);
-    return controller.size() >= suf.size() && controller.compare(controller.size() - suf.size(), suf.size(), suf) == 0;
-  };
-  if (ends("_current") || controller == "peak_and_hold") return "current";
-  if (ends("_position")) return "position";
-  return "";
-}
-
-Json BatchSections(const std::string& where, std::int64_t batch, const std::vector<RunView>& runs,
-                   const std::vector<report::TraceData>& traces) {
-  Json sections = Json::array();
-  std::vector<experiment::RunRecord> recs;
-  std::vector<report::MapPoint> map;
-  for (const auto& r : runs) {
-    recs.push_back({r.key.CaseName(), r.controller, r.ok(), r.metrics});
-    auto it = r.metrics.find("mean_position_pct");
-    if (r.ok() && it != r.metrics.end()) map.push_back({r.key, it->second});
-  }
-  sections.push_back({{"kind", "note"},
-                      {"text", "Batch " + std::to_string(batch) + " (" + where + "): " + std::to_string(runs.size()) +
-                                   " runs. Repeats are grouped: mean \u00b1 sample standard deviation."}});
-  for (auto& s : report::ComparisonSections(experiment::Compare(recs), "Comparison (ranked by RMSE)"))
-    sections.push_back(s);
-  Json m = report::StaticMapSection(map, "mean_position_pct [%]");
-  if (!m.is_null()) sections.push_back(m);
-  sections.push_back(report::TraceSection(traces));
-  return sections;
-}
 
 report::TraceData FromFetched(const std::string& label, const std::string& controlled, const client::FetchedTrace& f) {
   report::TraceData t;
@@ -80,8 +50,10 @@ ReportCli::ReportCli(CLI::App* app, SharedOptions shared) : shared_(shared) {
   report_->add_option("--regress", regress_, "a regression result stored by benchctl regress (local store)");
   report_->add_option("--diagnosis", diagnosis_, "a gap diagnosis JSON file (benchctl diagnose --json-out FILE, or --json > FILE)");
   report_->add_option("--html", html_, "output HTML file")->required();
-  report_->add_option("--max-traces", max_traces_, "traces of at most this many runs (default 4)")
-      ->check(CLI::Range(0, 100));
+  report_->add_option("--max-traces", max_traces_, "traces of at most this many runs (default 100)")
+      ->check(CLI::Range(0, 1000));
+  report_->add_option("--svg", svg_dir_, "also write every plot as DIR/NN-<heading>.svg (headless chromium)");
+  report_->add_option("--png", png_dir_, "also write every plot as DIR/NN-<heading>.png (headless chromium)");
   report_->add_flag("--local", local_, "runs from the local store even if a server is configured");
   report_->add_flag("--json", *shared_.json, "print {html, sections} as JSON");
   report_->add_option("--server", *shared_.server, "bench server address host:port (or VALVEBENCH_SERVER)");
@@ -125,34 +97,44 @@ int ReportCli::Run(const ClientFactory& make_client) {
     auto backend = ChooseBackend(server, store_path, make_client);
     auto fetched = run_ != 0 ? backend->Runs(0, {run_}) : backend->Runs(batch_, {});
     if (!fetched.ok()) return Fail(fetched.status());
-    const std::vector<RunView>& runs = *fetched;
-    std::vector<report::TraceData> traces;
-    for (std::size_t k = 0; k < runs.size() && static_cast<int>(k) < max_traces_; ++k) {
-      if (!runs[k].ended()) continue;  // no trace is stored before a run ends
-      auto t = backend->GetTrace(runs[k].id);
-      if (!t.ok()) return Fail(t.status());
-      traces.push_back(FromFetched("run " + std::to_string(runs[k].id) + ": " + runs[k].key.DisplayName(),
-                                   Controlled(runs[k].controller), *t));
+    std::vector<report::RunInfo> runs;
+    for (const RunView& v : *fetched) {
+      report::RunInfo r{v.id, v.key, v.controller, RunStatusName(v.status), v.metrics,
+                        v.spec ? experiment::SpecToJson(*v.spec, false) : std::string(),
+                        v.submitted_unix_s, v.started_unix_s, v.finished_unix_s, {}};
+      // No trace is stored before a run ends.
+      if (v.ended() && static_cast<int>(runs.size()) < max_traces_) {
+        auto t = backend->GetTrace(v.id);
+        if (!t.ok()) return Fail(t.status());
+        r.trace = FromFetched("run " + std::to_string(v.id) + ": " + v.key.DisplayName(), "", *t);
+      }
+      runs.push_back(std::move(r));
     }
-    const std::string where = server.empty() ? "local store" : "server " + server;
+    const std::string where = server.empty() ? "local store " + store_path : "server " + server;
     if (run_ != 0) {
       title = "Run " + std::to_string(run_) + ": " + runs.front().key.DisplayName();
-      std::vector<std::pair<std::string, double>> m(runs.front().metrics.begin(), runs.front().metrics.end());
-      sections.push_back(report::TraceSection(traces));
-      sections.push_back(report::MetricsSection("Metrics (docs/metrics.md)", m));
+      sections = report::RunSections(where, runs.front());
     } else {
-      title = "Batch " + std::to_string(batch_);
-      sections = BatchSections(where, batch_, runs, traces);
+      title = "Batch " + std::to_string(batch_) + ": " + runs.front().key.name.substr(0, runs.front().key.name.find('/'));
+      sections = report::BatchSections(where, batch_, runs);
     }
   }
   std::ofstream out(html_);
   out << report::RenderHtml(title, sections);
   out.close();
   if (!out) return Fail(Status::Unavailable(html_ + ": cannot write"));
+  std::vector<std::string> exported;
+  if (!svg_dir_.empty() || !png_dir_.empty()) {
+    auto files = report::ExportPlots(html_, svg_dir_, png_dir_);
+    if (!files.ok()) return Fail(files.status());
+    exported = *files;
+  }
   if (*shared_.json) {
-    std::cout << Json{{"html", html_}, {"title", title}, {"sections", sections.size()}}.dump(2) << "\n";
+    std::cout << Json{{"html", html_}, {"title", title}, {"sections", sections.size()}, {"plots", exported}}.dump(2)
+              << "\n";
   } else {
     std::printf("%s: %s (%zu sections)\n", html_.c_str(), title.c_str(), sections.size());
+    if (!exported.empty()) std::printf("%zu plot files in %s\n", exported.size(), (svg_dir_.empty() ? png_dir_ : svg_dir_).c_str());
   }
   return kExitOk;
 }

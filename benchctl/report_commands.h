@@ -21,8 +21,8 @@ class ReportCli {
   SharedOptions shared_;
   CLI::App* report_ = nullptr;
   std::int64_t batch_ = 0, run_ = 0, regress_ = 0;
-  std::string diagnosis_, html_;
-  int max_traces_ = 4;
+  std::string diagnosis_, html_, svg_dir_, png_dir_;
+  int max_traces_ = 100;
   bool local_ = false;
 };
 

@@ -126,11 +126,15 @@ int CmdRun(Backend& backend, const RunOptions& o, const Output& out) {
   } else if (out.csv) {
     std::cout << RunsCsv(runs, summaries);
   } else {
-    for (size_t k = 0; k < runs.size(); ++k) std::cout << RunText(runs[k], summaries[k], false);
-    if (runs.size() > 1) {
+    if (runs.size() == 1) {
+      std::cout << RunText(runs[0], summaries[0], false);
+    } else {  // a batch: one line per run, the metrics are in the comparison below (docs/comparison.md)
+      for (const auto& r : runs) std::cout << RunLine(r);
       auto cmp = backend.Compare(sub->batch_id, {});
       if (!cmp.ok()) return Fail(cmp.status());
-      std::cout << "\n" << experiment::ComparisonTable(*cmp);
+      if (const std::string bad = experiment::CheckTableOptions(*cmp, o.table); !bad.empty())
+        return Fail(Status::InvalidArgument(bad));
+      std::cout << "\n" << experiment::ComparisonTable(*cmp, o.table);
     }
   }
   return code;

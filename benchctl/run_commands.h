@@ -1,6 +1,6 @@
 // benchctl's run commands, written once against a Backend (the local store or a server) and printed through
 // the one run renderer (benchctl/run_view.h):
-//   run SPEC [--wait] [--trace-csv FILE] [--realtime]     queue a spec's runs (local: execute them now)
+//   run SPEC [--wait] [--trace-csv FILE] [--realtime] [--metrics a,b] [--wide]   queue a spec's runs (local: execute them now)
 //   queue [--status S] [--batch B] [--tag T] [--limit N]   runs waiting or running (or matching the filter)
 //   show RUN | watch RUN | cancel RUN [--reason TEXT]
 //   export RUN [--csv] [--trace-csv FILE] [--hdf5 FILE] [--mat FILE]
@@ -11,6 +11,7 @@
 #include <string>
 
 #include "benchctl/backend.h"
+#include "experiment/compare.h"
 
 namespace vb::benchctl {
 
@@ -24,6 +25,7 @@ struct RunOptions {
   bool wait = false;          // remote: wait for the runs (local runs always complete before `run` returns)
   std::string trace_csv;      // local: the recorded channels as CSV (batches: FILE-<n>.csv)
   bool realtime = false;      // local: paced to the wall clock
+  experiment::TableOptions table;  // a batch's comparison table: --metrics/--wide (docs/comparison.md)
 };
 int CmdRun(Backend& backend, const RunOptions& options, const Output& out);
 

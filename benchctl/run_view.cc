@@ -11,6 +11,7 @@
 
 #include "common/csv.h"
 #include "common/format.h"
+#include "experiment/compare.h"
 #include "experiment/metrics.h"
 
 namespace vb::benchctl {
@@ -105,8 +106,9 @@ std::string RunText(const RunView& r, const experiment::RunSummary* summary, boo
                          s.loop.ticks, s.loop.overruns, s.loop.jitter_p50_s * 1e6, s.loop.jitter_p99_s * 1e6,
                          s.loop.jitter_max_s * 1e6);
   }
-  for (const auto& [name, value] : OrderedMetrics(r.metrics))
-    if (std::isfinite(value)) out += fmt::format("  {:<20} {:.6g}\n", name, value);
+  for (const auto& [name, value] : OrderedMetrics(r.metrics))  // with its SI unit (docs/metrics.md)
+    if (const std::string unit = experiment::SiUnit(name, r.controller); std::isfinite(value))
+      out += fmt::format("  {:<20} {:.6g}{}{}\n", name, value, unit == "1" ? "" : " ", unit == "1" ? "" : unit);
   if (history)
     for (const auto& h : r.history)
       out += fmt::format("  history: {:<11} {}{}{}\n", RunStatusName(h.status), IsoLocalTime(h.at_unix_s),
@@ -170,15 +172,29 @@ std::string RunsCsv(const std::vector<RunView>& runs, const std::vector<const ex
   std::vector<std::string> columns;
   for (const auto& [name, unused] : OrderedMetrics(all)) columns.push_back(name);
 
-  std::string out = "id,batch_id,name,controller,status,bench,progress,duration_s,samples,wall_s";
+  // The sweep point as columns (one per swept field, in order of first appearance), so a static map's CSV
+  // reads as position against duty per pressure without parsing the name.
+  std::vector<std::string> axes;
+  for (const auto& r : runs)
+    for (const auto& c : r.key.sweep)
+      if (std::find(axes.begin(), axes.end(), c.field) == axes.end()) axes.push_back(c.field);
+
+  std::string out = "id,batch_id,name,controller";
+  for (const auto& a : axes) out.append(",").append(CsvQuoted(a));
+  out += ",status,bench,progress,duration_s,samples,wall_s";
   for (const auto& c : columns) out += "," + c;
   out += "\n";
   for (std::size_t k = 0; k < runs.size(); ++k) {
     const RunView& r = runs[k];
     const experiment::RunSummary* s = k < summaries.size() ? summaries[k] : nullptr;
     out += r.id != 0 ? fmt::format("{},{}", r.id, r.batch_id) : std::string(",");
-    out += fmt::format(",{},{},{},{},{:.3f}", CsvQuoted(r.key.DisplayName()), r.controller, RunStatusName(r.status),
-                       CsvQuoted(r.bench), r.progress);
+    out += fmt::format(",{},{}", CsvQuoted(r.key.DisplayName()), r.controller);
+    for (const auto& a : axes) {
+      out += ",";
+      for (const auto& c : r.key.sweep)
+        if (c.field == a) out += fmt::format("{:.10g}", c.value);
+    }
+    out += fmt::format(",{},{},{:.3f}", RunStatusName(r.status), CsvQuoted(r.bench), r.progress);
     out += s != nullptr ? fmt::format(",{:.9g},{},{:.6g}", s->duration_s, s->samples, s->wall_s) : std::string(",,,");
     for (const auto& c : columns) {
       auto it = r.metrics.find(c);
@@ -186,6 +202,21 @@ std::string RunsCsv(const std::vector<RunView>& runs, const std::vector<const ex
     }
     out += "\n";
   }
+  return out;
+}
+
+std::string RunLine(const RunView& r) {
+  // The sweep fields' last component: "static-map/fig8 duty=0.35 supply_pressure_Pa=200000".
+  std::string name = r.key.name;
+  for (const auto& c : r.key.sweep) {
+    const auto dot = c.field.rfind('.');
+    name.append(" ").append(c.field, dot == std::string::npos ? 0 : dot + 1).append(fmt::format("={:.10g}", c.value));
+  }
+  if (r.key.repeat >= 0) name.append(" repeat ").append(std::to_string(r.key.repeat));
+  std::string out = r.id != 0 ? fmt::format("run {} {}: {}", r.id, name, RunStatusName(r.status))
+                              : fmt::format("run {}: {}", name, RunStatusName(r.status));
+  if (!r.reason.empty()) out.append(" (").append(r.reason).append(")");
+  out.append("\n");
   return out;
 }
 

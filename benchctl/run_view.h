@@ -58,14 +58,19 @@ std::vector<std::pair<std::string, double>> OrderedMetrics(const std::map<std::s
 std::string IsoLocalTime(double unix_s);
 
 // Text: identity and status, bench and times, the run's summary when it executed in this process
-// (summary != nullptr), metrics, and with `history` every status change.
+// (summary != nullptr), metrics with their SI units, and with `history` every status change.
 std::string RunText(const RunView& run, const experiment::RunSummary* summary, bool history);
 // JSON: numeric ids, the lower-case status words of common/run_status.h, times as ISO 8601 and Unix seconds,
 // metrics in OrderedMetrics order; "summary" only for a run executed in this process; "id"/"batch_id" absent
 // for a run that was not stored.
 Json RunJson(const RunView& run, const experiment::RunSummary* summary);
-// CSV: one header for a list of runs (its metric columns: every name any of them has), one row per run.
+// CSV: one header for a list of runs (a column per swept field any of them has, then status and times, then
+// metric columns: every name any of them has), one row per run.
 std::string RunsCsv(const std::vector<RunView>& runs, const std::vector<const experiment::RunSummary*>& summaries);
+
+// One line for a run of a batch (run prints these, then the comparison carries the metrics):
+// "run 12 static-map/fig8 duty=0.35 supply_pressure_Pa=200000: done", the sweep fields' last component.
+std::string RunLine(const RunView& run);
 
 // One line for a status/progress event (watch, run --wait): "run 5 running 40 %".
 std::string EventText(const RunView& run);

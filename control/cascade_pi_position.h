@@ -129,6 +129,7 @@ class CascadePiPosition final : public Controller {
   std::string_view name() const override { return "cascade_pi_position"; }
   double period_s() const override { return 1.0 / p_.carrier_Hz; }
   SwitchCommand Step(const Measurement& m, const Reference& r, ControllerState* state) const override;
+  int input_slot() const override { return kForceDemand; }  // seed 002's u: the force demand
   bool NeedsPosition() const { return true; }
   bool NeedsVelocity() const { return false; }
   const Params& params() const { return p_; }

@@ -47,6 +47,10 @@ class Controller {
   virtual ControllerState InitialState() const { return {}; }
   // One tick: read m and r, update *state, return the command for the next period.
   virtual SwitchCommand Step(const Measurement& m, const Reference& r, ControllerState* state) const = 0;
+  // The ControllerState::x slot that holds, after Step, the law's own control input u as its paper defines it
+  // (the position laws: the force demand, seed 002 eqs. 7 and 22), or -1. The Runner integrates it into
+  // seed 002's effort ||u||_2 (docs/metrics.md); reading one double keeps Step's real-time contract.
+  virtual int input_slot() const { return -1; }
 };
 
 // Turns a voltage demand into a PWM command on a bench whose switch puts supply_V or ~0 V on the coil:

@@ -20,10 +20,12 @@ struct PwmSegment {
 class OpenLoopPwm final : public Controller {
  public:
   // segments sorted by start_s, the first at 0 (see Validate).
-  explicit OpenLoopPwm(std::vector<PwmSegment> segments) : segments_(std::move(segments)) {}
+  // name: the law as specs and tables know it ("dither_pwm" when seed 003's planner chose the one segment).
+  explicit OpenLoopPwm(std::vector<PwmSegment> segments, std::string_view name = "open_loop_pwm")
+      : segments_(std::move(segments)), name_(name) {}
   static Status Validate(const std::vector<PwmSegment>& segments);
 
-  std::string_view name() const override { return "open_loop_pwm"; }
+  std::string_view name() const override { return name_; }
   // The law only acts at segment starts; the runner also ticks at every breakpoint (segment starts).
   double period_s() const override { return 1e9; }
   ControllerState InitialState() const override {
@@ -36,6 +38,7 @@ class OpenLoopPwm final : public Controller {
 
  private:
   std::vector<PwmSegment> segments_;
+  std::string_view name_;  // a string literal
 };
 
 }  // namespace vb::control

@@ -1,10 +1,17 @@
 // Controller comparison over a set of runs: metrics side by side, mean and spread over repeats, a ranking by
-// RMSE in which differences inside the repeat spread are not ranked, and the Pareto front in (RMSE, effort).
+// RMSE in which differences inside the repeat spread are not ranked, and the Pareto front in (RMSE, effort),
+// with the effort chosen per experiment kind (docs/metrics.md "Effort per experiment kind").
+//
+// The renderings every command uses, local or remote: people (a table that fits 120 columns, units in every
+// header, SI prefixes per column: docs/comparison.md "Reading the table"), scripts (CSV and JSON with the full
+// metric names in SI units).
 #pragma once
 
 #include <map>
 #include <string>
 #include <vector>
+
+#include "common/run_key.h"
 
 namespace vb::experiment {
 
@@ -28,23 +35,71 @@ struct CompareRow {
   int failed = 0;
   std::map<std::string, MetricStat> metrics;
   int rank = 0;          // 1 = best RMSE; rows whose RMSE differs by less than the spread share a rank
-  bool pareto = false;   // not dominated in (rmse, effort_l2)
+  bool pareto = false;   // not dominated in (rank_metric, effort_metric)
 };
+
+// What was compared, read from the laws of the rows (every row the same class, else kGeneric).
+enum class ExperimentKind {
+  kGeneric,
+  kCurrentLaws,   // hysteresis, PI, predictive, fuzzy current laws, peak-and-hold: seed 001
+  kPositionLaws,  // cascade PI, sliding mode: seed 002
+  kDither,        // seed 003's planned PWM
+  kOpenLoop,      // open-loop PWM: seed 000's static map
+};
+ExperimentKind KindOf(const std::vector<std::string>& controllers);
+const char* KindName(ExperimentKind kind);
 
 struct Comparison {
   std::string rank_metric = "rmse";
-  std::string effort_metric = "effort_l2";
-  std::vector<std::string> columns;      // metrics shown, in order
-  std::vector<CompareRow> rows;          // sorted by rank
+  std::string effort_metric = "effort_l2";  // per kind: driver_loss_W (current laws), effort_u_l2 (position)
+  std::vector<std::string> columns;          // every metric some run has, MetricList order then by name
+  std::vector<CompareRow> rows;              // sorted by rank, then first-seen order
 };
 
 Comparison Compare(const std::vector<RunRecord>& runs);
 
-// The renderings every command uses, local or remote: people (fixed-width table), scripts (CSV, JSON:
-// {rank_metric, effort_metric, columns, rows: [{rank, name, controller, runs, failed, pareto,
-// metrics: {column: {mean, spread, n} or null}}]}).
-std::string ComparisonTable(const Comparison& c);
+// A metric's SI unit as its JSON value carries it ("A" or "m" for rmse by the law, "V s^0.5", "1" for ratios
+// and counts, "" when unknown): for listings that print SI values.
+std::string SiUnit(const std::string& metric, const std::string& controller);
+
+// A case name split into its spec name and sweep point ("m/fig8 sweep:a=1 sweep:b=2" -> "m/fig8", {a=1, b=2}).
+// RunKey::CaseName() is the only form a row carries through the server's comparison, so this reads it back.
+RunKey SplitCaseName(const std::string& case_name);
+
+// Which columns a table shows.
+struct TableOptions {
+  std::vector<std::string> metrics;  // --metrics a,b: exactly these (full names), in this order
+  bool wide = false;                 // --wide: every metric that has a value in some row
+};
+
+// The columns a table shows for these options: the kind's defaults, or the asked ones. Unknown names in
+// `metrics` are an InvalidArgument naming them and the known ones (returned as the message; empty = fine).
+std::string CheckTableOptions(const Comparison& c, const TableOptions& options);
+
+// For people: fits 120 columns with the defaults (tested). Static-map sweeps (open-loop runs with
+// mean_position_pct) print seed 000 Figs. 8-9's form: position against duty, one column per other sweep value.
+// Dither runs (seed 003) print the paper's Table I beside the planned and achieved values.
+std::string ComparisonTable(const Comparison& c, const TableOptions& options = {});
+// The table's cells for other renderers (the HTML report): the same columns, headers and units as the text
+// table's long form (one row per case, also for static maps).
+struct TableGrid {
+  std::vector<std::string> headers;
+  std::vector<bool> left;                     // left-aligned (text) columns
+  std::vector<std::vector<std::string>> rows;
+};
+TableGrid ComparisonGrid(const Comparison& c, const TableOptions& options = {});
+// How a metric is shown in these rows: "driver loss [mW]" and the factor from its SI value (1e3).
+struct MetricDisplay {
+  std::string header;
+  double scale = 1.0;
+};
+MetricDisplay DisplayOf(const Comparison& c, const std::string& metric);
+
+// For scripts: one row per case, the sweep coordinates as columns (full field paths), every metric and its
+// spread in SI units with full names.
 std::string ComparisonCsv(const Comparison& c);
+// {kind, rank_metric, effort_metric, columns, rows: [{rank, name, controller, runs, failed, pareto,
+// sweep: {field: value}, metrics: {column: {mean, spread, n} or null}}]}.
 std::string ComparisonJson(const Comparison& c);
 
 }  // namespace vb::experiment

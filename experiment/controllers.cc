@@ -120,7 +120,7 @@ StatusOr<BuiltController> BuildController(const valvebench::v1::ExperimentSpec& 
       std::vector<control::PwmSegment> segs = {{0.0, plan->frequency_Hz, plan->duty}};
       out.breakpoints_s.push_back(0.0);
       out.pwm_period_s = 1.0 / plan->frequency_Hz;
-      out.controller = std::make_unique<control::OpenLoopPwm>(std::move(segs));
+      out.controller = std::make_unique<control::OpenLoopPwm>(std::move(segs), "dither_pwm");
       out.controlled = ControlledVariable::kNone;
       return out;
     }

@@ -7,7 +7,7 @@
 namespace vb::experiment {
 
 Metrics ComputeMetrics(const Trace& tr, ControlledVariable cv, double start_s, double end_s, double x_min_m,
-                       double x_max_m) {
+                       double x_max_m, const DriverLossInputs& driver) {
   constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
   Metrics m;
   const size_t n = tr.size();
@@ -20,7 +20,9 @@ Metrics ComputeMetrics(const Trace& tr, ControlledVariable cv, double start_s, d
   if (count == 0) {
     for (auto* f : {&m.rmse, &m.iae, &m.max_abs_error, &m.overshoot, &m.settling_time_s, &m.effort_l2,
                     &m.effort_rms, &m.energy_J, &m.mean_current_A, &m.opening_delay_s, &m.closing_delay_s,
-                    &m.mean_position_m, &m.mean_position_pct, &m.mean_flow_kg_per_s})
+                    &m.mean_position_m, &m.mean_position_pct, &m.mean_flow_kg_per_s,
+                    &m.switching_rate_Hz, &m.diode_loss_W, &m.switching_loss_W, &m.driver_loss_W, &m.effort_u_l2,
+                    &m.pwm_frequency_Hz, &m.pwm_duty, &m.ripple_pp_A, &m.ripple_mid_A})
       *f = kNaN;
     return m;
   }
@@ -51,6 +53,34 @@ Metrics ComputeMetrics(const Trace& tr, ControlledVariable cv, double start_s, d
     m.switches = tr.switch_count[k1 - 1] - tr.switch_count[k0];
   }
   m.mean_current_A = isum * inv_n;
+  m.effort_u_l2 = m.pwm_frequency_Hz = m.pwm_duty = kNaN;  // the Runner's (it sees the law)
+
+  // Switching rate and the driver's losses (docs/metrics.md, "Effort per experiment kind").
+  const double window_s = exact ? tr.t_s[k1 - 1] - tr.t_s[k0] : static_cast<double>(count) * dt;
+  m.switching_rate_Hz = window_s > 0 ? m.switches / window_s : kNaN;
+  m.diode_loss_W = m.switching_loss_W = m.driver_loss_W = kNaN;
+  if (driver.low_side_flyback && std::isfinite(driver.supply_V) && std::isfinite(driver.diode_drop_V) &&
+      driver.supply_V > 0 && window_s > 0) {
+    const double vs = driver.supply_V, vd = driver.diode_drop_V;
+    // Charge through the coil, Q = Q_on + Q_off, and energy into it, E = V_s Q_on - V_d Q_off (the switch puts
+    // V_s on the coil, the freewheeling diode -V_d, and no current flows otherwise): Q_off = (V_s Q - E)/(V_s + V_d).
+    const double q_C = m.mean_current_A * window_s;
+    const double q_off_C = std::max(0.0, (vs * q_C - m.energy_J) / (vs + vd));
+    m.diode_loss_W = vd * q_off_C / window_s;
+    // Mohan, Undeland, Robbins, Power Electronics (3rd ed.) eq. 2-6, P_s = 1/2 V I f_s (t_c(on) + t_c(off)),
+    // per edge: the switch blocks V_s + V_d while the diode conducts; |i| at the edges is the window's mean
+    // current (turn-on at the ripple's troughs, turn-off at its peaks: they average to the mean).
+    m.switching_loss_W =
+        0.5 * (vs + vd) * std::abs(m.mean_current_A) * driver.switch_transition_s * m.switching_rate_Hz;
+    m.driver_loss_W = m.diode_loss_W + m.switching_loss_W;
+  }
+  // Ripple of an open-loop PWM run (seed 003 eqs. 10-11): peak-to-peak and mid-range of the current.
+  m.ripple_pp_A = m.ripple_mid_A = kNaN;
+  if (cv == ControlledVariable::kNone) {
+    const auto [lo, hi] = std::minmax_element(tr.i_A.begin() + k0, tr.i_A.begin() + k1);
+    m.ripple_pp_A = *hi - *lo;
+    m.ripple_mid_A = 0.5 * (*hi + *lo);
+  }
 
   // Tracking.
   const std::vector<double>* y = cv == ControlledVariable::kCurrent    ? &tr.i_A
@@ -75,6 +105,11 @@ Metrics ComputeMetrics(const Trace& tr, ControlledVariable cv, double start_s, d
     const double span = std::abs(r_end - y0);
     m.overshoot = span > 0 ? std::max(0.0, (ymax - r_end) / span) : 0.0;
     const double band = std::max(0.02 * std::abs(r_end), 1e-12);
+    // A step response only when the window starts away from the final set-point (more than 10 % of it):
+    // then overshoot and settling time mean something and max |e| is just the step. A window that starts at
+    // the set-point (a hold) has no overshoot or settling, and its max |e| is the worst excursion
+    // (docs/metrics.md "Which metrics apply").
+    const bool step_response = span > 0.1 * std::abs(r_end);
     double settle = 0.0;
     for (size_t k = k1; k-- > k0;) {
       if (std::abs((*y)[k] - tr.ref[k]) > band) {
@@ -83,6 +118,11 @@ Metrics ComputeMetrics(const Trace& tr, ControlledVariable cv, double start_s, d
       }
     }
     m.settling_time_s = settle;
+    if (step_response) {
+      m.max_abs_error = kNaN;
+    } else {
+      m.overshoot = m.settling_time_s = kNaN;
+    }
   }
 
   // Valve.
@@ -112,6 +152,8 @@ Metrics ComputeMetrics(const Trace& tr, ControlledVariable cv, double start_s, d
         opened = k;
         break;
       }
+    // An opening delay only from a closed valve: a rising edge while the valve is open (a hold) opens nothing.
+    if (rise < k1 && tr.x_m[rise] > closed_at) opened = k1;
     if (opened < k1) {
       m.opening_delay_s = tr.t_s[opened] - tr.t_s[rise];
       for (size_t k = opened + 1; k < k1; ++k)
@@ -144,7 +186,16 @@ std::vector<std::pair<std::string, double>> MetricList(const Metrics& m) {
           {"closing_delay_s", m.closing_delay_s},
           {"mean_position_m", m.mean_position_m},
           {"mean_position_pct", m.mean_position_pct},
-          {"mean_flow_kg_per_s", m.mean_flow_kg_per_s}};
+          {"mean_flow_kg_per_s", m.mean_flow_kg_per_s},
+          {"switching_rate_Hz", m.switching_rate_Hz},
+          {"diode_loss_W", m.diode_loss_W},
+          {"switching_loss_W", m.switching_loss_W},
+          {"driver_loss_W", m.driver_loss_W},
+          {"effort_u_l2", m.effort_u_l2},
+          {"pwm_frequency_Hz", m.pwm_frequency_Hz},
+          {"pwm_duty", m.pwm_duty},
+          {"ripple_pp_A", m.ripple_pp_A},
+          {"ripple_mid_A", m.ripple_mid_A}};
 }
 
 }  // namespace vb::experiment

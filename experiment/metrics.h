@@ -5,6 +5,7 @@
 #pragma once
 
 #include <cstdint>
+#include <limits>
 #include <string>
 #include <utility>
 #include <vector>
@@ -34,11 +35,34 @@ struct Metrics {
   double mean_position_m = 0;   // mean x (the static map of seed 000 Figs. 8-9)
   double mean_position_pct = 0; // 100 mean x / x_max
   double mean_flow_kg_per_s = 0;// mean of eq. (12) on the moving-average position
+  // What a switching law trades against tracking (docs/metrics.md "Effort per experiment kind").
+  double switching_rate_Hz = 0; // gate transitions / window length                   [1/s]
+  double diode_loss_W = 0;      // flyback diode conduction: V_d * integral(i, off) / T  [W]
+  double switching_loss_W = 0;  // hard switching: sum over edges 1/2 (V_s + V_d) |i| t_c / T  [W]
+  double driver_loss_W = 0;     // diode_loss_W + switching_loss_W                   [W]
+  double effort_u_l2 = 0;       // sqrt(integral F_d^2 dt): seed 002's ||u||_2 on the law's force demand [N s^0.5]
+  // Open-loop PWM (seed 003 dither; NaN for closed-loop laws)
+  double pwm_frequency_Hz = 0;  // carrier the law commands at the window start      [Hz]
+  double pwm_duty = 0;          // duty the law commands at the window start          [1]
+  double ripple_pp_A = 0;       // max i - min i over the window: seed 003's I_amp (eq. 11) [A]
+  double ripple_mid_A = 0;      // (max i + min i) / 2: seed 003's "average" I_avg (eq. 10) [A]
+};
+
+// The bench's driver, for the loss estimates (docs/metrics.md). Without it (supply_V NaN) the losses are NaN.
+struct DriverLossInputs {
+  double supply_V = std::numeric_limits<double>::quiet_NaN();
+  double diode_drop_V = std::numeric_limits<double>::quiet_NaN();
+  bool low_side_flyback = false;  // the loss split below holds for this driver only
+  // Current-commutation time t_c of the switch (rise + fall of the voltage-current overlap). The emulated
+  // switch is ideal and DriverParams has no timing, so this is an assumption: 100 ns, a logic-level MOSFET
+  // driven from a microcontroller pin through a gate resistor at these currents (docs/metrics.md).
+  double switch_transition_s = 100e-9;
 };
 
 // x_min_m/x_max_m: the stops, for the valve delays (ignored without a position channel).
+// The driver's losses need `driver`; effort_u_l2 and the PWM command are filled by the Runner (NaN here).
 Metrics ComputeMetrics(const Trace& trace, ControlledVariable cv, double start_s, double end_s, double x_min_m,
-                       double x_max_m);
+                       double x_max_m, const DriverLossInputs& driver = {});
 
 // Metrics as (name, value) pairs in a fixed order, for tables, JSON and the database.
 std::vector<std::pair<std::string, double>> MetricList(const Metrics& m);

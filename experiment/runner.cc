@@ -3,7 +3,10 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <sstream>
+
+#include "control/open_loop_pwm.h"
 
 namespace vb::experiment {
 
@@ -125,6 +128,15 @@ RunSummary RunImpl(const Experiment& e, hw::Bench& bench, Trace* trace, const st
   double t = 0.0;
   Measurement m;
   bool cancelled = false;
+  // Seed 002's ||u||_2 over the metric window: the law's input u held from one tick to the next (plain
+  // doubles: the loop stays allocation-free).
+  const int u_slot = ctl.input_slot();
+  const double w0 = e.metric_start_s, w1 = std::min(e.metric_end_s, e.duration_s);
+  double u_held = std::numeric_limits<double>::quiet_NaN(), u_since = 0.0, u2_int = 0.0;
+  auto accumulate_u = [&](double until) {
+    const double a = std::max(u_since, w0), b = std::min(until, w1);
+    if (b > a && std::isfinite(u_held)) u2_int += u_held * u_held * (b - a);
+  };
   while (t < e.duration_s) {
     st = bench.AdvanceTo(t, &m);
     // A bench may cut a long step short when the run is cancelled (SafetyBench does): that is a cancellation.
@@ -135,6 +147,11 @@ RunSummary RunImpl(const Experiment& e, hw::Bench& bench, Trace* trace, const st
     if (!st.ok()) break;
     st = bench.Apply(ctl.Step(m, e.reference.At(t), &state));
     if (!st.ok()) break;
+    if (u_slot >= 0) {
+      accumulate_u(t);
+      u_held = state.x[static_cast<size_t>(u_slot)];
+      u_since = t;
+    }
     ++sum.ticks;
     if (progress_t != nullptr) progress_t->store(t, std::memory_order_relaxed);
     // Next tick: the earliest controller instant or breakpoint after t.
@@ -161,8 +178,25 @@ RunSummary RunImpl(const Experiment& e, hw::Bench& bench, Trace* trace, const st
   sum.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
   sum.realtime_factor = sum.wall_s > 0.0 ? sum.duration_s / sum.wall_s : 0.0;
   sum.loop = bench.loop_stats();
-  sum.metrics = ComputeMetrics(*trace, e.controlled, e.metric_start_s, std::min(e.metric_end_s, sum.duration_s),
-                               e.plant.x_min_m, e.plant.x_max_m);
+  DriverLossInputs driver;
+  driver.supply_V = e.run.supply_V;
+  driver.diode_drop_V = e.driver.diode_drop_V;
+  driver.low_side_flyback = e.driver.kind == model::DriverKind::kLowSideFlyback;
+  const double metric_end_s = std::min(e.metric_end_s, sum.duration_s);
+  sum.metrics = ComputeMetrics(*trace, e.controlled, e.metric_start_s, metric_end_s, e.plant.x_min_m,
+                               e.plant.x_max_m, driver);
+  if (u_slot >= 0 && sum.termination == RunSummary::Termination::kDone) {
+    accumulate_u(sum.duration_s);
+    sum.metrics.effort_u_l2 = std::sqrt(u2_int);
+  }
+  // The carrier and duty an open-loop law commands at the window start (seed 003's planned f and D).
+  if (const auto* pwm = dynamic_cast<const control::OpenLoopPwm*>(&ctl)) {
+    for (const auto& seg : pwm->segments()) {
+      if (seg.start_s > e.metric_start_s + 1e-12) break;
+      sum.metrics.pwm_frequency_Hz = seg.frequency_Hz;
+      sum.metrics.pwm_duty = seg.duty;
+    }
+  }
   if (progress_t != nullptr) progress_t->store(sum.duration_s, std::memory_order_relaxed);
   return sum;
 }

@@ -1,4 +1,5 @@
 // The HTML page of a report: CSS, the data as JSON, and the renderer (vanilla JS, inline SVG, no network).
+#include <ctime>
 #include <string>
 
 #include "report/report.h"
@@ -7,16 +8,24 @@ namespace vb::report {
 namespace {
 
 constexpr const char* kCss = R"css(
-body { font: 14px/1.4 system-ui, sans-serif; margin: 20px 28px; color: #222; background: #fff; }
-h1 { font-size: 20px; margin: 0 0 4px; } h2 { font-size: 16px; margin: 26px 0 8px; } h3 { font-size: 14px; margin: 14px 0 4px; }
-#vb-status { font-size: 11px; color: #888; } #vb-status.bad { color: #c00; font-weight: bold; font-size: 14px; }
+body { font: 14px/1.4 system-ui, sans-serif; margin: 20px 28px; color: #222; background: #fff; max-width: 1320px; }
+section { max-width: 100%; }
+h1 { font-size: 20px; margin: 0 0 4px; } p.made { font-size: 12px; color: #666; margin: 0 0 6px; } h2 { font-size: 16px; margin: 26px 0 8px; } h3 { font-size: 14px; margin: 14px 0 4px; }
+#vb-status { display: none; } #vb-status.bad { display: block; color: #c00; font-weight: bold; font-size: 14px; }
+.scroll { overflow-x: auto; max-width: 100%; }
 table { border-collapse: collapse; font-size: 12px; margin: 4px 0 10px; }
+td.num { text-align: right; font-variant-numeric: tabular-nums; }
+table.meta td:first-child { font-weight: 600; background: #fafafa; }
+table.meta td { white-space: normal; max-width: 1100px; }
+details { margin: 6px 0; } summary { cursor: pointer; font-weight: 600; }
+pre.spec { font-size: 11px; background: #f8f8f8; padding: 6px 8px; overflow-x: auto; max-height: 320px; }
 th, td { border: 1px solid #ddd; padding: 3px 7px; text-align: left; white-space: nowrap; }
 th { background: #f3f3f3; }
 tr.regressed td { background: #fde2e2; } tr.improved td { background: #e3f6e3; } tr.new td { background: #e6eefc; }
 p.note { padding: 6px 10px; background: #f6f6f6; border-left: 4px solid #999; }
 p.note.good { border-color: #2a2; background: #eef9ee; } p.note.bad { border-color: #c22; background: #fcecec; }
-svg.plot { display: block; background: #fff; user-select: none; }
+svg.plot { display: block; background: #fff; user-select: none; width: 100%; max-width: 1200px; height: auto; }
+svg.plot .band { fill: rgba(255, 200, 0, 0.16); }
 svg.plot text { font: 11px system-ui, sans-serif; fill: #333; }
 svg.plot .grid { stroke: #eee; } svg.plot .axis { stroke: #999; fill: none; }
 svg.plot .sel { fill: rgba(80, 120, 220, 0.15); stroke: #57c; }
@@ -94,8 +103,8 @@ constexpr const char* kJs = R"js(
   // link: a shared {range, full, plots} object so that stacked panels zoom together.
   function LinePlot(parent, opt) {
     var self = this;
-    var W = opt.width || 960, H = opt.height || 220, M = {l: 72, r: 16, t: 10, b: 34};
-    var svg = svgEl('svg', {width: W, height: H, viewBox: '0 0 ' + W + ' ' + H, 'class': 'plot'}, parent);
+    var W = opt.width || 1200, H = opt.height || 240, M = {l: 78, r: 16, t: 10, b: 38};
+    var svg = svgEl('svg', {viewBox: '0 0 ' + W + ' ' + H, 'class': 'plot', preserveAspectRatio: 'xMinYMin meet'}, parent);
     var clipId = 'clip' + (++plots);
     var defs = svgEl('defs', {}, svg);
     var clip = svgEl('clipPath', {id: clipId}, defs);
@@ -104,7 +113,7 @@ constexpr const char* kJs = R"js(
     var link = opt.link || {plots: []};
     if (!link.full) {
       link.full = extent(opt.series.map(function (s) { return s.x; }));
-      link.range = link.full.slice();
+      link.range = opt.xRange ? opt.xRange.slice() : link.full.slice();
     }
     link.plots.push(self);
     function px(x, r) { return M.l + (x - r[0]) / (r[1] - r[0]) * (W - M.l - M.r); }
@@ -131,8 +140,16 @@ constexpr const char* kJs = R"js(
         svgEl('line', {x1: M.l, x2: W - M.r, y1: y, y2: y, 'class': 'grid'}, layer);
         svgEl('text', {x: M.l - 6, y: y + 4, 'text-anchor': 'end'}, layer).textContent = tickLabel(t, yt);
       });
+      if (opt.band) {
+        var b0 = Math.max(opt.band[0], xr[0]), b1 = Math.min(opt.band[1], xr[1]);
+        if (b1 > b0) {
+          var band = svgEl('rect', {x: px(b0, xr), y: M.t, width: px(b1, xr) - px(b0, xr), height: H - M.t - M.b,
+                                    'class': 'band'}, layer);
+          svgEl('title', {}, band).textContent = 'metric window ' + fmt(opt.band[0]) + '-' + fmt(opt.band[1]) + ' s';
+        }
+      }
       svgEl('rect', {x: M.l, y: M.t, width: W - M.l - M.r, height: H - M.t - M.b, 'class': 'axis'}, layer);
-      svgEl('text', {x: (W + M.l) / 2, y: H - 4, 'text-anchor': 'middle'}, layer).textContent = opt.xLabel || '';
+      svgEl('text', {x: (W + M.l) / 2, y: H - 4, 'text-anchor': 'middle'}, layer).textContent = opt.xLabel || 't [s]';
       svgEl('text', {x: 12, y: (H - M.b + M.t) / 2, 'text-anchor': 'middle',
                      transform: 'rotate(-90 12 ' + ((H - M.b + M.t) / 2) + ')'}, layer).textContent = opt.yLabel || '';
       opt.series.forEach(function (s, i) {
@@ -202,49 +219,105 @@ constexpr const char* kJs = R"js(
     });
   }
 
+  function drawRun(run, box) {
+    var link = {plots: []};
+    if (run.gate) new LinePlot(box, {series: [{name: 'gate', x: run.t, y: run.gate, step: true, color: '#555'}],
+                                     yLabel: 'gate', height: 110, link: link, yRange: [0, 1]});
+    if (run.i_A) {
+      var s = [{name: 'i [A]', x: run.t, y: run.i_A, color: '#1f77b4'}];
+      if (run.ref && run.controlled === 'current') s.push({name: 'reference [A]', x: run.t, y: run.ref, color: '#d62728', dash: '5,3'});
+      legend(box, s);
+      new LinePlot(box, {series: s, yLabel: 'current [A]', link: link});
+    }
+    if (run.x_m) {
+      var mm = run.x_m.map(function (v) { return finite(v) ? v * 1e3 : v; });
+      var p = [{name: 'x [mm]', x: run.t, y: mm, color: '#2ca02c'}];
+      if (run.ref && run.controlled === 'position')
+        p.push({name: 'reference [mm]', x: run.t, y: run.ref.map(function (v) { return finite(v) ? v * 1e3 : v; }),
+                color: '#d62728', dash: '5,3'});
+      legend(box, p);
+      new LinePlot(box, {series: p, yLabel: 'position [mm]', xLabel: 't [s]', link: link});
+    }
+  }
+
+  // Every run is reachable: one collapsible block per run, the first `open` drawn at once, the rest when opened.
   function renderTraces(sec, box) {
     if (!sec.runs || sec.runs.length === 0) { html('p', 'No traces stored for these runs.', box, 'note'); return; }
-    sec.runs.forEach(function (run) {
-      html('h3', run.label + ' (' + run.samples + ' samples)', box);
-      var link = {plots: []};
-      if (run.gate) new LinePlot(box, {series: [{name: 'gate', x: run.t, y: run.gate, step: true, color: '#555'}],
-                                       yLabel: 'gate', height: 110, link: link, yRange: [0, 1]});
-      if (run.i_A) {
-        var s = [{name: 'i [A]', x: run.t, y: run.i_A, color: '#1f77b4'}];
-        if (run.ref && run.controlled === 'current') s.push({name: 'reference [A]', x: run.t, y: run.ref, color: '#d62728', dash: '5,3'});
-        legend(box, s);
-        new LinePlot(box, {series: s, yLabel: 'current [A]', link: link});
-      }
-      if (run.x_m) {
-        var mm = run.x_m.map(function (v) { return finite(v) ? v * 1e3 : v; });
-        var p = [{name: 'x [mm]', x: run.t, y: mm, color: '#2ca02c'}];
-        if (run.ref && run.controlled === 'position')
-          p.push({name: 'reference [mm]', x: run.t, y: run.ref.map(function (v) { return finite(v) ? v * 1e3 : v; }),
-                  color: '#d62728', dash: '5,3'});
-        legend(box, p);
-        new LinePlot(box, {series: p, yLabel: 'position [mm]', xLabel: 't [s]', link: link});
-      }
+    var open = sec.open === undefined || location.hash === '#all' ? sec.runs.length : sec.open;
+    sec.runs.forEach(function (run, i) {
+      var d = html('details', null, box);
+      html('summary', run.label + ' (' + run.samples + ' samples)', d);
+      var drawn = false;
+      function draw() { if (!drawn) { drawn = true; drawRun(run, d); } }
+      if (i < open) { d.open = true; draw(); }
+      d.addEventListener('toggle', function () { if (d.open) draw(); });
     });
   }
 
+  function renderMeta(sec, box) {
+    var wrap = html('div', null, box, 'scroll');
+    var t = html('table', null, wrap, 'meta');
+    (sec.rows || []).forEach(function (row) {
+      var r = html('tr', null, t);
+      html('td', row[0], r);
+      html('td', row[1], r);
+    });
+    if (sec.specs && sec.specs.length > 0) {
+      var d = html('details', null, box);
+      html('summary', 'Specs (' + sec.specs.length + ')', d);
+      sec.specs.forEach(function (s) {
+        html('div', s.label, d);
+        html('pre', s.text, d, 'spec');
+      });
+    }
+  }
+
+  // The compared runs on shared axes: controlled variable and reference over the run (metric window shaded),
+  // tracking error over the metric window.
+  function renderOverlay(sec, box) {
+    var ys = [], es = [];
+    sec.series.forEach(function (s, i) {
+      var color = COLORS[i % COLORS.length];
+      ys.push({name: s.name, x: s.t, y: s.y, color: color});
+      es.push({name: s.name, x: s.et, y: s.e, color: color});
+    });
+    if (sec.series.length > 0) {
+      var r = sec.series[0];
+      ys.push({name: 'reference', x: r.t, y: r.ref, color: '#000', dash: '5,3', width: 1});
+    }
+    legend(box, ys);
+    new LinePlot(box, {series: ys, yLabel: sec.y_label, height: 300, band: sec.window});
+    html('h3', 'Tracking error over the metric window ' + fmt(sec.window[0]) + '-' + fmt(sec.window[1]) + ' s', box);
+    new LinePlot(box, {series: es, yLabel: sec.e_label, height: 260, band: sec.window});
+  }
+
   function renderTable(sec, box) {
-    var t = html('table', null, box);
+    if (sec.collapsed) {
+      box = html('details', null, box);
+      html('summary', (sec.rows || []).length + ' rows', box);
+    }
+    var t = html('table', null, html('div', null, box, 'scroll'));
     var tr = html('tr', null, t);
     (sec.columns || []).forEach(function (c) { html('th', c, tr); });
     (sec.rows || []).forEach(function (row, i) {
       var r = html('tr', null, t, sec.row_classes ? sec.row_classes[i] : '');
-      row.forEach(function (c) { html('td', c === null ? '' : (typeof c === 'number' ? fmt(c) : String(c)), r); });
+      row.forEach(function (c, j) {
+        var right = sec.left ? !sec.left[j] : typeof c === 'number';
+        html('td', c === null ? '' : (typeof c === 'number' ? fmt(c) : String(c)), r, right ? 'num' : '');
+      });
     });
   }
 
   function renderScatter(sec, box) {
-    var W = 960, H = 420, M = {l: 80, r: 20, t: 14, b: 40};
-    var svg = svgEl('svg', {width: W, height: H, viewBox: '0 0 ' + W + ' ' + H, 'class': 'plot'}, box);
+    var W = 1200, H = 440, M = {l: 84, r: 20, t: 14, b: 42};
+    var svg = svgEl('svg', {viewBox: '0 0 ' + W + ' ' + H, 'class': 'plot'}, box);
     var clipId = 'clip' + (++plots);
     var clip = svgEl('clipPath', {id: clipId}, svgEl('defs', {}, svg));
     svgEl('rect', {x: M.l, y: M.t, width: W - M.l - M.r, height: H - M.t - M.b}, clip);
     var xs = sec.points.map(function (p) { return p.x; }), ys = sec.points.map(function (p) { return p.y; });
     var xr = extent([xs]), yr = extent([ys]);
+    // A spread of a few per cent is not stretched across the plot: the axis then starts at 0.
+    if (xr[0] > 0 && (xr[1] - xr[0]) < 0.05 * xr[1]) xr[0] = 0;
     var dx = (xr[1] - xr[0]) * 0.08, dy = (yr[1] - yr[0]) * 0.1;
     xr = [xr[0] - dx, xr[1] + dx]; yr = [Math.max(0, yr[0] - dy), yr[1] + dy];
     if (yr[0] >= yr[1]) yr = [yr[0] - dy, yr[1] + dy];
@@ -266,7 +339,18 @@ constexpr const char* kJs = R"js(
     if (front.length > 1)
       svgEl('polyline', {points: front.map(function (p) { return px(p.x) + ',' + py(p.y); }).join(' '),
                          fill: 'none', stroke: '#d62728', 'stroke-width': 1.5, 'stroke-dasharray': '6,3'}, svg);
-    sec.points.forEach(function (p, i) {
+    var placed = [];  // label boxes already drawn: a new label moves down until it overlaps none
+    function place(x, y, w, right) {
+      var x0 = right ? x - w : x, h = 13;
+      for (var tries = 0; tries < 30; tries++) {
+        var hit = placed.some(function (b) { return x0 < b.x + b.w && b.x < x0 + w && y - h < b.y && b.y - h < y; });
+        if (!hit) break;
+        y += h;
+      }
+      placed.push({x: x0, y: y, w: w});
+      return y;
+    }
+    sec.points.slice().sort(function (a, b) { return a.y - b.y; }).reverse().forEach(function (p) {
       var color = p.front ? '#d62728' : '#1f77b4';
       var clipped = {stroke: color, 'clip-path': 'url(#' + clipId + ')'};
       if (p.y_err > 0) svgEl('line', Object.assign({x1: px(p.x), x2: px(p.x), y1: py(p.y - p.y_err), y2: py(p.y + p.y_err)}, clipped), svg);
@@ -274,16 +358,18 @@ constexpr const char* kJs = R"js(
       var c = svgEl('circle', {cx: px(p.x), cy: py(p.y), r: p.front ? 6 : 4.5, fill: color}, svg);
       svgEl('title', {}, c).textContent = p.label + ': ' + sec.x_label + ' ' + fmt(p.x) + ', ' + sec.y_label + ' ' + fmt(p.y);
       var right = px(p.x) > W * 0.7;
-      svgEl('text', {x: px(p.x) + (right ? -8 : 8), y: py(p.y) - 6 - (i % 2) * 10,
-                     'text-anchor': right ? 'end' : 'start'}, svg).textContent = p.label;
+      var ly = place(px(p.x) + (right ? -8 : 8), py(p.y) - 6, 7 * p.label.length, right);
+      svgEl('text', {x: px(p.x) + (right ? -8 : 8), y: ly, 'text-anchor': right ? 'end' : 'start'}, svg).textContent = p.label;
     });
     legend(box, [{name: 'Pareto front (not dominated in both)', color: '#d62728'}, {name: 'dominated', color: '#1f77b4'}]);
   }
 
   function renderBars(sec, box) {
-    var n = sec.labels.length, rowH = 20, W = 960, M = {l: 320, r: 30, t: 10, b: 30};
+    var n = sec.labels.length, rowH = 20, W = 1200;
+    var longest = sec.labels.reduce(function (m, l) { return Math.max(m, String(l).length); }, 0);
+    var M = {l: Math.min(560, 16 + 6.6 * longest), r: 70, t: 10, b: 30};
     var H = M.t + M.b + n * rowH;
-    var svg = svgEl('svg', {width: W, height: H, viewBox: '0 0 ' + W + ' ' + H, 'class': 'plot'}, box);
+    var svg = svgEl('svg', {viewBox: '0 0 ' + W + ' ' + H, 'class': 'plot'}, box);
     plots++;
     var lims = sec.limits || [];
     var xr = extent([sec.values.concat(lims).concat([0])]);
@@ -309,7 +395,7 @@ constexpr const char* kJs = R"js(
   }
 
   function renderLines(sec, box) {
-    var series = (sec.series || []).map(function (s) { return {name: s.name, x: s.x, y: s.y}; });
+    var series = (sec.series || []).map(function (s) { return {name: s.name, x: s.x, y: s.y, dash: s.dash, width: s.width}; });
     legend(box, series);
     new LinePlot(box, {series: series, xLabel: sec.x_label, yLabel: sec.y_label, height: 340, markers: !!sec.markers});
   }
@@ -317,6 +403,7 @@ constexpr const char* kJs = R"js(
   var data = JSON.parse(document.getElementById('vb-data').textContent);
   var root = document.getElementById('vb-report');
   var renderers = {traces: renderTraces, table: renderTable, scatter: renderScatter, bars: renderBars, lines: renderLines,
+                   meta: renderMeta, overlay: renderOverlay,
                    note: function (sec, box) { html('p', sec.text, box, 'note ' + (sec['class'] || '')); }};
   var count = 0;
   data.sections.forEach(function (sec) {
@@ -332,8 +419,21 @@ constexpr const char* kJs = R"js(
     status.textContent = 'rendered-ok: ' + count + ' sections, ' + plots + ' plots';
     document.body.setAttribute('data-vb-status', 'ok');
   }
+  // For the layout test: the page must not scroll sideways (docs/report.md).
+  document.body.setAttribute('data-vb-overflow-px',
+                             String(Math.max(0, document.documentElement.scrollWidth - document.documentElement.clientWidth)));
 })();
 )js";
+
+// Every page says when it was made (docs/report.md): UTC, to the second.
+std::string MadeAt() {
+  const std::time_t t = std::time(nullptr);
+  std::tm tm{};
+  gmtime_r(&t, &tm);
+  char buf[32];
+  std::strftime(buf, sizeof buf, "%Y-%m-%d %H:%M:%S UTC", &tm);
+  return buf;
+}
 
 std::string EscapeHtml(const std::string& s) {
   std::string out;
@@ -374,7 +474,7 @@ std::string RenderHtml(const std::string& title, const Json& sections) {
   out += kCss;
   out += "</style>\n</head>\n<body>\n<h1>";
   out += EscapeHtml(title);
-  out += "</h1>\n<div id=\"vb-status\">rendering... (needs JavaScript)</div>\n<div id=\"vb-report\"></div>\n";
+  out += "</h1>\n<p class=\"made\">page made " + MadeAt() + " by benchctl report</p>\n<div id=\"vb-status\">rendering... (needs JavaScript)</div>\n<div id=\"vb-report\"></div>\n";
   out += "<script type=\"application/json\" id=\"vb-data\">";
   out += ScriptSafe(data.dump(-1, ' ', false, Json::error_handler_t::replace));
   out += "</script>\n<script>";

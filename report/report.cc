@@ -1,7 +1,10 @@
 #include "report/report.h"
 
+#include <fmt/format.h>
 #include <fmt/printf.h>
+
 #include <algorithm>
+#include <ctime>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -49,7 +52,7 @@ std::vector<std::size_t> DecimationIndices(const std::map<std::string, std::vect
 
 }  // namespace
 
-Json TraceSection(const std::vector<TraceData>& traces, std::size_t max_points) {
+Json TraceSection(const std::vector<TraceData>& traces, std::size_t max_points, std::size_t open) {
   Json runs = Json::array();
   for (const auto& t : traces) {
     std::map<std::string, std::vector<double>> used;
@@ -73,35 +76,37 @@ Json TraceSection(const std::vector<TraceData>& traces, std::size_t max_points) 
     }
     runs.push_back(r);
   }
-  return {{"kind", "traces"}, {"title", "Traces (drag to zoom, double-click to reset)"}, {"runs", runs}};
+  return {{"kind", "traces"}, {"title", "Traces (drag to zoom, double-click to reset)"}, {"runs", runs}, {"open", open}};
 }
 
 Json ComparisonSections(const experiment::Comparison& c, const std::string& title) {
   Json out = Json::array();
-  Json cols = Json::array({"rank", "name", "controller", "runs", "failed", "Pareto"});
-  for (const auto& col : c.columns) cols.push_back(col);
+  // The terminal table's columns, headers and units (experiment::ComparisonGrid): one definition of both.
+  const experiment::TableGrid g = experiment::ComparisonGrid(c);
   Json rows = Json::array();
+  for (const auto& r : g.rows) rows.push_back(r);
+  Json left = Json::array();
+  for (bool l : g.left) left.push_back(l);
+  out.push_back({{"kind", "table"}, {"title", title}, {"columns", g.headers}, {"left", left}, {"rows", rows}});
+  const experiment::MetricDisplay ex = experiment::DisplayOf(c, c.rank_metric);
+  const experiment::MetricDisplay fx = experiment::DisplayOf(c, c.effort_metric);
   Json points = Json::array();
   for (const auto& r : c.rows) {
-    Json row = Json::array({r.rank, r.name, r.controller, r.runs, r.failed, r.pareto ? "*" : ""});
-    for (const auto& col : c.columns) {
-      const auto& s = r.metrics.at(col);
-      row.push_back(s.n == 0 ? std::string("") : Fmt(s.mean) + (s.n > 1 ? " \u00b1 " + Fmt(s.spread, "%.2g") : ""));
-    }
-    rows.push_back(row);
-    const auto& e = r.metrics.at(c.rank_metric);
-    const auto& f = r.metrics.at(c.effort_metric);
-    if (e.n > 0 && f.n > 0)
-      points.push_back({{"label", r.name}, {"x", f.mean}, {"y", e.mean}, {"front", r.pareto},
-                        {"x_err", f.spread}, {"y_err", e.spread}});
+    auto e = r.metrics.find(c.rank_metric), f = r.metrics.find(c.effort_metric);
+    if (e == r.metrics.end() || f == r.metrics.end() || e->second.n == 0 || f->second.n == 0) continue;
+    const std::string label = experiment::SplitCaseName(r.name).name;
+    points.push_back({{"label", label.substr(label.rfind('/') == std::string::npos ? 0 : label.rfind('/') + 1)},
+                      {"x", f->second.mean * fx.scale},
+                      {"y", e->second.mean * ex.scale},
+                      {"front", r.pareto},
+                      {"x_err", f->second.spread * fx.scale},
+                      {"y_err", e->second.spread * ex.scale}});
   }
-  out.push_back({{"kind", "table"}, {"title", title}, {"columns", cols}, {"rows", rows}});
-  if (!points.empty())
+  if (points.size() > 1)
     out.push_back({{"kind", "scatter"},
-                   {"title", "Controller comparison: " + c.rank_metric + " vs " + c.effort_metric +
-                                 " (Pareto front joined; lower-left is better)"},
-                   {"x_label", c.effort_metric},
-                   {"y_label", c.rank_metric},
+                   {"title", "Tracking error against effort (Pareto front joined; lower left is better)"},
+                   {"x_label", fx.header},
+                   {"y_label", ex.header},
                    {"points", points}});
   return out;
 }
@@ -114,40 +119,289 @@ Json MetricsSection(const std::string& title, const std::vector<std::pair<std::s
 }
 
 Json StaticMapSection(const std::vector<MapPoint>& points, const std::string& metric_label) {
-  std::map<std::string, std::map<double, std::vector<double>>> series;  // series -> x -> values (repeats)
-  std::vector<std::string> order;
-  std::string axis;
+  // Per spec name (fig8, fig9): x is the duty axis (else the last), one curve per value of the other axes.
+  std::vector<std::string> names;
+  std::map<std::string, std::map<std::string, std::map<double, std::vector<double>>>> by;  // name -> curve -> x -> ys
+  std::map<std::string, std::vector<std::string>> curve_order;
+  std::map<std::string, std::string> x_field;
+  auto leaf = [](const std::string& f) { return f.substr(f.rfind('.') == std::string::npos ? 0 : f.rfind('.') + 1); };
   for (const auto& p : points) {
     if (!std::isfinite(p.value) || p.key.sweep.empty()) continue;
-    const std::string& a = p.key.sweep.back().field;
-    const double x = p.key.sweep.back().value;
-    const std::string s =
-        RunKey{p.key.name, {p.key.sweep.begin(), p.key.sweep.end() - 1}, -1}.CaseName();
-    if (axis.empty()) axis = a;
-    if (a != axis) continue;
-    if (!series.count(s)) order.push_back(s);
-    series[s][x].push_back(p.value);
-  }
-  std::size_t total = 0;
-  for (const auto& [s, xs] : series) total += xs.size();
-  if (total < 3) return nullptr;
-  Json out = Json::array();
-  for (const auto& s : order) {
-    Json xs = Json::array(), ys = Json::array();
-    for (const auto& [x, vs] : series[s]) {
-      double sum = 0;
-      for (double v : vs) sum += v;
-      xs.push_back(x);
-      ys.push_back(sum / vs.size());
+    size_t xi = p.key.sweep.size() - 1;
+    for (size_t k = 0; k < p.key.sweep.size(); ++k)
+      if (leaf(p.key.sweep[k].field) == "duty") xi = k;
+    std::string curve;
+    for (size_t k = 0; k < p.key.sweep.size(); ++k) {
+      if (k == xi) continue;
+      const auto& sc = p.key.sweep[k];
+      const std::string l = leaf(sc.field);
+      // Seed 000 states pressures in bar, frequencies in Hz.
+      curve += (curve.empty() ? "" : ", ") +
+               (l == "supply_pressure_Pa" ? fmt::format("{:g} bar", sc.value / 1e5)
+                : l.size() > 3 && l.compare(l.size() - 3, 3, "_Hz") == 0 ? fmt::format("{:g} Hz", sc.value)
+                                                                          : fmt::format("{} = {:g}", l, sc.value));
     }
-    out.push_back({{"name", s}, {"x", xs}, {"y", ys}});
+    if (!by.count(p.key.name)) names.push_back(p.key.name);
+    if (!by[p.key.name].count(curve)) curve_order[p.key.name].push_back(curve);
+    x_field[p.key.name] = p.key.sweep[xi].field;
+    by[p.key.name][curve][p.key.sweep[xi].value].push_back(p.value);
   }
-  return {{"kind", "lines"},
-          {"title", "Static map (seed 000 Figs. 8-9 style): " + metric_label + " vs " + axis},
-          {"x_label", axis},
-          {"y_label", metric_label},
-          {"markers", true},
-          {"series", out}};
+  Json out = Json::array();
+  for (const auto& name : names) {
+    std::size_t total = 0;
+    for (const auto& [c, xs] : by[name]) total += xs.size();
+    if (total < 3) continue;
+    const bool duty = leaf(x_field[name]) == "duty";
+    Json series = Json::array();
+    for (const auto& curve : curve_order[name]) {
+      Json xs = Json::array(), ys = Json::array();
+      for (const auto& [x, vs] : by[name][curve]) {
+        double sum = 0;
+        for (double v : vs) sum += v;
+        xs.push_back(duty ? 100.0 * x : x);
+        ys.push_back(sum / vs.size());
+      }
+      series.push_back({{"name", curve.empty() ? metric_label : curve}, {"x", xs}, {"y", ys}});
+    }
+    out.push_back({{"kind", "lines"},
+                   {"title", "Static map, " + name + ": " + metric_label + " against " +
+                                 (duty ? std::string("PWM duty") : leaf(x_field[name])) + " (seed 000 Figs. 8-9)"},
+                   {"x_label", duty ? std::string("duty [%]") : leaf(x_field[name])},
+                   {"y_label", metric_label},
+                   {"markers", true},
+                   {"series", series}});
+  }
+  return out;
+}
+
+namespace {
+
+std::string Utc(double unix_s) {
+  if (!(unix_s > 0)) return "";
+  const std::time_t t = static_cast<std::time_t>(unix_s);
+  std::tm tm{};
+  gmtime_r(&t, &tm);
+  char buf[32];
+  std::strftime(buf, sizeof buf, "%Y-%m-%d %H:%M:%S UTC", &tm);
+  return buf;
+}
+
+Json ParseSpec(const std::string& spec_json) {
+  if (spec_json.empty()) return nullptr;
+  try {
+    return Json::parse(spec_json);
+  } catch (const Json::exception&) {
+    return nullptr;
+  }
+}
+
+double SpecNumber(const Json& spec, std::initializer_list<const char*> path, double fallback) {
+  const Json* j = &spec;
+  for (const char* k : path) {
+    if (!j->is_object() || !j->contains(k)) return fallback;
+    j = &(*j)[k];
+  }
+  return j->is_number() ? j->get<double>() : fallback;
+}
+
+// [start, end] of the metric window (docs/spec.md: default the whole run).
+std::pair<double, double> MetricWindow(const Json& spec) {
+  const double duration = SpecNumber(spec, {"duration_s"}, NAN);
+  return {SpecNumber(spec, {"metric_window", "start_s"}, 0.0), SpecNumber(spec, {"metric_window", "end_s"}, duration)};
+}
+
+std::string Controlled(const std::string& controller) {
+  auto ends = [&](const char* suf) {
+    const std::string s(suf);
+    return controller.size() >= s.size() && controller.compare(controller.size() - s.size(), s.size(), s) == 0;
+  };
+  if (ends("_current") || controller == "peak_and_hold") return "current";
+  if (ends("_position")) return "position";
+  return "";
+}
+
+// The SI prefix for a channel whose largest magnitude is max_abs: (symbol, scale).
+std::pair<std::string, double> PrefixFor(double max_abs) {
+  if (max_abs >= 1) return {"", 1};
+  if (max_abs >= 1e-3) return {"m", 1e3};
+  if (max_abs >= 1e-6) return {"µ", 1e6};
+  return {"n", 1e9};
+}
+
+}  // namespace
+
+Json MetaSection(const std::string& where, const std::vector<RunInfo>& runs) {
+  Json rows = Json::array();
+  auto add = [&](const std::string& k, const std::string& v) {
+    if (!v.empty()) rows.push_back(Json::array({k, v}));
+  };
+  add("page made", Utc(static_cast<double>(std::time(nullptr))));
+  add("runs from", where);
+  double first = 0, last = 0;
+  int done = 0;
+  for (const auto& r : runs) {
+    if (r.started_unix_s > 0 && (first == 0 || r.started_unix_s < first)) first = r.started_unix_s;
+    last = std::max(last, r.finished_unix_s);
+    done += r.status == "done";
+  }
+  add("runs", std::to_string(runs.size()) + " (" + std::to_string(done) + " done)");
+  if (first > 0) add("ran", Utc(first) + " to " + Utc(last));
+  const Json spec = runs.empty() ? Json(nullptr) : ParseSpec(runs.front().spec_json);
+  if (spec.is_object()) {
+    auto str = [&](std::initializer_list<const char*> path) {
+      const Json* j = &spec;
+      for (const char* k : path) {
+        if (!j->is_object() || !j->contains(k)) return std::string();
+        j = &(*j)[k];
+      }
+      return j->is_string() ? j->get<std::string>() : j->dump();
+    };
+    add("description", str({"description"}));
+    add("bench", str({"bench", "model", "preset"}) + (str({"bench", "driver", "kind"}).empty() ? "" : ", driver " + str({"bench", "driver", "kind"})));
+    std::string cond;
+    if (spec.contains("conditions") && spec["conditions"].is_object())
+      for (const auto& [k, v] : spec["conditions"].items())
+        if (v.is_number()) cond += (cond.empty() ? "" : ", ") + k + " = " + fmt::format("{:g}", v.get<double>());
+    add("conditions", cond);
+    const auto [w0, w1] = MetricWindow(spec);
+    add("duration", fmt::format("{:g} s; metric window {:g}-{:g} s", SpecNumber(spec, {"duration_s"}, NAN), w0, w1));
+  }
+  Json specs = Json::array();
+  for (const auto& r : runs)
+    if (!r.spec_json.empty()) {
+      const Json j = ParseSpec(r.spec_json);
+      specs.push_back({{"label", "run " + std::to_string(r.id) + ": " + r.key.DisplayName()},
+                       {"text", j.is_null() ? r.spec_json : j.dump(2)}});
+    }
+  return {{"kind", "meta"}, {"title", "Runs, conditions and specs"}, {"rows", rows}, {"specs", specs}};
+}
+
+Json OverlaySection(const std::vector<RunInfo>& runs, std::size_t max_points) {
+  std::string controlled;
+  for (const auto& r : runs) {
+    const std::string c = Controlled(r.controller);
+    if (c.empty() || (!controlled.empty() && c != controlled)) return nullptr;
+    controlled = c;
+  }
+  const std::string ych = controlled == "current" ? "i_A" : "x_m";
+  // Units: the largest magnitude of the controlled variable and of the error over the window.
+  double y_max = 0, e_max = 0;
+  struct Prepared {
+    const RunInfo* run;
+    const std::vector<double>* y;
+    const std::vector<double>* ref;
+    double w0, w1;
+  };
+  std::vector<Prepared> ready;
+  for (const auto& r : runs) {
+    auto y = r.trace.channels.find(ych), ref = r.trace.channels.find("ref");
+    if (y == r.trace.channels.end() || ref == r.trace.channels.end() || y->second.empty()) continue;
+    auto [w0, w1] = MetricWindow(ParseSpec(r.spec_json));
+    const double dt = r.trace.sample_period_s;
+    const std::size_t n = std::min(y->second.size(), ref->second.size());
+    if (!std::isfinite(w1)) w1 = r.trace.t0_s + dt * static_cast<double>(n);
+    for (std::size_t k = 0; k < n; ++k) {
+      const double t = r.trace.t0_s + dt * static_cast<double>(k);
+      if (std::isfinite(y->second[k])) y_max = std::max(y_max, std::abs(y->second[k]));
+      if (t >= w0 && t <= w1 && std::isfinite(ref->second[k]))
+        e_max = std::max(e_max, std::abs(y->second[k] - ref->second[k]));
+    }
+    ready.push_back({&r, &y->second, &ref->second, w0, w1});
+  }
+  if (ready.size() < 1) return nullptr;
+  const auto [yp, ys] = PrefixFor(y_max);
+  const auto [ep, es] = PrefixFor(e_max);
+  const std::string base = controlled == "current" ? "A" : "m";
+  Json series = Json::array();
+  double w0_all = INFINITY, w1_all = -INFINITY;
+  for (const auto& p : ready) {
+    const RunInfo& r = *p.run;
+    const double dt = r.trace.sample_period_s;
+    const std::size_t n = std::min(p.y->size(), p.ref->size());
+    std::map<std::string, std::vector<double>> full = {{"y", *p.y}, {"ref", *p.ref}};
+    for (auto& [k, v] : full) v.resize(n);
+    const auto keep = DecimationIndices(full, n, max_points);
+    Json t = Json::array(), y = Json::array(), ref = Json::array();
+    for (auto k : keep) {
+      t.push_back(r.trace.t0_s + dt * static_cast<double>(k));
+      y.push_back(Num((*p.y)[k] * ys));
+      ref.push_back(Num((*p.ref)[k] * ys));
+    }
+    // The error over the metric window only: where the metrics are computed.
+    std::size_t k0 = 0, k1 = 0;
+    while (k0 < n && r.trace.t0_s + dt * k0 < p.w0 - 1e-12) ++k0;
+    k1 = k0;
+    while (k1 < n && r.trace.t0_s + dt * k1 <= p.w1 + 1e-12) ++k1;
+    std::map<std::string, std::vector<double>> err = {{"e", {}}};
+    for (std::size_t k = k0; k < k1; ++k) err["e"].push_back((*p.y)[k] - (*p.ref)[k]);
+    const auto ekeep = DecimationIndices(err, err["e"].size(), max_points);
+    Json et = Json::array(), ev = Json::array();
+    if (!err["e"].empty())
+      for (auto k : ekeep) {
+        et.push_back(r.trace.t0_s + dt * static_cast<double>(k0 + k));
+        ev.push_back(Num(err["e"][k] * es));
+      }
+    const std::string label = r.key.DisplayName();
+    series.push_back({{"name", label.substr(label.rfind('/') == std::string::npos ? 0 : label.rfind('/') + 1)},
+                      {"t", t}, {"y", y}, {"ref", ref}, {"et", et}, {"e", ev}});
+    w0_all = std::min(w0_all, p.w0);
+    w1_all = std::max(w1_all, p.w1);
+  }
+  const std::string what = controlled == "current" ? "current" : "position";
+  return {{"kind", "overlay"},
+          {"title", "The compared laws on shared axes: " + what + " and tracking error (metric window shaded)"},
+          {"y_label", what + " [" + yp + base + "]"},
+          {"e_label", "error " + what + " - reference [" + ep + base + "]"},
+          {"window", Json::array({w0_all, w1_all})},
+          {"series", series}};
+}
+
+Json BatchSections(const std::string& where, std::int64_t batch, const std::vector<RunInfo>& runs) {
+  Json sections = Json::array();
+  sections.push_back(MetaSection(where, runs));
+  std::vector<experiment::RunRecord> recs;
+  std::vector<MapPoint> map;
+  for (const auto& r : runs) {
+    recs.push_back({r.key.CaseName(), r.controller, r.status == "done", r.metrics});
+    auto it = r.metrics.find("mean_position_pct");
+    if (r.status == "done" && r.controller == "open_loop_pwm" && it != r.metrics.end()) map.push_back({r.key, it->second});
+  }
+  sections.push_back({{"kind", "note"},
+                      {"text", "Batch " + std::to_string(batch) + ": " + std::to_string(runs.size()) +
+                                   " runs. Repeats are grouped: mean \u00b1 sample standard deviation. Metric "
+                                   "definitions: docs/metrics.md."}});
+  const experiment::Comparison c = experiment::Compare(recs);
+  // A static map first as the paper's figures, its table (a row per run) after them.
+  for (auto& s : StaticMapSection(map, "mean position [% of stroke]")) sections.push_back(s);
+  for (auto& s : ComparisonSections(c, "Comparison")) {
+    if (s["kind"] == "table" && s["rows"].size() > 20) s["collapsed"] = true;  // opened on demand
+    sections.push_back(s);
+  }
+  Json overlay = OverlaySection(runs);
+  if (!overlay.is_null()) sections.push_back(overlay);
+  std::vector<TraceData> traces;
+  for (const auto& r : runs)
+    if (!r.trace.channels.empty()) {
+      traces.push_back(r.trace);
+      if (traces.back().controlled.empty()) traces.back().controlled = Controlled(r.controller);
+    }
+  const std::size_t points = traces.size() <= 4 ? 4000 : std::max<std::size_t>(600, 16000 / traces.size());
+  sections.push_back(TraceSection(traces, points, 2));
+  return sections;
+}
+
+Json RunSections(const std::string& where, const RunInfo& run) {
+  Json sections = Json::array();
+  sections.push_back(MetaSection(where, {run}));
+  std::vector<TraceData> traces;
+  if (!run.trace.channels.empty()) {
+    traces.push_back(run.trace);
+    if (traces.back().controlled.empty()) traces.back().controlled = Controlled(run.controller);
+  }
+  sections.push_back(TraceSection(traces, 4000, 1));
+  std::vector<std::pair<std::string, double>> m(run.metrics.begin(), run.metrics.end());
+  sections.push_back(MetricsSection("Metrics (SI units, names as in --json; docs/metrics.md)", m));
+  return sections;
 }
 
 Json RegressionSections(const Json& r) {
@@ -163,6 +417,9 @@ Json RegressionSections(const Json& r) {
   if (r.contains("baseline") && r["baseline"].is_object())
     head += " vs baseline " + str(r["baseline"], "name") + " v" + std::to_string(r["baseline"].value("version", 0));
   if (!str(r, "night").empty()) head += ", night " + str(r, "night");
+  if (r.contains("batch_id") && r["batch_id"].is_number() && r["batch_id"].get<double>() > 0)
+    head += ", batch " + r["batch_id"].dump() + " (benchctl report --batch " + r["batch_id"].dump() + ": its specs and conditions)";
+  if (const std::string when = Utc(num(r, "created_unix_s")); !when.empty()) head += ", run " + when;
   head += ": " + str(r, "verdict");
   if (r.contains("counts") && r["counts"].is_object()) {
     const Json& c = r["counts"];
@@ -310,7 +567,10 @@ Json DiagnosisSections(const Json& d) {
       Json series = Json::array();
       for (const char* k : {"measured_A", "nominal_A", "fitted_A"}) {
         if (!o.contains(k) || !o[k].is_array()) continue;
-        series.push_back({{"name", std::string(k).substr(0, std::string(k).size() - 2)}, {"x", o["t_s"]}, {"y", o[k]}});
+        // Measured wide and solid, the model curves thin and dashed: a fitted curve never hides the measurement.
+        const bool measured = std::string(k) == "measured_A";
+        series.push_back({{"name", std::string(k).substr(0, std::string(k).size() - 2)}, {"x", o["t_s"]}, {"y", o[k]},
+                          {"width", measured ? 3.0 : 1.3}, {"dash", measured ? "" : "6,3"}});
       }
       if (series.empty()) continue;
       const std::string run = o.contains("run") ? (o["run"].is_string() ? o["run"].get<std::string>() : o["run"].dump())

@@ -86,7 +86,8 @@ TEST(BenchctlCli, UnreachableServerSaysWhereItLookedInOneLine) {
 TEST(BenchctlCli, CompareAndCsvOutputs) {
   Result run = RunBenchctl("run --local " + Example("dither.json") + " --csv");
   ASSERT_EQ(run.exit_code, 0) << run.out;
-  EXPECT_EQ(run.out.rfind("id,batch_id,name,controller,status", 0), 0u) << run.out;
+  EXPECT_EQ(run.out.rfind("id,batch_id,name,controller,\"controller.dither_pwm.average_current_A\",status", 0), 0u)
+      << "the sweep value is a column: " << run.out;
   size_t rows = 0;
   for (size_t p = run.out.find('\n'); p != std::string::npos; p = run.out.find('\n', p + 1)) ++rows;
   EXPECT_EQ(rows, 5u) << "header + 4 sweep points";
@@ -130,6 +131,50 @@ TEST(BenchctlCli, LocalRunsAreRecordedAndComparableByBatch) {
   Result unstored = RunBenchctl("run --local " + Example("standard/e3.json") + " --json --no-store");
   ASSERT_EQ(unstored.exit_code, 0) << unstored.out;
   EXPECT_EQ(unstored.out.find("\"id\": "), std::string::npos) << "--no-store records nothing";
+}
+
+// The tables' options reach the comparison on `run` and on `compare --batch/--runs` of the store; a batch
+// prints one line per run (the metrics are in the table), a single run its metrics with units; a report of a
+// stored run carries its spec and times (docs/comparison.md, docs/report.md).
+TEST(BenchctlCli, TableOptionsPerRunLinesUnitsAndReportOnTheLocalStore) {
+  Result run = RunBenchctl("run --local " + Example("compare-current-controllers.json") +
+                           " --metrics rmse,driver_loss_W");
+  ASSERT_EQ(run.exit_code, 0) << run.out;
+  const std::regex line("(^|\n)run [0-9]+ compare-current-controllers/pi: done\n");
+  EXPECT_TRUE(std::regex_search(run.out, line)) << "one line per run: " << run.out;
+  EXPECT_EQ(run.out.find("  rmse "), std::string::npos) << "no per-run metric lines in a batch: " << run.out;
+  EXPECT_NE(run.out.find("RMSE [mA]"), std::string::npos) << run.out;
+  EXPECT_NE(run.out.find("driver loss [mW]"), std::string::npos) << run.out;
+  EXPECT_EQ(run.out.find("sw rate"), std::string::npos) << "--metrics picks the columns: " << run.out;
+  std::smatch m;
+  ASSERT_TRUE(std::regex_search(run.out, m, std::regex("run ([0-9]+) compare-current-controllers/hysteresis")));
+  const std::int64_t first = std::stoll(m[1]);
+  const std::string ids = std::to_string(first) + "," + std::to_string(first + 1);
+
+  Result cmp = RunBenchctl("compare --local --runs " + ids + " --metrics max_abs_error");
+  ASSERT_EQ(cmp.exit_code, 0) << cmp.out;
+  EXPECT_NE(cmp.out.find("max|e| [mA]"), std::string::npos) << cmp.out;
+  EXPECT_EQ(cmp.out.find("driver loss [mW]"), std::string::npos) << cmp.out;
+  Result wide = RunBenchctl("compare --local --runs " + ids + " --wide");
+  ASSERT_EQ(wide.exit_code, 0) << wide.out;
+  EXPECT_NE(wide.out.find("energy"), std::string::npos) << "--wide: every metric: " << wide.out;
+  Result bad = RunBenchctl("compare --local --runs " + ids + " --metrics no_such_metric");
+  EXPECT_EQ(bad.exit_code, 2) << bad.out;
+  EXPECT_NE(bad.out.find("no_such_metric"), std::string::npos) << bad.out;
+
+  Result single = RunBenchctl("run --local " + Example("standard/e3.json"));
+  ASSERT_EQ(single.exit_code, 0) << single.out;
+  EXPECT_TRUE(std::regex_search(single.out, std::regex("\n  mean_current_A +[0-9.e+-]+ A\n"))) << single.out;
+  std::smatch sm;
+  ASSERT_TRUE(std::regex_search(single.out, sm, std::regex("^run ([0-9]+) e3 ")));
+  const std::string html = ::testing::TempDir() + "/benchctl-cli-run.html";
+  Result rep = RunBenchctl("report --run " + sm[1].str() + " --html " + html);
+  ASSERT_EQ(rep.exit_code, 0) << rep.out;
+  std::ifstream in(html);
+  std::stringstream page;
+  page << in.rdbuf();
+  EXPECT_NE(page.str().find("supply_V"), std::string::npos) << "the run's spec is on its page";
+  EXPECT_NE(page.str().find("[\"ran\",\"2"), std::string::npos) << "the run's times are on its page";
 }
 
 std::int64_t FirstId(const std::string& run_json) {

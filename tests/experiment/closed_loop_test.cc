@@ -36,6 +36,16 @@ TEST_P(CurrentLawOnEmulator, HoldsTheReferenceAfterOpeningTheValve) {
   ASSERT_TRUE(s.ok()) << s.message;
   EXPECT_LT(s.metrics.rmse, c.rmse_max_A);
   EXPECT_LT(std::abs(s.metrics.mean_current_A - 0.5), c.mean_err_max_A);
+  // A hold (the window starts at the set-point): no overshoot, settling or opening delay; the driver's losses
+  // from its diode drop (0.7 V) and the 24 V supply (docs/metrics.md).
+  EXPECT_TRUE(std::isnan(s.metrics.overshoot));
+  EXPECT_TRUE(std::isnan(s.metrics.settling_time_s));
+  EXPECT_TRUE(std::isnan(s.metrics.opening_delay_s));
+  EXPECT_GT(s.metrics.max_abs_error, 0.0);
+  EXPECT_NEAR(s.metrics.switching_rate_Hz, s.metrics.switches / 0.08, 0.01 * s.metrics.switching_rate_Hz);
+  // The diode carries the current for about (1 - D) of the time, D = R i / V = 13 * 0.5 / 24.
+  EXPECT_NEAR(s.metrics.diode_loss_W, 0.7 * 0.5 * (1 - 13.0 * 0.5 / 24.0), 0.03);
+  EXPECT_NEAR(s.metrics.driver_loss_W, s.metrics.diode_loss_W + s.metrics.switching_loss_W, 1e-12);
   // The switching pulse opened the valve, and it stays open at the holding current.
   const Metrics whole = ComputeMetrics(trace, ControlledVariable::kCurrent, 0.0, 0.1, e->plant.x_min_m,
                                        e->plant.x_max_m);
@@ -101,6 +111,13 @@ TEST_P(PositionLawOnEmulator, ReachesTheReferenceNominalAndPerturbed) {
     if (trace.t_s[k] >= 0.3) worst = std::max(worst, std::abs(trace.x_m[k] - 1.0e-3));
   EXPECT_LT(worst, 0.05e-3) << GetParam();
   EXPECT_GT(s.metrics.switches, 1000.0) << "closed-loop PWM";
+  // Seed 002's ||u||_2 on the force demand: at least the static hold force (0.1248 N at 1 mm, docs/
+  // position-controllers.md) over the last 0.3 s, and not the open-loop laws' metrics.
+  EXPECT_GT(s.metrics.effort_u_l2, 0.1248 * std::sqrt(0.3) * 0.75) << GetParam();
+  EXPECT_LT(s.metrics.effort_u_l2, 1.0) << GetParam();
+  EXPECT_TRUE(std::isnan(s.metrics.pwm_frequency_Hz));
+  EXPECT_TRUE(std::isnan(s.metrics.max_abs_error)) << "a step response: max |e| is the step";
+  EXPECT_TRUE(std::isfinite(s.metrics.overshoot));
 }
 
 INSTANTIATE_TEST_SUITE_P(Seed002, PositionLawOnEmulator,
@@ -194,7 +211,8 @@ TEST(DitherOnEmulator, PlannedPwmGivesTheRequestedAverageAndAmplitude) {
     ASSERT_TRUE(e.ok()) << e.status().message();
     hw::EmulatedBench bench(EmulatedBenchFor(*e));
     Trace trace;
-    ASSERT_TRUE(Runner::Run(*e, bench, &trace).ok());
+    const RunSummary s = Runner::Run(*e, bench, &trace);
+    ASSERT_TRUE(s.ok());
     double lo = 1e9, hi = -1e9;
     for (size_t k = 0; k < trace.size(); ++k)
       if (trace.t_s[k] >= 0.25) {
@@ -204,6 +222,13 @@ TEST(DitherOnEmulator, PlannedPwmGivesTheRequestedAverageAndAmplitude) {
     // Sampled at 100 kHz, the extremes are within one sample's slope of the true ones.
     EXPECT_NEAR((hi + lo) / 2, want_avg, 0.01 * want_avg) << want_avg;
     EXPECT_NEAR(hi - lo, 0.05, 0.002) << want_avg;
+    // The metrics carry the plan and the ripple over the metric window (0.2-0.3 s), and name the law.
+    EXPECT_EQ(e->controller->name(), "dither_pwm");
+    EXPECT_NEAR(s.metrics.ripple_pp_A, 0.05, 0.002) << want_avg;
+    EXPECT_NEAR(s.metrics.ripple_mid_A, want_avg, 0.01 * want_avg) << want_avg;
+    EXPECT_GT(s.metrics.pwm_frequency_Hz, 50.0);
+    EXPECT_NEAR(s.metrics.pwm_duty, want_avg * 28.5 / 24.0, 0.02) << "D ~ I_avg R / V (eq. 12)";
+    EXPECT_TRUE(std::isnan(s.metrics.effort_u_l2));
   }
 }
 

@@ -2,6 +2,12 @@
 
 #include "experiment/compare.h"
 
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+
+#include "common/run_key.h"
+
 namespace vb::experiment {
 namespace {
 
@@ -60,6 +66,186 @@ TEST(Compare, CsvQuotesNamesSoCommasAndQuotesStayInTheirColumn) {
   const Comparison c = Compare({R("say \"hi\", then go", 1.0, 1.0)});
   const std::string csv = ComparisonCsv(c);
   EXPECT_NE(csv.find(",\"say \"\"hi\"\", then go\","), std::string::npos) << csv;
+}
+
+
+size_t Widest(const std::string& text) {
+  size_t w = 0;
+  std::istringstream in(text);
+  for (std::string line; std::getline(in, line);) {
+    size_t n = 0;
+    for (unsigned char ch : line) n += (ch & 0xC0) != 0x80;  // characters, not bytes
+    w = std::max(w, n);
+  }
+  return w;
+}
+
+// Seed 001's four laws as the emulator measures them (docs/comparison.md), with every metric a run records.
+std::vector<RunRecord> CurrentLaws() {
+  struct L {
+    const char* law;
+    double rmse, rate, sw_loss, diode;
+  };
+  std::vector<RunRecord> out;
+  for (const L& l : {L{"hysteresis_current", 0.006018, 3437, 0.0021, 0.2561}, L{"pi_current", 0.000953, 40000, 0.0247, 0.2553},
+                     L{"predictive_current", 0.000694, 40000, 0.0247, 0.2550}, L{"fuzzy_current", 0.000538, 40000, 0.0247, 0.2551}}) {
+    RunRecord r;
+    r.name = "compare-current-controllers/" + std::string(l.law).substr(0, std::string(l.law).find('_'));
+    r.controller = l.law;
+    r.metrics = {{"rmse", l.rmse}, {"iae", l.rmse * 0.08}, {"max_abs_error", l.rmse * 3}, {"overshoot", NAN},
+                 {"settling_time_s", NAN}, {"effort_l2", 3.67}, {"effort_rms", 12.97}, {"energy_J", 0.26},
+                 {"switches", l.rate * 0.08}, {"mean_current_A", 0.5}, {"opening_delay_s", NAN},
+                 {"closing_delay_s", NAN}, {"mean_position_m", 3e-4}, {"mean_position_pct", 100},
+                 {"mean_flow_kg_per_s", 1e-3}, {"switching_rate_Hz", l.rate}, {"diode_loss_W", l.diode},
+                 {"switching_loss_W", l.sw_loss}, {"driver_loss_W", l.diode + l.sw_loss}, {"effort_u_l2", NAN},
+                 {"pwm_frequency_Hz", NAN}, {"pwm_duty", NAN}, {"ripple_pp_A", NAN}, {"ripple_mid_A", NAN}};
+    out.push_back(r);
+  }
+  return out;
+}
+
+TEST(CompareTable, CurrentLawsFitIn120ColumnsWithUnitsAndWithoutTheSharedPrefix) {
+  const Comparison c = Compare(CurrentLaws());
+  const std::string t = ComparisonTable(c);
+  EXPECT_LE(Widest(t), 120u) << t;
+  EXPECT_NE(t.find("RMSE [mA]"), std::string::npos) << t;
+  EXPECT_NE(t.find("sw rate [kHz]"), std::string::npos) << t;
+  EXPECT_NE(t.find("driver loss [mW]"), std::string::npos) << t;
+  EXPECT_NE(t.find("0.538"), std::string::npos) << "0.000538 A in mA: " << t;
+  EXPECT_NE(t.find("40.00"), std::string::npos) << "40000 Hz in kHz: " << t;
+  // Metrics that apply to no row (a hold has no overshoot, settling or opening delay) are absent, not 0.
+  EXPECT_EQ(t.find("overshoot"), std::string::npos) << t;
+  EXPECT_EQ(t.find("settling"), std::string::npos) << t;
+  EXPECT_EQ(t.find("open delay"), std::string::npos) << t;
+  // The 28-character prefix is said once, not on every row.
+  EXPECT_EQ(t.find("compare-current-controllers/"), std::string::npos) << t;
+  EXPECT_EQ(t.rfind("compare-current-controllers: 4 cases", 0), 0u) << t;
+}
+
+TEST(CompareTable, CurrentLawsTradeRmseAgainstTheDriverLoss) {
+  const Comparison c = Compare(CurrentLaws());
+  EXPECT_EQ(c.effort_metric, "driver_loss_W");
+  EXPECT_TRUE(Row(c, "compare-current-controllers/fuzzy").pareto) << "best RMSE";
+  EXPECT_TRUE(Row(c, "compare-current-controllers/hysteresis").pareto) << "12x fewer edges: least loss";
+  EXPECT_FALSE(Row(c, "compare-current-controllers/pi").pareto);
+  EXPECT_NE(ComparisonTable(c).find("Pareto-optimal in (RMSE, driver loss)"), std::string::npos);
+}
+
+TEST(CompareTable, MetricsAndWidePickTheColumnsInAStableOrder) {
+  const Comparison c = Compare(CurrentLaws());
+  const std::string picked = ComparisonTable(c, {{"switches", "rmse"}, false});
+  const size_t sw = picked.find("switches"), rmse = picked.find("RMSE [mA]");
+  ASSERT_NE(sw, std::string::npos) << picked;
+  ASSERT_NE(rmse, std::string::npos) << picked;
+  EXPECT_LT(sw, rmse) << "the asked order";
+  EXPECT_EQ(picked.substr(0, picked.find("\n", picked.find("\n") + 1)).find("driver loss"), std::string::npos)
+      << "only the asked columns: " << picked;
+  const std::string wide = ComparisonTable(c, {{}, true});
+  EXPECT_NE(wide.find("||v||2 [V s^0.5]"), std::string::npos) << wide;
+  EXPECT_NE(wide.find("energy [mJ]"), std::string::npos) << wide;
+  EXPECT_EQ(wide.find("overshoot"), std::string::npos) << "still absent: it applies to no row";
+  EXPECT_EQ(CheckTableOptions(c, {{"rmse"}, false}), "");
+  EXPECT_NE(CheckTableOptions(c, {{"rmse", "speed"}, false}).find("no metric speed"), std::string::npos);
+  // Columns follow MetricList's order whatever order the runs' maps come in.
+  EXPECT_EQ(c.columns.front(), "rmse");
+  EXPECT_EQ(Compare(CurrentLaws()).columns, c.columns);
+  EXPECT_EQ(ComparisonTable(Compare(CurrentLaws())), ComparisonTable(c));
+}
+
+TEST(CompareTable, PositionLawsUseTheirForceNormAsEffort) {
+  std::vector<RunRecord> runs;
+  for (auto [law, rmse, u] : {std::tuple{"cascade_pi_position", 6.46e-5, 0.21}, std::tuple{"sliding_mode_position", 6.40e-5, 0.12}}) {
+    RunRecord r;
+    r.name = std::string("position/") + law;
+    r.controller = law;
+    r.metrics = {{"rmse", rmse}, {"overshoot", 0.2}, {"max_abs_error", NAN}, {"effort_u_l2", u}, {"effort_l2", 152.5}};
+    runs.push_back(r);
+  }
+  const Comparison c = Compare(runs);
+  EXPECT_EQ(c.effort_metric, "effort_u_l2");
+  const std::string t = ComparisonTable(c);
+  EXPECT_NE(t.find("RMSE [µm]"), std::string::npos) << t;
+  EXPECT_NE(t.find("||u||2 [mN s^0.5]"), std::string::npos) << t;
+  EXPECT_NE(t.find("overshoot [%]"), std::string::npos) << t;
+  EXPECT_EQ(t.find("max|e|"), std::string::npos) << t;
+}
+
+TEST(CompareTable, StaticMapIsPositionAgainstDutyOneColumnPerPressure) {
+  std::vector<RunRecord> runs;
+  for (const char* variant : {"fig8", "fig9"})
+    for (double other : {200000.0, 400000.0})
+      for (double duty : {0.0, 0.5, 1.0}) {
+        const bool f8 = std::string(variant) == "fig8";
+        RunKey key{std::string("static-map/") + variant,
+                   {{"controller.open_loop_pwm.segments[0].duty", duty},
+                    {f8 ? "conditions.supply_pressure_Pa" : "controller.open_loop_pwm.segments[0].frequency_Hz",
+                     f8 ? other : other / 4000}},
+                   -1};
+        RunRecord r;
+        r.name = key.CaseName();
+        r.controller = "open_loop_pwm";
+        r.metrics = {{"mean_position_pct", 100 * duty * (f8 ? other / 400000 : 1)}, {"mean_current_A", duty}};
+        runs.push_back(r);
+      }
+  const Comparison c = Compare(runs);
+  const std::string t = ComparisonTable(c);
+  EXPECT_NE(t.find("fig8: mean position [% of stroke] against duty, one column per supply_pressure"), std::string::npos) << t;
+  EXPECT_NE(t.find("fig9: mean position"), std::string::npos) << "the second variant is kept: " << t;
+  EXPECT_NE(t.find("200 kPa"), std::string::npos) << t;
+  EXPECT_NE(t.find("100 Hz"), std::string::npos) << t;
+  EXPECT_NE(t.find("50.0"), std::string::npos) << "fig8 at 200 kPa, duty 100 %: " << t;
+  EXPECT_LE(Widest(t), 120u) << t;
+  // --wide: one row per run with the sweep values as columns; CSV and JSON carry them too.
+  const std::string wide = ComparisonTable(c, {{}, true});
+  EXPECT_NE(wide.find("supply_pressure [kPa]"), std::string::npos) << wide;
+  EXPECT_NE(wide.find("mean x [%]"), std::string::npos) << wide;
+  const std::string csv = ComparisonCsv(c);
+  EXPECT_NE(csv.find("\"controller.open_loop_pwm.segments[0].duty\",\"conditions.supply_pressure_Pa\""), std::string::npos) << csv;
+  EXPECT_NE(csv.find("mean_position_pct"), std::string::npos);
+  EXPECT_NE(ComparisonJson(c).find("\"conditions.supply_pressure_Pa\": 200000"), std::string::npos);
+}
+
+TEST(CompareTable, DitherShowsSeed003TableIBesidePlannedAndAchieved) {
+  std::vector<RunRecord> runs;
+  for (auto [avg, f, d] : {std::tuple{0.1, 149.3594, 0.116566}, std::tuple{0.3, 332.997, 0.355880}}) {
+    RunKey key{"dither", {{"controller.dither_pwm.average_current_A", avg}}, -1};
+    RunRecord r;
+    r.name = key.CaseName();
+    r.controller = "dither_pwm";
+    r.metrics = {{"pwm_frequency_Hz", f}, {"pwm_duty", d}, {"ripple_pp_A", 0.0500}, {"ripple_mid_A", avg}};
+    runs.push_back(r);
+  }
+  const std::string t = ComparisonTable(Compare(runs));
+  EXPECT_NE(t.find("f plan [Hz]"), std::string::npos) << t;
+  EXPECT_EQ(t.rfind("dither: 2 cases", 0), 0u) << t;
+  EXPECT_NE(t.find("Table I f [Hz]"), std::string::npos) << t;
+  EXPECT_NE(t.find("149.36"), std::string::npos) << "the paper's 0.1 A row: " << t;
+  EXPECT_NE(t.find("333.99"), std::string::npos) << "the paper's 0.3 A row as printed: " << t;
+  EXPECT_NE(t.find("333.00"), std::string::npos) << "ours, beside the paper's typo: " << t;
+  EXPECT_NE(t.find("Table I I_amp [mA]"), std::string::npos) << t;
+  EXPECT_NE(t.find("I_amp p-p [mA]"), std::string::npos) << t;
+  EXPECT_EQ(t.find("open_loop_pwm"), std::string::npos) << t;
+  EXPECT_LE(Widest(t), 120u) << t;
+}
+
+TEST(CompareTable, SiUnitsFollowTheLaw) {
+  EXPECT_EQ(SiUnit("rmse", "pi_current"), "A");
+  EXPECT_EQ(SiUnit("rmse", "sliding_mode_position"), "m");
+  EXPECT_EQ(SiUnit("iae", "sliding_mode_position"), "m s");
+  EXPECT_EQ(SiUnit("effort_l2", "pi_current"), "V s^0.5");
+  EXPECT_EQ(SiUnit("effort_u_l2", "cascade_pi_position"), "N s^0.5");
+  EXPECT_EQ(SiUnit("overshoot", "pi_current"), "1");
+  EXPECT_EQ(SiUnit("pwm_duty", "dither_pwm"), "1");
+  EXPECT_EQ(SiUnit("mean_position_pct", "open_loop_pwm"), "%");
+  EXPECT_EQ(SiUnit("mean_flow_kg_per_s", "open_loop_pwm"), "kg/s");
+  EXPECT_EQ(SiUnit("driver_loss_W", "pi_current"), "W");
+  EXPECT_EQ(SiUnit("switches", "pi_current"), "1");
+}
+
+TEST(CompareTable, CaseNamesSplitBackIntoTheirKey) {
+  const RunKey key{"static-map/fig8", {{"controller.open_loop_pwm.segments[0].duty", 0.35}, {"conditions.supply_V", 24}}, -1};
+  EXPECT_EQ(SplitCaseName(key.CaseName()), key);
+  EXPECT_EQ(SplitCaseName("say hi, then go").name, "say hi, then go");
 }
 
 }  // namespace

@@ -33,10 +33,15 @@ TEST(BenchctlRemote, RunWaitQueueShowExportCompareBenches) {
   ASSERT_FALSE(addr.empty()) << server.Log();
   const std::string op = "--server " + addr + " --token " + testing::kOperatorToken;
 
-  Result run = Benchctl("run " + Example("compare-current-controllers.json") + " --wait " + op);
+  Result run = Benchctl("run " + Example("compare-current-controllers.json") + " --wait --metrics rmse,driver_loss_W " + op);
   ASSERT_EQ(run.exit_code, 0) << run.out;
-  EXPECT_NE(run.out.find("done"), std::string::npos) << run.out;
-  EXPECT_NE(run.out.find("rank by rmse"), std::string::npos) << "a batch ends with the comparison";
+  EXPECT_NE(run.out.find("compare-current-controllers/pi: done\n"), std::string::npos) << "one line per run: " << run.out;
+  EXPECT_NE(run.out.find("rank by RMSE"), std::string::npos) << "a batch ends with the comparison";
+  EXPECT_NE(run.out.find("driver loss [mW]"), std::string::npos) << "--metrics reaches a server's comparison";
+  EXPECT_EQ(run.out.find("sw rate"), std::string::npos) << run.out;
+  Result wide = Benchctl("compare --batch 1 --wide " + op);
+  ASSERT_EQ(wide.exit_code, 0) << wide.out;
+  EXPECT_NE(wide.out.find("energy"), std::string::npos) << "--wide: every metric the server has: " << wide.out;
 
   Result submitted = Benchctl("run " + Example("standard/e3.json") + " --json " + op);
   ASSERT_EQ(submitted.exit_code, 0) << submitted.out;

@@ -7,6 +7,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <sstream>
 #include <string>
 
 #include "../common/run_command.h"
@@ -20,6 +21,12 @@ std::string Chromium() {
   for (const char* p : {"/usr/bin/chromium", "/usr/bin/chromium-browser"})
     if (::access(p, X_OK) == 0) return p;
   return "";
+}
+
+size_t Count(const std::string& s, const std::string& what) {
+  size_t n = 0;
+  for (size_t at = s.find(what); at != std::string::npos; at = s.find(what, at + 1)) ++n;
+  return n;
 }
 
 class HeadlessReport : public ::testing::Test {
@@ -67,23 +74,69 @@ TEST_F(HeadlessReport, BatchRunRegressionAndDiagnosisPagesRenderWithoutErrors) {
   const std::string suites = std::string(VB_SOURCE_DIR) + "/examples/suites/";
   // A suite run: batch 1 (PI and hysteresis repeats, a 3-point static map) and regression result 1.
   Benchctl("regress " + suites + "ci.json --baseline " + suites + "ci-baseline.json --local");
-  Benchctl("report --batch 1 --html " + dir_ + "/batch.html --max-traces 2");
+  Benchctl("report --batch 1 --html " + dir_ + "/batch.html");
   Benchctl("report --run 1 --html " + dir_ + "/run.html");
   Benchctl("report --regress 1 --html " + dir_ + "/regress.html");
   const std::string fixtures = std::string(VB_SOURCE_DIR) + "/tests/report/";
   Benchctl("report --diagnosis " + fixtures + "diagnosis_fixture.json --html " + dir_ + "/diag.html");
   Benchctl("report --diagnosis " + fixtures + "diagnosis_partial.json --html " + dir_ + "/partial.html");
   for (const char* page : {"run", "regress", "partial"}) ExpectRenders(dir_ + "/" + page + ".html", page);
-  // The batch page: comparison table, Pareto scatter, static map, 2 runs x 3 trace panels.
+  // The batch page: meta, note, static map, comparison table, Pareto scatter, traces: 2 runs drawn x 3 panels,
+  // the other 7 collapsed but there.
   const std::string batch = ExpectRenders(dir_ + "/batch.html", "batch");
-  EXPECT_NE(batch.find("id=\"vb-status\">rendered-ok: 5 sections, 8 plots"), std::string::npos)
+  EXPECT_NE(batch.find("id=\"vb-status\">rendered-ok: 6 sections, 8 plots"), std::string::npos)
       << batch.substr(0, 2000);
+  EXPECT_NE(batch.find("Runs, conditions and specs"), std::string::npos);
   EXPECT_NE(batch.find("Static map"), std::string::npos);
   EXPECT_NE(batch.find("<polyline"), std::string::npos);
+  EXPECT_EQ(Count(batch, "<details"), 10u) << "9 runs, every one reachable, and the specs";
   // The diagnosis page: summary, shares, per-phase table, ranking, one overlay of three curves.
   const std::string diag = ExpectRenders(dir_ + "/diag.html", "diag");
   EXPECT_NE(diag.find("id=\"vb-status\">rendered-ok: 5 sections, 2 plots"), std::string::npos) << diag.substr(0, 2000);
   ExpectScreenshot(dir_ + "/batch.html", dir_ + "/batch.png", 40000);
+}
+
+TEST_F(HeadlessReport, ComparedLawsAreOverlaidAndPagesFitALaptopScreen) {
+  // Seed 001's four current laws, then seed 000's static map (fig8 and fig9): batches 1 and 2.
+  const std::string examples = std::string(VB_SOURCE_DIR) + "/examples/";
+  Benchctl("run --local " + examples + "compare-current-controllers.json");
+  Benchctl("report --batch 1 --html " + dir_ + "/current.html --svg " + dir_ + "/svg --png " + dir_ + "/png");
+  const std::string page = ExpectRenders(dir_ + "/current.html", "current laws");
+  EXPECT_NE(page.find("The compared laws on shared axes"), std::string::npos);
+  EXPECT_NE(page.find("class=\"band\""), std::string::npos) << "the metric window is marked";
+  EXPECT_NE(page.find("Tracking error over the metric window"), std::string::npos);
+  EXPECT_NE(page.find("driver loss [mW]"), std::string::npos) << "axes carry units";
+  EXPECT_NE(page.find("UTC"), std::string::npos) << "timestamps on the page";
+  EXPECT_NE(page.find("supply_V = 24"), std::string::npos) << "conditions on the page";
+  EXPECT_EQ(page.find("rendered-ok: 1"), std::string::npos);
+  for (const char* size : {"1400,900", "1024,768"}) {
+    auto r = RunCommand(Browser(std::string("--window-size=") + size + " --dump-dom file://" + dir_ + "/current.html"));
+    EXPECT_NE(r.out.find("data-vb-overflow-px=\"0\""), std::string::npos) << "sideways overflow at " << size;
+  }
+  // --svg/--png: every drawn plot, overlays included, as files.
+  size_t svgs = 0, pngs = 0;
+  for (const auto& e : fs::directory_iterator(dir_ + "/svg")) svgs += e.path().extension() == ".svg";
+  for (const auto& e : fs::directory_iterator(dir_ + "/png")) pngs += e.path().extension() == ".png" && fs::file_size(e.path()) > 2000;
+  EXPECT_GE(svgs, 3u + 4u * 3u) << "scatter, 2 overlay panels, 4 runs x 3 trace panels";
+  EXPECT_EQ(pngs, svgs);
+  std::string overlay_file;
+  for (const auto& e : fs::directory_iterator(dir_ + "/svg"))
+    if (e.path().filename().string().rfind("02-the-compared-laws-on-shared-axes", 0) == 0) overlay_file = e.path();
+  std::ifstream overlay(overlay_file);
+  std::stringstream ss;
+  ss << overlay.rdbuf();
+  EXPECT_NE(ss.str().find("xmlns=\"http://www.w3.org/2000/svg\""), std::string::npos) << ss.str().substr(0, 300);
+  EXPECT_GE(Count(ss.str(), "<polyline"), 5u) << "four laws and the reference on one axis";
+
+  Benchctl("run --local " + examples + "static-map.json");
+  Benchctl("report --batch 2 --html " + dir_ + "/map.html --max-traces 3");
+  const std::string map = ExpectRenders(dir_ + "/map.html", "static map");
+  EXPECT_NE(map.find("Static map, static-map/fig8"), std::string::npos);
+  EXPECT_NE(map.find("Static map, static-map/fig9"), std::string::npos);
+  EXPECT_NE(map.find("duty [%]"), std::string::npos);
+  EXPECT_NE(map.find("4 bar"), std::string::npos);
+  auto r = RunCommand(Browser("--window-size=1024,768 --dump-dom file://" + dir_ + "/map.html"));
+  EXPECT_NE(r.out.find("data-vb-overflow-px=\"0\""), std::string::npos) << "sideways overflow at 1024 px";
 }
 
 TEST_F(HeadlessReport, ABrokenPageIsCaught) {

@@ -1,6 +1,7 @@
 // report/: section builders (what they keep, what they tolerate) and the page's data embedding.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <sstream>
@@ -89,19 +90,74 @@ TEST(ReportTraces, DecimationBoundsPointsAndKeepsPeaks) {
   EXPECT_EQ(TraceSection({t})["runs"][0]["t"].size(), 3u);
 }
 
-TEST(ReportMaps, StaticMapGroupsBySweepAndIgnoresNonSweeps) {
-  auto key = [](double p, double duty, int repeat) {
-    return RunKey{"m/fig8", {{"p", p}, {"duty", duty}}, repeat};
+TEST(ReportMaps, StaticMapIsPositionAgainstDutyOneCurvePerPressureAndOnePlotPerVariant) {
+  auto key = [](const char* name, const char* field, double v, double duty, int repeat) {
+    return RunKey{name, {{field, v}, {"controller.open_loop_pwm.segments[0].duty", duty}}, repeat};
   };
-  std::vector<MapPoint> pts = {{key(0, 0.2, -1), 10}, {key(0, 0.6, -1), 60}, {key(4, 0.2, -1), 5},
-                               {key(4, 0.6, 1), 50},  {key(4, 0.6, 0), 52}};
+  const char* p = "conditions.supply_pressure_Pa";
+  const char* f = "controller.open_loop_pwm.segments[0].frequency_Hz";
+  std::vector<MapPoint> pts = {{key("m/fig8", p, 0, 0.2, -1), 10},     {key("m/fig8", p, 0, 0.6, -1), 60},
+                               {key("m/fig8", p, 4e5, 0.2, -1), 5},    {key("m/fig8", p, 4e5, 0.6, 1), 50},
+                               {key("m/fig8", p, 4e5, 0.6, 0), 52},    {key("m/fig9", f, 25, 0.2, -1), 20},
+                               {key("m/fig9", f, 25, 0.6, -1), 70},    {key("m/fig9", f, 100, 0.6, -1), 40}};
   const Json s = StaticMapSection(pts, "pct");
-  ASSERT_FALSE(s.is_null());
-  EXPECT_EQ(s["x_label"], "duty");
-  ASSERT_EQ(s["series"].size(), 2u);
-  EXPECT_EQ(s["series"][1]["name"], "m/fig8 sweep:p=4");
-  EXPECT_DOUBLE_EQ(s["series"][1]["y"][1].get<double>(), 51.0);  // repeats averaged
-  EXPECT_TRUE(StaticMapSection({{NamedRun("a"), 1}, {NamedRun("b"), 2}, {NamedRun("c"), 3}}, "pct").is_null());
+  ASSERT_EQ(s.size(), 2u) << "fig8 and fig9, each its own plot";
+  const Json& fig8 = s[0];
+  EXPECT_EQ(fig8["x_label"], "duty [%]");
+  ASSERT_EQ(fig8["series"].size(), 2u);
+  EXPECT_EQ(fig8["series"][0]["name"], "0 bar");
+  EXPECT_EQ(fig8["series"][1]["name"], "4 bar");
+  EXPECT_DOUBLE_EQ(fig8["series"][1]["x"][1].get<double>(), 60.0);  // duty in %
+  EXPECT_DOUBLE_EQ(fig8["series"][1]["y"][1].get<double>(), 51.0);  // repeats averaged
+  EXPECT_NE(s[1]["title"].get<std::string>().find("m/fig9"), std::string::npos);
+  EXPECT_EQ(s[1]["series"][1]["name"], "100 Hz");
+  EXPECT_TRUE(StaticMapSection({{NamedRun("a"), 1}, {NamedRun("b"), 2}, {NamedRun("c"), 3}}, "pct").empty());
+}
+
+TEST(ReportBatch, OverlaysTheComparedLawsWithTheErrorOverTheMetricWindow) {
+  std::vector<RunInfo> runs;
+  for (const char* law : {"pi_current", "fuzzy_current"}) {
+    RunInfo r;
+    r.id = static_cast<std::int64_t>(runs.size()) + 1;
+    r.key = NamedRun(std::string("cmp/") + law);
+    r.controller = law;
+    r.status = "done";
+    r.metrics = {{"rmse", 1e-3 * r.id}, {"driver_loss_W", 0.25}};
+    r.spec_json = R"({"duration_s": 0.1, "metric_window": {"start_s": 0.02, "end_s": 0.1}, "conditions": {"supply_V": 24}})";
+    r.started_unix_s = 1.7e9;
+    r.finished_unix_s = 1.7e9 + 1;
+    r.trace.sample_period_s = 1e-4;
+    std::vector<double> i(1001), ref(1001, 0.5);
+    for (std::size_t k = 0; k < i.size(); ++k) i[k] = 0.5 + 0.002 * r.id * std::sin(k * 0.3);
+    r.trace.channels = {{"i_A", i}, {"ref", ref}};
+    runs.push_back(r);
+  }
+  const Json o = OverlaySection(runs);
+  ASSERT_FALSE(o.is_null());
+  EXPECT_EQ(o["series"].size(), 2u);
+  EXPECT_EQ(o["y_label"], "current [mA]");
+  EXPECT_EQ(o["e_label"], "error current - reference [mA]");
+  EXPECT_DOUBLE_EQ(o["window"][0].get<double>(), 0.02);
+  // The error is over the window only: 0.02-0.1 s, at most 2 mA (run 1) and 4 mA (run 2).
+  EXPECT_GE(o["series"][0]["et"][0].get<double>(), 0.02 - 1e-12);
+  double emax = 0;
+  for (const auto& e : o["series"][1]["e"]) emax = std::max(emax, std::abs(e.get<double>()));
+  EXPECT_NEAR(emax, 4.0, 0.05);
+  // The batch page: meta (conditions, times), comparison, scatter, overlay, every run's traces.
+  const Json b = BatchSections("local store x.db", 7, runs);
+  std::vector<std::string> kinds;
+  for (const auto& s : b) kinds.push_back(s["kind"]);
+  EXPECT_EQ(kinds, (std::vector<std::string>{"meta", "note", "table", "scatter", "overlay", "traces"}));
+  EXPECT_NE(b[0].dump().find("supply_V = 24"), std::string::npos) << b[0].dump();
+  EXPECT_NE(b[0].dump().find("metric window 0.02-0.1 s"), std::string::npos) << b[0].dump();
+  EXPECT_NE(b[0].dump().find("UTC"), std::string::npos);
+  EXPECT_EQ(b[2]["columns"][1], "case");
+  EXPECT_NE(b[2].dump().find("RMSE [mA]"), std::string::npos) << b[2].dump();
+  EXPECT_EQ(b[3]["x_label"], "driver loss [mW]");
+  EXPECT_EQ(b[5]["runs"].size(), 2u);
+  // Open-loop runs have no reference: no overlay.
+  for (auto& r : runs) r.controller = "open_loop_pwm";
+  EXPECT_TRUE(OverlaySection(runs).is_null());
 }
 
 TEST(ReportPage, DataCannotCloseTheScriptElement) {
