@@ -158,6 +158,9 @@ class SqliteStore final : public Store {
 
   sql::Connection conn_;
   int version_;
+  trace::Codec1 codec_;             // zstd contexts and scratch, reused chunk after chunk
+  std::string encoded_;             // the last chunk's compressed BLOB (reused buffer)
+  std::vector<std::uint8_t> blob_;  // a compressed BLOB read back (reused buffer)
   std::unique_ptr<Checkpointer> checkpointer_;  // destroyed (thread joined) before conn_ closes
 };
 
@@ -620,13 +623,17 @@ StatusOr<std::int64_t> SqliteStore::CountQueued(const std::string& submitter) {
 Status SqliteStore::AppendTraceChunk(std::int64_t run_id, const TraceChunk& chunk) {
   VB_RETURN_IF_ERROR(trace::ValidateChunk(chunk));
   const std::string where = Cat("trace chunk ", chunk.index, ": ");
-  const std::uint64_t bytes = 8 * static_cast<std::uint64_t>(chunk.data.size());
+  const std::string channels = trace::JoinChannels(chunk.channels);
+  // Compressed before the write transaction starts: other writers never wait for zstd.
+  VB_RETURN_IF_ERROR(codec_.Encode(chunk.data.data(), chunk.channels.size(), static_cast<std::size_t>(chunk.samples),
+                                   &encoded_)
+                         .WithContext(Cat("trace chunk ", chunk.index)));
+  const std::uint64_t bytes = encoded_.size();
   const auto max_bytes = static_cast<std::uint64_t>(sqlite3_limit(conn_.raw(), SQLITE_LIMIT_LENGTH, -1));
   if (bytes > max_bytes) {
     return Status::InvalidArgument(Cat(where, bytes, " bytes of data exceed the largest BLOB SQLite stores here (",
                                        max_bytes, " bytes): use smaller chunks"));
   }
-  const std::string channels = trace::JoinChannels(chunk.channels);
 
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kWrite));
@@ -651,20 +658,15 @@ Status SqliteStore::AppendTraceChunk(std::int64_t run_id, const TraceChunk& chun
   }
 
   VB_DB_ASSIGN_OR_RETURN(Stmt ins, conn_.Prepare("INSERT INTO trace_chunks (run_id, idx, t0, period, samples, "
-                                                 "channels, data) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)"));
+                                                 "channels, data, codec) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8)"));
   ins.Bind(1, run_id);
   ins.Bind(2, static_cast<std::int64_t>(chunk.index));
   ins.Bind(3, chunk.t0_s);
   ins.Bind(4, chunk.sample_period_s);
   ins.Bind(5, static_cast<std::int64_t>(chunk.samples));
   ins.Bind(6, channels);
-  std::string swapped;  // big-endian hosts only: the little-endian copy
-  if constexpr (trace::kNativeIsLittleEndian) {
-    ins.BindBlobNoCopy(7, chunk.data.data(), bytes);  // the array already is the encoding: no copy here
-  } else {
-    swapped = trace::EncodeValues(chunk.data);
-    ins.BindBlobNoCopy(7, swapped.data(), swapped.size());
-  }
+  ins.BindBlobNoCopy(7, encoded_.data(), encoded_.size());
+  ins.Bind(8, static_cast<std::int64_t>(trace::Codec::kShuffledZstd));
   VB_RETURN_IF_ERROR(ins.Run());
   return txn.Commit();
 }
@@ -692,8 +694,8 @@ Status SqliteStore::ForEachTraceChunk(std::int64_t run_id,
   }
   // length(data) comes from the record header without reading the BLOB; the BLOB itself is then copied straight
   // into the chunk's buffer by incremental BLOB I/O (one copy instead of two).
-  VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT rowid, idx, t0, period, samples, channels, length(data) "
-                                                "FROM trace_chunks WHERE run_id = ?1 ORDER BY idx"));
+  VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT rowid, idx, t0, period, samples, channels, length(data), "
+                                                "codec FROM trace_chunks WHERE run_id = ?1 ORDER BY idx"));
   st.Bind(1, run_id);
   sql::BlobReader blob(conn_.raw(), "trace_chunks", "data");
   TraceChunk c;  // reused: its buffer keeps its capacity from chunk to chunk
@@ -711,12 +713,24 @@ Status SqliteStore::ForEachTraceChunk(std::int64_t run_id,
       return Status::DataLoss(Cat(what, ": expected chunk ", expected, " (a chunk is missing)"));
     }
     const std::size_t values = c.channels.size() * static_cast<std::size_t>(c.samples);
-    VB_RETURN_IF_ERROR(trace::CheckSize(static_cast<std::size_t>(st.Int(6)), values, what));
-    VB_DB_ASSIGN_OR_RETURN(const std::size_t bytes, blob.Open(st.Int(0)));
-    VB_RETURN_IF_ERROR(trace::CheckSize(bytes, values, what));
-    c.data.resize(values);
-    VB_RETURN_IF_ERROR(blob.Read(c.data.data(), bytes));
-    trace::FromLittleEndian(&c.data);
+    const std::int64_t codec = st.Int(7);
+    if (codec == static_cast<std::int64_t>(trace::Codec::kRawFloat64)) {  // written before schema v4
+      VB_RETURN_IF_ERROR(trace::CheckSize(static_cast<std::size_t>(st.Int(6)), values, what));
+      VB_DB_ASSIGN_OR_RETURN(const std::size_t bytes, blob.Open(st.Int(0)));
+      VB_RETURN_IF_ERROR(trace::CheckSize(bytes, values, what));
+      c.data.resize(values);
+      VB_RETURN_IF_ERROR(blob.Read(c.data.data(), bytes));
+      trace::FromLittleEndian(&c.data);
+    } else if (codec == static_cast<std::int64_t>(trace::Codec::kShuffledZstd)) {
+      VB_DB_ASSIGN_OR_RETURN(const std::size_t bytes, blob.Open(st.Int(0)));
+      blob_.resize(bytes);
+      VB_RETURN_IF_ERROR(blob.Read(blob_.data(), bytes));
+      c.data.resize(values);
+      VB_RETURN_IF_ERROR(codec_.Decode(blob_.data(), bytes, c.channels.size(), static_cast<std::size_t>(c.samples),
+                                       c.data.data(), what));
+    } else {
+      return Status::DataLoss(Cat(what, ": unknown codec ", codec));
+    }
     VB_RETURN_IF_ERROR(fn(c, total));
     ++expected;
   }
