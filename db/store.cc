@@ -6,6 +6,11 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <ctime>
+#include <limits>
+#include <map>
+#include <set>
+#include <string_view>
 #include <unordered_set>
 #include <utility>
 
@@ -147,6 +152,7 @@ class SqliteStore final : public Store {
   StatusOr<std::int64_t> SaveRegression(const RegressionRecord& record) override;
   StatusOr<RegressionRecord> GetRegression(std::int64_t id) override;
   StatusOr<std::vector<RegressionRecord>> ListRegressions(bool nights_only, std::int32_t limit) override;
+  StatusOr<PruneResult> Prune(const PruneRequest& request) override;
 
  private:
   // Helpers run inside the caller's transaction.
@@ -737,7 +743,164 @@ Status SqliteStore::ForEachTraceChunk(std::int64_t run_id,
   return txn.Commit();
 }
 
+// ---- Retention ----
+
+std::string UtcDate(double unix_s) {
+  const std::time_t t = static_cast<std::time_t>(unix_s);
+  std::tm tm{};
+  gmtime_r(&t, &tm);
+  char buf[32];
+  std::strftime(buf, sizeof buf, "%Y-%m-%d %H:%M UTC", &tm);
+  return buf;
+}
+
+StatusOr<PruneResult> SqliteStore::Prune(const PruneRequest& request) {
+  if (!std::isfinite(request.finished_before_unix_s) || request.finished_before_unix_s <= 0) {
+    return Status::InvalidArgument(Cat("finished_before_unix_s: must be a finite time > 0, got ",
+                                       FormatExact(request.finished_before_unix_s)));
+  }
+  if (request.keep_last < 0) return Status::InvalidArgument(Cat("keep_last: must be >= 0, got ", request.keep_last));
+  for (std::size_t k = 0; k < request.protected_batches.size(); ++k) {
+    if (request.protected_batches[k] <= 0) {
+      return Status::InvalidArgument(Cat("protected_batches[", k, "]: must be a batch id > 0, got ",
+                                         request.protected_batches[k]));
+    }
+  }
+  Transaction txn(&conn_);
+  VB_RETURN_IF_ERROR(txn.Begin(request.dry_run ? TxnKind::kRead : TxnKind::kWrite));
+
+  // What references batches: results of regression runs and nights, baselines taken from local batches, and
+  // whatever the caller names.
+  std::map<std::int64_t, std::string> protected_batches;
+  for (std::int64_t b : request.protected_batches)
+    protected_batches.emplace(b, request.protected_why.empty() ? "protected by the caller" : request.protected_why);
+  {
+    VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT id, batch_id, night, suite FROM regressions "
+                                                  "WHERE batch_id != 0 ORDER BY id"));
+    while (true) {
+      VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+      if (!row) break;
+      const std::string night = st.Text(2);
+      protected_batches.emplace(st.Int(1), night.empty()
+                                               ? Cat("regression result ", st.Int(0), " (suite ", st.Text(3), ")")
+                                               : Cat("regression night ", night, " (result ", st.Int(0), ")"));
+    }
+  }
+  {
+    VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT name, version, source FROM baselines ORDER BY id"));
+    while (true) {
+      VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+      if (!row) break;
+      const std::int64_t batch = LocalBatchOfBaselineSource(st.Text(2));
+      if (batch != 0) protected_batches.emplace(batch, Cat("baseline '", st.Text(0), "' v", st.Int(1)));
+    }
+  }
+
+  PruneResult out;
+  std::vector<std::int64_t> doomed;
+  std::set<std::int64_t> touched_batches;
+  {
+    // Newest first, so that the first keep_last finished runs are the newest.
+    VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT id, batch_id, name, status, finished FROM runs "
+                                                  "ORDER BY id DESC"));
+    std::int32_t finished_seen = 0;
+    while (true) {
+      VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+      if (!row) break;
+      PruneDecision d;
+      d.run_id = st.Int(0);
+      d.batch_id = st.Int(1);
+      d.name = st.Text(2);
+      StatusOr<RunStatus> status = ParseRunStatus(st.Text(3));
+      if (!status.ok()) return Status::DataLoss(Cat("run ", d.run_id, ": ", status.status().message()));
+      d.status = *status;
+      d.finished_unix_s = st.Double(4);
+      const bool final_status = d.status == RunStatus::kDone || d.status == RunStatus::kFailed ||
+                                d.status == RunStatus::kCancelled;
+      if (!final_status) {
+        d.why = Cat(RunStatusName(d.status), ": only finished runs are pruned");
+        out.kept.push_back(std::move(d));
+        continue;
+      }
+      ++finished_seen;
+      if (d.finished_unix_s >= request.finished_before_unix_s) {
+        ++out.newer_kept;
+        continue;
+      }
+      if (auto p = protected_batches.find(d.batch_id); p != protected_batches.end()) {
+        d.why = Cat(p->second, " references batch ", d.batch_id);
+        out.kept.push_back(std::move(d));
+        continue;
+      }
+      if (finished_seen <= request.keep_last) {
+        d.why = Cat("one of the newest ", request.keep_last, " finished runs (--keep-last)");
+        out.kept.push_back(std::move(d));
+        continue;
+      }
+      d.why = Cat(RunStatusName(d.status), ", finished ", UtcDate(d.finished_unix_s), ", before the cutoff ",
+                  UtcDate(request.finished_before_unix_s));
+      doomed.push_back(d.run_id);
+      touched_batches.insert(d.batch_id);
+      out.deleted.push_back(std::move(d));
+    }
+  }
+  {
+    VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT COALESCE(SUM(length(data)), 0) FROM trace_chunks "
+                                                  "WHERE run_id = ?1"));
+    for (std::int64_t id : doomed) {
+      st.Reset();
+      st.Bind(1, id);
+      VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+      if (row) out.trace_bytes += st.Int(0);
+    }
+  }
+  if (!request.dry_run) {
+    // Children go with their run (ON DELETE CASCADE): tags, history, metrics, sweep point, trace chunks.
+    VB_DB_ASSIGN_OR_RETURN(Stmt del, conn_.Prepare("DELETE FROM runs WHERE id = ?1"));
+    for (std::int64_t id : doomed) {
+      del.Reset();
+      del.Bind(1, id);
+      VB_RETURN_IF_ERROR(del.Run());
+    }
+    VB_DB_ASSIGN_OR_RETURN(Stmt empty, conn_.Prepare("DELETE FROM batches WHERE id = ?1 AND NOT EXISTS "
+                                                     "(SELECT 1 FROM runs WHERE batch_id = ?1)"));
+    for (std::int64_t b : touched_batches) {
+      empty.Reset();
+      empty.Bind(1, b);
+      VB_RETURN_IF_ERROR(empty.Run());
+      out.batches_deleted += sqlite3_changes(conn_.raw());
+    }
+  } else {
+    VB_DB_ASSIGN_OR_RETURN(Stmt left, conn_.Prepare("SELECT count(*) FROM runs WHERE batch_id = ?1"));
+    for (std::int64_t b : touched_batches) {
+      left.Reset();
+      left.Bind(1, b);
+      VB_DB_ASSIGN_OR_RETURN(const bool row, left.Step());
+      std::int64_t remaining = row ? left.Int(0) : 0;
+      for (const PruneDecision& d : out.deleted) remaining -= d.batch_id == b;
+      out.batches_deleted += remaining == 0;
+    }
+  }
+  VB_RETURN_IF_ERROR(txn.Commit());
+  return out;
+}
+
 }  // namespace
+
+std::int64_t LocalBatchOfBaselineSource(const std::string& source) {
+  // "local batch 12" (baseline set --batch 12 --local) or "suite ci (local batch 12, seed 1)" (--suite).
+  constexpr std::string_view kMarker = "local batch ";
+  const std::size_t at = source.find(kMarker);
+  if (at == std::string::npos || (at > 0 && source[at - 1] != ' ' && source[at - 1] != '(')) return 0;
+  std::int64_t batch = 0;
+  std::size_t k = at + kMarker.size();
+  if (k >= source.size() || source[k] < '0' || source[k] > '9') return 0;
+  for (; k < source.size() && source[k] >= '0' && source[k] <= '9'; ++k) {
+    if (batch > (std::numeric_limits<std::int64_t>::max() - 9) / 10) return 0;
+    batch = batch * 10 + (source[k] - '0');
+  }
+  return batch;
+}
 
 StatusOr<std::unique_ptr<Store>> Store::Open(const std::string& path) {
   if (path.empty()) {
