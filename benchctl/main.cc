@@ -18,6 +18,7 @@
 #include "benchctl/hw_commands.h"
 #include "benchctl/local_commands.h"
 #include "benchctl/local_run.h"
+#include "benchctl/prune_command.h"
 #include "benchctl/regress_commands.h"
 #include "benchctl/report_commands.h"
 #include "benchctl/remote.h"
@@ -123,6 +124,7 @@ int main(int argc, char** argv) {
   vb::benchctl::ReportCli report_cli(&app, {&json, &server, &token, &tls_ca_file, &store_path});
   // diagnose, identify, convert, import (benchctl/gap_commands.cc).
   vb::benchctl::GapCli gap_cli(&app, {&json, &server, &token, &tls_ca_file, &store_path});
+  vb::benchctl::PruneCli prune_cli(&app, {&json, &server, &token, &tls_ca_file, &store_path});  // prune_command.cc
 
   try {
     app.parse(argc, argv);
@@ -151,6 +153,7 @@ int main(int argc, char** argv) {
   if (regress_cli.parsed()) return regress_cli.Run(make_client);
   if (report_cli.parsed()) return report_cli.Run(make_client);
   if (gap_cli.parsed()) return gap_cli.Run(make_client);
+  if (prune_cli.parsed()) return prune_cli.Run();
   if (run->parsed()) {
     if (local || server.empty()) return vb::benchctl::CmdRun(spec_path, local, store_path, trace_csv, json, csv, realtime);
     if (!trace_csv.empty() || realtime)
