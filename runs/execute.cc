@@ -75,7 +75,7 @@ Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& se
   // 3. Run it, visible to watchers.
   experiment::RunMonitor monitor;
   const int decimation = std::max(1, static_cast<int>(std::lround(e->run.sample_rate_Hz / 1000.0)));
-  LiveTap tap(decimation);
+  LiveTap tap(decimation, &e->reference);
   if (ctx.registry != nullptr) ctx.registry->Add(run.id, &monitor, &tap, e->duration_s);
   if (ctx.current_monitor != nullptr) ctx.current_monitor->store(&monitor);
   auto cancel_requested = store->CancelRequested(run.id);

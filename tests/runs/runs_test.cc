@@ -4,7 +4,9 @@
 #include <cmath>
 
 #include "db/store.h"
+#include "hw/emulated_bench.h"
 #include "runs/admit.h"
+#include "runs/monitor.h"
 #include "runs/worker.h"
 
 namespace vb::runs {
@@ -173,6 +175,52 @@ TEST(Execute, AStoredSpecThatNoLongerParsesFailsTheRunWithTheReason) {
   ASSERT_TRUE(got.ok());
   EXPECT_EQ(got->status, db::RunStatus::kFailed);
   EXPECT_NE(got->reason.find("stored spec does not parse"), std::string::npos) << got->reason;
+}
+
+// The live stream carries the reference (issue 14: LiveSample.ref was always 0): a PI current law on the
+// seed-001 profile, 0.9 A for 6 ms then 0.5 A.
+TEST(LiveTap, SamplesCarryTheReferenceOfTheControlledVariable) {
+  auto spec = experiment::LoadSpecFile(Example("compare-current-controllers.json"));
+  ASSERT_TRUE(spec.ok()) << spec.status().ToString();
+  spec->clear_variants();
+  spec->set_duration_s(0.02);
+  spec->clear_metric_window();
+  auto e = experiment::BuildExperiment(*spec);
+  ASSERT_TRUE(e.ok()) << e.status().ToString();
+  hw::EmulatedBench bench(experiment::EmulatedBenchFor(*e));
+  LiveTap tap(50, &e->reference);
+  experiment::Trace trace;
+  experiment::RunMonitor monitor;
+  ASSERT_TRUE(experiment::Runner::Run(*e, bench, &trace, &monitor, &tap).ok());
+  std::vector<LiveSample> got;
+  tap.Drain(&got);
+  ASSERT_GT(got.size(), 10u);
+  for (const LiveSample& s : got) EXPECT_EQ(s.ref, s.t_s < 0.006 ? 0.9 : 0.5) << "t = " << s.t_s;
+  // Without a profile (an open-loop run), NaN: "no reference", not a reference of 0.
+  LiveTap open(50, nullptr);
+  hw::BenchSample b{};
+  b.t_s = 0.1;
+  for (int k = 0; k < 50; ++k) open.OnSample(b);
+  got.clear();
+  open.Drain(&got);
+  ASSERT_EQ(got.size(), 1u);
+  EXPECT_TRUE(std::isnan(got[0].ref));
+}
+
+// WatchRun's sample_rate_Hz (issue 14: 0 and 10 Hz both streamed 1 kHz).
+TEST(SampleThinner, KeepsAtMostTheRequestedRateAndNoneForZero) {
+  auto kept = [](double rate_Hz) {
+    SampleThinner thin(rate_Hz);
+    int n = 0;
+    for (int k = 0; k < 2000; ++k) n += thin.Keep(k * 1e-3);  // 2 s of a 1 kHz stream
+    return n;
+  };
+  EXPECT_EQ(kept(0.0), 0);
+  EXPECT_EQ(kept(-1.0), 0);
+  EXPECT_EQ(kept(10.0), 20);
+  EXPECT_EQ(kept(1000.0), 2000);
+  EXPECT_EQ(kept(1e6), 2000);  // never more than the stream has
+  EXPECT_EQ(kept(3.0), 6);
 }
 
 }  // namespace
