@@ -92,7 +92,13 @@ Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& se
     return out;
   }
 
-  // 4. Record.
+  // 4. Record. A run that stopped early keeps how far it got (issue 14: cancelled runs read 0 %); a done run's
+  // progress is set to 1 by Finish.
+  if (out.summary.termination != experiment::RunSummary::Termination::kDone && e->duration_s > 0) {
+    const double reached = std::clamp(out.summary.duration_s / e->duration_s, 0.0, 1.0);
+    if (auto st = store->SetProgress(run.id, reached); !st.ok())
+      spdlog::warn("run {}: cannot record its progress: {}", static_cast<long long>(run.id), st.message().c_str());
+  }
   const Status stored = db::AppendRecordedTrace(store, run.id, out.trace);
   db::RunStatus status = StatusOf(out.summary.termination);
   std::string reason = out.summary.message;

@@ -1,7 +1,9 @@
 // runs/: Admit and Execute, the one pipeline behind the server, the nights and benchctl's local mode.
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <cmath>
+#include <thread>
 
 #include "db/store.h"
 #include "hw/emulated_bench.h"
@@ -221,6 +223,41 @@ TEST(SampleThinner, KeepsAtMostTheRequestedRateAndNoneForZero) {
   EXPECT_EQ(kept(1000.0), 2000);
   EXPECT_EQ(kept(1e6), 2000);  // never more than the stream has
   EXPECT_EQ(kept(3.0), 6);
+}
+
+// A run cancelled half-way keeps the progress it reached (issue 14: every cancelled run read 0 %).
+TEST(Execute, ACancelledRunKeepsTheProgressItReached) {
+  auto store = db::Store::Open(":memory:");
+  ASSERT_TRUE(store.ok());
+  Policy local;
+  local.benches = {LocalEmulatorSetup()};
+  auto spec = E3();
+  spec.set_duration_s(1.0);
+  spec.set_realtime(true);  // paced: 1 s of wall time, so the cancel lands mid-run
+  auto a = Admit({"me", "b", {spec}, {}, ""}, local);
+  ASSERT_TRUE(a.ok()) << a.status().ToString();
+  auto q = Enqueue(store->get(), std::move(*a), local);
+  ASSERT_TRUE(q.ok()) << q.status().ToString();
+  const std::int64_t id = q->run_ids[0];
+  Registry registry;
+  Worker worker(LocalEmulatorSetup(), &registry);
+  std::thread canceller([&] {
+    double progress = 0.0;
+    const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(5);
+    while ((!registry.Progress(id, &progress) || progress < 0.2) && std::chrono::steady_clock::now() < until)
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    registry.Cancel(id);
+  });
+  auto o = worker.ClaimAndExecute(store->get());
+  canceller.join();
+  ASSERT_TRUE(o.ok() && o->has_value());
+  EXPECT_EQ((*o)->status, db::RunStatus::kCancelled);
+  auto r = (*store)->GetRun(id);
+  ASSERT_TRUE(r.ok());
+  EXPECT_EQ(r->status, db::RunStatus::kCancelled);
+  EXPECT_GE(r->progress, 0.2);
+  EXPECT_LT(r->progress, 0.9);
+  EXPECT_NEAR(r->progress, (*o)->summary.duration_s / 1.0, 1e-9);
 }
 
 }  // namespace
