@@ -161,6 +161,8 @@ class SqliteStore final : public Store {
   StatusOr<RunRecord> ReadRun(const Stmt& row);  // a row of kRunColumns, with its tags
   StatusOr<RunRecord> LoadRun(std::int64_t run_id);
   StatusOr<std::int64_t> InterruptionsOfRun(std::int64_t run_id);  // 'interrupted' entries in its history
+  // The chunks of a run in order, in one read transaction; fn may take the chunk's contents (move from it).
+  Status ReadChunks(std::int64_t run_id, const std::function<Status(TraceChunk&, std::int64_t)>& fn);
 
   sql::Connection conn_;
   int version_;
@@ -679,8 +681,10 @@ Status SqliteStore::AppendTraceChunk(std::int64_t run_id, const TraceChunk& chun
 
 StatusOr<std::vector<TraceChunk>> SqliteStore::ReadTrace(std::int64_t run_id) {
   std::vector<TraceChunk> out;
-  VB_RETURN_IF_ERROR(ForEachTraceChunk(run_id, [&](const TraceChunk& c, std::int64_t) {
-    out.push_back(c);
+  // Each chunk is decoded into its own vector and moved into the result: no copy of the whole trace.
+  VB_RETURN_IF_ERROR(ReadChunks(run_id, [&](TraceChunk& c, std::int64_t) {
+    out.push_back(std::move(c));
+    c = TraceChunk();
     return Status::Ok();
   }));
   return out;
@@ -688,6 +692,10 @@ StatusOr<std::vector<TraceChunk>> SqliteStore::ReadTrace(std::int64_t run_id) {
 
 Status SqliteStore::ForEachTraceChunk(std::int64_t run_id,
                                       const std::function<Status(const TraceChunk&, std::int64_t)>& fn) {
+  return ReadChunks(run_id, [&](TraceChunk& c, std::int64_t total) { return fn(c, total); });
+}
+
+Status SqliteStore::ReadChunks(std::int64_t run_id, const std::function<Status(TraceChunk&, std::int64_t)>& fn) {
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
   VB_RETURN_IF_ERROR(StatusOf(run_id).status());
@@ -704,7 +712,7 @@ Status SqliteStore::ForEachTraceChunk(std::int64_t run_id,
                                                 "codec FROM trace_chunks WHERE run_id = ?1 ORDER BY idx"));
   st.Bind(1, run_id);
   sql::BlobReader blob(conn_.raw(), "trace_chunks", "data");
-  TraceChunk c;  // reused: its buffer keeps its capacity from chunk to chunk
+  TraceChunk c;  // reused unless fn takes it: its buffer keeps its capacity from chunk to chunk
   std::int32_t expected = 0;
   while (true) {
     VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
