@@ -4,9 +4,14 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <condition_variable>
+#include <mutex>
 #include <cmath>
 #include <filesystem>
 #include <thread>
+
+#include <grpcpp/generic/generic_stub.h>
+#include <grpcpp/grpcpp.h>
 
 #include "client/client.h"
 #include "experiment/spec.h"
@@ -94,6 +99,54 @@ TEST(ServiceDefects, UnknownStatusFilterAndTooManyCompareIdsAreRefusedNamingTheF
   EXPECT_EQ(compared.status().code(), StatusCode::kInvalidArgument);
   EXPECT_NE(compared.status().message().find("run_ids: at most 1000"), std::string::npos)
       << compared.status().message();
+}
+
+// grpc.health.v1.Health/Check by hand (no generated health stubs here): HealthCheckRequest{service = name} is
+// field 1 as a length-delimited string; the response's status SERVING is field 1 = 1, bytes 08 01.
+StatusOr<std::string> HealthCheck(const std::string& address, const std::string& service) {
+  auto channel = grpc::CreateChannel(address, grpc::InsecureChannelCredentials());
+  grpc::GenericStub stub(channel);
+  std::string request;
+  if (!service.empty()) {
+    request.push_back('\x0a');
+    request.push_back(static_cast<char>(service.size()));
+    request += service;
+  }
+  grpc::Slice slice(request);
+  grpc::ByteBuffer in(&slice, 1), out;
+  grpc::ClientContext ctx;
+  ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(5));
+  std::mutex mu;
+  std::condition_variable cv;
+  bool done = false;
+  grpc::Status status;
+  stub.UnaryCall(&ctx, "/grpc.health.v1.Health/Check", grpc::StubOptions(), &in, &out, [&](grpc::Status s) {
+    std::lock_guard<std::mutex> lock(mu);
+    status = s;
+    done = true;
+    cv.notify_one();
+  });
+  std::unique_lock<std::mutex> lock(mu);
+  cv.wait(lock, [&] { return done; });
+  if (!status.ok()) return Status::NotFound(std::to_string(status.error_code()) + " " + status.error_message());
+  std::vector<grpc::Slice> slices;
+  (void)out.Dump(&slices);
+  std::string bytes;
+  for (const auto& s : slices) bytes.append(reinterpret_cast<const char*>(s.begin()), s.size());
+  return bytes;
+}
+
+TEST(ServiceDefects, HealthAnswersServingForTheServiceByName) {
+  ServerProcess server(TempDir("health"));
+  const std::string addr = server.Start();
+  ASSERT_FALSE(addr.empty()) << server.Log();
+  auto overall = HealthCheck(addr, "");
+  ASSERT_TRUE(overall.ok()) << overall.status().message();
+  EXPECT_EQ(*overall, std::string("\x08\x01"));
+  auto by_name = HealthCheck(addr, "valvebench.v1.BenchService");
+  ASSERT_TRUE(by_name.ok()) << "health by service name: " << by_name.status().message();
+  EXPECT_EQ(*by_name, std::string("\x08\x01"));
+  EXPECT_FALSE(HealthCheck(addr, "no.such.Service").ok());
 }
 
 }  // namespace
