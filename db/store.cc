@@ -141,6 +141,7 @@ class SqliteStore final : public Store {
   StatusOr<std::vector<StatusChange>> History(std::int64_t run_id) override;
   StatusOr<std::vector<Metric>> GetMetrics(std::int64_t run_id) override;
   StatusOr<std::int64_t> CountQueued(const std::string& submitter) override;
+  StatusOr<std::int64_t> StoredTraceBytes(const std::string& submitter) override;
   Status AppendTraceChunk(std::int64_t run_id, const TraceChunk& chunk) override;
   StatusOr<std::vector<TraceChunk>> ReadTrace(std::int64_t run_id) override;
   Status ForEachTraceChunk(std::int64_t run_id,
@@ -621,6 +622,21 @@ StatusOr<std::int64_t> SqliteStore::CountQueued(const std::string& submitter) {
   if (!submitter.empty()) st.Bind(1, submitter);
   VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
   if (!row) return Status::Internal("count(*) returned no row");
+  const std::int64_t n = st.Int(0);
+  VB_RETURN_IF_ERROR(txn.Commit());
+  return n;
+}
+
+StatusOr<std::int64_t> SqliteStore::StoredTraceBytes(const std::string& submitter) {
+  Transaction txn(&conn_);
+  VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
+  // runs_submitter finds the user's runs, the trace_chunks primary key their chunks; length() reads the
+  // record header, not the BLOB.
+  VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT COALESCE(SUM(length(c.data)), 0) FROM runs r "
+                                                "JOIN trace_chunks c ON c.run_id = r.id WHERE r.submitter = ?1"));
+  st.Bind(1, submitter);
+  VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+  if (!row) return Status::Internal("sum() returned no row");
   const std::int64_t n = st.Int(0);
   VB_RETURN_IF_ERROR(txn.Commit());
   return n;

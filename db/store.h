@@ -177,6 +177,8 @@ class Store {
   virtual StatusOr<std::vector<StatusChange>> History(std::int64_t run_id) = 0;
   virtual StatusOr<std::vector<Metric>> GetMetrics(std::int64_t run_id) = 0;
   virtual StatusOr<std::int64_t> CountQueued(const std::string& submitter) = 0;
+  // Bytes the stored trace chunks of `submitter`'s runs take (as stored: compressed since schema v4).
+  virtual StatusOr<std::int64_t> StoredTraceBytes(const std::string& submitter) = 0;
 
   // Traces: chunks appended in index order while the run executes; read back in order.
   virtual Status AppendTraceChunk(std::int64_t run_id, const TraceChunk& chunk) = 0;

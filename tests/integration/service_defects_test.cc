@@ -14,6 +14,8 @@
 #include <grpcpp/grpcpp.h>
 
 #include "client/client.h"
+#include "server/auth.h"
+#include "server/config.h"
 #include "experiment/spec.h"
 #include "server_process.h"
 
@@ -147,6 +149,28 @@ TEST(ServiceDefects, HealthAnswersServingForTheServiceByName) {
   ASSERT_TRUE(by_name.ok()) << "health by service name: " << by_name.status().message();
   EXPECT_EQ(*by_name, std::string("\x08\x01"));
   EXPECT_FALSE(HealthCheck(addr, "no.such.Service").ok());
+}
+
+TEST(ServerConfig, PerUserDiskBudgetIsMappedAndValidated) {
+  valvebench::v1::ServerConfig c;
+  auto* b = c.add_benches();
+  b->set_name("emu");
+  b->mutable_model()->set_preset("taghizadeh2009");
+  auto* t = c.add_tokens();
+  t->set_user("v");
+  t->set_role("viewer");
+  t->set_token_sha256(server::Sha256Hex("x"));
+  auto none = server::SettingsFromConfig(c, "");
+  ASSERT_TRUE(none.ok()) << none.status().message();
+  EXPECT_TRUE(std::isinf(none->AdmitPolicy().limits.max_disk_bytes_per_user));  // 0 / absent: no limit
+  c.mutable_limits()->set_max_disk_mb_per_user(250);
+  auto set = server::SettingsFromConfig(c, "");
+  ASSERT_TRUE(set.ok()) << set.status().message();
+  EXPECT_EQ(set->AdmitPolicy().limits.max_disk_bytes_per_user, 250e6);
+  c.mutable_limits()->set_max_disk_mb_per_user(-1);
+  auto bad = server::SettingsFromConfig(c, "");
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.status().message().find("limits.max_disk_MB_per_user"), std::string::npos) << bad.status().message();
 }
 
 }  // namespace

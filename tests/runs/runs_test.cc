@@ -1,6 +1,7 @@
 // runs/: Admit and Execute, the one pipeline behind the server, the nights and benchctl's local mode.
 #include <gtest/gtest.h>
 
+#include <bit>
 #include <chrono>
 #include <cmath>
 #include <thread>
@@ -258,6 +259,48 @@ TEST(Execute, ACancelledRunKeepsTheProgressItReached) {
   EXPECT_GE(r->progress, 0.2);
   EXPECT_LT(r->progress, 0.9);
   EXPECT_NEAR(r->progress, (*o)->summary.duration_s / 1.0, 1e-9);
+}
+
+// Per-user disk budget (issue 14 item 1): what the user's traces take, plus the new runs' traces counted
+// uncompressed, must fit; the refusal names the limit and what to do.
+TEST(Enqueue, APerUserDiskBudgetCountsStoredTracesAndTheNewRunsUncompressed) {
+  auto store = db::Store::Open(":memory:");
+  ASSERT_TRUE(store.ok());
+  Policy p = ServerPolicy();
+  auto spec = E3();  // 0.1 s at 50 kHz: 5 002 samples x 12 x 8 B = 480 kB uncompressed
+  auto a = Admit({"alice", "first", {spec}, {}, ""}, p);
+  ASSERT_TRUE(a.ok()) << a.status().ToString();
+  EXPECT_EQ(a->trace_bytes_raw, 5002.0 * 12 * 8);  // the samples the Runner reserves
+  p.limits.max_disk_bytes_per_user = 1e6;  // 1 MB
+  auto q = Enqueue(store->get(), *a, p);
+  ASSERT_TRUE(q.ok()) << q.status().ToString();
+  // The run stores 700 kB of (incompressible) trace: alice's next 480 kB no longer fit, bob's do.
+  db::TraceChunk c;
+  c.sample_period_s = 1e-5;
+  c.samples = 45000;  // 2 x 45 000 random doubles: 720 kB, incompressible
+  c.channels = {"noise", "noise2"};
+  std::uint64_t x = 88172645463325252ULL;
+  for (int k = 0; k < 2 * c.samples; ++k) {
+    x ^= x << 13, x ^= x >> 7, x ^= x << 17;
+    c.data.push_back(std::bit_cast<double>(x & 0x7fefffffffffffffULL));
+  }
+  ASSERT_TRUE((*store)->AppendTraceChunk(q->run_ids[0], c).ok());
+  auto used = (*store)->StoredTraceBytes("alice");
+  ASSERT_TRUE(used.ok());
+  EXPECT_GT(*used, 700000);
+  EXPECT_EQ(*(*store)->StoredTraceBytes("bob"), 0);
+  auto b = Admit({"alice", "second", {spec}, {}, ""}, p);
+  ASSERT_TRUE(b.ok());
+  auto refused = Enqueue(store->get(), *b, p);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_EQ(refused.status().code(), StatusCode::kResourceExhausted);
+  EXPECT_NE(refused.status().message().find("limits.max_disk_MB_per_user: user alice's stored traces take"),
+            std::string::npos)
+      << refused.status().message();
+  EXPECT_NE(refused.status().message().find("benchctl prune"), std::string::npos);
+  auto other = Admit({"bob", "first", {spec}, {}, ""}, p);
+  ASSERT_TRUE(other.ok());
+  EXPECT_TRUE(Enqueue(store->get(), *other, p).ok());
 }
 
 }  // namespace
