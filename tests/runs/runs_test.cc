@@ -6,6 +6,7 @@
 #include <cmath>
 #include <thread>
 
+#include "common/format.h"
 #include "db/store.h"
 #include "hw/emulated_bench.h"
 #include "runs/admit.h"
@@ -301,6 +302,47 @@ TEST(Enqueue, APerUserDiskBudgetCountsStoredTracesAndTheNewRunsUncompressed) {
   auto other = Admit({"bob", "first", {spec}, {}, ""}, p);
   ASSERT_TRUE(other.ok());
   EXPECT_TRUE(Enqueue(store->get(), *other, p).ok());
+}
+
+// A cancel that cuts a long bench step short (the interlocks split it and watch the cancel flag) states where
+// the bench got to, not the end of the step it was in (issue 14: "cancelled at t = 600 s" for a run stopped at
+// 420 s, and progress 100 %).
+TEST(Execute, ACancelInsideALongStepStatesTheTimeTheBenchReached) {
+  auto store = db::Store::Open(":memory:");
+  ASSERT_TRUE(store.ok());
+  BenchSetup bench = LocalEmulatorSetup();
+  bench.interlocks = true;  // as on a server bench
+  bench.safety.max_current_A = 100;
+  Policy local;
+  local.benches = {bench};
+  auto spec = experiment::LoadSpecFile(Example("standard/e1.json"));
+  ASSERT_TRUE(spec.ok());
+  spec->set_duration_s(600);  // open loop: one bench step to the end (no control ticks in between)
+  spec->mutable_recording()->set_rate_hz(1000);
+  auto a = Admit({"me", "b", {*spec}, {}, ""}, local);
+  ASSERT_TRUE(a.ok()) << a.status().ToString();
+  auto q = Enqueue(store->get(), std::move(*a), local);
+  ASSERT_TRUE(q.ok());
+  const std::int64_t id = q->run_ids[0];
+  Registry registry;
+  Worker worker(bench, &registry);
+  std::thread canceller([&] {
+    double progress = 0.0;
+    while (!registry.Progress(id, &progress)) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    std::this_thread::sleep_for(std::chrono::milliseconds(150));
+    registry.Cancel(id);
+  });
+  auto o = worker.ClaimAndExecute(store->get());
+  canceller.join();
+  ASSERT_TRUE(o.ok() && o->has_value());
+  ASSERT_EQ((*o)->status, db::RunStatus::kCancelled) << (*o)->reason;
+  const double reached = (*o)->trace.t_s.back();
+  EXPECT_LT(reached, 599.0) << "the cancel did not land inside the run";
+  auto r = (*store)->GetRun(id);
+  ASSERT_TRUE(r.ok());
+  EXPECT_NE(r->reason.find("cancelled at t = " + FormatNumber(reached) + " s of 600 s"), std::string::npos)
+      << r->reason;
+  EXPECT_NEAR(r->progress, reached / 600.0, 1e-9);
 }
 
 }  // namespace
