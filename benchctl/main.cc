@@ -17,6 +17,7 @@
 #include "benchctl/hw_commands.h"
 #include "benchctl/local_commands.h"
 #include "benchctl/local_run.h"
+#include "benchctl/prune_command.h"
 #include "benchctl/regress_commands.h"
 #include "benchctl/report_commands.h"
 #include "benchctl/run_commands.h"
@@ -140,6 +141,7 @@ int main(int argc, char** argv) {
   vb::benchctl::ReportCli report_cli(&app, {&json, &server, &token, &tls_ca_file, &store_path});
   // diagnose, identify, convert, import (benchctl/gap_commands.cc).
   vb::benchctl::GapCli gap_cli(&app, {&json, &server, &token, &tls_ca_file, &store_path});
+  vb::benchctl::PruneCli prune_cli(&app, {&json, &server, &token, &tls_ca_file, &store_path});  // prune_command.cc
 
   try {
     app.parse(argc, argv);
@@ -173,6 +175,7 @@ int main(int argc, char** argv) {
   if (gap_cli.parsed()) return gap_cli.Run(make_client);
   // One decision per invocation: the server if one is given and --local is not, else the local store.
   auto backend = [&]() { return vb::benchctl::ChooseBackend(local ? "" : server, store_path, make_client); };
+  if (prune_cli.parsed()) return prune_cli.Run();
   if (run->parsed()) {
     if (!local && server.empty())
       return Fail(Status::FailedPrecondition(

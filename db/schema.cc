@@ -155,11 +155,20 @@ UPDATE runs SET t_start_s = (SELECT CAST(substr(tag, 11) AS REAL) FROM run_tags
   WHERE bench_kind = 'imported';
 )sql";
 
+// Version 4. Trace chunks say how their data is encoded (db/trace_codec.h): 0 = raw little-endian float64, what
+// every chunk stored before this version is, so they stay readable as they are; the store writes 1 (per-channel
+// transform, byte shuffle, zstd) from now on. Nothing is rewritten: a migration that recompressed gigabytes
+// inside Open()'s one transaction would hold the write lock for minutes (docs/store.md, "Schema version 4").
+constexpr const char* kV4 = R"sql(
+ALTER TABLE trace_chunks ADD COLUMN codec INTEGER NOT NULL DEFAULT 0 CHECK (codec IN (0, 1));
+)sql";
+
 constexpr Migration kMigrations[] = {
     {1, "initial schema: batches, runs, run_tags, status_history, metrics, trace_chunks", kV1},
     {2, "baselines, baseline_metrics, regressions (benchctl baseline / regress / nights)",
      kV2},
     {3, "runs: key_name, repeat_index, split, t_start_s; run_sweep (a run's identity as fields)", kV3},
+    {4, "trace_chunks: codec (compressed traces; older chunks stay raw float64)", kV4},
 };
 
 }  // namespace

@@ -54,6 +54,8 @@ class Stmt {
   StatusOr<bool> Step();
   // Steps a statement that returns no rows (INSERT/UPDATE/DELETE/BEGIN/...).
   Status Run();
+  // Back to the start (bindings kept), to bind and step again after reading fewer rows than it has.
+  void Reset() { sqlite3_reset(stmt_); }
 
   std::int64_t Int(int col) const { return sqlite3_column_int64(stmt_, col); }
   double Double(int col) const { return sqlite3_column_double(stmt_, col); }

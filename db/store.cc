@@ -6,6 +6,11 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <ctime>
+#include <limits>
+#include <map>
+#include <set>
+#include <string_view>
 #include <unordered_set>
 #include <utility>
 
@@ -136,6 +141,7 @@ class SqliteStore final : public Store {
   StatusOr<std::vector<StatusChange>> History(std::int64_t run_id) override;
   StatusOr<std::vector<Metric>> GetMetrics(std::int64_t run_id) override;
   StatusOr<std::int64_t> CountQueued(const std::string& submitter) override;
+  StatusOr<std::int64_t> StoredTraceBytes(const std::string& submitter) override;
   Status AppendTraceChunk(std::int64_t run_id, const TraceChunk& chunk) override;
   StatusOr<std::vector<TraceChunk>> ReadTrace(std::int64_t run_id) override;
   Status ForEachTraceChunk(std::int64_t run_id,
@@ -147,6 +153,7 @@ class SqliteStore final : public Store {
   StatusOr<std::int64_t> SaveRegression(const RegressionRecord& record) override;
   StatusOr<RegressionRecord> GetRegression(std::int64_t id) override;
   StatusOr<std::vector<RegressionRecord>> ListRegressions(bool nights_only, std::int32_t limit) override;
+  StatusOr<PruneResult> Prune(const PruneRequest& request) override;
 
  private:
   // Helpers run inside the caller's transaction.
@@ -155,9 +162,14 @@ class SqliteStore final : public Store {
   StatusOr<RunRecord> ReadRun(const Stmt& row);  // a row of kRunColumns, with its tags
   StatusOr<RunRecord> LoadRun(std::int64_t run_id);
   StatusOr<std::int64_t> InterruptionsOfRun(std::int64_t run_id);  // 'interrupted' entries in its history
+  // The chunks of a run in order, in one read transaction; fn may take the chunk's contents (move from it).
+  Status ReadChunks(std::int64_t run_id, const std::function<Status(TraceChunk&, std::int64_t)>& fn);
 
   sql::Connection conn_;
   int version_;
+  trace::Codec1 codec_;             // zstd contexts and scratch, reused chunk after chunk
+  std::string encoded_;             // the last chunk's compressed BLOB (reused buffer)
+  std::vector<std::uint8_t> blob_;  // a compressed BLOB read back (reused buffer)
   std::unique_ptr<Checkpointer> checkpointer_;  // destroyed (thread joined) before conn_ closes
 };
 
@@ -615,18 +627,37 @@ StatusOr<std::int64_t> SqliteStore::CountQueued(const std::string& submitter) {
   return n;
 }
 
+StatusOr<std::int64_t> SqliteStore::StoredTraceBytes(const std::string& submitter) {
+  Transaction txn(&conn_);
+  VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
+  // runs_submitter finds the user's runs, the trace_chunks primary key their chunks; length() reads the
+  // record header, not the BLOB.
+  VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT COALESCE(SUM(length(c.data)), 0) FROM runs r "
+                                                "JOIN trace_chunks c ON c.run_id = r.id WHERE r.submitter = ?1"));
+  st.Bind(1, submitter);
+  VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+  if (!row) return Status::Internal("sum() returned no row");
+  const std::int64_t n = st.Int(0);
+  VB_RETURN_IF_ERROR(txn.Commit());
+  return n;
+}
+
 // ---- Traces ----
 
 Status SqliteStore::AppendTraceChunk(std::int64_t run_id, const TraceChunk& chunk) {
   VB_RETURN_IF_ERROR(trace::ValidateChunk(chunk));
   const std::string where = Cat("trace chunk ", chunk.index, ": ");
-  const std::uint64_t bytes = 8 * static_cast<std::uint64_t>(chunk.data.size());
+  const std::string channels = trace::JoinChannels(chunk.channels);
+  // Compressed before the write transaction starts: other writers never wait for zstd.
+  VB_RETURN_IF_ERROR(codec_.Encode(chunk.data.data(), chunk.channels.size(), static_cast<std::size_t>(chunk.samples),
+                                   &encoded_)
+                         .WithContext(Cat("trace chunk ", chunk.index)));
+  const std::uint64_t bytes = encoded_.size();
   const auto max_bytes = static_cast<std::uint64_t>(sqlite3_limit(conn_.raw(), SQLITE_LIMIT_LENGTH, -1));
   if (bytes > max_bytes) {
     return Status::InvalidArgument(Cat(where, bytes, " bytes of data exceed the largest BLOB SQLite stores here (",
                                        max_bytes, " bytes): use smaller chunks"));
   }
-  const std::string channels = trace::JoinChannels(chunk.channels);
 
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kWrite));
@@ -651,28 +682,25 @@ Status SqliteStore::AppendTraceChunk(std::int64_t run_id, const TraceChunk& chun
   }
 
   VB_DB_ASSIGN_OR_RETURN(Stmt ins, conn_.Prepare("INSERT INTO trace_chunks (run_id, idx, t0, period, samples, "
-                                                 "channels, data) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)"));
+                                                 "channels, data, codec) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8)"));
   ins.Bind(1, run_id);
   ins.Bind(2, static_cast<std::int64_t>(chunk.index));
   ins.Bind(3, chunk.t0_s);
   ins.Bind(4, chunk.sample_period_s);
   ins.Bind(5, static_cast<std::int64_t>(chunk.samples));
   ins.Bind(6, channels);
-  std::string swapped;  // big-endian hosts only: the little-endian copy
-  if constexpr (trace::kNativeIsLittleEndian) {
-    ins.BindBlobNoCopy(7, chunk.data.data(), bytes);  // the array already is the encoding: no copy here
-  } else {
-    swapped = trace::EncodeValues(chunk.data);
-    ins.BindBlobNoCopy(7, swapped.data(), swapped.size());
-  }
+  ins.BindBlobNoCopy(7, encoded_.data(), encoded_.size());
+  ins.Bind(8, static_cast<std::int64_t>(trace::Codec::kShuffledZstd));
   VB_RETURN_IF_ERROR(ins.Run());
   return txn.Commit();
 }
 
 StatusOr<std::vector<TraceChunk>> SqliteStore::ReadTrace(std::int64_t run_id) {
   std::vector<TraceChunk> out;
-  VB_RETURN_IF_ERROR(ForEachTraceChunk(run_id, [&](const TraceChunk& c, std::int64_t) {
-    out.push_back(c);
+  // Each chunk is decoded into its own vector and moved into the result: no copy of the whole trace.
+  VB_RETURN_IF_ERROR(ReadChunks(run_id, [&](TraceChunk& c, std::int64_t) {
+    out.push_back(std::move(c));
+    c = TraceChunk();
     return Status::Ok();
   }));
   return out;
@@ -680,6 +708,10 @@ StatusOr<std::vector<TraceChunk>> SqliteStore::ReadTrace(std::int64_t run_id) {
 
 Status SqliteStore::ForEachTraceChunk(std::int64_t run_id,
                                       const std::function<Status(const TraceChunk&, std::int64_t)>& fn) {
+  return ReadChunks(run_id, [&](TraceChunk& c, std::int64_t total) { return fn(c, total); });
+}
+
+Status SqliteStore::ReadChunks(std::int64_t run_id, const std::function<Status(TraceChunk&, std::int64_t)>& fn) {
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
   VB_RETURN_IF_ERROR(StatusOf(run_id).status());
@@ -692,11 +724,11 @@ Status SqliteStore::ForEachTraceChunk(std::int64_t run_id,
   }
   // length(data) comes from the record header without reading the BLOB; the BLOB itself is then copied straight
   // into the chunk's buffer by incremental BLOB I/O (one copy instead of two).
-  VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT rowid, idx, t0, period, samples, channels, length(data) "
-                                                "FROM trace_chunks WHERE run_id = ?1 ORDER BY idx"));
+  VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT rowid, idx, t0, period, samples, channels, length(data), "
+                                                "codec FROM trace_chunks WHERE run_id = ?1 ORDER BY idx"));
   st.Bind(1, run_id);
   sql::BlobReader blob(conn_.raw(), "trace_chunks", "data");
-  TraceChunk c;  // reused: its buffer keeps its capacity from chunk to chunk
+  TraceChunk c;  // reused unless fn takes it: its buffer keeps its capacity from chunk to chunk
   std::int32_t expected = 0;
   while (true) {
     VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
@@ -711,19 +743,188 @@ Status SqliteStore::ForEachTraceChunk(std::int64_t run_id,
       return Status::DataLoss(Cat(what, ": expected chunk ", expected, " (a chunk is missing)"));
     }
     const std::size_t values = c.channels.size() * static_cast<std::size_t>(c.samples);
-    VB_RETURN_IF_ERROR(trace::CheckSize(static_cast<std::size_t>(st.Int(6)), values, what));
-    VB_DB_ASSIGN_OR_RETURN(const std::size_t bytes, blob.Open(st.Int(0)));
-    VB_RETURN_IF_ERROR(trace::CheckSize(bytes, values, what));
-    c.data.resize(values);
-    VB_RETURN_IF_ERROR(blob.Read(c.data.data(), bytes));
-    trace::FromLittleEndian(&c.data);
+    const std::int64_t codec = st.Int(7);
+    if (codec == static_cast<std::int64_t>(trace::Codec::kRawFloat64)) {  // written before schema v4
+      VB_RETURN_IF_ERROR(trace::CheckSize(static_cast<std::size_t>(st.Int(6)), values, what));
+      VB_DB_ASSIGN_OR_RETURN(const std::size_t bytes, blob.Open(st.Int(0)));
+      VB_RETURN_IF_ERROR(trace::CheckSize(bytes, values, what));
+      c.data.resize(values);
+      VB_RETURN_IF_ERROR(blob.Read(c.data.data(), bytes));
+      trace::FromLittleEndian(&c.data);
+    } else if (codec == static_cast<std::int64_t>(trace::Codec::kShuffledZstd)) {
+      VB_DB_ASSIGN_OR_RETURN(const std::size_t bytes, blob.Open(st.Int(0)));
+      blob_.resize(bytes);
+      VB_RETURN_IF_ERROR(blob.Read(blob_.data(), bytes));
+      c.data.resize(values);
+      VB_RETURN_IF_ERROR(codec_.Decode(blob_.data(), bytes, c.channels.size(), static_cast<std::size_t>(c.samples),
+                                       c.data.data(), what));
+    } else {
+      return Status::DataLoss(Cat(what, ": unknown codec ", codec));
+    }
     VB_RETURN_IF_ERROR(fn(c, total));
     ++expected;
   }
   return txn.Commit();
 }
 
+// ---- Retention ----
+
+std::string UtcDate(double unix_s) {
+  const std::time_t t = static_cast<std::time_t>(unix_s);
+  std::tm tm{};
+  gmtime_r(&t, &tm);
+  char buf[32];
+  std::strftime(buf, sizeof buf, "%Y-%m-%d %H:%M:%S UTC", &tm);
+  return buf;
+}
+
+StatusOr<PruneResult> SqliteStore::Prune(const PruneRequest& request) {
+  if (!std::isfinite(request.finished_before_unix_s) || request.finished_before_unix_s <= 0) {
+    return Status::InvalidArgument(Cat("finished_before_unix_s: must be a finite time > 0, got ",
+                                       FormatExact(request.finished_before_unix_s)));
+  }
+  if (request.keep_last < 0) return Status::InvalidArgument(Cat("keep_last: must be >= 0, got ", request.keep_last));
+  for (std::size_t k = 0; k < request.protected_batches.size(); ++k) {
+    if (request.protected_batches[k] <= 0) {
+      return Status::InvalidArgument(Cat("protected_batches[", k, "]: must be a batch id > 0, got ",
+                                         request.protected_batches[k]));
+    }
+  }
+  Transaction txn(&conn_);
+  VB_RETURN_IF_ERROR(txn.Begin(request.dry_run ? TxnKind::kRead : TxnKind::kWrite));
+
+  // What references batches: results of regression runs and nights, baselines taken from local batches, and
+  // whatever the caller names.
+  std::map<std::int64_t, std::string> protected_batches;
+  for (std::int64_t b : request.protected_batches)
+    protected_batches.emplace(b, request.protected_why.empty() ? "protected by the caller" : request.protected_why);
+  {
+    VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT id, batch_id, night, suite FROM regressions "
+                                                  "WHERE batch_id != 0 ORDER BY id"));
+    while (true) {
+      VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+      if (!row) break;
+      const std::string night = st.Text(2);
+      protected_batches.emplace(st.Int(1), night.empty()
+                                               ? Cat("regression result ", st.Int(0), " (suite ", st.Text(3), ")")
+                                               : Cat("regression night ", night, " (result ", st.Int(0), ")"));
+    }
+  }
+  {
+    VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT name, version, source FROM baselines ORDER BY id"));
+    while (true) {
+      VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+      if (!row) break;
+      const std::int64_t batch = LocalBatchOfBaselineSource(st.Text(2));
+      if (batch != 0) protected_batches.emplace(batch, Cat("baseline '", st.Text(0), "' v", st.Int(1)));
+    }
+  }
+
+  PruneResult out;
+  std::vector<std::int64_t> doomed;
+  std::set<std::int64_t> touched_batches;
+  {
+    // Newest first, so that the first keep_last finished runs are the newest.
+    VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT id, batch_id, name, status, finished FROM runs "
+                                                  "ORDER BY id DESC"));
+    std::int32_t finished_seen = 0;
+    while (true) {
+      VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+      if (!row) break;
+      PruneDecision d;
+      d.run_id = st.Int(0);
+      d.batch_id = st.Int(1);
+      d.name = st.Text(2);
+      StatusOr<RunStatus> status = ParseRunStatus(st.Text(3));
+      if (!status.ok()) return Status::DataLoss(Cat("run ", d.run_id, ": ", status.status().message()));
+      d.status = *status;
+      d.finished_unix_s = st.Double(4);
+      const bool final_status = d.status == RunStatus::kDone || d.status == RunStatus::kFailed ||
+                                d.status == RunStatus::kCancelled;
+      if (!final_status) {
+        d.why = Cat(RunStatusName(d.status), ": only finished runs are pruned");
+        out.kept.push_back(std::move(d));
+        continue;
+      }
+      ++finished_seen;
+      if (d.finished_unix_s >= request.finished_before_unix_s) {
+        ++out.newer_kept;
+        continue;
+      }
+      if (auto p = protected_batches.find(d.batch_id); p != protected_batches.end()) {
+        d.why = Cat(p->second, " references batch ", d.batch_id);
+        out.kept.push_back(std::move(d));
+        continue;
+      }
+      if (finished_seen <= request.keep_last) {
+        d.why = Cat("one of the newest ", request.keep_last, " finished runs (--keep-last)");
+        out.kept.push_back(std::move(d));
+        continue;
+      }
+      d.why = Cat(RunStatusName(d.status), ", finished ", UtcDate(d.finished_unix_s), ", before the cutoff ",
+                  UtcDate(request.finished_before_unix_s));
+      doomed.push_back(d.run_id);
+      touched_batches.insert(d.batch_id);
+      out.deleted.push_back(std::move(d));
+    }
+  }
+  {
+    VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT COALESCE(SUM(length(data)), 0) FROM trace_chunks "
+                                                  "WHERE run_id = ?1"));
+    for (std::int64_t id : doomed) {
+      st.Reset();
+      st.Bind(1, id);
+      VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+      if (row) out.trace_bytes += st.Int(0);
+    }
+  }
+  if (!request.dry_run) {
+    // Children go with their run (ON DELETE CASCADE): tags, history, metrics, sweep point, trace chunks.
+    VB_DB_ASSIGN_OR_RETURN(Stmt del, conn_.Prepare("DELETE FROM runs WHERE id = ?1"));
+    for (std::int64_t id : doomed) {
+      del.Reset();
+      del.Bind(1, id);
+      VB_RETURN_IF_ERROR(del.Run());
+    }
+    VB_DB_ASSIGN_OR_RETURN(Stmt empty, conn_.Prepare("DELETE FROM batches WHERE id = ?1 AND NOT EXISTS "
+                                                     "(SELECT 1 FROM runs WHERE batch_id = ?1)"));
+    for (std::int64_t b : touched_batches) {
+      empty.Reset();
+      empty.Bind(1, b);
+      VB_RETURN_IF_ERROR(empty.Run());
+      out.batches_deleted += sqlite3_changes(conn_.raw());
+    }
+  } else {
+    VB_DB_ASSIGN_OR_RETURN(Stmt left, conn_.Prepare("SELECT count(*) FROM runs WHERE batch_id = ?1"));
+    for (std::int64_t b : touched_batches) {
+      left.Reset();
+      left.Bind(1, b);
+      VB_DB_ASSIGN_OR_RETURN(const bool row, left.Step());
+      std::int64_t remaining = row ? left.Int(0) : 0;
+      for (const PruneDecision& d : out.deleted) remaining -= d.batch_id == b;
+      out.batches_deleted += remaining == 0;
+    }
+  }
+  VB_RETURN_IF_ERROR(txn.Commit());
+  return out;
+}
+
 }  // namespace
+
+std::int64_t LocalBatchOfBaselineSource(const std::string& source) {
+  // "local batch 12" (baseline set --batch 12 --local) or "suite ci (local batch 12, seed 1)" (--suite).
+  constexpr std::string_view kMarker = "local batch ";
+  const std::size_t at = source.find(kMarker);
+  if (at == std::string::npos || (at > 0 && source[at - 1] != ' ' && source[at - 1] != '(')) return 0;
+  std::int64_t batch = 0;
+  std::size_t k = at + kMarker.size();
+  if (k >= source.size() || source[k] < '0' || source[k] > '9') return 0;
+  for (; k < source.size() && source[k] >= '0' && source[k] <= '9'; ++k) {
+    if (batch > (std::numeric_limits<std::int64_t>::max() - 9) / 10) return 0;
+    batch = batch * 10 + (source[k] - '0');
+  }
+  return batch;
+}
 
 StatusOr<std::unique_ptr<Store>> Store::Open(const std::string& path) {
   if (path.empty()) {

@@ -111,6 +111,34 @@ struct RegressionRecord {
   std::string result_json;          // empty in listings
 };
 
+// Retention (docs/store.md, "Retention"): which finished runs to delete, with their traces.
+struct PruneRequest {
+  double finished_before_unix_s = 0.0;  // candidates: runs that finished before this instant (> 0)
+  std::int32_t keep_last = 0;           // the newest N finished runs (by id) are kept whatever their age (>= 0)
+  bool dry_run = false;                 // decide and report, delete nothing
+  // Batches that something outside this store references (the server's configured baseline file): kept.
+  std::vector<std::int64_t> protected_batches;
+  std::string protected_why;            // says what references them, e.g. "the server's baseline 'main' v2"
+};
+// One run prune looked at: deleted (or would be, in a dry run) or kept, and why.
+struct PruneDecision {
+  std::int64_t run_id = 0;
+  std::int64_t batch_id = 0;
+  std::string name;                     // RunKey::DisplayName()
+  RunStatus status = RunStatus::kDone;
+  double finished_unix_s = 0.0;
+  std::string why;                      // e.g. "finished 2026-10-01 (older than the cutoff)", "baseline 'ci' v3 ..."
+};
+struct PruneResult {
+  std::vector<PruneDecision> deleted;   // in a dry run: what would be deleted
+  // Runs old enough to go but kept (a baseline or regression references them, among the newest N), and every
+  // queued, running or interrupted run (never touched).
+  std::vector<PruneDecision> kept;
+  std::int64_t newer_kept = 0;          // finished runs newer than the cutoff (kept; not listed)
+  std::int64_t trace_bytes = 0;         // stored trace bytes of the deleted runs
+  std::int64_t batches_deleted = 0;     // batches left without runs, deleted with them
+};
+
 class Store {
  public:
   // Opens (creating if needed) the database at path, with WAL, foreign keys and busy timeout on, and migrates
@@ -149,6 +177,8 @@ class Store {
   virtual StatusOr<std::vector<StatusChange>> History(std::int64_t run_id) = 0;
   virtual StatusOr<std::vector<Metric>> GetMetrics(std::int64_t run_id) = 0;
   virtual StatusOr<std::int64_t> CountQueued(const std::string& submitter) = 0;
+  // Bytes the stored trace chunks of `submitter`'s runs take (as stored: compressed since schema v4).
+  virtual StatusOr<std::int64_t> StoredTraceBytes(const std::string& submitter) = 0;
 
   // Traces: chunks appended in index order while the run executes; read back in order.
   virtual Status AppendTraceChunk(std::int64_t run_id, const TraceChunk& chunk) = 0;
@@ -169,6 +199,17 @@ class Store {
   virtual StatusOr<std::int64_t> SaveRegression(const RegressionRecord& record) = 0;
   virtual StatusOr<RegressionRecord> GetRegression(std::int64_t id) = 0;
   virtual StatusOr<std::vector<RegressionRecord>> ListRegressions(bool nights_only, std::int32_t limit) = 0;
+
+  // Retention: deletes finished runs (done, failed, cancelled) that finished before the cutoff, with their
+  // metrics, history, tags and traces, in one transaction; never a queued, running or interrupted run, never a
+  // run of a batch that a baseline ("local batch N" in its source) or a regression result references, never
+  // one of the newest keep_last finished runs. Batches left empty are deleted too. InvalidArgument naming the
+  // field for a bad request.
+  virtual StatusOr<PruneResult> Prune(const PruneRequest& request) = 0;
 };
+
+// The batch a baseline's source names when its runs are in the local store ("local batch 12", "suite ci (local
+// batch 12, seed 1)"), else 0. benchctl writes these sources (benchctl/regress_commands.cc).
+std::int64_t LocalBatchOfBaselineSource(const std::string& source);
 
 }  // namespace vb::db

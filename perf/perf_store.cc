@@ -1,10 +1,17 @@
-// Trace ingest and read-back speed of the SQLite store (db/store.h) on a real file: a 1 M-sample trace of
-// 12 float64 channels appended in chunks (one transaction per chunk, as a worker does), then read back whole.
-// Prints figures; targets (docs/store.md): ingest >= 5 M samples/s, read back of 1 M samples < 100 ms.
-// A "sample" is one instant of all 12 channels (12 values, 96 bytes).
+// Trace ingest and read-back speed of the SQLite store (db/store.h) on a real file: 1 M-sample traces of
+// 12 float64 channels appended in chunks (one transaction per chunk, as a worker does), then read back whole,
+// and how much smaller the compressed chunks are than the raw values (docs/store.md, "Trace encoding").
+// Prints figures; targets (docs/store.md): ingest >= 5 M samples/s, read back of 1 M samples < 100 ms, stored
+// size at most 1/4 of the raw values on a real emulator trace. A "sample" is one instant of all 12 channels
+// (12 values, 96 bytes raw).
+//
+// Two traces: "emulator", a real recorded run (examples/standard/e1.json, 50 Hz PWM at 50 kHz, run for 20 s:
+// 1 000 002 samples of the experiment's 12 channels), and "noise", a slow sine plus Gaussian noise in every
+// channel (random low mantissa bytes everywhere: the codec's worst case for time and size).
+// Times are wall clock on whatever else the machine is doing; the thread's CPU time is printed beside them.
 //
 // Usage: perf_store [DIR [CHUNK_SAMPLES...]]   (database DIR/perf_store.db, default $TMPDIR or /tmp, removed
-//        after; chunk sizes default to 1000 10000 65536 100000)
+//        after; chunk sizes default to 10000 16384 65536)
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -16,10 +23,15 @@
 #include <string>
 #include <vector>
 
+#include <sqlite3.h>
+#include <time.h>
 #include <unistd.h>
 
 #include "db/store.h"
 #include "db/text.h"
+#include "experiment/runner.h"
+#include "experiment/spec.h"
+#include "hw/emulated_bench.h"
 
 namespace {
 
@@ -33,6 +45,12 @@ constexpr double kReadTargetMs = 100;   // for kSamples
 
 double Seconds(Clock::duration d) { return std::chrono::duration<double>(d).count(); }
 
+double ThreadCpuSeconds() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
+}
+
 double Median(std::vector<double> v) {
   std::sort(v.begin(), v.end());
   return v[v.size() / 2];
@@ -43,31 +61,87 @@ void Die(const vb::Status& s, const char* what) {
   std::exit(3);
 }
 
-// The chunks of one trace, generated before timing (a slow sine plus noise per channel: realistic values,
-// not zeros that some layer could shortcut).
-std::vector<vb::db::TraceChunk> MakeTrace(int chunk_samples) {
+// A whole trace, channel-major, before it is cut into chunks.
+struct Trace {
+  std::string name;
   std::vector<std::string> channels;
-  for (int c = 0; c < kChannels; ++c) channels.push_back(vb::db::Cat("ch", c));
+  double period_s = 0.0;
+  std::size_t samples = 0;
+  std::vector<double> data;  // channels.size() * samples
+};
+
+// A slow sine plus noise per channel: random low mantissa bytes in every value.
+Trace NoiseTrace() {
+  Trace t;
+  t.name = "noise";
+  for (int c = 0; c < kChannels; ++c) t.channels.push_back(vb::db::Cat("ch", c));
+  t.period_s = 1e-5;
+  t.samples = kSamples;
+  t.data.resize(static_cast<std::size_t>(kChannels) * kSamples);
   std::mt19937_64 rng(42);
   std::normal_distribution<double> noise(0.0, 1e-3);
+  for (int c = 0; c < kChannels; ++c)
+    for (int k = 0; k < kSamples; ++k) t.data[static_cast<std::size_t>(c) * kSamples + k] = std::sin(1e-3 * k + c) + noise(rng);
+  return t;
+}
+
+// A recorded emulator run of `spec` (optionally run for `duration_s` instead of the spec's duration).
+Trace EmulatorTrace(const std::string& spec_name, double duration_s) {
+  auto spec = vb::experiment::LoadSpecFile(std::string(VB_SOURCE_DIR) + "/examples/standard/" + spec_name + ".json");
+  if (!spec.ok()) Die(spec.status(), "spec");
+  if (duration_s > 0) spec->set_duration_s(duration_s);
+  auto e = vb::experiment::BuildExperiment(*spec);
+  if (!e.ok()) Die(e.status(), "experiment");
+  vb::hw::EmulatedBench bench(vb::experiment::EmulatedBenchFor(*e));
+  vb::experiment::Trace rec;
+  const auto summary = vb::experiment::Runner::Run(*e, bench, &rec);
+  if (!summary.ok()) Die(vb::Status::Internal(summary.message), "run");
+  Trace t;
+  t.name = spec_name;
+  t.channels = vb::experiment::Trace::ChannelNames();
+  t.period_s = rec.sample_period_s;
+  t.samples = rec.size();
+  t.data.resize(t.channels.size() * t.samples);
+  for (std::size_t c = 0; c < t.channels.size(); ++c)
+    for (std::size_t k = 0; k < t.samples; ++k) t.data[c * t.samples + k] = rec.Value(c, k);
+  return t;
+}
+
+// The chunks of one trace, cut before timing.
+std::vector<vb::db::TraceChunk> Chunks(const Trace& t, int chunk_samples) {
   std::vector<vb::db::TraceChunk> chunks;
-  const double period = 1e-5;
-  for (int start = 0, idx = 0; start < kSamples; start += chunk_samples, ++idx) {
+  const std::size_t n = t.samples, step = static_cast<std::size_t>(chunk_samples);
+  for (std::size_t start = 0, idx = 0; start < n; start += step, ++idx) {
     vb::db::TraceChunk ch;
-    ch.index = idx;
-    ch.t0_s = start * period;
-    ch.sample_period_s = period;
-    ch.samples = std::min(chunk_samples, kSamples - start);
-    ch.channels = channels;
-    ch.data.resize(static_cast<std::size_t>(kChannels) * ch.samples);
-    for (int c = 0; c < kChannels; ++c) {
-      for (int k = 0; k < ch.samples; ++k) {
-        ch.data[static_cast<std::size_t>(c) * ch.samples + k] = std::sin(1e-3 * (start + k) + c) + noise(rng);
-      }
-    }
+    ch.index = static_cast<std::int32_t>(idx);
+    ch.t0_s = static_cast<double>(start) * t.period_s;
+    ch.sample_period_s = t.period_s;
+    ch.samples = static_cast<std::int32_t>(std::min(step, n - start));
+    ch.channels = t.channels;
+    ch.data.resize(t.channels.size() * static_cast<std::size_t>(ch.samples));
+    for (std::size_t c = 0; c < t.channels.size(); ++c)
+      std::memcpy(&ch.data[c * ch.samples], &t.data[c * n + start], sizeof(double) * ch.samples);
     chunks.push_back(std::move(ch));
   }
   return chunks;
+}
+
+// Stored BLOB bytes of the trace chunks in the database at `path` (what the trace takes on disk, less the
+// pages' slack), and the raw float64 bytes they hold.
+std::pair<double, double> StoredAndRawBytes(const std::string& path) {
+  sqlite3* db = nullptr;
+  std::pair<double, double> out{0, 0};
+  if (sqlite3_open_v2(path.c_str(), &db, SQLITE_OPEN_READONLY, nullptr) == SQLITE_OK) {
+    sqlite3_stmt* st = nullptr;
+    const char* sql =
+        "SELECT SUM(length(data)), SUM(8.0 * samples * (length(channels) - length(replace(channels, char(10), '')) + 1)) "
+        "FROM trace_chunks";
+    if (sqlite3_prepare_v2(db, sql, -1, &st, nullptr) == SQLITE_OK && sqlite3_step(st) == SQLITE_ROW)
+      out = {sqlite3_column_double(st, 0), sqlite3_column_double(st, 1)};
+    sqlite3_finalize(st);
+  }
+  sqlite3_close(db);
+  return out;
 }
 
 std::int64_t NewRunningRun(vb::db::Store& store) {
@@ -95,27 +169,33 @@ std::unique_ptr<vb::db::Store> OpenFresh(const std::string& path) {
 struct Figures {
   double ingest_samples_per_s;  // median over the traces
   double read_ms;               // median
+  double ratio;                 // raw bytes / stored bytes
 };
 
-// kRepeats traces of kSamples in `chunk_samples` chunks, one after the other, into a fresh database.
-Figures MeasureTraces(const std::string& path, int chunk_samples) {
-  const auto chunks = MakeTrace(chunk_samples);
+// kRepeats traces of `trace` in `chunk_samples` chunks, one after the other, into a fresh database.
+Figures MeasureTraces(const std::string& path, const Trace& trace, int chunk_samples) {
+  const auto chunks = Chunks(trace, chunk_samples);
   auto store = OpenFresh(path);
   sync();  // start with no dirty pages left over from the previous configuration
-  std::vector<double> ingest_s, read_s;
+  std::vector<double> ingest_s, read_s, ingest_cpu_s, read_cpu_s;
   for (int rep = 0; rep < kRepeats; ++rep) {
     const std::int64_t run = NewRunningRun(*store);
+    const double c0 = ThreadCpuSeconds();
     const auto t0 = Clock::now();
     for (const auto& ch : chunks) {
       vb::Status s = store->AppendTraceChunk(run, ch);
       if (!s.ok()) Die(s, "append");
     }
     const auto t1 = Clock::now();
+    const double c1 = ThreadCpuSeconds();
     auto back = store->ReadTrace(run);
     const auto t2 = Clock::now();
+    const double c2 = ThreadCpuSeconds();
     if (!back.ok()) Die(back.status(), "read");
     ingest_s.push_back(Seconds(t1 - t0));
     read_s.push_back(Seconds(t2 - t1));
+    ingest_cpu_s.push_back(c1 - c0);
+    read_cpu_s.push_back(c2 - c1);
     // Checked outside the timing: what came back is what went in, bit for bit.
     if (back->size() != chunks.size()) Die(vb::Status::DataLoss("chunk count differs"), "verify");
     for (std::size_t k = 0; k < chunks.size(); ++k) {
@@ -128,9 +208,14 @@ Figures MeasureTraces(const std::string& path, int chunk_samples) {
     vb::Status f = store->Finish(run, vb::db::RunStatus::kDone, "", {});
     if (!f.ok()) Die(f, "finish");
   }
-  const Figures fig{kSamples / Median(ingest_s), 1e3 * Median(read_s)};
-  std::printf("%14d %8zu %18.3g %8.0f %14.1f   ", chunk_samples, chunks.size(), fig.ingest_samples_per_s,
-              8.0 * kChannels * fig.ingest_samples_per_s / 1e6, fig.read_ms);
+  store.reset();
+  const auto [stored, raw] = StoredAndRawBytes(path);
+  const double per_million = 1e6 / static_cast<double>(trace.samples);  // figures for 1 M samples
+  const Figures fig{static_cast<double>(trace.samples) / Median(ingest_s), 1e3 * Median(read_s) * per_million,
+                    stored > 0 ? raw / stored : 0.0};
+  std::printf("%-9s %8d %7zu %10.3g %10.3g %8.1f %8.1f %7.2f   ", trace.name.c_str(), chunk_samples, chunks.size(),
+              fig.ingest_samples_per_s, static_cast<double>(trace.samples) / Median(ingest_cpu_s), fig.read_ms,
+              1e3 * Median(read_cpu_s) * per_million, fig.ratio);
   for (double s : ingest_s) std::printf(" %.0f", 1e3 * s);
   std::printf("%s\n", fig.ingest_samples_per_s >= kIngestTarget && fig.read_ms < kReadTargetMs
                           ? ""
@@ -140,8 +225,8 @@ Figures MeasureTraces(const std::string& path, int chunk_samples) {
 
 // Sustained: kRepeats traces appended back to back with nothing in between, then the Store closed, which
 // waits for the last checkpoint: every sample is then in the database file and fsynced. Disk-bound.
-void MeasureSustained(const std::string& path, int chunk_samples) {
-  const auto chunks = MakeTrace(chunk_samples);
+void MeasureSustained(const std::string& path, const Trace& trace, int chunk_samples) {
+  const auto chunks = Chunks(trace, chunk_samples);
   auto store = OpenFresh(path);
   sync();
   std::vector<std::int64_t> runs;
@@ -156,10 +241,10 @@ void MeasureSustained(const std::string& path, int chunk_samples) {
   const auto t1 = Clock::now();
   store.reset();
   const auto t2 = Clock::now();
-  const double samples = static_cast<double>(kSamples) * kRepeats;
-  std::printf("\nsustained, %d traces of %d-sample chunks back to back: %.3g samples/s until the last append "
+  const double samples = static_cast<double>(trace.samples) * kRepeats;
+  std::printf("\nsustained, %d %s traces of %d-sample chunks back to back: %.3g samples/s until the last append "
               "returned,\n  %.3g samples/s until closed (all checkpointed into the database file and fsynced)\n",
-              kRepeats, chunk_samples, samples / Seconds(t1 - t0), samples / Seconds(t2 - t0));
+              kRepeats, trace.name.c_str(), chunk_samples, samples / Seconds(t1 - t0), samples / Seconds(t2 - t0));
 }
 
 // The queue's small transactions, for scale: one-run batches submitted, then claimed and finished.
@@ -197,24 +282,48 @@ int main(int argc, char** argv) {
   const std::string dir = argc > 1 ? argv[1] : (tmp != nullptr ? tmp : "/tmp");
   std::vector<int> chunk_sizes;
   for (int k = 2; k < argc; ++k) chunk_sizes.push_back(std::max(1, std::atoi(argv[k])));
-  if (chunk_sizes.empty()) chunk_sizes = {1'000, 10'000, 65'536};
+  if (chunk_sizes.empty()) chunk_sizes = {10'000, 16'384, 65'536};
   const std::string path = dir + "/perf_store.db";
 
-  std::printf("perf_store: %d samples x %d channels (float64, %.0f MB per trace) into %s\n", kSamples, kChannels,
-              8.0 * kSamples * kChannels / 1e6, path.c_str());
+  // Compression on the standard experiments' own runs, as recorded (one trace each, 16384-sample chunks as
+  // the run pipeline writes them).
+  std::printf("compression of real emulator traces (examples/standard, 12 channels, as recorded):\n");
+  for (const char* spec : {"e1", "e2", "e3"}) {
+    const Trace t = EmulatorTrace(spec, 0.0);
+    const auto chunks = Chunks(t, 16'384);
+    auto store = OpenFresh(path);
+    const std::int64_t run = NewRunningRun(*store);
+    for (const auto& ch : chunks) {
+      vb::Status s = store->AppendTraceChunk(run, ch);
+      if (!s.ok()) Die(s, "append");
+    }
+    store.reset();
+    const auto [stored, raw] = StoredAndRawBytes(path);
+    std::printf("  %-3s %8zu samples: %10.0f bytes raw, %9.0f stored, %5.2fx smaller\n", spec, t.samples, raw, stored,
+                raw / stored);
+  }
+
+  std::printf("\nperf_store: %d-sample traces x %d channels (float64, %.0f MB raw per trace) into %s\n", kSamples,
+              kChannels, 8.0 * kSamples * kChannels / 1e6, path.c_str());
   std::printf("one transaction per chunk; %d traces back to back per chunk size, fresh database each; medians\n",
               kRepeats);
-  std::printf("targets: ingest >= %.0f M samples/s, read back < %.0f ms\n\n", kIngestTarget / 1e6, kReadTargetMs);
-  std::printf("%14s %8s %18s %8s %14s    %s\n", "chunk samples", "chunks", "ingest samples/s", "MB/s",
-              "read back ms", "ingest ms of each trace");
-  int met = 0;
-  for (int chunk_samples : chunk_sizes) {
-    const Figures fig = MeasureTraces(path, chunk_samples);
-    met += fig.ingest_samples_per_s >= kIngestTarget && fig.read_ms < kReadTargetMs;
+  std::printf("targets: ingest >= %.0f M samples/s, read back of 1 M samples < %.0f ms, >= 4x smaller (emulator)\n\n",
+              kIngestTarget / 1e6, kReadTargetMs);
+  std::printf("%-9s %8s %7s %10s %10s %8s %8s %7s    %s\n", "trace", "chunk", "chunks", "ingest/s", "(cpu)/s",
+              "read ms", "(cpu)", "ratio", "ingest ms of each trace");
+  const Trace emulator = EmulatorTrace("e1", 20.0);
+  const Trace noise = NoiseTrace();
+  int met = 0, measured = 0;
+  for (const Trace* trace : {&emulator, &noise}) {
+    for (int chunk_samples : chunk_sizes) {
+      const Figures fig = MeasureTraces(path, *trace, chunk_samples);
+      ++measured;
+      met += fig.ingest_samples_per_s >= kIngestTarget && fig.read_ms < kReadTargetMs;
+    }
   }
-  MeasureSustained(path, 65'536);
+  MeasureSustained(path, emulator, 16'384);
   MeasureQueue(path);
   for (const char* suffix : {"", "-wal", "-shm"}) std::remove((path + suffix).c_str());
-  std::printf("\ntargets met for %d of %zu chunk sizes\n", met, chunk_sizes.size());
+  std::printf("\ntargets met for %d of %d configurations\n", met, measured);
   return 0;
 }

@@ -105,6 +105,7 @@ StatusOr<Admitted> Admit(const Submission& submission, const Policy& policy) {
       // The trace's memory, computed in double (no overflow): samples as the Runner reserves them.
       const double samples = e->run.sample_rate_Hz > 0.0 ? std::floor(e->duration_s * e->run.sample_rate_Hz) + 2.0 : 0.0;
       const double bytes = samples * static_cast<double>(experiment::Trace::kBytesPerSample);
+      out.trace_bytes_raw += samples * static_cast<double>(experiment::Trace::ChannelNames().size() * sizeof(double));
       if (bytes > lim.max_trace_bytes_per_run)
         return ctxt(Status::ResourceExhausted(
             "recording: the trace would take " + FormatNumber(std::round(bytes / 1e6)) + " MB (" +
@@ -143,6 +144,18 @@ StatusOr<Queued> Enqueue(db::Store* store, Admitted admitted, const Policy& poli
       return Status::ResourceExhausted("user " + admitted.submitter + " has " + std::to_string(*queued) +
                                        " queued runs; " + std::to_string(admitted.runs.size()) +
                                        " more would exceed the limit of " + std::to_string(limit));
+  }
+  if (const double budget = policy.limits.max_disk_bytes_per_user; std::isfinite(budget)) {
+    auto used = store->StoredTraceBytes(admitted.submitter);
+    if (!used.ok()) return used.status();
+    const double after = static_cast<double>(*used) + admitted.trace_bytes_raw;
+    if (after > budget)
+      return Status::ResourceExhausted(
+          "limits.max_disk_MB_per_user: user " + admitted.submitter + "'s stored traces take " +
+          FormatNumber(std::round(static_cast<double>(*used) / 1e6)) + " MB and these runs may add up to " +
+          FormatNumber(std::round(admitted.trace_bytes_raw / 1e6)) + " MB (uncompressed), over the per-user budget of " +
+          FormatNumber(std::round(budget / 1e6)) + " MB; prune old runs (benchctl prune) or lower recording.rate_Hz "
+          "or duration_s");
   }
   Queued out;
   auto batch = store->SubmitBatch(admitted.submitter, admitted.batch_name, admitted.batch_json,

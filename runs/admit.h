@@ -32,6 +32,10 @@ struct Limits {
   // Memory a run's trace takes while it runs (samples x experiment::Trace::kBytesPerSample): a run that would
   // not fit is refused at submission instead of taking the process down when it starts.
   double max_trace_bytes_per_run = std::numeric_limits<double>::infinity();
+  // Disk a submitter's stored traces may take: Enqueue refuses a submission when what the user's traces take
+  // now plus the new runs' traces counted uncompressed (an upper bound: stored traces are compressed) would
+  // exceed it.
+  double max_disk_bytes_per_user = std::numeric_limits<double>::infinity();
 };
 
 // The local mode's trace budget: a quarter of this machine's physical memory.
@@ -57,6 +61,7 @@ struct Admitted {
   std::string batch_name;
   std::string batch_json;            // the submitted spec verbatim when there is one, else empty
   std::vector<db::RunRecord> runs;   // queued in this order
+  double trace_bytes_raw = 0.0;      // the runs' traces uncompressed (12 float64 channels per sample)
 };
 
 struct Queued {

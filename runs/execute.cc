@@ -6,6 +6,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include "common/format.h"
 #include "db/trace_writer.h"
 #include "experiment/spec.h"
 #include "hw/safety.h"
@@ -75,7 +76,7 @@ Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& se
   // 3. Run it, visible to watchers.
   experiment::RunMonitor monitor;
   const int decimation = std::max(1, static_cast<int>(std::lround(e->run.sample_rate_Hz / 1000.0)));
-  LiveTap tap(decimation);
+  LiveTap tap(decimation, &e->reference);
   if (ctx.registry != nullptr) ctx.registry->Add(run.id, &monitor, &tap, e->duration_s);
   if (ctx.current_monitor != nullptr) ctx.current_monitor->store(&monitor);
   auto cancel_requested = store->CancelRequested(run.id);
@@ -92,7 +93,21 @@ Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& se
     return out;
   }
 
-  // 4. Record.
+  // 4. Record. A run that stopped early says where it stopped and keeps how far it got (issue 14: cancelled
+  // runs read 0 %, and a cancel that cut a long bench step short stated the step's end as the time). Where the
+  // bench really got to is the last recorded sample (to one sample period), not the tick the Runner aimed at.
+  if (out.summary.termination != experiment::RunSummary::Termination::kDone && out.trace.size() > 0 &&
+      out.trace.t_s.back() < out.summary.duration_s) {
+    out.summary.duration_s = out.trace.t_s.back();
+    if (out.summary.termination == experiment::RunSummary::Termination::kCancelled)
+      out.summary.message = "cancelled at t = " + FormatNumber(out.summary.duration_s) + " s of " +
+                            FormatNumber(e->duration_s) + " s";
+  }
+  if (out.summary.termination != experiment::RunSummary::Termination::kDone && e->duration_s > 0) {
+    const double reached = std::clamp(out.summary.duration_s / e->duration_s, 0.0, 1.0);
+    if (auto st = store->SetProgress(run.id, reached); !st.ok())
+      spdlog::warn("run {}: cannot record its progress: {}", static_cast<long long>(run.id), st.message().c_str());
+  }
   const Status stored = db::AppendRecordedTrace(store, run.id, out.trace);
   db::RunStatus status = StatusOf(out.summary.termination);
   std::string reason = out.summary.message;

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <limits>
 
 namespace vb::runs {
 
@@ -12,7 +13,10 @@ void LiveTap::OnSample(const hw::BenchSample& s) {
   const size_t head = head_.load(std::memory_order_relaxed);
   const size_t next = (head + 1) % kCapacity;
   if (next == tail_.load(std::memory_order_acquire)) return;  // full: drop, never block
-  ring_[head] = LiveSample{s.t_s, s.gate, s.i_A, s.x_m};
+  // ReferenceProfile::At is arithmetic on the profile's fixed data: no allocation, lock or I/O in the loop.
+  const double ref = reference_ != nullptr && reference_->has_reference() ? reference_->At(s.t_s).value
+                                                                          : std::numeric_limits<double>::quiet_NaN();
+  ring_[head] = LiveSample{s.t_s, s.gate, s.i_A, s.x_m, ref};
   head_.store(next, std::memory_order_release);
 }
 

@@ -23,12 +23,15 @@ struct LiveSample {
   int gate;
   double i_A;
   double x_m;
+  double ref;  // the reference of the controlled variable at t_s (NaN when the experiment has none)
 };
 
 // Every `decimation`-th sample into a fixed ring; the loop never blocks (a full ring drops the sample).
+// `reference` (may be null; must outlive the tap) gives each sample its reference value.
 class LiveTap final : public hw::SampleSink {
  public:
-  explicit LiveTap(int decimation) : decimation_(decimation > 0 ? decimation : 1) {}
+  explicit LiveTap(int decimation, const experiment::ReferenceProfile* reference = nullptr)
+      : reference_(reference), decimation_(decimation > 0 ? decimation : 1) {}
   void OnSample(const hw::BenchSample& s) override;
   // Consumer side; one consumer at a time (the Registry holds its mutex).
   size_t Drain(std::vector<LiveSample>* out);
@@ -41,8 +44,28 @@ class LiveTap final : public hw::SampleSink {
   std::array<LiveSample, kCapacity> ring_{};
   std::atomic<size_t> head_{0}, tail_{0};
   std::atomic<double> last_t_s_{0.0};
+  const experiment::ReferenceProfile* reference_;
   int decimation_;
   int count_ = 0;
+};
+
+// WatchRun's sample_rate_Hz (proto/valvebench/v1/api.proto): keeps at most rate_Hz samples per second of run
+// time from the live stream (which the tap already thins to ~1 kHz); rate_Hz <= 0 keeps none.
+class SampleThinner {
+ public:
+  explicit SampleThinner(double rate_Hz) : period_s_(rate_Hz > 0 ? 1.0 / rate_Hz : -1.0) {}
+  bool Keep(double t_s) {
+    if (period_s_ < 0) return false;
+    if (t_s + 1e-12 < next_t_s_) return false;
+    // The next kept sample is one period after this one (not after the last due instant: a gap in the stream
+    // does not cause a burst afterwards).
+    next_t_s_ = t_s + period_s_;
+    return true;
+  }
+
+ private:
+  double period_s_;
+  double next_t_s_ = -1e300;
 };
 
 class Registry {

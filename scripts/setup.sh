@@ -18,6 +18,8 @@ packages=(
   libusb-1.0-0-dev libhidapi-dev
   # storage, CLI, JSON
   libsqlite3-dev sqlite3 libcli11-dev nlohmann-json3-dev openssl
+  # compressed trace chunks (docs/store.md, "Trace encoding")
+  libzstd-dev
   # text formatting ({fmt}) and the server's log (spdlog)
   libfmt-dev libspdlog-dev
   # tests and benchmarks

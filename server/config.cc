@@ -156,6 +156,7 @@ runs::Policy Settings::AdmitPolicy() const {
   p.limits.max_queued_runs_per_user = limits.max_queued_runs_per_user();
   p.limits.max_runs_per_submission = limits.max_runs_per_submission();
   p.limits.max_trace_bytes_per_run = limits.max_trace_mb_per_run() * 1e6;
+  if (limits.max_disk_mb_per_user() > 0.0) p.limits.max_disk_bytes_per_user = limits.max_disk_mb_per_user() * 1e6;
   p.benches = benches;
   return p;
 }
@@ -226,6 +227,8 @@ StatusOr<Settings> SettingsFromConfig(const valvebench::v1::ServerConfig& c, con
   if (s.limits.max_trace_mb_per_run() == 0.0) s.limits.set_max_trace_mb_per_run(512.0);
   if (!(s.limits.max_trace_mb_per_run() > 0.0) || !std::isfinite(s.limits.max_trace_mb_per_run()))
     return Status::InvalidArgument("limits.max_trace_MB_per_run: must be > 0");
+  if (!(s.limits.max_disk_mb_per_user() >= 0.0) || !std::isfinite(s.limits.max_disk_mb_per_user()))
+    return Status::InvalidArgument("limits.max_disk_MB_per_user: must be >= 0 (0 = no limit)");
   auto nights = NightsFromConfig(c.nights(), base_dir);
   if (!nights.ok()) return nights.status();
   s.nights = std::move(*nights);

@@ -99,6 +99,10 @@ int main(int argc, char** argv) {
     spdlog::error("cannot listen on {}", settings->listen_address.c_str());
     return 3;
   }
+  // Health by service name (grpc.health.v1 Check with service "valvebench.v1.BenchService") answers SERVING, not
+  // NOT_FOUND (issue 14); the overall status ("") is SERVING by default.
+  server->GetHealthCheckService()->SetServingStatus(valvebench::v1::BenchService::service_full_name(), true);
+
   for (auto& w : workers) w->Start(settings->database_path);
   std::unique_ptr<vb::server::NightScheduler> nights;
   if (settings->nights.enabled) {

@@ -140,6 +140,9 @@ grpc::Status BenchServiceImpl::ListRuns(grpc::ServerContext* ctx, const v1::List
   if (auto st = Authorize(ctx, Role::kViewer, &who); !st.ok()) return st;
   db::RunFilter f;
   f.status = api::FromProto(req->status());
+  // An unknown value (a newer client, a typo through a raw API) must not read as "any status" (issue 14).
+  if (req->status() != v1::RUN_STATUS_UNSPECIFIED && !f.status.has_value())
+    return ToGrpcStatus(Status::InvalidArgument("status: unknown run status " + std::to_string(req->status())));
   f.tag = req->tag();
   f.batch_id = req->batch_id();
   f.controller = req->controller();
@@ -197,6 +200,9 @@ grpc::Status BenchServiceImpl::WatchRun(grpc::ServerContext* ctx, const v1::Watc
                                         grpc::ServerWriter<v1::RunEvent>* writer) {
   Principal who;
   if (auto st = Authorize(ctx, Role::kViewer, &who); !st.ok()) return st;
+  if (!std::isfinite(req->sample_rate_hz()))
+    return ToGrpcStatus(Status::InvalidArgument("sample_rate_Hz: must be finite (0 = no live samples)"));
+  runs::SampleThinner thinner(req->sample_rate_hz());
   auto store = pool_->Acquire();
   if (!store.ok()) return ToGrpcStatus(store.status());
   std::uint64_t seq = 0;
@@ -226,15 +232,17 @@ grpc::Status BenchServiceImpl::WatchRun(grpc::ServerContext* ctx, const v1::Watc
     double progress = r->status == db::RunStatus::kDone ? 1.0 : r->progress;
     if (r->status == db::RunStatus::kRunning) {
       registry_->Progress(r->id, &progress);
-      if (req->sample_rate_hz() >= 0.0) {
+      if (req->sample_rate_hz() > 0.0) {  // 0 (or less): no live samples (proto: "0 = none")
         std::vector<runs::LiveSample> samples;
         registry_->SamplesSince(r->id, &seq, &samples);
         for (const auto& s : samples) {
+          if (!thinner.Keep(s.t_s)) continue;
           auto* ls = ev.add_samples();
           ls->set_t_s(s.t_s);
           ls->set_gate(s.gate);
           ls->set_i_a(s.i_A);
           ls->set_x_m(s.x_m);
+          ls->set_ref(s.ref);
         }
       }
     }
@@ -297,6 +305,12 @@ grpc::Status BenchServiceImpl::CompareRuns(grpc::ServerContext* ctx, const v1::C
   if (auto st = Authorize(ctx, Role::kViewer, &who); !st.ok()) return st;
   if ((req->batch_id() == 0) == (req->run_ids_size() == 0))
     return ToGrpcStatus(Status::InvalidArgument("batch_id, run_ids: give a batch or a list of runs"));
+  // A comparison is a table for people; 100 k ids cost the server ~1 s and 125 MB (issue 14). A batch is
+  // bounded by limits.max_runs_per_submission already.
+  constexpr int kMaxCompareRuns = 1000;
+  if (req->run_ids_size() > kMaxCompareRuns)
+    return ToGrpcStatus(Status::InvalidArgument("run_ids: at most " + std::to_string(kMaxCompareRuns) +
+                                                " runs per comparison, got " + std::to_string(req->run_ids_size())));
   auto store = pool_->Acquire();
   if (!store.ok()) return ToGrpcStatus(store.status());
   auto runs = req->batch_id() != 0

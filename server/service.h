@@ -70,6 +70,9 @@ class BenchServiceImpl final : public valvebench::v1::BenchService::Service {
   // server/nights_service.cc
   grpc::Status ListNights(grpc::ServerContext* ctx, const valvebench::v1::ListNightsRequest* req,
                           valvebench::v1::ListNightsResponse* resp) override;
+  // server/prune_service.cc
+  grpc::Status PruneRuns(grpc::ServerContext* ctx, const valvebench::v1::PruneRunsRequest* req,
+                         valvebench::v1::PruneRunsResponse* resp) override;
 
   // Admits and queues a submission (runs::Admit, runs::Enqueue) and wakes the workers: what SubmitRun and
   // SubmitBatch do after authorising, and what the nights scheduler calls directly.

@@ -178,7 +178,7 @@ TEST(StoreSchemaTest, NewDatabaseIsAtTheCurrentVersionInWalMode) {
     auto store = OpenOrDie(path);
     ASSERT_NE(store, nullptr);
     EXPECT_EQ(store->schema_version(), schema::CurrentVersion());
-    EXPECT_EQ(schema::CurrentVersion(), 3);  // v2: baselines and regressions; v3: run keys as fields
+    EXPECT_EQ(schema::CurrentVersion(), 4);  // v2: baselines and regressions; v3: run keys as fields; v4: codecs
   }
   RawDb raw(path);
   EXPECT_EQ(raw.Int("PRAGMA user_version"), schema::CurrentVersion());
@@ -300,7 +300,7 @@ TEST(StoreSchemaTest, Version3FillsRunKeysOfOlderDatabasesFromTheirTags) {
   }
   auto store = OpenOrDie(path);
   ASSERT_NE(store, nullptr);
-  EXPECT_EQ(store->schema_version(), 3);
+  EXPECT_EQ(store->schema_version(), schema::CurrentVersion());
   auto a = store->GetRun(1);
   ASSERT_TRUE(a.ok()) << a.status().ToString();
   EXPECT_EQ(a->key, (RunKey{"m/pi", {{"conditions.supply_V", 24.0}, {"x", 0.5}}, 3}));
@@ -977,7 +977,13 @@ TEST(StoreCrashTest, SigkilledWriterLosesNothingCommitted) {
   // Every batch is whole (two runs) and every stored trace chunk is intact: no half transaction survived.
   RawDb raw(path);
   EXPECT_EQ(raw.Int("SELECT count(*) FROM (SELECT batch_id FROM runs GROUP BY batch_id HAVING count(*) != 2)"), 0);
-  EXPECT_EQ(raw.Int("SELECT count(*) FROM trace_chunks WHERE length(data) != 8 * 3 * 2000"), 0);
+  EXPECT_EQ(raw.Int("SELECT count(*) FROM trace_chunks WHERE samples != 2000"), 0);
+  const std::vector<double> written = MakeChunk(0, 2000, {"a", "b", "c"}, 7).data;
+  for (std::int64_t id : reported) {
+    auto trace = store->ReadTrace(id + 1);  // each batch's second run carries the trace
+    ASSERT_TRUE(trace.ok()) << trace.status().ToString();
+    for (const TraceChunk& c : *trace) EXPECT_EQ(c.data, written) << "run " << id + 1;
+  }
   EXPECT_EQ(*store->RecoverAfterCrash(), 1);
 }
 
@@ -1186,28 +1192,34 @@ TEST(StoreTraceTest, RoundTripIsBitExact) {
   }
 }
 
-TEST(StoreTraceTest, BlobIsLittleEndianChannelMajorFloat64) {
+TEST(StoreTraceTest, Codec0BlobIsLittleEndianChannelMajorFloat64) {
+  // Chunks written before schema v4 hold raw float64 (codec 0): the store reads that layout, byte for byte.
   const std::string path = TempDb("trace_layout");
   std::int64_t id = 0;
   {
     auto store = OpenOrDie(path);
     id = Submit(*store, {MakeRun("a")})[0];
-    TraceChunk c;
-    c.index = 0;
-    c.sample_period_s = 1e-3;
-    c.samples = 2;
-    c.channels = {"a", "b"};
-    c.data = {1.0, 2.0, -1.0, 0.5};  // a: 1, 2; b: -1, 0.5
-    ASSERT_TRUE(store->AppendTraceChunk(id, c).ok());
   }
+  {
+    RawDb raw(path);
+    // 1.0 = 0x3FF0000000000000, little-endian: 00 00 00 00 00 00 F0 3F. a: 1, 2; b: -1, 0.5
+    raw.Exec(Cat("INSERT INTO trace_chunks (run_id, idx, t0, period, samples, channels, data, codec) VALUES (", id,
+                 ", 0, 0.0, 0.001, 2, 'a' || char(10) || 'b', X'000000000000F03F0000000000000040000000000000F0BF"
+                 "000000000000E03F', 0)"));
+  }
+  auto store = OpenOrDie(path);
+  auto back = store->ReadTrace(id);
+  ASSERT_TRUE(back.ok()) << back.status().ToString();
+  ASSERT_EQ(back->size(), 1u);
+  EXPECT_EQ((*back)[0].channels, (std::vector<std::string>{"a", "b"}));
+  EXPECT_EQ((*back)[0].data, (std::vector<double>{1.0, 2.0, -1.0, 0.5}));
+  // What the store writes now is codec 1, channels joined by a newline.
+  TraceChunk c = (*back)[0];
+  c.index = 1;
+  ASSERT_TRUE(store->AppendTraceChunk(id, c).ok());
   RawDb raw(path);
-  // 1.0 = 0x3FF0000000000000, little-endian: 00 00 00 00 00 00 F0 3F.
-  EXPECT_EQ(raw.Text(Cat("SELECT hex(data) FROM trace_chunks WHERE run_id = ", id)),
-            "000000000000F03F"
-            "0000000000000040"
-            "000000000000F0BF"
-            "000000000000E03F");
-  EXPECT_EQ(raw.Text("SELECT channels FROM trace_chunks"), "a\nb");
+  EXPECT_EQ(raw.Int(Cat("SELECT codec FROM trace_chunks WHERE run_id = ", id, " AND idx = 1")), 1);
+  EXPECT_EQ(raw.Text("SELECT channels FROM trace_chunks WHERE idx = 1"), "a\nb");
 }
 
 TEST(StoreTraceTest, BadChunksAreRejectedAndStoredOnesKept) {

@@ -1,10 +1,16 @@
 // runs/: Admit and Execute, the one pipeline behind the server, the nights and benchctl's local mode.
 #include <gtest/gtest.h>
 
+#include <bit>
+#include <chrono>
 #include <cmath>
+#include <thread>
 
+#include "common/format.h"
 #include "db/store.h"
+#include "hw/emulated_bench.h"
 #include "runs/admit.h"
+#include "runs/monitor.h"
 #include "runs/worker.h"
 
 namespace vb::runs {
@@ -191,6 +197,168 @@ TEST(Registry, ProgressFollowsTheSamplesBetweenTicks) {
   monitor.t_s.store(1.5);
   ASSERT_TRUE(registry.Progress(7, &progress));
   EXPECT_DOUBLE_EQ(progress, 0.75);
+// The live stream carries the reference (issue 14: LiveSample.ref was always 0): a PI current law on the
+// seed-001 profile, 0.9 A for 6 ms then 0.5 A.
+TEST(LiveTap, SamplesCarryTheReferenceOfTheControlledVariable) {
+  auto spec = experiment::LoadSpecFile(Example("compare-current-controllers.json"));
+  ASSERT_TRUE(spec.ok()) << spec.status().ToString();
+  spec->clear_variants();
+  spec->set_duration_s(0.02);
+  spec->clear_metric_window();
+  auto e = experiment::BuildExperiment(*spec);
+  ASSERT_TRUE(e.ok()) << e.status().ToString();
+  hw::EmulatedBench bench(experiment::EmulatedBenchFor(*e));
+  LiveTap tap(50, &e->reference);
+  experiment::Trace trace;
+  experiment::RunMonitor monitor;
+  ASSERT_TRUE(experiment::Runner::Run(*e, bench, &trace, &monitor, &tap).ok());
+  std::vector<LiveSample> got;
+  tap.Drain(&got);
+  ASSERT_GT(got.size(), 10u);
+  for (const LiveSample& s : got) EXPECT_EQ(s.ref, s.t_s < 0.006 ? 0.9 : 0.5) << "t = " << s.t_s;
+  // Without a profile (an open-loop run), NaN: "no reference", not a reference of 0.
+  LiveTap open(50, nullptr);
+  hw::BenchSample b{};
+  b.t_s = 0.1;
+  for (int k = 0; k < 50; ++k) open.OnSample(b);
+  got.clear();
+  open.Drain(&got);
+  ASSERT_EQ(got.size(), 1u);
+  EXPECT_TRUE(std::isnan(got[0].ref));
+}
+
+// WatchRun's sample_rate_Hz (issue 14: 0 and 10 Hz both streamed 1 kHz).
+TEST(SampleThinner, KeepsAtMostTheRequestedRateAndNoneForZero) {
+  auto kept = [](double rate_Hz) {
+    SampleThinner thin(rate_Hz);
+    int n = 0;
+    for (int k = 0; k < 2000; ++k) n += thin.Keep(k * 1e-3);  // 2 s of a 1 kHz stream
+    return n;
+  };
+  EXPECT_EQ(kept(0.0), 0);
+  EXPECT_EQ(kept(-1.0), 0);
+  EXPECT_EQ(kept(10.0), 20);
+  EXPECT_EQ(kept(1000.0), 2000);
+  EXPECT_EQ(kept(1e6), 2000);  // never more than the stream has
+  EXPECT_EQ(kept(3.0), 6);
+}
+
+// A run cancelled half-way keeps the progress it reached (issue 14: every cancelled run read 0 %).
+TEST(Execute, ACancelledRunKeepsTheProgressItReached) {
+  auto store = db::Store::Open(":memory:");
+  ASSERT_TRUE(store.ok());
+  Policy local;
+  local.benches = {LocalEmulatorSetup()};
+  auto spec = E3();
+  spec.set_duration_s(1.0);
+  spec.set_realtime(true);  // paced: 1 s of wall time, so the cancel lands mid-run
+  auto a = Admit({"me", "b", {spec}, {}, ""}, local);
+  ASSERT_TRUE(a.ok()) << a.status().ToString();
+  auto q = Enqueue(store->get(), std::move(*a), local);
+  ASSERT_TRUE(q.ok()) << q.status().ToString();
+  const std::int64_t id = q->run_ids[0];
+  Registry registry;
+  Worker worker(LocalEmulatorSetup(), &registry);
+  std::thread canceller([&] {
+    double progress = 0.0;
+    const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(5);
+    while ((!registry.Progress(id, &progress) || progress < 0.2) && std::chrono::steady_clock::now() < until)
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    registry.Cancel(id);
+  });
+  auto o = worker.ClaimAndExecute(store->get());
+  canceller.join();
+  ASSERT_TRUE(o.ok() && o->has_value());
+  EXPECT_EQ((*o)->status, db::RunStatus::kCancelled);
+  auto r = (*store)->GetRun(id);
+  ASSERT_TRUE(r.ok());
+  EXPECT_EQ(r->status, db::RunStatus::kCancelled);
+  EXPECT_GE(r->progress, 0.2);
+  EXPECT_LT(r->progress, 0.9);
+  EXPECT_NEAR(r->progress, (*o)->summary.duration_s / 1.0, 1e-9);
+}
+
+// Per-user disk budget (issue 14 item 1): what the user's traces take, plus the new runs' traces counted
+// uncompressed, must fit; the refusal names the limit and what to do.
+TEST(Enqueue, APerUserDiskBudgetCountsStoredTracesAndTheNewRunsUncompressed) {
+  auto store = db::Store::Open(":memory:");
+  ASSERT_TRUE(store.ok());
+  Policy p = ServerPolicy();
+  auto spec = E3();  // 0.1 s at 50 kHz: 5 002 samples x 12 x 8 B = 480 kB uncompressed
+  auto a = Admit({"alice", "first", {spec}, {}, ""}, p);
+  ASSERT_TRUE(a.ok()) << a.status().ToString();
+  EXPECT_EQ(a->trace_bytes_raw, 5002.0 * 12 * 8);  // the samples the Runner reserves
+  p.limits.max_disk_bytes_per_user = 1e6;  // 1 MB
+  auto q = Enqueue(store->get(), *a, p);
+  ASSERT_TRUE(q.ok()) << q.status().ToString();
+  // The run stores 700 kB of (incompressible) trace: alice's next 480 kB no longer fit, bob's do.
+  db::TraceChunk c;
+  c.sample_period_s = 1e-5;
+  c.samples = 45000;  // 2 x 45 000 random doubles: 720 kB, incompressible
+  c.channels = {"noise", "noise2"};
+  std::uint64_t x = 88172645463325252ULL;
+  for (int k = 0; k < 2 * c.samples; ++k) {
+    x ^= x << 13, x ^= x >> 7, x ^= x << 17;
+    c.data.push_back(std::bit_cast<double>(x & 0x7fefffffffffffffULL));
+  }
+  ASSERT_TRUE((*store)->AppendTraceChunk(q->run_ids[0], c).ok());
+  auto used = (*store)->StoredTraceBytes("alice");
+  ASSERT_TRUE(used.ok());
+  EXPECT_GT(*used, 700000);
+  EXPECT_EQ(*(*store)->StoredTraceBytes("bob"), 0);
+  auto b = Admit({"alice", "second", {spec}, {}, ""}, p);
+  ASSERT_TRUE(b.ok());
+  auto refused = Enqueue(store->get(), *b, p);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_EQ(refused.status().code(), StatusCode::kResourceExhausted);
+  EXPECT_NE(refused.status().message().find("limits.max_disk_MB_per_user: user alice's stored traces take"),
+            std::string::npos)
+      << refused.status().message();
+  EXPECT_NE(refused.status().message().find("benchctl prune"), std::string::npos);
+  auto other = Admit({"bob", "first", {spec}, {}, ""}, p);
+  ASSERT_TRUE(other.ok());
+  EXPECT_TRUE(Enqueue(store->get(), *other, p).ok());
+}
+
+// A cancel that cuts a long bench step short (the interlocks split it and watch the cancel flag) states where
+// the bench got to, not the end of the step it was in (issue 14: "cancelled at t = 600 s" for a run stopped at
+// 420 s, and progress 100 %).
+TEST(Execute, ACancelInsideALongStepStatesTheTimeTheBenchReached) {
+  auto store = db::Store::Open(":memory:");
+  ASSERT_TRUE(store.ok());
+  BenchSetup bench = LocalEmulatorSetup();
+  bench.interlocks = true;  // as on a server bench
+  bench.safety.max_current_A = 100;
+  Policy local;
+  local.benches = {bench};
+  auto spec = experiment::LoadSpecFile(Example("standard/e1.json"));
+  ASSERT_TRUE(spec.ok());
+  spec->set_duration_s(600);  // open loop: one bench step to the end (no control ticks in between)
+  spec->mutable_recording()->set_rate_hz(1000);
+  auto a = Admit({"me", "b", {*spec}, {}, ""}, local);
+  ASSERT_TRUE(a.ok()) << a.status().ToString();
+  auto q = Enqueue(store->get(), std::move(*a), local);
+  ASSERT_TRUE(q.ok());
+  const std::int64_t id = q->run_ids[0];
+  Registry registry;
+  Worker worker(bench, &registry);
+  std::thread canceller([&] {
+    double progress = 0.0;
+    while (!registry.Progress(id, &progress)) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    std::this_thread::sleep_for(std::chrono::milliseconds(150));
+    registry.Cancel(id);
+  });
+  auto o = worker.ClaimAndExecute(store->get());
+  canceller.join();
+  ASSERT_TRUE(o.ok() && o->has_value());
+  ASSERT_EQ((*o)->status, db::RunStatus::kCancelled) << (*o)->reason;
+  const double reached = (*o)->trace.t_s.back();
+  EXPECT_LT(reached, 599.0) << "the cancel did not land inside the run";
+  auto r = (*store)->GetRun(id);
+  ASSERT_TRUE(r.ok());
+  EXPECT_NE(r->reason.find("cancelled at t = " + FormatNumber(reached) + " s of 600 s"), std::string::npos)
+      << r->reason;
+  EXPECT_NEAR(r->progress, reached / 600.0, 1e-9);
 }
 
 }  // namespace

@@ -1,0 +1,213 @@
+#include "benchctl/prune_command.h"
+
+#include <grpcpp/grpcpp.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <ctime>
+#include <fstream>
+#include <iostream>
+#include <sstream>
+
+#include <nlohmann/json.hpp>
+
+#include "benchctl/cli_common.h"
+#include "client/client.h"
+#include "db/store.h"
+#include "proto/api_convert.h"
+#include "valvebench/v1/api.grpc.pb.h"
+
+namespace vb::benchctl {
+namespace {
+
+namespace v1 = valvebench::v1;
+using Json = nlohmann::ordered_json;
+
+double NowUnixS() {
+  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+}
+
+std::string UtcTime(double unix_s) {
+  if (unix_s <= 0) return "-";
+  const std::time_t t = static_cast<std::time_t>(unix_s);
+  std::tm tm{};
+  gmtime_r(&t, &tm);
+  char buf[32];
+  std::strftime(buf, sizeof buf, "%Y-%m-%d %H:%M:%S UTC", &tm);
+  return buf;
+}
+
+std::string Bytes(std::int64_t b) {
+  char buf[32];
+  if (b >= 1'000'000'000) std::snprintf(buf, sizeof buf, "%.2f GB", b / 1e9);
+  else if (b >= 1'000'000) std::snprintf(buf, sizeof buf, "%.1f MB", b / 1e6);
+  else if (b >= 1'000) std::snprintf(buf, sizeof buf, "%.1f kB", b / 1e3);
+  else std::snprintf(buf, sizeof buf, "%lld B", static_cast<long long>(b));
+  return buf;
+}
+
+// What both backends return, in the store's terms.
+struct Outcome {
+  db::PruneResult result;
+  double cutoff_unix_s = 0;
+  bool dry_run = false;
+};
+
+StatusOr<Outcome> PruneLocal(const std::string& path, double age_s, std::int32_t keep_last, bool dry_run) {
+  if (path.empty()) return Status::InvalidArgument("--no-store: prune needs the local store (--db FILE)");
+  // Pruning a store that is not there would create an empty one: say so instead.
+  if (access(path.c_str(), F_OK) != 0)
+    return Status::FailedPrecondition("no local store at " + path + " (--db FILE or VALVEBENCH_DB)");
+  auto store = db::Store::Open(path);
+  if (!store.ok()) return store.status().WithContext("local store " + path);
+  db::PruneRequest req;
+  req.finished_before_unix_s = NowUnixS() - age_s;
+  req.keep_last = keep_last;
+  req.dry_run = dry_run;
+  auto r = (*store)->Prune(req);
+  if (!r.ok()) return r.status();
+  return Outcome{std::move(*r), req.finished_before_unix_s, dry_run};
+}
+
+db::PruneDecision FromProto(const v1::PruneDecision& d) {
+  db::PruneDecision out;
+  out.run_id = d.run_id();
+  out.batch_id = d.batch_id();
+  out.name = d.name();
+  out.status = api::FromProto(d.status()).value_or(RunStatus::kFailed);
+  out.finished_unix_s = d.finished_unix_s();
+  out.why = d.why();
+  return out;
+}
+
+StatusOr<Outcome> PruneRemote(const SharedOptions& o, double age_s, std::int32_t keep_last, bool dry_run) {
+  std::shared_ptr<grpc::ChannelCredentials> creds = grpc::InsecureChannelCredentials();
+  if (!o.tls_ca_file->empty()) {
+    std::ifstream in(*o.tls_ca_file);
+    if (!in) return Status::InvalidArgument("--tls-ca: cannot read " + *o.tls_ca_file);
+    std::stringstream ss;
+    ss << in.rdbuf();
+    grpc::SslCredentialsOptions ssl;
+    ssl.pem_root_certs = ss.str();
+    creds = grpc::SslCredentials(ssl);
+  }
+  auto stub = v1::BenchService::NewStub(grpc::CreateChannel(*o.server, creds));
+  grpc::ClientContext ctx;
+  ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::minutes(10));  // a large delete takes a while
+  if (!o.token->empty()) ctx.AddMetadata("authorization", "Bearer " + *o.token);
+  v1::PruneRunsRequest req;
+  req.set_older_than_s(age_s);
+  req.set_keep_last(keep_last);
+  req.set_dry_run(dry_run);
+  v1::PruneRunsResponse resp;
+  const grpc::Status st = stub->PruneRuns(&ctx, req, &resp);
+  if (!st.ok()) return client::FromGrpc(st).WithContext("server " + *o.server);
+  Outcome out;
+  for (const auto& d : resp.deleted()) out.result.deleted.push_back(FromProto(d));
+  for (const auto& d : resp.kept()) out.result.kept.push_back(FromProto(d));
+  out.result.newer_kept = resp.newer_kept();
+  out.result.trace_bytes = resp.trace_bytes();
+  out.result.batches_deleted = resp.batches_deleted();
+  out.cutoff_unix_s = resp.cutoff_unix_s();
+  out.dry_run = resp.dry_run();
+  return out;
+}
+
+Json ToJson(const db::PruneDecision& d) {
+  return Json{{"run_id", d.run_id},   {"batch_id", d.batch_id},
+              {"name", d.name},       {"status", RunStatusName(d.status)},
+              {"finished_unix_s", d.finished_unix_s}, {"why", d.why}};
+}
+
+void Print(const Outcome& o, const std::string& where, bool json) {
+  const db::PruneResult& r = o.result;
+  if (json) {
+    Json j{{"where", where}, {"dry_run", o.dry_run}, {"cutoff_unix_s", o.cutoff_unix_s}};
+    Json del = Json::array(), kept = Json::array();
+    for (const auto& d : r.deleted) del.push_back(ToJson(d));
+    for (const auto& d : r.kept) kept.push_back(ToJson(d));
+    j["deleted"] = del;
+    j["kept"] = kept;
+    j["newer_kept"] = r.newer_kept;
+    j["trace_bytes"] = r.trace_bytes;
+    j["batches_deleted"] = r.batches_deleted;
+    std::cout << j.dump(2) << "\n";
+    return;
+  }
+  std::printf("prune %s%s: finished runs that ended before %s\n", where.c_str(), o.dry_run ? " (dry run)" : "",
+              UtcTime(o.cutoff_unix_s).c_str());
+  std::printf("%s %zu run(s), %s of traces, %lld batch(es) left empty\n", o.dry_run ? "would delete" : "deleted",
+              r.deleted.size(), Bytes(r.trace_bytes).c_str(), static_cast<long long>(r.batches_deleted));
+  auto line = [](const db::PruneDecision& d) {
+    std::printf("  run %-6lld batch %-5lld %-9s %-20s %s\n      %s\n", static_cast<long long>(d.run_id),
+                static_cast<long long>(d.batch_id), RunStatusName(d.status), UtcTime(d.finished_unix_s).c_str(),
+                d.name.c_str(), d.why.c_str());
+  };
+  for (const auto& d : r.deleted) line(d);
+  std::printf("kept %zu run(s) that are old or unfinished:\n", r.kept.size());
+  for (const auto& d : r.kept) line(d);
+  std::printf("kept %lld newer finished run(s)\n", static_cast<long long>(r.newer_kept));
+}
+
+}  // namespace
+
+StatusOr<double> ParseAge(const std::string& text) {
+  const auto bad = [&] {
+    return Status::InvalidArgument("--older-than: '" + text +
+                                   "' is not an age; give a number and a unit: 30d, 12h, 90m, 3600s, 2w");
+  };
+  if (text.size() < 2) return bad();
+  const char unit = text.back();
+  double scale = 0;
+  switch (unit) {
+    case 's': scale = 1; break;
+    case 'm': scale = 60; break;
+    case 'h': scale = 3600; break;
+    case 'd': scale = 86400; break;
+    case 'w': scale = 7 * 86400; break;
+    default: return bad();
+  }
+  const std::string number = text.substr(0, text.size() - 1);
+  std::size_t used = 0;
+  double v = 0;
+  try {
+    v = std::stod(number, &used);
+  } catch (const std::exception&) {
+    return bad();
+  }
+  if (used != number.size() || !std::isfinite(v)) return bad();
+  if (v <= 0) return Status::InvalidArgument("--older-than: must be > 0, got '" + text + "'");
+  const double s = v * scale;
+  if (s > 200.0 * 365.25 * 86400) return Status::InvalidArgument("--older-than: '" + text + "' reaches before 1970");
+  return s;
+}
+
+PruneCli::PruneCli(CLI::App* app, SharedOptions shared) : shared_(shared) {
+  cmd_ = app->add_subcommand("prune", "delete old finished runs and their traces (never baselines' or nights' runs, "
+                                      "never queued or running runs)");
+  cmd_->add_option("--older-than", older_than_, "age of the runs to delete: 30d, 12h, 90m, 3600s, 2w")->required();
+  cmd_->add_option("--keep-last", keep_last_, "always keep the newest N finished runs (default 0)");
+  cmd_->add_flag("--dry-run", dry_run_, "say what would be deleted and kept; delete nothing");
+  cmd_->add_flag("--local", local_, "prune the local store (default when no server is given)");
+  cmd_->add_option("--db", *shared_.store_path, "local store (default $VALVEBENCH_DB or ~/.local/share/valvebench/local.db)");
+  cmd_->add_flag("--json", *shared_.json, "machine-readable output on stdout");
+  cmd_->add_option("--server", *shared_.server, "bench server address host:port (or VALVEBENCH_SERVER); admin token");
+  cmd_->add_option("--token", *shared_.token, "bearer token (or VALVEBENCH_TOKEN)");
+  cmd_->add_option("--tls-ca", *shared_.tls_ca_file, "PEM file of the CA that signed the server's certificate");
+}
+
+int PruneCli::Run() {
+  auto age = ParseAge(older_than_);
+  if (!age.ok()) return Fail(age.status());
+  if (keep_last_ < 0) return Fail(Status::InvalidArgument("--keep-last: must be >= 0"));
+  const bool local = local_ || shared_.server->empty();
+  auto out = local ? PruneLocal(*shared_.store_path, *age, keep_last_, dry_run_)
+                   : PruneRemote(shared_, *age, keep_last_, dry_run_);
+  if (!out.ok()) return Fail(out.status());
+  Print(*out, local ? "local store " + *shared_.store_path : "server " + *shared_.server, *shared_.json);
+  return kExitOk;
+}
+
+}  // namespace vb::benchctl
