@@ -197,6 +197,8 @@ TEST(Registry, ProgressFollowsTheSamplesBetweenTicks) {
   monitor.t_s.store(1.5);
   ASSERT_TRUE(registry.Progress(7, &progress));
   EXPECT_DOUBLE_EQ(progress, 0.75);
+}
+
 // The live stream carries the reference (issue 14: LiveSample.ref was always 0): a PI current law on the
 // seed-001 profile, 0.9 A for 6 ms then 0.5 A.
 TEST(LiveTap, SamplesCarryTheReferenceOfTheControlledVariable) {
