@@ -33,6 +33,31 @@ nlohmann::ordered_json RowJson(const CandidateResult& r) {
   return row;
 }
 
+// Words (split further at spaces) on lines of at most `width` columns, each indented by `indent` (the first by
+// `first`, when given: a hanging indent).
+std::string Wrap(const std::vector<std::string>& items, std::size_t indent, std::size_t width = 120,
+                 std::size_t first = std::string::npos) {
+  std::string out, line;
+  auto pad = [&]() { return out.empty() && first != std::string::npos ? first : indent; };
+  for (const auto& item : items) {
+    std::istringstream in(item);
+    std::string word;
+    bool first = true;
+    while (in >> word) {
+      const std::string piece = (first && !line.empty() ? "  " : line.empty() ? "" : " ") + word;
+      if (!line.empty() && pad() + line.size() + piece.size() > width) {
+        out += std::string(pad(), ' ') + line + "\n";
+        line = word;
+      } else {
+        line += piece;
+      }
+      first = false;
+    }
+  }
+  if (!line.empty()) out += std::string(pad(), ' ') + line + "\n";
+  return out;
+}
+
 nlohmann::ordered_json NumOrNull(double v) { return std::isfinite(v) ? nlohmann::ordered_json(v) : nlohmann::ordered_json(nullptr); }
 
 }  // namespace
@@ -177,25 +202,26 @@ std::string DiagnosisReport(const Diagnosis& d) {
   }
   if (!d.ranking.empty()) {
     os << "which (fitted on the fit runs, scored on the holdout runs):\n";
-    os << "  rank  candidate                               holdout before -> after   closed  signature  fitted\n";
+    // One row per candidate within 120 columns; its fitted values (and why it may not be the verdict) follow,
+    // wrapped, on indented lines.
+    os << "  rank  candidate                                     holdout before -> after [mA]  closed  signature\n";
     for (std::size_t k = 0; k < d.ranking.size(); ++k) {
       const auto& r = d.ranking[k];
-      std::string params;
-      for (const auto& [name, v] : r.params) {
-        char pb[96];
-        auto u = r.uncertainty.find(name);
-        if (u != r.uncertainty.end())
-          std::snprintf(pb, sizeof pb, "%s%s=%.4g+-%.2g", params.empty() ? "" : " ", name.c_str(), v, u->second);
-        else
-          std::snprintf(pb, sizeof pb, "%s%s=%.4g", params.empty() ? "" : " ", name.c_str(), v);
-        params += pb;
+      os << fmt::format("  {:>4}  {:<44}  {:>7.2f} -> {:>7.2f}       {:>4.0f} %  {:>9.2f}\n", k + 1, r.name,
+                        r.holdout_rmse_before_A * 1e3, r.holdout_rmse_after_A * 1e3, 100.0 * r.closed,
+                        r.signature_match);
+      std::vector<std::string> words;
+      if (!r.status.ok()) {
+        words.push_back("failed: " + r.status.message());
+      } else {
+        for (const auto& [name, v] : r.params) {
+          auto u = r.uncertainty.find(name);
+          words.push_back(u != r.uncertainty.end() ? fmt::format("{}={:.4g}+-{:.2g}", name, v, u->second)
+                                                   : fmt::format("{}={:.4g}", name, v));
+        }
       }
-      if (!r.status.ok()) params = "failed: " + r.status.message();
-      if (!r.disqualified.empty()) params += "  [not the verdict: " + r.disqualified + "]";
-      std::snprintf(buf, sizeof buf, "  %4zu  %-38s %7.2f -> %7.2f mA  %5.0f %%  %8.2f  %s\n", k + 1, r.name.c_str(),
-                    r.holdout_rmse_before_A * 1e3, r.holdout_rmse_after_A * 1e3, 100.0 * r.closed, r.signature_match,
-                    params.c_str());
-      os << buf;
+      os << Wrap(words, 8);
+      if (!r.disqualified.empty()) os << Wrap({"not the verdict: " + r.disqualified}, 8);
     }
     if (d.parametric >= 0) {
       const auto& p = d.ranking[static_cast<std::size_t>(d.parametric)];
@@ -234,13 +260,14 @@ std::string DiagnosisReport(const Diagnosis& d) {
          << "\n";
     }
   }
-  os << "verdict: " << d.verdict << (d.verdict_reason.empty() ? "" : " (" + d.verdict_reason + ")") << "\n";
+  os << Wrap({"verdict: " + d.verdict + (d.verdict_reason.empty() ? "" : " (" + d.verdict_reason + ")")}, 2, 120, 0);
   for (const auto& n : d.nuisance)
-    os << fmt::format("nuisance drift beside it: {} = {:.4g} ({:+.1f} % from nominal); the verdict alone leaves "
-                      "{:.2f} mA on the holdout runs, with the drift {:.2f} mA\n",
-                      n.param, n.value, 100.0 * (n.value / n.nominal - 1.0), d.verdict_alone_holdout_A * 1e3,
-                      d.ranking.front().holdout_rmse_after_A * 1e3);
-  for (const auto& w : d.warnings) os << "warning: " << w << "\n";
+    os << Wrap({fmt::format("nuisance drift beside it: {} = {:.4g} ({:+.1f} % from nominal); the verdict alone leaves "
+                            "{:.2f} mA on the holdout runs, with the drift {:.2f} mA",
+                            n.param, n.value, 100.0 * (n.value / n.nominal - 1.0), d.verdict_alone_holdout_A * 1e3,
+                            d.ranking.front().holdout_rmse_after_A * 1e3)},
+               2, 120, 0);
+  for (const auto& w : d.warnings) os << Wrap({"warning: " + w}, 2, 120, 0);
   return os.str();
 }
 
