@@ -153,6 +153,25 @@ StatusOr<std::vector<ReadingsSession>> ConvertReadingsCsv(const std::string& csv
   std::error_code ec;
   fs::create_directories(out_dir, ec);
   if (ec) return Status::Unavailable(out_dir + ": cannot create: " + ec.message());
+  // One directory per session. Two devices whose names differ only in characters a directory name cannot
+  // carry ("a b", "a_b") would write one session over the other: refused, naming both. One device at several
+  // supplies or amplifier gains gets them in its directory names.
+  std::map<std::string, std::vector<const SessionKey*>> by_dir;
+  for (const auto& entry : sessions) {
+    const auto& [device, supply_V, feedback_ohm, temp_C, stroke_mm] = entry.first;
+    by_dir[SafeName(device) + "_s" + Tag(stroke_mm) + "mm_" + Tag(temp_C) + "C"].push_back(&entry.first);
+  }
+  std::map<const SessionKey*, std::string> dir_of;
+  for (const auto& [name, keys] : by_dir) {
+    for (const SessionKey* k : keys)
+      if (std::get<0>(*k) != std::get<0>(*keys.front()))
+        return Status::InvalidArgument(display + ": column device: '" + std::get<0>(*keys.front()) + "' and '" +
+                                       std::get<0>(*k) + "' both become the directory " + name +
+                                       " (characters other than letters, digits, - and _ become _): rename one");
+    for (const SessionKey* k : keys)
+      dir_of[k] = keys.size() == 1 ? name
+                                   : name + "_" + Tag(std::get<1>(*k)) + "V_amp" + Tag(std::get<2>(*k)) + "ohm";
+  }
   std::vector<ReadingsSession> out;
   for (const auto& [key, runs] : sessions) {
     const auto& [device, supply_V, feedback_ohm, temp_C, stroke_mm] = key;
@@ -161,7 +180,7 @@ StatusOr<std::vector<ReadingsSession>> ConvertReadingsCsv(const std::string& csv
     s.supply_V = supply_V;
     s.temp_C = temp_C;
     s.stroke_m = stroke_mm * 1e-3;
-    s.directory = (fs::path(out_dir) / (SafeName(device) + "_s" + Tag(stroke_mm) + "mm_" + Tag(temp_C) + "C")).string();
+    s.directory = (fs::path(out_dir) / dir_of.at(&key)).string();
     nlohmann::json m;
     m["format"] = "valve-runs/2";
     m["model"] = opt.model;

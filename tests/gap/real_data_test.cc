@@ -413,6 +413,18 @@ TEST(ReadingsCsv, ErrorsNameTheLineAndTheColumn) {
   // converter wrote and LoadDataset then refused (|i_A| <= 1000 A).
   EXPECT_EQ(convert(header + "X,5,0,26,0,100,0.001,v0,0.0001,583000,0,10\n").status().message(),
             "r.csv:2: column v_mV_mean: 583000 mV is 2915 A through the shunt and amplifier, outside [-1000, 1000] A");
+  // Found by the fuzzing helper: two devices whose names differ only in characters a directory cannot carry
+  // wrote one session over the other.
+  EXPECT_EQ(convert(header + "a b,5,19400,26,0,100,0.001,v0,0.0001,91,0,10\na_b,5,19400,26,0,100,0.001,v0,0.0001,91,0,10\n")
+                .status()
+                .message(),
+            "r.csv: column device: 'a b' and 'a_b' both become the directory a_b_s0mm_26C (characters other than "
+            "letters, digits, - and _ become _): rename one");
+  // One device at two supplies: two sessions, two directories.
+  auto two = convert(header + "X,5,19400,26,0,100,0.001,v0,0.0001,91,0,10\nX,12,19400,26,0,100,0.001,v0,0.0001,91,0,10\n");
+  ASSERT_TRUE(two.ok()) << two.status().message();
+  ASSERT_EQ(two->size(), 2u);
+  EXPECT_NE(two->at(0).directory, two->at(1).directory);
   auto ok = convert(header + "X,5,19400,26,0,100,0.001,v0,0.0001,91,0,10\nX,5,19400,26,0,100,0.001,v1,0.0007,205.8,0.4216,10\n");
   ASSERT_TRUE(ok.ok()) << ok.status().message();
   ASSERT_EQ(ok->size(), 1u);
