@@ -87,9 +87,10 @@ class Driver {
   void OnCurrentZero() { state_.blocked = true; }
   void OnLevelCrossed() { state_.chopper_on = !state_.chopper_on; }
 
-  // The segment in force at t_s for a coil (terminal) current i_A, advancing the state machine: a current
-  // that is no longer positive in a freewheel path becomes blocked, the chopper starts after the boost.
-  // When the segment is blocked the caller holds the current at 0 (unless an eddy branch carries it).
+  // The segment in force at t_s for the coil current i_A (the simulator passes its magnetising current),
+  // advancing the state machine: a current that is no longer positive in a freewheel path becomes blocked,
+  // the chopper starts after the boost. When the segment is blocked the caller holds the current at 0 (unless
+  // an eddy branch carries it).
   DriveSegment Segment(double supply_V, double t_s, double i_A) { return Next(p_, gate_, supply_V, t_s, i_A, &state_); }
   // The same segment without changing the state (for const readers).
   DriveSegment PeekSegment(double supply_V, double t_s, double i_A) const {
