@@ -104,7 +104,8 @@ double BracketedRoot(F&& f, double a, double b, double fa, double fb, double abs
       boost::math::policies::domain_error<boost::math::policies::ignore_error>,
       boost::math::policies::evaluation_error<boost::math::policies::ignore_error>>;
   std::uintmax_t max_evaluations = 300;
-  const std::pair<double, double> r = boost::math::tools::toms748_solve(f, a, b, fa, fb, narrow, max_evaluations, NoThrow());
+  const std::pair<double, double> r =
+      boost::math::tools::toms748_solve(f, a, b, fa, fb, narrow, max_evaluations, NoThrow());
   return 0.5 * (r.first + r.second);
 }
 

@@ -84,7 +84,8 @@ struct Terminal {
 // v_source_V: the driver's voltage plus any series disturbance (read only when the segment is not blocked).
 // Without eddy currents the terminal current is the magnetising current. With a loss resistance R_p across the
 // magnetising inductance (one eddy branch) and the supply's R_s in series while the supply drives:
-//   v_source - R_s i = R i + v_L,  i = i_mag + v_L / R_p   =>   v_L = (v_source - (R + R_s) i_mag) / (1 + (R + R_s)/R_p)
+//   v_source - R_s i = R i + v_L,  i = i_mag + v_L / R_p
+//   =>  v_L = (v_source - (R + R_s) i_mag) / (1 + (R + R_s)/R_p)
 // and with the switch and the diode both off (blocked) the terminal current is 0 and i_mag decays through
 // R_p: v_L = -R_p i_mag.
 inline Terminal TerminalAt(const Plant& plant, const DriveSegment& seg, double v_source_V, double i_mag,

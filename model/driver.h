@@ -53,7 +53,7 @@ inline constexpr double kSameInstant_s = 1e-12;
 // on one segment.
 struct DriveSegment {
   double v0_V = 0.0;       // coil voltage at t_origin_s
-  double tau_s = 0.0;      // > 0: v = v0 exp(-(t - t_origin)/tau) (the internal electronics' reverse voltage); 0: constant
+  double tau_s = 0.0;      // > 0: v = v0 exp(-(t - t_origin)/tau) (internal electronics' reverse); 0: constant
   double t_origin_s = 0.0;
   double t_end_s = std::numeric_limits<double>::infinity();  // a time event of the driver (boost end)
   int clamp = 0;           // +1: conduction ends when i falls to 0; -1: when i rises to 0

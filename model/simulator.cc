@@ -147,7 +147,8 @@ void Simulator::Rhs(const Segment& seg, const State& y, State& dy, double t) con
   dy[5] = 0.0;
   dy[6] = fx.residual_w_A > 0.0 && play_ != Play::kInside ? dy[0] : 0.0;
   if (fx.heating)
-    dy[5] = (term.i_A * term.i_A * model::ResistanceAt(plant_, y[5]) - y[5] / fx.heating_R_th_K_per_W) / fx.heating_C_th_J_per_K;
+    dy[5] = (term.i_A * term.i_A * model::ResistanceAt(plant_, y[5]) - y[5] / fx.heating_R_th_K_per_W) /
+            fx.heating_C_th_J_per_K;
   if (frozen_) {
     dy[1] = 0.0;
     dy[2] = 0.0;
