@@ -2,11 +2,15 @@
 
 #include <fmt/format.h>
 
+#include <boost/math/policies/policy.hpp>
+#include <boost/math/tools/toms748_solve.hpp>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <limits>
 #include <string>
+#include <utility>
 
 namespace vb::control {
 namespace {
@@ -85,65 +89,24 @@ RlPwmSteadyStateResult Eval(const RlCoil& coil, double frequency_Hz, double duty
   return r;
 }
 
-// Brent's bracketed root finder (van Wijngaarden-Dekker-Brent, as in Numerical Recipes' zbrent). Requires
-// f(a) and f(b) of opposite signs (or one of them zero); every iterate stays inside the bracket. Stops when the
-// bracket is narrower than ~abs_tol + 4 eps |x|.
+// A bracketed root by Boost.Math's TOMS 748 solver (Alefeld, Potra, Shi, ACM TOMS 21 (1995), algorithm 748;
+// docs/decisions.md, "Bracketing solvers"). Requires f(a) and f(b) of opposite signs (or one of them zero); every
+// iterate stays inside the bracket. Narrows the bracket to abs_tol + 4 eps |x| and returns its midpoint.
 template <typename F>
-double BrentRoot(F&& f, double a, double b, double fa, double fb, double abs_tol) {
+double BracketedRoot(F&& f, double a, double b, double fa, double fb, double abs_tol) {
   if (fa == 0.0) return a;
   if (fb == 0.0) return b;
   constexpr double kEps = std::numeric_limits<double>::epsilon();
-  double c = b, fc = fb;
-  double d = b - a, e = d;
-  for (int iter = 0; iter < 300; ++iter) {
-    if ((fb > 0.0 && fc > 0.0) || (fb < 0.0 && fc < 0.0)) {
-      c = a;
-      fc = fa;
-      d = e = b - a;
-    }
-    if (std::fabs(fc) < std::fabs(fb)) {
-      a = b;
-      b = c;
-      c = a;
-      fa = fb;
-      fb = fc;
-      fc = fa;
-    }
-    const double tol1 = 2.0 * kEps * std::fabs(b) + 0.5 * abs_tol;
-    const double xm = 0.5 * (c - b);
-    if (std::fabs(xm) <= tol1 || fb == 0.0) return b;
-    if (std::fabs(e) >= tol1 && std::fabs(fa) > std::fabs(fb)) {
-      const double s = fb / fa;
-      double p, q;
-      if (a == c) {  // secant
-        p = 2.0 * xm * s;
-        q = 1.0 - s;
-      } else {  // inverse quadratic interpolation
-        const double qq = fa / fc, r = fb / fc;
-        p = s * (2.0 * xm * qq * (qq - r) - (b - a) * (r - 1.0));
-        q = (qq - 1.0) * (r - 1.0) * (s - 1.0);
-      }
-      if (p > 0.0) q = -q;
-      p = std::fabs(p);
-      const double min1 = 3.0 * xm * q - std::fabs(tol1 * q);
-      const double min2 = std::fabs(e * q);
-      if (2.0 * p < std::min(min1, min2)) {
-        e = d;
-        d = p / q;
-      } else {  // interpolation not good enough: bisect
-        d = xm;
-        e = d;
-      }
-    } else {
-      d = xm;
-      e = d;
-    }
-    a = b;
-    fa = fb;
-    b += std::fabs(d) > tol1 ? d : std::copysign(tol1, xm);
-    fb = f(b);
-  }
-  return b;
+  auto narrow = [abs_tol](double lo, double hi) {
+    return hi - lo <= abs_tol + 4.0 * kEps * std::max(std::fabs(lo), std::fabs(hi));
+  };
+  using NoThrow = boost::math::policies::policy<
+      boost::math::policies::domain_error<boost::math::policies::ignore_error>,
+      boost::math::policies::evaluation_error<boost::math::policies::ignore_error>>;
+  std::uintmax_t max_evaluations = 300;
+  const std::pair<double, double> r =
+      boost::math::tools::toms748_solve(f, a, b, fa, fb, narrow, max_evaluations, NoThrow());
+  return 0.5 * (r.first + r.second);
 }
 
 constexpr double kDutyTol = 1e-15;  // absolute, on duty in [0, 1]
@@ -152,7 +115,7 @@ constexpr double kDutyTol = 1e-15;  // absolute, on duty in [0, 1]
 // D = 1, so the root is unique; the caller guarantees 0 < i_avg_A < V/R.
 double DutyForAverage(const RlCoil& coil, double frequency_Hz, double i_avg_A) {
   auto h = [&](double duty) { return Eval(coil, frequency_Hz, duty).i_avg_A - i_avg_A; };
-  return BrentRoot(h, 0.0, 1.0, h(0.0), h(1.0), kDutyTol);
+  return BracketedRoot(h, 0.0, 1.0, h(0.0), h(1.0), kDutyTol);
 }
 
 // The interval of frequencies [f_lo, f_hi] whose D_f lies inside the duty bounds (PlanDitherExact step 2).
@@ -196,7 +159,7 @@ StatusOr<Band> FeasibleBand(const RlCoil& coil, double i_avg_A, const DitherPlan
     if ((h_min > 0.0 && h_max > 0.0) || (h_min < 0.0 && h_max < 0.0)) {
       return std::fabs(h_min) < std::fabs(h_max) ? f_min : f_max;
     }
-    return BrentRoot(h, f_min, f_max, h_min, h_max, 1e-12 * f_max);
+    return BracketedRoot(h, f_min, f_max, h_min, h_max, 1e-12 * f_max);
   };
   auto clamp_duty = [&](double d) { return std::clamp(d, o.min_duty, o.max_duty); };
   Band band{f_min, f_max, clamp_duty(duty_a), clamp_duty(duty_b)};
@@ -285,7 +248,7 @@ StatusOr<DitherPlan> PlanDitherExact(const RlCoil& coil, const DitherRequest& re
   } else if (i_amp_A <= range->min_amplitude_A) {
     f = f_hi;
   } else {
-    f = BrentRoot(g, f_lo, f_hi, range->max_amplitude_A - i_amp_A, range->min_amplitude_A - i_amp_A, 1e-13 * f_hi);
+    f = BracketedRoot(g, f_lo, f_hi, range->max_amplitude_A - i_amp_A, range->min_amplitude_A - i_amp_A, 1e-13 * f_hi);
   }
   // D_f(f) is inside the duty box for f in [f_lo, f_hi]; the clamp only removes last-bit rounding.
   const double duty = std::clamp(DutyForAverage(coil, f, i_avg_A), options.min_duty, options.max_duty);

@@ -82,7 +82,7 @@ struct DitherPlan {
 
 // Exact method: solves eqs. (10) and (11) simultaneously for (f, D) inside the options' box.
 //
-// Method (all steps are bracketed Brent root solves, so the result is as accurate as double allows):
+// Method (all steps are bracketed TOMS 748 root solves, Boost.Math, so the result is as accurate as double allows):
 //   1. For a frequency f, D_f(f) is the duty with I_avg(f, D) = average_current_A (I_avg is strictly increasing
 //      in D at fixed f: a larger duty gives a pointwise larger periodic current).
 //   2. D_f is monotone in f, so the frequencies with D_f(f) inside [min_duty, max_duty] form an interval

@@ -70,4 +70,103 @@ Status Validate(const DriverParams& d) {
   return Status::Ok();
 }
 
+double DriveSegment::VoltageAt(double t_s) const {
+  if (blocked) return 0.0;
+  if (tau_s > 0.0) return v0_V * std::exp(-(t_s - t_origin_s) / tau_s);
+  return v0_V;
+}
+
+void Driver::Reset() {
+  gate_ = 0;
+  state_ = State{};
+}
+
+bool Driver::SetGate(int gate, double t_s) {
+  if (gate == gate_) return false;
+  gate_ = gate;
+  state_.t_gate_change_s = t_s;
+  state_.chopper_started = false;
+  if (gate != 0) state_.blocked = false;
+  return true;
+}
+
+DriveSegment Driver::Next(const DriverParams& p, int gate, double supply_V, double t_s, double i_A, State* st) {
+  DriveSegment s;
+  const double drop = p.diode_drop_V;
+  auto block = [&]() {
+    st->blocked = true;
+    s.blocked = true;
+  };
+  switch (p.kind) {
+    case DriverKind::kLowSideFlyback:
+      if (gate == 1) {
+        s.v0_V = supply_V;
+        s.from_supply = true;
+      } else if (st->blocked || i_A <= 0.0) {
+        block();
+      } else {
+        s.v0_V = -drop;
+        s.clamp = +1;
+      }
+      break;
+    case DriverKind::kHBridge:
+      if (gate == 1) {
+        s.v0_V = supply_V;
+        s.from_supply = true;
+      } else if (gate == -1) {
+        s.v0_V = -supply_V;
+        s.from_supply = true;
+      } else if (!st->blocked && i_A > 0.0) {
+        s.v0_V = -(supply_V + 2.0 * drop);
+        s.clamp = +1;
+      } else if (!st->blocked && i_A < 0.0) {
+        s.v0_V = supply_V + 2.0 * drop;
+        s.clamp = -1;
+      } else {
+        block();
+      }
+      break;
+    case DriverKind::kInternalElectronics: {
+      if (gate == 1) {
+        const double boost_end = st->t_gate_change_s + p.boost_time_s;
+        if (t_s < boost_end - kSameInstant_s) {
+          s.v0_V = supply_V;
+          s.from_supply = true;
+          s.t_end_s = boost_end;
+          break;
+        }
+        const double lo = p.hold_current_A - 0.5 * p.hold_band_A;
+        const double hi = p.hold_current_A + 0.5 * p.hold_band_A;
+        if (!st->chopper_started) {
+          st->chopper_started = true;
+          st->chopper_on = i_A < lo;
+        }
+        if (!st->chopper_on && (st->blocked || i_A <= 0.0)) st->chopper_on = true;
+        if (st->chopper_on) {
+          st->blocked = false;
+          s.v0_V = supply_V;
+          s.from_supply = true;
+          s.level_A = hi;
+          s.level_dir = +1;
+        } else {
+          s.v0_V = -drop;
+          s.clamp = +1;
+          s.level_A = lo;
+          s.level_dir = -1;
+        }
+      } else if (st->blocked || i_A <= 0.0) {
+        // Reverse voltage from the capacitor, decaying from the gate's falling edge, until the current is 0.
+        block();
+      } else {
+        s.v0_V = -p.reverse_V;
+        s.tau_s = p.reverse_tau_s;
+        s.t_origin_s = st->t_gate_change_s;
+        s.clamp = +1;
+      }
+      break;
+    }
+  }
+  return s;
+}
+
 }  // namespace vb::model

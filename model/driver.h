@@ -14,6 +14,7 @@
 //   (the paper's "low-pass filter with initial value"), until i reaches 0.
 #pragma once
 
+#include <limits>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -44,5 +45,71 @@ inline bool AcceptsGate(DriverKind kind, int gate) {
 
 Status SetDriverParam(DriverParams* d, std::string_view name, double value);
 Status Validate(const DriverParams& d);
+
+// Two instants closer than this are the same instant (sample grid vs. edges computed in floating point).
+inline constexpr double kSameInstant_s = 1e-12;
+
+// What the driver puts on the coil until its next event: a piece of the simulation (model/simulator.h) runs
+// on one segment.
+struct DriveSegment {
+  double v0_V = 0.0;       // coil voltage at t_origin_s
+  double tau_s = 0.0;      // > 0: v = v0 exp(-(t - t_origin)/tau) (internal electronics' reverse); 0: constant
+  double t_origin_s = 0.0;
+  double t_end_s = std::numeric_limits<double>::infinity();  // a time event of the driver (boost end)
+  int clamp = 0;           // +1: conduction ends when i falls to 0; -1: when i rises to 0
+  bool blocked = false;    // i is held at 0 (diode blocks), v_coil = 0
+  double level_A = 0.0;    // driver threshold event on i (the chopper) ...
+  int level_dir = 0;       // ... crossed upward (+1) or downward (-1); 0 = none
+  bool from_supply = false;  // the supply drives the coil (its source resistance is in series)
+
+  // The driver's voltage at t (the open-circuit source; the coil's terminal voltage is in model/coil.h).
+  double VoltageAt(double t_s) const;
+};
+
+// The driver's state machine: gate -> coil voltage, as described at the top of this file. It knows the gate,
+// whether a diode blocks the current, and the internal electronics' boost and chopper; the simulator tells it
+// the time, the coil current and the events it located (current zero, chopper level).
+class Driver {
+ public:
+  explicit Driver(const DriverParams& params) : p_(params) {}
+
+  const DriverParams& params() const { return p_; }
+  // Gate 0, current blocked, no boost or chopper running.
+  void Reset();
+  // A new gate level at t_s (the caller guarantees AcceptsGate). Returns false if the level did not change.
+  bool SetGate(int gate, double t_s);
+  int gate() const { return gate_; }
+  bool blocked() const { return state_.blocked; }
+  // The coil current was set from outside (> 0): the diode conducts again.
+  void Unblock() { state_.blocked = false; }
+  // Events the simulator located on the segment: the terminal current reached zero (clamp), or the chopper's
+  // level was crossed (level_dir).
+  void OnCurrentZero() { state_.blocked = true; }
+  void OnLevelCrossed() { state_.chopper_on = !state_.chopper_on; }
+
+  // The segment in force at t_s for the coil current i_A (the simulator passes its magnetising current),
+  // advancing the state machine: a current that is no longer positive in a freewheel path becomes blocked,
+  // the chopper starts after the boost. When the segment is blocked the caller holds the current at 0 (unless
+  // an eddy branch carries it).
+  DriveSegment Segment(double supply_V, double t_s, double i_A) { return Next(p_, gate_, supply_V, t_s, i_A, &state_); }
+  // The same segment without changing the state (for const readers).
+  DriveSegment PeekSegment(double supply_V, double t_s, double i_A) const {
+    State copy = state_;
+    return Next(p_, gate_, supply_V, t_s, i_A, &copy);
+  }
+
+ private:
+  struct State {
+    bool blocked = true;
+    double t_gate_change_s = 0.0;
+    bool chopper_started = false;
+    bool chopper_on = false;
+  };
+  static DriveSegment Next(const DriverParams& p, int gate, double supply_V, double t_s, double i_A, State* s);
+
+  DriverParams p_;
+  int gate_ = 0;
+  State state_;
+};
 
 }  // namespace vb::model

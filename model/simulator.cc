@@ -7,8 +7,6 @@ namespace vb::model {
 namespace {
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
-// Two instants closer than this are the same instant (sample grid vs. edges computed in floating point).
-constexpr double kSameInstant_s = 1e-12;
 
 }  // namespace
 
@@ -32,6 +30,7 @@ Simulator::Simulator(const Plant& plant, const DriverParams& driver, const Condi
       driver_(driver),
       cond_(conditions),
       opt_(options),
+      sensor_(plant.params().effects),
       stepper_(boost::numeric::odeint::make_dense_output(options.abs_tol, options.rel_tol, options.max_step_s,
                                                          boost::numeric::odeint::runge_kutta_dopri5<State>())) {
   const PlantParams& p = plant_.params();
@@ -41,6 +40,7 @@ Simulator::Simulator(const Plant& plant, const DriverParams& driver, const Condi
   inv_x_scale_ = 1.0 / x_scale_;
   v_scale_ = x_scale_ / 1e-3;  // velocity in units of "full travel per millisecond"
   inv_v_scale_ = 1.0 / v_scale_;
+  locator_.time_tol_s = opt_.event_time_tol_s;
   Reset();
 }
 
@@ -53,19 +53,12 @@ void Simulator::Reset() {
   switches_ = 0;
   const Effects& fx = plant_.params().effects;
   dT_ = fx.heating ? fx.heating_dT0_K : 0.0;
-  sensor_y_ = sensor_prev_i_ = 0.0;
-  sensor_prev_t_ = -1.0;
-  sensor_head_ = sensor_count_ = 0;
-  last_reading_ = 0.0;
+  sensor_.Reset();
   im_ = fx.residual_w_A > 0.0 ? fx.residual_im0_A : 0.0;
   play_ = Play::kInside;
   general_ = fx.NeedsGeneralPath() || dist_.active();
-  gate_ = 0;
+  driver_.Reset();
   contact_ = Contact::kLower;
-  blocked_ = true;
-  t_gate_change_s_ = 0.0;
-  chopper_started_ = false;
-  chopper_on_ = false;
   next_sample_ = 0;
   stepper_valid_ = false;
   dt_guess_s_ = 1e-6;
@@ -107,23 +100,13 @@ bool Simulator::CheckWatchdog() {
 
 void Simulator::SetSamplePeriod(double period_s) {
   sample_period_s_ = period_s > 0.0 ? period_s : 0.0;
-  // The sensor latency's history (outside the loop: no allocation while it runs).
-  const double delay = plant_.params().effects.sensor_delay_s;
-  sensor_hist_.assign(sample_period_s_ > 0.0 && delay > 0.0
-                          ? static_cast<std::size_t>(std::ceil(delay / sample_period_s_)) + 3
-                          : 1,
-                      0.0);
-  sensor_head_ = sensor_count_ = 0;
+  sensor_.SetSamplePeriod(sample_period_s_);  // sizes the latency's ring: no allocation while the loop runs
   next_sample_ = sample_period_s_ > 0.0 ? static_cast<std::int64_t>(std::ceil(t_ / sample_period_s_ - 1e-9)) : 0;
 }
 
 void Simulator::SetGate(int gate) {
-  if (gate == gate_) return;
-  gate_ = gate;
+  if (!driver_.SetGate(gate, t_)) return;
   ++switches_;
-  t_gate_change_s_ = t_;
-  chopper_started_ = false;
-  if (gate != 0) blocked_ = false;
   stepper_valid_ = false;
 }
 
@@ -138,96 +121,13 @@ void Simulator::SetDisturbance(const Disturbance& disturbance) {
   stepper_valid_ = false;
 }
 
-double Simulator::ResistanceAt(double dT) const {
-  const Effects& fx = plant_.params().effects;
-  const double R = plant_.params().R_ohm;
-  return fx.heating ? R * (1.0 + fx.heating_alpha_per_K * dT) : R;
-}
-
-// The coil as the driver and the sensor see it. Without eddy currents the terminal current is the magnetising
-// current. With a loss resistance R_p across the magnetising inductance (one eddy branch):
-//   v_source - R_s i = R i + v_L,  i = i_mag + v_L / R_p   =>   v_L = (v_source - (R + R_s) i_mag) / (1 + (R + R_s)/R_p)
-// and with the switch and the diode both off (blocked) the terminal current is 0 and i_mag decays through
-// R_p: v_L = -R_p i_mag.
-Simulator::Terminal Simulator::TerminalAt(const Segment& seg, double t, double i_mag, double dT) const {
-  const Effects& fx = plant_.params().effects;
-  if (!fx.any()) {  // the nominal coil: the hot path of every integrated piece
-    Terminal out;
-    out.i_A = seg.blocked ? 0.0 : i_mag;
-    out.v_V = seg.blocked ? 0.0 : SegmentVoltage(seg, t) + DisturbanceVoltage(t);
-    out.vL_V = out.v_V - plant_.params().R_ohm * out.i_A;
-    return out;
-  }
-  const double R = ResistanceAt(dT);
-  const double Rs = seg.from_supply ? fx.supply_R_ohm : 0.0;
-  Terminal out;
-  if (seg.blocked) {
-    out.i_A = 0.0;
-    out.vL_V = fx.eddy_R_p_ohm > 0.0 ? -fx.eddy_R_p_ohm * i_mag : 0.0;
-    out.v_V = out.vL_V;
-    return out;
-  }
-  const double v0 = SegmentVoltage(seg, t) + DisturbanceVoltage(t);
-  if (fx.eddy_R_p_ohm > 0.0) {
-    const double Rser = R + Rs;
-    out.vL_V = (v0 - Rser * i_mag) / (1.0 + Rser / fx.eddy_R_p_ohm);
-    out.i_A = i_mag + out.vL_V / fx.eddy_R_p_ohm;
-  } else {
-    out.i_A = i_mag;
-    out.vL_V = v0 - (R + Rs) * i_mag;
-  }
-  out.v_V = v0 - Rs * out.i_A;
-  return out;
-}
-
-Simulator::Magnetics Simulator::MagneticsAt(double i, double x) const {
-  double L, dLdx;
-  plant_.InductanceAndSlope(x, &L, &dLdx);
-  Magnetics m;
-  const double B_sat = plant_.params().effects.saturation_B_T;
-  if (B_sat <= 0.0) {  // linear: lambda = L(x) i
-    m.dlambda_di = L;
-    m.dlambda_dx = dLdx * i;
-    m.force_N = 0.5 * i * i * dLdx;
-    return m;
-  }
-  // A saturating core in parallel with the air path it can never lose (the core at mu_r -> 1):
-  //   lambda = ls f(u) + La i,   u = Lc i / ls,   La = L / mu_r,  Lc = L - La,  ls = N A_e B_sat
-  // with the knee f Frohlich's f(u) = u / (1 + |u|) (the classic magnetisation-curve fit, a gradual knee) or
-  // tanh(u) (a sharp one); both give lambda = L i at small currents. Co-energy W' = ls^2/Lc G(u) + La i^2 / 2,
-  // G' = f (Frohlich: G = |u| - ln(1 + |u|); tanh: G = ln cosh u), so at constant i
-  //   F = dW'/dx = (dLc/dx) (ls i f(u) / Lc - ls^2 / Lc^2 G(u)) + (dLa/dx) i^2 / 2.
-  // The air path keeps the incremental inductance >= La: deep saturation stays physical and non-stiff.
-  const PlantParams& pp = plant_.params();
-  const double air = pp.law == InductanceLaw::kReluctance ? 1.0 / std::max(pp.mu_r, 1.0) : 0.01;
-  const double La = air * L, Lc = L - La, dLa = air * dLdx, dLc = dLdx - dLa;
-  const double ls = pp.N_turns * pp.A_e_m2 * B_sat;
-  const double u = Lc * i / ls;
-  const double au = std::abs(u);
-  double f, df, G;
-  if (pp.effects.saturation_tanh >= 0.5) {
-    f = std::tanh(u);
-    df = 1.0 - f * f;
-    G = au + std::log1p(std::exp(-2.0 * au)) - M_LN2;  // ln cosh u, stable for large |u|
-  } else {
-    f = u / (1.0 + au);
-    df = 1.0 / ((1.0 + au) * (1.0 + au));
-    G = au - std::log1p(au);
-  }
-  m.dlambda_di = Lc * df + La;
-  m.dlambda_dx = (dLc * df + dLa) * i;
-  m.force_N = dLc * (ls * i * f / Lc - ls * ls / (Lc * Lc) * G) + 0.5 * dLa * i * i;
-  return m;
+Terminal Simulator::TerminalAt(const Segment& seg, double t, double i_mag, double dT) const {
+  const double v_source = seg.blocked ? 0.0 : seg.VoltageAt(t) + DisturbanceVoltage(t);
+  return model::TerminalAt(plant_, seg, v_source, i_mag, dT);
 }
 
 double Simulator::NetForceAtRest_N(double j, double x, double t) const {
   return MagneticsAt(j, x).force_N + plant_.PassiveForce_N(x, cond_.supply_pressure_Pa) + DisturbanceForce(t);
-}
-
-double Simulator::FluxCurrent(double i, double i_m) const {
-  const Effects& fx = plant_.params().effects;
-  if (fx.residual_w_A <= 0.0) return i;
-  return fx.residual_alpha * i + (1.0 - fx.residual_alpha) * i_m;
 }
 
 void Simulator::Rhs(const Segment& seg, const State& y, State& dy, double t) const {
@@ -247,7 +147,8 @@ void Simulator::Rhs(const Segment& seg, const State& y, State& dy, double t) con
   dy[5] = 0.0;
   dy[6] = fx.residual_w_A > 0.0 && play_ != Play::kInside ? dy[0] : 0.0;
   if (fx.heating)
-    dy[5] = (term.i_A * term.i_A * ResistanceAt(y[5]) - y[5] / fx.heating_R_th_K_per_W) / fx.heating_C_th_J_per_K;
+    dy[5] = (term.i_A * term.i_A * model::ResistanceAt(plant_, y[5]) - y[5] / fx.heating_R_th_K_per_W) /
+            fx.heating_C_th_J_per_K;
   if (frozen_) {
     dy[1] = 0.0;
     dy[2] = 0.0;
@@ -260,61 +161,19 @@ void Simulator::Rhs(const Segment& seg, const State& y, State& dy, double t) con
 }
 
 double Simulator::measured_current_A() const {
-  const Effects& fx = plant_.params().effects;
-  if ((fx.sensor_tau_s > 0.0 || fx.sensor_delay_s > 0.0) && sensor_prev_t_ >= 0.0) return SenseChain(last_reading_);
-  if (fx.eddy_R_p_ohm > 0.0) {
-    Simulator* self = const_cast<Simulator*>(this);  // CurrentSegment() only normalises driver bookkeeping
-    return SenseChain(TerminalAt(self->CurrentSegment(), t_, i_, dT_).i_A);
+  if (sensor_.has_reading()) return sensor_.LastReading_A();
+  if (plant_.params().effects.eddy_R_p_ohm > 0.0) {
+    // The terminal current now: the driver's segment as it stands (PeekSegment changes nothing).
+    const Segment seg = driver_.PeekSegment(cond_.supply_V, t_, i_);
+    return sensor_.Static(TerminalAt(seg, t_, i_, dT_).i_A);
   }
-  return SenseChain(i_);
-}
-
-double Simulator::SenseChain(double i_A) const {
-  const Effects& fx = plant_.params().effects;
-  return fx.sensor_gain * i_A + fx.sensor_offset_A;
+  return sensor_.Static(i_);
 }
 
 void Simulator::SetCoilCurrent(double i_A) {
   i_ = std::max(i_A, 0.0);
-  if (i_ > 0.0) blocked_ = false;
+  if (i_ > 0.0) driver_.Unblock();
   stepper_valid_ = false;
-}
-
-double Simulator::SensorReading(double t, double i_true) const {
-  const Effects& fx = plant_.params().effects;
-  if (fx.sensor_tau_s <= 0.0 && fx.sensor_delay_s <= 0.0) return SenseChain(i_true);
-  // First-order lag, exact for a current linear between samples (first-order hold):
-  //   y_k = a y_(k-1) + (1 - a) i_(k-1) + (i_k - i_(k-1)) (1 - tau (1 - a) / h),   a = exp(-h / tau)
-  if (sensor_prev_t_ < 0.0 || fx.sensor_tau_s <= 0.0) {
-    sensor_y_ = i_true;
-  } else {
-    const double h = t - sensor_prev_t_;
-    if (h > 0.0) {
-      const double tau = fx.sensor_tau_s;
-      const double a = std::exp(-h / tau);
-      sensor_y_ = a * sensor_y_ + (1.0 - a) * sensor_prev_i_ + (i_true - sensor_prev_i_) * (1.0 - tau * (1.0 - a) / h);
-    }
-  }
-  sensor_prev_i_ = i_true;
-  sensor_prev_t_ = t;
-  double out = sensor_y_;
-  if (fx.sensor_delay_s > 0.0 && sample_period_s_ > 0.0) {
-    // Latency: the lagged reading delay_s ago, interpolated between the samples around it (0 before the run).
-    const std::size_t cap = sensor_hist_.size();
-    sensor_hist_[sensor_head_] = sensor_y_;
-    sensor_head_ = (sensor_head_ + 1) % cap;
-    sensor_count_ = std::min(sensor_count_ + 1, cap);
-    const double back = fx.sensor_delay_s / sample_period_s_;
-    const auto k0 = static_cast<std::size_t>(std::floor(back));
-    const double frac = back - static_cast<double>(k0);
-    auto at = [&](std::size_t ago) {  // the reading `ago` samples back; before the first sample: 0
-      if (ago >= sensor_count_) return 0.0;
-      return sensor_hist_[(sensor_head_ + cap - 1 - ago) % cap];
-    };
-    out = (1.0 - frac) * at(k0) + frac * at(k0 + 1);
-  }
-  last_reading_ = out;
-  return SenseChain(out);
 }
 
 Simulator::State Simulator::CurrentState() const {
@@ -333,108 +192,18 @@ double Simulator::DisturbanceForce(double t) const {
 }
 
 Simulator::Segment Simulator::CurrentSegment() {
-  Segment s;
-  const double supply = cond_.supply_V;
-  const double drop = driver_.diode_drop_V;
-  const bool eddy = plant_.params().effects.eddy_R_p_ohm > 0.0;
-  auto freewheel_or_block = [&](double v_if_positive) {
-    if (blocked_ || i_ <= 0.0) {
-      blocked_ = true;
-      if (!eddy) i_ = 0.0;
-      s.blocked = true;
-    } else {
-      s.v0_V = v_if_positive;
-      s.clamp = +1;
-    }
-  };
-  switch (driver_.kind) {
-    case DriverKind::kLowSideFlyback:
-      if (gate_ == 1) {
-        s.v0_V = supply;
-        s.from_supply = true;
-      } else {
-        freewheel_or_block(-drop);
-      }
-      break;
-    case DriverKind::kHBridge:
-      if (gate_ == 1) {
-        s.v0_V = supply;
-        s.from_supply = true;
-      } else if (gate_ == -1) {
-        s.v0_V = -supply;
-        s.from_supply = true;
-      } else if (!blocked_ && i_ > 0.0) {
-        s.v0_V = -(supply + 2.0 * drop);
-        s.clamp = +1;
-      } else if (!blocked_ && i_ < 0.0) {
-        s.v0_V = supply + 2.0 * drop;
-        s.clamp = -1;
-      } else {
-        blocked_ = true;
-        if (!eddy) i_ = 0.0;
-        s.blocked = true;
-      }
-      break;
-    case DriverKind::kInternalElectronics: {
-      if (gate_ == 1) {
-        const double boost_end = t_gate_change_s_ + driver_.boost_time_s;
-        if (t_ < boost_end - kSameInstant_s) {
-          s.v0_V = supply;
-          s.from_supply = true;
-          s.t_end_s = boost_end;
-          break;
-        }
-        const double lo = driver_.hold_current_A - 0.5 * driver_.hold_band_A;
-        const double hi = driver_.hold_current_A + 0.5 * driver_.hold_band_A;
-        if (!chopper_started_) {
-          chopper_started_ = true;
-          chopper_on_ = i_ < lo;
-        }
-        if (!chopper_on_ && (blocked_ || i_ <= 0.0)) chopper_on_ = true;
-        if (chopper_on_) {
-          blocked_ = false;
-          s.v0_V = supply;
-          s.from_supply = true;
-          s.level_A = hi;
-          s.level_dir = +1;
-        } else {
-          s.v0_V = -drop;
-          s.clamp = +1;
-          s.level_A = lo;
-          s.level_dir = -1;
-        }
-      } else {
-        // Reverse voltage from the capacitor, decaying from the gate's falling edge.
-        if (blocked_ || i_ <= 0.0) {
-          blocked_ = true;
-          if (!eddy) i_ = 0.0;
-          s.blocked = true;
-        } else {
-          s.v0_V = -driver_.reverse_V;
-          s.tau_s = driver_.reverse_tau_s;
-          s.t_origin_s = t_gate_change_s_;
-          s.clamp = +1;
-        }
-      }
-      break;
-    }
-  }
+  const Segment s = driver_.Segment(cond_.supply_V, t_, i_);
+  if (s.blocked && plant_.params().effects.eddy_R_p_ohm <= 0.0) i_ = 0.0;
   return s;
 }
 
-double Simulator::SegmentVoltage(const Segment& seg, double t) const {
-  if (seg.blocked) return 0.0;
-  if (seg.tau_s > 0.0) return seg.v0_V * std::exp(-(t - seg.t_origin_s) / seg.tau_s);
-  return seg.v0_V;
-}
-
-void Simulator::EmitSample(const Segment& /*seg*/, double t, double i_meas, double v_term, double x, double v,
-                           double v2_int, double vi_int, SimObserver* obs) const {
+void Simulator::EmitSample(double t, double i_meas, double v_term, double x, double v, double v2_int,
+                           double vi_int, SimObserver* obs) {
   PlantSample s;
   s.t_s = t;
-  s.gate = static_cast<std::int8_t>(gate_);
+  s.gate = static_cast<std::int8_t>(driver_.gate());
   s.v_coil_V = v_term;
-  s.i_A = SensorReading(t, i_meas);
+  s.i_A = sensor_.Sample(t, i_meas);
   s.x_m = x;
   s.v_mps = v;
   s.v2_integral_V2s = v2_int;
@@ -448,7 +217,7 @@ void Simulator::EmitPendingSample(SimObserver* observer) {
   if (SampleTime(next_sample_) <= t_ + kSameInstant_s) {
     Segment seg = CurrentSegment();
     const Terminal term = TerminalAt(seg, t_, i_, dT_);
-    EmitSample(seg, SampleTime(next_sample_), term.i_A, term.v_V, x_, v_, v2_int_, vi_int_, observer);
+    EmitSample(SampleTime(next_sample_), term.i_A, term.v_V, x_, v_, v2_int_, vi_int_, observer);
     ++next_sample_;
   }
 }
@@ -508,7 +277,7 @@ void Simulator::AdvanceClosedForm(const Segment& seg, double t_stop, SimObserver
   if (seg.blocked) {
     if (sample_period_s_ > 0.0 && obs) {
       for (double tk = SampleTime(next_sample_); tk < t_stop - kSameInstant_s; tk = SampleTime(++next_sample_))
-        EmitSample(seg, tk, 0.0, 0.0, x_, 0.0, v2_int_, vi_int_, obs);
+        EmitSample(tk, 0.0, 0.0, x_, 0.0, v2_int_, vi_int_, obs);
     }
     t_ = t_stop;
     return;
@@ -569,13 +338,13 @@ void Simulator::AdvanceClosedForm(const Segment& seg, double t_stop, SimObserver
     if (Rs == 0.0) {  // the nominal coil: v is constant, so the integrals need no i^2 term
       for (double tk = SampleTime(next_sample_); tk < limit; tk = SampleTime(++next_sample_)) {
         const double dt = tk - t0, e = std::exp(-dt / tau);
-        EmitSample(seg, tk, i_inf + d0 * e, v0, x_, 0.0, v2_int_ + v0 * v0 * dt, vi_int_ + v0 * int_i(dt, e), obs);
+        EmitSample(tk, i_inf + d0 * e, v0, x_, 0.0, v2_int_ + v0 * v0 * dt, vi_int_ + v0 * int_i(dt, e), obs);
       }
     } else {
       for (double tk = SampleTime(next_sample_); tk < limit; tk = SampleTime(++next_sample_)) {
         const double dt = tk - t0, e = std::exp(-dt / tau);
         const double i = i_inf + d0 * e;
-        EmitSample(seg, tk, i, v0 - Rs * i, x_, 0.0, v2_at(dt, e), vi_at(dt, e), obs);
+        EmitSample(tk, i, v0 - Rs * i, x_, 0.0, v2_at(dt, e), vi_at(dt, e), obs);
       }
     }
   }
@@ -674,34 +443,6 @@ void Simulator::AdvanceOde(const Segment& seg, double t_stop, SimObserver* obs) 
   if (seg.clamp != 0) events[n_events++] = Ev::kClamp;
   if (seg.level_dir != 0) events[n_events++] = Ev::kLevel;
 
-  auto g_at = [&](Ev ev, double t) {
-    State y;
-    stepper_.calc_state(t, y);
-    return EventFunction(ev, seg, t, y);
-  };
-  // Illinois (modified regula falsi) on the dense output: g(lo) > 0 >= g(hi); returns the first instant
-  // with g <= 0, to event_time_tol_s.
-  auto locate = [&](Ev ev, double lo, double flo, double hi, double fhi) {
-    int side = 0;
-    for (int iter = 0; iter < 200 && hi - lo > opt_.event_time_tol_s; ++iter) {
-      double m = (lo * fhi - hi * flo) / (fhi - flo);
-      if (!(m > lo && m < hi)) m = 0.5 * (lo + hi);
-      const double fm = g_at(ev, m);
-      if (fm > 0.0) {
-        lo = m;
-        flo = fm;
-        if (side == -1) fhi *= 0.5;
-        side = -1;
-      } else {
-        hi = m;
-        fhi = fm;
-        if (side == +1) flo *= 0.5;
-        side = +1;
-      }
-    }
-    return hi;
-  };
-
   for (;;) {
     if (stepper_.current_time() <= t_ + kSameInstant_s) {
       try {
@@ -742,45 +483,18 @@ void Simulator::AdvanceOde(const Segment& seg, double t_stop, SimObserver* obs) 
     for (int k = 0; k < n_events; ++k) {
       const Ev ev = events[k];
       const double gb = EventFunction(ev, seg, b, yb);
-      if (gb > 0.0) continue;
-      double ga = EventFunction(ev, seg, a, ya);
-      double lo = a;
-      if (!(ga > 0.0)) {
-        // Started exactly on the surface (just lifted, released, rebounded): find an instant where it has left
-        // it. Probe close to the start first (a short rebound can be over long before the step's end), then
-        // across the step.
-        bool found = false;
-        static constexpr double kProbe[] = {1e-9, 1e-7, 1e-5, 1e-3, 1.0 / 64, 1.0 / 16, 2.0 / 16, 3.0 / 16,
-                                            4.0 / 16, 6.0 / 16, 8.0 / 16, 10.0 / 16, 12.0 / 16, 14.0 / 16};
-        for (double frac : kProbe) {
-          const double tj = a + (b - a) * frac;
-          if (!(tj > a)) continue;
-          const double gj = g_at(ev, tj);
-          if (gj > 0.0) {
-            lo = tj;
-            ga = gj;
-            found = true;
-            break;
-          }
-        }
-        if (!found) {
-          // Still exactly on the surface (g = 0: nothing moved, e.g. a current held at zero on a play edge):
-          // no crossing. Past it at the step's end without ever being measurably off it: it is back on the
-          // surface at once (a vanishing rebound). Never let the state pass through a stop.
-          // Round-off-level excursions (a spool at rest with zero net force over a few nanoseconds) are not a
-          // crossing: the surface functions are O(1), so 1e-9 is far below any real pass (a missed micro-rebound
-          // is ~1e-5 of the travel) and far above round-off.
-          if (!(gb < -1e-9)) continue;
-          if (a < best_t || best_ev == Ev::kNone) {
-            best_t = a;
-            best_ev = ev;
-          }
-          continue;
-        }
-      }
-      const double t_ev = locate(ev, lo, ga, b, gb);
-      if (t_ev < best_t || (t_ev == best_t && best_ev == Ev::kNone)) {
-        best_t = t_ev;
+      if (gb > 0.0) continue;  // no event in this step (LocateEvent would say so; g(a) is not needed)
+      // The event function on the step's dense output (model/event_locator.h).
+      auto g = [&](double t) {
+        State y;
+        stepper_.calc_state(t, y);
+        return EventFunction(ev, seg, t, y);
+      };
+      const EventHit hit = LocateEvent(g, a, EventFunction(ev, seg, a, ya), b, gb, locator_);
+      if (hit.found == EventFound::kNone) continue;
+      // Never let the state pass through a stop: the earliest event wins (at a tie, the first listed).
+      if (hit.t_s < best_t || best_ev == Ev::kNone) {
+        best_t = hit.t_s;
         best_ev = ev;
       }
     }
@@ -794,7 +508,7 @@ void Simulator::AdvanceOde(const Segment& seg, double t_stop, SimObserver* obs) 
         Unscale(y, &i, &x, &v);
         if (seg.blocked && fx.eddy_R_p_ohm == 0.0) i = 0.0;
         const Terminal term = TerminalAt(seg, tk, i, y[5]);
-        EmitSample(seg, tk, term.i_A, term.v_V, std::clamp(x, x_lo_, x_hi_), v, ode_piece_v2_ + y[3],
+        EmitSample(tk, term.i_A, term.v_V, std::clamp(x, x_lo_, x_hi_), v, ode_piece_v2_ + y[3],
                    ode_piece_vi_ + y[4], obs);
       }
     }
@@ -870,12 +584,12 @@ void Simulator::ApplyEvent(Ev ev, const Segment& seg, SimObserver* obs) {
     case Ev::kClamp:
       // The terminal current reached zero; without an eddy branch that is the whole coil current.
       if (plant_.params().effects.eddy_R_p_ohm == 0.0) i_ = 0.0;
-      blocked_ = true;
+      driver_.OnCurrentZero();
       kind = EventKind::kCurrentZero;
       break;
     case Ev::kLevel:
       if (plant_.params().effects.eddy_R_p_ohm == 0.0) i_ = seg.level_A;
-      chopper_on_ = !chopper_on_;
+      driver_.OnLevelCrossed();
       kind = EventKind::kDriverSwitch;
       break;
     case Ev::kPlayUpper:

@@ -12,6 +12,10 @@
 // dense output, so sampling costs no steps and never perturbs the solution.
 //
 // Real-time: AdvanceTo() does not allocate, lock or do I/O (the observer may, in its own code).
+//
+// The simulator composes the ideas that live in their own files (docs/model.md, "Structure"): the plant's
+// equations (model/plant.h), the coil with effects (model/coil.h), the driver's state machine
+// (model/driver.h), the current sensor (model/sensor.h) and the event locator (model/event_locator.h).
 #pragma once
 
 #include <array>
@@ -22,8 +26,11 @@
 
 #include <boost/numeric/odeint.hpp>
 
+#include "model/coil.h"
 #include "model/driver.h"
+#include "model/event_locator.h"
 #include "model/plant.h"
+#include "model/sensor.h"
 
 namespace vb::model {
 
@@ -128,18 +135,14 @@ class Simulator {
   double coil_temperature_rise_K() const { return dT_; }
   double play_state_A() const { return im_; }  // residual_magnetism's play output (the core's memory)
   // The magnetic law with effects: dlambda/di, dlambda/dx and the force at current i and position x.
-  struct Magnetics {
-    double dlambda_di;  // incremental inductance [H]
-    double dlambda_dx;  // [Wb/m]
-    double force_N;     // magnetic pull
-  };
-  Magnetics MagneticsAt(double i, double x) const;
+  using Magnetics = model::Magnetics;
+  Magnetics MagneticsAt(double i, double x) const { return model::MagneticsAt(plant_, i, x); }
   // Everything pushing the spool at rest at x (magnetic + passive + disturbance), for a flux-equivalent
   // current j (= the magnetising current unless residual_magnetism).
   double NetForceAtRest_N(double j, double x, double t) const;
   double x_m() const { return x_; }
   double v_mps() const { return v_; }
-  int gate() const { return gate_; }
+  int gate() const { return driver_.gate(); }
   Contact contact() const { return contact_; }
   const Plant& plant() const { return plant_; }
   const Conditions& conditions() const { return cond_; }
@@ -154,42 +157,26 @@ class Simulator {
   // scaled: i [A] (the magnetising current: the terminal current unless eddy currents branch off),
   // (x - x_min)/x_scale, v/v_scale, two quadratures from the piece start (integral v_coil^2 dt and
   // integral v_coil i dt), the coil's temperature rise dT [K] (coil_heating) and the play operator's
-  // output i_m [A] (residual_magnetism). The current sensor is not part of the plant: see SensorReading().
+  // output i_m [A] (residual_magnetism). The current sensor is not part of the plant: see sensor_.
   using State = std::array<double, 7>;
   enum class Play : std::uint8_t { kInside, kRising, kFalling };  // residual_magnetism's mode
   using Stepper = boost::numeric::odeint::result_of::make_dense_output<
       boost::numeric::odeint::runge_kutta_dopri5<State>>::type;
 
   // What the driver puts on the coil until the next driver event.
-  struct Segment {
-    double v0_V = 0.0;       // coil voltage at t_origin_s
-    double tau_s = 0.0;      // > 0: v = v0 exp(-(t - t_origin)/tau); 0: constant
-    double t_origin_s = 0.0;
-    double t_end_s = std::numeric_limits<double>::infinity();  // a time event of the driver
-    int clamp = 0;           // +1: conduction ends when i falls to 0; -1: when i rises to 0
-    bool blocked = false;    // i is held at 0 (diode blocks), v_coil = 0
-    double level_A = 0.0;    // driver threshold event on i ...
-    int level_dir = 0;       // ... crossed upward (+1) or downward (-1); 0 = none
-    bool from_supply = false;  // the supply drives the coil (its source resistance is in series)
-  };
+  using Segment = DriveSegment;
   enum class Ev : std::uint8_t {
     kNone, kUpper, kLower, kLeaveStop, kClamp, kLevel, kVelocityZero, kPlayUpper, kPlayLower, kPlayTurn
   };
   // Right-hand side of the integrated piece (also used by events that need di/dt).
   void Rhs(const Segment& seg, const State& y, State& dy, double t) const;
   // The flux-equivalent current (residual_magnetism; the magnetising current otherwise).
-  double FluxCurrent(double i, double i_m) const;
-  // The coil's terminal quantities for a magnetising current: what the driver and the sensor see.
-  struct Terminal {
-    double i_A;   // terminal current
-    double v_V;   // terminal voltage
-    double vL_V;  // voltage across the magnetising inductance (drives dlambda/dt)
-  };
+  double FluxCurrent(double i, double i_m) const { return model::FluxCurrent(plant_.params().effects, i, i_m); }
+  // The coil's terminal quantities at t (the driver's voltage plus the disturbance; model/coil.h).
   Terminal TerminalAt(const Segment& seg, double t, double i_mag, double dT) const;
-  double ResistanceAt(double dT) const;
 
+  // The driver's segment now; a blocked segment holds the current at 0 (unless an eddy branch carries it).
   Segment CurrentSegment();
-  double SegmentVoltage(const Segment& seg, double t) const;
   void AdvanceClosedForm(const Segment& seg, double t_stop, SimObserver* obs);
   void AdvanceOde(const Segment& seg, double t_stop, SimObserver* obs);
   void ApplyEvent(Ev ev, const Segment& seg, SimObserver* obs);
@@ -199,9 +186,9 @@ class Simulator {
   double DisturbanceVoltage(double t) const;
   double DisturbanceForce(double t) const;
   double SampleTime(std::int64_t k) const { return static_cast<double>(k) * sample_period_s_; }
-  // i_meas: what the current sensor reports; v_term: the terminal voltage.
-  void EmitSample(const Segment& seg, double t, double i_meas, double v_term, double x, double v, double v2_int,
-                  double vi_int, SimObserver* obs) const;
+  // i_meas: the terminal current the sensor measures; v_term: the terminal voltage. Advances the sensor.
+  void EmitSample(double t, double i_meas, double v_term, double x, double v, double v2_int, double vi_int,
+                  SimObserver* obs);
   State Scale(double i, double x, double v) const {
     return {i, (x - x_lo_) * inv_x_scale_, v * inv_v_scale_, 0.0, 0.0, dT_, im_};
   }
@@ -212,7 +199,7 @@ class Simulator {
   }
 
   Plant plant_;
-  DriverParams driver_;
+  Driver driver_;
   Conditions cond_;
   SolverOptions opt_;
   Disturbance dist_;
@@ -221,16 +208,8 @@ class Simulator {
   double t_ = 0.0, i_ = 0.0, x_ = 0.0, v_ = 0.0;
   double v2_int_ = 0.0, vi_int_ = 0.0;   // running integrals up to t_
   double dT_ = 0.0;                       // coil temperature rise (coil_heating)
-  // The measurement chain (sensor_lag): a first-order lag applied to the sampled terminal current, exact for a
-  // current linear between samples (first-order hold), then a latency by interpolation in a history ring.
-  double SensorReading(double t, double i_true) const;
-  // The static part of the sense chain: what the sensor reports for a (lagged) current (sensor_offset,
-  // sensor_gain).
-  double SenseChain(double i_A) const;
-  mutable double sensor_y_ = 0.0, sensor_prev_i_ = 0.0, sensor_prev_t_ = -1.0;
-  mutable std::vector<double> sensor_hist_;   // sensor outputs at the last samples (latency), ring
-  mutable std::size_t sensor_head_ = 0, sensor_count_ = 0;
-  mutable double last_reading_ = 0.0;
+  CurrentSensor sensor_;                  // the measurement chain: fed at every sample
+  EventLocatorOptions locator_;           // from SolverOptions
   bool general_ = false;                  // effects or disturbances: integrate every piece
   double free_dir_ = 1.0;                 // direction of motion in a free piece (kinetic friction's sign)
   double im_ = 0.0;                       // play operator output (residual_magnetism)
@@ -238,12 +217,7 @@ class Simulator {
   bool frozen_ = false;                   // the current integrated piece holds the spool
   std::uint64_t switches_ = 0;
   double ode_piece_v2_ = 0.0, ode_piece_vi_ = 0.0;  // integrals at the ODE stepper's restart time
-  int gate_ = 0;
   Contact contact_ = Contact::kLower;
-  bool blocked_ = true;         // current held at zero by a blocking diode
-  double t_gate_change_s_ = 0.0;
-  bool chopper_started_ = false;
-  bool chopper_on_ = false;
 
   double sample_period_s_ = 0.0;
   std::int64_t next_sample_ = 0;
@@ -258,7 +232,6 @@ class Simulator {
 
   Stepper stepper_;
   bool stepper_valid_ = false;
-  Segment stepper_segment_;
   double dt_guess_s_ = 1e-6;
   std::uint64_t ode_steps_ = 0, restarts_ = 0;
 };

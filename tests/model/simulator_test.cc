@@ -249,5 +249,18 @@ TEST(Watchdog, TheStepBudgetAndTheDeadlineStopALongSimulation) {
   EXPECT_EQ(free_run.t_s(), 1.0);
 }
 
+// A finite but absurd force that reverses (1e30 N at 50 Hz) makes the steps collapse instead of the state
+// overflowing: the step-collapse watchdog stops it, at the reversal.
+TEST(Watchdog, CollapsingStepsStopWithTheirReason) {
+  Plant plant(*Preset("taghizadeh2009"));
+  Simulator sim(plant, DriverParams{}, Conditions{24.0, 0.0});
+  sim.SetDisturbance(Disturbance{0.0, 1e30, 50.0});
+  sim.SetGate(1);
+  sim.AdvanceTo(0.05, nullptr);
+  ASSERT_TRUE(sim.failed());
+  EXPECT_NE(std::string(sim.failure()).find("steps below 1e-15"), std::string::npos) << sim.failure();
+  EXPECT_NEAR(sim.failure_t_s(), 0.01, 1e-9);
+}
+
 }  // namespace
 }  // namespace vb::model
