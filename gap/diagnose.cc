@@ -287,8 +287,16 @@ Status SelectCombination(const Dataset& ds, const std::vector<bool>& fit_mask, c
     if (tried[k].status.ok() && tried[k].disqualified.empty()) good.push_back(k);
   std::stable_sort(good.begin(), good.end(),
                    [&](std::size_t a, std::size_t b) { return tried[a].fit_rmse_A < tried[b].fit_rmse_A; });
-  // Triples only where a pair still leaves a significant residual on the runs it was fitted to.
+  // Triples only where a pair still leaves a significant residual on the runs it was fitted to, and where pairs
+  // helped at all on the holdout runs (the best removes a quarter of what the best single leaves above the
+  // floor): the beam grows where the last size moved towards the data, not into every corner of the catalog.
   if (!good.empty() && tried[good.front()].fit_rmse_A <= kSignificance * floor) good.clear();
+  {
+    double best_pair_after = INFINITY;
+    for (std::size_t k : good) best_pair_after = std::min(best_pair_after, tried[k].holdout_rmse_after_A);
+    const double single_after = base_row.holdout_rmse_after_A;
+    if (!(best_pair_after <= single_after - 0.25 * (single_after - floor))) good.clear();
+  }
   // The second-best pair is extended too only when it fits nearly as well as the best (within 25 %).
   if (good.size() > 1 && tried[good[1]].fit_rmse_A > 1.25 * tried[good[0]].fit_rmse_A) good.erase(good.begin() + 1, good.end());
   if (opt.max_effects >= 3) {
