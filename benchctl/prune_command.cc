@@ -18,6 +18,7 @@
 #include "db/store.h"
 #include "proto/api_convert.h"
 #include "valvebench/v1/api.grpc.pb.h"
+#include "common/format.h"
 
 namespace vb::benchctl {
 namespace {
@@ -29,15 +30,7 @@ double NowUnixS() {
   return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
 }
 
-std::string UtcTime(double unix_s) {
-  if (unix_s <= 0) return "-";
-  const std::time_t t = static_cast<std::time_t>(unix_s);
-  std::tm tm{};
-  gmtime_r(&t, &tm);
-  char buf[32];
-  std::strftime(buf, sizeof buf, "%Y-%m-%d %H:%M:%S UTC", &tm);
-  return buf;
-}
+std::string UtcTime(double unix_s) { return unix_s <= 0 ? "-" : FormatUtc(unix_s); }
 
 std::string Bytes(std::int64_t b) {
   char buf[32];

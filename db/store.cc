@@ -769,14 +769,7 @@ Status SqliteStore::ReadChunks(std::int64_t run_id, const std::function<Status(T
 
 // ---- Retention ----
 
-std::string UtcDate(double unix_s) {
-  const std::time_t t = static_cast<std::time_t>(unix_s);
-  std::tm tm{};
-  gmtime_r(&t, &tm);
-  char buf[32];
-  std::strftime(buf, sizeof buf, "%Y-%m-%d %H:%M:%S UTC", &tm);
-  return buf;
-}
+std::string UtcDate(double unix_s) { return FormatUtc(unix_s); }
 
 StatusOr<PruneResult> SqliteStore::Prune(const PruneRequest& request) {
   if (!std::isfinite(request.finished_before_unix_s) || request.finished_before_unix_s <= 0) {

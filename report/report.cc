@@ -1,4 +1,5 @@
 #include "report/report.h"
+#include "common/format.h"
 
 #include <fmt/format.h>
 #include <fmt/printf.h>
@@ -176,15 +177,7 @@ Json StaticMapSection(const std::vector<MapPoint>& points, const std::string& me
 
 namespace {
 
-std::string Utc(double unix_s) {
-  if (!(unix_s > 0)) return "";
-  const std::time_t t = static_cast<std::time_t>(unix_s);
-  std::tm tm{};
-  gmtime_r(&t, &tm);
-  char buf[32];
-  std::strftime(buf, sizeof buf, "%Y-%m-%d %H:%M:%S UTC", &tm);
-  return buf;
-}
+std::string Utc(double unix_s) { return unix_s > 0 ? FormatUtc(unix_s) : ""; }
 
 Json ParseSpec(const std::string& spec_json) {
   if (spec_json.empty()) return nullptr;
