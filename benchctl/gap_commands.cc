@@ -269,43 +269,64 @@ int DiagnoseAndReport(const gap::Dataset& ds_in, const Nominal& nominal, const s
 namespace {
 
 // The diagnosis of stored runs, from the local store or a server (the same fields either way).
+struct StoredRunInfo {
+  double started_unix_s = 0.0;
+  std::optional<double> t_start_s;
+  std::string split, preset;
+};
+
+// A stored run as a measured waveform run of a dataset: its gate and current, its conditions; no split and its
+// own start time (callers place it in their session).
+StatusOr<gap::RunData> StoredRun(Backend& backend, std::int64_t id, StoredRunInfo* info) {
+  const std::string where = "run " + std::to_string(id);
+  auto run = backend.GetRun(id);
+  if (!run.ok()) return run.status().WithContext(where);
+  if (!run->ok()) return Status::FailedPrecondition(where + ": not done");
+  const valvebench::v1::ExperimentSpec spec = run->spec.value_or(valvebench::v1::ExperimentSpec{});
+  auto trace = backend.GetTrace(id);
+  if (!trace.ok()) return trace.status().WithContext(where);
+  if (!trace->columns.count("gate") || !trace->columns.count("i_A"))
+    return Status::InvalidArgument(where + ": the trace has no gate and i_A channels");
+  gap::RunData r;
+  r.id = std::to_string(id) + ":" + run->key.DisplayName();
+  r.file = where;
+  r.supply_V = spec.conditions().supply_v();
+  r.supply_pressure_Pa = spec.conditions().supply_pressure_pa();
+  r.sample_period_s = trace->sample_period_s;
+  r.i_A = trace->columns.at("i_A");
+  for (std::size_t j = 0; j < r.i_A.size(); ++j) {
+    const double g = trace->columns.at("gate")[j];
+    if (g != 0.0 && g != 1.0)
+      return Status::InvalidArgument(where + ": gate[" + std::to_string(j) + "] is " + std::to_string(g) +
+                                     "; the diagnosis needs a low-side switch command (0 or 1)");
+    r.gate.push_back(static_cast<std::int8_t>(g));
+    r.t_s.push_back(static_cast<double>(j) * r.sample_period_s);
+  }
+  if (info != nullptr) {
+    info->started_unix_s = run->started_unix_s;
+    info->t_start_s = run->t_start_s;
+    info->split = run->split;
+    info->preset = spec.bench().model().preset().empty() ? "taghizadeh2009" : spec.bench().model().preset();
+  }
+  return r;
+}
+
 int StoredDiagnose(Backend& backend, const std::vector<std::int64_t>& run_ids, const std::string& model,
                    const DiagnoseOutput& out) {
   gap::Dataset ds;
   ds.format = std::string(gap::kFormatValveRuns1);
   double first_start_unix = -1.0;
   for (std::size_t k = 0; k < run_ids.size(); ++k) {
-    const std::string where = "run " + std::to_string(run_ids[k]);
-    auto run = backend.GetRun(run_ids[k]);
-    if (!run.ok()) return Fail(run.status().WithContext(where));
-    if (!run->ok()) return Fail(Status::FailedPrecondition(where + ": not done"));
-    const valvebench::v1::ExperimentSpec spec = run->spec.value_or(valvebench::v1::ExperimentSpec{});
-    auto trace = backend.GetTrace(run_ids[k]);
-    if (!trace.ok()) return Fail(trace.status().WithContext(where));
-    if (!trace->columns.count("gate") || !trace->columns.count("i_A"))
-      return Fail(Status::InvalidArgument(where + ": the trace has no gate and i_A channels"));
-    gap::RunData r;
-    r.id = std::to_string(run_ids[k]) + ":" + run->key.DisplayName();
-    r.file = where;
-    r.supply_V = spec.conditions().supply_v();
-    r.supply_pressure_Pa = spec.conditions().supply_pressure_pa();
+    StoredRunInfo info;
+    auto r = StoredRun(backend, run_ids[k], &info);
+    if (!r.ok()) return Fail(r.status());
     // Imported runs carry their session's start time and split as fields (docs/server.md); other runs take
     // the start from when they ran.
-    if (first_start_unix < 0.0) first_start_unix = run->started_unix_s;
-    r.t_start_s = run->t_start_s ? *run->t_start_s : run->started_unix_s - first_start_unix;
-    r.split = run->split == "fit" || run->split == "holdout" ? run->split : "";
-    r.sample_period_s = trace->sample_period_s;
-    r.i_A = trace->columns.at("i_A");
-    for (std::size_t j = 0; j < r.i_A.size(); ++j) {
-      const double g = trace->columns.at("gate")[j];
-      if (g != 0.0 && g != 1.0)
-        return Fail(Status::InvalidArgument(where + ": gate[" + std::to_string(j) + "] is " + std::to_string(g) +
-                                            "; the diagnosis needs a low-side switch command (0 or 1)"));
-      r.gate.push_back(static_cast<std::int8_t>(g));
-      r.t_s.push_back(static_cast<double>(j) * r.sample_period_s);
-    }
-    if (k == 0) ds.model = spec.bench().model().preset().empty() ? "taghizadeh2009" : spec.bench().model().preset();
-    ds.runs.push_back(std::move(r));
+    if (first_start_unix < 0.0) first_start_unix = info.started_unix_s;
+    r->t_start_s = info.t_start_s ? *info.t_start_s : info.started_unix_s - first_start_unix;
+    r->split = info.split == "fit" || info.split == "holdout" ? info.split : "";
+    if (k == 0) ds.model = info.preset;
+    ds.runs.push_back(std::move(*r));
   }
   std::stable_sort(ds.runs.begin(), ds.runs.end(),
                    [](const gap::RunData& a, const gap::RunData& b) { return a.t_start_s < b.t_start_s; });
@@ -394,6 +415,10 @@ GapCli::GapCli(CLI::App* app, SharedOptions shared) : shared_(shared) {
   diagnose_->add_option("--model-out", model_out_,
                         "write the improved model (ModelSpec JSON: --model and an emulated bench load it)");
   diagnose_->add_option("--emit-model", emit_model_, "old name of --model-out");
+  diagnose_->add_option("--add-runs", add_runs_,
+                        "add these stored runs (the local store's or the server's) to the dataset as holdout runs, "
+                        "e.g. the ones --suggest proposed")
+      ->delimiter(',');
   diagnose_->add_option("--suggest", suggest_out_,
                         "when the leading candidates are confusable, write the runs that would separate them best "
                         "(an experiment spec: benchctl run FILE) and list them");
@@ -474,6 +499,22 @@ int GapCli::Diagnose(const ClientFactory& make_client) {
   if (dataset_dir_.empty()) return Fail(Status::InvalidArgument("diagnose: give a dataset directory or --runs ID,..."));
   auto ds = Load(dataset_dir_);
   if (!ds.ok()) return Fail(ds.status());
+  if (!add_runs_.empty()) {
+    // Runs made since the session (e.g. the ones --suggest proposed), as holdout runs after its end: they test
+    // each candidate's prediction where the candidates disagree (docs/gap.md, "The next experiment").
+    auto backend = ChooseBackend(local_ ? "" : *shared_.server, *shared_.store_path, make_client);
+    double t = 0.0;
+    for (const auto& r : ds->runs)
+      if (std::isfinite(r.t_start_s) && !r.t_s.empty()) t = std::max(t, r.t_start_s + r.t_s.back());
+    for (std::int64_t id : add_runs_) {
+      auto r = StoredRun(*backend, id, nullptr);
+      if (!r.ok()) return Fail(r.status().WithContext("--add-runs"));
+      r->split = "holdout";
+      r->t_start_s = t + 1.0;
+      t = r->t_start_s + (r->t_s.empty() ? 0.0 : r->t_s.back());
+      ds->runs.push_back(std::move(*r));
+    }
+  }
   auto nominal = NominalFor(*ds, model_);
   if (!nominal.ok()) return Fail(nominal.status());
   gap::DiagnoseOptions options;

@@ -43,7 +43,7 @@ class GapCli {
   std::string dataset_dir_, model_, json_path_, json_out_, model_out_, suggest_out_, emit_model_, reference_dir_, out_path_,
       csv_path_, out_dir_;
   bool local_ = false;
-  std::vector<std::int64_t> runs_;
+  std::vector<std::int64_t> runs_, add_runs_;
   std::vector<std::string> params_, reference_params_, fixed_;
   bool no_global_ = false, global_ = false;
   double shunt_ohm_ = 0.2, amp_ref_ohm_ = 1000.0, adc_lsb_V_ = 1e-3;

@@ -3,7 +3,14 @@
 // the effect on (the bench), its runs added to the session, and the diagnosis again.
 #include <gtest/gtest.h>
 
+#include <nlohmann/json.hpp>
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
 #include <random>
+
+#include "../common/run_command.h"
 
 #include "experiment/runner.h"
 #include "experiment/spec.h"
@@ -121,6 +128,38 @@ TEST(Suggest, ARunLikeTheSessionsOwnLeavesTheAmbiguity) {
   auto after = Diagnose(ds, nominal, Options());
   ASSERT_TRUE(after.ok()) << after.status().message();
   EXPECT_FALSE(after->confusable.empty()) << "verdict " << after->verdict;
+}
+
+// The same loop as a user runs it, with benchctl alone: diagnose p09 (a 15 % soft spring, confusable with a
+// smaller preload) --suggest; run the suggested spec on the local emulator with the valve's true spring; diagnose
+// p09 again with those runs added (--add-runs): param:k, and nothing confusable.
+TEST(Suggest, TheLoopWithBenchctlAlone) {
+  namespace fs = std::filesystem;
+  const fs::path dir = fs::path(::testing::TempDir()) / ("vb-suggest-" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const std::string bc = std::string(VB_BENCHCTL), db = (dir / "store.db").string();
+  const std::string p09 = std::string(VB_SHARED_DIR) + "/gapbench/practice/p09";
+  auto first = testing::RunCommand(bc + " diagnose " + p09 + " --suggest " + (dir / "next.json").string() + " 2>&1");
+  ASSERT_EQ(first.exit_code, 0) << first.out;
+  EXPECT_NE(first.out.find("next experiment (to separate param:k param:delta"), std::string::npos) << first.out;
+  // The bench: the emulator with the valve's true spring (the gapbench label: k = 8500 N/m).
+  nlohmann::json spec = nlohmann::json::parse(std::ifstream(dir / "next.json"));
+  spec["bench"]["model"]["params"] = {{"k", 8500.0}};
+  std::ofstream(dir / "bench.json") << spec.dump();
+  auto ran = testing::RunCommand(bc + " run --local --db " + db + " " + (dir / "bench.json").string() + " --json");
+  ASSERT_EQ(ran.exit_code, 0) << ran.out;
+  std::string ids;
+  for (const auto& r : nlohmann::json::parse(ran.out)) ids += (ids.empty() ? "" : ",") + std::to_string(r["id"].get<long>());
+  auto again = testing::RunCommand(bc + " diagnose " + p09 + " --add-runs " + ids + " --local --db " + db + " --json");
+  ASSERT_EQ(again.exit_code, 0) << again.out;
+  const auto d = nlohmann::json::parse(again.out);
+  EXPECT_EQ(d["verdict"], "param:k");
+  EXPECT_TRUE(d["confusable"].empty()) << d["confusable"].dump();
+  int holdout = 0;
+  for (const auto& r : d["runs"]) holdout += r["split"] == "holdout" && r["id"].get<std::string>().find("next-experiment") != std::string::npos;
+  EXPECT_EQ(holdout, static_cast<int>(nlohmann::json::parse(ran.out).size()));
+  fs::remove_all(dir);
 }
 
 TEST(Suggest, NothingToSeparateWhenTheVerdictStandsAlone) {
