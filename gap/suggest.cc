@@ -85,6 +85,11 @@ std::vector<std::int8_t> DesignGate(const Design& design, double dt) {
 StatusOr<Suggestion> SuggestNextRuns(const Dataset& ds, const model::PlantParams& nominal, const Diagnosis& d,
                                      const SuggestOptions& options) {
   Suggestion s;
+  if (d.has_reference) {
+    // The contenders were fitted around the device as identified on the reference, which this call does not have.
+    s.note = "no suggestion: not made against a reference session yet (diagnose without --reference to get one)";
+    return s;
+  }
   // The contenders: the verdict and what it is confusable with; with no verdict, the best rows that may be it.
   std::vector<std::size_t> rows;
   auto row_of = [&](const std::string& name) -> int {
