@@ -3,12 +3,14 @@
 #include <fmt/format.h>
 #include <google/protobuf/util/json_util.h>
 
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <set>
 #include <sstream>
 
+#include "common/format.h"
 #include "experiment/spec.h"
 #include "regress/compare.h"
 #include "regress/cron.h"
@@ -132,6 +134,30 @@ StatusOr<NightsSetup> NightsFromConfig(const valvebench::v1::NightsConfig& n, co
   return out;
 }
 
+// retention: checked at start like nights, so a typo stops the server instead of silently never pruning.
+StatusOr<RetentionSetup> RetentionFromConfig(const valvebench::v1::ServerConfig& c) {
+  RetentionSetup out;
+  if (!c.has_retention()) return out;
+  const auto& r = c.retention();
+  if (!std::isfinite(r.older_than_days()) || !(r.older_than_days() > 0.0))
+    return Status::InvalidArgument("retention.older_than_days: must be a number of days > 0, got " +
+                                   FormatExact(r.older_than_days()));
+  if (r.older_than_days() > 1e6)
+    return Status::InvalidArgument("retention.older_than_days: " + FormatExact(r.older_than_days()) +
+                                   " days reaches before 1970");
+  if (r.keep_last() < 0)
+    return Status::InvalidArgument("retention.keep_last: must be >= 0, got " + std::to_string(r.keep_last()));
+  if (!r.cron().empty()) {
+    auto cron = regress::Cron::Parse(r.cron());
+    if (!cron.ok()) return Status::InvalidArgument("retention.cron: " + cron.status().message());
+    out.cron = r.cron();
+  }
+  out.enabled = true;
+  out.older_than_days = r.older_than_days();
+  out.keep_last = r.keep_last();
+  return out;
+}
+
 }  // namespace
 
 StatusOr<regress::Baseline> LoadBaselineFile(const std::string& path) {
@@ -232,6 +258,9 @@ StatusOr<Settings> SettingsFromConfig(const valvebench::v1::ServerConfig& c, con
   auto nights = NightsFromConfig(c.nights(), base_dir);
   if (!nights.ok()) return nights.status();
   s.nights = std::move(*nights);
+  auto retention = RetentionFromConfig(c);
+  if (!retention.ok()) return retention.status();
+  s.retention = std::move(*retention);
   return s;
 }
 

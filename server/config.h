@@ -25,6 +25,14 @@ struct NightsSetup {
   bool utc = true;              // the only time zone supported
 };
 
+// Retention on a schedule (config "retention"; docs/store.md "Retention", docs/server.md).
+struct RetentionSetup {
+  bool enabled = false;
+  double older_than_days = 0.0;  // > 0
+  int keep_last = 0;             // >= 0
+  std::string cron = "30 3 * * *";  // validated 5-field expression, UTC
+};
+
 struct Settings {
   std::string listen_address = "127.0.0.1:50051";
   std::string database_path;
@@ -35,6 +43,7 @@ struct Settings {
   // What submissions are admitted with (runs/admit.h): the limits above and the configured benches.
   runs::Policy AdmitPolicy() const;
   NightsSetup nights;
+  RetentionSetup retention;
 };
 
 StatusOr<Settings> LoadSettings(const std::string& config_path);

@@ -1,6 +1,7 @@
 // valvebench-server --config FILE
 // With a "nights" block in the config, a scheduler thread runs the regression suite at each cron fire (UTC;
 // server/nights.h). Test hook (hidden): --run-night-now runs one night right after start.
+// With a "retention" block, another thread prunes old finished runs at each of its cron fires (server/retention.h).
 // Serves BenchService, grpc.health.v1 and server reflection; one worker per configured bench. Listens on
 // loopback unless the config says otherwise. SIGTERM/SIGINT: stop accepting, stop running experiments (the
 // benches go to their safe state; the runs are re-queued at the next start), exit 0.
@@ -21,6 +22,7 @@
 
 #include "server/config.h"
 #include "server/nights.h"
+#include "server/retention.h"
 #include "server/service.h"
 
 int main(int argc, char** argv) {
@@ -110,6 +112,11 @@ int main(int argc, char** argv) {
         settings->nights, &pool, [&service](const vb::runs::Submission& s) { return service.Queue(s); });
     nights->Start(run_night_now);
   }
+  std::unique_ptr<vb::server::RetentionScheduler> retention;
+  if (settings->retention.enabled) {
+    retention = std::make_unique<vb::server::RetentionScheduler>(settings->retention, settings->nights, &pool);
+    retention->Start();
+  }
   // The address with the port actually bound (a config may ask for port 0: any free port).
   std::string bound = settings->listen_address;
   if (const size_t colon = bound.rfind(':'); colon != std::string::npos && bound.rfind("unix:", 0) != 0)
@@ -120,10 +127,15 @@ int main(int argc, char** argv) {
   if (nights) spdlog::info("nights: '{}' (UTC), suite {}",
                            settings->nights.cron.c_str(), settings->nights.suite_path.c_str());
 
+  if (retention)
+    spdlog::info("retention: '{}' (UTC), runs finished more than {} days before go, newest {} kept",
+                 settings->retention.cron.c_str(), settings->retention.older_than_days, settings->retention.keep_last);
+
   int sig = 0;
   sigwait(&signals, &sig);
   spdlog::info("{}: shutting down", sig == SIGTERM ? "SIGTERM" : "SIGINT");
   if (nights) nights->Stop();
+  if (retention) retention->Stop();
   server->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(2));
   for (auto& w : workers) w->Stop();
   server->Wait();
