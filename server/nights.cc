@@ -36,23 +36,8 @@ void NightScheduler::Start(bool run_now) {
 }
 
 void NightScheduler::Stop() {
-  {
-    std::lock_guard<std::mutex> lock(mu_);
-    stop_ = true;
-  }
-  cv_.notify_all();
+  stop_signal_.Stop();
   if (thread_.joinable()) thread_.join();
-}
-
-bool NightScheduler::SleepUntil(double t_unix_s) {
-  std::unique_lock<std::mutex> lock(mu_);
-  for (;;) {
-    if (stop_) return false;
-    const double left_s = t_unix_s - clock_();
-    if (left_s <= 0.0) return true;
-    // Re-read the clock at least each minute: the wall clock may be set while we sleep.
-    cv_.wait_for(lock, std::chrono::duration<double>(std::min(left_s, 60.0)), [this] { return stop_; });
-  }
 }
 
 void NightScheduler::Loop(bool run_now) {
@@ -73,7 +58,7 @@ void NightScheduler::Loop(bool run_now) {
                    next.status().message().c_str());
       return;
     }
-    if (!SleepUntil(*next)) return;
+    if (!stop_signal_.SleepUntil(*next)) return;
     night(*next);
   }
 }
@@ -148,8 +133,7 @@ StatusOr<std::int64_t> NightScheduler::RunNight(double fire_unix_s) {
   std::vector<regress::RunMetrics> measured;
   for (;;) {
     {
-      std::unique_lock<std::mutex> lock(mu_);
-      if (stop_)
+      if (stop_signal_.stopped())
         return Status::Aborted("night " + date + ": the server stopped before batch " + std::to_string(batch_id) +
                                " finished; nothing stored");
     }
@@ -178,8 +162,7 @@ StatusOr<std::int64_t> NightScheduler::RunNight(double fire_unix_s) {
     if (clock_() - started_unix_s > kNightDeadline_s)
       return error(Status::Unavailable("batch " + std::to_string(batch_id) + " did not finish within " +
                                        std::to_string(static_cast<int>(kNightDeadline_s / 3600)) + " h"));
-    std::unique_lock<std::mutex> lock(mu_);
-    cv_.wait_for(lock, std::chrono::duration<double>(kPollPeriod_s), [this] { return stop_; });
+    stop_signal_.SleepFor(kPollPeriod_s);
   }
 
   regress::RegressResult r = regress::Compare(suite->suite, *baseline, regress::Summarise(measured));

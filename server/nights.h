@@ -15,6 +15,7 @@
 #include "common/status.h"
 #include "runs/admit.h"
 #include "server/config.h"
+#include "server/stop_signal.h"
 #include "server/service.h"
 
 namespace vb::server {
@@ -44,8 +45,6 @@ class NightScheduler {
 
  private:
   void Loop(bool run_now);
-  // Sleeps until unix time t (or stop); false when stopped.
-  bool SleepUntil(double t_unix_s);
   StatusOr<std::int64_t> SaveNight(const std::string& date, std::int64_t batch_id, const std::string& verdict,
                                    const std::string& result_json, double finished_unix_s);
 
@@ -54,9 +53,7 @@ class NightScheduler {
   SubmitFn submit_;
   ClockFn clock_;
   std::thread thread_;
-  std::mutex mu_;
-  std::condition_variable cv_;
-  bool stop_ = false;
+  StopSignal stop_signal_{[this] { return clock_(); }};
 };
 
 }  // namespace vb::server

@@ -69,23 +69,8 @@ void RetentionScheduler::Start() {
 }
 
 void RetentionScheduler::Stop() {
-  {
-    std::lock_guard<std::mutex> lock(mu_);
-    stop_ = true;
-  }
-  cv_.notify_all();
+  stop_signal_.Stop();
   if (thread_.joinable()) thread_.join();
-}
-
-bool RetentionScheduler::SleepUntil(double t_unix_s) {
-  std::unique_lock<std::mutex> lock(mu_);
-  for (;;) {
-    if (stop_) return false;
-    const double left_s = t_unix_s - clock_();
-    if (left_s <= 0.0) return true;
-    // Re-read the clock at least each minute: the wall clock may be set while we sleep.
-    cv_.wait_for(lock, std::chrono::duration<double>(std::min(left_s, 60.0)), [this] { return stop_; });
-  }
 }
 
 void RetentionScheduler::Loop() {
@@ -101,7 +86,7 @@ void RetentionScheduler::Loop() {
                     next.status().message().c_str());
       return;
     }
-    if (!SleepUntil(*next)) return;
+    if (!stop_signal_.SleepUntil(*next)) return;
     auto r = RunOnce(*next);
     if (!r.ok()) spdlog::error("retention: {}; nothing deleted", r.status().message().c_str());
   }

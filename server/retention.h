@@ -10,6 +10,7 @@
 #include "common/status.h"
 #include "db/store.h"
 #include "server/config.h"
+#include "server/stop_signal.h"
 #include "server/service.h"
 
 namespace vb::server {
@@ -39,16 +40,13 @@ class RetentionScheduler {
 
  private:
   void Loop();
-  bool SleepUntil(double t_unix_s);  // false when stopped
 
   RetentionSetup setup_;
   NightsSetup nights_;
   StorePool* pool_;
   ClockFn clock_;
   std::thread thread_;
-  std::mutex mu_;
-  std::condition_variable cv_;
-  bool stop_ = false;
+  StopSignal stop_signal_{[this] { return clock_(); }};
 };
 
 }  // namespace vb::server
