@@ -1,5 +1,7 @@
 #include "experiment/bounds.h"
 
+#include "experiment/spec.h"
+
 #include <google/protobuf/descriptor.h>
 #include <google/protobuf/message.h>
 
@@ -196,17 +198,6 @@ double ScalarValue(const pb::Message& m, const pb::FieldDescriptor* f, int index
   }
 }
 
-bool IsNumber(const pb::FieldDescriptor* f) {
-  switch (f->cpp_type()) {
-    case pb::FieldDescriptor::CPPTYPE_DOUBLE:
-    case pb::FieldDescriptor::CPPTYPE_FLOAT:
-    case pb::FieldDescriptor::CPPTYPE_INT32:
-    case pb::FieldDescriptor::CPPTYPE_UINT32:
-    case pb::FieldDescriptor::CPPTYPE_INT64:
-    case pb::FieldDescriptor::CPPTYPE_UINT64: return true;
-    default: return false;
-  }
-}
 
 std::string Join(const std::string& prefix, const std::string& name) {
   return prefix.empty() ? name : prefix + "." + name;
@@ -223,7 +214,7 @@ Status Walk(const pb::Message& m, const std::string& path, const std::string& pa
     if (f->is_map()) {
       const pb::FieldDescriptor* kf = f->message_type()->map_key();
       const pb::FieldDescriptor* vf = f->message_type()->map_value();
-      if (!IsNumber(vf)) continue;
+      if (!IsNumericField(vf)) continue;
       const FieldBound* b = FindSpecBound(fpattern + "[*]");
       for (int k = 0; k < r->FieldSize(m, f); ++k) {
         const pb::Message& e = r->GetRepeatedMessage(m, f, k);
@@ -241,7 +232,7 @@ Status Walk(const pb::Message& m, const std::string& path, const std::string& pa
       } else if (r->HasField(m, f)) {
         VB_RETURN_IF_ERROR(Walk(r->GetMessage(m, f), fpath, fpattern, overlay));
       }
-    } else if (IsNumber(f)) {
+    } else if (IsNumericField(f)) {
       if (f->is_repeated()) {
         const FieldBound* b = FindSpecBound(fpattern + "[]");
         for (int k = 0; k < r->FieldSize(m, f); ++k)

@@ -168,17 +168,6 @@ const pb::FieldDescriptor* FindField(const pb::Descriptor* d, const std::string&
   return f;
 }
 
-bool IsNumeric(const pb::FieldDescriptor* f) {
-  switch (f->cpp_type()) {
-    case pb::FieldDescriptor::CPPTYPE_DOUBLE:
-    case pb::FieldDescriptor::CPPTYPE_FLOAT:
-    case pb::FieldDescriptor::CPPTYPE_INT32:
-    case pb::FieldDescriptor::CPPTYPE_UINT32:
-    case pb::FieldDescriptor::CPPTYPE_INT64:
-    case pb::FieldDescriptor::CPPTYPE_UINT64: return true;
-    default: return false;
-  }
-}
 
 // Walks the path; when `set` is true creates what is missing and writes *value, else reads into *value.
 Status WalkPath(pb::Message* msg, std::string_view path, double* value, bool set) {
@@ -240,7 +229,7 @@ Status WalkPath(pb::Message* msg, std::string_view path, double* value, bool set
       cur = r->MutableMessage(cur, f);
       continue;
     }
-    if (!last || !IsNumeric(f)) return Status::InvalidArgument(where + ": '" + tok.name + "' is not a number");
+    if (!last || !IsNumericField(f)) return Status::InvalidArgument(where + ": '" + tok.name + "' is not a number");
     if (set && f->cpp_type() != pb::FieldDescriptor::CPPTYPE_DOUBLE &&
         f->cpp_type() != pb::FieldDescriptor::CPPTYPE_FLOAT) {
       // An integer field takes whole values of its type only; a cast of anything else would be undefined.
@@ -544,6 +533,18 @@ StatusOr<Experiment> BuildExperiment(const ExperimentSpec& spec) {
   std::sort(e.breakpoints_s.begin(), e.breakpoints_s.end());
   e.breakpoints_s.erase(std::unique(e.breakpoints_s.begin(), e.breakpoints_s.end()), e.breakpoints_s.end());
   return e;
+}
+
+bool IsNumericField(const google::protobuf::FieldDescriptor* f) {
+  switch (f->cpp_type()) {
+    case google::protobuf::FieldDescriptor::CPPTYPE_DOUBLE:
+    case google::protobuf::FieldDescriptor::CPPTYPE_FLOAT:
+    case google::protobuf::FieldDescriptor::CPPTYPE_INT32:
+    case google::protobuf::FieldDescriptor::CPPTYPE_UINT32:
+    case google::protobuf::FieldDescriptor::CPPTYPE_INT64:
+    case google::protobuf::FieldDescriptor::CPPTYPE_UINT64: return true;
+    default: return false;
+  }
 }
 
 }  // namespace vb::experiment

@@ -47,6 +47,8 @@ StatusOr<std::vector<ExperimentSpec>> ExpandSweep(const ExperimentSpec& spec, si
 // "bench.model.params[R]").
 Status SetFieldByPath(ExperimentSpec* spec, std::string_view path, double value);
 StatusOr<double> GetFieldByPath(const ExperimentSpec& spec, std::string_view path);
+// A field that holds a number (double, float or an integer): what sweeps and the bounds table act on.
+bool IsNumericField(const google::protobuf::FieldDescriptor* f);
 
 // One resolved run.
 struct Experiment {
