@@ -26,14 +26,7 @@ std::string NightsBlock(const std::string& cron) {
 }
 
 valvebench::v1::ServerConfig Config(const std::string& cron, const std::string& tz = "UTC") {
-  valvebench::v1::ServerConfig c;
-  auto* b = c.add_benches();
-  b->set_name("emu");
-  b->mutable_model()->set_preset("taghizadeh2009");
-  auto* t = c.add_tokens();
-  t->set_user("v");
-  t->set_role("viewer");
-  t->set_token_sha256(server::Sha256Hex("x"));
+  valvebench::v1::ServerConfig c = testing::MinimalConfig();
   c.mutable_nights()->set_cron(cron);
   c.mutable_nights()->set_suite_file(kSuites + "ci.json");
   c.mutable_nights()->set_baseline_file(kSuites + "ci-baseline.json");

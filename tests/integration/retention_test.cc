@@ -25,14 +25,7 @@ namespace {
 constexpr double kDay_s = 86400.0;
 
 valvebench::v1::ServerConfig Config() {
-  valvebench::v1::ServerConfig c;
-  auto* b = c.add_benches();
-  b->set_name("emu");
-  b->mutable_model()->set_preset("taghizadeh2009");
-  auto* t = c.add_tokens();
-  t->set_user("v");
-  t->set_role("viewer");
-  t->set_token_sha256(server::Sha256Hex("x"));
+  valvebench::v1::ServerConfig c = testing::MinimalConfig();
   return c;
 }
 

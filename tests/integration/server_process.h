@@ -18,12 +18,27 @@
 #include <vector>
 
 #include "server/auth.h"
+#include "valvebench/v1/config.pb.h"
 
 extern char** environ;
 
 namespace vb::testing {
 
 // Tokens the fixture configures: one per role.
+// The smallest valid server configuration: one emulated bench "emu" and a viewer whose token is "x" (config
+// validation tests add the block under test).
+inline valvebench::v1::ServerConfig MinimalConfig() {
+  valvebench::v1::ServerConfig c;
+  auto* b = c.add_benches();
+  b->set_name("emu");
+  b->mutable_model()->set_preset("taghizadeh2009");
+  auto* t = c.add_tokens();
+  t->set_user("v");
+  t->set_role("viewer");
+  t->set_token_sha256(vb::server::Sha256Hex("x"));
+  return c;
+}
+
 inline constexpr const char* kViewerToken = "viewer-token-1";
 inline constexpr const char* kOperatorToken = "operator-token-1";
 inline constexpr const char* kOperator2Token = "operator-token-2";

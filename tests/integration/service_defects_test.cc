@@ -152,14 +152,7 @@ TEST(ServiceDefects, HealthAnswersServingForTheServiceByName) {
 }
 
 TEST(ServerConfig, PerUserDiskBudgetIsMappedAndValidated) {
-  valvebench::v1::ServerConfig c;
-  auto* b = c.add_benches();
-  b->set_name("emu");
-  b->mutable_model()->set_preset("taghizadeh2009");
-  auto* t = c.add_tokens();
-  t->set_user("v");
-  t->set_role("viewer");
-  t->set_token_sha256(server::Sha256Hex("x"));
+  valvebench::v1::ServerConfig c = testing::MinimalConfig();
   auto none = server::SettingsFromConfig(c, "");
   ASSERT_TRUE(none.ok()) << none.status().message();
   EXPECT_TRUE(std::isinf(none->AdmitPolicy().limits.max_disk_bytes_per_user));  // 0 / absent: no limit
