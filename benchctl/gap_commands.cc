@@ -392,9 +392,7 @@ int ImportDataset(Backend& backend, const std::string& dataset_dir, bool json) {
 
 GapCli::GapCli(CLI::App* app, SharedOptions shared) : shared_(shared) {
   auto server_opts = [&](CLI::App* sub) {
-    sub->add_option("--server", *shared_.server, "bench server address host:port (or VALVEBENCH_SERVER)");
-    sub->add_option("--token", *shared_.token, "bearer token (or VALVEBENCH_TOKEN)");
-    sub->add_option("--tls-ca", *shared_.tls_ca_file, "PEM file of the CA that signed the server's certificate");
+    AddServerOptions(sub, shared_);
   };
   diagnose_ = app->add_subcommand("diagnose", "where and why measured runs differ from the model (valve-runs/1, /2)");
   diagnose_->add_option("dataset", dataset_dir_, "dataset directory (manifest.json and its files)");

@@ -51,9 +51,7 @@ int main(int argc, char** argv) {
   auto common = [&](CLI::App* sub, bool with_csv) {
     sub->add_flag("--json", json, "machine-readable output on stdout");
     if (with_csv) sub->add_flag("--csv", csv, "CSV output on stdout");
-    sub->add_option("--server", server, "bench server address host:port (or VALVEBENCH_SERVER)");
-    sub->add_option("--token", token, "bearer token (or VALVEBENCH_TOKEN)");
-    sub->add_option("--tls-ca", tls_ca_file, "PEM file of the CA that signed the server's certificate");
+    vb::benchctl::AddServerOptions(sub, &server, &token, &tls_ca_file);
   };
 
   std::string spec_path, trace_csv;

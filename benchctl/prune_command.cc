@@ -186,9 +186,7 @@ PruneCli::PruneCli(CLI::App* app, SharedOptions shared) : shared_(shared) {
   cmd_->add_flag("--local", local_, "prune the local store (default when no server is given)");
   cmd_->add_option("--db", *shared_.store_path, "local store (default $VALVEBENCH_DB or ~/.local/share/valvebench/local.db)");
   cmd_->add_flag("--json", *shared_.json, "machine-readable output on stdout");
-  cmd_->add_option("--server", *shared_.server, "bench server address host:port (or VALVEBENCH_SERVER); admin token");
-  cmd_->add_option("--token", *shared_.token, "bearer token (or VALVEBENCH_TOKEN)");
-  cmd_->add_option("--tls-ca", *shared_.tls_ca_file, "PEM file of the CA that signed the server's certificate");
+  AddServerOptions(cmd_, shared_);  // on a server, prune needs an admin token
 }
 
 int PruneCli::Run() {

@@ -157,9 +157,7 @@ Status WriteFile(const std::string& path, const std::string& text) {
 RegressCli::RegressCli(CLI::App* app, SharedOptions shared) : shared_(shared) {
   auto common = [this](CLI::App* sub, bool with_db = true) {
     sub->add_flag("--json", *shared_.json, "machine-readable output on stdout");
-    sub->add_option("--server", *shared_.server, "bench server address host:port (or VALVEBENCH_SERVER)");
-    sub->add_option("--token", *shared_.token, "bearer token (or VALVEBENCH_TOKEN)");
-    sub->add_option("--tls-ca", *shared_.tls_ca_file, "PEM file of the CA that signed the server's certificate");
+    AddServerOptions(sub, shared_);
     if (with_db) sub->add_option("--db", *shared_.store_path, "local store holding baselines and regression results");
   };
   baseline_ = app->add_subcommand("baseline", "named, versioned metric baselines for regress");

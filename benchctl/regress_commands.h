@@ -26,6 +26,16 @@ struct SharedOptions {
   std::string* store_path;  // local store ("" after --no-store)
 };
 
+// --server, --token and --tls-ca on a subcommand: one wording for every command that can reach a server.
+inline void AddServerOptions(CLI::App* sub, std::string* server, std::string* token, std::string* tls_ca_file) {
+  sub->add_option("--server", *server, "bench server address host:port (or VALVEBENCH_SERVER)");
+  sub->add_option("--token", *token, "bearer token (or VALVEBENCH_TOKEN)");
+  sub->add_option("--tls-ca", *tls_ca_file, "PEM file of the CA that signed the server's certificate");
+}
+inline void AddServerOptions(CLI::App* sub, const SharedOptions& shared) {
+  AddServerOptions(sub, shared.server, shared.token, shared.tls_ca_file);
+}
+
 using ClientFactory = std::function<std::unique_ptr<client::Client>()>;
 
 class RegressCli {

@@ -56,9 +56,7 @@ ReportCli::ReportCli(CLI::App* app, SharedOptions shared) : shared_(shared) {
   report_->add_option("--png", png_dir_, "also write every plot as DIR/NN-<heading>.png (headless chromium)");
   report_->add_flag("--local", local_, "runs from the local store even if a server is configured");
   report_->add_flag("--json", *shared_.json, "print {html, sections} as JSON");
-  report_->add_option("--server", *shared_.server, "bench server address host:port (or VALVEBENCH_SERVER)");
-  report_->add_option("--token", *shared_.token, "bearer token (or VALVEBENCH_TOKEN)");
-  report_->add_option("--tls-ca", *shared_.tls_ca_file, "PEM file of the CA that signed the server's certificate");
+  AddServerOptions(report_, shared_);
   report_->add_option("--db", *shared_.store_path, "local store");
 }
 
