@@ -74,7 +74,7 @@ class StoreRelay {
       const std::int64_t id = worker_->current_run();
       if (id == 0) continue;
       double progress = 0.0;
-      if (registry_->Progress(id, &progress)) (void)store_->SetProgress(id, progress);
+      if (registry_->Progress(id, &progress)) (void)store_->SetProgress(worker_->current_lease(), progress);
       if (auto c = store_->CancelRequested(id); c.ok() && *c) registry_->Cancel(id);
     }
   }

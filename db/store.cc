@@ -129,20 +129,30 @@ class SqliteStore final : public Store {
   StatusOr<std::int64_t> SubmitBatch(const std::string& submitter, const std::string& name,
                                      const std::string& batch_spec_json, std::vector<RunRecord> runs,
                                      std::vector<std::int64_t>* run_ids) override;
-  StatusOr<std::optional<RunRecord>> ClaimNext(const std::string& bench_kind, const std::string& bench_name) override;
-  Status SetProgress(std::int64_t run_id, double progress) override;
-  Status Finish(std::int64_t run_id, RunStatus final_status, const std::string& reason,
+  StatusOr<std::optional<RunRecord>> ClaimNext(const ClaimRequest& request) override;
+  Status SetProgress(const Lease& lease, double progress) override;
+  Status Finish(const Lease& lease, RunStatus final_status, const std::string& reason,
                 const std::vector<Metric>& metrics) override;
   StatusOr<RunStatus> RequestCancel(std::int64_t run_id, const std::string& reason) override;
   StatusOr<bool> CancelRequested(std::int64_t run_id) override;
-  StatusOr<int> RecoverAfterCrash() override;
+  StatusOr<int> RecoverAfterCrash(const std::string& host) override;
+  // TODO(lab): schema v5 and the lab's methods on SQLite (docs/lab.md); the lab branch replaces these.
+  Status Heartbeat(const HostRecord&, double) override { return Status::Internal("Heartbeat: not built yet on SQLite"); }
+  StatusOr<std::vector<HostRecord>> ListHosts() override { return Status::Internal("ListHosts: not built yet on SQLite"); }
+  StatusOr<std::vector<std::int64_t>> RequeueLapsed() override { return Status::Internal("RequeueLapsed: not built yet on SQLite"); }
+  StatusOr<std::vector<StaleWrite>> StaleWrites(std::int32_t, std::int64_t*) override {
+    return Status::Internal("StaleWrites: not built yet on SQLite");
+  }
+  StatusOr<bool> ClaimNight(const std::string&, const std::string&) override {
+    return Status::Internal("ClaimNight: not built yet on SQLite");
+  }
   StatusOr<RunRecord> GetRun(std::int64_t run_id) override;
   StatusOr<std::vector<RunRecord>> ListRuns(const RunFilter& filter) override;
   StatusOr<std::vector<StatusChange>> History(std::int64_t run_id) override;
   StatusOr<std::vector<Metric>> GetMetrics(std::int64_t run_id) override;
   StatusOr<std::int64_t> CountQueued(const std::string& submitter) override;
   StatusOr<std::int64_t> StoredTraceBytes(const std::string& submitter) override;
-  Status AppendTraceChunk(std::int64_t run_id, const TraceChunk& chunk) override;
+  Status AppendTraceChunk(const Lease& lease, const TraceChunk& chunk) override;
   StatusOr<std::vector<TraceChunk>> ReadTrace(std::int64_t run_id) override;
   Status ForEachTraceChunk(std::int64_t run_id,
                            const std::function<Status(const TraceChunk&, std::int64_t)>& fn) override;
@@ -312,8 +322,9 @@ StatusOr<std::int64_t> SqliteStore::SubmitBatch(const std::string& submitter, co
   return batch_id;
 }
 
-StatusOr<std::optional<RunRecord>> SqliteStore::ClaimNext(const std::string& bench_kind,
-                                                          const std::string& bench_name) {
+StatusOr<std::optional<RunRecord>> SqliteStore::ClaimNext(const ClaimRequest& request) {
+  const std::string& bench_kind = request.bench_kind;
+  const std::string& bench_name = request.bench_name;
   if (bench_name.empty()) return Status::InvalidArgument("bench_name: must name the bench that claims the run");
   Transaction txn(&conn_);
   // BEGIN IMMEDIATE takes the database's single write lock before the SELECT: two claimers (threads or
@@ -344,7 +355,8 @@ StatusOr<std::optional<RunRecord>> SqliteStore::ClaimNext(const std::string& ben
   return std::optional<RunRecord>(std::move(run));
 }
 
-Status SqliteStore::SetProgress(std::int64_t run_id, double progress) {
+Status SqliteStore::SetProgress(const Lease& lease, double progress) {
+  const std::int64_t run_id = lease.run_id;
   if (!(progress >= 0.0 && progress <= 1.0)) {
     return Status::InvalidArgument(Cat("progress: must be in [0, 1], got ", FormatExact(progress)));
   }
@@ -362,8 +374,9 @@ Status SqliteStore::SetProgress(std::int64_t run_id, double progress) {
   return txn.Commit();
 }
 
-Status SqliteStore::Finish(std::int64_t run_id, RunStatus final_status, const std::string& reason,
+Status SqliteStore::Finish(const Lease& lease, RunStatus final_status, const std::string& reason,
                            const std::vector<Metric>& metrics) {
+  const std::int64_t run_id = lease.run_id;
   if (final_status != RunStatus::kDone && final_status != RunStatus::kFailed &&
       final_status != RunStatus::kCancelled) {
     return Status::InvalidArgument(
@@ -456,7 +469,7 @@ StatusOr<std::int64_t> SqliteStore::InterruptionsOfRun(std::int64_t run_id) {
   return row ? st.Int(0) : 0;
 }
 
-StatusOr<int> SqliteStore::RecoverAfterCrash() {
+StatusOr<int> SqliteStore::RecoverAfterCrash(const std::string& /*host*/) {
   struct Running {
     std::int64_t id;
     bool requeue;
@@ -644,7 +657,8 @@ StatusOr<std::int64_t> SqliteStore::StoredTraceBytes(const std::string& submitte
 
 // ---- Traces ----
 
-Status SqliteStore::AppendTraceChunk(std::int64_t run_id, const TraceChunk& chunk) {
+Status SqliteStore::AppendTraceChunk(const Lease& lease, const TraceChunk& chunk) {
+  const std::int64_t run_id = lease.run_id;
   VB_RETURN_IF_ERROR(trace::ValidateChunk(chunk));
   const std::string where = Cat("trace chunk ", chunk.index, ": ");
   const std::string channels = trace::JoinChannels(chunk.channels);

@@ -45,6 +45,56 @@ struct RunRecord {
   // start time within its dataset session (NaN = not an imported run).
   std::string split;
   double t_start_s = std::numeric_limits<double>::quiet_NaN();
+  // The lab (docs/lab.md), schema v5: the attempt that holds the run (incremented by every claim; the fencing
+  // token its writes carry), the host executing it, and when its lease lapses (0 = no lease: one machine).
+  std::int64_t fence = 0;
+  std::string host;
+  double lease_expires_unix_s = 0.0;
+};
+
+// A claimed run's lease (docs/lab.md, "Leases and fencing"): the run and the attempt that holds it. Every write
+// the executing host makes for the run carries it. The store refuses a write whose fence is not the run's
+// current one, or for a run that is no longer running (the lease lapsed and the run was re-queued or
+// re-assigned to another host), with FailedPrecondition starting "stale write", logs it and counts it.
+struct Lease {
+  std::int64_t run_id = 0;
+  std::int64_t fence = 0;
+};
+inline Lease LeaseOf(const RunRecord& run) { return {run.id, run.fence}; }
+
+// What ClaimNext claims for.
+struct ClaimRequest {
+  std::string bench_kind;        // the bench's class: runs asking for another kind are not claimed
+  std::string bench_name;        // the claiming bench (required); runs asking for another bench are not claimed
+  std::string host;              // the claiming host ("" = one machine, no lab)
+  double lease_ttl_s = 0.0;      // > 0: the lease lapses this long after the claim or the last Heartbeat
+  double aging_s = 0.0;          // > 0: a queued run's priority rises by 1 for every aging_s it has waited
+};
+// A claim on one machine: no host, no lease, no aging.
+inline ClaimRequest BenchClaim(std::string bench_kind, std::string bench_name) {
+  ClaimRequest r;
+  r.bench_kind = std::move(bench_kind);
+  r.bench_name = std::move(bench_name);
+  return r;
+}
+
+// A server process sharing the store (docs/lab.md, "Hosts").
+struct HostRecord {
+  std::string name;              // unique in the lab
+  std::string address;           // where its gRPC API listens (host:port), for people and other hosts
+  std::string benches_json;      // its benches as a JSON array (name, kind, ...), written at every heartbeat
+  double started_unix_s = 0.0;
+  double heartbeat_unix_s = 0.0; // set by the store (its clock) at every Heartbeat
+};
+
+// A write the store refused because its lease was stale (StaleWrites()).
+struct StaleWrite {
+  std::int64_t run_id = 0;
+  std::int64_t fence = 0;        // the writer's
+  std::int64_t current_fence = 0;
+  std::string host;              // the host that holds the run now ("" = none: re-queued)
+  std::string what;              // "progress", "trace chunk 3", "finish done", ...
+  double at_unix_s = 0.0;
 };
 
 struct StatusChange {
@@ -153,24 +203,40 @@ class Store {
                                              const std::string& batch_spec_json, std::vector<RunRecord> runs,
                                              std::vector<std::int64_t>* run_ids) = 0;
 
-  // Queue: atomically picks the queued run with the highest priority, then the oldest (lowest id), whose
-  // bench_kind equals `bench_kind` (or is empty) and whose bench_name is empty or equals `bench_name`; marks it
-  // running on bench_name. nullopt when none is waiting.
-  virtual StatusOr<std::optional<RunRecord>> ClaimNext(const std::string& bench_kind,
-                                                       const std::string& bench_name) = 0;
-  virtual Status SetProgress(std::int64_t run_id, double progress) = 0;
+  // Queue: atomically picks the queued run with the highest priority (plus its aging, ClaimRequest::aging_s),
+  // then the oldest (lowest id), whose bench_kind equals the request's (or is empty) and whose bench_name is
+  // empty or equals the request's; marks it running on that bench and host with the next fence (and a lease
+  // when lease_ttl_s > 0). nullopt when none is waiting. Concurrent claimers, in one process or on many hosts,
+  // never get the same run.
+  virtual StatusOr<std::optional<RunRecord>> ClaimNext(const ClaimRequest& request) = 0;
+  // Writes for a claimed run: each refused as a stale write when `lease` no longer holds the run (see Lease).
+  virtual Status SetProgress(const Lease& lease, double progress) = 0;
   // Final state with metrics (written in the same transaction). FailedPrecondition if the run is not running.
-  virtual Status Finish(std::int64_t run_id, RunStatus final_status, const std::string& reason,
+  virtual Status Finish(const Lease& lease, RunStatus final_status, const std::string& reason,
                         const std::vector<Metric>& metrics) = 0;
   // Cancels a queued run at once (returns kCancelled); for a running run records the request and returns
   // kRunning (the worker stops it and calls Finish(kCancelled)); FailedPrecondition for finished runs.
   virtual StatusOr<RunStatus> RequestCancel(std::int64_t run_id, const std::string& reason) = 0;
   virtual StatusOr<bool> CancelRequested(std::int64_t run_id) = 0;
-  // On server start: every run still marked running becomes interrupted; those with requeue_on_interrupt
-  // are queued again (keeping their id, priority and age), unless this was their third interruption: a run
-  // that keeps taking the server down is failed with the reason (a poison run). Returns how many were
-  // interrupted.
-  virtual StatusOr<int> RecoverAfterCrash() = 0;
+  // On server start: every run still marked running on `host` ("" = every running run: one machine) becomes
+  // interrupted; those with requeue_on_interrupt are queued again (keeping their id, priority and age), unless
+  // this was their third interruption: a run that keeps taking the server down is failed with the reason (a
+  // poison run). Returns how many were interrupted.
+  virtual StatusOr<int> RecoverAfterCrash(const std::string& host) = 0;
+
+  // ---- The lab (docs/lab.md) ----
+  // Registers or refreshes `host` (its heartbeat is the store's clock now) and renews the leases of the runs it
+  // is executing to now + lease_ttl_s.
+  virtual Status Heartbeat(const HostRecord& host, double lease_ttl_s) = 0;
+  virtual StatusOr<std::vector<HostRecord>> ListHosts() = 0;
+  // Runs whose lease lapsed (their host stopped heartbeating): treated as RecoverAfterCrash treats a run of a
+  // crashed host (interrupted, then re-queued or failed as poison). Any host may call it. Returns their ids.
+  virtual StatusOr<std::vector<std::int64_t>> RequeueLapsed() = 0;
+  // The writes refused as stale, oldest first (at most `limit`, 1..1000), and how many there were in all.
+  virtual StatusOr<std::vector<StaleWrite>> StaleWrites(std::int32_t limit, std::int64_t* total) = 0;
+  // True for exactly one caller per `night` (YYYY-MM-DD) across every host sharing the store: that host runs
+  // the night; the others skip it.
+  virtual StatusOr<bool> ClaimNight(const std::string& night, const std::string& host) = 0;
 
   virtual StatusOr<RunRecord> GetRun(std::int64_t run_id) = 0;
   virtual StatusOr<std::vector<RunRecord>> ListRuns(const RunFilter& filter) = 0;
@@ -181,7 +247,7 @@ class Store {
   virtual StatusOr<std::int64_t> StoredTraceBytes(const std::string& submitter) = 0;
 
   // Traces: chunks appended in index order while the run executes; read back in order.
-  virtual Status AppendTraceChunk(std::int64_t run_id, const TraceChunk& chunk) = 0;
+  virtual Status AppendTraceChunk(const Lease& lease, const TraceChunk& chunk) = 0;
   virtual StatusOr<std::vector<TraceChunk>> ReadTrace(std::int64_t run_id) = 0;
   // Streams the chunks in order within one read transaction, reusing one buffer: nothing but the current
   // chunk is in memory. total_samples is the trace's length (the sum over its chunks). Stops at the first

@@ -4,7 +4,7 @@
 
 namespace vb::db {
 
-Status AppendTrace(Store* store, std::int64_t run_id, const TraceSource& source, int chunk_samples) {
+Status AppendTrace(Store* store, const Lease& lease, const TraceSource& source, int chunk_samples) {
   if (chunk_samples <= 0) return Status::InvalidArgument("chunk_samples: must be > 0");
   const std::size_t n = source.samples;
   const std::size_t step = static_cast<std::size_t>(chunk_samples);
@@ -20,7 +20,7 @@ Status AppendTrace(Store* store, std::int64_t run_id, const TraceSource& source,
     chunk.data.resize(source.channels.size() * count);
     for (std::size_t c = 0; c < source.channels.size(); ++c)
       for (std::size_t k = 0; k < count; ++k) chunk.data[c * count + k] = source.value(c, start + k);
-    VB_RETURN_IF_ERROR(store->AppendTraceChunk(run_id, chunk));
+    VB_RETURN_IF_ERROR(store->AppendTraceChunk(lease, chunk));
   }
   return Status::Ok();
 }

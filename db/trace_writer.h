@@ -21,20 +21,20 @@ struct TraceSource {
 
 inline constexpr int kDefaultChunkSamples = 16384;  // small BLOBs read back fast (docs/perf.md)
 
-Status AppendTrace(Store* store, std::int64_t run_id, const TraceSource& source,
+Status AppendTrace(Store* store, const Lease& lease, const TraceSource& source,
                    int chunk_samples = kDefaultChunkSamples);
 
 // Any recorded trace with ChannelNames(), size(), t_s[k], sample_period_s and Value(channel, k) -- such as
 // experiment::Trace -- without db/ depending on the layer that defines it.
 template <typename RecordedTrace>
-Status AppendRecordedTrace(Store* store, std::int64_t run_id, const RecordedTrace& trace) {
+Status AppendRecordedTrace(Store* store, const Lease& lease, const RecordedTrace& trace) {
   TraceSource src;
   src.channels = RecordedTrace::ChannelNames();
   src.sample_period_s = trace.sample_period_s;
   src.samples = trace.size();
   src.t_s = [&](std::size_t k) { return trace.t_s[k]; };
   src.value = [&](std::size_t c, std::size_t k) { return trace.Value(c, k); };
-  return AppendTrace(store, run_id, src);
+  return AppendTrace(store, lease, src);
 }
 
 }  // namespace vb::db

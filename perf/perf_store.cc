@@ -144,7 +144,7 @@ std::pair<double, double> StoredAndRawBytes(const std::string& path) {
   return out;
 }
 
-std::int64_t NewRunningRun(vb::db::Store& store) {
+vb::db::Lease NewRunningRun(vb::db::Store& store) {
   vb::db::RunRecord r;
   r.key = vb::NamedRun("perf");
   r.controller = "pi_current";
@@ -153,9 +153,9 @@ std::int64_t NewRunningRun(vb::db::Store& store) {
   std::vector<std::int64_t> ids;
   auto b = store.SubmitBatch("perf", "perf", "{}", {r}, &ids);
   if (!b.ok()) Die(b.status(), "submit");
-  auto c = store.ClaimNext("emulated", "perf-bench");
-  if (!c.ok()) Die(c.status(), "claim");
-  return ids[0];
+  auto c = store.ClaimNext(vb::db::BenchClaim("emulated", "perf-bench"));
+  if (!c.ok() || !c->has_value()) Die(c.ok() ? vb::Status::Internal("queue empty") : c.status(), "claim");
+  return vb::db::LeaseOf(**c);
 }
 
 
@@ -179,7 +179,7 @@ Figures MeasureTraces(const std::string& path, const Trace& trace, int chunk_sam
   sync();  // start with no dirty pages left over from the previous configuration
   std::vector<double> ingest_s, read_s, ingest_cpu_s, read_cpu_s;
   for (int rep = 0; rep < kRepeats; ++rep) {
-    const std::int64_t run = NewRunningRun(*store);
+    const vb::db::Lease run = NewRunningRun(*store);
     const double c0 = ThreadCpuSeconds();
     const auto t0 = Clock::now();
     for (const auto& ch : chunks) {
@@ -188,7 +188,7 @@ Figures MeasureTraces(const std::string& path, const Trace& trace, int chunk_sam
     }
     const auto t1 = Clock::now();
     const double c1 = ThreadCpuSeconds();
-    auto back = store->ReadTrace(run);
+    auto back = store->ReadTrace(run.run_id);
     const auto t2 = Clock::now();
     const double c2 = ThreadCpuSeconds();
     if (!back.ok()) Die(back.status(), "read");
@@ -229,10 +229,10 @@ void MeasureSustained(const std::string& path, const Trace& trace, int chunk_sam
   const auto chunks = Chunks(trace, chunk_samples);
   auto store = OpenFresh(path);
   sync();
-  std::vector<std::int64_t> runs;
+  std::vector<vb::db::Lease> runs;
   for (int rep = 0; rep < kRepeats; ++rep) runs.push_back(NewRunningRun(*store));
   const auto t0 = Clock::now();
-  for (std::int64_t run : runs) {
+  for (const vb::db::Lease& run : runs) {
     for (const auto& ch : chunks) {
       vb::Status s = store->AppendTraceChunk(run, ch);
       if (!s.ok()) Die(s, "append");
@@ -265,9 +265,9 @@ void MeasureQueue(const std::string& path) {
   }
   const auto q1 = Clock::now();
   for (int k = 0; k < kQueueRuns; ++k) {
-    auto c = store->ClaimNext("emulated", "perf-bench");
+    auto c = store->ClaimNext(vb::db::BenchClaim("emulated", "perf-bench"));
     if (!c.ok() || !c->has_value()) Die(c.ok() ? vb::Status::Internal("queue empty") : c.status(), "claim");
-    vb::Status f = store->Finish((*c)->id, vb::db::RunStatus::kDone, "", {{"rmse_A", 0.01}, {"effort_J", 1.0}});
+    vb::Status f = store->Finish(vb::db::LeaseOf(**c), vb::db::RunStatus::kDone, "", {{"rmse_A", 0.01}, {"effort_J", 1.0}});
     if (!f.ok()) Die(f, "finish");
   }
   const auto q2 = Clock::now();
@@ -292,7 +292,7 @@ int main(int argc, char** argv) {
     const Trace t = EmulatorTrace(spec, 0.0);
     const auto chunks = Chunks(t, 16'384);
     auto store = OpenFresh(path);
-    const std::int64_t run = NewRunningRun(*store);
+    const vb::db::Lease run = NewRunningRun(*store);
     for (const auto& ch : chunks) {
       vb::Status s = store->AppendTraceChunk(run, ch);
       if (!s.ok()) Die(s, "append");

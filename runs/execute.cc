@@ -45,7 +45,7 @@ Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& se
       out.summary.termination = experiment::RunSummary::Termination::kFailed;
       out.summary.message = out.reason;
     }
-    auto st = store->Finish(run.id, status, out.reason, metrics);
+    auto st = store->Finish(db::LeaseOf(run), status, out.reason, metrics);
     out.recorded = st.ok();
     if (!st.ok())
       spdlog::error("run {}: cannot record the result: {}", static_cast<long long>(run.id),
@@ -105,10 +105,10 @@ Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& se
   }
   if (out.summary.termination != experiment::RunSummary::Termination::kDone && e->duration_s > 0) {
     const double reached = std::clamp(out.summary.duration_s / e->duration_s, 0.0, 1.0);
-    if (auto st = store->SetProgress(run.id, reached); !st.ok())
+    if (auto st = store->SetProgress(db::LeaseOf(run), reached); !st.ok())
       spdlog::warn("run {}: cannot record its progress: {}", static_cast<long long>(run.id), st.message().c_str());
   }
-  const Status stored = db::AppendRecordedTrace(store, run.id, out.trace);
+  const Status stored = db::AppendRecordedTrace(store, db::LeaseOf(run), out.trace);
   db::RunStatus status = StatusOf(out.summary.termination);
   std::string reason = out.summary.message;
   if (status == db::RunStatus::kCancelled) {

@@ -11,9 +11,10 @@ Worker::Worker(BenchSetup setup, Registry* registry) : setup_(std::move(setup)),
 Worker::~Worker() { Stop(); }
 
 StatusOr<std::optional<Outcome>> Worker::ClaimAndExecute(db::Store* store) {
-  auto claimed = store->ClaimNext(setup_.bench_class, setup_.name);
+  auto claimed = store->ClaimNext(db::BenchClaim(setup_.bench_class, setup_.name));
   if (!claimed.ok()) return claimed.status();
   if (!claimed->has_value()) return std::optional<Outcome>();
+  current_fence_.store((*claimed)->fence);
   current_run_.store((*claimed)->id);
   ExecuteContext ctx;
   ctx.registry = registry_;

@@ -35,6 +35,8 @@ class Worker {
 
   const BenchSetup& setup() const { return setup_; }
   std::int64_t current_run() const { return current_run_.load(); }
+  // The lease of the run in progress (run_id 0 when none): its writes carry it (db::Lease).
+  db::Lease current_lease() const { return {current_run_.load(), current_fence_.load()}; }
 
  private:
   void Loop(const std::string& db_path);
@@ -43,6 +45,7 @@ class Worker {
   Registry* registry_;
   std::thread thread_;
   std::atomic<bool> stop_{false};
+  std::atomic<std::int64_t> current_fence_{0};  // written before current_run_
   std::atomic<std::int64_t> current_run_{0};
   std::atomic<experiment::RunMonitor*> monitor_{nullptr};
 };

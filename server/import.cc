@@ -116,7 +116,7 @@ grpc::Status BenchServiceImpl::ImportRuns(grpc::ServerContext* ctx, const v1::Im
   if (!batch.ok()) return ToGrpcStatus(batch.status());
   for (int k = 0; k < req->runs_size(); ++k) {
     const auto& r = req->runs(k);
-    auto claimed = (*store)->ClaimNext(kImportedKind, "import");
+    auto claimed = (*store)->ClaimNext(db::BenchClaim(kImportedKind, "import"));
     if (!claimed.ok()) return ToGrpcStatus(claimed.status());
     if (!claimed->has_value() || (*claimed)->id != ids[static_cast<std::size_t>(k)])
       return ToGrpcStatus(Status::Internal("import: run " + std::to_string(ids[static_cast<std::size_t>(k)]) +
@@ -142,11 +142,11 @@ grpc::Status BenchServiceImpl::ImportRuns(grpc::ServerContext* ctx, const v1::Im
         for (std::size_t j = 0; j < m; ++j) c.data.push_back(r.x_m(static_cast<int>(from + j)));
       if (r.v_coil_v_size() > 0)
         for (std::size_t j = 0; j < m; ++j) c.data.push_back(r.v_coil_v(static_cast<int>(from + j)));
-      st = (*store)->AppendTraceChunk((*claimed)->id, c);
+      st = (*store)->AppendTraceChunk(db::LeaseOf(**claimed), c);
     }
-    if (st.ok()) st = (*store)->Finish((*claimed)->id, db::RunStatus::kDone, "imported from " + req->dataset(), {});
+    if (st.ok()) st = (*store)->Finish(db::LeaseOf(**claimed), db::RunStatus::kDone, "imported from " + req->dataset(), {});
     if (!st.ok()) {
-      (void)(*store)->Finish((*claimed)->id, db::RunStatus::kFailed, "import failed: " + st.message(), {});
+      (void)(*store)->Finish(db::LeaseOf(**claimed), db::RunStatus::kFailed, "import failed: " + st.message(), {});
       return ToGrpcStatus(st.WithContext("runs[" + std::to_string(k) + "]"));
     }
     resp->add_run_ids((*claimed)->id);

@@ -65,7 +65,7 @@ int main(int argc, char** argv) {
                  store.status().message().c_str());
     return 3;
   }
-  auto recovered = (*store)->RecoverAfterCrash();
+  auto recovered = (*store)->RecoverAfterCrash("");
   if (!recovered.ok()) {
     spdlog::error("recovery failed: {}", recovered.status().message().c_str());
     return 3;

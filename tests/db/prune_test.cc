@@ -10,6 +10,7 @@
 
 #include "db/sqlite_conn.h"
 #include "db/store.h"
+#include "db/testing.h"
 #include "db/text.h"
 
 namespace vb::db {
@@ -56,7 +57,7 @@ class PruneTest : public ::testing::Test {
   }
   // Claims, traces and finishes run `id`, then sets its finish time to `days_ago` days before now.
   void FinishAged(std::int64_t id, double days_ago, RunStatus status = RunStatus::kDone) {
-    auto c = store_->ClaimNext("emulated", "bench-1");
+    auto c = store_->ClaimNext(db::BenchClaim("emulated", "bench-1"));
     ASSERT_TRUE(c.ok() && c->has_value());
     ASSERT_EQ((*c)->id, id) << "runs are claimed in id order in these tests";
     TraceChunk ch;
@@ -64,8 +65,8 @@ class PruneTest : public ::testing::Test {
     ch.samples = 100;
     ch.channels = {"i_A"};
     ch.data.assign(100, 0.25);
-    ASSERT_TRUE(store_->AppendTraceChunk(id, ch).ok());
-    ASSERT_TRUE(store_->Finish(id, status, "", {{"rmse_A", 0.01}}).ok());
+    ASSERT_TRUE(store_->AppendTraceChunk(vb::db::testing::CurrentLease(store_, id), ch).ok());
+    ASSERT_TRUE(store_->Finish(vb::db::testing::CurrentLease(store_, id), status, "", {{"rmse_A", 0.01}}).ok());
     Exec(Cat("UPDATE runs SET finished = ", static_cast<std::int64_t>(now_ - days_ago * kDay), " WHERE id = ", id));
   }
   void Exec(const std::string& sql) {
@@ -135,7 +136,7 @@ TEST_F(PruneTest, DeletesOldFinishedRunsWithEverythingTheyOwnAndTheirEmptyBatch)
 TEST_F(PruneTest, NeverTouchesQueuedRunningOrInterruptedRuns) {
   auto ids = Batch(4);
   FinishAged(ids[0], 100);
-  ASSERT_TRUE(store_->ClaimNext("emulated", "bench-1").ok());  // ids[1] running
+  ASSERT_TRUE(store_->ClaimNext(db::BenchClaim("emulated", "bench-1")).ok());  // ids[1] running
   // ids[2] interrupted (as RecoverAfterCrash leaves a run that may not be re-queued), ids[3] queued; both with
   // old times, so only their status protects them.
   Exec(Cat("UPDATE runs SET status = 'interrupted', submitted = 1, finished = 1 WHERE id = ", ids[2]));

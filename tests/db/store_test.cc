@@ -26,6 +26,7 @@
 #include "db/checkpointer.h"
 #include "db/schema.h"
 #include "db/store.h"
+#include "db/testing.h"
 #include "db/text.h"
 
 namespace vb::db {
@@ -95,7 +96,7 @@ std::vector<std::int64_t> Submit(Store& store, std::vector<RunRecord> runs, cons
 }
 
 std::int64_t ClaimId(Store& store, const std::string& kind = "emulated", const std::string& bench = "bench-1") {
-  auto c = store.ClaimNext(kind, bench);
+  auto c = store.ClaimNext(db::BenchClaim(kind, bench));
   EXPECT_TRUE(c.ok()) << c.status().ToString();
   if (!c.ok() || !c->has_value()) return 0;
   return (*c)->id;
@@ -500,11 +501,11 @@ TEST(StoreAtomicityTest, AFailureHalfWayRollsTheWholeMethodBack) {
   EXPECT_NE(b.status().message().find("injected fault"), std::string::npos) << b.status().message();
   EXPECT_TRUE(ids.empty());
   // Metrics are written after the status change and the history row.
-  Status f = store->Finish(first[0], RunStatus::kDone, "", {{"rmse_A", 1}, {"boom", 2}});
+  Status f = store->Finish(vb::db::testing::CurrentLease(store, first[0]), RunStatus::kDone, "", {{"rmse_A", 1}, {"boom", 2}});
   ASSERT_FALSE(f.ok());
   // The second chunk fails; the first stays.
-  ASSERT_TRUE(store->AppendTraceChunk(first[0], MakeChunk(0, 10, {"i_A"}, 1)).ok());
-  EXPECT_FALSE(store->AppendTraceChunk(first[0], MakeChunk(1, 10, {"i_A"}, 2)).ok());
+  ASSERT_TRUE(store->AppendTraceChunk(vb::db::testing::CurrentLease(store, first[0]), MakeChunk(0, 10, {"i_A"}, 1)).ok());
+  EXPECT_FALSE(store->AppendTraceChunk(vb::db::testing::CurrentLease(store, first[0]), MakeChunk(1, 10, {"i_A"}, 2)).ok());
 
   RawDb raw(path);
   EXPECT_EQ(raw.Int("SELECT count(*) FROM batches"), 1);
@@ -515,7 +516,7 @@ TEST(StoreAtomicityTest, AFailureHalfWayRollsTheWholeMethodBack) {
   EXPECT_EQ(raw.Int("SELECT count(*) FROM trace_chunks"), 1);
   EXPECT_EQ(store->GetRun(first[0])->status, RunStatus::kRunning);
   // And the Store is still usable: no transaction was left open.
-  EXPECT_TRUE(store->Finish(first[0], RunStatus::kDone, "", {{"rmse_A", 1}}).ok());
+  EXPECT_TRUE(store->Finish(vb::db::testing::CurrentLease(store, first[0]), RunStatus::kDone, "", {{"rmse_A", 1}}).ok());
   EXPECT_EQ(Submit(*store, {MakeRun("after")}).size(), 1u);
 }
 
@@ -528,11 +529,11 @@ TEST(StoreSubmitTest, UnknownRunIsNotFoundEverywhere) {
   EXPECT_EQ(store->History(42).status().code(), StatusCode::kNotFound);
   EXPECT_EQ(store->GetMetrics(42).status().code(), StatusCode::kNotFound);
   EXPECT_EQ(store->ReadTrace(42).status().code(), StatusCode::kNotFound);
-  EXPECT_EQ(store->SetProgress(42, 0.5).code(), StatusCode::kNotFound);
-  EXPECT_EQ(store->Finish(42, RunStatus::kDone, "", {}).code(), StatusCode::kNotFound);
+  EXPECT_EQ(store->SetProgress(vb::db::testing::CurrentLease(store, 42), 0.5).code(), StatusCode::kNotFound);
+  EXPECT_EQ(store->Finish(vb::db::testing::CurrentLease(store, 42), RunStatus::kDone, "", {}).code(), StatusCode::kNotFound);
   EXPECT_EQ(store->RequestCancel(42, "why").status().code(), StatusCode::kNotFound);
   EXPECT_EQ(store->CancelRequested(42).status().code(), StatusCode::kNotFound);
-  EXPECT_EQ(store->AppendTraceChunk(42, MakeChunk(0, 4, {"i_A"}, 1)).code(), StatusCode::kNotFound);
+  EXPECT_EQ(store->AppendTraceChunk(vb::db::testing::CurrentLease(store, 42), MakeChunk(0, 4, {"i_A"}, 1)).code(), StatusCode::kNotFound);
 }
 
 // ---- the queue ----
@@ -544,7 +545,7 @@ TEST(StoreQueueTest, ClaimsByPriorityThenAge) {
   const std::vector<std::int64_t> expected = {second[1], first[1], second[0], first[0], first[2], second[2]};
   std::vector<std::int64_t> claimed;
   for (std::size_t k = 0; k < expected.size(); ++k) {
-    auto c = store->ClaimNext("emulated", "bench-1");
+    auto c = store->ClaimNext(db::BenchClaim("emulated", "bench-1"));
     ASSERT_TRUE(c.ok()) << c.status().ToString();
     ASSERT_TRUE(c->has_value());
     EXPECT_EQ((*c)->status, RunStatus::kRunning);
@@ -553,7 +554,7 @@ TEST(StoreQueueTest, ClaimsByPriorityThenAge) {
     claimed.push_back((*c)->id);
   }
   EXPECT_EQ(claimed, expected);
-  auto none = store->ClaimNext("emulated", "bench-1");
+  auto none = store->ClaimNext(db::BenchClaim("emulated", "bench-1"));
   ASSERT_TRUE(none.ok());
   EXPECT_FALSE(none->has_value());
 }
@@ -563,7 +564,7 @@ TEST(StoreQueueTest, ClaimMatchesBenchKindAndName) {
   auto ids = Submit(*store, {MakeRun("emu-any", 0, "emulated", ""), MakeRun("usb-any", 0, "usb", ""),
                              MakeRun("any-kind", 0, "", ""), MakeRun("emu-on-b", 9, "emulated", "bench-b")});
   // bench-a (emulated) cannot take the run that asked for bench-b, even though it has the top priority.
-  auto a = store->ClaimNext("emulated", "bench-a");
+  auto a = store->ClaimNext(db::BenchClaim("emulated", "bench-a"));
   ASSERT_TRUE(a.ok());
   ASSERT_TRUE(a->has_value());
   EXPECT_EQ((*a)->id, ids[0]);
@@ -574,7 +575,7 @@ TEST(StoreQueueTest, ClaimMatchesBenchKindAndName) {
   EXPECT_EQ(ClaimId(*store, "usb", "usb-1"), 0);
   EXPECT_EQ(ClaimId(*store, "emulated", "bench-a"), 0);
   EXPECT_EQ(ClaimId(*store, "emulated", "bench-b"), ids[3]);
-  auto bad = store->ClaimNext("emulated", "");
+  auto bad = store->ClaimNext(db::BenchClaim("emulated", ""));
   ASSERT_FALSE(bad.ok());
   EXPECT_EQ(bad.status().code(), StatusCode::kInvalidArgument);
   EXPECT_NE(bad.status().message().find("bench_name"), std::string::npos);
@@ -607,7 +608,7 @@ TEST(StoreQueueTest, TwoConnectionsInTwoThreadsClaimEveryRunExactlyOnce) {
       while (ready.load() < kThreads) std::this_thread::yield();
       const std::string bench = Cat("bench-", t);
       while (true) {
-        auto c = store->ClaimNext("emulated", bench);
+        auto c = store->ClaimNext(db::BenchClaim("emulated", bench));
         if (!c.ok()) {
           errors[t] = c.status().ToString();
           return;
@@ -615,7 +616,7 @@ TEST(StoreQueueTest, TwoConnectionsInTwoThreadsClaimEveryRunExactlyOnce) {
         if (!c->has_value()) return;
         claimed[t].push_back((*c)->id);
         // Finishing in between makes the two writers contend for the lock the way workers do.
-        Status f = store->Finish((*c)->id, RunStatus::kDone, "", {{"claimed_by", static_cast<double>(t)}});
+        Status f = store->Finish(db::LeaseOf(**c), RunStatus::kDone, "", {{"claimed_by", static_cast<double>(t)}});
         if (!f.ok()) {
           errors[t] = f.ToString();
           return;
@@ -660,24 +661,24 @@ TEST(StoreRunTest, FinishWithMetricsAndHistory) {
   auto store = OpenOrDie(":memory:");
   auto ids = Submit(*store, {MakeRun("a")});
   ASSERT_EQ(ClaimId(*store), ids[0]);
-  ASSERT_TRUE(store->SetProgress(ids[0], 0.25).ok());
+  ASSERT_TRUE(store->SetProgress(vb::db::testing::CurrentLease(store, ids[0]), 0.25).ok());
   EXPECT_EQ(store->GetRun(ids[0])->progress, 0.25);
-  EXPECT_EQ(store->SetProgress(ids[0], 1.5).code(), StatusCode::kInvalidArgument);
-  EXPECT_EQ(store->SetProgress(ids[0], std::nan("")).code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(store->SetProgress(vb::db::testing::CurrentLease(store, ids[0]), 1.5).code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(store->SetProgress(vb::db::testing::CurrentLease(store, ids[0]), std::nan("")).code(), StatusCode::kInvalidArgument);
 
   const std::vector<Metric> metrics = {{"rmse_A", 0.0125}, {"effort_J", 3.5}, {"overshoot", std::nan("")},
                                        {"settle_s", std::numeric_limits<double>::infinity()}};
   // Bad metrics change nothing.
-  Status dup = store->Finish(ids[0], RunStatus::kDone, "", {{"a", 1}, {"a", 2}});
+  Status dup = store->Finish(vb::db::testing::CurrentLease(store, ids[0]), RunStatus::kDone, "", {{"a", 1}, {"a", 2}});
   EXPECT_EQ(dup.code(), StatusCode::kInvalidArgument);
   EXPECT_NE(dup.message().find("metrics[1].name: duplicate metric \"a\""), std::string::npos) << dup.message();
-  EXPECT_EQ(store->Finish(ids[0], RunStatus::kDone, "", {{"", 1}}).code(), StatusCode::kInvalidArgument);
-  Status not_final = store->Finish(ids[0], RunStatus::kQueued, "", {});
+  EXPECT_EQ(store->Finish(vb::db::testing::CurrentLease(store, ids[0]), RunStatus::kDone, "", {{"", 1}}).code(), StatusCode::kInvalidArgument);
+  Status not_final = store->Finish(vb::db::testing::CurrentLease(store, ids[0]), RunStatus::kQueued, "", {});
   EXPECT_EQ(not_final.code(), StatusCode::kInvalidArgument);
   EXPECT_NE(not_final.message().find("final_status"), std::string::npos);
   EXPECT_EQ(store->GetRun(ids[0])->status, RunStatus::kRunning);
 
-  ASSERT_TRUE(store->Finish(ids[0], RunStatus::kDone, "", metrics).ok());
+  ASSERT_TRUE(store->Finish(vb::db::testing::CurrentLease(store, ids[0]), RunStatus::kDone, "", metrics).ok());
   auto run = store->GetRun(ids[0]);
   ASSERT_TRUE(run.ok());
   EXPECT_EQ(run->status, RunStatus::kDone);
@@ -708,10 +709,10 @@ TEST(StoreRunTest, FinishWithMetricsAndHistory) {
   EXPECT_EQ((*h)[2].at_unix_s, run->finished_unix_s);
 
   // A finished run cannot finish again, report progress or be cancelled.
-  Status again = store->Finish(ids[0], RunStatus::kFailed, "x", {});
+  Status again = store->Finish(vb::db::testing::CurrentLease(store, ids[0]), RunStatus::kFailed, "x", {});
   EXPECT_EQ(again.code(), StatusCode::kFailedPrecondition);
   EXPECT_NE(again.message().find("is done, not running"), std::string::npos) << again.message();
-  EXPECT_EQ(store->SetProgress(ids[0], 0.5).code(), StatusCode::kFailedPrecondition);
+  EXPECT_EQ(store->SetProgress(vb::db::testing::CurrentLease(store, ids[0]), 0.5).code(), StatusCode::kFailedPrecondition);
   EXPECT_EQ(store->RequestCancel(ids[0], "late").status().code(), StatusCode::kFailedPrecondition);
   EXPECT_EQ(store->GetMetrics(ids[0])->size(), 4u);
 }
@@ -719,8 +720,8 @@ TEST(StoreRunTest, FinishWithMetricsAndHistory) {
 TEST(StoreRunTest, FinishOfAQueuedRunIsAPreconditionFailure) {
   auto store = OpenOrDie(":memory:");
   auto ids = Submit(*store, {MakeRun("a")});
-  EXPECT_EQ(store->Finish(ids[0], RunStatus::kFailed, "no", {}).code(), StatusCode::kFailedPrecondition);
-  EXPECT_EQ(store->SetProgress(ids[0], 0.5).code(), StatusCode::kFailedPrecondition);
+  EXPECT_EQ(store->Finish(vb::db::testing::CurrentLease(store, ids[0]), RunStatus::kFailed, "no", {}).code(), StatusCode::kFailedPrecondition);
+  EXPECT_EQ(store->SetProgress(vb::db::testing::CurrentLease(store, ids[0]), 0.5).code(), StatusCode::kFailedPrecondition);
   EXPECT_EQ(store->GetRun(ids[0])->status, RunStatus::kQueued);
 }
 
@@ -728,7 +729,7 @@ TEST(StoreRunTest, FailedRunKeepsItsReason) {
   auto store = OpenOrDie(":memory:");
   auto ids = Submit(*store, {MakeRun("a")});
   ClaimId(*store);
-  ASSERT_TRUE(store->Finish(ids[0], RunStatus::kFailed, "safety trip: current_A > 3", {}).ok());
+  ASSERT_TRUE(store->Finish(vb::db::testing::CurrentLease(store, ids[0]), RunStatus::kFailed, "safety trip: current_A > 3", {}).ok());
   auto run = store->GetRun(ids[0]);
   EXPECT_EQ(run->status, RunStatus::kFailed);
   EXPECT_EQ(run->reason, "safety trip: current_A > 3");
@@ -759,7 +760,7 @@ TEST(StoreRunTest, CancelQueuedAtOnceAndRunningOnRequest) {
   EXPECT_TRUE(*store->CancelRequested(ids[0]));
   EXPECT_EQ(store->GetRun(ids[0])->status, RunStatus::kRunning);
   EXPECT_EQ(*store->RequestCancel(ids[0], "user asked"), RunStatus::kRunning);  // idempotent
-  ASSERT_TRUE(store->Finish(ids[0], RunStatus::kCancelled, "user asked", {}).ok());
+  ASSERT_TRUE(store->Finish(vb::db::testing::CurrentLease(store, ids[0]), RunStatus::kCancelled, "user asked", {}).ok());
   EXPECT_EQ(HistoryStatuses(*store, ids[0]),
             (std::vector<RunStatus>{RunStatus::kQueued, RunStatus::kRunning, RunStatus::kCancelled}));
 }
@@ -779,14 +780,14 @@ TEST(StoreRecoveryTest, RecoverAfterCrashRequeuesOrInterrupts) {
     RunRecord waiting = MakeRun("waiting", 1);
     ids = Submit(*store, {keep, once, cancel, done, waiting});
     for (int k = 0; k < 4; ++k) ASSERT_EQ(ClaimId(*store, "emulated", "bench-x"), ids[k]);
-    ASSERT_TRUE(store->AppendTraceChunk(ids[0], MakeChunk(0, 8, {"i_A"}, 3)).ok());
-    ASSERT_TRUE(store->SetProgress(ids[0], 0.6).ok());
+    ASSERT_TRUE(store->AppendTraceChunk(vb::db::testing::CurrentLease(store, ids[0]), MakeChunk(0, 8, {"i_A"}, 3)).ok());
+    ASSERT_TRUE(store->SetProgress(vb::db::testing::CurrentLease(store, ids[0]), 0.6).ok());
     ASSERT_EQ(*store->RequestCancel(ids[2], "user asked"), RunStatus::kRunning);
-    ASSERT_TRUE(store->Finish(ids[3], RunStatus::kDone, "", {}).ok());
+    ASSERT_TRUE(store->Finish(vb::db::testing::CurrentLease(store, ids[3]), RunStatus::kDone, "", {}).ok());
     // The "server" dies here: the Store goes away without Finish for ids[0..2].
   }
   auto store = OpenOrDie(path);
-  auto n = store->RecoverAfterCrash();
+  auto n = store->RecoverAfterCrash("");
   ASSERT_TRUE(n.ok()) << n.status().ToString();
   EXPECT_EQ(*n, 3);
 
@@ -817,14 +818,14 @@ TEST(StoreRecoveryTest, RecoverAfterCrashRequeuesOrInterrupts) {
   EXPECT_EQ(HistoryStatuses(*store, ids[4]), (std::vector<RunStatus>{RunStatus::kQueued}));
 
   // The requeued run keeps its place: priority 5 beats the waiting priority-1 run; its trace starts afresh.
-  auto again = store->ClaimNext("emulated", "bench-y");
+  auto again = store->ClaimNext(db::BenchClaim("emulated", "bench-y"));
   ASSERT_TRUE(again.ok());
   ASSERT_TRUE(again->has_value());
   EXPECT_EQ((*again)->id, ids[0]);
   EXPECT_EQ((*again)->reason, "");
-  EXPECT_TRUE(store->AppendTraceChunk(ids[0], MakeChunk(0, 8, {"i_A"}, 4)).ok());
-  EXPECT_EQ(*store->RecoverAfterCrash(), 1);
-  EXPECT_EQ(*store->RecoverAfterCrash(), 0);
+  EXPECT_TRUE(store->AppendTraceChunk(vb::db::testing::CurrentLease(store, ids[0]), MakeChunk(0, 8, {"i_A"}, 4)).ok());
+  EXPECT_EQ(*store->RecoverAfterCrash(""), 1);
+  EXPECT_EQ(*store->RecoverAfterCrash(""), 0);
 }
 
 // A run that takes the server down at every attempt is re-queued twice, then failed with the reason.
@@ -840,14 +841,14 @@ TEST(StoreRecoveryTest, APoisonRunIsFailedAtItsThirdInterruption) {
     ASSERT_EQ(ClaimId(*store, "emulated", "bench-x"), id) << attempt;
     // ... and the "server" dies while it runs.
     auto reopened = OpenOrDie(path);
-    ASSERT_EQ(*reopened->RecoverAfterCrash(), 1);
+    ASSERT_EQ(*reopened->RecoverAfterCrash(""), 1);
     const auto run = reopened->GetRun(id);
     if (attempt < 3) {
       EXPECT_EQ(run->status, RunStatus::kQueued) << attempt;
     } else {
       EXPECT_EQ(run->status, RunStatus::kFailed);
       EXPECT_NE(run->reason.find("stopped 3 times while this run ran"), std::string::npos) << run->reason;
-      EXPECT_EQ(*reopened->RecoverAfterCrash(), 0) << "a clean start after it";
+      EXPECT_EQ(*reopened->RecoverAfterCrash(""), 0) << "a clean start after it";
     }
   }
 }
@@ -885,9 +886,9 @@ TEST(StoreCrashTest, ProcessExitingWithoutCleanupLosesNothingCommitted) {
       std::vector<std::int64_t> ids;
       if (!(*opened)->SubmitBatch("child", "b", "{}", {MakeRun(Cat("r", k))}, &ids).ok()) _exit(11);
     }
-    auto c = (*opened)->ClaimNext("emulated", "bench-1");
+    auto c = (*opened)->ClaimNext(db::BenchClaim("emulated", "bench-1"));
     if (!c.ok() || !c->has_value()) _exit(12);
-    if (!(*opened)->AppendTraceChunk((*c)->id, MakeChunk(0, 100, {"i_A", "x_m"}, 9)).ok()) _exit(13);
+    if (!(*opened)->AppendTraceChunk(db::LeaseOf(**c), MakeChunk(0, 100, {"i_A", "x_m"}, 9)).ok()) _exit(13);
     _exit(0);  // no destructors: the connection is never closed, the WAL never checkpointed
   });
   int status = 0;
@@ -905,7 +906,7 @@ TEST(StoreCrashTest, ProcessExitingWithoutCleanupLosesNothingCommitted) {
   ASSERT_TRUE(trace.ok());
   ASSERT_EQ(trace->size(), 1u);
   EXPECT_EQ((*trace)[0].data, MakeChunk(0, 100, {"i_A", "x_m"}, 9).data);
-  EXPECT_EQ(*store->RecoverAfterCrash(), 1);
+  EXPECT_EQ(*store->RecoverAfterCrash(""), 1);
   EXPECT_EQ(*store->CountQueued(""), kRuns);
 }
 
@@ -927,13 +928,13 @@ TEST(StoreCrashTest, SigkilledWriterLosesNothingCommitted) {
       if (!store.SubmitBatch("child", "b", "{}", {r, MakeRun("second")}, &ids).ok()) _exit(11);
       if (write(fds[1], &ids[0], sizeof ids[0]) != sizeof ids[0]) _exit(12);
       if (k == 4) {
-        auto c = store.ClaimNext("emulated", "bench-1");
+        auto c = store.ClaimNext(db::BenchClaim("emulated", "bench-1"));
         if (!c.ok() || !c->has_value()) _exit(13);
         const std::int64_t claimed = -(*c)->id;
         if (write(fds[1], &claimed, sizeof claimed) != sizeof claimed) _exit(14);
       }
       // Traces too, so the kill may land in the middle of a large write.
-      if (!store.AppendTraceChunk(ids[1], MakeChunk(0, 2000, {"a", "b", "c"}, 7)).ok()) _exit(15);
+      if (!store.AppendTraceChunk(vb::db::testing::CurrentLease(&store, ids[1]), MakeChunk(0, 2000, {"a", "b", "c"}, 7)).ok()) _exit(15);
     }
   });
   close(fds[1]);
@@ -984,7 +985,7 @@ TEST(StoreCrashTest, SigkilledWriterLosesNothingCommitted) {
     ASSERT_TRUE(trace.ok()) << trace.status().ToString();
     for (const TraceChunk& c : *trace) EXPECT_EQ(c.data, written) << "run " << id + 1;
   }
-  EXPECT_EQ(*store->RecoverAfterCrash(), 1);
+  EXPECT_EQ(*store->RecoverAfterCrash(""), 1);
 }
 
 // ---- background checkpoints ----
@@ -1176,7 +1177,7 @@ TEST(StoreTraceTest, RoundTripIsBitExact) {
   chunks[1].data[4] = -std::numeric_limits<double>::infinity();
   chunks[1].data[5] = std::numeric_limits<double>::denorm_min();
   chunks[1].data[6] = std::numeric_limits<double>::max();
-  for (const auto& c : chunks) ASSERT_TRUE(store->AppendTraceChunk(ids[0], c).ok());
+  for (const auto& c : chunks) ASSERT_TRUE(store->AppendTraceChunk(vb::db::testing::CurrentLease(store, ids[0]), c).ok());
 
   auto back = store->ReadTrace(ids[0]);
   ASSERT_TRUE(back.ok()) << back.status().ToString();
@@ -1216,7 +1217,7 @@ TEST(StoreTraceTest, Codec0BlobIsLittleEndianChannelMajorFloat64) {
   // What the store writes now is codec 1, channels joined by a newline.
   TraceChunk c = (*back)[0];
   c.index = 1;
-  ASSERT_TRUE(store->AppendTraceChunk(id, c).ok());
+  ASSERT_TRUE(store->AppendTraceChunk(vb::db::testing::CurrentLease(store, id), c).ok());
   RawDb raw(path);
   EXPECT_EQ(raw.Int(Cat("SELECT codec FROM trace_chunks WHERE run_id = ", id, " AND idx = 1")), 1);
   EXPECT_EQ(raw.Text("SELECT channels FROM trace_chunks WHERE idx = 1"), "a\nb");
@@ -1227,24 +1228,24 @@ TEST(StoreTraceTest, BadChunksAreRejectedAndStoredOnesKept) {
   auto ids = Submit(*store, {MakeRun("a")});
   const std::vector<std::string> ch = {"i_A", "x_m"};
   const TraceChunk first = MakeChunk(0, 10, ch, 1);
-  ASSERT_TRUE(store->AppendTraceChunk(ids[0], first).ok());
+  ASSERT_TRUE(store->AppendTraceChunk(vb::db::testing::CurrentLease(store, ids[0]), first).ok());
 
   TraceChunk wrong_size = MakeChunk(3, 10, ch, 2);
   wrong_size.data.pop_back();
-  Status s = store->AppendTraceChunk(ids[0], wrong_size);
+  Status s = store->AppendTraceChunk(vb::db::testing::CurrentLease(store, ids[0]), wrong_size);
   EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
   EXPECT_NE(s.message().find("trace chunk 3: channels.size() * samples != data.size()"), std::string::npos)
       << s.message();
 
-  s = store->AppendTraceChunk(ids[0], MakeChunk(2, 10, ch, 3));  // skips 1
+  s = store->AppendTraceChunk(vb::db::testing::CurrentLease(store, ids[0]), MakeChunk(2, 10, ch, 3));  // skips 1
   EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
   EXPECT_NE(s.message().find("trace chunk 2: index must be 1"), std::string::npos) << s.message();
 
-  s = store->AppendTraceChunk(ids[0], MakeChunk(0, 10, ch, 4));  // repeats 0
+  s = store->AppendTraceChunk(vb::db::testing::CurrentLease(store, ids[0]), MakeChunk(0, 10, ch, 4));  // repeats 0
   EXPECT_EQ(s.code(), StatusCode::kAlreadyExists);
   EXPECT_NE(s.message().find("trace chunk 0: already stored"), std::string::npos) << s.message();
 
-  s = store->AppendTraceChunk(ids[0], MakeChunk(1, 10, {"i_A", "v_coil_V"}, 5));
+  s = store->AppendTraceChunk(vb::db::testing::CurrentLease(store, ids[0]), MakeChunk(1, 10, {"i_A", "v_coil_V"}, 5));
   EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
   EXPECT_NE(s.message().find("trace chunk 1: channels differ"), std::string::npos) << s.message();
 
@@ -1273,7 +1274,7 @@ TEST(StoreTraceTest, BadChunksAreRejectedAndStoredOnesKept) {
     cases.push_back({c, "trace chunk 1: t0_s must be finite"});
   }
   for (const Case& c : cases) {
-    Status bad = store->AppendTraceChunk(ids[0], c.chunk);
+    Status bad = store->AppendTraceChunk(vb::db::testing::CurrentLease(store, ids[0]), c.chunk);
     EXPECT_EQ(bad.code(), StatusCode::kInvalidArgument) << c.message;
     EXPECT_NE(bad.message().find(c.message), std::string::npos) << bad.message();
   }
@@ -1282,16 +1283,16 @@ TEST(StoreTraceTest, BadChunksAreRejectedAndStoredOnesKept) {
   ASSERT_TRUE(back.ok());
   ASSERT_EQ(back->size(), 1u);
   EXPECT_TRUE(BitEqual((*back)[0].data, first.data));
-  EXPECT_TRUE(store->AppendTraceChunk(ids[0], MakeChunk(1, 10, ch, 7)).ok());
+  EXPECT_TRUE(store->AppendTraceChunk(vb::db::testing::CurrentLease(store, ids[0]), MakeChunk(1, 10, ch, 7)).ok());
   EXPECT_EQ(store->ReadTrace(ids[0])->size(), 2u);
 }
 
 TEST(StoreTraceTest, TracesOfDifferentRunsAreSeparate) {
   auto store = OpenOrDie(":memory:");
   auto ids = Submit(*store, {MakeRun("a"), MakeRun("b")});
-  ASSERT_TRUE(store->AppendTraceChunk(ids[0], MakeChunk(0, 5, {"a"}, 1)).ok());
-  ASSERT_TRUE(store->AppendTraceChunk(ids[1], MakeChunk(0, 6, {"b"}, 2)).ok());
-  ASSERT_TRUE(store->AppendTraceChunk(ids[0], MakeChunk(1, 5, {"a"}, 3)).ok());
+  ASSERT_TRUE(store->AppendTraceChunk(vb::db::testing::CurrentLease(store, ids[0]), MakeChunk(0, 5, {"a"}, 1)).ok());
+  ASSERT_TRUE(store->AppendTraceChunk(vb::db::testing::CurrentLease(store, ids[1]), MakeChunk(0, 6, {"b"}, 2)).ok());
+  ASSERT_TRUE(store->AppendTraceChunk(vb::db::testing::CurrentLease(store, ids[0]), MakeChunk(1, 5, {"a"}, 3)).ok());
   EXPECT_EQ(store->ReadTrace(ids[0])->size(), 2u);
   EXPECT_EQ(store->ReadTrace(ids[1])->size(), 1u);
   EXPECT_EQ(store->ReadTrace(ids[1])->at(0).samples, 6);
@@ -1308,7 +1309,7 @@ TEST(StoreTraceTest, ForEachTraceChunkStreamsInOrderAndStopsOnError) {
   auto store = OpenOrDie(":memory:");
   auto ids = Submit(*store, {MakeRun("a")});
   ASSERT_EQ(ClaimId(*store), ids[0]);
-  for (int k = 0; k < 3; ++k) ASSERT_TRUE(store->AppendTraceChunk(ids[0], MakeChunk(k, 7, {"i_A", "x_m"}, k)).ok());
+  for (int k = 0; k < 3; ++k) ASSERT_TRUE(store->AppendTraceChunk(vb::db::testing::CurrentLease(store, ids[0]), MakeChunk(k, 7, {"i_A", "x_m"}, k)).ok());
   std::vector<std::int32_t> seen;
   ASSERT_TRUE(store->ForEachTraceChunk(ids[0], [&](const TraceChunk& c, std::int64_t total) {
                      EXPECT_EQ(total, 21);

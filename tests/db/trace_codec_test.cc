@@ -17,6 +17,7 @@
 #include "db/schema.h"
 #include "db/sqlite_conn.h"
 #include "db/store.h"
+#include "db/testing.h"
 #include "db/text.h"
 #include "db/trace_codec.h"
 
@@ -207,7 +208,7 @@ std::int64_t SubmitAndClaim(Store& store) {
   r.spec_json = "{}";
   std::vector<std::int64_t> ids;
   EXPECT_TRUE(store.SubmitBatch("alice", "b", "{}", {r}, &ids).ok());
-  EXPECT_TRUE(store.ClaimNext("emulated", "bench-1").ok());
+  EXPECT_TRUE(store.ClaimNext(db::BenchClaim("emulated", "bench-1")).ok());
   return ids.at(0);
 }
 
@@ -225,7 +226,7 @@ TEST(TraceCodecTest, StoreWritesCodec1AndReadsItBackBitExact) {
   {
     auto store = std::move(Store::Open(path)).value();
     id = SubmitAndClaim(*store);
-    ASSERT_TRUE(store->AppendTraceChunk(id, c).ok());
+    ASSERT_TRUE(store->AppendTraceChunk(vb::db::testing::CurrentLease(store, id), c).ok());
     auto back = store->ReadTrace(id);
     ASSERT_TRUE(back.ok()) << back.status().ToString();
     ASSERT_EQ(back->size(), 1u);
@@ -304,7 +305,7 @@ TEST(TraceCodecTest, Version3RawTracesStayReadableAfterTheMigrationBesideNewComp
   next.samples = 2;
   next.channels = {"a", "b"};
   next.data = {-std::numeric_limits<double>::infinity(), 7.0, FromBits(0xfff0000000000001ULL), 8.0};
-  ASSERT_TRUE(store->AppendTraceChunk(1, next).ok());
+  ASSERT_TRUE(store->AppendTraceChunk(vb::db::testing::CurrentLease(store, 1), next).ok());
   auto back = store->ReadTrace(1);
   ASSERT_TRUE(back.ok()) << back.status().ToString();
   ASSERT_EQ(back->size(), 2u);

@@ -14,6 +14,7 @@
 #include <nlohmann/json.hpp>
 
 #include "db/store.h"
+#include "db/testing.h"
 #include "regress/cron.h"
 #include "server/config.h"
 #include "server/retention.h"
@@ -115,7 +116,7 @@ class RetentionSchedulerTest : public ::testing::Test {
   }
   // Runs the next queued run (it must be `id`) to done with a small trace.
   void Finish(std::int64_t id) {
-    auto c = store_->ClaimNext("emulated", "emu");
+    auto c = store_->ClaimNext(db::BenchClaim("emulated", "emu"));
     ASSERT_TRUE(c.ok() && c->has_value());
     ASSERT_EQ((*c)->id, id);
     db::TraceChunk ch;
@@ -123,8 +124,8 @@ class RetentionSchedulerTest : public ::testing::Test {
     ch.samples = 100;
     ch.channels = {"i_A"};
     ch.data.assign(100, 0.25);
-    ASSERT_TRUE(store_->AppendTraceChunk(id, ch).ok());
-    ASSERT_TRUE(store_->Finish(id, db::RunStatus::kDone, "", {{"rmse_A", 0.01}}).ok());
+    ASSERT_TRUE(store_->AppendTraceChunk(vb::db::testing::CurrentLease(store_, id), ch).ok());
+    ASSERT_TRUE(store_->Finish(vb::db::testing::CurrentLease(store_, id), db::RunStatus::kDone, "", {{"rmse_A", 0.01}}).ok());
   }
   bool Exists(std::int64_t id) { return store_->GetRun(id).ok(); }
 

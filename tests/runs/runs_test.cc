@@ -8,6 +8,7 @@
 
 #include "common/format.h"
 #include "db/store.h"
+#include "db/testing.h"
 #include "hw/emulated_bench.h"
 #include "runs/admit.h"
 #include "runs/monitor.h"
@@ -303,7 +304,7 @@ TEST(Enqueue, APerUserDiskBudgetCountsStoredTracesAndTheNewRunsUncompressed) {
     x ^= x << 13, x ^= x >> 7, x ^= x << 17;
     c.data.push_back(std::bit_cast<double>(x & 0x7fefffffffffffffULL));
   }
-  ASSERT_TRUE((*store)->AppendTraceChunk(q->run_ids[0], c).ok());
+  ASSERT_TRUE((*store)->AppendTraceChunk(vb::db::testing::CurrentLease(*store, q->run_ids[0]), c).ok());
   auto used = (*store)->StoredTraceBytes("alice");
   ASSERT_TRUE(used.ok());
   EXPECT_GT(*used, 700000);
