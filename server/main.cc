@@ -24,6 +24,7 @@
 #include "server/nights.h"
 #include "server/retention.h"
 #include "server/service.h"
+#include "server/status_interceptor.h"
 
 int main(int argc, char** argv) {
   CLI::App app{"valvebench-server: the bench server"};
@@ -96,6 +97,9 @@ int main(int argc, char** argv) {
   builder.RegisterService(&service);
   builder.SetMaxReceiveMessageSize(64 << 20);
   builder.SetMaxSendMessageSize(64 << 20);
+  std::vector<std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface>> interceptors;
+  interceptors.push_back(std::make_unique<vb::server::BadRequestInterceptorFactory>());
+  builder.experimental().SetInterceptorCreators(std::move(interceptors));
   std::unique_ptr<grpc::Server> server = builder.BuildAndStart();
   if (server == nullptr || port == 0) {
     spdlog::error("cannot listen on {}", settings->listen_address.c_str());

@@ -70,6 +70,18 @@ try:
     answers = list(refl(iter([b"\x3a\x00"]), timeout=5))
     check("reflection lists BenchService", any(b"valvebench.v1.BenchService" in a for a in answers), answers)
 
+    # Bytes that are not a protobuf message (field 1 as a length-delimited string running past the end): an
+    # INVALID_ARGUMENT naming the method, not gRPC's INTERNAL with an empty message.
+    raw_get = channel.unary_unary("/valvebench.v1.BenchService/GetRun", request_serializer=lambda b: b,
+                                  response_deserializer=lambda b: b)
+    try:
+        raw_get(b"\x0a\xff\xff\xff\x0f", metadata=md, timeout=5)
+        check("malformed request refused", False, "the call succeeded")
+    except grpc.RpcError as e:
+        check("malformed request is INVALID_ARGUMENT", e.code() == grpc.StatusCode.INVALID_ARGUMENT,
+              (e.code(), e.details()))
+        check("malformed request names the method", "GetRun" in (e.details() or ""), e.details())
+
     stub = api_pb2_grpc.BenchServiceStub(channel)
     benches = stub.ListBenches(api_pb2.ListBenchesRequest(), metadata=md, timeout=5)
     check("list benches", [b.name for b in benches.benches] == ["emu"], benches)
