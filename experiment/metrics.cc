@@ -6,18 +6,122 @@
 
 namespace vb::experiment {
 
-Metrics ComputeMetrics(const Trace& tr, ControlledVariable cv, double start_s, double end_s, double x_min_m,
-                       double x_max_m, const DriverLossInputs& driver) {
-  constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+namespace {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+constexpr double kTimeSlack_s = 1e-12;
+
+// A channel a hand-built trace may leave empty reads as NaN.
+double At(const std::vector<double>& channel, size_t k) { return k < channel.size() ? channel[k] : kNaN; }
+
+double BandOf(double final_ref) { return std::max(0.02 * std::abs(final_ref), 1e-12); }
+
+}  // namespace
+
+MetricsAccumulator::MetricsAccumulator(ControlledVariable cv, double start_s, double end_s, double x_min_m,
+                                       double x_max_m, const DriverLossInputs& driver, double final_ref_hint)
+    : cv_(cv),
+      start_s_(start_s),
+      end_s_(end_s),
+      x_min_m_(x_min_m),
+      x_max_m_(x_max_m),
+      driver_(driver),
+      hint_ref_(final_ref_hint),
+      hint_band_(BandOf(final_ref_hint)) {}
+
+void MetricsAccumulator::Add(const Trace& block, size_t from, size_t to) {
+  dt_ = block.sample_period_s;
+  to = std::min(to, block.size());
+  for (size_t k = from; k < to; ++k) AddSample(block, k);
+}
+
+void MetricsAccumulator::AddSample(const Trace& b, size_t k) {
+  const double t = b.t_s[k];
+  if (t < start_s_ - kTimeSlack_s || t > end_s_ + kTimeSlack_s) return;
+  const double v = b.v_coil_V[k], i = b.i_A[k], ref = At(b.ref, k), x = At(b.x_m, k);
+  const std::int8_t gate = b.gate[k];
+  const double y = cv_ == ControlledVariable::kCurrent ? i : cv_ == ControlledVariable::kPosition ? x : kNaN;
+  const bool first = count_ == 0;
+  if (first) {
+    t_first_ = t;
+    v2int_first_ = At(b.v2_int_V2s, k);
+    eint_first_ = At(b.energy_int_J, k);
+    sw_first_ = At(b.switch_count, k);
+    has_exact_ = std::isfinite(v2int_first_);
+    y0_ = y;
+    ref_first_ = ref;
+    x_first_ = x;
+    i_lo_ = i_hi_ = i;
+    ymax_ = -std::numeric_limits<double>::infinity();
+  } else if (gate != gate_prev_) {
+    switches_ += 1.0;
+  }
+  ++count_;
+  t_last_ = t;
+  v2int_last_ = At(b.v2_int_V2s, k);
+  eint_last_ = At(b.energy_int_J, k);
+  sw_last_ = At(b.switch_count, k);
+  ref_last_ = ref;
+
+  // Effort, energy, wear, ripple.
+  v2_ += v * v;
+  p_ += v * i;
+  isum_ += i;
+  i_lo_ = std::min(i_lo_, i);
+  i_hi_ = std::max(i_hi_, i);
+
+  // Tracking: the settling time is the instant after the last sample outside the band (that sample's own time
+  // when it is the window's last).
+  if (cv_ != ControlledVariable::kNone) {
+    const double e = y - ref;
+    e2_ += e * e;
+    ea_ += std::abs(e);
+    emax_ = std::max(emax_, std::abs(e));
+    ymax_ = std::max(ymax_, y);
+    if (exceed_pending_) {
+      settle_ = t - t_first_;
+      exceed_pending_ = false;
+    }
+    if (std::abs(e) > hint_band_) {
+      settle_ = t - t_first_;
+      exceed_pending_ = true;
+    }
+  }
+
+  // Valve.
+  if (x_max_m_ > x_min_m_ && !std::isnan(x_first_)) {
+    xs_ += x;
+    const double flow = At(b.flow_kg_per_s, k);
+    fs_ += std::isnan(flow) ? 0.0 : flow;
+    const double open_at = x_max_m_ - 1e-6 * (x_max_m_ - x_min_m_);
+    const double closed_at = x_min_m_ + 1e-6 * (x_max_m_ - x_min_m_);
+    const bool rising = first ? (gate == 1 && x <= closed_at) : (gate == 1 && gate_prev_ != 1);
+    const bool falling = !first && gate != 1 && gate_prev_ == 1;
+    if (valve_ == Valve::kSeekRise && rising) {
+      t_rise_ = t;
+      // An opening delay only from a closed valve: a rising edge while the valve is open (a hold) opens nothing.
+      valve_ = x > closed_at ? Valve::kDone : Valve::kSeekOpen;
+    }
+    if (valve_ == Valve::kSeekOpen && x >= open_at) {
+      opening_s_ = t - t_rise_;
+      opened_ = true;
+      valve_ = Valve::kSeekFall;
+    } else if (valve_ == Valve::kSeekFall && falling) {
+      t_fall_ = t;
+      valve_ = Valve::kSeekClosed;
+    }
+    if (valve_ == Valve::kSeekClosed && x <= closed_at) {
+      closing_s_ = t - t_fall_;
+      closed_ = true;
+      valve_ = Valve::kDone;
+    }
+  }
+  gate_prev_ = gate;
+}
+
+Metrics MetricsAccumulator::Finish() const {
   Metrics m;
-  const size_t n = tr.size();
-  const double dt = tr.sample_period_s;
-  size_t k0 = 0, k1 = 0;
-  while (k0 < n && tr.t_s[k0] < start_s - 1e-12) ++k0;
-  k1 = k0;
-  while (k1 < n && tr.t_s[k1] <= end_s + 1e-12) ++k1;
-  const size_t count = k1 > k0 ? k1 - k0 : 0;
-  if (count == 0) {
+  if (count_ == 0) {
     for (auto* f : {&m.rmse, &m.iae, &m.max_abs_error, &m.overshoot, &m.settling_time_s, &m.effort_l2,
                     &m.effort_rms, &m.energy_J, &m.mean_current_A, &m.opening_delay_s, &m.closing_delay_s,
                     &m.mean_position_m, &m.mean_position_pct, &m.mean_flow_kg_per_s,
@@ -26,42 +130,34 @@ Metrics ComputeMetrics(const Trace& tr, ControlledVariable cv, double start_s, d
       *f = kNaN;
     return m;
   }
-  const double inv_n = 1.0 / static_cast<double>(count);
+  const double dt = dt_;
+  const double inv_n = 1.0 / static_cast<double>(count_);
 
   // Effort, energy, wear.
-  double v2 = 0, p = 0, isum = 0;
-  int switches = 0;
-  for (size_t k = k0; k < k1; ++k) {
-    v2 += tr.v_coil_V[k] * tr.v_coil_V[k];
-    p += tr.v_coil_V[k] * tr.i_A[k];
-    isum += tr.i_A[k];
-    if (k > k0 && tr.gate[k] != tr.gate[k - 1]) ++switches;
-  }
-  m.effort_l2 = std::sqrt(v2 * dt);
-  m.effort_rms = std::sqrt(v2 * inv_n);
-  m.energy_J = p * dt;
-  m.switches = switches;
+  m.effort_l2 = std::sqrt(v2_ * dt);
+  m.effort_rms = std::sqrt(v2_ * inv_n);
+  m.energy_J = p_ * dt;
+  m.switches = switches_;
   // Prefer the bench's exact running integrals: sampled sums cannot see a PWM faster than the sample rate.
-  const bool exact = !tr.v2_int_V2s.empty() && std::isfinite(tr.v2_int_V2s[k0]) &&
-                     std::isfinite(tr.v2_int_V2s[k1 - 1]) && k1 - 1 > k0;
+  const bool exact = has_exact_ && std::isfinite(v2int_last_) && count_ > 1;
   if (exact) {
-    const double span_s = tr.t_s[k1 - 1] - tr.t_s[k0];
-    const double v2_exact = tr.v2_int_V2s[k1 - 1] - tr.v2_int_V2s[k0];
+    const double span_s = t_last_ - t_first_;
+    const double v2_exact = v2int_last_ - v2int_first_;
     m.effort_l2 = std::sqrt(std::max(0.0, v2_exact));
     m.effort_rms = std::sqrt(std::max(0.0, v2_exact) / span_s);
-    m.energy_J = tr.energy_int_J[k1 - 1] - tr.energy_int_J[k0];
-    m.switches = tr.switch_count[k1 - 1] - tr.switch_count[k0];
+    m.energy_J = eint_last_ - eint_first_;
+    m.switches = sw_last_ - sw_first_;
   }
-  m.mean_current_A = isum * inv_n;
+  m.mean_current_A = isum_ * inv_n;
   m.effort_u_l2 = m.pwm_frequency_Hz = m.pwm_duty = kNaN;  // the Runner's (it sees the law)
 
   // Switching rate and the driver's losses (docs/metrics.md, "Effort per experiment kind").
-  const double window_s = exact ? tr.t_s[k1 - 1] - tr.t_s[k0] : static_cast<double>(count) * dt;
+  const double window_s = exact ? t_last_ - t_first_ : static_cast<double>(count_) * dt;
   m.switching_rate_Hz = window_s > 0 ? m.switches / window_s : kNaN;
   m.diode_loss_W = m.switching_loss_W = m.driver_loss_W = kNaN;
-  if (driver.low_side_flyback && std::isfinite(driver.supply_V) && std::isfinite(driver.diode_drop_V) &&
-      driver.supply_V > 0 && window_s > 0) {
-    const double vs = driver.supply_V, vd = driver.diode_drop_V;
+  if (driver_.low_side_flyback && std::isfinite(driver_.supply_V) && std::isfinite(driver_.diode_drop_V) &&
+      driver_.supply_V > 0 && window_s > 0) {
+    const double vs = driver_.supply_V, vd = driver_.diode_drop_V;
     // Charge through the coil, Q = Q_on + Q_off, and energy into it, E = V_s Q_on - V_d Q_off (the switch puts
     // V_s on the coil, the freewheeling diode -V_d, and no current flows otherwise): Q_off = (V_s Q - E)/(V_s + V_d).
     const double q_C = m.mean_current_A * window_s;
@@ -71,53 +167,33 @@ Metrics ComputeMetrics(const Trace& tr, ControlledVariable cv, double start_s, d
     // per edge: the switch blocks V_s + V_d while the diode conducts; |i| at the edges is the window's mean
     // current (turn-on at the ripple's troughs, turn-off at its peaks: they average to the mean).
     m.switching_loss_W =
-        0.5 * (vs + vd) * std::abs(m.mean_current_A) * driver.switch_transition_s * m.switching_rate_Hz;
+        0.5 * (vs + vd) * std::abs(m.mean_current_A) * driver_.switch_transition_s * m.switching_rate_Hz;
     m.driver_loss_W = m.diode_loss_W + m.switching_loss_W;
   }
   // Ripple of an open-loop PWM run (seed 003 eqs. 10-11): peak-to-peak and mid-range of the current.
   m.ripple_pp_A = m.ripple_mid_A = kNaN;
-  if (cv == ControlledVariable::kNone) {
-    const auto [lo, hi] = std::minmax_element(tr.i_A.begin() + k0, tr.i_A.begin() + k1);
-    m.ripple_pp_A = *hi - *lo;
-    m.ripple_mid_A = 0.5 * (*hi + *lo);
+  if (cv_ == ControlledVariable::kNone) {
+    m.ripple_pp_A = i_hi_ - i_lo_;
+    m.ripple_mid_A = 0.5 * (i_hi_ + i_lo_);
   }
 
   // Tracking.
-  const std::vector<double>* y = cv == ControlledVariable::kCurrent    ? &tr.i_A
-                                 : cv == ControlledVariable::kPosition ? &tr.x_m
-                                                                       : nullptr;
-  if (y == nullptr || std::isnan(tr.ref[k0])) {
+  if (cv_ == ControlledVariable::kNone || std::isnan(ref_first_)) {
     m.rmse = m.iae = m.max_abs_error = m.overshoot = m.settling_time_s = kNaN;
   } else {
-    double e2 = 0, ea = 0, emax = 0, ymax = -std::numeric_limits<double>::infinity();
-    for (size_t k = k0; k < k1; ++k) {
-      const double e = (*y)[k] - tr.ref[k];
-      e2 += e * e;
-      ea += std::abs(e);
-      emax = std::max(emax, std::abs(e));
-      ymax = std::max(ymax, (*y)[k]);
-    }
-    m.rmse = std::sqrt(e2 * inv_n);
-    m.iae = ea * dt;
-    m.max_abs_error = emax;
-    const double r_end = tr.ref[k1 - 1];
-    const double y0 = (*y)[k0];
-    const double span = std::abs(r_end - y0);
-    m.overshoot = span > 0 ? std::max(0.0, (ymax - r_end) / span) : 0.0;
-    const double band = std::max(0.02 * std::abs(r_end), 1e-12);
+    m.rmse = std::sqrt(e2_ * inv_n);
+    m.iae = ea_ * dt;
+    m.max_abs_error = emax_;
+    const double r_end = ref_last_;
+    const double span = std::abs(r_end - y0_);
+    m.overshoot = span > 0 ? std::max(0.0, (ymax_ - r_end) / span) : 0.0;
+    // The band was the hint's; a window that ended at another reference has no settling time to report.
+    m.settling_time_s = r_end == hint_ref_ || BandOf(r_end) == hint_band_ ? settle_ : kNaN;
     // A step response only when the window starts away from the final set-point (more than 10 % of it):
     // then overshoot and settling time mean something and max |e| is just the step. A window that starts at
     // the set-point (a hold) has no overshoot or settling, and its max |e| is the worst excursion
     // (docs/metrics.md "Which metrics apply").
     const bool step_response = span > 0.1 * std::abs(r_end);
-    double settle = 0.0;
-    for (size_t k = k1; k-- > k0;) {
-      if (std::abs((*y)[k] - tr.ref[k]) > band) {
-        settle = (k + 1 < k1 ? tr.t_s[k + 1] : tr.t_s[k]) - tr.t_s[k0];
-        break;
-      }
-    }
-    m.settling_time_s = settle;
     if (step_response) {
       m.max_abs_error = kNaN;
     } else {
@@ -126,49 +202,32 @@ Metrics ComputeMetrics(const Trace& tr, ControlledVariable cv, double start_s, d
   }
 
   // Valve.
-  if (std::isnan(tr.x_m[k0]) || !(x_max_m > x_min_m)) {
+  if (std::isnan(x_first_) || !(x_max_m_ > x_min_m_)) {
     m.opening_delay_s = m.closing_delay_s = m.mean_position_m = m.mean_position_pct = m.mean_flow_kg_per_s = kNaN;
   } else {
-    double xs = 0, fs = 0;
-    for (size_t k = k0; k < k1; ++k) {
-      xs += tr.x_m[k];
-      fs += std::isnan(tr.flow_kg_per_s[k]) ? 0.0 : tr.flow_kg_per_s[k];
-    }
-    m.mean_position_m = xs * inv_n;
-    m.mean_position_pct = 100.0 * m.mean_position_m / x_max_m;
-    m.mean_flow_kg_per_s = fs * inv_n;
-    const double open_at = x_max_m - 1e-6 * (x_max_m - x_min_m);
-    const double closed_at = x_min_m + 1e-6 * (x_max_m - x_min_m);
-    m.opening_delay_s = m.closing_delay_s = kNaN;
-    size_t rise = k1, opened = k1, fall = k1;
-    for (size_t k = k0 + 1; k < k1; ++k)
-      if (tr.gate[k] == 1 && tr.gate[k - 1] != 1) {
-        rise = k;
-        break;
-      }
-    if (k0 < k1 && tr.gate[k0] == 1 && tr.x_m[k0] <= closed_at) rise = k0;
-    for (size_t k = rise; k < k1; ++k)
-      if (tr.x_m[k] >= open_at) {
-        opened = k;
-        break;
-      }
-    // An opening delay only from a closed valve: a rising edge while the valve is open (a hold) opens nothing.
-    if (rise < k1 && tr.x_m[rise] > closed_at) opened = k1;
-    if (opened < k1) {
-      m.opening_delay_s = tr.t_s[opened] - tr.t_s[rise];
-      for (size_t k = opened + 1; k < k1; ++k)
-        if (tr.gate[k] != 1 && tr.gate[k - 1] == 1) {
-          fall = k;
-          break;
-        }
-      for (size_t k = fall; k < k1; ++k)
-        if (tr.x_m[k] <= closed_at) {
-          m.closing_delay_s = tr.t_s[k] - tr.t_s[fall];
-          break;
-        }
-    }
+    m.mean_position_m = xs_ * inv_n;
+    m.mean_position_pct = 100.0 * m.mean_position_m / x_max_m_;
+    m.mean_flow_kg_per_s = fs_ * inv_n;
+    m.opening_delay_s = opened_ ? opening_s_ : kNaN;
+    m.closing_delay_s = closed_ ? closing_s_ : kNaN;
   }
   return m;
+}
+
+Metrics ComputeMetrics(const Trace& tr, ControlledVariable cv, double start_s, double end_s, double x_min_m,
+                       double x_max_m, const DriverLossInputs& driver) {
+  // The reference at the window's last sample: the settling band (MetricsAccumulator), exact for a whole trace.
+  double final_ref = kNaN;
+  for (size_t k = tr.size(); k-- > 0;) {
+    if (tr.t_s[k] < start_s - kTimeSlack_s) break;
+    if (tr.t_s[k] <= end_s + kTimeSlack_s) {
+      final_ref = At(tr.ref, k);
+      break;
+    }
+  }
+  MetricsAccumulator acc(cv, start_s, end_s, x_min_m, x_max_m, driver, final_ref);
+  acc.Add(tr);
+  return acc.Finish();
 }
 
 std::vector<std::pair<std::string, double>> MetricList(const Metrics& m) {

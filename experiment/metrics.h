@@ -59,6 +59,50 @@ struct DriverLossInputs {
   double switch_transition_s = 100e-9;
 };
 
+// The metrics of a trace that arrives in blocks (the Runner streams traces to the store: docs/store.md, "Traces
+// while the run executes"), sample by sample, in constant memory: ComputeMetrics() below is this over one
+// whole trace, so both give the same numbers. The one quantity that needs the window's end before its last
+// sample is the settling band (2 % of the final reference): it is taken from `final_ref_hint`, the reference at
+// the window's last planned sample; if the run ends elsewhere (cancelled, failed) and the reference there
+// differs, the settling time is NaN (a step response cut short has no settling time).
+class MetricsAccumulator {
+ public:
+  MetricsAccumulator(ControlledVariable cv, double start_s, double end_s, double x_min_m, double x_max_m,
+                     const DriverLossInputs& driver, double final_ref_hint);
+  // Samples [from, to) of `block`, in time order after every sample added before.
+  void Add(const Trace& block, size_t from, size_t to);
+  void Add(const Trace& block) { Add(block, 0, block.size()); }
+  Metrics Finish() const;
+
+ private:
+  void AddSample(const Trace& b, size_t k);
+
+  ControlledVariable cv_;
+  double start_s_, end_s_, x_min_m_, x_max_m_;
+  DriverLossInputs driver_;
+  double hint_ref_, hint_band_;
+  double dt_ = 0.0;
+  // The window's first and last samples.
+  size_t count_ = 0;
+  double t_first_ = 0.0, t_last_ = 0.0;
+  double v2int_first_ = 0.0, v2int_last_ = 0.0, eint_first_ = 0.0, eint_last_ = 0.0, sw_first_ = 0.0,
+         sw_last_ = 0.0;
+  bool has_exact_ = false;
+  double y0_ = 0.0, ref_first_ = 0.0, ref_last_ = 0.0, x_first_ = 0.0;
+  std::int8_t gate_prev_ = 0;
+  // Sums over the window.
+  double v2_ = 0.0, p_ = 0.0, isum_ = 0.0, switches_ = 0.0, i_lo_ = 0.0, i_hi_ = 0.0;
+  double e2_ = 0.0, ea_ = 0.0, emax_ = 0.0, ymax_ = 0.0, settle_ = 0.0;
+  bool exceed_pending_ = false;
+  double xs_ = 0.0, fs_ = 0.0;
+  // The valve's delays: a small state machine over the window (seek the rising edge, the open stop, the
+  // falling edge, the closed stop).
+  enum class Valve { kSeekRise, kSeekOpen, kSeekFall, kSeekClosed, kDone };
+  Valve valve_ = Valve::kSeekRise;
+  double t_rise_ = 0.0, t_fall_ = 0.0, opening_s_ = 0.0, closing_s_ = 0.0;
+  bool opened_ = false, closed_ = false;
+};
+
 // x_min_m/x_max_m: the stops, for the valve delays (ignored without a position channel).
 // The driver's losses need `driver`; effort_u_l2 and the PWM command are filled by the Runner (NaN here).
 Metrics ComputeMetrics(const Trace& trace, ControlledVariable cv, double start_s, double end_s, double x_min_m,
