@@ -129,6 +129,7 @@ StatusOr<std::vector<LocalRunResult>> RunLocal(LocalSubmission sub, db::Store* g
 
   runs::Registry registry;
   runs::Worker worker(bench, stored ? &registry : nullptr);
+  worker.set_keep_traces(sub.keep_traces);
   std::unique_ptr<StoreRelay> relay;
   if (stored) relay = std::make_unique<StoreRelay>(sub.store_path, &registry, &worker);
   std::vector<LocalRunResult> out;

@@ -65,31 +65,95 @@ class TeeSink final : public hw::SampleSink {
 };
 
 RunSummary RunImpl(const Experiment& e, hw::Bench& bench, Trace* trace, const std::atomic<bool>* cancel,
-                   std::atomic<double>* progress_t, hw::SampleSink* extra_sink);
+                   std::atomic<double>* progress_t, hw::SampleSink* extra_sink, const RunOptions* stream);
+
+// The stream's consumer side: the metrics see every block, then the caller's sink stores it (and the whole
+// trace is kept only when asked).
+class StreamedRecording final : public BlockSink {
+ public:
+  StreamedRecording(MetricsAccumulator* metrics, BlockSink* sink, Trace* whole)
+      : metrics_(metrics), sink_(sink), whole_(whole) {}
+  Status OnBlock(const Trace& block, std::uint64_t first_sample) override {
+    metrics_->Add(block);
+    if (block.size() > 0) last_t_s_ = block.t_s.back();
+    if (whole_ != nullptr) {
+      for (size_t k = 0; k < block.size(); ++k) {
+        whole_->t_s.push_back(block.t_s[k]);
+        whole_->gate.push_back(block.gate[k]);
+        whole_->v_coil_V.push_back(block.v_coil_V[k]);
+        whole_->i_A.push_back(block.i_A[k]);
+        whole_->x_m.push_back(block.x_m[k]);
+        whole_->v_mps.push_back(block.v_mps[k]);
+        whole_->ref.push_back(block.ref[k]);
+        whole_->x_avg_m.push_back(block.x_avg_m[k]);
+        whole_->flow_kg_per_s.push_back(block.flow_kg_per_s[k]);
+        whole_->v2_int_V2s.push_back(block.v2_int_V2s[k]);
+        whole_->energy_int_J.push_back(block.energy_int_J[k]);
+        whole_->switch_count.push_back(block.switch_count[k]);
+      }
+    }
+    return sink_->OnBlock(block, first_sample);
+  }
+  double last_t_s() const { return last_t_s_; }
+
+ private:
+  MetricsAccumulator* metrics_;
+  BlockSink* sink_;
+  Trace* whole_;
+  double last_t_s_ = 0.0;
+};
 
 }  // namespace
 
 RunSummary Runner::Run(const Experiment& e, hw::Bench& bench, Trace* trace, const std::atomic<bool>* cancel) {
-  return RunImpl(e, bench, trace, cancel, nullptr, nullptr);
+  return RunImpl(e, bench, trace, cancel, nullptr, nullptr, nullptr);
 }
 
 RunSummary Runner::Run(const Experiment& e, hw::Bench& bench, Trace* trace, RunMonitor* monitor,
                        hw::SampleSink* extra_sink) {
   return RunImpl(e, bench, trace, monitor ? &monitor->cancel : nullptr, monitor ? &monitor->t_s : nullptr,
-                 extra_sink);
+                 extra_sink, nullptr);
+}
+
+RunSummary Runner::Run(const Experiment& e, hw::Bench& bench, Trace* trace, const RunOptions& options) {
+  RunMonitor* monitor = options.monitor;
+  return RunImpl(e, bench, trace, monitor ? &monitor->cancel : nullptr, monitor ? &monitor->t_s : nullptr,
+                 options.extra_sink, options.block_sink != nullptr ? &options : nullptr);
 }
 
 namespace {
 
 RunSummary RunImpl(const Experiment& e, hw::Bench& bench, Trace* trace, const std::atomic<bool>* cancel,
-                   std::atomic<double>* progress_t, hw::SampleSink* extra_sink) {
+                   std::atomic<double>* progress_t, hw::SampleSink* extra_sink, const RunOptions* stream_options) {
   RunSummary sum;
   const auto wall0 = std::chrono::steady_clock::now();
   trace->Clear();
   const double dt_sample = e.run.sample_rate_Hz > 0.0 ? 1.0 / e.run.sample_rate_Hz : 0.0;
   const double samples = dt_sample > 0.0 ? std::floor(e.duration_s / dt_sample + 1e-9) + 2.0 : 0.0;
+  DriverLossInputs driver;
+  driver.supply_V = e.run.supply_V;
+  driver.diode_drop_V = e.driver.diode_drop_V;
+  driver.low_side_flyback = e.driver.kind == model::DriverKind::kLowSideFlyback;
+  // Streaming: the metrics see the blocks as they pass; the settling band comes from the reference at the
+  // window's last planned sample (MetricsAccumulator).
+  const double window_end_s = std::min(e.metric_end_s, e.duration_s);
+  double final_ref = std::numeric_limits<double>::quiet_NaN();
+  if (e.reference.has_reference() && dt_sample > 0.0)
+    final_ref = e.reference.At(std::floor(window_end_s / dt_sample + 1e-9) * dt_sample).value;
+  MetricsAccumulator streamed_metrics(e.controlled, e.metric_start_s, window_end_s, e.plant.x_min_m, e.plant.x_max_m,
+                                      driver, final_ref);
+  std::unique_ptr<StreamedRecording> recording;
+  std::unique_ptr<TraceStream> stream;
   try {
-    trace->Reserve(static_cast<size_t>(samples));
+    if (stream_options != nullptr) {
+      recording = std::make_unique<StreamedRecording>(&streamed_metrics, stream_options->block_sink,
+                                                      stream_options->keep_whole_trace ? trace : nullptr);
+      stream = std::make_unique<TraceStream>(std::max<size_t>(1, stream_options->block_samples),
+                                             stream_options->stream_blocks, dt_sample, recording.get());
+      trace->sample_period_s = dt_sample;
+    } else {
+      trace->Reserve(static_cast<size_t>(samples));
+    }
   } catch (const std::exception&) {
     // Admission budgets traces (runs/admit.h); a memory cap it cannot see (a cgroup) still must not end the
     // process: the run fails with the reason, before the bench is touched.
@@ -100,7 +164,9 @@ RunSummary RunImpl(const Experiment& e, hw::Bench& bench, Trace* trace, const st
                   " MB); lower recording.rate_Hz or duration_s";
     return sum;
   }
-  Recorder recorder(trace, &e.reference, &e.plant, e.run.supply_pressure_Pa, dt_sample, e.average_window_s);
+  Recorder recorder(stream ? stream->first() : trace, &e.reference, &e.plant, e.run.supply_pressure_Pa, dt_sample,
+                    e.average_window_s);
+  if (stream) recorder.StreamTo(stream.get());
 
   auto fail = [&](const Status& st, RunSummary::Termination term) {
     bench.SafeState();
@@ -145,6 +211,7 @@ RunSummary RunImpl(const Experiment& e, hw::Bench& bench, Trace* trace, const st
       break;
     }
     if (!st.ok()) break;
+    if (stream && stream->failed()) break;  // the recording cannot go on: Close() says why
     st = bench.Apply(ctl.Step(m, e.reference.At(t), &state));
     if (!st.ok()) break;
     if (u_slot >= 0) {
@@ -161,7 +228,7 @@ RunSummary RunImpl(const Experiment& e, hw::Bench& bench, Trace* trace, const st
     if (next_bp < bp.size()) t_next = std::min(t_next, bp[next_bp]);
     t = t_next;
   }
-  if (st.ok() && !cancelled) {
+  if (st.ok() && !cancelled && !(stream && stream->failed())) {
     st = bench.AdvanceTo(e.duration_s, &m);
     if (cancel != nullptr && cancel->load(std::memory_order_relaxed)) cancelled = true;
   }
@@ -173,18 +240,28 @@ RunSummary RunImpl(const Experiment& e, hw::Bench& bench, Trace* trace, const st
     st = bench.Stop();
     if (!st.ok()) fail(st, RunSummary::Termination::kFailed);
   }
+  // The bench is stopped: its last samples are in the last block; the store takes the rest.
+  if (stream) {
+    const Status recorded = stream->Close(recorder.current());
+    sum.record_waits = stream->loop_waits();
+    if (!recorded.ok()) {
+      bench.SafeState();
+      if (sum.termination != RunSummary::Termination::kCancelled) {
+        sum.termination = RunSummary::Termination::kFailed;
+        sum.message = recorded.WithContext("recording").message();
+      }
+    }
+  }
   sum.duration_s = sum.termination == RunSummary::Termination::kDone ? e.duration_s : t;
-  sum.samples = trace->size();
+  sum.samples = stream ? static_cast<size_t>(stream->samples_handed()) : trace->size();
+  sum.last_sample_t_s = stream ? recording->last_t_s() : (trace->size() > 0 ? trace->t_s.back() : 0.0);
   sum.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
   sum.realtime_factor = sum.wall_s > 0.0 ? sum.duration_s / sum.wall_s : 0.0;
   sum.loop = bench.loop_stats();
-  DriverLossInputs driver;
-  driver.supply_V = e.run.supply_V;
-  driver.diode_drop_V = e.driver.diode_drop_V;
-  driver.low_side_flyback = e.driver.kind == model::DriverKind::kLowSideFlyback;
   const double metric_end_s = std::min(e.metric_end_s, sum.duration_s);
-  sum.metrics = ComputeMetrics(*trace, e.controlled, e.metric_start_s, metric_end_s, e.plant.x_min_m,
-                               e.plant.x_max_m, driver);
+  sum.metrics = stream ? streamed_metrics.Finish()
+                       : ComputeMetrics(*trace, e.controlled, e.metric_start_s, metric_end_s, e.plant.x_min_m,
+                                        e.plant.x_max_m, driver);
   if (u_slot >= 0 && sum.termination == RunSummary::Termination::kDone) {
     accumulate_u(sum.duration_s);
     sum.metrics.effort_u_l2 = std::sqrt(u2_int);

@@ -12,6 +12,7 @@
 #include "experiment/metrics.h"
 #include "experiment/spec.h"
 #include "experiment/trace.h"
+#include "experiment/trace_stream.h"
 #include "hw/bench.h"
 #include "hw/emulated_bench.h"
 
@@ -24,6 +25,8 @@ struct RunSummary {
   double duration_s = 0.0;          // simulated / experiment time covered
   size_t samples = 0;
   double wall_s = 0.0;
+  double last_sample_t_s = 0.0;     // the last recorded sample's time (where the bench really got to)
+  std::uint64_t record_waits = 0;   // streaming: times the loop waited for the store to take a block
   double realtime_factor = 0.0;     // experiment seconds per wall second
   std::uint64_t ticks = 0;
   hw::LoopStats loop;               // pacing (realtime runs)
@@ -46,6 +49,19 @@ struct RunMonitor {
   std::atomic<double> t_s{0.0};      // experiment time reached, updated every tick
 };
 
+// How a run records (Runner::Run with options).
+struct RunOptions {
+  RunMonitor* monitor = nullptr;          // cancel and progress for another thread
+  hw::SampleSink* extra_sink = nullptr;   // also receives every sample (a live tap); must not block
+  // Streaming (docs/store.md, "Traces while the run executes"): the trace goes to this sink in blocks of
+  // block_samples while the run executes, and the run's memory stays `stream_blocks` blocks whatever its
+  // length. Metrics are computed on the blocks as they pass. Without a sink the whole trace is reserved up front.
+  BlockSink* block_sink = nullptr;
+  std::size_t block_samples = 16384;
+  int stream_blocks = 4;
+  bool keep_whole_trace = false;          // with a sink: also keep every sample in *trace (costs memory)
+};
+
 class Runner {
  public:
   // cancel may be null. The trace is cleared and filled. `extra_sink`, if given, also receives every sample
@@ -54,6 +70,9 @@ class Runner {
                         const std::atomic<bool>* cancel = nullptr);
   static RunSummary Run(const Experiment& experiment, hw::Bench& bench, Trace* trace, RunMonitor* monitor,
                         hw::SampleSink* extra_sink);
+  // With a block_sink, *trace ends up with the whole trace only if keep_whole_trace; otherwise it is left
+  // empty, and RunSummary::samples and last_sample_t_s say what was recorded.
+  static RunSummary Run(const Experiment& experiment, hw::Bench& bench, Trace* trace, const RunOptions& options);
 };
 
 }  // namespace vb::experiment

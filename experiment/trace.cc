@@ -1,5 +1,7 @@
 #include "experiment/trace.h"
 
+#include "experiment/trace_stream.h"
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -74,10 +76,18 @@ Recorder::Recorder(Trace* trace, const ReferenceProfile* reference, const model:
   avg_.Reset(window_buf_.data(), window);
 }
 
+void Recorder::StreamTo(TraceStream* stream) {
+  stream_ = stream;
+  trace_ = stream->first();
+}
+
 void Recorder::OnSample(const hw::BenchSample& s) {
   if (trace_->t_s.size() == trace_->t_s.capacity()) {  // never reallocate inside the loop
-    ++trace_->dropped;
-    return;
+    if (stream_ == nullptr) {
+      ++trace_->dropped;
+      return;
+    }
+    trace_ = stream_->Rotate(trace_);
   }
   constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
   trace_->t_s.push_back(s.t_s);

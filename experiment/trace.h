@@ -36,15 +36,23 @@ struct Trace {
   double Value(size_t channel, size_t k) const;
 };
 
+class TraceStream;
+
 class Recorder final : public hw::SampleSink {
  public:
   // plant may be null (no flow channel). average_window_s: the moving-average window (one PWM period).
   Recorder(Trace* trace, const ReferenceProfile* reference, const model::PlantParams* plant,
            double supply_pressure_Pa, double sample_period_s, double average_window_s);
   void OnSample(const hw::BenchSample& s) override;
+  // Record into `stream`'s blocks from now on: a full block is handed over and recording goes on in the next
+  // (experiment/trace_stream.h) instead of dropping samples.
+  void StreamTo(TraceStream* stream);
+  // The block being recorded into (the trace given at construction when not streaming).
+  Trace* current() const { return trace_; }
 
  private:
   Trace* trace_;
+  TraceStream* stream_ = nullptr;
   const ReferenceProfile* reference_;
   const model::PlantParams* plant_;
   double pressure_Pa_;

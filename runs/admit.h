@@ -29,8 +29,9 @@ struct Limits {
   double max_record_rate_Hz = std::numeric_limits<double>::infinity();
   std::uint64_t max_queued_runs_per_user = std::numeric_limits<std::uint64_t>::max();
   std::uint64_t max_runs_per_submission = 100'000;
-  // Memory a run's trace takes while it runs (samples x experiment::Trace::kBytesPerSample): a run that would
-  // not fit is refused at submission instead of taking the process down when it starts.
+  // The size of a run's trace (samples x experiment::Trace::kBytesPerSample). The trace streams to the store
+  // in chunks while the run executes (a run's memory stays a few blocks), so this bounds what one run may
+  // write and what reading it back whole (an export, benchctl run --trace-csv) takes.
   double max_trace_bytes_per_run = std::numeric_limits<double>::infinity();
   // Disk a submitter's stored traces may take: Enqueue refuses a submission when what the user's traces take
   // now plus the new runs' traces counted uncompressed (an upper bound: stored traces are compressed) would

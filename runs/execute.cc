@@ -31,6 +31,33 @@ db::RunStatus StatusOf(experiment::RunSummary::Termination t) {
   }
 }
 
+// The trace's blocks as store chunks, appended with the run's lease while the run executes (on the trace
+// stream's thread; the worker's thread does not touch the store until the Runner returns).
+class StoreChunks final : public experiment::BlockSink {
+ public:
+  StoreChunks(db::Store* store, db::Lease lease) : store_(store), lease_(lease) {
+    chunk_.channels = experiment::Trace::ChannelNames();
+  }
+  Status OnBlock(const experiment::Trace& block, std::uint64_t /*first_sample*/) override {
+    const std::size_t n = block.size();
+    if (n == 0) return Status::Ok();
+    chunk_.index = index_++;
+    chunk_.t0_s = block.t_s[0];
+    chunk_.sample_period_s = block.sample_period_s;
+    chunk_.samples = static_cast<std::int32_t>(n);
+    chunk_.data.resize(chunk_.channels.size() * n);
+    for (std::size_t c = 0; c < chunk_.channels.size(); ++c)
+      for (std::size_t k = 0; k < n; ++k) chunk_.data[c * n + k] = block.Value(c, k);
+    return store_->AppendTraceChunk(lease_, chunk_);
+  }
+
+ private:
+  db::Store* store_;
+  db::Lease lease_;
+  db::TraceChunk chunk_;
+  std::int32_t index_ = 0;
+};
+
 }  // namespace
 
 Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& setup, const ExecuteContext& ctx) {
@@ -41,7 +68,7 @@ Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& se
     out.reason = std::move(reason);
     // A run that never started still reads as failed, with the reason, to whoever looks at the summary.
     if (status == db::RunStatus::kFailed && out.summary.termination != experiment::RunSummary::Termination::kFailed &&
-        out.trace.size() == 0) {
+        out.summary.samples == 0) {
       out.summary.termination = experiment::RunSummary::Termination::kFailed;
       out.summary.message = out.reason;
     }
@@ -82,7 +109,14 @@ Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& se
   auto cancel_requested = store->CancelRequested(run.id);
   if (stopping || (cancel_requested.ok() && *cancel_requested)) monitor.cancel.store(true);
   if (safety) safety->set_cancel_flag(&monitor.cancel);  // cancel and shutdown act within a check period
-  out.summary = experiment::Runner::Run(*e, *bench, &out.trace, &monitor, ctx.registry != nullptr ? &tap : nullptr);
+  StoreChunks chunks(store, db::LeaseOf(run));
+  experiment::RunOptions options;
+  options.monitor = &monitor;
+  options.extra_sink = ctx.registry != nullptr ? &tap : nullptr;
+  options.block_sink = &chunks;
+  options.block_samples = db::kDefaultChunkSamples;
+  options.keep_whole_trace = ctx.keep_trace;
+  out.summary = experiment::Runner::Run(*e, *bench, &out.trace, options);
   bench->SafeState();
   if (ctx.current_monitor != nullptr) ctx.current_monitor->store(nullptr);
   if (ctx.registry != nullptr) ctx.registry->Remove(run.id);
@@ -96,9 +130,9 @@ Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& se
   // 4. Record. A run that stopped early says where it stopped and keeps how far it got (issue 14: cancelled
   // runs read 0 %, and a cancel that cut a long bench step short stated the step's end as the time). Where the
   // bench really got to is the last recorded sample (to one sample period), not the tick the Runner aimed at.
-  if (out.summary.termination != experiment::RunSummary::Termination::kDone && out.trace.size() > 0 &&
-      out.trace.t_s.back() < out.summary.duration_s) {
-    out.summary.duration_s = out.trace.t_s.back();
+  if (out.summary.termination != experiment::RunSummary::Termination::kDone && out.summary.samples > 0 &&
+      out.summary.last_sample_t_s < out.summary.duration_s) {
+    out.summary.duration_s = out.summary.last_sample_t_s;
     if (out.summary.termination == experiment::RunSummary::Termination::kCancelled)
       out.summary.message = "cancelled at t = " + FormatNumber(out.summary.duration_s) + " s of " +
                             FormatNumber(e->duration_s) + " s";
@@ -108,15 +142,12 @@ Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& se
     if (auto st = store->SetProgress(db::LeaseOf(run), reached); !st.ok())
       spdlog::warn("run {}: cannot record its progress: {}", static_cast<long long>(run.id), st.message().c_str());
   }
-  const Status stored = db::AppendRecordedTrace(store, db::LeaseOf(run), out.trace);
+  // The trace is in the store already (a chunk the store refused failed the run, "recording: ...").
   db::RunStatus status = StatusOf(out.summary.termination);
   std::string reason = out.summary.message;
   if (status == db::RunStatus::kCancelled) {
     // Keep why it was cancelled (the request's reason, stored by RequestCancel), not only when.
     if (auto row = store->GetRun(run.id); row.ok() && !row->reason.empty()) reason = row->reason + "; " + reason;
-  } else if (status == db::RunStatus::kDone && !stored.ok()) {
-    status = db::RunStatus::kFailed;
-    reason = "storing the trace failed: " + stored.message();
   }
   return finish(status, std::move(reason), RecordedMetrics(out.summary.metrics));
 }

@@ -4,8 +4,10 @@
 //      stands in for hardware, and a spec cannot change hardware); the spec's perturbations still apply;
 //   2. build the experiment and open the bench, behind the safety interlocks (current, duty, on-time, coil
 //      temperature, watchdog) unless the setup has none;
-//   3. run it (Runner), with cancel and progress through a RunMonitor registered for watchers;
-//   4. append the trace, then finish the run with its status, reason and finite metrics.
+//   3. run it (Runner), with cancel and progress through a RunMonitor registered for watchers; the trace
+//      streams to the store in chunks while it runs (docs/store.md, "Traces while the run executes"), so a
+//      run's memory does not grow with its length and a watcher elsewhere sees the chunks as they land;
+//   4. finish the run with its status, reason and finite metrics.
 // A run stopped by `stop` (server shutdown) is not finished: it stays running in the store, and the next
 // start marks it interrupted and re-queues it (docs/decisions.md, "A server stopped mid-run").
 #pragma once
@@ -27,13 +29,14 @@ struct Outcome {
   std::string reason;
   bool recorded = false;             // false: left running for recovery (stopped), or the store refused
   experiment::RunSummary summary;    // empty when the run never started (bad spec, bench not there)
-  experiment::Trace trace;           // what was recorded (also appended to the store)
+  experiment::Trace trace;           // what was recorded, when ExecuteContext::keep_trace (it is in the store)
 };
 
 struct ExecuteContext {
   Registry* registry = nullptr;                 // where watchers find the run; nullptr: nobody watches
   const std::atomic<bool>* stop = nullptr;      // shutdown: stop the run and leave it for recovery
   std::atomic<experiment::RunMonitor*>* current_monitor = nullptr;  // published while the run executes
+  bool keep_trace = false;                      // also keep the whole trace in Outcome::trace (memory grows)
 };
 
 Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& setup, const ExecuteContext& ctx);

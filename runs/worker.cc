@@ -20,6 +20,7 @@ StatusOr<std::optional<Outcome>> Worker::ClaimAndExecute(db::Store* store) {
   ctx.registry = registry_;
   ctx.stop = &stop_;
   ctx.current_monitor = &monitor_;
+  ctx.keep_trace = keep_traces_;
   Outcome out = Execute(store, **claimed, setup_, ctx);
   current_run_.store(0);
   return std::optional<Outcome>(std::move(out));

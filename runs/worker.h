@@ -34,6 +34,8 @@ class Worker {
   void Stop();
 
   const BenchSetup& setup() const { return setup_; }
+  // Keep each run's whole trace in its Outcome (benchctl's local mode, for --trace-csv): memory grows with it.
+  void set_keep_traces(bool keep) { keep_traces_ = keep; }
   std::int64_t current_run() const { return current_run_.load(); }
   // The lease of the run in progress (run_id 0 when none): its writes carry it (db::Lease).
   db::Lease current_lease() const { return {current_run_.load(), current_fence_.load()}; }
@@ -42,6 +44,7 @@ class Worker {
   void Loop(const std::string& db_path);
 
   BenchSetup setup_;
+  bool keep_traces_ = false;
   Registry* registry_;
   std::thread thread_;
   std::atomic<bool> stop_{false};

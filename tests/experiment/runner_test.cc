@@ -90,6 +90,117 @@ TEST(Runner, ATraceThatCannotBeReservedFailsTheRunWithTheReason) {
   EXPECT_NE(s.message.find("recording: cannot reserve memory"), std::string::npos) << s.message;
 }
 
+// Collects what a stream delivers: the blocks' sizes and first indices, and the samples themselves.
+class CollectingSink final : public BlockSink {
+ public:
+  Status OnBlock(const Trace& block, std::uint64_t first_sample) override {
+    if (fail_at_block >= 0 && static_cast<int>(firsts.size()) == fail_at_block)
+      return Status::FailedPrecondition("stale write: the store refused the chunk");
+    firsts.push_back(first_sample);
+    sizes.push_back(block.size());
+    for (size_t k = 0; k < block.size(); ++k) {
+      t_s.push_back(block.t_s[k]);
+      i_A.push_back(block.i_A[k]);
+    }
+    return Status::Ok();
+  }
+  int fail_at_block = -1;
+  std::vector<std::uint64_t> firsts;
+  std::vector<size_t> sizes;
+  std::vector<double> t_s, i_A;
+};
+
+// Every experiment kind, streamed in small blocks: the same samples in order, and the same metrics as the
+// whole trace gives (MetricsAccumulator against ComputeMetrics), while the run holds only a few blocks.
+TEST(Runner, AStreamedTraceHasEverySampleInOrderAndTheSameMetrics) {
+  for (const char* example : {"standard/e1.json", "standard/e2.json", "standard/e3.json",
+                              "compare-position-controllers.json", "compare-current-controllers.json"}) {
+    SCOPED_TRACE(example);
+    auto spec = LoadSpecFile(Example(example));
+    ASSERT_TRUE(spec.ok());
+    auto points = ExpandRuns(*spec);
+    ASSERT_TRUE(points.ok() && !points->empty());
+    auto e = BuildExperiment(points->back().spec);
+    ASSERT_TRUE(e.ok()) << e.status().message();
+    Ran whole;
+    {
+      hw::EmulatedBench bench(EmulatedBenchFor(*e));
+      whole.summary = Runner::Run(*e, bench, &whole.trace);
+    }
+    ASSERT_TRUE(whole.summary.ok());
+    CollectingSink sink;
+    RunOptions options;
+    options.block_sink = &sink;
+    options.block_samples = 997;  // no divisor of anything: blocks end at odd places
+    options.stream_blocks = 2;
+    Trace streamed;
+    hw::EmulatedBench bench(EmulatedBenchFor(*e));
+    const RunSummary s = Runner::Run(*e, bench, &streamed, options);
+    ASSERT_TRUE(s.ok()) << s.message;
+    EXPECT_EQ(streamed.size(), 0u) << "the whole trace is not kept unless asked";
+    ASSERT_EQ(sink.t_s.size(), whole.trace.size());
+    EXPECT_EQ(s.samples, whole.trace.size());
+    for (size_t k = 0; k < sink.t_s.size(); ++k) {
+      ASSERT_EQ(sink.t_s[k], whole.trace.t_s[k]) << k;
+      ASSERT_EQ(sink.i_A[k], whole.trace.i_A[k]) << k;
+    }
+    std::uint64_t next = 0;
+    for (size_t b = 0; b < sink.firsts.size(); ++b) {
+      EXPECT_EQ(sink.firsts[b], next);
+      EXPECT_LE(sink.sizes[b], 997u);
+      next += sink.sizes[b];
+    }
+    EXPECT_DOUBLE_EQ(s.last_sample_t_s, whole.trace.t_s.back());
+    const auto a = MetricList(whole.summary.metrics), b = MetricList(s.metrics);
+    for (size_t m = 0; m < a.size(); ++m) {
+      if (std::isnan(a[m].second)) {
+        EXPECT_TRUE(std::isnan(b[m].second)) << a[m].first;
+      } else {
+        EXPECT_NEAR(b[m].second, a[m].second, 1e-12 * std::max(1.0, std::abs(a[m].second))) << a[m].first;
+      }
+    }
+  }
+}
+
+// A store that refuses a chunk (a stale lease, a full disk) fails the run with the reason and leaves the
+// bench safe; nothing after the refused block is delivered.
+TEST(Runner, ARefusedBlockFailsTheRunWithTheReasonAndTheBenchSafe) {
+  auto spec = LoadSpecFile(Example("standard/e3.json"));
+  ASSERT_TRUE(spec.ok());
+  auto e = BuildExperiment(*spec);
+  ASSERT_TRUE(e.ok());
+  hw::EmulatedBench bench(EmulatedBenchFor(*e));
+  CollectingSink sink;
+  sink.fail_at_block = 2;
+  RunOptions options;
+  options.block_sink = &sink;
+  options.block_samples = 500;
+  Trace trace;
+  const RunSummary s = Runner::Run(*e, bench, &trace, options);
+  EXPECT_EQ(s.termination, RunSummary::Termination::kFailed);
+  EXPECT_NE(s.message.find("recording: stale write"), std::string::npos) << s.message;
+  EXPECT_EQ(sink.firsts.size(), 2u);
+  EXPECT_EQ(bench.simulator().gate(), 0);
+}
+
+// keep_whole_trace: the caller asked for every sample as well (benchctl run --trace-csv).
+TEST(Runner, AStreamedRunCanKeepTheWholeTraceWhenAsked) {
+  auto spec = LoadSpecFile(Example("standard/e1.json"));
+  ASSERT_TRUE(spec.ok());
+  auto e = BuildExperiment(*spec);
+  ASSERT_TRUE(e.ok());
+  hw::EmulatedBench bench(EmulatedBenchFor(*e));
+  CollectingSink sink;
+  RunOptions options;
+  options.block_sink = &sink;
+  options.keep_whole_trace = true;
+  Trace trace;
+  const RunSummary s = Runner::Run(*e, bench, &trace, options);
+  ASSERT_TRUE(s.ok());
+  ASSERT_EQ(trace.size(), sink.t_s.size());
+  EXPECT_EQ(trace.t_s.back(), sink.t_s.back());
+}
+
 TEST(Runner, RealtimeRunReportsJitter) {
   auto spec = LoadSpecFile(Example("standard/e3.json"));
   ASSERT_TRUE(spec.ok());

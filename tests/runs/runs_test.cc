@@ -6,6 +6,8 @@
 #include <cmath>
 #include <thread>
 
+#include <unistd.h>
+
 #include "common/format.h"
 #include "db/store.h"
 #include "db/testing.h"
@@ -143,7 +145,15 @@ TEST(Execute, AWorkerRunsTheQueueAndRecordsEveryRun) {
     ASSERT_TRUE(o->has_value());
     EXPECT_EQ((*o)->status, db::RunStatus::kDone);
     EXPECT_TRUE((*o)->recorded);
-    EXPECT_EQ((*o)->trace.size(), 5001u);
+    // The trace streamed to the store while the run executed; the Outcome keeps it only when asked.
+    EXPECT_EQ((*o)->summary.samples, 5001u);
+    EXPECT_EQ((*o)->trace.size(), 0u);
+    std::int64_t stored = 0;
+    ASSERT_TRUE((*store)->ForEachTraceChunk((*o)->run_id, [&](const db::TraceChunk&, std::int64_t total) {
+      stored = total;
+      return Status::Ok();
+    }).ok());
+    EXPECT_EQ(stored, 5001);
   }
   auto none = worker.ClaimAndExecute(store->get());
   ASSERT_TRUE(none.ok());
@@ -326,6 +336,54 @@ TEST(Enqueue, APerUserDiskBudgetCountsStoredTracesAndTheNewRunsUncompressed) {
 // A cancel that cuts a long bench step short (the interlocks split it and watch the cancel flag) states where
 // the bench got to, not the end of the step it was in (issue 14: "cancelled at t = 600 s" for a run stopped at
 // 420 s, and progress 100 %).
+// The trace reaches the store in chunks while the run executes (what a watcher on another host reads), and
+// the run's memory does not grow with its length: 60 s at 50 kHz is 3 M samples, 290 MB if kept whole.
+TEST(Execute, TheTraceIsInTheStoreWhileTheRunExecutes) {
+  const std::string path = ::testing::TempDir() + "/streaming_" + std::to_string(::getpid()) + ".db";
+  for (const char* suffix : {"", "-wal", "-shm"}) std::remove((path + suffix).c_str());
+  auto store = db::Store::Open(path);
+  ASSERT_TRUE(store.ok());
+  Policy local;
+  local.benches = {LocalEmulatorSetup()};
+  auto spec = experiment::LoadSpecFile(Example("standard/e1.json"));
+  ASSERT_TRUE(spec.ok());
+  spec->set_duration_s(60);
+  auto a = Admit({"me", "b", {*spec}, {}, ""}, local);
+  ASSERT_TRUE(a.ok()) << a.status().ToString();
+  auto q = Enqueue(store->get(), std::move(*a), local);
+  ASSERT_TRUE(q.ok());
+  const std::int64_t id = q->run_ids[0];
+  std::atomic<bool> finished{false};
+  std::int64_t seen_while_running = 0;
+  std::thread watcher([&] {
+    auto other = db::Store::Open(path);  // another connection, as another host would have
+    if (!other.ok()) return;
+    while (!finished.load()) {
+      auto run = (*other)->GetRun(id);
+      if (run.ok() && run->status == db::RunStatus::kRunning) {
+        std::int64_t samples = 0;
+        (void)(*other)->ForEachTraceChunk(id, [&](const db::TraceChunk&, std::int64_t total) {
+          samples = total;
+          return Status::Ok();
+        });
+        seen_while_running = std::max(seen_while_running, samples);
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    }
+  });
+  Worker worker(LocalEmulatorSetup(), nullptr);
+  auto o = worker.ClaimAndExecute(store->get());
+  finished.store(true);
+  watcher.join();
+  ASSERT_TRUE(o.ok() && o->has_value());
+  ASSERT_EQ((*o)->status, db::RunStatus::kDone) << (*o)->reason;
+  EXPECT_EQ((*o)->summary.samples, 3'000'001u);
+  EXPECT_GT(seen_while_running, 0) << "no chunk was in the store before the run finished";
+  EXPECT_LT(seen_while_running, 3'000'001) << "the watcher only ever saw the finished trace";
+  EXPECT_EQ((*o)->trace.size(), 0u);
+  for (const char* suffix : {"", "-wal", "-shm"}) std::remove((path + suffix).c_str());
+}
+
 TEST(Execute, ACancelInsideALongStepStatesTheTimeTheBenchReached) {
   auto store = db::Store::Open(":memory:");
   ASSERT_TRUE(store.ok());
@@ -355,7 +413,11 @@ TEST(Execute, ACancelInsideALongStepStatesTheTimeTheBenchReached) {
   canceller.join();
   ASSERT_TRUE(o.ok() && o->has_value());
   ASSERT_EQ((*o)->status, db::RunStatus::kCancelled) << (*o)->reason;
-  const double reached = (*o)->trace.t_s.back();
+  const double reached = (*o)->summary.last_sample_t_s;
+  auto chunks = (*store)->ReadTrace(id);
+  ASSERT_TRUE(chunks.ok() && !chunks->empty());
+  const db::TraceChunk& last = chunks->back();
+  EXPECT_DOUBLE_EQ(last.t0_s + last.sample_period_s * (last.samples - 1), reached) << "the stored trace ends there";
   EXPECT_LT(reached, 599.0) << "the cancel did not land inside the run";
   auto r = (*store)->GetRun(id);
   ASSERT_TRUE(r.ok());
