@@ -9,6 +9,7 @@
 // Samples at the recording rate go to the SampleSink as they are produced; the sink must not block.
 #pragma once
 
+#include <atomic>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -94,6 +95,11 @@ class Bench {
   virtual void SafeState() noexcept = 0;
   // Pacing statistics of the last run (zeros when not paced).
   virtual LoopStats loop_stats() const = 0;
+  // The run's cancel flag (may be null). A bench that can take long steps (a PWM segment of minutes on the
+  // emulator, a bench behind the interlocks) stops a step soon after the flag is set: AdvanceTo then answers
+  // Aborted("cancelled at t = ... s") and the Runner, seeing the flag, ends the run as cancelled. Benches whose
+  // steps are short anyway need not do anything.
+  virtual void set_cancel_flag(const std::atomic<bool>* /*cancel*/) {}
 };
 
 }  // namespace vb::hw

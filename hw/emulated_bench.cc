@@ -116,10 +116,18 @@ Status EmulatedBench::Apply(const SwitchCommand& command) {
 }
 
 void EmulatedBench::RunPwmTo(double t_s) {
+  // A cancel lands within one PWM edge, or one slice of a constant gate (an open-loop segment of minutes is
+  // one step for the Runner): docs/server.md, "Cancel".
+  constexpr double kCancelSlice_s = 0.01;
   while (sim_.t_s() < t_s && !sim_.failed()) {
+    if (CancelSet()) return;
     if (!pwm_mode_) {
-      sim_.AdvanceTo(t_s, &forwarder_);
-      return;
+      if (cancel_ == nullptr) {
+        sim_.AdvanceTo(t_s, &forwarder_);
+        return;
+      }
+      sim_.AdvanceTo(std::min(t_s, sim_.t_s() + kCancelSlice_s), &forwarder_);
+      continue;
     }
     const double t_period = origin_s_ + static_cast<double>(period_index_) * period_s_;
     const double t_fall = t_period + duty_ * period_s_;
@@ -144,6 +152,8 @@ void EmulatedBench::RunPwmTo(double t_s) {
 Status EmulatedBench::AdvanceTo(double t_s, Measurement* m) {
   if (!running_) return Status::FailedPrecondition("bench " + opt_.name + " is not running");
   RunPwmTo(t_s);
+  if (sim_.t_s() < t_s && CancelSet() && !sim_.failed())
+    return Status::Aborted("cancelled at t = " + std::to_string(sim_.t_s()) + " s");
   if (sim_.failed()) {
     // The emulator's watchdog stopped the plant (docs/model.md): the run fails with the reason, as a real
     // bench's fault would; nothing hangs.

@@ -56,6 +56,7 @@ class EmulatedBench final : public Bench {
   Status Stop() override;
   void SafeState() noexcept override;
   LoopStats loop_stats() const override;
+  void set_cancel_flag(const std::atomic<bool>* cancel) override { cancel_ = cancel; }
 
   const model::Simulator& simulator() const { return sim_; }
 
@@ -70,6 +71,7 @@ class EmulatedBench final : public Bench {
     }
   };
   void RunPwmTo(double t_s);
+  bool CancelSet() const { return cancel_ != nullptr && cancel_->load(std::memory_order_relaxed); }
 
   EmulatedBenchOptions opt_;
   Capabilities caps_;
@@ -78,6 +80,7 @@ class EmulatedBench final : public Bench {
   RunConfig config_;
   Forwarder forwarder_;
   bool running_ = false;
+  const std::atomic<bool>* cancel_ = nullptr;
 
   // PWM peripheral
   bool pwm_mode_ = false;

@@ -66,7 +66,10 @@ class SafetyBench final : public Bench {
   // once it is set and puts the bench in its safe state, so cancel and shutdown (SIGTERM) do not wait for the
   // controller's next tick. Not a trip: AdvanceTo answers Aborted("cancelled ...") and the Runner, seeing the
   // flag, ends the run as cancelled. May be null.
-  void set_cancel_flag(const std::atomic<bool>* cancel) { cancel_ = cancel; }
+  void set_cancel_flag(const std::atomic<bool>* cancel) override {
+    cancel_ = cancel;
+    inner_->set_cancel_flag(cancel);
+  }
 
   bool tripped() const { return tripped_.load(); }
   double coil_temp_C() const { return temp_C_; }

@@ -108,7 +108,7 @@ Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& se
   if (ctx.current_monitor != nullptr) ctx.current_monitor->store(&monitor);
   auto cancel_requested = store->CancelRequested(run.id);
   if (stopping || (cancel_requested.ok() && *cancel_requested)) monitor.cancel.store(true);
-  if (safety) safety->set_cancel_flag(&monitor.cancel);  // cancel and shutdown act within a check period
+  bench->set_cancel_flag(&monitor.cancel);  // cancel and shutdown stop a long bench step (hw::Bench)
   StoreChunks chunks(store, db::LeaseOf(run));
   experiment::RunOptions options;
   options.monitor = &monitor;

@@ -384,6 +384,40 @@ TEST(Execute, TheTraceIsInTheStoreWhileTheRunExecutes) {
   for (const char* suffix : {"", "-wal", "-shm"}) std::remove((path + suffix).c_str());
 }
 
+// benchctl run --local has no interlocks: the bare emulator itself stops a ten-minute PWM segment (one Runner
+// step) at the next edge once the flag is set, so the cancel lands inside the run, not at its end.
+TEST(Execute, ACancelLandsInsideALongStepOnTheBareEmulator) {
+  auto store = db::Store::Open(":memory:");
+  ASSERT_TRUE(store.ok());
+  BenchSetup bench = LocalEmulatorSetup();
+  ASSERT_FALSE(bench.interlocks);
+  Policy local;
+  local.benches = {bench};
+  auto spec = experiment::LoadSpecFile(Example("standard/e1.json"));
+  ASSERT_TRUE(spec.ok());
+  spec->set_duration_s(600);
+  spec->mutable_recording()->set_rate_hz(1000);
+  auto a = Admit({"me", "b", {*spec}, {}, ""}, local);
+  ASSERT_TRUE(a.ok()) << a.status().ToString();
+  auto q = Enqueue(store->get(), std::move(*a), local);
+  ASSERT_TRUE(q.ok());
+  const std::int64_t id = q->run_ids[0];
+  Registry registry;
+  Worker worker(bench, &registry);
+  std::thread canceller([&] {
+    double progress = 0.0;
+    while (!registry.Progress(id, &progress)) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    registry.Cancel(id);
+  });
+  auto o = worker.ClaimAndExecute(store->get());
+  canceller.join();
+  ASSERT_TRUE(o.ok() && o->has_value());
+  ASSERT_EQ((*o)->status, db::RunStatus::kCancelled) << (*o)->reason;
+  EXPECT_LT((*o)->summary.last_sample_t_s, 599.0) << "the cancel waited for the end of the segment";
+  EXPECT_LT((*o)->summary.samples, 599'000u);
+}
+
 TEST(Execute, ACancelInsideALongStepStatesTheTimeTheBenchReached) {
   auto store = db::Store::Open(":memory:");
   ASSERT_TRUE(store.ok());
