@@ -1,5 +1,7 @@
 #include "client/client.h"
 
+#include <algorithm>
+
 #include <grpcpp/grpcpp.h>
 
 #include <cstring>
@@ -219,10 +221,60 @@ StatusOr<v1::ListBenchesResponse> Client::Benches() {
 }
 
 StatusOr<v1::SubmitRunResponse> Client::ImportRuns(const v1::ImportRunsRequest& request, double deadline_s) {
+  // A request that fits one message goes as one (the server checks all of it before storing anything);
+  // a larger one is streamed (ImportRunsStream): the header with every run's metadata, then the samples in
+  // parts of kPartSamples, so a run of any length fits gRPC's message limit and the server stores it chunk by
+  // chunk.
+  constexpr std::size_t kOneMessageBytes = 16 << 20;
+  constexpr int kPartSamples = 65536;
   grpc::ClientContext ctx;
   Prepare(&ctx, deadline_s);
   v1::SubmitRunResponse resp;
-  auto st = stub_->ImportRuns(&ctx, request, &resp);
+  if (request.ByteSizeLong() < kOneMessageBytes) {
+    auto st = stub_->ImportRuns(&ctx, request, &resp);
+    if (!st.ok()) return Error(st);
+    return resp;
+  }
+  auto writer = stub_->ImportRunsStream(&ctx, &resp);
+  v1::ImportRunsPart part;
+  v1::ImportRunsRequest* header = part.mutable_header();
+  header->set_dataset(request.dataset());
+  header->set_model(request.model());
+  header->set_description(request.description());
+  for (const auto& r : request.runs()) {
+    v1::ImportedRun* meta = header->add_runs();
+    meta->set_id(r.id());
+    meta->set_supply_v(r.supply_v());
+    meta->set_supply_pressure_pa(r.supply_pressure_pa());
+    meta->set_t_start_s(r.t_start_s());
+    meta->set_split(r.split());
+    meta->set_sample_period_s(r.sample_period_s());
+    meta->set_samples(r.gate_size());
+    meta->set_has_x_m(r.x_m_size() > 0);
+    meta->set_has_v_coil_v(r.v_coil_v_size() > 0);
+  }
+  bool open = writer->Write(part);
+  for (int k = 0; open && k < request.runs_size(); ++k) {
+    const auto& r = request.runs(k);
+    // Each column is sent as it is, ragged or not: the server names a column that does not match.
+    const int longest = std::max({r.gate_size(), r.i_a_size(), r.x_m_size(), r.v_coil_v_size()});
+    auto slice = [](const auto& column, auto* out, int from, int to) {
+      if (from < column.size()) out->Add(column.begin() + from, column.begin() + std::min(to, column.size()));
+    };
+    for (int from = 0; open && from < longest; from += kPartSamples) {
+      const int to = from + kPartSamples;
+      v1::ImportSamples* s = part.mutable_samples();
+      s->Clear();
+      s->set_run_index(k);
+      slice(r.gate(), s->mutable_gate(), from, to);
+      slice(r.i_a(), s->mutable_i_a(), from, to);
+      slice(r.x_m(), s->mutable_x_m(), from, to);
+      slice(r.v_coil_v(), s->mutable_v_coil_v(), from, to);
+      open = writer->Write(part);
+    }
+  }
+  if (open) writer->WritesDone();
+  auto st = writer->Finish();
   if (!st.ok()) return Error(st);
   return resp;
 }

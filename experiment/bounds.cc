@@ -1,5 +1,7 @@
 #include "experiment/bounds.h"
 
+#include <cctype>
+
 #include "experiment/spec.h"
 
 #include <google/protobuf/descriptor.h>
@@ -291,6 +293,22 @@ const FieldBound* FindSpecBound(std::string_view pattern) {
   }();
   const auto it = index->find(pattern);
   return it == index->end() ? nullptr : it->second;
+}
+
+Status CheckFieldValue(std::string_view path, double value) {
+  // The table's pattern of a concrete path: indices become "[]" (map keys stay: a map's pattern is "[*]").
+  std::string pattern;
+  for (std::size_t k = 0; k < path.size(); ++k) {
+    if (path[k] == '[' && k + 1 < path.size() && std::isdigit(static_cast<unsigned char>(path[k + 1]))) {
+      const std::size_t close = path.find(']', k);
+      if (close == std::string_view::npos) break;
+      pattern += "[]";
+      k = close;
+    } else {
+      pattern += path[k];
+    }
+  }
+  return CheckValue(FindSpecBound(pattern), std::string(path), value, false);
 }
 
 std::uint64_t CountRuns(const ExperimentSpec& spec) {

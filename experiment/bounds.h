@@ -45,8 +45,8 @@ inline constexpr double kMaxValveCommandCycles = 1e6;
 // Also the cross-field counts: the runs the spec expands to (CountRuns) and the valve command's cycles.
 Status CheckSpecBounds(const valvebench::v1::ExperimentSpec& spec);
 
-// Checks one value against the entry of a concrete field path ("controller.open_loop_pwm.segments[0].duty";
-// camelCase components are accepted as the sweep paths allow them). Ok when the path has no entry.
+// Checks one value against the entry of a concrete field path ("controller.open_loop_pwm.segments[0].duty").
+// A path with no entry only has to be finite.
 Status CheckFieldValue(std::string_view path, double value);
 
 // The runs a spec expands to: the sum over its variants (or the spec itself) of repeats x the product of its

@@ -72,6 +72,10 @@ std::string JsonTypeName(const json& j) {
 
 // ---- files -----------------------------------------------------------------------------------------------
 
+// The largest run file a dataset may have (docs/dataset-format.md, "Limits"): 512 MiB of CSV is about 12 M
+// samples of four columns. A larger file is refused from its size, before a byte is read.
+constexpr std::uintmax_t kMaxFileBytes = std::uintmax_t{512} << 20;
+
 // Reads a whole file. `display` names it in the error.
 Status ReadFile(const fs::path& path, const std::string& display, std::string* out) {
   struct Closer {
@@ -82,6 +86,10 @@ Status ReadFile(const fs::path& path, const std::string& display, std::string* o
   out->clear();
   std::error_code ec;
   const auto size = fs::file_size(path, ec);
+  if (!ec && size > kMaxFileBytes)
+    return Status::InvalidArgument(display + ": " + std::to_string(size >> 20) + " MiB exceeds the " +
+                                   std::to_string(kMaxFileBytes >> 20) +
+                                   " MiB a dataset file may have; split the run into several runs (files)");
   if (!ec) out->reserve(static_cast<size_t>(size));
   std::array<char, 1 << 16> buf;
   size_t n = 0;

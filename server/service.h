@@ -67,6 +67,8 @@ class BenchServiceImpl final : public valvebench::v1::BenchService::Service {
   // server/import.cc
   grpc::Status ImportRuns(grpc::ServerContext* ctx, const valvebench::v1::ImportRunsRequest* req,
                           valvebench::v1::SubmitRunResponse* resp) override;
+  grpc::Status ImportRunsStream(grpc::ServerContext* ctx, grpc::ServerReader<valvebench::v1::ImportRunsPart>* reader,
+                                valvebench::v1::SubmitRunResponse* resp) override;
   // server/nights_service.cc
   grpc::Status ListNights(grpc::ServerContext* ctx, const valvebench::v1::ListNightsRequest* req,
                           valvebench::v1::ListNightsResponse* resp) override;

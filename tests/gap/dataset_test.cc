@@ -145,6 +145,15 @@ TEST_F(DatasetTest, LoadsEveryField) {
   EXPECT_EQ(b.gate, (std::vector<int8_t>{1, 0, 0}));
 }
 
+// A run file over the size limit is refused from its size, before it is read: a 600 MiB sparse file takes no
+// disk and would take seconds and 600 MiB of memory to read.
+TEST_F(DatasetTest, AFileOverTheSizeLimitIsRefusedBeforeItIsRead) {
+  WriteValid();
+  fs::resize_file(dir_ / "b.csv", std::uintmax_t{600} << 20);
+  ExpectError("ds/b.csv: 600 MiB exceeds the 512 MiB a dataset file may have; split the run into several runs "
+              "(files)");
+}
+
 TEST_F(DatasetTest, OptionalFieldsAndEqualStartTimes) {
   WriteValid();
   json m = ValidManifest();

@@ -412,4 +412,95 @@ TEST(Server, ImportRunsRefusesBadRunsAndStoresNothing) {
   EXPECT_FALSE(viewer.ImportRuns(req).ok()) << "importing needs the operator role";
 }
 
+// A run larger than one gRPC message (1.5 M samples, about 25 MB) is streamed (ImportRunsStream) and stored
+// chunk by chunk; a bad sample deep inside a streamed run fails that run with the field named, and the runs
+// imported before stay. Bounds and duplicate ids are refused with the field named.
+TEST(Server, ImportRunsStreamsRunsOfAnyLength) {
+  ServerProcess server(TempDir("import_stream"));
+  const std::string addr = server.Start();
+  ASSERT_FALSE(addr.empty()) << server.Log();
+  auto olga = MakeClient(addr, testing::kOperatorToken);
+  constexpr int kSamples = 1'500'000;
+  auto make = [](const char* dataset) {
+    v1::ImportRunsRequest req;
+    req.set_dataset(dataset);
+    auto* r = req.add_runs();
+    r->set_id("long");
+    r->set_supply_v(24.0);
+    r->set_sample_period_s(1e-5);
+    for (int k = 0; k < kSamples; ++k) {
+      r->add_gate((k / 1000) % 2);
+      r->add_i_a(1e-3 * (k % 997));
+      r->add_x_m(1e-7 * (k % 13));
+    }
+    return req;
+  };
+  v1::ImportRunsRequest req = make("long");
+  ASSERT_GT(req.ByteSizeLong(), 16u << 20) << "the request must be too large for one message";
+  auto ok = olga.ImportRuns(req);
+  ASSERT_TRUE(ok.ok()) << ok.status().message();
+  ASSERT_EQ(ok->run_ids_size(), 1);
+  auto trace = olga.GetTrace(ok->run_ids(0));
+  ASSERT_TRUE(trace.ok()) << trace.status().message();
+  ASSERT_EQ(trace->samples(), static_cast<size_t>(kSamples));
+  for (int k : {0, 65535, 65536, 777777, kSamples - 1}) {
+    EXPECT_EQ(trace->columns.at("i_A")[static_cast<size_t>(k)], 1e-3 * (k % 997)) << k;
+    EXPECT_EQ(trace->columns.at("gate")[static_cast<size_t>(k)], (k / 1000) % 2) << k;
+  }
+
+  // A bad current deep in the second run of a streamed import: the first run stays imported, the second fails.
+  v1::ImportRunsRequest two = make("two");
+  *two.add_runs() = two.runs(0);
+  two.mutable_runs(1)->set_id("long-2");
+  two.mutable_runs(1)->set_t_start_s(100);
+  two.mutable_runs(1)->set_i_a(1'234'567, 1e300);
+  auto bad = olga.ImportRuns(two);
+  ASSERT_FALSE(bad.ok());
+  EXPECT_EQ(bad.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(bad.status().message().find("runs[1].i_A[1234567]: must be in [-1000, 1000] A, got 1e+300"),
+            std::string::npos)
+      << bad.status().message();
+  v1::ListRunsRequest all;
+  auto listed = olga.ListRuns(all);
+  ASSERT_TRUE(listed.ok());
+  ASSERT_EQ(listed->runs_size(), 3);
+  EXPECT_EQ(listed->runs(1).status(), v1::DONE) << "the run imported before the bad one stays";
+  EXPECT_EQ(listed->runs(2).status(), v1::FAILED);
+  EXPECT_NE(listed->runs(2).reason().find("import failed: runs[1].i_A[1234567]"), std::string::npos)
+      << listed->runs(2).reason();
+
+  // Bounds and identity, small requests (one message): refused before anything is stored.
+  v1::ImportRunsRequest small;
+  small.set_dataset("small");
+  auto* r = small.add_runs();
+  r->set_id("a");
+  r->set_supply_v(1e308);
+  r->set_sample_period_s(1e-5);
+  for (int k = 0; k < 3; ++k) {
+    r->add_gate(0);
+    r->add_i_a(0.0);
+  }
+  auto huge_supply = olga.ImportRuns(small);
+  ASSERT_FALSE(huge_supply.ok());
+  EXPECT_NE(huge_supply.status().message().find("runs[0].supply_V: must be in [0, 1000] V, got 1e+308"),
+            std::string::npos)
+      << huge_supply.status().message();
+  r->set_supply_v(24);
+  r->set_sample_period_s(1e-300);
+  auto tiny_period = olga.ImportRuns(small);
+  ASSERT_FALSE(tiny_period.ok());
+  EXPECT_NE(tiny_period.status().message().find("runs[0].sample_period_s: must be in [1e-09, 10] s"),
+            std::string::npos)
+      << tiny_period.status().message();
+  r->set_sample_period_s(1e-5);
+  *small.add_runs() = small.runs(0);
+  auto duplicate = olga.ImportRuns(small);
+  ASSERT_FALSE(duplicate.ok());
+  EXPECT_NE(duplicate.status().message().find("runs[1].id: \"a\" is also runs[0].id"), std::string::npos)
+      << duplicate.status().message();
+  auto after = olga.ListRuns(all);
+  ASSERT_TRUE(after.ok());
+  EXPECT_EQ(after->runs_size(), 3) << "refused imports store nothing";
+}
+
 }  // namespace vb
