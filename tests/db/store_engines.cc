@@ -1,10 +1,12 @@
 #include "tests/db/store_engines.h"
 
+#include <sqlite3.h>
 #include <unistd.h>
 
 #include <cstdio>
 
 #include "db/open_store.h"
+#include "db/pg_conn.h"
 #include "db/text.h"
 #include "tests/db/pg_server.h"
 
@@ -67,5 +69,68 @@ std::unique_ptr<Store> StoreEngineTest::OpenAnother() {
   EXPECT_TRUE(s.ok()) << s.status().ToString();
   return s.ok() ? std::move(s).value() : nullptr;
 }
+
+namespace {
+
+// One raw query: the first column of the first row as text (SQLite) or as the engine's binary value (PostgreSQL).
+struct RawRow {
+  bool ok = false;
+  std::int64_t i = 0;
+  std::string text;
+};
+
+RawRow RawQuery(bool postgres, const std::string& location, const std::string& sql, bool script = false) {
+  RawRow out;
+  if (postgres) {
+    auto c = pg::Connection::Open(location);
+    EXPECT_TRUE(c.ok()) << c.status().ToString();
+    if (!c.ok()) return out;
+    if (script) {
+      const Status st = (*c)->Script(sql);
+      EXPECT_TRUE(st.ok()) << st.ToString();
+      out.ok = st.ok();
+      return out;
+    }
+    auto r = (*c)->Exec(sql);
+    EXPECT_TRUE(r.ok()) << r.status().ToString();
+    if (!r.ok()) return out;
+    out.ok = true;
+    if (r->rows() > 0 && r->columns() > 0) {
+      out.i = r->Int(0, 0);
+      out.text = r->Text(0, 0);
+    }
+    return out;
+  }
+  sqlite3* db = nullptr;
+  EXPECT_EQ(sqlite3_open(location.c_str(), &db), SQLITE_OK);
+  char* err = nullptr;
+  struct Sink {
+    RawRow* row;
+    bool first = true;
+  } sink{&out};
+  const int rc = sqlite3_exec(
+      db, sql.c_str(),
+      [](void* p, int n, char** values, char**) {
+        auto* s = static_cast<Sink*>(p);
+        if (s->first && n > 0 && values[0] != nullptr) {
+          s->row->text = values[0];
+          s->row->i = std::strtoll(values[0], nullptr, 10);
+        }
+        s->first = false;
+        return 0;
+      },
+      &sink, &err);
+  EXPECT_EQ(rc, SQLITE_OK) << (err != nullptr ? err : "") << " in " << sql;
+  sqlite3_free(err);
+  sqlite3_close(db);
+  out.ok = rc == SQLITE_OK;
+  return out;
+}
+
+}  // namespace
+
+std::int64_t StoreEngineTest::RawInt(const std::string& sql) { return RawQuery(postgres(), location_, sql).i; }
+std::string StoreEngineTest::RawText(const std::string& sql) { return RawQuery(postgres(), location_, sql).text; }
+void StoreEngineTest::RawExec(const std::string& sql) { RawQuery(postgres(), location_, sql, true); }
 
 }  // namespace vb::db::testing

@@ -36,6 +36,11 @@ class StoreEngineTest : public ::testing::TestWithParam<std::string> {
   bool postgres() const { return GetParam() == "postgresql"; }
   // Another connection to the same store (another thread or host).
   std::unique_ptr<Store> OpenAnother();
+  // Raw SQL on the store's database, beside the Store API (checks it does not offer, injected faults). The SQL
+  // must be valid on the engine at hand: most counting queries are the same on both.
+  std::int64_t RawInt(const std::string& sql);
+  std::string RawText(const std::string& sql);
+  void RawExec(const std::string& sql);
 
   std::unique_ptr<Store> store_;
   std::string location_;
