@@ -24,6 +24,7 @@
 #include "server/nights.h"
 #include "server/retention.h"
 #include "server/service.h"
+#include "db/open_store.h"
 
 int main(int argc, char** argv) {
   CLI::App app{"valvebench-server: the bench server"};
@@ -59,7 +60,7 @@ int main(int argc, char** argv) {
     spdlog::error("--run-night-now: the config has no \"nights\" block");
     return 2;
   }
-  auto store = vb::db::Store::Open(settings->database_path);
+  auto store = vb::db::OpenStore(settings->database_path);
   if (!store.ok()) {
     spdlog::error("{}: {}", settings->database_path.c_str(),
                  store.status().message().c_str());
