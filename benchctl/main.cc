@@ -17,6 +17,7 @@
 #include "benchctl/hw_commands.h"
 #include "benchctl/local_commands.h"
 #include "benchctl/local_run.h"
+#include "benchctl/db_commands.h"
 #include "benchctl/prune_command.h"
 #include "benchctl/regress_commands.h"
 #include "benchctl/report_commands.h"
@@ -140,6 +141,7 @@ int main(int argc, char** argv) {
   // diagnose, identify, convert, import (benchctl/gap_commands.cc).
   vb::benchctl::GapCli gap_cli(&app, {&json, &server, &token, &tls_ca_file, &store_path});
   vb::benchctl::PruneCli prune_cli(&app, {&json, &server, &token, &tls_ca_file, &store_path});  // prune_command.cc
+  vb::benchctl::DbCli db_cli(&app, &json, &store_path);  // db info, db copy (db_commands.cc)
 
   try {
     app.parse(argc, argv);
@@ -174,6 +176,7 @@ int main(int argc, char** argv) {
   // One decision per invocation: the server if one is given and --local is not, else the local store.
   auto backend = [&]() { return vb::benchctl::ChooseBackend(local ? "" : server, store_path, make_client); };
   if (prune_cli.parsed()) return prune_cli.Run();
+  if (db_cli.parsed()) return db_cli.Run();
   if (run->parsed()) {
     if (!local && server.empty())
       return Fail(Status::FailedPrecondition(
