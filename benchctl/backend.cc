@@ -244,7 +244,9 @@ class Local final : public Backend {
     return recs;
   }
 
-  std::string StoreName() const { return path_.empty() ? "in-memory store (--no-store)" : "local store " + path_; }
+  std::string StoreName() const {
+    return path_.empty() ? "in-memory store (--no-store)" : "local store " + db::DisplayLocation(path_);
+  }
 
   std::string path_;
   std::unique_ptr<db::Store> store_;

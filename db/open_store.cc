@@ -7,6 +7,10 @@ namespace vb::db {
 
 bool IsPostgresLocation(const std::string& location) { return pg::IsPostgresLocation(location); }
 
+std::string DisplayLocation(const std::string& location) {
+  return pg::IsPostgresLocation(location) ? pg::DescribeLocation(location) : location;
+}
+
 StatusOr<std::unique_ptr<Store>> OpenStore(const std::string& location) {
   if (pg::IsPostgresLocation(location)) return OpenPgStore(location);
   return Store::Open(location);

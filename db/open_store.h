@@ -14,5 +14,8 @@ namespace vb::db {
 StatusOr<std::unique_ptr<Store>> OpenStore(const std::string& location);
 // True when OpenStore would open `location` on PostgreSQL.
 bool IsPostgresLocation(const std::string& location);
+// `location` for logs and messages: a file path as it is, a PostgreSQL database as host, port, database and user
+// (never its password).
+std::string DisplayLocation(const std::string& location);
 
 }  // namespace vb::db
