@@ -2,7 +2,6 @@
 
 #include <chrono>
 #include <cstdio>
-
 #include <nlohmann/json.hpp>
 
 #include "benchctl/cli_common.h"
@@ -15,10 +14,14 @@ using Json = nlohmann::ordered_json;
 
 std::string Bytes(std::int64_t b) {
   char buf[32];
-  if (b >= 1'000'000'000) std::snprintf(buf, sizeof buf, "%.2f GB", b / 1e9);
-  else if (b >= 1'000'000) std::snprintf(buf, sizeof buf, "%.1f MB", b / 1e6);
-  else if (b >= 1'000) std::snprintf(buf, sizeof buf, "%.1f kB", b / 1e3);
-  else std::snprintf(buf, sizeof buf, "%lld B", static_cast<long long>(b));
+  if (b >= 1'000'000'000)
+    std::snprintf(buf, sizeof buf, "%.2f GB", b / 1e9);
+  else if (b >= 1'000'000)
+    std::snprintf(buf, sizeof buf, "%.1f MB", b / 1e6);
+  else if (b >= 1'000)
+    std::snprintf(buf, sizeof buf, "%.1f kB", b / 1e3);
+  else
+    std::snprintf(buf, sizeof buf, "%lld B", static_cast<long long>(b));
   return buf;
 }
 
@@ -28,8 +31,9 @@ DbCli::DbCli(CLI::App* app, bool* json, std::string* store_path) : json_(json), 
   cmd_ = app->add_subcommand("db", "the store itself: info, copy a SQLite store into PostgreSQL");
   cmd_->require_subcommand(1);
   info_ = cmd_->add_subcommand("info", "engine, schema version, runs by status, rows, trace bytes");
-  info_->add_option("--db", *store_path_, "the store: a SQLite file or a PostgreSQL connection string "
-                                          "(default $VALVEBENCH_DB or ~/.local/share/valvebench/local.db)");
+  info_->add_option("--db", *store_path_,
+                    "the store: a SQLite file or a PostgreSQL connection string "
+                    "(default $VALVEBENCH_DB or ~/.local/share/valvebench/local.db)");
   info_->add_flag("--json", *json_, "machine-readable output on stdout");
   copy_ = cmd_->add_subcommand("copy", "copy a SQLite store's history into PostgreSQL, keeping ids");
   copy_->add_option("--from", from_, "the SQLite store file")->required();

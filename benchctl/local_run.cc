@@ -104,7 +104,7 @@ StatusOr<std::vector<LocalRunResult>> RunLocal(LocalSubmission sub, db::Store* g
   if (!admitted.ok()) return admitted.status();
 
   const bool stored = !sub.store_path.empty();
-  const std::string where = stored ? "local store " + sub.store_path : "in-memory store";
+  const std::string where = stored ? "local store " + db::DisplayLocation(sub.store_path) : "in-memory store";
   std::unique_ptr<db::Store> opened;
   db::Store* store = given;
   if (store == nullptr) {

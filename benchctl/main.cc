@@ -60,8 +60,8 @@ int main(int argc, char** argv) {
   std::string store_path = vb::benchctl::DefaultLocalStorePath();
   bool no_store = false;
   auto local_store = [&](CLI::App* sub) {
-    sub->add_option("--db", store_path, "local store (SQLite) for --local runs (default $VALVEBENCH_DB or "
-                                        "~/.local/share/valvebench/local.db)");
+    sub->add_option("--db", store_path, "local store for --local runs: a SQLite file or postgresql://... "
+                                        "(default $VALVEBENCH_DB or ~/.local/share/valvebench/local.db)");
     sub->add_flag("--no-store", no_store, "local: do not record the runs");
   };
   vb::experiment::TableOptions table;  // comparison tables: --metrics, --wide (docs/comparison.md)

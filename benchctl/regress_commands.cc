@@ -35,7 +35,7 @@ StatusOr<std::unique_ptr<db::Store>> OpenStore(const std::string& path) {
     std::filesystem::create_directories(parent, ec);
   }
   auto s = db::OpenStore(path);
-  if (!s.ok()) return s.status().WithContext("local store " + path);
+  if (!s.ok()) return s.status().WithContext("local store " + db::DisplayLocation(path));
   return s;
 }
 

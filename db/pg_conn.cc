@@ -146,11 +146,16 @@ std::int64_t Result::Int(int row, int col) const {
   if (IsNull(row, col)) return 0;
   const char* p = PQgetvalue(r_.get(), row, col);
   switch (PQgetlength(r_.get(), row, col)) {
-    case 1: return static_cast<unsigned char>(p[0]);
-    case 2: return static_cast<std::int16_t>(FromBigEndian(p, 2));
-    case 4: return static_cast<std::int32_t>(FromBigEndian(p, 4));
-    case 8: return static_cast<std::int64_t>(FromBigEndian(p, 8));
-    default: return 0;  // not an integer column: a bug in the query (the store casts sums and counts)
+    case 1:
+      return static_cast<unsigned char>(p[0]);
+    case 2:
+      return static_cast<std::int16_t>(FromBigEndian(p, 2));
+    case 4:
+      return static_cast<std::int32_t>(FromBigEndian(p, 4));
+    case 8:
+      return static_cast<std::int64_t>(FromBigEndian(p, 8));
+    default:
+      return 0;  // not an integer column: a bug in the query (the store casts sums and counts)
   }
 }
 
@@ -239,8 +244,8 @@ StatusOr<Result> Connection::Exec(const std::string& sql, const Params& params) 
   auto it = prepared_.find(sql);
   if (it == prepared_.end()) {
     const std::string name = Cat("vb", prepared_.size());
-    PGresult* prep = PQprepare(conn_, name.c_str(), sql.c_str(), static_cast<int>(params.size()),
-                               params.types().data());
+    PGresult* prep =
+        PQprepare(conn_, name.c_str(), sql.c_str(), static_cast<int>(params.size()), params.types().data());
     if (prep == nullptr || PQresultStatus(prep) != PGRES_COMMAND_OK) {
       Status s = Error(prep, Cat("\"", sql, "\""));
       if (prep != nullptr) PQclear(prep);
@@ -289,8 +294,7 @@ Transaction::~Transaction() {
 
 Status Transaction::Begin(Kind kind) {
   if (!conn_->in_transaction()) VB_RETURN_IF_ERROR(conn_->EnsureConnected());
-  VB_RETURN_IF_ERROR(conn_->Script(kind == Kind::kRead ? "BEGIN ISOLATION LEVEL REPEATABLE READ READ ONLY"
-                                                       : "BEGIN"));
+  VB_RETURN_IF_ERROR(conn_->Script(kind == Kind::kRead ? "BEGIN ISOLATION LEVEL REPEATABLE READ READ ONLY" : "BEGIN"));
   open_ = true;
   return Status::Ok();
 }

@@ -42,7 +42,7 @@ std::string DescribeLocation(const std::string& location);
 class Params {
  public:
   Params& Int(std::int64_t v);
-  Params& Double(double v);  // NaN and infinities stay what they are (binary float8)
+  Params& Double(double v);        // NaN and infinities stay what they are (binary float8)
   Params& DoubleOrNull(double v);  // NaN becomes NULL (SQLite's rule for metric values and t_start_s)
   Params& Bool(bool v);
   Params& Text(std::string_view v);
@@ -55,9 +55,9 @@ class Params {
 
  private:
   void Owned(unsigned type, std::string bytes);
-  std::vector<unsigned> types_;          // type OIDs
-  std::vector<std::string> owned_;       // encoded values we own
-  std::vector<std::ptrdiff_t> owned_at_; // index into owned_, or -1: external (ext_)
+  std::vector<unsigned> types_;           // type OIDs
+  std::vector<std::string> owned_;        // encoded values we own
+  std::vector<std::ptrdiff_t> owned_at_;  // index into owned_, or -1: external (ext_)
   std::vector<const char*> ext_;
   std::vector<int> lengths_;
   std::vector<bool> null_;
@@ -71,11 +71,11 @@ class Result {
   int rows() const;
   int columns() const;
   bool IsNull(int row, int col) const;
-  std::int64_t Int(int row, int col) const;     // int2, int4, int8 or bool columns; NULL reads 0
-  double Double(int row, int col) const;        // float8 (or float4) columns; NULL reads NaN
-  std::string Text(int row, int col) const;     // text columns (and anything else, as raw bytes)
+  std::int64_t Int(int row, int col) const;        // int2, int4, int8 or bool columns; NULL reads 0
+  double Double(int row, int col) const;           // float8 (or float4) columns; NULL reads NaN
+  std::string Text(int row, int col) const;        // text columns (and anything else, as raw bytes)
   std::string_view Bytes(int row, int col) const;  // bytea: the bytes, valid while this Result lives
-  std::int64_t affected() const;                // rows an INSERT/UPDATE/DELETE touched
+  std::int64_t affected() const;                   // rows an INSERT/UPDATE/DELETE touched
 
  private:
   struct Clear {

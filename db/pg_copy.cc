@@ -38,34 +38,83 @@ struct Table {
 std::vector<Table> Tables() {
   using K = Kind;
   return {
-      {"batches", "id", {{"id", K::kInt}, {"submitter", K::kText}, {"name", K::kText}, {"spec_json", K::kText},
-                         {"created", K::kDouble}}, "id"},
-      {"runs", "id",
-       {{"id", K::kInt}, {"batch_id", K::kInt}, {"name", K::kText}, {"controller", K::kText},
-        {"bench_kind", K::kText}, {"requested_bench", K::kText}, {"bench_name", K::kText}, {"spec_json", K::kText},
-        {"submitter", K::kText}, {"priority", K::kInt}, {"status", K::kText}, {"reason", K::kText},
-        {"requeue_on_interrupt", K::kBool}, {"cancel_requested", K::kBool}, {"submitted", K::kDouble},
-        {"started", K::kDouble}, {"finished", K::kDouble}, {"progress", K::kDouble}, {"key_name", K::kText},
-        {"repeat_index", K::kInt}, {"split", K::kText}, {"t_start_s", K::kDoubleOrNull}},
+      {"batches",
+       "id",
+       {{"id", K::kInt}, {"submitter", K::kText}, {"name", K::kText}, {"spec_json", K::kText}, {"created", K::kDouble}},
+       "id"},
+      {"runs",
+       "id",
+       {{"id", K::kInt},
+        {"batch_id", K::kInt},
+        {"name", K::kText},
+        {"controller", K::kText},
+        {"bench_kind", K::kText},
+        {"requested_bench", K::kText},
+        {"bench_name", K::kText},
+        {"spec_json", K::kText},
+        {"submitter", K::kText},
+        {"priority", K::kInt},
+        {"status", K::kText},
+        {"reason", K::kText},
+        {"requeue_on_interrupt", K::kBool},
+        {"cancel_requested", K::kBool},
+        {"submitted", K::kDouble},
+        {"started", K::kDouble},
+        {"finished", K::kDouble},
+        {"progress", K::kDouble},
+        {"key_name", K::kText},
+        {"repeat_index", K::kInt},
+        {"split", K::kText},
+        {"t_start_s", K::kDoubleOrNull}},
        "id"},
       {"run_tags", "rowid", {{"run_id", K::kInt}, {"tag", K::kText}}},
-      {"run_sweep", "run_id, axis", {{"run_id", K::kInt}, {"axis", K::kInt}, {"field", K::kText}, {"value", K::kDouble}}},
-      {"status_history", "id",
-       {{"id", K::kInt}, {"run_id", K::kInt}, {"status", K::kText}, {"at", K::kDouble}, {"reason", K::kText}}, "id"},
+      {"run_sweep",
+       "run_id, axis",
+       {{"run_id", K::kInt}, {"axis", K::kInt}, {"field", K::kText}, {"value", K::kDouble}}},
+      {"status_history",
+       "id",
+       {{"id", K::kInt}, {"run_id", K::kInt}, {"status", K::kText}, {"at", K::kDouble}, {"reason", K::kText}},
+       "id"},
       {"metrics", "run_id, name", {{"run_id", K::kInt}, {"name", K::kText}, {"value", K::kDoubleOrNull}}},
-      {"trace_chunks", "run_id, idx",
-       {{"run_id", K::kInt}, {"idx", K::kInt}, {"t0", K::kDouble}, {"period", K::kDouble}, {"samples", K::kInt},
-        {"channels", K::kText}, {"data", K::kBlob}, {"codec", K::kInt}}},
-      {"baselines", "id",
-       {{"id", K::kInt}, {"name", K::kText}, {"version", K::kInt}, {"created", K::kDouble}, {"source", K::kText},
-        {"note", K::kText}}, "id"},
-      {"baseline_metrics", "baseline_id, case_name, metric",
-       {{"baseline_id", K::kInt}, {"case_name", K::kText}, {"metric", K::kText}, {"mean", K::kDouble},
-        {"spread", K::kDouble}, {"n", K::kInt}}},
-      {"regressions", "id",
-       {{"id", K::kInt}, {"suite", K::kText}, {"baseline_name", K::kText}, {"baseline_version", K::kInt},
-        {"batch_id", K::kInt}, {"night", K::kText}, {"created", K::kDouble}, {"verdict", K::kText},
-        {"result_json", K::kText}}, "id"},
+      {"trace_chunks",
+       "run_id, idx",
+       {{"run_id", K::kInt},
+        {"idx", K::kInt},
+        {"t0", K::kDouble},
+        {"period", K::kDouble},
+        {"samples", K::kInt},
+        {"channels", K::kText},
+        {"data", K::kBlob},
+        {"codec", K::kInt}}},
+      {"baselines",
+       "id",
+       {{"id", K::kInt},
+        {"name", K::kText},
+        {"version", K::kInt},
+        {"created", K::kDouble},
+        {"source", K::kText},
+        {"note", K::kText}},
+       "id"},
+      {"baseline_metrics",
+       "baseline_id, case_name, metric",
+       {{"baseline_id", K::kInt},
+        {"case_name", K::kText},
+        {"metric", K::kText},
+        {"mean", K::kDouble},
+        {"spread", K::kDouble},
+        {"n", K::kInt}}},
+      {"regressions",
+       "id",
+       {{"id", K::kInt},
+        {"suite", K::kText},
+        {"baseline_name", K::kText},
+        {"baseline_version", K::kInt},
+        {"batch_id", K::kInt},
+        {"night", K::kText},
+        {"created", K::kDouble},
+        {"verdict", K::kText},
+        {"result_json", K::kText}},
+       "id"},
   };
 }
 
@@ -125,8 +174,10 @@ StatusOr<CopySummary> CopySqliteToPostgres(const std::string& sqlite_path, const
     return Status::InvalidArgument("--from: must be a SQLite store file, got a PostgreSQL connection string");
   }
   if (!pg::IsPostgresLocation(pg_location)) {
-    return Status::InvalidArgument(Cat("--to: must be a PostgreSQL connection string (postgresql://... or "
-                                       "\"host=... dbname=...\"), got \"", pg_location, "\""));
+    return Status::InvalidArgument(
+        Cat("--to: must be a PostgreSQL connection string (postgresql://... or "
+            "\"host=... dbname=...\"), got \"",
+            pg_location, "\""));
   }
   if (access(sqlite_path.c_str(), R_OK) != 0) {
     return Status::NotFound(Cat("--from: no SQLite store at '", sqlite_path, "'"));
@@ -140,10 +191,10 @@ StatusOr<CopySummary> CopySqliteToPostgres(const std::string& sqlite_path, const
   }
   SqliteReader src;
   VB_RETURN_IF_ERROR(src.Open(sqlite_path));
-  VB_PG_ASSIGN_OR_RETURN(const std::int64_t running,
-                         src.Int("SELECT count(*) FROM runs WHERE status = 'running'"));
+  VB_PG_ASSIGN_OR_RETURN(const std::int64_t running, src.Int("SELECT count(*) FROM runs WHERE status = 'running'"));
   if (running > 0) {
-    return Status::FailedPrecondition(Cat("--from: ", running, " runs in '", sqlite_path, "' are running: stop the "
+    return Status::FailedPrecondition(Cat("--from: ", running, " runs in '", sqlite_path,
+                                          "' are running: stop the "
                                           "server that uses it, then copy (its next start would re-queue them)"));
   }
 
@@ -162,7 +213,8 @@ StatusOr<CopySummary> CopySqliteToPostgres(const std::string& sqlite_path, const
                            dst->QueryInt("SELECT (SELECT count(*) FROM runs) + (SELECT count(*) FROM batches) + "
                                          "(SELECT count(*) FROM baselines) + (SELECT count(*) FROM regressions)"));
     if (held > 0) {
-      return Status::FailedPrecondition(Cat("--to: ", dst->location(), " already holds ", held, " runs, batches, "
+      return Status::FailedPrecondition(Cat("--to: ", dst->location(), " already holds ", held,
+                                            " runs, batches, "
                                             "baselines or regression results; nothing was copied (--into-non-empty "
                                             "to add to it, when no id collides)"));
     }
@@ -183,10 +235,18 @@ StatusOr<CopySummary> CopySqliteToPostgres(const std::string& sqlite_path, const
         const int c = static_cast<int>(k);
         const bool null = sqlite3_column_type(row, c) == SQLITE_NULL;
         switch (t.columns[k].kind) {
-          case Kind::kInt: p.Int(sqlite3_column_int64(row, c)); break;
-          case Kind::kBool: p.Bool(sqlite3_column_int64(row, c) != 0); break;
-          case Kind::kDouble: p.Double(sqlite3_column_double(row, c)); break;
-          case Kind::kDoubleOrNull: p.DoubleOrNull(null ? std::nan("") : sqlite3_column_double(row, c)); break;
+          case Kind::kInt:
+            p.Int(sqlite3_column_int64(row, c));
+            break;
+          case Kind::kBool:
+            p.Bool(sqlite3_column_int64(row, c) != 0);
+            break;
+          case Kind::kDouble:
+            p.Double(sqlite3_column_double(row, c));
+            break;
+          case Kind::kDoubleOrNull:
+            p.DoubleOrNull(null ? std::nan("") : sqlite3_column_double(row, c));
+            break;
           case Kind::kText: {
             const auto* s = reinterpret_cast<const char*>(sqlite3_column_text(row, c));
             p.Text(std::string_view(s != nullptr ? s : "", static_cast<std::size_t>(sqlite3_column_bytes(row, c))));
@@ -207,8 +267,10 @@ StatusOr<CopySummary> CopySqliteToPostgres(const std::string& sqlite_path, const
     VB_RETURN_IF_ERROR(st);
     summary.rows.emplace_back(t.name, rows);
     if (t.identity != nullptr) {
-      VB_RETURN_IF_ERROR(dst->Exec(Cat("SELECT setval(pg_get_serial_sequence('", t.name, "', '", t.identity, "'), "
-                                       "max(", t.identity, ")) FROM ", t.name, " HAVING count(*) > 0"))
+      VB_RETURN_IF_ERROR(dst->Exec(Cat("SELECT setval(pg_get_serial_sequence('", t.name, "', '", t.identity,
+                                       "'), "
+                                       "max(",
+                                       t.identity, ")) FROM ", t.name, " HAVING count(*) > 0"))
                              .status());
     }
   }
@@ -245,8 +307,8 @@ StatusOr<StoreInfo> ReadStoreInfo(const std::string& location) {
                            count(Cat("SELECT count(*) FROM runs WHERE status = '", RunStatusName(s), "'")));
     info.runs_by_status.emplace_back(std::string(RunStatusName(s)), n);
   }
-  for (const char* table : {"batches", "runs", "status_history", "metrics", "trace_chunks", "baselines",
-                            "regressions"}) {
+  for (const char* table :
+       {"batches", "runs", "status_history", "metrics", "trace_chunks", "baselines", "regressions"}) {
     VB_PG_ASSIGN_OR_RETURN(const std::int64_t n, count(Cat("SELECT count(*) FROM ", table)));
     info.rows.emplace_back(table, n);
   }

@@ -17,7 +17,7 @@ struct CopyOptions {
 
 struct CopySummary {
   std::vector<std::pair<std::string, std::int64_t>> rows;  // per table, in copy order
-  std::int64_t trace_bytes = 0;                             // trace chunk bytes as stored (compressed)
+  std::int64_t trace_bytes = 0;                            // trace chunk bytes as stored (compressed)
   int source_version = 0, target_version = 0;
 };
 
@@ -36,7 +36,7 @@ struct StoreInfo {
   std::string location;  // the file, or the PostgreSQL database without its password
   int schema_version = 0;
   std::vector<std::pair<std::string, std::int64_t>> runs_by_status;  // every status, in lifecycle order
-  std::vector<std::pair<std::string, std::int64_t>> rows;           // batches, runs, trace_chunks, baselines, ...
+  std::vector<std::pair<std::string, std::int64_t>> rows;            // batches, runs, trace_chunks, baselines, ...
   std::int64_t trace_bytes = 0;
 };
 

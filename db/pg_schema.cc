@@ -166,8 +166,9 @@ constexpr Migration kMigrations[] = {
     {2, "(SQLite's baselines and regressions; on PostgreSQL part of version 5)", ""},
     {3, "(SQLite's run keys as fields; on PostgreSQL part of version 5)", ""},
     {4, "(SQLite's trace codec column; on PostgreSQL part of version 5)", ""},
-    {5, "the whole schema as of SQLite version 5: runs with fence, host and lease; hosts, stale_writes, "
-        "nights_claimed",
+    {5,
+     "the whole schema as of SQLite version 5: runs with fence, host and lease; hosts, stale_writes, "
+     "nights_claimed",
      kV5},
 };
 
@@ -216,14 +217,15 @@ StatusOr<int> Migrate(pg::Connection* conn, std::span<const Migration> migration
       return Status::FailedPrecondition(Cat(where, " is not a valvebench database (its schema has ", tables,
                                             " tables but no schema_version); it was left untouched"));
     }
-    VB_RETURN_IF_ERROR(conn->Script("CREATE TABLE schema_version (version integer NOT NULL); "
-                                    "INSERT INTO schema_version VALUES (0)"));
+    VB_RETURN_IF_ERROR(
+        conn->Script("CREATE TABLE schema_version (version integer NOT NULL); "
+                     "INSERT INTO schema_version VALUES (0)"));
   }
   for (const Migration& m : migrations) {
     if (m.version <= version) continue;
     if (m.sql[0] != '\0') {
-      VB_RETURN_IF_ERROR(conn->Script(m.sql).WithContext(
-          Cat("schema migration to version ", m.version, " (", m.description, ")")));
+      VB_RETURN_IF_ERROR(
+          conn->Script(m.sql).WithContext(Cat("schema migration to version ", m.version, " (", m.description, ")")));
     }
     version = m.version;
   }

@@ -87,7 +87,8 @@ Status ValidateBatch(const std::string& submitter, const std::vector<RunRecord>&
         return Status::InvalidArgument(Cat(field, ".key.sweep[", a, "].value: must be finite"));
     }
     if (!r.split.empty() && r.split != "fit" && r.split != "holdout")
-      return Status::InvalidArgument(Cat(field, ".split: must be \"fit\", \"holdout\" or empty, got \"", r.split, "\""));
+      return Status::InvalidArgument(
+          Cat(field, ".split: must be \"fit\", \"holdout\" or empty, got \"", r.split, "\""));
     if (r.spec_json.empty()) return Status::InvalidArgument(field + ".spec_json: must not be empty");
     if (!r.submitter.empty() && r.submitter != submitter) {
       return Status::InvalidArgument(
@@ -123,7 +124,8 @@ Status ValidateFilter(const RunFilter& f) {
 }
 
 Status ValidateSeconds(const char* field, double v) {
-  if (!std::isfinite(v) || v < 0) return Status::InvalidArgument(Cat(field, ": must be finite and >= 0, got ", FormatExact(v)));
+  if (!std::isfinite(v) || v < 0)
+    return Status::InvalidArgument(Cat(field, ": must be finite and >= 0, got ", FormatExact(v)));
   return Status::Ok();
 }
 
@@ -140,7 +142,8 @@ Status ValidateBaseline(const std::string& name, const std::vector<BaselineEntry
     if (e.case_name.empty()) return Status::InvalidArgument(where + ".case_name: must not be empty");
     if (e.metric.empty()) return Status::InvalidArgument(where + ".metric: must not be empty");
     if (!std::isfinite(e.mean)) return Status::InvalidArgument(where + ".mean: must be finite");
-    if (!std::isfinite(e.spread) || e.spread < 0) return Status::InvalidArgument(where + ".spread: must be finite and >= 0");
+    if (!std::isfinite(e.spread) || e.spread < 0)
+      return Status::InvalidArgument(where + ".spread: must be finite and >= 0");
     if (e.n < 1) return Status::InvalidArgument(where + ".n: must be >= 1");
     if (!seen.insert({e.case_name, e.metric}).second)
       return Status::InvalidArgument(Cat(where, ": duplicate (", e.case_name, ", ", e.metric, ")"));
@@ -197,8 +200,7 @@ class PgStore final : public Store {
   // `txn`) and FailedPrecondition "stale write: ..." returned. NotFound for an unknown run.
   Status CheckLease(pg::Transaction* txn, const Lease& lease, const char* running_action, const std::string& what);
   // Interrupts the selected running runs (RecoverAfterCrash, RequeueLapsed); returns their ids.
-  StatusOr<std::vector<std::int64_t>> Interrupt(const std::string& select_sql, const Params& params,
-                                                bool lapsed);
+  StatusOr<std::vector<std::int64_t>> Interrupt(const std::string& select_sql, const Params& params, bool lapsed);
   Status ReadChunks(std::int64_t run_id, const std::function<Status(TraceChunk&, std::int64_t)>& fn);
 
   std::unique_ptr<pg::Connection> conn_;
@@ -282,24 +284,25 @@ StatusOr<std::int64_t> PgStore::SubmitBatch(const std::string& submitter, const 
   for (const RunRecord& r : runs) {
     VB_PG_ASSIGN_OR_RETURN(
         const std::int64_t id,
-        conn_->QueryInt("INSERT INTO runs (batch_id, name, controller, bench_kind, requested_bench, bench_name, "
-                        "spec_json, submitter, priority, status, requeue_on_interrupt, submitted, key_name, "
-                        "repeat_index, split, t_start_s) VALUES ($1, $2, $3, $4, $5, $5, $6, $7, $8, 'queued', $9, "
-                        VB_PG_NOW ", $10, $11, $12, $13) RETURNING id",
-                        Params()
-                            .Int(batch_id)
-                            .Text(r.key.DisplayName())
-                            .Text(r.controller)
-                            .Text(r.bench_kind)
-                            .Text(r.bench_name)
-                            .Text(r.spec_json)
-                            .Text(submitter)
-                            .Int(r.priority)
-                            .Bool(r.requeue_on_interrupt)
-                            .Text(r.key.name)
-                            .Int(r.key.repeat)
-                            .Text(r.split)
-                            .DoubleOrNull(r.t_start_s)));
+        conn_->QueryInt(
+            "INSERT INTO runs (batch_id, name, controller, bench_kind, requested_bench, bench_name, "
+            "spec_json, submitter, priority, status, requeue_on_interrupt, submitted, key_name, "
+            "repeat_index, split, t_start_s) VALUES ($1, $2, $3, $4, $5, $5, $6, $7, $8, 'queued', $9, " VB_PG_NOW
+            ", $10, $11, $12, $13) RETURNING id",
+            Params()
+                .Int(batch_id)
+                .Text(r.key.DisplayName())
+                .Text(r.controller)
+                .Text(r.bench_kind)
+                .Text(r.bench_name)
+                .Text(r.spec_json)
+                .Text(submitter)
+                .Int(r.priority)
+                .Bool(r.requeue_on_interrupt)
+                .Text(r.key.name)
+                .Int(r.key.repeat)
+                .Text(r.split)
+                .DoubleOrNull(r.t_start_s)));
     ids.push_back(id);
     for (std::size_t a = 0; a < r.key.sweep.size(); ++a) {
       VB_RETURN_IF_ERROR(conn_
@@ -401,8 +404,7 @@ Status PgStore::SetProgress(const Lease& lease, double progress) {
 Status PgStore::Finish(const Lease& lease, RunStatus final_status, const std::string& reason,
                        const std::vector<Metric>& metrics) {
   const std::int64_t run_id = lease.run_id;
-  if (final_status != RunStatus::kDone && final_status != RunStatus::kFailed &&
-      final_status != RunStatus::kCancelled) {
+  if (final_status != RunStatus::kDone && final_status != RunStatus::kFailed && final_status != RunStatus::kCancelled) {
     return Status::InvalidArgument(
         Cat("final_status: must be done, failed or cancelled, got ", RunStatusName(final_status)));
   }
@@ -437,7 +439,8 @@ Status PgStore::Finish(const Lease& lease, RunStatus final_status, const std::st
 StatusOr<RunStatus> PgStore::RequestCancel(std::int64_t run_id, const std::string& reason) {
   pg::Transaction txn(conn_.get());
   VB_RETURN_IF_ERROR(txn.Begin());
-  VB_PG_ASSIGN_OR_RETURN(Result r, conn_->Exec("SELECT status FROM runs WHERE id = $1 FOR UPDATE", Params().Int(run_id)));
+  VB_PG_ASSIGN_OR_RETURN(Result r,
+                         conn_->Exec("SELECT status FROM runs WHERE id = $1 FOR UPDATE", Params().Int(run_id)));
   if (r.rows() == 0) return RunNotFound(run_id);
   StatusOr<RunStatus> parsed = ParseRunStatus(r.Text(0, 0));
   if (!parsed.ok()) return Status::DataLoss(Cat("run ", run_id, ": ", parsed.status().message()));
@@ -465,7 +468,8 @@ StatusOr<RunStatus> PgStore::RequestCancel(std::int64_t run_id, const std::strin
 }
 
 StatusOr<bool> PgStore::CancelRequested(std::int64_t run_id) {
-  VB_PG_ASSIGN_OR_RETURN(Result r, conn_->Exec("SELECT cancel_requested FROM runs WHERE id = $1", Params().Int(run_id)));
+  VB_PG_ASSIGN_OR_RETURN(Result r,
+                         conn_->Exec("SELECT cancel_requested FROM runs WHERE id = $1", Params().Int(run_id)));
   if (r.rows() == 0) return RunNotFound(run_id);
   return r.Int(0, 0) != 0;
 }
@@ -500,15 +504,16 @@ StatusOr<std::vector<std::int64_t>> PgStore::Interrupt(const std::string& select
                                            "status = 'interrupted'",
                                            Params().Int(r.id)));
     if (r.cancel_requested) {
-      const std::string reason = r.cancel_reason.empty() ? "cancel requested before the server restarted"
-                                                         : r.cancel_reason;
+      const std::string reason =
+          r.cancel_reason.empty() ? "cancel requested before the server restarted" : r.cancel_reason;
       VB_RETURN_IF_ERROR(conn_
                              ->Exec("UPDATE runs SET status = 'cancelled', reason = $2, host = '' WHERE id = $1",
                                     Params().Int(r.id).Text(reason))
                              .status());
       VB_RETURN_IF_ERROR(AddHistory(r.id, RunStatus::kCancelled, reason));
     } else if (r.requeue && times >= kMaxInterruptions) {
-      const std::string reason = Cat("the server stopped ", times, " times while this run ran: not re-queued again "
+      const std::string reason = Cat("the server stopped ", times,
+                                     " times while this run ran: not re-queued again "
                                      "(a run that takes the server down; see the server's log)");
       VB_RETURN_IF_ERROR(conn_
                              ->Exec("UPDATE runs SET status = 'failed', reason = $2, host = '' WHERE id = $1",
@@ -536,12 +541,14 @@ StatusOr<int> PgStore::RecoverAfterCrash(const std::string& host) {
   pg::Transaction txn(conn_.get());
   VB_RETURN_IF_ERROR(txn.Begin());
   StatusOr<std::vector<std::int64_t>> ids =
-      host.empty() ? Interrupt("SELECT id, requeue_on_interrupt, cancel_requested, reason, host FROM runs "
-                               "WHERE status = 'running' ORDER BY id FOR UPDATE",
-                               Params(), false)
-                   : Interrupt("SELECT id, requeue_on_interrupt, cancel_requested, reason, host FROM runs "
-                               "WHERE status = 'running' AND host = $1 ORDER BY id FOR UPDATE",
-                               Params().Text(host), false);
+      host.empty() ? Interrupt(
+                         "SELECT id, requeue_on_interrupt, cancel_requested, reason, host FROM runs "
+                         "WHERE status = 'running' ORDER BY id FOR UPDATE",
+                         Params(), false)
+                   : Interrupt(
+                         "SELECT id, requeue_on_interrupt, cancel_requested, reason, host FROM runs "
+                         "WHERE status = 'running' AND host = $1 ORDER BY id FOR UPDATE",
+                         Params().Text(host), false);
   if (!ids.ok()) return ids.status();
   VB_RETURN_IF_ERROR(txn.Commit());
   return static_cast<int>(ids->size());
@@ -724,9 +731,10 @@ StatusOr<std::int64_t> PgStore::CountQueued(const std::string& submitter) {
 }
 
 StatusOr<std::int64_t> PgStore::StoredTraceBytes(const std::string& submitter) {
-  return conn_->QueryInt("SELECT COALESCE(SUM(octet_length(c.data)), 0)::int8 FROM runs r "
-                         "JOIN trace_chunks c ON c.run_id = r.id WHERE r.submitter = $1",
-                         Params().Text(submitter));
+  return conn_->QueryInt(
+      "SELECT COALESCE(SUM(octet_length(c.data)), 0)::int8 FROM runs r "
+      "JOIN trace_chunks c ON c.run_id = r.id WHERE r.submitter = $1",
+      Params().Text(submitter));
 }
 
 // ---- Traces ----
@@ -737,12 +745,14 @@ Status PgStore::AppendTraceChunk(const Lease& lease, const TraceChunk& chunk) {
   const std::string where = Cat("trace chunk ", chunk.index, ": ");
   const std::string channels = trace::JoinChannels(chunk.channels);
   // Compressed before the transaction starts: the run's row is locked only for the insert.
-  VB_RETURN_IF_ERROR(codec_.Encode(chunk.data.data(), chunk.channels.size(), static_cast<std::size_t>(chunk.samples),
-                                   &encoded_)
-                         .WithContext(Cat("trace chunk ", chunk.index)));
+  VB_RETURN_IF_ERROR(
+      codec_.Encode(chunk.data.data(), chunk.channels.size(), static_cast<std::size_t>(chunk.samples), &encoded_)
+          .WithContext(Cat("trace chunk ", chunk.index)));
   if (encoded_.size() > kMaxBlobBytes) {
-    return Status::InvalidArgument(Cat(where, encoded_.size(), " bytes of data exceed the largest bytea PostgreSQL "
-                                       "stores (", kMaxBlobBytes, " bytes): use smaller chunks"));
+    return Status::InvalidArgument(Cat(where, encoded_.size(),
+                                       " bytes of data exceed the largest bytea PostgreSQL "
+                                       "stores (",
+                                       kMaxBlobBytes, " bytes): use smaller chunks"));
   }
   pg::Transaction txn(conn_.get());
   VB_RETURN_IF_ERROR(txn.Begin());
@@ -757,8 +767,8 @@ Status PgStore::AppendTraceChunk(const Lease& lease, const TraceChunk& chunk) {
     return Status::AlreadyExists(Cat(where, "already stored for run ", run_id, " (the next index is ", next, ")"));
   }
   if (chunk.index > next) {
-    return Status::InvalidArgument(Cat(where, "index must be ", next, " (chunks of run ", run_id,
-                                       " are appended in order from 0, without gaps)"));
+    return Status::InvalidArgument(
+        Cat(where, "index must be ", next, " (chunks of run ", run_id, " are appended in order from 0, without gaps)"));
   }
   if (any && last.Text(0, 1) != channels) {
     return Status::InvalidArgument(Cat(where, "channels differ from those of the run's earlier chunks"));
@@ -855,11 +865,12 @@ StatusOr<std::int32_t> PgStore::SaveBaseline(const std::string& name, const std:
                                          "($1, $2, " VB_PG_NOW ", $3, $4) RETURNING id",
                                          Params().Text(name).Int(version).Text(source).Text(note)));
   for (const BaselineEntry& e : entries) {
-    VB_RETURN_IF_ERROR(conn_
-                           ->Exec("INSERT INTO baseline_metrics (baseline_id, case_name, metric, mean, spread, n) "
-                                  "VALUES ($1, $2, $3, $4, $5, $6)",
-                                  Params().Int(id).Text(e.case_name).Text(e.metric).Double(e.mean).Double(e.spread).Int(e.n))
-                           .status());
+    VB_RETURN_IF_ERROR(
+        conn_
+            ->Exec("INSERT INTO baseline_metrics (baseline_id, case_name, metric, mean, spread, n) "
+                   "VALUES ($1, $2, $3, $4, $5, $6)",
+                   Params().Int(id).Text(e.case_name).Text(e.metric).Double(e.mean).Double(e.spread).Int(e.n))
+            .status());
   }
   VB_RETURN_IF_ERROR(txn.Commit());
   return static_cast<std::int32_t>(version);
@@ -869,13 +880,14 @@ StatusOr<BaselineRecord> PgStore::GetBaseline(const std::string& name, std::int3
   if (version < 0) return Status::InvalidArgument(Cat("version: must be >= 1 (0 = newest), got ", version));
   pg::Transaction txn(conn_.get());
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
-  StatusOr<Result> head =
-      version == 0 ? conn_->Exec("SELECT id, version, created, source, note FROM baselines WHERE name = $1 "
-                                 "ORDER BY version DESC LIMIT 1",
-                                 Params().Text(name))
-                   : conn_->Exec("SELECT id, version, created, source, note FROM baselines WHERE name = $1 "
-                                 "AND version = $2",
-                                 Params().Text(name).Int(version));
+  StatusOr<Result> head = version == 0 ? conn_->Exec(
+                                             "SELECT id, version, created, source, note FROM baselines WHERE name = $1 "
+                                             "ORDER BY version DESC LIMIT 1",
+                                             Params().Text(name))
+                                       : conn_->Exec(
+                                             "SELECT id, version, created, source, note FROM baselines WHERE name = $1 "
+                                             "AND version = $2",
+                                             Params().Text(name).Int(version));
   if (!head.ok()) return head.status();
   if (head->rows() == 0) {
     return Status::NotFound(version == 0 ? Cat("baseline '", name, "' not found")
@@ -893,8 +905,8 @@ StatusOr<BaselineRecord> PgStore::GetBaseline(const std::string& name, std::int3
                                                "metric COLLATE \"C\"",
                                                Params().Int(id)));
   for (int k = 0; k < m.rows(); ++k) {
-    b.entries.push_back({m.Text(k, 0), m.Text(k, 1), m.Double(k, 2), m.Double(k, 3),
-                         static_cast<std::int32_t>(m.Int(k, 4))});
+    b.entries.push_back(
+        {m.Text(k, 0), m.Text(k, 1), m.Double(k, 2), m.Double(k, 3), static_cast<std::int32_t>(m.Int(k, 4))});
   }
   VB_RETURN_IF_ERROR(txn.Commit());
   return b;
@@ -916,7 +928,8 @@ StatusOr<std::vector<BaselineRecord>> PgStore::ListBaselines() {
   return out;
 }
 
-constexpr const char* kRegressionColumns = "id, suite, baseline_name, baseline_version, batch_id, night, created, verdict";
+constexpr const char* kRegressionColumns =
+    "id, suite, baseline_name, baseline_version, batch_id, night, created, verdict";
 
 RegressionRecord ReadRegression(const Result& r, int k) {
   RegressionRecord out;
@@ -934,18 +947,19 @@ RegressionRecord ReadRegression(const Result& r, int k) {
 StatusOr<std::int64_t> PgStore::SaveRegression(const RegressionRecord& record) {
   if (record.suite.empty()) return Status::InvalidArgument("regression.suite: must not be empty");
   if (record.verdict.empty()) return Status::InvalidArgument("regression.verdict: must not be empty");
-  return conn_->QueryInt("INSERT INTO regressions (suite, baseline_name, baseline_version, batch_id, night, created, "
-                         "verdict, result_json) VALUES ($1, $2, $3, $4, $5, CASE WHEN $6 > 0 THEN $6 ELSE " VB_PG_NOW
-                         " END, $7, $8) RETURNING id",
-                         Params()
-                             .Text(record.suite)
-                             .Text(record.baseline_name)
-                             .Int(record.baseline_version)
-                             .Int(record.batch_id)
-                             .Text(record.night)
-                             .Double(record.created_unix_s)
-                             .Text(record.verdict)
-                             .Text(record.result_json));
+  return conn_->QueryInt(
+      "INSERT INTO regressions (suite, baseline_name, baseline_version, batch_id, night, created, "
+      "verdict, result_json) VALUES ($1, $2, $3, $4, $5, CASE WHEN $6 > 0 THEN $6 ELSE " VB_PG_NOW
+      " END, $7, $8) RETURNING id",
+      Params()
+          .Text(record.suite)
+          .Text(record.baseline_name)
+          .Int(record.baseline_version)
+          .Int(record.batch_id)
+          .Text(record.night)
+          .Double(record.created_unix_s)
+          .Text(record.verdict)
+          .Text(record.result_json));
 }
 
 StatusOr<RegressionRecord> PgStore::GetRegression(std::int64_t id) {
@@ -960,9 +974,10 @@ StatusOr<RegressionRecord> PgStore::GetRegression(std::int64_t id) {
 StatusOr<std::vector<RegressionRecord>> PgStore::ListRegressions(bool nights_only, std::int32_t limit) {
   if (limit < 1 || limit > kMaxListLimit)
     return Status::InvalidArgument(Cat("limit: must be in 1..", kMaxListLimit, ", got ", limit));
-  VB_PG_ASSIGN_OR_RETURN(Result r, conn_->Exec(Cat("SELECT ", kRegressionColumns, " FROM regressions",
-                                                   nights_only ? " WHERE night != ''" : "", " ORDER BY id DESC LIMIT $1"),
-                                               Params().Int(limit)));
+  VB_PG_ASSIGN_OR_RETURN(Result r,
+                         conn_->Exec(Cat("SELECT ", kRegressionColumns, " FROM regressions",
+                                         nights_only ? " WHERE night != ''" : "", " ORDER BY id DESC LIMIT $1"),
+                                     Params().Int(limit)));
   std::vector<RegressionRecord> out;
   for (int k = 0; k < r.rows(); ++k) out.push_back(ReadRegression(r, k));
   return out;
@@ -972,14 +987,14 @@ StatusOr<std::vector<RegressionRecord>> PgStore::ListRegressions(bool nights_onl
 
 StatusOr<PruneResult> PgStore::Prune(const PruneRequest& request) {
   if (!std::isfinite(request.finished_before_unix_s) || request.finished_before_unix_s <= 0) {
-    return Status::InvalidArgument(Cat("finished_before_unix_s: must be a finite time > 0, got ",
-                                       FormatExact(request.finished_before_unix_s)));
+    return Status::InvalidArgument(
+        Cat("finished_before_unix_s: must be a finite time > 0, got ", FormatExact(request.finished_before_unix_s)));
   }
   if (request.keep_last < 0) return Status::InvalidArgument(Cat("keep_last: must be >= 0, got ", request.keep_last));
   for (std::size_t k = 0; k < request.protected_batches.size(); ++k) {
     if (request.protected_batches[k] <= 0) {
-      return Status::InvalidArgument(Cat("protected_batches[", k, "]: must be a batch id > 0, got ",
-                                         request.protected_batches[k]));
+      return Status::InvalidArgument(
+          Cat("protected_batches[", k, "]: must be a batch id > 0, got ", request.protected_batches[k]));
     }
   }
   pg::Transaction txn(conn_.get());
@@ -1021,8 +1036,8 @@ StatusOr<PruneResult> PgStore::Prune(const PruneRequest& request) {
       if (!status.ok()) return Status::DataLoss(Cat("run ", d.run_id, ": ", status.status().message()));
       d.status = *status;
       d.finished_unix_s = r.Double(k, 4);
-      const bool final_status = d.status == RunStatus::kDone || d.status == RunStatus::kFailed ||
-                                d.status == RunStatus::kCancelled;
+      const bool final_status =
+          d.status == RunStatus::kDone || d.status == RunStatus::kFailed || d.status == RunStatus::kCancelled;
       if (!final_status) {
         d.why = Cat(RunStatusName(d.status), ": only finished runs are pruned");
         out.kept.push_back(std::move(d));
@@ -1083,8 +1098,10 @@ StatusOr<PruneResult> PgStore::Prune(const PruneRequest& request) {
 
 StatusOr<std::unique_ptr<Store>> OpenPgStore(const std::string& location) {
   if (!pg::IsPostgresLocation(location)) {
-    return Status::InvalidArgument(Cat("location: not a PostgreSQL connection string (postgresql://... or "
-                                       "\"host=... dbname=...\"): \"", location, "\""));
+    return Status::InvalidArgument(
+        Cat("location: not a PostgreSQL connection string (postgresql://... or "
+            "\"host=... dbname=...\"): \"",
+            location, "\""));
   }
   VB_PG_ASSIGN_OR_RETURN(std::unique_ptr<pg::Connection> conn, pg::Connection::Open(location));
   VB_PG_ASSIGN_OR_RETURN(const int version, pg_schema::Migrate(conn.get(), pg_schema::Migrations()));

@@ -10,6 +10,8 @@
 // Usage: perf_store_pg PG_LOCATION [SQLITE_DIR]
 //   PG_LOCATION: a libpq connection string of an EMPTY database the program may fill (e.g. "host=/tmp/pg
 //   dbname=perf"); SQLITE_DIR: where the SQLite file goes (default /tmp). Wall clock on a shared machine.
+#include <unistd.h>
+
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -20,8 +22,6 @@
 #include <string>
 #include <thread>
 #include <vector>
-
-#include <unistd.h>
 
 #include "db/open_store.h"
 #include "db/store.h"
@@ -103,10 +103,11 @@ void Claims(const char* engine, const std::string& location) {
   }
   for (auto& th : threads) th.join();
   const double four_s = Seconds(Clock::now() - t1);
-  std::printf("%-10s claims: median %.3f ms, p99 %.3f ms, %.0f claims/s (1 connection); %.0f claims/s "
-              "(%d connections, %d runs)\n",
-              engine, ms[ms.size() / 2], ms[static_cast<std::size_t>(0.99 * static_cast<double>(ms.size()))],
-              kRuns / one_s, claimed.load() / four_s, kThreads, claimed.load());
+  std::printf(
+      "%-10s claims: median %.3f ms, p99 %.3f ms, %.0f claims/s (1 connection); %.0f claims/s "
+      "(%d connections, %d runs)\n",
+      engine, ms[ms.size() / 2], ms[static_cast<std::size_t>(0.99 * static_cast<double>(ms.size()))], kRuns / one_s,
+      claimed.load() / four_s, kThreads, claimed.load());
 }
 
 void Traces(const char* engine, const std::string& location) {
@@ -147,10 +148,10 @@ void Traces(const char* engine, const std::string& location) {
   if (!back.ok()) Die(back.status(), "read");
   const double out_s = Seconds(Clock::now() - t1);
   const double raw_mb = static_cast<double>(kSamples) * kChannels * 8 / 1e6;
-  std::printf("%-10s traces: %.0f MB raw in %.2f s = %.0f MB/s (%.2f M samples/s), stored %.1f MB, "
-              "read back in %.0f ms\n",
-              engine, raw_mb, in_s, raw_mb / in_s, kSamples / in_s / 1e6, static_cast<double>(*bytes) / 1e6,
-              1e3 * out_s);
+  std::printf(
+      "%-10s traces: %.0f MB raw in %.2f s = %.0f MB/s (%.2f M samples/s), stored %.1f MB, "
+      "read back in %.0f ms\n",
+      engine, raw_mb, in_s, raw_mb / in_s, kSamples / in_s / 1e6, static_cast<double>(*bytes) / 1e6, 1e3 * out_s);
 }
 
 }  // namespace
@@ -164,8 +165,10 @@ int main(int argc, char** argv) {
   const std::string dir = argc > 2 ? argv[2] : "/tmp";
   const std::string lite = vb::db::Cat(dir, "/perf_store_pg_", getpid(), ".db");
   for (const char* suffix : {"", "-wal", "-shm"}) std::remove((lite + suffix).c_str());
-  std::printf("perf_store_pg: %d claims, then %d with %d connections; a %d-sample trace of %d channels in "
-              "%d-sample chunks\n", kRuns, kRuns, kThreads, kSamples, kChannels, kChunk);
+  std::printf(
+      "perf_store_pg: %d claims, then %d with %d connections; a %d-sample trace of %d channels in "
+      "%d-sample chunks\n",
+      kRuns, kRuns, kThreads, kSamples, kChannels, kChunk);
   Claims("sqlite", lite);
   Claims("postgresql", pg);
   Traces("sqlite", lite);

@@ -3,6 +3,8 @@
 // in both codecs; two baseline versions; a regression night) copied into PostgreSQL reads back identical
 // through the Store API, ids included; a non-empty target and a source with running runs are refused, changing
 // nothing; and benchctl db copy / db info drive it with the house exit codes.
+#include "db/pg_copy.h"
+
 #include <gtest/gtest.h>
 #include <sqlite3.h>
 #include <sys/wait.h>
@@ -13,11 +15,9 @@
 #include <cstring>
 #include <fstream>
 #include <iterator>
-
 #include <nlohmann/json.hpp>
 
 #include "db/open_store.h"
-#include "db/pg_copy.h"
 #include "db/store.h"
 #include "db/testing.h"
 #include "db/text.h"
@@ -84,8 +84,9 @@ std::vector<std::int64_t> Populate(Store& s) {
   EXPECT_TRUE(c0.ok() && c0->has_value() && (*c0)->id == ids[0]);
   for (int k = 0; k < 3; ++k) EXPECT_TRUE(s.AppendTraceChunk(LeaseOf(**c0), Chunk(k, 500, k)).ok());
   EXPECT_TRUE(s.SetProgress(LeaseOf(**c0), 0.5).ok());
-  EXPECT_TRUE(s.Finish(LeaseOf(**c0), RunStatus::kDone, "", {{"rmse_A", 1.25e-3}, {"nan_metric", std::nan("")},
-                                                             {"effort", -0.0}}).ok());
+  EXPECT_TRUE(s.Finish(LeaseOf(**c0), RunStatus::kDone, "",
+                       {{"rmse_A", 1.25e-3}, {"nan_metric", std::nan("")}, {"effort", -0.0}})
+                  .ok());
   auto c1 = s.ClaimNext(BenchClaim("emulated", "bench-b"));
   EXPECT_TRUE(c1.ok() && c1->has_value());
   EXPECT_TRUE(s.Finish(LeaseOf(**c1), RunStatus::kFailed, "bench tripped: over-current", {}).ok());
@@ -96,7 +97,8 @@ std::vector<std::int64_t> Populate(Store& s) {
   EXPECT_TRUE(s.RequestCancel(ids[4], "not needed").ok());
   EXPECT_TRUE(s.SaveBaseline("main", "local batch 1", "first", {{"m/pi", "rmse_A", 1e-3, 1e-5, 3}}).ok());
   EXPECT_TRUE(s.SaveBaseline("main", "local batch 1", "second",
-                             {{"m/pi", "rmse_A", 2e-3, 0, 1}, {"m/pi", "effort", 3.5, 0.25, 2}}).ok());
+                             {{"m/pi", "rmse_A", 2e-3, 0, 1}, {"m/pi", "effort", 3.5, 0.25, 2}})
+                  .ok());
   RegressionRecord night;
   night.suite = "ci";
   night.baseline_name = "main";
@@ -164,8 +166,11 @@ TEST_F(PgCopyTest, EverythingReadsBackIdenticalWithItsIds) {
     // A chunk an older build stored raw (codec 0), as the file keeps it.
     sqlite3* raw = nullptr;
     ASSERT_EQ(sqlite3_open(source_.c_str(), &raw), SQLITE_OK);
-    ASSERT_EQ(sqlite3_exec(raw, Cat("INSERT INTO trace_chunks (run_id, idx, t0, period, samples, channels, data, codec) "
-                                    "VALUES (", ids[1], ", 0, 0.0, 0.001, 1, 'a', X'000000000000F03F', 0)").c_str(),
+    ASSERT_EQ(sqlite3_exec(raw,
+                           Cat("INSERT INTO trace_chunks (run_id, idx, t0, period, samples, channels, data, codec) "
+                               "VALUES (",
+                               ids[1], ", 0, 0.0, 0.001, 1, 'a', X'000000000000F03F', 0)")
+                               .c_str(),
                            nullptr, nullptr, nullptr),
               SQLITE_OK);
     sqlite3_close(raw);

@@ -284,8 +284,9 @@ TEST_P(PgLabTest, TwoReapersAtOnceHandleEachLapsedRunOnce) {
   for (const RunRecord& r : *list) {
     auto h = store().History(r.id);
     ASSERT_TRUE(h.ok());
-    EXPECT_EQ(std::count_if(h->begin(), h->end(), [](const StatusChange& c) { return c.status == RunStatus::kInterrupted; }),
-              1);
+    EXPECT_EQ(
+        std::count_if(h->begin(), h->end(), [](const StatusChange& c) { return c.status == RunStatus::kInterrupted; }),
+        1);
     EXPECT_EQ(r.status, RunStatus::kQueued);
   }
 }
@@ -339,8 +340,10 @@ TEST_P(PgLabTest, ANightIsClaimedByExactlyOneHost) {
         return;
       }
       auto won = (*s)->ClaimNight("2026-11-25", Cat("host", t));
-      if (!won.ok()) ++errors;
-      else if (*won) ++winners;
+      if (!won.ok())
+        ++errors;
+      else if (*won)
+        ++winners;
     });
   }
   for (auto& th : threads) th.join();
@@ -426,8 +429,10 @@ TEST_P(PgLabTest, ConcurrentFirstOpensMigrateOnceAndAFailingMigrationChangesNoth
   for (int t = 0; t < 4; ++t) {
     threads.emplace_back([&] {
       auto s = OpenStore(*fresh);
-      if (s.ok() && (*s)->schema_version() == 5) ++ok;
-      else if (!s.ok()) ADD_FAILURE() << s.status().ToString();
+      if (s.ok() && (*s)->schema_version() == 5)
+        ++ok;
+      else if (!s.ok())
+        ADD_FAILURE() << s.status().ToString();
     });
   }
   for (auto& th : threads) th.join();

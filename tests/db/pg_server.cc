@@ -100,8 +100,9 @@ bool PgServer::Start(std::string* why) {
   }
   bindir_ = FindBindir();
   if (bindir_.empty()) {
-    *why = "no PostgreSQL server binaries (initdb) found: install Debian's `postgresql` package "
-           "(scripts/setup.sh does), or set VB_PG_BINDIR";
+    *why =
+        "no PostgreSQL server binaries (initdb) found: install Debian's `postgresql` package "
+        "(scripts/setup.sh does), or set VB_PG_BINDIR";
     return false;
   }
   char tmpl[] = "/tmp/vbpg.XXXXXX";  // short: the socket path must stay under 108 bytes
@@ -118,7 +119,7 @@ bool PgServer::Start(std::string* why) {
       return false;
     }
     run_as_ = IsExecutable("/usr/sbin/runuser") ? "/usr/sbin/runuser -u nobody -- "
-                                                  : "setpriv --reuid=nobody --regid=nogroup --clear-groups -- ";
+                                                : "setpriv --reuid=nobody --regid=nogroup --clear-groups -- ";
   }
   std::string tpl;
   if (!EnsureTemplate(&tpl, why)) return false;
@@ -138,8 +139,8 @@ bool PgServer::Start(std::string* why) {
 bool PgServer::StartIn(const std::string& dir, std::string* why) {
   const std::string log = dir + "/log";
   const std::string start =
-      Cat(run_as_, bindir_, "/pg_ctl -D ", dir, "/data -l ", log, " -w -t 60 -s -o \"-c listen_addresses='' -k ",
-          dir, " -c fsync=off -c synchronous_commit=off -c full_page_writes=off -c max_connections=60 "
+      Cat(run_as_, bindir_, "/pg_ctl -D ", dir, "/data -l ", log, " -w -t 60 -s -o \"-c listen_addresses='' -k ", dir,
+          " -c fsync=off -c synchronous_commit=off -c full_page_writes=off -c max_connections=60 "
           "-c shared_buffers=32MB\" start > /dev/null 2>&1");
   if (std::system(start.c_str()) != 0) {
     *why = Cat("the PostgreSQL server did not start: ", Tail(ReadAll(log), 600));
@@ -159,7 +160,8 @@ bool PgServer::EnsureTemplate(std::string* tpl, std::string* why) {
   }
   const std::string build = tmpl;
   auto fail = [&](std::string message) {
-    (void)std::system(Cat(run_as_, bindir_, "/pg_ctl -D ", build, "/data -m immediate -w -s stop > /dev/null 2>&1").c_str());
+    (void)std::system(
+        Cat(run_as_, bindir_, "/pg_ctl -D ", build, "/data -m immediate -w -s stop > /dev/null 2>&1").c_str());
     (void)std::system(Cat("rm -rf ", build).c_str());
     *why = std::move(message);
     return false;
@@ -170,21 +172,26 @@ bool PgServer::EnsureTemplate(std::string* tpl, std::string* why) {
       return fail("running as root, and cannot hand a temporary directory to user `nobody`");
     }
   }
-  const std::string initdb = Cat(run_as_, bindir_, "/initdb -D ", build, "/data -A trust -U postgres -E UTF8 "
-                                 "--locale=C --no-sync --no-instructions --wal-segsize=1 > ", build, "/initdb.log 2>&1");
+  const std::string initdb = Cat(run_as_, bindir_, "/initdb -D ", build,
+                                 "/data -A trust -U postgres -E UTF8 "
+                                 "--locale=C --no-sync --no-instructions --wal-segsize=1 > ",
+                                 build, "/initdb.log 2>&1");
   if (std::system(initdb.c_str()) != 0) return fail(Cat("initdb failed: ", Tail(ReadAll(build + "/initdb.log"), 600)));
   if (!StartIn(build, why)) return fail(*why);
   {
     auto c = db::pg::Connection::Open(Cat("host=", build, " port=5432 user=postgres dbname=postgres"));
     if (!c.ok()) return fail(c.status().message());
-    const Status made = (*c)->Script("CREATE DATABASE fresh TEMPLATE template0 LC_COLLATE 'C' LC_CTYPE 'C' "
-                                     "ENCODING 'UTF8'");
+    const Status made = (*c)->Script(
+        "CREATE DATABASE fresh TEMPLATE template0 LC_COLLATE 'C' LC_CTYPE 'C' "
+        "ENCODING 'UTF8'");
     if (!made.ok()) return fail(made.message());
   }
-  if (std::system(Cat(run_as_, bindir_, "/pg_ctl -D ", build, "/data -m fast -w -s stop > /dev/null 2>&1").c_str()) != 0) {
+  if (std::system(Cat(run_as_, bindir_, "/pg_ctl -D ", build, "/data -m fast -w -s stop > /dev/null 2>&1").c_str()) !=
+      0) {
     return fail("the template cluster did not stop cleanly");
   }
-  std::ofstream(build + "/ready") << "a stopped PostgreSQL cluster with an empty database 'fresh' (tests/db/pg_server.cc)\n";
+  std::ofstream(build + "/ready")
+      << "a stopped PostgreSQL cluster with an empty database 'fresh' (tests/db/pg_server.cc)\n";
   // Another test process may have built it meanwhile: then its copy is used and ours removed.
   if (rename(build.c_str(), tpl->c_str()) != 0) (void)std::system(Cat("rm -rf ", build).c_str());
   if (access((*tpl + "/ready").c_str(), F_OK) != 0) {
@@ -204,14 +211,15 @@ StatusOr<std::string> PgServer::CreateDatabase() {
   const std::string name = Cat("vbtest_", getpid(), "_", ++databases_);
   // Separate statements: DROP/CREATE DATABASE refuse to run in the implicit transaction of a multi-statement.
   VB_RETURN_IF_ERROR((*c)->Script(Cat("DROP DATABASE IF EXISTS ", name)));
-  VB_RETURN_IF_ERROR((*c)->Script(Cat("CREATE DATABASE ", name,
-                                      " TEMPLATE template0 LC_COLLATE 'C' LC_CTYPE 'C' ENCODING 'UTF8'")));
+  VB_RETURN_IF_ERROR(
+      (*c)->Script(Cat("CREATE DATABASE ", name, " TEMPLATE template0 LC_COLLATE 'C' LC_CTYPE 'C' ENCODING 'UTF8'")));
   return Location(name);
 }
 
 void PgServer::Stop() {
   if (running_ && !dir_.empty()) {
-    const std::string stop = Cat(run_as_, bindir_, "/pg_ctl -D ", dir_, "/data -m immediate -w -s stop > /dev/null 2>&1");
+    const std::string stop =
+        Cat(run_as_, bindir_, "/pg_ctl -D ", dir_, "/data -m immediate -w -s stop > /dev/null 2>&1");
     (void)std::system(stop.c_str());
   }
   running_ = false;

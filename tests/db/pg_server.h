@@ -35,13 +35,13 @@ class PgServer {
   bool StartIn(const std::string& dir, std::string* why);  // pg_ctl start on dir/data, socket in dir
   std::string Location(const std::string& dbname) const;
 
-  std::string dir_;        // temporary directory (data/, socket, log); empty when external
+  std::string dir_;  // temporary directory (data/, socket, log); empty when external
   std::string bindir_;
-  std::string run_as_;     // "runuser -u nobody -- " when running as root
+  std::string run_as_;  // "runuser -u nobody -- " when running as root
   std::string admin_;
-  std::string base_;       // connection string without dbname
+  std::string base_;  // connection string without dbname
   bool running_ = false;
-  bool fresh_ = false;     // "fresh" not handed out yet
+  bool fresh_ = false;  // "fresh" not handed out yet
   int databases_ = 0;
 };
 

@@ -2,6 +2,8 @@
 // connection string; a run submitted with benchctl is queued, executed and stored (metrics, trace) in the
 // database, survives a server restart, and the password in the location never reaches the server's log. The
 // config keeps such a location as it is (never resolved against the config's directory).
+#include "tests/db/pg_server.h"
+
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -15,7 +17,6 @@
 #include "db/open_store.h"
 #include "server/config.h"
 #include "server_process.h"
-#include "tests/db/pg_server.h"
 
 namespace vb {
 namespace {
