@@ -241,6 +241,7 @@ Status Connection::Error(pg_result* r, std::string_view what) const {
 }
 
 StatusOr<Result> Connection::Exec(const std::string& sql, const Params& params) {
+  if (!txn_) VB_RETURN_IF_ERROR(EnsureConnected());  // a statement on its own may run on a new connection
   auto it = prepared_.find(sql);
   if (it == prepared_.end()) {
     const std::string name = Cat("vb", prepared_.size());
@@ -293,20 +294,25 @@ Transaction::~Transaction() {
 }
 
 Status Transaction::Begin(Kind kind) {
-  if (!conn_->in_transaction()) VB_RETURN_IF_ERROR(conn_->EnsureConnected());
+  VB_RETURN_IF_ERROR(conn_->EnsureConnected());  // a lost connection (restarted server) is re-made here
   VB_RETURN_IF_ERROR(conn_->Script(kind == Kind::kRead ? "BEGIN ISOLATION LEVEL REPEATABLE READ READ ONLY" : "BEGIN"));
   open_ = true;
+  conn_->set_in_transaction_block(true);
   return Status::Ok();
 }
 
 Status Transaction::Commit() {
   open_ = false;
-  return conn_->Script("COMMIT");
+  Status s = conn_->Script("COMMIT");
+  conn_->set_in_transaction_block(false);
+  return s;
 }
 
 Status Transaction::Rollback() {
   open_ = false;
-  return conn_->Script("ROLLBACK");
+  Status s = conn_->Script("ROLLBACK");
+  conn_->set_in_transaction_block(false);
+  return s;
 }
 
 }  // namespace vb::db::pg

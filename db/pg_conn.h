@@ -105,6 +105,8 @@ class Connection {
   Status EnsureConnected();
   const std::string& location() const { return location_; }  // as described by DescribeLocation
   bool in_transaction() const;
+  // Set by Transaction: inside one, a lost connection is an error (the transaction is gone), never re-made.
+  void set_in_transaction_block(bool open) { txn_ = open; }
   pg_conn* raw() { return conn_; }
 
  private:
@@ -113,6 +115,7 @@ class Connection {
   pg_conn* conn_;
   std::string location_;
   std::unordered_map<std::string, std::string> prepared_;  // SQL text -> statement name
+  bool txn_ = false;
 };
 
 // BEGIN ... COMMIT; the destructor rolls back a transaction that was begun and not committed.

@@ -392,6 +392,30 @@ TEST_P(PgLabTest, RecoverAfterCrashTouchesOnlyItsOwnHostsRuns) {
   EXPECT_EQ(store().GetRun(b.id)->status, RunStatus::kRunning);
 }
 
+TEST_P(PgLabTest, AConnectionTheServerDroppedIsRemadeOnTheNextCall) {
+  Submit(store(), {MakeRun("a")});
+  ASSERT_TRUE(store().CountQueued("").ok());  // the store's connection is up
+  auto admin = pg::Connection::Open(location());
+  ASSERT_TRUE(admin.ok());
+  // As a restarted or failed-over database server does: every other session on the database ends.
+  auto killed = (*admin)->QueryInt(
+      "SELECT count(*) FROM (SELECT pid FROM pg_stat_activity WHERE datname = current_database() AND "
+      "pid <> pg_backend_pid() OFFSET 0) AS others WHERE pg_terminate_backend(pid, 5000)");  // OFFSET 0: filter first
+  ASSERT_TRUE(killed.ok()) << killed.status().ToString();
+  ASSERT_GE(*killed, 1);
+  // The call that finds the connection gone says so (Unavailable); the next one reconnects.
+  auto first = store().CountQueued("");
+  if (!first.ok()) {
+    EXPECT_EQ(first.status().code(), StatusCode::kUnavailable) << first.status().ToString();
+  }
+  auto second = store().CountQueued("");
+  ASSERT_TRUE(second.ok()) << second.status().ToString();
+  EXPECT_EQ(*second, 1);
+  // Transactions work again too: a claim, and a write under its lease.
+  RunRecord r = ClaimOrDie(store(), HostClaim("h", 10));
+  EXPECT_TRUE(store().SetProgress(LeaseOf(r), 0.5).ok());
+}
+
 // ---- The schema machinery on PostgreSQL ----
 
 TEST_P(PgLabTest, SchemaIsAtTheCurrentVersionAndReopeningKeepsIt) {
