@@ -416,6 +416,34 @@ TEST_P(PgLabTest, AConnectionTheServerDroppedIsRemadeOnTheNextCall) {
   EXPECT_TRUE(store().SetProgress(LeaseOf(r), 0.5).ok());
 }
 
+TEST_P(PgLabTest, HostsSavingABaselineUnderOneNameAtOnceGetSuccessiveVersions) {
+  constexpr int kHosts = 4;
+  std::vector<std::int32_t> versions(kHosts, 0);
+  std::vector<std::string> errors(kHosts);
+  std::vector<std::thread> threads;
+  for (int t = 0; t < kHosts; ++t) {
+    threads.emplace_back([&, t] {
+      auto s = OpenStore(location());
+      if (!s.ok()) {
+        errors[static_cast<std::size_t>(t)] = s.status().ToString();
+        return;
+      }
+      auto v = (*s)->SaveBaseline("main", Cat("host ", t), "", {{"case", "rmse_A", 1.0 + t, 0.0, 1}});
+      if (v.ok())
+        versions[static_cast<std::size_t>(t)] = *v;
+      else
+        errors[static_cast<std::size_t>(t)] = v.status().ToString();
+    });
+  }
+  for (auto& th : threads) th.join();
+  for (const std::string& e : errors) EXPECT_EQ(e, "");
+  std::sort(versions.begin(), versions.end());
+  EXPECT_EQ(versions, (std::vector<std::int32_t>{1, 2, 3, 4}));
+  auto listed = store().ListBaselines();
+  ASSERT_TRUE(listed.ok());
+  EXPECT_EQ(listed->size(), static_cast<std::size_t>(kHosts));
+}
+
 // ---- The schema machinery on PostgreSQL ----
 
 TEST_P(PgLabTest, SchemaIsAtTheCurrentVersionAndReopeningKeepsIt) {
