@@ -12,6 +12,7 @@
 
 #include "benchctl/hw_commands.h"
 #include "benchctl/local_run.h"
+#include "db/open_store.h"
 #include "db/store.h"
 #include "proto/api_convert.h"
 #include "runs/query.h"
@@ -226,11 +227,12 @@ class Local final : public Backend {
   // (what this invocation ran can still be compared; nothing is kept).
   StatusOr<db::Store*> Open() {
     if (store_ == nullptr) {
-      if (const auto parent = std::filesystem::path(path_).parent_path(); !path_.empty() && !parent.empty()) {
+      if (const auto parent = std::filesystem::path(path_).parent_path();
+          !path_.empty() && !parent.empty() && !db::IsPostgresLocation(path_)) {
         std::error_code ec;  // a first run on a fresh machine: ~/.local/share/valvebench/ may not exist yet
         std::filesystem::create_directories(parent, ec);
       }
-      auto s = db::Store::Open(path_.empty() ? ":memory:" : path_);
+      auto s = db::OpenStore(path_.empty() ? ":memory:" : path_);
       if (!s.ok()) return s.status().WithContext(StoreName());
       store_ = std::move(s.value());
     }
@@ -242,7 +244,9 @@ class Local final : public Backend {
     return recs;
   }
 
-  std::string StoreName() const { return path_.empty() ? "in-memory store (--no-store)" : "local store " + path_; }
+  std::string StoreName() const {
+    return path_.empty() ? "in-memory store (--no-store)" : "local store " + db::DisplayLocation(path_);
+  }
 
   std::string path_;
   std::unique_ptr<db::Store> store_;

@@ -12,6 +12,7 @@
 #include <filesystem>
 #include <map>
 
+#include "db/open_store.h"
 #include "db/store.h"
 #include "runs/admit.h"
 #include "runs/worker.h"
@@ -52,7 +53,7 @@ class StoreRelay {
  public:
   StoreRelay(const std::string& path, runs::Registry* registry, const runs::Worker* worker)
       : registry_(registry), worker_(worker) {
-    auto s = db::Store::Open(path);
+    auto s = db::OpenStore(path);
     if (!s.ok()) return;  // nobody else can watch then; the runs themselves are unaffected
     store_ = std::move(s.value());
     thread_ = std::thread([this] { Loop(); });
@@ -106,17 +107,17 @@ StatusOr<std::vector<LocalRunResult>> RunLocal(LocalSubmission sub, db::Store* g
   if (!admitted.ok()) return admitted.status();
 
   const bool stored = !sub.store_path.empty();
-  const std::string where = stored ? "local store " + sub.store_path : "in-memory store";
+  const std::string where = stored ? "local store " + db::DisplayLocation(sub.store_path) : "in-memory store";
   std::unique_ptr<db::Store> opened;
   db::Store* store = given;
   if (store == nullptr) {
-    if (stored) {
+    if (stored && !db::IsPostgresLocation(sub.store_path)) {
       if (const auto parent = std::filesystem::path(sub.store_path).parent_path(); !parent.empty()) {
         std::error_code ec;
         std::filesystem::create_directories(parent, ec);
       }
     }
-    auto s = db::Store::Open(stored ? sub.store_path : ":memory:");
+    auto s = db::OpenStore(stored ? sub.store_path : ":memory:");
     if (!s.ok()) return s.status().WithContext(where);
     opened = std::move(s.value());
     store = opened.get();

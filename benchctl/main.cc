@@ -17,6 +17,7 @@
 #include "benchctl/hw_commands.h"
 #include "benchctl/local_commands.h"
 #include "benchctl/local_run.h"
+#include "benchctl/db_commands.h"
 #include "benchctl/prune_command.h"
 #include "benchctl/regress_commands.h"
 #include "benchctl/report_commands.h"
@@ -59,8 +60,8 @@ int main(int argc, char** argv) {
   std::string store_path = vb::benchctl::DefaultLocalStorePath();
   bool no_store = false;
   auto local_store = [&](CLI::App* sub) {
-    sub->add_option("--db", store_path, "local store (SQLite) for --local runs (default $VALVEBENCH_DB or "
-                                        "~/.local/share/valvebench/local.db)");
+    sub->add_option("--db", store_path, "local store for --local runs: a SQLite file or postgresql://... "
+                                        "(default $VALVEBENCH_DB or ~/.local/share/valvebench/local.db)");
     sub->add_flag("--no-store", no_store, "local: do not record the runs");
   };
   vb::experiment::TableOptions table;  // comparison tables: --metrics, --wide (docs/comparison.md)
@@ -140,6 +141,7 @@ int main(int argc, char** argv) {
   // diagnose, identify, convert, import (benchctl/gap_commands.cc).
   vb::benchctl::GapCli gap_cli(&app, {&json, &server, &token, &tls_ca_file, &store_path});
   vb::benchctl::PruneCli prune_cli(&app, {&json, &server, &token, &tls_ca_file, &store_path});  // prune_command.cc
+  vb::benchctl::DbCli db_cli(&app, &json, &store_path);  // db info, db copy (db_commands.cc)
 
   try {
     app.parse(argc, argv);
@@ -174,6 +176,7 @@ int main(int argc, char** argv) {
   // One decision per invocation: the server if one is given and --local is not, else the local store.
   auto backend = [&]() { return vb::benchctl::ChooseBackend(local ? "" : server, store_path, make_client); };
   if (prune_cli.parsed()) return prune_cli.Run();
+  if (db_cli.parsed()) return db_cli.Run();
   if (run->parsed()) {
     if (!local && server.empty())
       return Fail(Status::FailedPrecondition(

@@ -15,6 +15,7 @@
 
 #include "benchctl/cli_common.h"
 #include "client/client.h"
+#include "db/open_store.h"
 #include "db/store.h"
 #include "proto/api_convert.h"
 #include "valvebench/v1/api.grpc.pb.h"
@@ -51,10 +52,10 @@ struct Outcome {
 StatusOr<Outcome> PruneLocal(const std::string& path, double age_s, std::int32_t keep_last, bool dry_run) {
   if (path.empty()) return Status::InvalidArgument("--no-store: prune needs the local store (--db FILE)");
   // Pruning a store that is not there would create an empty one: say so instead.
-  if (access(path.c_str(), F_OK) != 0)
+  if (!db::IsPostgresLocation(path) && access(path.c_str(), F_OK) != 0)
     return Status::FailedPrecondition("no local store at " + path + " (--db FILE or VALVEBENCH_DB)");
-  auto store = db::Store::Open(path);
-  if (!store.ok()) return store.status().WithContext("local store " + path);
+  auto store = db::OpenStore(path);
+  if (!store.ok()) return store.status().WithContext("local store " + db::DisplayLocation(path));
   db::PruneRequest req;
   req.finished_before_unix_s = NowUnixS() - age_s;
   req.keep_last = keep_last;
@@ -197,7 +198,7 @@ int PruneCli::Run() {
   auto out = local ? PruneLocal(*shared_.store_path, *age, keep_last_, dry_run_)
                    : PruneRemote(shared_, *age, keep_last_, dry_run_);
   if (!out.ok()) return Fail(out.status());
-  Print(*out, local ? "local store " + *shared_.store_path : "server " + *shared_.server, *shared_.json);
+  Print(*out, local ? "local store " + db::DisplayLocation(*shared_.store_path) : "server " + *shared_.server, *shared_.json);
   return kExitOk;
 }
 

@@ -12,6 +12,7 @@
 #include "benchctl/backend.h"
 #include "benchctl/cli_common.h"
 #include "proto/api_convert.h"
+#include "db/open_store.h"
 #include "db/store.h"
 #include "experiment/spec.h"
 #include "regress/compare.h"
@@ -29,12 +30,12 @@ std::string Where(const std::string& server) { return server.empty() ? "local" :
 StatusOr<std::unique_ptr<db::Store>> OpenStore(const std::string& path) {
   if (path.empty())
     return Status::InvalidArgument("--no-store: baselines and regression results need the local store (--db FILE)");
-  if (const auto parent = std::filesystem::path(path).parent_path(); !parent.empty()) {
+  if (const auto parent = std::filesystem::path(path).parent_path(); !parent.empty() && !db::IsPostgresLocation(path)) {
     std::error_code ec;
     std::filesystem::create_directories(parent, ec);
   }
-  auto s = db::Store::Open(path);
-  if (!s.ok()) return s.status().WithContext("local store " + path);
+  auto s = db::OpenStore(path);
+  if (!s.ok()) return s.status().WithContext("local store " + db::DisplayLocation(path));
   return s;
 }
 

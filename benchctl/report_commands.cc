@@ -9,6 +9,7 @@
 
 #include "benchctl/backend.h"
 #include "benchctl/cli_common.h"
+#include "db/open_store.h"
 #include "db/store.h"
 #include "experiment/compare.h"
 #include "experiment/metrics.h"
@@ -76,7 +77,7 @@ int ReportCli::Run(const ClientFactory& make_client) {
     sections = report::DiagnosisSections(*j);
   } else if (regress_ != 0) {
     if (store_path.empty()) return Fail(Status::InvalidArgument("--regress needs the local store (--db)"));
-    auto store = db::Store::Open(store_path);
+    auto store = db::OpenStore(store_path);
     if (!store.ok()) return Fail(store.status().WithContext("local store " + store_path));
     auto rec = (*store)->GetRegression(regress_);
     if (!rec.ok()) return Fail(rec.status());

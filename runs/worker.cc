@@ -4,6 +4,8 @@
 
 #include <spdlog/spdlog.h>
 
+#include "db/open_store.h"
+
 namespace vb::runs {
 
 Worker::Worker(BenchSetup setup, Registry* registry) : setup_(std::move(setup)), registry_(registry) {}
@@ -38,7 +40,7 @@ void Worker::Stop() {
 }
 
 void Worker::Loop(const std::string& db_path) {
-  auto store = db::Store::Open(db_path);
+  auto store = db::OpenStore(db_path);
   if (!store.ok()) {
     spdlog::error("bench {}: cannot open the store: {}", setup_.name.c_str(),
                  store.status().message().c_str());

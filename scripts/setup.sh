@@ -20,6 +20,8 @@ packages=(
   libsqlite3-dev sqlite3 libcli11-dev nlohmann-json3-dev openssl
   # compressed trace chunks (docs/store.md, "Trace encoding")
   libzstd-dev
+  # the PostgreSQL store for a lab of hosts (libpq), and the server its tests start (docs/store.md, "PostgreSQL")
+  libpq-dev postgresql
   # text formatting ({fmt}) and the server's log (spdlog)
   libfmt-dev libspdlog-dev
   # tests and benchmarks

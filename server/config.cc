@@ -15,6 +15,7 @@
 #include "regress/compare.h"
 #include "regress/cron.h"
 #include "regress/suite.h"
+#include "db/open_store.h"
 
 namespace vb::server {
 
@@ -190,7 +191,10 @@ runs::Policy Settings::AdmitPolicy() const {
 StatusOr<Settings> SettingsFromConfig(const valvebench::v1::ServerConfig& c, const std::string& base_dir) {
   Settings s;
   if (!c.listen_address().empty()) s.listen_address = c.listen_address();
-  s.database_path = Resolve(base_dir, c.database_path().empty() ? "valvebench.db" : c.database_path());
+  // A PostgreSQL connection string is taken as it is; a file path is relative to the config (docs/store.md).
+  s.database_path = db::IsPostgresLocation(c.database_path())
+                        ? c.database_path()
+                        : Resolve(base_dir, c.database_path().empty() ? "valvebench.db" : c.database_path());
   if (c.benches_size() == 0) return Status::InvalidArgument("benches: at least one bench must be configured");
   std::set<std::string> names;
   for (int k = 0; k < c.benches_size(); ++k) {

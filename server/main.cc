@@ -25,6 +25,7 @@
 #include "server/retention.h"
 #include "server/service.h"
 #include "server/status_interceptor.h"
+#include "db/open_store.h"
 
 int main(int argc, char** argv) {
   CLI::App app{"valvebench-server: the bench server"};
@@ -60,9 +61,9 @@ int main(int argc, char** argv) {
     spdlog::error("--run-night-now: the config has no \"nights\" block");
     return 2;
   }
-  auto store = vb::db::Store::Open(settings->database_path);
+  auto store = vb::db::OpenStore(settings->database_path);
   if (!store.ok()) {
-    spdlog::error("{}: {}", settings->database_path.c_str(),
+    spdlog::error("{}: {}", vb::db::DisplayLocation(settings->database_path).c_str(),
                  store.status().message().c_str());
     return 3;
   }
@@ -127,7 +128,7 @@ int main(int argc, char** argv) {
     bound = bound.substr(0, colon + 1) + std::to_string(port);
   spdlog::info("listening on {} ({}), {} bench(es), database {}", bound.c_str(),
                settings->tls_cert_pem.empty() ? "insecure" : "TLS", workers.size(),
-               settings->database_path.c_str());
+               vb::db::DisplayLocation(settings->database_path).c_str());
   if (nights) spdlog::info("nights: '{}' (UTC), suite {}",
                            settings->nights.cron.c_str(), settings->nights.suite_path.c_str());
 

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <thread>
 
+#include "db/open_store.h"
 #include "experiment/compare.h"
 #include "experiment/spec.h"
 #include "hw/usb/list_attached.h"
@@ -33,7 +34,7 @@ StatusOr<StorePool::Handle> StorePool::Acquire() {
       return Handle(this, std::move(s));
     }
   }
-  auto s = db::Store::Open(path_);
+  auto s = db::OpenStore(path_);  // a SQLite file or PostgreSQL
   if (!s.ok()) return s.status();
   return Handle(this, std::move(s.value()));
 }

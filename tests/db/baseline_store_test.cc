@@ -11,22 +11,21 @@
 #include "db/sqlite_conn.h"
 #include "db/store.h"
 #include "db/text.h"
+#include "tests/db/store_engines.h"
 
 namespace vb::db {
 namespace {
 
-std::unique_ptr<Store> OpenMem() {
-  auto s = Store::Open(":memory:");
-  EXPECT_TRUE(s.ok()) << s.status().ToString();
-  return s.ok() ? std::move(s.value()) : nullptr;
-}
+// On both engines (tests/db/store_engines.h), except AVersion1FileMigratesKeepingItsData (SQLite's migrations).
+class BaselineStoreTest : public testing::StoreEngineTest {};
+INSTANTIATE_TEST_SUITE_P(Engines, BaselineStoreTest, ::testing::ValuesIn(testing::StoreEngines()), testing::EngineName);
 
 std::vector<BaselineEntry> Entries(double rmse) {
   return {{"pi", "rmse", rmse, 1e-5, 3}, {"pi", "effort_l2", 3.67, 0.01, 3}, {"fuzzy", "rmse", 5e-4, 0.0, 1}};
 }
 
-TEST(BaselineStoreTest, SavingUnderAnExistingNameAddsAVersionAndKeepsTheOld) {
-  auto store = OpenMem();
+TEST_P(BaselineStoreTest, SavingUnderAnExistingNameAddsAVersionAndKeepsTheOld) {
+  Store* store = &this->store();
   ASSERT_NE(store, nullptr);
   auto v1 = store->SaveBaseline("main", "local batch 1", "first", Entries(1e-3));
   ASSERT_TRUE(v1.ok()) << v1.status().ToString();
@@ -62,8 +61,8 @@ TEST(BaselineStoreTest, SavingUnderAnExistingNameAddsAVersionAndKeepsTheOld) {
   EXPECT_TRUE((*list)[0].entries.empty());
 }
 
-TEST(BaselineStoreTest, UnknownNamesAndVersionsAreNotFound) {
-  auto store = OpenMem();
+TEST_P(BaselineStoreTest, UnknownNamesAndVersionsAreNotFound) {
+  Store* store = &this->store();
   ASSERT_NE(store, nullptr);
   auto none = store->GetBaseline("nope", 0);
   ASSERT_FALSE(none.ok());
@@ -76,8 +75,8 @@ TEST(BaselineStoreTest, UnknownNamesAndVersionsAreNotFound) {
   EXPECT_NE(v9.status().message().find("no version 9"), std::string::npos) << v9.status().message();
 }
 
-TEST(BaselineStoreTest, BadEntriesNameTheFieldAndStoreNothing) {
-  auto store = OpenMem();
+TEST_P(BaselineStoreTest, BadEntriesNameTheFieldAndStoreNothing) {
+  Store* store = &this->store();
   ASSERT_NE(store, nullptr);
   ASSERT_TRUE(store->SaveBaseline("main", "", "", Entries(1.0)).ok());
   struct Case {
@@ -106,8 +105,8 @@ TEST(BaselineStoreTest, BadEntriesNameTheFieldAndStoreNothing) {
   EXPECT_EQ((*list)[0].version, 1);
 }
 
-TEST(BaselineStoreTest, RegressionsRoundTripAndNightsFilter) {
-  auto store = OpenMem();
+TEST_P(BaselineStoreTest, RegressionsRoundTripAndNightsFilter) {
+  Store* store = &this->store();
   ASSERT_NE(store, nullptr);
   RegressionRecord a{0, "ci", "main", 1, 4, "", 0, "passed", R"({"x":1})"};
   RegressionRecord b{0, "nightly", "main", 2, 5, "2026-11-20", 0, "regressed", R"({"y":2})"};
@@ -140,7 +139,7 @@ TEST(BaselineStoreTest, RegressionsRoundTripAndNightsFilter) {
   EXPECT_NE(refused.status().message().find("regression.suite"), std::string::npos);
 }
 
-TEST(BaselineStoreTest, AVersion1FileMigratesKeepingItsData) {
+TEST(BaselineSchemaTest, AVersion1FileMigratesKeepingItsData) {
   const std::string path = Cat(::testing::TempDir(), "vb_baseline_v1_", getpid(), ".db");
   std::remove(path.c_str());
   {

@@ -24,10 +24,12 @@
 #include <thread>
 
 #include "db/checkpointer.h"
+#include "db/open_store.h"
 #include "db/schema.h"
 #include "db/store.h"
 #include "db/testing.h"
 #include "db/text.h"
+#include "tests/db/store_engines.h"
 
 namespace vb::db {
 namespace {
@@ -156,6 +158,29 @@ TraceChunk MakeChunk(std::int32_t index, std::int32_t samples, const std::vector
   return c;
 }
 
+// ---- tests on both engines (tests/db/store_engines.h) ----
+// Everything below through the traces runs on SQLite and on PostgreSQL, except the suites marked SQLite-only:
+// StoreSchemaTest (user_version, WAL, the file's bytes; PostgreSQL's schema machinery: pg_lab_test.cc),
+// StoreCrashTest (a writer process killed mid-write: WAL recovery of the file) and CheckpointerTest.
+class StoreRunKeyTest : public testing::StoreEngineTest {};
+class StoreSubmitTest : public testing::StoreEngineTest {};
+class StoreAtomicityTest : public testing::StoreEngineTest {};
+class StoreQueueTest : public testing::StoreEngineTest {};
+class StoreRunTest : public testing::StoreEngineTest {};
+class StoreRecoveryTest : public testing::StoreEngineTest {};
+class StoreConnectionsTest : public testing::StoreEngineTest {};
+class StoreTraceTest : public testing::StoreEngineTest {};
+#define VB_ENGINES(suite) \
+  INSTANTIATE_TEST_SUITE_P(Engines, suite, ::testing::ValuesIn(testing::StoreEngines()), testing::EngineName)
+VB_ENGINES(StoreRunKeyTest);
+VB_ENGINES(StoreSubmitTest);
+VB_ENGINES(StoreAtomicityTest);
+VB_ENGINES(StoreQueueTest);
+VB_ENGINES(StoreRunTest);
+VB_ENGINES(StoreRecoveryTest);
+VB_ENGINES(StoreConnectionsTest);
+VB_ENGINES(StoreTraceTest);
+
 // ---- status names ----
 
 TEST(RunStatusTest, NamesRoundTrip) {
@@ -242,8 +267,8 @@ TEST(StoreSchemaTest, MigrationsApplyInOrderAndKeepData) {
   EXPECT_EQ(*again, next);
 }
 
-TEST(StoreRunKeyTest, KeySplitAndStartTimeAreStoredAsFields) {
-  auto store = OpenOrDie(":memory:");
+TEST_P(StoreRunKeyTest, KeySplitAndStartTimeAreStoredAsFields) {
+  Store* store = &this->store();
   ASSERT_NE(store, nullptr);
   RunRecord swept = MakeRun("m/pi");
   swept.key.sweep = {{"conditions.supply_V", 24.0}, {"bench.model.params[R]", 3.0000000001}};
@@ -409,8 +434,8 @@ TEST(StoreSchemaTest, UnopenablePathIsUnavailable) {
 
 // ---- submission ----
 
-TEST(StoreSubmitTest, StoresEveryFieldAndAQueuedHistoryRow) {
-  auto store = OpenOrDie(":memory:");
+TEST_P(StoreSubmitTest, StoresEveryFieldAndAQueuedHistoryRow) {
+  Store* store = &this->store();
   RunRecord r = MakeRun("sweep/duty=0.3/rep=1", 7, "emulated", "bench-a", {"nightly", "duty=0.3"});
   r.requeue_on_interrupt = false;
   r.spec_json = "{ \"exact\":  [1, 2.50, \"verbatim\"] }\n";
@@ -442,8 +467,8 @@ TEST(StoreSubmitTest, StoresEveryFieldAndAQueuedHistoryRow) {
   EXPECT_EQ((*h)[0].at_unix_s, got->submitted_unix_s);
 }
 
-TEST(StoreSubmitTest, BadInputNamesTheFieldAndStoresNothing) {
-  auto store = OpenOrDie(":memory:");
+TEST_P(StoreSubmitTest, BadInputNamesTheFieldAndStoresNothing) {
+  Store* store = &this->store();
   struct Case {
     std::string submitter;
     std::vector<RunRecord> runs;
@@ -479,14 +504,21 @@ TEST(StoreSubmitTest, BadInputNamesTheFieldAndStoresNothing) {
 }
 
 // Fault injection: a trigger makes SQLite fail half-way through a transaction; nothing of it may remain.
-TEST(StoreAtomicityTest, AFailureHalfWayRollsTheWholeMethodBack) {
-  const std::string path = TempDb("atomic");
-  auto store = OpenOrDie(path);
+TEST_P(StoreAtomicityTest, AFailureHalfWayRollsTheWholeMethodBack) {
+  Store* store = &this->store();
   auto first = Submit(*store, {MakeRun("before")});
   ASSERT_EQ(ClaimId(*store), first[0]);
-  {
-    RawDb raw(path);
-    raw.Exec("CREATE TRIGGER boom_run BEFORE INSERT ON runs WHEN NEW.name = 'boom' "
+  if (postgres()) {
+    RawExec("CREATE FUNCTION boom() RETURNS trigger LANGUAGE plpgsql AS $$ BEGIN RAISE EXCEPTION 'injected fault'; "
+            "END $$;"
+            "CREATE TRIGGER boom_run BEFORE INSERT ON runs FOR EACH ROW WHEN (NEW.name = 'boom') "
+            "EXECUTE FUNCTION boom();"
+            "CREATE TRIGGER boom_metric BEFORE INSERT ON metrics FOR EACH ROW WHEN (NEW.name = 'boom') "
+            "EXECUTE FUNCTION boom();"
+            "CREATE TRIGGER boom_chunk BEFORE INSERT ON trace_chunks FOR EACH ROW WHEN (NEW.idx = 1) "
+            "EXECUTE FUNCTION boom();");
+  } else {
+    RawExec("CREATE TRIGGER boom_run BEFORE INSERT ON runs WHEN NEW.name = 'boom' "
              "BEGIN SELECT RAISE(ABORT, 'injected fault'); END;"
              "CREATE TRIGGER boom_metric BEFORE INSERT ON metrics WHEN NEW.name = 'boom' "
              "BEGIN SELECT RAISE(ABORT, 'injected fault'); END;"
@@ -507,21 +539,20 @@ TEST(StoreAtomicityTest, AFailureHalfWayRollsTheWholeMethodBack) {
   ASSERT_TRUE(store->AppendTraceChunk(vb::db::testing::CurrentLease(store, first[0]), MakeChunk(0, 10, {"i_A"}, 1)).ok());
   EXPECT_FALSE(store->AppendTraceChunk(vb::db::testing::CurrentLease(store, first[0]), MakeChunk(1, 10, {"i_A"}, 2)).ok());
 
-  RawDb raw(path);
-  EXPECT_EQ(raw.Int("SELECT count(*) FROM batches"), 1);
-  EXPECT_EQ(raw.Int("SELECT count(*) FROM runs"), 1);
-  EXPECT_EQ(raw.Int("SELECT count(*) FROM run_tags"), 0);
-  EXPECT_EQ(raw.Int("SELECT count(*) FROM status_history"), 2);  // queued + running of the first run
-  EXPECT_EQ(raw.Int("SELECT count(*) FROM metrics"), 0);
-  EXPECT_EQ(raw.Int("SELECT count(*) FROM trace_chunks"), 1);
+  EXPECT_EQ(RawInt("SELECT count(*) FROM batches"), 1);
+  EXPECT_EQ(RawInt("SELECT count(*) FROM runs"), 1);
+  EXPECT_EQ(RawInt("SELECT count(*) FROM run_tags"), 0);
+  EXPECT_EQ(RawInt("SELECT count(*) FROM status_history"), 2);  // queued + running of the first run
+  EXPECT_EQ(RawInt("SELECT count(*) FROM metrics"), 0);
+  EXPECT_EQ(RawInt("SELECT count(*) FROM trace_chunks"), 1);
   EXPECT_EQ(store->GetRun(first[0])->status, RunStatus::kRunning);
   // And the Store is still usable: no transaction was left open.
   EXPECT_TRUE(store->Finish(vb::db::testing::CurrentLease(store, first[0]), RunStatus::kDone, "", {{"rmse_A", 1}}).ok());
   EXPECT_EQ(Submit(*store, {MakeRun("after")}).size(), 1u);
 }
 
-TEST(StoreSubmitTest, UnknownRunIsNotFoundEverywhere) {
-  auto store = OpenOrDie(":memory:");
+TEST_P(StoreSubmitTest, UnknownRunIsNotFoundEverywhere) {
+  Store* store = &this->store();
   auto run = store->GetRun(42);
   ASSERT_FALSE(run.ok());
   EXPECT_EQ(run.status().code(), StatusCode::kNotFound);
@@ -538,8 +569,8 @@ TEST(StoreSubmitTest, UnknownRunIsNotFoundEverywhere) {
 
 // ---- the queue ----
 
-TEST(StoreQueueTest, ClaimsByPriorityThenAge) {
-  auto store = OpenOrDie(":memory:");
+TEST_P(StoreQueueTest, ClaimsByPriorityThenAge) {
+  Store* store = &this->store();
   auto first = Submit(*store, {MakeRun("p0-a", 0), MakeRun("p5-a", 5), MakeRun("p0-b", 0)});
   auto second = Submit(*store, {MakeRun("p5-b", 5), MakeRun("p10", 10), MakeRun("p-3", -3)}, "bob");
   const std::vector<std::int64_t> expected = {second[1], first[1], second[0], first[0], first[2], second[2]};
@@ -559,8 +590,8 @@ TEST(StoreQueueTest, ClaimsByPriorityThenAge) {
   EXPECT_FALSE(none->has_value());
 }
 
-TEST(StoreQueueTest, ClaimMatchesBenchKindAndName) {
-  auto store = OpenOrDie(":memory:");
+TEST_P(StoreQueueTest, ClaimMatchesBenchKindAndName) {
+  Store* store = &this->store();
   auto ids = Submit(*store, {MakeRun("emu-any", 0, "emulated", ""), MakeRun("usb-any", 0, "usb", ""),
                              MakeRun("any-kind", 0, "", ""), MakeRun("emu-on-b", 9, "emulated", "bench-b")});
   // bench-a (emulated) cannot take the run that asked for bench-b, even though it has the top priority.
@@ -581,13 +612,11 @@ TEST(StoreQueueTest, ClaimMatchesBenchKindAndName) {
   EXPECT_NE(bad.status().message().find("bench_name"), std::string::npos);
 }
 
-TEST(StoreQueueTest, TwoConnectionsInTwoThreadsClaimEveryRunExactlyOnce) {
-  const std::string path = TempDb("concurrent");
+TEST_P(StoreQueueTest, TwoConnectionsInTwoThreadsClaimEveryRunExactlyOnce) {
   constexpr int kThreads = 2;
   constexpr int kRunsPerThread = 200;
   {
-    auto store = OpenOrDie(path);
-    ASSERT_NE(store, nullptr);
+    Store* store = &this->store();
     std::vector<RunRecord> runs;
     for (int k = 0; k < kThreads * kRunsPerThread; ++k) runs.push_back(MakeRun(Cat("r", k), k % 3));
     ASSERT_EQ(Submit(*store, std::move(runs)).size(), static_cast<std::size_t>(kThreads * kRunsPerThread));
@@ -598,7 +627,7 @@ TEST(StoreQueueTest, TwoConnectionsInTwoThreadsClaimEveryRunExactlyOnce) {
   std::vector<std::thread> threads;
   for (int t = 0; t < kThreads; ++t) {
     threads.emplace_back([&, t] {
-      auto opened = Store::Open(path);  // one Store (connection) per thread
+      auto opened = OpenStore(location());  // one Store (connection) per thread
       if (!opened.ok()) {
         errors[t] = opened.status().ToString();
         return;
@@ -631,21 +660,20 @@ TEST(StoreQueueTest, TwoConnectionsInTwoThreadsClaimEveryRunExactlyOnce) {
   std::set<std::int64_t> unique(all.begin(), all.end());
   EXPECT_EQ(all.size(), static_cast<std::size_t>(kThreads * kRunsPerThread));
   EXPECT_EQ(unique.size(), all.size()) << "some run was claimed twice";
-  RawDb raw(path);
-  EXPECT_EQ(raw.Int("SELECT count(*) FROM runs WHERE status = 'done'"), kThreads * kRunsPerThread);
-  EXPECT_EQ(raw.Int("SELECT count(*) FROM status_history WHERE status = 'running'"), kThreads * kRunsPerThread);
-  EXPECT_EQ(raw.Int("SELECT max(n) FROM (SELECT count(*) AS n FROM status_history WHERE status = 'running' "
-                    "GROUP BY run_id)"),
+  EXPECT_EQ(RawInt("SELECT count(*) FROM runs WHERE status = 'done'"), kThreads * kRunsPerThread);
+  EXPECT_EQ(RawInt("SELECT count(*) FROM status_history WHERE status = 'running'"), kThreads * kRunsPerThread);
+  EXPECT_EQ(RawInt("SELECT max(n) FROM (SELECT count(*) AS n FROM status_history WHERE status = 'running' "
+                   "GROUP BY run_id) AS per_run"),
             1);
   // Each thread finished exactly the runs it claimed.
   for (int t = 0; t < kThreads; ++t) {
-    EXPECT_EQ(raw.Int(Cat("SELECT count(*) FROM runs WHERE bench_name = 'bench-", t, "'")),
+    EXPECT_EQ(RawInt(Cat("SELECT count(*) FROM runs WHERE bench_name = 'bench-", t, "'")),
               static_cast<std::int64_t>(claimed[t].size()));
   }
 }
 
-TEST(StoreQueueTest, CountQueuedPerSubmitter) {
-  auto store = OpenOrDie(":memory:");
+TEST_P(StoreQueueTest, CountQueuedPerSubmitter) {
+  Store* store = &this->store();
   Submit(*store, {MakeRun("a"), MakeRun("b")}, "alice");
   Submit(*store, {MakeRun("c")}, "bob");
   ClaimId(*store);  // takes one of alice's
@@ -657,8 +685,8 @@ TEST(StoreQueueTest, CountQueuedPerSubmitter) {
 
 // ---- progress, finish, cancel, history ----
 
-TEST(StoreRunTest, FinishWithMetricsAndHistory) {
-  auto store = OpenOrDie(":memory:");
+TEST_P(StoreRunTest, FinishWithMetricsAndHistory) {
+  Store* store = &this->store();
   auto ids = Submit(*store, {MakeRun("a")});
   ASSERT_EQ(ClaimId(*store), ids[0]);
   ASSERT_TRUE(store->SetProgress(vb::db::testing::CurrentLease(store, ids[0]), 0.25).ok());
@@ -717,16 +745,16 @@ TEST(StoreRunTest, FinishWithMetricsAndHistory) {
   EXPECT_EQ(store->GetMetrics(ids[0])->size(), 4u);
 }
 
-TEST(StoreRunTest, FinishOfAQueuedRunIsAPreconditionFailure) {
-  auto store = OpenOrDie(":memory:");
+TEST_P(StoreRunTest, FinishOfAQueuedRunIsAPreconditionFailure) {
+  Store* store = &this->store();
   auto ids = Submit(*store, {MakeRun("a")});
   EXPECT_EQ(store->Finish(vb::db::testing::CurrentLease(store, ids[0]), RunStatus::kFailed, "no", {}).code(), StatusCode::kFailedPrecondition);
   EXPECT_EQ(store->SetProgress(vb::db::testing::CurrentLease(store, ids[0]), 0.5).code(), StatusCode::kFailedPrecondition);
   EXPECT_EQ(store->GetRun(ids[0])->status, RunStatus::kQueued);
 }
 
-TEST(StoreRunTest, FailedRunKeepsItsReason) {
-  auto store = OpenOrDie(":memory:");
+TEST_P(StoreRunTest, FailedRunKeepsItsReason) {
+  Store* store = &this->store();
   auto ids = Submit(*store, {MakeRun("a")});
   ClaimId(*store);
   ASSERT_TRUE(store->Finish(vb::db::testing::CurrentLease(store, ids[0]), RunStatus::kFailed, "safety trip: current_A > 3", {}).ok());
@@ -736,8 +764,8 @@ TEST(StoreRunTest, FailedRunKeepsItsReason) {
   EXPECT_EQ(store->History(ids[0])->back().reason, "safety trip: current_A > 3");
 }
 
-TEST(StoreRunTest, CancelQueuedAtOnceAndRunningOnRequest) {
-  auto store = OpenOrDie(":memory:");
+TEST_P(StoreRunTest, CancelQueuedAtOnceAndRunningOnRequest) {
+  Store* store = &this->store();
   auto ids = Submit(*store, {MakeRun("running", 1), MakeRun("queued", 0)});
   ASSERT_EQ(ClaimId(*store), ids[0]);
 
@@ -767,11 +795,10 @@ TEST(StoreRunTest, CancelQueuedAtOnceAndRunningOnRequest) {
 
 // ---- crash recovery ----
 
-TEST(StoreRecoveryTest, RecoverAfterCrashRequeuesOrInterrupts) {
-  const std::string path = TempDb("recover");
+TEST_P(StoreRecoveryTest, RecoverAfterCrashRequeuesOrInterrupts) {
   std::vector<std::int64_t> ids;
   {
-    auto store = OpenOrDie(path);
+    auto store = OpenAnother();
     RunRecord keep = MakeRun("requeue-me", 5, "emulated", "");
     RunRecord once = MakeRun("run-once", 4);
     once.requeue_on_interrupt = false;
@@ -786,7 +813,7 @@ TEST(StoreRecoveryTest, RecoverAfterCrashRequeuesOrInterrupts) {
     ASSERT_TRUE(store->Finish(vb::db::testing::CurrentLease(store, ids[3]), RunStatus::kDone, "", {}).ok());
     // The "server" dies here: the Store goes away without Finish for ids[0..2].
   }
-  auto store = OpenOrDie(path);
+  auto store = OpenAnother();
   auto n = store->RecoverAfterCrash("");
   ASSERT_TRUE(n.ok()) << n.status().ToString();
   EXPECT_EQ(*n, 3);
@@ -829,18 +856,17 @@ TEST(StoreRecoveryTest, RecoverAfterCrashRequeuesOrInterrupts) {
 }
 
 // A run that takes the server down at every attempt is re-queued twice, then failed with the reason.
-TEST(StoreRecoveryTest, APoisonRunIsFailedAtItsThirdInterruption) {
-  const std::string path = TempDb("poison");
+TEST_P(StoreRecoveryTest, APoisonRunIsFailedAtItsThirdInterruption) {
   std::int64_t id = 0;
   {
-    auto store = OpenOrDie(path);
+    auto store = OpenAnother();
     id = Submit(*store, {MakeRun("poison", 1)})[0];
   }
   for (int attempt = 1; attempt <= 3; ++attempt) {
-    auto store = OpenOrDie(path);
+    auto store = OpenAnother();
     ASSERT_EQ(ClaimId(*store, "emulated", "bench-x"), id) << attempt;
     // ... and the "server" dies while it runs.
-    auto reopened = OpenOrDie(path);
+    auto reopened = OpenAnother();
     ASSERT_EQ(*reopened->RecoverAfterCrash(""), 1);
     const auto run = reopened->GetRun(id);
     if (attempt < 3) {
@@ -1020,10 +1046,11 @@ TEST(CheckpointerTest, NoCheckpointerForInMemoryDatabases) {
 
 // ---- listing ----
 
-class StoreListTest : public ::testing::Test {
+class StoreListTest : public testing::StoreEngineTest {
  protected:
   void SetUp() override {
-    store_ = OpenOrDie(":memory:");
+    StoreEngineTest::SetUp();
+    if (IsSkipped() || HasFatalFailure()) return;
     RunRecord a1 = MakeRun("a1", 0, "emulated", "", {"nightly", "duty=0.3"});
     RunRecord a2 = MakeRun("a2", 0, "emulated", "", {"nightly"});
     a2.controller = "hysteresis";
@@ -1047,19 +1074,19 @@ class StoreListTest : public ::testing::Test {
     return out;
   }
 
-  std::unique_ptr<Store> store_;
   std::vector<std::int64_t> alice_, bob_;
   std::int64_t batch_a_ = 0, batch_b_ = 0;
   double bob_submitted_ = 0;
 };
+VB_ENGINES(StoreListTest);
 
-TEST_F(StoreListTest, NoFilterListsAllInIdOrder) {
+TEST_P(StoreListTest, NoFilterListsAllInIdOrder) {
   EXPECT_EQ(Ids({}), (std::vector<std::int64_t>{alice_[0], alice_[1], alice_[2], bob_[0], bob_[1]}));
   auto runs = store_->ListRuns({});
   EXPECT_EQ((*runs)[0].tags, (std::vector<std::string>{"nightly", "duty=0.3"}));
 }
 
-TEST_F(StoreListTest, Filters) {
+TEST_P(StoreListTest, Filters) {
   RunFilter f;
   f.status = RunStatus::kRunning;
   EXPECT_EQ(Ids(f), (std::vector<std::int64_t>{alice_[2]}));
@@ -1103,7 +1130,7 @@ TEST_F(StoreListTest, Filters) {
   EXPECT_TRUE(Ids(f).empty());
 }
 
-TEST_F(StoreListTest, Paging) {
+TEST_P(StoreListTest, Paging) {
   std::vector<std::int64_t> all;
   RunFilter f;
   f.limit = 2;
@@ -1127,7 +1154,7 @@ TEST_F(StoreListTest, Paging) {
   EXPECT_EQ(Ids(f), (std::vector<std::int64_t>{bob_[0]}));
 }
 
-TEST_F(StoreListTest, BadFilterNamesTheField) {
+TEST_P(StoreListTest, BadFilterNamesTheField) {
   RunFilter f;
   f.limit = 0;
   auto r = store_->ListRuns(f);
@@ -1144,10 +1171,9 @@ TEST_F(StoreListTest, BadFilterNamesTheField) {
   EXPECT_NE(store_->ListRuns(f).status().message().find("filter.submitted_before_unix_s"), std::string::npos);
 }
 
-TEST(StoreConnectionsTest, TwoStoresOnOneFileSeeEachOthersCommits) {
-  const std::string path = TempDb("two_stores");
-  auto writer = OpenOrDie(path);
-  auto reader = OpenOrDie(path);
+TEST_P(StoreConnectionsTest, TwoStoresOnOneDatabaseSeeEachOthersCommits) {
+  auto writer = OpenAnother();
+  auto reader = OpenAnother();
   auto ids = Submit(*writer, {MakeRun("a")});
   auto run = reader->GetRun(ids[0]);
   ASSERT_TRUE(run.ok());
@@ -1162,8 +1188,8 @@ bool BitEqual(const std::vector<double>& a, const std::vector<double>& b) {
   return a.size() == b.size() && (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(double)) == 0);
 }
 
-TEST(StoreTraceTest, RoundTripIsBitExact) {
-  auto store = OpenOrDie(":memory:");
+TEST_P(StoreTraceTest, RoundTripIsBitExact) {
+  Store* store = &this->store();
   auto ids = Submit(*store, {MakeRun("a")});
   ClaimId(*store);
   const std::vector<std::string> channels = {"t_s", "gate", "v_coil_V", "i_A", "x_m", "ref"};
@@ -1193,22 +1219,21 @@ TEST(StoreTraceTest, RoundTripIsBitExact) {
   }
 }
 
-TEST(StoreTraceTest, Codec0BlobIsLittleEndianChannelMajorFloat64) {
+TEST_P(StoreTraceTest, Codec0BlobIsLittleEndianChannelMajorFloat64) {
   // Chunks written before schema v4 hold raw float64 (codec 0): the store reads that layout, byte for byte.
-  const std::string path = TempDb("trace_layout");
   std::int64_t id = 0;
   {
-    auto store = OpenOrDie(path);
+    auto store = OpenAnother();
     id = Submit(*store, {MakeRun("a")})[0];
   }
   {
-    RawDb raw(path);
     // 1.0 = 0x3FF0000000000000, little-endian: 00 00 00 00 00 00 F0 3F. a: 1, 2; b: -1, 0.5
-    raw.Exec(Cat("INSERT INTO trace_chunks (run_id, idx, t0, period, samples, channels, data, codec) VALUES (", id,
-                 ", 0, 0.0, 0.001, 2, 'a' || char(10) || 'b', X'000000000000F03F0000000000000040000000000000F0BF"
-                 "000000000000E03F', 0)"));
+    const char* hex = "000000000000F03F0000000000000040000000000000F0BF000000000000E03F";
+    RawExec(Cat("INSERT INTO trace_chunks (run_id, idx, t0, period, samples, channels, data, codec) VALUES (", id,
+                ", 0, 0.0, 0.001, 2, 'a' || ", postgres() ? "chr(10)" : "char(10)", " || 'b', ",
+                postgres() ? Cat("decode('", hex, "', 'hex')") : Cat("X'", hex, "'"), ", 0)"));
   }
-  auto store = OpenOrDie(path);
+  auto store = OpenAnother();
   auto back = store->ReadTrace(id);
   ASSERT_TRUE(back.ok()) << back.status().ToString();
   ASSERT_EQ(back->size(), 1u);
@@ -1218,13 +1243,12 @@ TEST(StoreTraceTest, Codec0BlobIsLittleEndianChannelMajorFloat64) {
   TraceChunk c = (*back)[0];
   c.index = 1;
   ASSERT_TRUE(store->AppendTraceChunk(vb::db::testing::CurrentLease(store, id), c).ok());
-  RawDb raw(path);
-  EXPECT_EQ(raw.Int(Cat("SELECT codec FROM trace_chunks WHERE run_id = ", id, " AND idx = 1")), 1);
-  EXPECT_EQ(raw.Text("SELECT channels FROM trace_chunks WHERE idx = 1"), "a\nb");
+  EXPECT_EQ(RawInt(Cat("SELECT codec FROM trace_chunks WHERE run_id = ", id, " AND idx = 1")), 1);
+  EXPECT_EQ(RawText("SELECT channels FROM trace_chunks WHERE idx = 1"), "a\nb");
 }
 
-TEST(StoreTraceTest, BadChunksAreRejectedAndStoredOnesKept) {
-  auto store = OpenOrDie(":memory:");
+TEST_P(StoreTraceTest, BadChunksAreRejectedAndStoredOnesKept) {
+  Store* store = &this->store();
   auto ids = Submit(*store, {MakeRun("a")});
   const std::vector<std::string> ch = {"i_A", "x_m"};
   const TraceChunk first = MakeChunk(0, 10, ch, 1);
@@ -1287,8 +1311,8 @@ TEST(StoreTraceTest, BadChunksAreRejectedAndStoredOnesKept) {
   EXPECT_EQ(store->ReadTrace(ids[0])->size(), 2u);
 }
 
-TEST(StoreTraceTest, TracesOfDifferentRunsAreSeparate) {
-  auto store = OpenOrDie(":memory:");
+TEST_P(StoreTraceTest, TracesOfDifferentRunsAreSeparate) {
+  Store* store = &this->store();
   auto ids = Submit(*store, {MakeRun("a"), MakeRun("b")});
   ASSERT_TRUE(store->AppendTraceChunk(vb::db::testing::CurrentLease(store, ids[0]), MakeChunk(0, 5, {"a"}, 1)).ok());
   ASSERT_TRUE(store->AppendTraceChunk(vb::db::testing::CurrentLease(store, ids[1]), MakeChunk(0, 6, {"b"}, 2)).ok());
@@ -1305,8 +1329,8 @@ namespace vb::db {
 namespace {
 
 // The streaming read hands chunks over in order with the total length, and stops at the callback's error.
-TEST(StoreTraceTest, ForEachTraceChunkStreamsInOrderAndStopsOnError) {
-  auto store = OpenOrDie(":memory:");
+TEST_P(StoreTraceTest, ForEachTraceChunkStreamsInOrderAndStopsOnError) {
+  Store* store = &this->store();
   auto ids = Submit(*store, {MakeRun("a")});
   ASSERT_EQ(ClaimId(*store), ids[0]);
   for (int k = 0; k < 3; ++k) ASSERT_TRUE(store->AppendTraceChunk(vb::db::testing::CurrentLease(store, ids[0]), MakeChunk(k, 7, {"i_A", "x_m"}, k)).ok());

@@ -1,6 +1,8 @@
 // Compressed trace chunks (db/trace_codec.h, docs/store.md "Trace encoding"): bit-exact round trips of every
 // transform on values that must survive bit for bit, corrupt BLOBs refused as DataLoss, and the schema v4
 // migration: chunks stored raw by an older build stay readable next to compressed ones.
+// The store-level tests at the end (codec 1 written, a v3 file's raw chunks beside new ones) inspect the SQLite
+// file itself and stay SQLite-only; the codec-0 layout is read back on both engines in store_test.cc.
 #include <gtest/gtest.h>
 #include <sqlite3.h>
 #include <unistd.h>

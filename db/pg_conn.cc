@@ -1,0 +1,318 @@
+#include "db/pg_conn.h"
+
+#include <libpq-fe.h>
+
+#include <bit>
+#include <cmath>
+#include <cstring>
+#include <utility>
+
+#include "db/text.h"
+
+namespace vb::db::pg {
+namespace {
+
+// Type OIDs (src/include/catalog/pg_type.dat); stable across PostgreSQL versions.
+constexpr unsigned kBoolOid = 16, kByteaOid = 17, kInt8Oid = 20, kInt2Oid = 21, kInt4Oid = 23, kTextOid = 25,
+                   kFloat4Oid = 700, kFloat8Oid = 701;
+
+std::string BigEndian(std::uint64_t v, int bytes) {
+  std::string out(static_cast<std::size_t>(bytes), '\0');
+  for (int k = bytes - 1; k >= 0; --k) {
+    out[static_cast<std::size_t>(k)] = static_cast<char>(v & 0xff);
+    v >>= 8;
+  }
+  return out;
+}
+
+std::uint64_t FromBigEndian(const char* p, int bytes) {
+  std::uint64_t v = 0;
+  for (int k = 0; k < bytes; ++k) v = (v << 8) | static_cast<unsigned char>(p[k]);
+  return v;
+}
+
+void DropNotice(void*, const char*) {}
+
+}  // namespace
+
+bool IsPostgresLocation(const std::string& location) {
+  if (location.rfind("postgresql://", 0) == 0 || location.rfind("postgres://", 0) == 0) return true;
+  if (location.find('=') == std::string::npos) return false;
+  char* err = nullptr;
+  PQconninfoOption* opts = PQconninfoParse(location.c_str(), &err);
+  if (err != nullptr) PQfreemem(err);
+  if (opts == nullptr) return false;
+  PQconninfoFree(opts);
+  return true;
+}
+
+std::string DescribeLocation(const std::string& location) {
+  char* err = nullptr;
+  PQconninfoOption* opts = PQconninfoParse(location.c_str(), &err);
+  if (err != nullptr) PQfreemem(err);
+  if (opts == nullptr) return "postgresql database (unparsable connection string)";
+  std::string host, port, dbname, user;
+  for (PQconninfoOption* o = opts; o->keyword != nullptr; ++o) {
+    if (o->val == nullptr) continue;
+    const std::string_view key = o->keyword;
+    if (key == "host" || key == "hostaddr") host = o->val;
+    if (key == "port") port = o->val;
+    if (key == "dbname") dbname = o->val;
+    if (key == "user") user = o->val;
+  }
+  PQconninfoFree(opts);
+  std::string out = Cat("postgresql database '", dbname.empty() ? std::string("(default)") : dbname, "'");
+  if (!host.empty()) out += Cat(" on '", host, port.empty() ? std::string() : Cat(":", port), "'");
+  if (!user.empty()) out += Cat(" as '", user, "'");
+  return out;
+}
+
+// ---- Params ----
+
+void Params::Owned(unsigned type, std::string bytes) {
+  types_.push_back(type);
+  lengths_.push_back(static_cast<int>(bytes.size()));
+  owned_at_.push_back(static_cast<std::ptrdiff_t>(owned_.size()));
+  owned_.push_back(std::move(bytes));
+  ext_.push_back(nullptr);
+  null_.push_back(false);
+}
+
+Params& Params::Int(std::int64_t v) {
+  Owned(kInt8Oid, BigEndian(static_cast<std::uint64_t>(v), 8));
+  return *this;
+}
+
+Params& Params::Double(double v) {
+  Owned(kFloat8Oid, BigEndian(std::bit_cast<std::uint64_t>(v), 8));
+  return *this;
+}
+
+Params& Params::DoubleOrNull(double v) {
+  if (!std::isnan(v)) return Double(v);
+  types_.push_back(kFloat8Oid);
+  lengths_.push_back(0);
+  owned_at_.push_back(-1);
+  ext_.push_back(nullptr);
+  null_.push_back(true);
+  return *this;
+}
+
+Params& Params::Bool(bool v) {
+  Owned(kBoolOid, std::string(1, v ? '\1' : '\0'));
+  return *this;
+}
+
+Params& Params::Text(std::string_view v) {
+  Owned(kTextOid, std::string(v));
+  return *this;
+}
+
+Params& Params::Bytes(const void* data, std::size_t size) {
+  types_.push_back(kByteaOid);
+  lengths_.push_back(static_cast<int>(size));
+  owned_at_.push_back(-1);
+  // A zero-length value needs a non-null pointer (a null one is SQL NULL).
+  ext_.push_back(size == 0 ? "" : static_cast<const char*>(data));
+  null_.push_back(false);
+  return *this;
+}
+
+void Params::Arrays(std::vector<const char*>* values, std::vector<int>* lengths, std::vector<int>* formats) const {
+  const std::size_t n = types_.size();
+  values->resize(n);
+  lengths->assign(lengths_.begin(), lengths_.end());
+  formats->assign(n, 1);
+  for (std::size_t k = 0; k < n; ++k) {
+    if (null_[k]) {
+      (*values)[k] = nullptr;
+    } else if (owned_at_[k] >= 0) {
+      (*values)[k] = owned_[static_cast<std::size_t>(owned_at_[k])].data();
+    } else {
+      (*values)[k] = ext_[k];
+    }
+  }
+}
+
+// ---- Result ----
+
+void Result::Clear::operator()(pg_result* r) const { PQclear(r); }
+Result::Result(pg_result* r) : r_(r) {}
+int Result::rows() const { return r_ ? PQntuples(r_.get()) : 0; }
+int Result::columns() const { return r_ ? PQnfields(r_.get()) : 0; }
+bool Result::IsNull(int row, int col) const { return PQgetisnull(r_.get(), row, col) != 0; }
+
+std::int64_t Result::Int(int row, int col) const {
+  if (IsNull(row, col)) return 0;
+  const char* p = PQgetvalue(r_.get(), row, col);
+  switch (PQgetlength(r_.get(), row, col)) {
+    case 1:
+      return static_cast<unsigned char>(p[0]);
+    case 2:
+      return static_cast<std::int16_t>(FromBigEndian(p, 2));
+    case 4:
+      return static_cast<std::int32_t>(FromBigEndian(p, 4));
+    case 8:
+      return static_cast<std::int64_t>(FromBigEndian(p, 8));
+    default:
+      return 0;  // not an integer column: a bug in the query (the store casts sums and counts)
+  }
+}
+
+double Result::Double(int row, int col) const {
+  if (IsNull(row, col)) return std::nan("");
+  const char* p = PQgetvalue(r_.get(), row, col);
+  const int len = PQgetlength(r_.get(), row, col);
+  if (PQftype(r_.get(), col) == kFloat4Oid && len == 4) {
+    return std::bit_cast<float>(static_cast<std::uint32_t>(FromBigEndian(p, 4)));
+  }
+  if (PQftype(r_.get(), col) == kFloat8Oid && len == 8) return std::bit_cast<double>(FromBigEndian(p, 8));
+  const unsigned type = PQftype(r_.get(), col);
+  if (type == kInt8Oid || type == kInt4Oid || type == kInt2Oid) return static_cast<double>(Int(row, col));
+  return std::nan("");  // not a float column: a bug in the query
+}
+
+std::string Result::Text(int row, int col) const {
+  if (IsNull(row, col)) return std::string();
+  return std::string(PQgetvalue(r_.get(), row, col), static_cast<std::size_t>(PQgetlength(r_.get(), row, col)));
+}
+
+std::string_view Result::Bytes(int row, int col) const {
+  return std::string_view(PQgetvalue(r_.get(), row, col), static_cast<std::size_t>(PQgetlength(r_.get(), row, col)));
+}
+
+std::int64_t Result::affected() const {
+  const char* n = r_ ? PQcmdTuples(r_.get()) : "";
+  return n[0] == '\0' ? 0 : std::strtoll(n, nullptr, 10);
+}
+
+// ---- Connection ----
+
+StatusOr<std::unique_ptr<Connection>> Connection::Open(const std::string& location) {
+  const std::string where = DescribeLocation(location);
+  PGconn* conn = PQconnectdb(location.c_str());
+  if (conn == nullptr) return Status::ResourceExhausted(Cat(where, ": out of memory connecting"));
+  if (PQstatus(conn) != CONNECTION_OK) {
+    std::string msg = PQerrorMessage(conn);
+    while (!msg.empty() && (msg.back() == '\n' || msg.back() == ' ')) msg.pop_back();
+    PQfinish(conn);
+    return Status::Unavailable(Cat(where, ": cannot connect: ", msg));
+  }
+  PQsetNoticeProcessor(conn, DropNotice, nullptr);
+  auto c = std::unique_ptr<Connection>(new Connection(conn, where));
+  // UTC and UTF-8 whatever the server's defaults; times are stored as unix seconds anyway.
+  VB_RETURN_IF_ERROR(c->Script("SET TIME ZONE 'UTC'; SET client_encoding = 'UTF8'"));
+  return c;
+}
+
+Connection::~Connection() {
+  if (conn_ != nullptr) PQfinish(conn_);
+}
+
+bool Connection::in_transaction() const { return PQtransactionStatus(conn_) != PQTRANS_IDLE; }
+
+Status Connection::EnsureConnected() {
+  if (PQstatus(conn_) == CONNECTION_OK) return Status::Ok();
+  PQreset(conn_);
+  prepared_.clear();
+  if (PQstatus(conn_) != CONNECTION_OK) {
+    return Status::Unavailable(Cat(location_, ": connection lost and cannot reconnect: ", PQerrorMessage(conn_)));
+  }
+  PQsetNoticeProcessor(conn_, DropNotice, nullptr);
+  return Script("SET TIME ZONE 'UTC'; SET client_encoding = 'UTF8'");
+}
+
+Status Connection::Error(pg_result* r, std::string_view what) const {
+  std::string msg = r != nullptr ? PQresultErrorMessage(r) : PQerrorMessage(conn_);
+  while (!msg.empty() && (msg.back() == '\n' || msg.back() == ' ')) msg.pop_back();
+  const char* state = r != nullptr ? PQresultErrorField(r, PG_DIAG_SQLSTATE) : nullptr;
+  const std::string sqlstate = state != nullptr ? state : "";
+  std::string text = Cat(location_, ": ", what, ": ", msg);
+  if (!sqlstate.empty()) text += Cat(" (sqlstate ", sqlstate, ")");
+  if (PQstatus(conn_) != CONNECTION_OK || sqlstate.rfind("08", 0) == 0 || sqlstate.rfind("57P", 0) == 0) {
+    return Status::Unavailable(std::move(text));
+  }
+  if (sqlstate.rfind("40", 0) == 0 || sqlstate == "55P03") return Status::Aborted(std::move(text));
+  if (sqlstate == "23505") return Status::AlreadyExists(std::move(text));
+  if (sqlstate.rfind("23", 0) == 0 || sqlstate.rfind("22", 0) == 0) return Status::InvalidArgument(std::move(text));
+  if (sqlstate.rfind("53", 0) == 0 || sqlstate == "54000") return Status::ResourceExhausted(std::move(text));
+  if (sqlstate.rfind("XX", 0) == 0) return Status::DataLoss(std::move(text));
+  return Status::Internal(std::move(text));
+}
+
+StatusOr<Result> Connection::Exec(const std::string& sql, const Params& params) {
+  if (!txn_) VB_RETURN_IF_ERROR(EnsureConnected());  // a statement on its own may run on a new connection
+  auto it = prepared_.find(sql);
+  if (it == prepared_.end()) {
+    const std::string name = Cat("vb", prepared_.size());
+    PGresult* prep =
+        PQprepare(conn_, name.c_str(), sql.c_str(), static_cast<int>(params.size()), params.types().data());
+    if (prep == nullptr || PQresultStatus(prep) != PGRES_COMMAND_OK) {
+      Status s = Error(prep, Cat("\"", sql, "\""));
+      if (prep != nullptr) PQclear(prep);
+      return s;
+    }
+    PQclear(prep);
+    it = prepared_.emplace(sql, name).first;
+  }
+  std::vector<const char*> values;
+  std::vector<int> lengths, formats;
+  params.Arrays(&values, &lengths, &formats);
+  PGresult* r = PQexecPrepared(conn_, it->second.c_str(), static_cast<int>(params.size()), values.data(),
+                               lengths.data(), formats.data(), /*resultFormat=*/1);
+  const ExecStatusType st = r != nullptr ? PQresultStatus(r) : PGRES_FATAL_ERROR;
+  if (st != PGRES_TUPLES_OK && st != PGRES_COMMAND_OK) {
+    Status s = Error(r, Cat("\"", sql, "\""));
+    if (r != nullptr) PQclear(r);
+    return s;
+  }
+  return Result(r);
+}
+
+Status Connection::Script(const std::string& sql) {
+  PGresult* r = PQexec(conn_, sql.c_str());
+  const ExecStatusType st = r != nullptr ? PQresultStatus(r) : PGRES_FATAL_ERROR;
+  if (st != PGRES_TUPLES_OK && st != PGRES_COMMAND_OK) {
+    Status s = Error(r, sql.size() > 80 ? Cat("\"", sql.substr(0, 77), "...\"") : Cat("\"", sql, "\""));
+    if (r != nullptr) PQclear(r);
+    return s;
+  }
+  PQclear(r);
+  return Status::Ok();
+}
+
+StatusOr<std::int64_t> Connection::QueryInt(const std::string& sql, const Params& params) {
+  VB_PG_ASSIGN_OR_RETURN(Result r, Exec(sql, params));
+  if (r.rows() < 1 || r.columns() < 1) return Status::Internal(Cat("\"", sql, "\" returned no row"));
+  return r.Int(0, 0);
+}
+
+// ---- Transaction ----
+
+Transaction::~Transaction() {
+  if (open_) (void)Rollback();
+}
+
+Status Transaction::Begin(Kind kind) {
+  VB_RETURN_IF_ERROR(conn_->EnsureConnected());  // a lost connection (restarted server) is re-made here
+  VB_RETURN_IF_ERROR(conn_->Script(kind == Kind::kRead ? "BEGIN ISOLATION LEVEL REPEATABLE READ READ ONLY" : "BEGIN"));
+  open_ = true;
+  conn_->set_in_transaction_block(true);
+  return Status::Ok();
+}
+
+Status Transaction::Commit() {
+  open_ = false;
+  Status s = conn_->Script("COMMIT");
+  conn_->set_in_transaction_block(false);
+  return s;
+}
+
+Status Transaction::Rollback() {
+  open_ = false;
+  Status s = conn_->Script("ROLLBACK");
+  conn_->set_in_transaction_block(false);
+  return s;
+}
+
+}  // namespace vb::db::pg

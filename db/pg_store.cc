@@ -1,0 +1,1111 @@
+// The PostgreSQL implementation of db/store.h (docs/store.md, "PostgreSQL"). It mirrors the SQLite store
+// (db/store.cc) method by method: the same checks in the same order with the same field-named messages, the
+// same rows. What differs is how concurrency is had: SQLite serialises writers with one lock, here many hosts
+// write at once, so the queue is claimed with FOR UPDATE SKIP LOCKED and every write for a claimed run locks the
+// run's row and checks its lease's fence in the same transaction. Times come from the database's clock.
+#include "db/pg_store.h"
+
+#include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <map>
+#include <set>
+#include <string_view>
+#include <unordered_set>
+#include <utility>
+
+#include "common/format.h"
+#include "db/pg_conn.h"
+#include "db/pg_schema.h"
+#include "db/text.h"
+#include "db/trace_codec.h"
+
+namespace vb::db {
+namespace {
+
+using pg::Params;
+using pg::Result;
+using TxnKind = pg::Transaction::Kind;
+
+// The database's clock in unix seconds: the transaction's start (now()), so every row one method writes has the
+// same time, whichever host's clock is off (docs/store.md, "PostgreSQL", "The clock").
+#define VB_PG_NOW "extract(epoch FROM now())::float8"
+
+constexpr std::int32_t kMaxListLimit = 1000;
+constexpr const char* kRecoverReason = "server restarted while running";
+constexpr int kMaxInterruptions = 3;  // as SQLite (db/store.cc): a run interrupted this often is failed
+// bytea values are limited to 1 GiB by PostgreSQL.
+constexpr std::uint64_t kMaxBlobBytes = (std::uint64_t{1} << 30) - 1;
+
+// The columns every RunRecord query reads (ReadRun() reads them in this order), tags and sweep point included as
+// length-prefixed text so a listing is one query: tags as "<bytes>:<tag>", the sweep as "<bytes>:<field><value>;".
+constexpr const char* kRunColumns =
+    "id, batch_id, name, controller, bench_kind, bench_name, spec_json, submitter, priority, status, reason, "
+    "requeue_on_interrupt, submitted, started, finished, progress, key_name, repeat_index, split, t_start_s, "
+    "fence, host, lease_expires, "
+    "(SELECT string_agg(octet_length(t.tag) || ':' || t.tag, '' ORDER BY t.id) FROM run_tags t "
+    "WHERE t.run_id = runs.id), "
+    "(SELECT string_agg(octet_length(s.field) || ':' || s.field || s.value::text || ';', '' ORDER BY s.axis) "
+    "FROM run_sweep s WHERE s.run_id = runs.id)";
+
+Status RunNotFound(std::int64_t id) { return Status::NotFound(Cat("run ", id, " not found")); }
+
+// Parses "<n>:<n bytes>" items; `tail` (';' or 0) ends each item's remainder (the sweep value).
+bool SplitPrefixed(std::string_view s, char tail, std::vector<std::pair<std::string, std::string>>* out) {
+  while (!s.empty()) {
+    const std::size_t colon = s.find(':');
+    if (colon == std::string_view::npos) return false;
+    const std::size_t n = std::strtoull(std::string(s.substr(0, colon)).c_str(), nullptr, 10);
+    if (colon + 1 + n > s.size()) return false;
+    std::string item(s.substr(colon + 1, n));
+    s.remove_prefix(colon + 1 + n);
+    std::string rest;
+    if (tail != 0) {
+      const std::size_t end = s.find(tail);
+      if (end == std::string_view::npos) return false;
+      rest = std::string(s.substr(0, end));
+      s.remove_prefix(end + 1);
+    }
+    out->emplace_back(std::move(item), std::move(rest));
+  }
+  return true;
+}
+
+// The checks of SqliteStore (db/store.cc), with its messages.
+Status ValidateBatch(const std::string& submitter, const std::vector<RunRecord>& runs) {
+  if (submitter.empty()) return Status::InvalidArgument("submitter: must not be empty");
+  if (runs.empty()) return Status::InvalidArgument("runs: a batch needs at least one run");
+  for (std::size_t k = 0; k < runs.size(); ++k) {
+    const RunRecord& r = runs[k];
+    const std::string field = Cat("runs[", k, "]");
+    if (r.key.name.empty()) return Status::InvalidArgument(field + ".key.name: must not be empty");
+    if (r.key.repeat < -1) return Status::InvalidArgument(Cat(field, ".key.repeat: must be >= -1, got ", r.key.repeat));
+    for (std::size_t a = 0; a < r.key.sweep.size(); ++a) {
+      if (r.key.sweep[a].field.empty())
+        return Status::InvalidArgument(Cat(field, ".key.sweep[", a, "].field: must not be empty"));
+      if (!std::isfinite(r.key.sweep[a].value))
+        return Status::InvalidArgument(Cat(field, ".key.sweep[", a, "].value: must be finite"));
+    }
+    if (!r.split.empty() && r.split != "fit" && r.split != "holdout")
+      return Status::InvalidArgument(
+          Cat(field, ".split: must be \"fit\", \"holdout\" or empty, got \"", r.split, "\""));
+    if (r.spec_json.empty()) return Status::InvalidArgument(field + ".spec_json: must not be empty");
+    if (!r.submitter.empty() && r.submitter != submitter) {
+      return Status::InvalidArgument(
+          Cat(field, ".submitter: \"", r.submitter, "\" differs from the batch's \"", submitter, "\""));
+    }
+    std::unordered_set<std::string_view> tags;
+    for (std::size_t j = 0; j < r.tags.size(); ++j) {
+      const std::string tag_field = Cat(field, ".tags[", j, "]");
+      if (r.tags[j].empty()) return Status::InvalidArgument(tag_field + ": must not be empty");
+      if (!tags.insert(r.tags[j]).second) {
+        return Status::InvalidArgument(Cat(tag_field, ": duplicate tag \"", r.tags[j], "\""));
+      }
+    }
+  }
+  return Status::Ok();
+}
+
+Status ValidateFilter(const RunFilter& f) {
+  if (f.limit < 1 || f.limit > kMaxListLimit) {
+    return Status::InvalidArgument(Cat("filter.limit: must be in 1..", kMaxListLimit, ", got ", f.limit));
+  }
+  if (f.after_id < 0) return Status::InvalidArgument(Cat("filter.after_id: must be >= 0, got ", f.after_id));
+  if (f.batch_id < 0) return Status::InvalidArgument(Cat("filter.batch_id: must be >= 0, got ", f.batch_id));
+  if (!std::isfinite(f.submitted_after_unix_s) || f.submitted_after_unix_s < 0) {
+    return Status::InvalidArgument(
+        Cat("filter.submitted_after_unix_s: must be finite and >= 0, got ", FormatExact(f.submitted_after_unix_s)));
+  }
+  if (!std::isfinite(f.submitted_before_unix_s) || f.submitted_before_unix_s < 0) {
+    return Status::InvalidArgument(
+        Cat("filter.submitted_before_unix_s: must be finite and >= 0, got ", FormatExact(f.submitted_before_unix_s)));
+  }
+  return Status::Ok();
+}
+
+Status ValidateSeconds(const char* field, double v) {
+  if (!std::isfinite(v) || v < 0)
+    return Status::InvalidArgument(Cat(field, ": must be finite and >= 0, got ", FormatExact(v)));
+  return Status::Ok();
+}
+
+Status ValidateBaseline(const std::string& name, const std::vector<BaselineEntry>& entries) {
+  if (name.empty()) return Status::InvalidArgument("baseline.name: must not be empty");
+  for (char c : name)
+    if (static_cast<unsigned char>(c) < 0x20)
+      return Status::InvalidArgument("baseline.name: must not contain control characters");
+  if (entries.empty()) return Status::InvalidArgument("baseline.entries: a baseline needs at least one metric value");
+  std::set<std::pair<std::string, std::string>> seen;
+  for (std::size_t k = 0; k < entries.size(); ++k) {
+    const BaselineEntry& e = entries[k];
+    const std::string where = Cat("baseline.entries[", k, "]");
+    if (e.case_name.empty()) return Status::InvalidArgument(where + ".case_name: must not be empty");
+    if (e.metric.empty()) return Status::InvalidArgument(where + ".metric: must not be empty");
+    if (!std::isfinite(e.mean)) return Status::InvalidArgument(where + ".mean: must be finite");
+    if (!std::isfinite(e.spread) || e.spread < 0)
+      return Status::InvalidArgument(where + ".spread: must be finite and >= 0");
+    if (e.n < 1) return Status::InvalidArgument(where + ".n: must be >= 1");
+    if (!seen.insert({e.case_name, e.metric}).second)
+      return Status::InvalidArgument(Cat(where, ": duplicate (", e.case_name, ", ", e.metric, ")"));
+  }
+  return Status::Ok();
+}
+
+class PgStore final : public Store {
+ public:
+  PgStore(std::unique_ptr<pg::Connection> conn, int version) : conn_(std::move(conn)), version_(version) {}
+
+  int schema_version() const override { return version_; }
+  StatusOr<std::int64_t> SubmitBatch(const std::string& submitter, const std::string& name,
+                                     const std::string& batch_spec_json, std::vector<RunRecord> runs,
+                                     std::vector<std::int64_t>* run_ids) override;
+  StatusOr<std::optional<RunRecord>> ClaimNext(const ClaimRequest& request) override;
+  Status SetProgress(const Lease& lease, double progress) override;
+  Status Finish(const Lease& lease, RunStatus final_status, const std::string& reason,
+                const std::vector<Metric>& metrics) override;
+  StatusOr<RunStatus> RequestCancel(std::int64_t run_id, const std::string& reason) override;
+  StatusOr<bool> CancelRequested(std::int64_t run_id) override;
+  StatusOr<int> RecoverAfterCrash(const std::string& host) override;
+  Status Heartbeat(const HostRecord& host, double lease_ttl_s) override;
+  StatusOr<std::vector<HostRecord>> ListHosts() override;
+  StatusOr<std::vector<std::int64_t>> RequeueLapsed() override;
+  StatusOr<std::vector<StaleWrite>> StaleWrites(std::int32_t limit, std::int64_t* total) override;
+  StatusOr<bool> ClaimNight(const std::string& night, const std::string& host) override;
+  StatusOr<RunRecord> GetRun(std::int64_t run_id) override;
+  StatusOr<std::vector<RunRecord>> ListRuns(const RunFilter& filter) override;
+  StatusOr<std::vector<StatusChange>> History(std::int64_t run_id) override;
+  StatusOr<std::vector<Metric>> GetMetrics(std::int64_t run_id) override;
+  StatusOr<std::int64_t> CountQueued(const std::string& submitter) override;
+  StatusOr<std::int64_t> StoredTraceBytes(const std::string& submitter) override;
+  Status AppendTraceChunk(const Lease& lease, const TraceChunk& chunk) override;
+  StatusOr<std::vector<TraceChunk>> ReadTrace(std::int64_t run_id) override;
+  Status ForEachTraceChunk(std::int64_t run_id,
+                           const std::function<Status(const TraceChunk&, std::int64_t)>& fn) override;
+  StatusOr<std::int32_t> SaveBaseline(const std::string& name, const std::string& source, const std::string& note,
+                                      const std::vector<BaselineEntry>& entries) override;
+  StatusOr<BaselineRecord> GetBaseline(const std::string& name, std::int32_t version) override;
+  StatusOr<std::vector<BaselineRecord>> ListBaselines() override;
+  StatusOr<std::int64_t> SaveRegression(const RegressionRecord& record) override;
+  StatusOr<RegressionRecord> GetRegression(std::int64_t id) override;
+  StatusOr<std::vector<RegressionRecord>> ListRegressions(bool nights_only, std::int32_t limit) override;
+  StatusOr<PruneResult> Prune(const PruneRequest& request) override;
+
+ private:
+  StatusOr<RunStatus> StatusOf(std::int64_t run_id);
+  Status AddHistory(std::int64_t run_id, RunStatus status, const std::string& reason);
+  StatusOr<RunRecord> ReadRun(const Result& r, int row);
+  StatusOr<RunRecord> LoadRun(std::int64_t run_id);
+  // Locks the run's row and checks that `lease` holds it (its fence is the run's, and, when `running_action` is
+  // given, the run is running). A stale lease: the write is recorded in stale_writes, that is committed (ending
+  // `txn`) and FailedPrecondition "stale write: ..." returned. NotFound for an unknown run.
+  Status CheckLease(pg::Transaction* txn, const Lease& lease, const char* running_action, const std::string& what);
+  // Interrupts the selected running runs (RecoverAfterCrash, RequeueLapsed); returns their ids.
+  StatusOr<std::vector<std::int64_t>> Interrupt(const std::string& select_sql, const Params& params, bool lapsed);
+  Status ReadChunks(std::int64_t run_id, const std::function<Status(TraceChunk&, std::int64_t)>& fn);
+
+  std::unique_ptr<pg::Connection> conn_;
+  int version_;
+  trace::Codec1 codec_;
+  std::string encoded_;
+};
+
+StatusOr<RunStatus> PgStore::StatusOf(std::int64_t run_id) {
+  VB_PG_ASSIGN_OR_RETURN(Result r, conn_->Exec("SELECT status FROM runs WHERE id = $1", Params().Int(run_id)));
+  if (r.rows() == 0) return RunNotFound(run_id);
+  StatusOr<RunStatus> s = ParseRunStatus(r.Text(0, 0));
+  if (!s.ok()) return Status::DataLoss(Cat("run ", run_id, ": ", s.status().message()));
+  return s;
+}
+
+Status PgStore::AddHistory(std::int64_t run_id, RunStatus status, const std::string& reason) {
+  return conn_
+      ->Exec("INSERT INTO status_history (run_id, status, at, reason) VALUES ($1, $2, " VB_PG_NOW ", $3)",
+             Params().Int(run_id).Text(RunStatusName(status)).Text(reason))
+      .status();
+}
+
+StatusOr<RunRecord> PgStore::ReadRun(const Result& row, int k) {
+  RunRecord r;
+  r.id = row.Int(k, 0);
+  r.batch_id = row.Int(k, 1);
+  r.controller = row.Text(k, 3);
+  r.bench_kind = row.Text(k, 4);
+  r.bench_name = row.Text(k, 5);
+  r.spec_json = row.Text(k, 6);
+  r.submitter = row.Text(k, 7);
+  r.priority = static_cast<std::int32_t>(row.Int(k, 8));
+  StatusOr<RunStatus> status = ParseRunStatus(row.Text(k, 9));
+  if (!status.ok()) return Status::DataLoss(Cat("run ", r.id, ": ", status.status().message()));
+  r.status = *status;
+  r.reason = row.Text(k, 10);
+  r.requeue_on_interrupt = row.Int(k, 11) != 0;
+  r.submitted_unix_s = row.Double(k, 12);
+  r.started_unix_s = row.Double(k, 13);
+  r.finished_unix_s = row.Double(k, 14);
+  r.progress = row.Double(k, 15);
+  r.key.name = row.Text(k, 16);
+  r.key.repeat = static_cast<int>(row.Int(k, 17));
+  r.split = row.Text(k, 18);
+  if (!row.IsNull(k, 19)) r.t_start_s = row.Double(k, 19);
+  r.fence = row.Int(k, 20);
+  r.host = row.Text(k, 21);
+  r.lease_expires_unix_s = row.Double(k, 22);
+  std::vector<std::pair<std::string, std::string>> items;
+  if (!SplitPrefixed(row.Text(k, 23), 0, &items)) return Status::DataLoss(Cat("run ", r.id, ": unreadable tags"));
+  for (auto& [tag, _] : items) r.tags.push_back(std::move(tag));
+  items.clear();
+  if (!SplitPrefixed(row.Text(k, 24), ';', &items)) return Status::DataLoss(Cat("run ", r.id, ": unreadable sweep"));
+  for (auto& [field, value] : items) r.key.sweep.push_back({std::move(field), std::strtod(value.c_str(), nullptr)});
+  return r;
+}
+
+StatusOr<RunRecord> PgStore::LoadRun(std::int64_t run_id) {
+  static const std::string sql = Cat("SELECT ", kRunColumns, " FROM runs WHERE id = $1");
+  VB_PG_ASSIGN_OR_RETURN(Result r, conn_->Exec(sql, Params().Int(run_id)));
+  if (r.rows() == 0) return RunNotFound(run_id);
+  return ReadRun(r, 0);
+}
+
+// ---- Submission and the queue ----
+
+StatusOr<std::int64_t> PgStore::SubmitBatch(const std::string& submitter, const std::string& name,
+                                            const std::string& batch_spec_json, std::vector<RunRecord> runs,
+                                            std::vector<std::int64_t>* run_ids) {
+  VB_RETURN_IF_ERROR(ValidateBatch(submitter, runs));
+  pg::Transaction txn(conn_.get());
+  VB_RETURN_IF_ERROR(txn.Begin());
+  VB_PG_ASSIGN_OR_RETURN(
+      const std::int64_t batch_id,
+      conn_->QueryInt("INSERT INTO batches (submitter, name, spec_json, created) VALUES ($1, $2, $3, " VB_PG_NOW
+                      ") RETURNING id",
+                      Params().Text(submitter).Text(name).Text(batch_spec_json)));
+  std::vector<std::int64_t> ids;
+  ids.reserve(runs.size());
+  for (const RunRecord& r : runs) {
+    VB_PG_ASSIGN_OR_RETURN(
+        const std::int64_t id,
+        conn_->QueryInt(
+            "INSERT INTO runs (batch_id, name, controller, bench_kind, requested_bench, bench_name, "
+            "spec_json, submitter, priority, status, requeue_on_interrupt, submitted, key_name, "
+            "repeat_index, split, t_start_s) VALUES ($1, $2, $3, $4, $5, $5, $6, $7, $8, 'queued', $9, " VB_PG_NOW
+            ", $10, $11, $12, $13) RETURNING id",
+            Params()
+                .Int(batch_id)
+                .Text(r.key.DisplayName())
+                .Text(r.controller)
+                .Text(r.bench_kind)
+                .Text(r.bench_name)
+                .Text(r.spec_json)
+                .Text(submitter)
+                .Int(r.priority)
+                .Bool(r.requeue_on_interrupt)
+                .Text(r.key.name)
+                .Int(r.key.repeat)
+                .Text(r.split)
+                .DoubleOrNull(r.t_start_s)));
+    ids.push_back(id);
+    for (std::size_t a = 0; a < r.key.sweep.size(); ++a) {
+      VB_RETURN_IF_ERROR(conn_
+                             ->Exec("INSERT INTO run_sweep (run_id, axis, field, value) VALUES ($1, $2, $3, $4)",
+                                    Params()
+                                        .Int(id)
+                                        .Int(static_cast<std::int64_t>(a))
+                                        .Text(r.key.sweep[a].field)
+                                        .Double(r.key.sweep[a].value))
+                             .status());
+    }
+    for (const std::string& tag : r.tags) {
+      VB_RETURN_IF_ERROR(
+          conn_->Exec("INSERT INTO run_tags (run_id, tag) VALUES ($1, $2)", Params().Int(id).Text(tag)).status());
+    }
+    VB_RETURN_IF_ERROR(AddHistory(id, RunStatus::kQueued, ""));
+  }
+  VB_RETURN_IF_ERROR(txn.Commit());
+  if (run_ids != nullptr) *run_ids = std::move(ids);
+  return batch_id;
+}
+
+StatusOr<std::optional<RunRecord>> PgStore::ClaimNext(const ClaimRequest& request) {
+  if (request.bench_name.empty()) return Status::InvalidArgument("bench_name: must name the bench that claims the run");
+  VB_RETURN_IF_ERROR(ValidateSeconds("lease_ttl_s", request.lease_ttl_s));
+  VB_RETURN_IF_ERROR(ValidateSeconds("aging_s", request.aging_s));
+  pg::Transaction txn(conn_.get());
+  VB_RETURN_IF_ERROR(txn.Begin());
+  // The inner SELECT locks the first compatible queued run that no other claimer has locked (SKIP LOCKED): two
+  // claimers never wait for each other and never get the same run; a run another claimer claimed and committed
+  // meanwhile is re-checked against status = 'queued' and passed over.
+  VB_PG_ASSIGN_OR_RETURN(
+      Result claimed,
+      conn_->Exec("UPDATE runs SET status = 'running', bench_name = $2, host = $3, fence = fence + 1, "
+                  "started = " VB_PG_NOW ", finished = 0, progress = 0, reason = '', cancel_requested = false, "
+                  "lease_expires = CASE WHEN $4 > 0 THEN " VB_PG_NOW " + $4 ELSE 0 END "
+                  "WHERE id = (SELECT id FROM runs WHERE status = 'queued' "
+                  "AND (bench_kind = '' OR bench_kind = $1) AND (bench_name = '' OR bench_name = $2) "
+                  "ORDER BY priority + CASE WHEN $5 > 0 THEN floor((" VB_PG_NOW " - submitted) / $5) ELSE 0 END "
+                  "DESC, id LIMIT 1 FOR UPDATE SKIP LOCKED) RETURNING id",
+                  Params()
+                      .Text(request.bench_kind)
+                      .Text(request.bench_name)
+                      .Text(request.host)
+                      .Double(request.lease_ttl_s)
+                      .Double(request.aging_s)));
+  if (claimed.rows() == 0) return std::optional<RunRecord>();  // the destructor rolls back the empty transaction
+  const std::int64_t id = claimed.Int(0, 0);
+  VB_RETURN_IF_ERROR(AddHistory(id, RunStatus::kRunning,
+                                request.host.empty()
+                                    ? Cat("claimed by bench ", request.bench_name)
+                                    : Cat("claimed by bench ", request.bench_name, " on host ", request.host)));
+  VB_PG_ASSIGN_OR_RETURN(RunRecord run, LoadRun(id));
+  VB_RETURN_IF_ERROR(txn.Commit());
+  return std::optional<RunRecord>(std::move(run));
+}
+
+Status PgStore::CheckLease(pg::Transaction* txn, const Lease& lease, const char* running_action,
+                           const std::string& what) {
+  VB_PG_ASSIGN_OR_RETURN(Result r, conn_->Exec("SELECT status, fence, host FROM runs WHERE id = $1 FOR UPDATE",
+                                               Params().Int(lease.run_id)));
+  if (r.rows() == 0) return RunNotFound(lease.run_id);
+  StatusOr<RunStatus> status = ParseRunStatus(r.Text(0, 0));
+  if (!status.ok()) return Status::DataLoss(Cat("run ", lease.run_id, ": ", status.status().message()));
+  const std::int64_t fence = r.Int(0, 1);
+  const std::string host = r.Text(0, 2);
+  std::string why;
+  if (lease.fence != fence) {
+    why = Cat("stale write: run ", lease.run_id, " is held by attempt ", fence,
+              host.empty() ? std::string() : Cat(" on host ", host), ", not by this lease's attempt ", lease.fence,
+              " (its lease lapsed and the run was re-queued or claimed again)");
+  } else if (running_action != nullptr && *status != RunStatus::kRunning) {
+    why = Cat("stale write: run ", lease.run_id, " is ", RunStatusName(*status), ", not running: only a running run ",
+              running_action);
+  } else {
+    return Status::Ok();
+  }
+  VB_RETURN_IF_ERROR(conn_
+                         ->Exec("INSERT INTO stale_writes (run_id, fence, current_fence, host, what, at) "
+                                "VALUES ($1, $2, $3, $4, $5, " VB_PG_NOW ")",
+                                Params().Int(lease.run_id).Int(lease.fence).Int(fence).Text(host).Text(what))
+                         .status());
+  VB_RETURN_IF_ERROR(txn->Commit());
+  return Status::FailedPrecondition(std::move(why));
+}
+
+Status PgStore::SetProgress(const Lease& lease, double progress) {
+  if (!(progress >= 0.0 && progress <= 1.0)) {
+    return Status::InvalidArgument(Cat("progress: must be in [0, 1], got ", FormatExact(progress)));
+  }
+  pg::Transaction txn(conn_.get());
+  VB_RETURN_IF_ERROR(txn.Begin());
+  VB_RETURN_IF_ERROR(CheckLease(&txn, lease, "reports progress", "progress"));
+  VB_RETURN_IF_ERROR(
+      conn_->Exec("UPDATE runs SET progress = $2 WHERE id = $1", Params().Int(lease.run_id).Double(progress)).status());
+  return txn.Commit();
+}
+
+Status PgStore::Finish(const Lease& lease, RunStatus final_status, const std::string& reason,
+                       const std::vector<Metric>& metrics) {
+  const std::int64_t run_id = lease.run_id;
+  if (final_status != RunStatus::kDone && final_status != RunStatus::kFailed && final_status != RunStatus::kCancelled) {
+    return Status::InvalidArgument(
+        Cat("final_status: must be done, failed or cancelled, got ", RunStatusName(final_status)));
+  }
+  std::unordered_set<std::string_view> names;
+  for (std::size_t k = 0; k < metrics.size(); ++k) {
+    const std::string field = Cat("metrics[", k, "].name");
+    if (metrics[k].name.empty()) return Status::InvalidArgument(field + ": must not be empty");
+    if (!names.insert(metrics[k].name).second) {
+      return Status::InvalidArgument(Cat(field, ": duplicate metric \"", metrics[k].name, "\""));
+    }
+  }
+  pg::Transaction txn(conn_.get());
+  VB_RETURN_IF_ERROR(txn.Begin());
+  VB_RETURN_IF_ERROR(CheckLease(&txn, lease, "can finish", Cat("finish ", RunStatusName(final_status))));
+  VB_RETURN_IF_ERROR(conn_
+                         ->Exec("UPDATE runs SET status = $2, reason = $3, finished = " VB_PG_NOW ", "
+                                "progress = CASE WHEN $2 = 'done' THEN 1.0 ELSE progress END, lease_expires = 0 "
+                                "WHERE id = $1",
+                                Params().Int(run_id).Text(RunStatusName(final_status)).Text(reason))
+                         .status());
+  VB_RETURN_IF_ERROR(AddHistory(run_id, final_status, reason));
+  for (const Metric& m : metrics) {
+    // NaN is stored as NULL, as SQLite does, and GetMetrics() turns NULL back into NaN.
+    VB_RETURN_IF_ERROR(conn_
+                           ->Exec("INSERT INTO metrics (run_id, name, value) VALUES ($1, $2, $3)",
+                                  Params().Int(run_id).Text(m.name).DoubleOrNull(m.value))
+                           .status());
+  }
+  return txn.Commit();
+}
+
+StatusOr<RunStatus> PgStore::RequestCancel(std::int64_t run_id, const std::string& reason) {
+  pg::Transaction txn(conn_.get());
+  VB_RETURN_IF_ERROR(txn.Begin());
+  VB_PG_ASSIGN_OR_RETURN(Result r,
+                         conn_->Exec("SELECT status FROM runs WHERE id = $1 FOR UPDATE", Params().Int(run_id)));
+  if (r.rows() == 0) return RunNotFound(run_id);
+  StatusOr<RunStatus> parsed = ParseRunStatus(r.Text(0, 0));
+  if (!parsed.ok()) return Status::DataLoss(Cat("run ", run_id, ": ", parsed.status().message()));
+  const RunStatus status = *parsed;
+  if (status == RunStatus::kQueued) {
+    VB_RETURN_IF_ERROR(conn_
+                           ->Exec("UPDATE runs SET status = 'cancelled', reason = $2, finished = " VB_PG_NOW
+                                  " WHERE id = $1",
+                                  Params().Int(run_id).Text(reason))
+                           .status());
+    VB_RETURN_IF_ERROR(AddHistory(run_id, RunStatus::kCancelled, reason));
+    VB_RETURN_IF_ERROR(txn.Commit());
+    return RunStatus::kCancelled;
+  }
+  if (status == RunStatus::kRunning) {
+    VB_RETURN_IF_ERROR(conn_
+                           ->Exec("UPDATE runs SET cancel_requested = true, reason = $2 WHERE id = $1",
+                                  Params().Int(run_id).Text(reason))
+                           .status());
+    VB_RETURN_IF_ERROR(txn.Commit());
+    return RunStatus::kRunning;
+  }
+  return Status::FailedPrecondition(
+      Cat("run ", run_id, " is ", RunStatusName(status), ": only a queued or running run can be cancelled"));
+}
+
+StatusOr<bool> PgStore::CancelRequested(std::int64_t run_id) {
+  VB_PG_ASSIGN_OR_RETURN(Result r,
+                         conn_->Exec("SELECT cancel_requested FROM runs WHERE id = $1", Params().Int(run_id)));
+  if (r.rows() == 0) return RunNotFound(run_id);
+  return r.Int(0, 0) != 0;
+}
+
+StatusOr<std::vector<std::int64_t>> PgStore::Interrupt(const std::string& select_sql, const Params& params,
+                                                       bool lapsed) {
+  struct Running {
+    std::int64_t id;
+    bool requeue;
+    bool cancel_requested;
+    std::string cancel_reason;
+    std::string host;
+  };
+  VB_PG_ASSIGN_OR_RETURN(Result rows, conn_->Exec(select_sql, params));
+  std::vector<Running> running;
+  for (int k = 0; k < rows.rows(); ++k) {
+    running.push_back({rows.Int(k, 0), rows.Int(k, 1) != 0, rows.Int(k, 2) != 0, rows.Text(k, 3), rows.Text(k, 4)});
+  }
+  std::vector<std::int64_t> ids;
+  for (const Running& r : running) {
+    const std::string why =
+        lapsed ? Cat("lease lapsed: host ", r.host.empty() ? std::string("(none)") : r.host, " stopped heartbeating")
+               : std::string(kRecoverReason);
+    VB_RETURN_IF_ERROR(conn_
+                           ->Exec("UPDATE runs SET status = 'interrupted', reason = $2, finished = " VB_PG_NOW
+                                  ", lease_expires = 0 WHERE id = $1",
+                                  Params().Int(r.id).Text(why))
+                           .status());
+    VB_RETURN_IF_ERROR(AddHistory(r.id, RunStatus::kInterrupted, why));
+    VB_PG_ASSIGN_OR_RETURN(const std::int64_t times,
+                           conn_->QueryInt("SELECT count(*) FROM status_history WHERE run_id = $1 AND "
+                                           "status = 'interrupted'",
+                                           Params().Int(r.id)));
+    if (r.cancel_requested) {
+      const std::string reason =
+          r.cancel_reason.empty() ? "cancel requested before the server restarted" : r.cancel_reason;
+      VB_RETURN_IF_ERROR(conn_
+                             ->Exec("UPDATE runs SET status = 'cancelled', reason = $2, host = '' WHERE id = $1",
+                                    Params().Int(r.id).Text(reason))
+                             .status());
+      VB_RETURN_IF_ERROR(AddHistory(r.id, RunStatus::kCancelled, reason));
+    } else if (r.requeue && times >= kMaxInterruptions) {
+      const std::string reason = Cat("the server stopped ", times,
+                                     " times while this run ran: not re-queued again "
+                                     "(a run that takes the server down; see the server's log)");
+      VB_RETURN_IF_ERROR(conn_
+                             ->Exec("UPDATE runs SET status = 'failed', reason = $2, host = '' WHERE id = $1",
+                                    Params().Int(r.id).Text(reason))
+                             .status());
+      VB_RETURN_IF_ERROR(AddHistory(r.id, RunStatus::kFailed, reason));
+    } else if (r.requeue) {
+      // As on SQLite: back in the queue with its id, priority and age, asking for the bench it asked for; the
+      // partial trace is dropped. The fence stays: the next claim moves it on, so the old attempt stays stale.
+      VB_RETURN_IF_ERROR(conn_
+                             ->Exec("UPDATE runs SET status = 'queued', bench_name = requested_bench, started = 0, "
+                                    "finished = 0, progress = 0, cancel_requested = false, host = '', "
+                                    "lease_expires = 0 WHERE id = $1",
+                                    Params().Int(r.id))
+                             .status());
+      VB_RETURN_IF_ERROR(conn_->Exec("DELETE FROM trace_chunks WHERE run_id = $1", Params().Int(r.id)).status());
+      VB_RETURN_IF_ERROR(AddHistory(r.id, RunStatus::kQueued, why));
+    }
+    ids.push_back(r.id);
+  }
+  return ids;
+}
+
+StatusOr<int> PgStore::RecoverAfterCrash(const std::string& host) {
+  pg::Transaction txn(conn_.get());
+  VB_RETURN_IF_ERROR(txn.Begin());
+  StatusOr<std::vector<std::int64_t>> ids =
+      host.empty() ? Interrupt(
+                         "SELECT id, requeue_on_interrupt, cancel_requested, reason, host FROM runs "
+                         "WHERE status = 'running' ORDER BY id FOR UPDATE",
+                         Params(), false)
+                   : Interrupt(
+                         "SELECT id, requeue_on_interrupt, cancel_requested, reason, host FROM runs "
+                         "WHERE status = 'running' AND host = $1 ORDER BY id FOR UPDATE",
+                         Params().Text(host), false);
+  if (!ids.ok()) return ids.status();
+  VB_RETURN_IF_ERROR(txn.Commit());
+  return static_cast<int>(ids->size());
+}
+
+// ---- The lab ----
+
+Status PgStore::Heartbeat(const HostRecord& host, double lease_ttl_s) {
+  if (host.name.empty()) return Status::InvalidArgument("host.name: must not be empty");
+  VB_RETURN_IF_ERROR(ValidateSeconds("lease_ttl_s", lease_ttl_s));
+  if (!std::isfinite(host.started_unix_s) || host.started_unix_s < 0) {
+    return Status::InvalidArgument(
+        Cat("host.started_unix_s: must be finite and >= 0, got ", FormatExact(host.started_unix_s)));
+  }
+  pg::Transaction txn(conn_.get());
+  VB_RETURN_IF_ERROR(txn.Begin());
+  VB_RETURN_IF_ERROR(conn_
+                         ->Exec("INSERT INTO hosts (name, address, benches_json, started, heartbeat) VALUES "
+                                "($1, $2, $3, CASE WHEN $4 > 0 THEN $4 ELSE " VB_PG_NOW " END, " VB_PG_NOW ") "
+                                "ON CONFLICT (name) DO UPDATE SET address = excluded.address, "
+                                "benches_json = excluded.benches_json, started = excluded.started, "
+                                "heartbeat = excluded.heartbeat",
+                                Params()
+                                    .Text(host.name)
+                                    .Text(host.address)
+                                    .Text(host.benches_json.empty() ? "[]" : host.benches_json)
+                                    .Double(host.started_unix_s))
+                         .status());
+  if (lease_ttl_s > 0) {
+    VB_RETURN_IF_ERROR(conn_
+                           ->Exec("UPDATE runs SET lease_expires = " VB_PG_NOW " + $2 "
+                                  "WHERE status = 'running' AND host = $1",
+                                  Params().Text(host.name).Double(lease_ttl_s))
+                           .status());
+  }
+  return txn.Commit();
+}
+
+StatusOr<std::vector<HostRecord>> PgStore::ListHosts() {
+  VB_PG_ASSIGN_OR_RETURN(Result r, conn_->Exec("SELECT name, address, benches_json, started, heartbeat FROM hosts "
+                                               "ORDER BY name"));
+  std::vector<HostRecord> out;
+  for (int k = 0; k < r.rows(); ++k) {
+    out.push_back({r.Text(k, 0), r.Text(k, 1), r.Text(k, 2), r.Double(k, 3), r.Double(k, 4)});
+  }
+  return out;
+}
+
+StatusOr<std::vector<std::int64_t>> PgStore::RequeueLapsed() {
+  pg::Transaction txn(conn_.get());
+  VB_RETURN_IF_ERROR(txn.Begin());
+  // SKIP LOCKED: a run another host is reaping (or writing for) right now is left to it.
+  VB_PG_ASSIGN_OR_RETURN(std::vector<std::int64_t> ids,
+                         Interrupt("SELECT id, requeue_on_interrupt, cancel_requested, reason, host FROM runs "
+                                   "WHERE status = 'running' AND lease_expires > 0 AND lease_expires < " VB_PG_NOW
+                                   " ORDER BY id FOR UPDATE SKIP LOCKED",
+                                   Params(), true));
+  VB_RETURN_IF_ERROR(txn.Commit());
+  return ids;
+}
+
+StatusOr<std::vector<StaleWrite>> PgStore::StaleWrites(std::int32_t limit, std::int64_t* total) {
+  if (limit < 1 || limit > kMaxListLimit)
+    return Status::InvalidArgument(Cat("limit: must be in 1..", kMaxListLimit, ", got ", limit));
+  pg::Transaction txn(conn_.get());
+  VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
+  VB_PG_ASSIGN_OR_RETURN(Result r, conn_->Exec("SELECT run_id, fence, current_fence, host, what, at FROM stale_writes "
+                                               "ORDER BY id LIMIT $1",
+                                               Params().Int(limit)));
+  std::vector<StaleWrite> out;
+  for (int k = 0; k < r.rows(); ++k) {
+    out.push_back({r.Int(k, 0), r.Int(k, 1), r.Int(k, 2), r.Text(k, 3), r.Text(k, 4), r.Double(k, 5)});
+  }
+  if (total != nullptr) {
+    VB_PG_ASSIGN_OR_RETURN(*total, conn_->QueryInt("SELECT count(*) FROM stale_writes"));
+  }
+  VB_RETURN_IF_ERROR(txn.Commit());
+  return out;
+}
+
+StatusOr<bool> PgStore::ClaimNight(const std::string& night, const std::string& host) {
+  bool well_formed = night.size() == 10 && night[4] == '-' && night[7] == '-';
+  for (std::size_t k : {0, 1, 2, 3, 5, 6, 8, 9}) well_formed = well_formed && night[k] >= '0' && night[k] <= '9';
+  if (!well_formed) return Status::InvalidArgument(Cat("night: must be YYYY-MM-DD, got \"", night, "\""));
+  VB_PG_ASSIGN_OR_RETURN(Result r, conn_->Exec("INSERT INTO nights_claimed (night, host, at) VALUES ($1, $2, " VB_PG_NOW
+                                               ") ON CONFLICT (night) DO NOTHING",
+                                               Params().Text(night).Text(host)));
+  return r.affected() == 1;
+}
+
+// ---- Reading runs ----
+
+StatusOr<RunRecord> PgStore::GetRun(std::int64_t run_id) { return LoadRun(run_id); }
+
+StatusOr<std::vector<RunRecord>> PgStore::ListRuns(const RunFilter& f) {
+  VB_RETURN_IF_ERROR(ValidateFilter(f));
+  Params p;
+  int n = 0;
+  auto next = [&n] { return Cat("$", ++n); };
+  std::string q = Cat("SELECT ", kRunColumns, " FROM runs WHERE id > ", next());
+  p.Int(f.after_id);
+  if (f.status) {
+    q += " AND status = " + next();
+    p.Text(RunStatusName(*f.status));
+  }
+  if (!f.tag.empty()) {
+    q += Cat(" AND id IN (SELECT run_id FROM run_tags WHERE tag = ", next(), ")");
+    p.Text(f.tag);
+  }
+  if (f.batch_id != 0) {
+    q += " AND batch_id = " + next();
+    p.Int(f.batch_id);
+  }
+  if (!f.controller.empty()) {
+    q += " AND controller = " + next();
+    p.Text(f.controller);
+  }
+  if (!f.bench_name.empty()) {
+    q += " AND bench_name = " + next();
+    p.Text(f.bench_name);
+  }
+  if (!f.submitter.empty()) {
+    q += " AND submitter = " + next();
+    p.Text(f.submitter);
+  }
+  if (f.submitted_after_unix_s > 0) {
+    q += " AND submitted >= " + next();
+    p.Double(f.submitted_after_unix_s);
+  }
+  if (f.submitted_before_unix_s > 0) {
+    q += " AND submitted < " + next();
+    p.Double(f.submitted_before_unix_s);
+  }
+  q += " ORDER BY id LIMIT " + next();
+  p.Int(f.limit);
+  VB_PG_ASSIGN_OR_RETURN(Result r, conn_->Exec(q, p));
+  std::vector<RunRecord> out;
+  for (int k = 0; k < r.rows(); ++k) {
+    VB_PG_ASSIGN_OR_RETURN(RunRecord run, ReadRun(r, k));
+    out.push_back(std::move(run));
+  }
+  return out;
+}
+
+StatusOr<std::vector<StatusChange>> PgStore::History(std::int64_t run_id) {
+  pg::Transaction txn(conn_.get());
+  VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
+  VB_RETURN_IF_ERROR(StatusOf(run_id).status());
+  VB_PG_ASSIGN_OR_RETURN(Result r, conn_->Exec("SELECT status, at, reason FROM status_history WHERE run_id = $1 "
+                                               "ORDER BY id",
+                                               Params().Int(run_id)));
+  std::vector<StatusChange> out;
+  for (int k = 0; k < r.rows(); ++k) {
+    StatusOr<RunStatus> s = ParseRunStatus(r.Text(k, 0));
+    if (!s.ok()) return Status::DataLoss(Cat("history of run ", run_id, ": ", s.status().message()));
+    out.push_back({*s, r.Double(k, 1), r.Text(k, 2)});
+  }
+  VB_RETURN_IF_ERROR(txn.Commit());
+  return out;
+}
+
+StatusOr<std::vector<Metric>> PgStore::GetMetrics(std::int64_t run_id) {
+  pg::Transaction txn(conn_.get());
+  VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
+  VB_RETURN_IF_ERROR(StatusOf(run_id).status());
+  // COLLATE "C": byte order, as SQLite's ORDER BY on text.
+  VB_PG_ASSIGN_OR_RETURN(Result r, conn_->Exec("SELECT name, value FROM metrics WHERE run_id = $1 "
+                                               "ORDER BY name COLLATE \"C\"",
+                                               Params().Int(run_id)));
+  std::vector<Metric> out;
+  for (int k = 0; k < r.rows(); ++k) out.push_back({r.Text(k, 0), r.Double(k, 1)});
+  VB_RETURN_IF_ERROR(txn.Commit());
+  return out;
+}
+
+StatusOr<std::int64_t> PgStore::CountQueued(const std::string& submitter) {
+  if (submitter.empty()) return conn_->QueryInt("SELECT count(*) FROM runs WHERE status = 'queued'");
+  return conn_->QueryInt("SELECT count(*) FROM runs WHERE submitter = $1 AND status = 'queued'",
+                         Params().Text(submitter));
+}
+
+StatusOr<std::int64_t> PgStore::StoredTraceBytes(const std::string& submitter) {
+  return conn_->QueryInt(
+      "SELECT COALESCE(SUM(octet_length(c.data)), 0)::int8 FROM runs r "
+      "JOIN trace_chunks c ON c.run_id = r.id WHERE r.submitter = $1",
+      Params().Text(submitter));
+}
+
+// ---- Traces ----
+
+Status PgStore::AppendTraceChunk(const Lease& lease, const TraceChunk& chunk) {
+  const std::int64_t run_id = lease.run_id;
+  VB_RETURN_IF_ERROR(trace::ValidateChunk(chunk));
+  const std::string where = Cat("trace chunk ", chunk.index, ": ");
+  const std::string channels = trace::JoinChannels(chunk.channels);
+  // Compressed before the transaction starts: the run's row is locked only for the insert.
+  VB_RETURN_IF_ERROR(
+      codec_.Encode(chunk.data.data(), chunk.channels.size(), static_cast<std::size_t>(chunk.samples), &encoded_)
+          .WithContext(Cat("trace chunk ", chunk.index)));
+  if (encoded_.size() > kMaxBlobBytes) {
+    return Status::InvalidArgument(Cat(where, encoded_.size(),
+                                       " bytes of data exceed the largest bytea PostgreSQL "
+                                       "stores (",
+                                       kMaxBlobBytes, " bytes): use smaller chunks"));
+  }
+  pg::Transaction txn(conn_.get());
+  VB_RETURN_IF_ERROR(txn.Begin());
+  // Trace chunks keep SQLite's rule (any status), but only the lease's attempt may write them.
+  VB_RETURN_IF_ERROR(CheckLease(&txn, lease, nullptr, Cat("trace chunk ", chunk.index)));
+  VB_PG_ASSIGN_OR_RETURN(Result last, conn_->Exec("SELECT idx, channels FROM trace_chunks WHERE run_id = $1 "
+                                                  "ORDER BY idx DESC LIMIT 1",
+                                                  Params().Int(run_id)));
+  const bool any = last.rows() > 0;
+  const std::int64_t next = any ? last.Int(0, 0) + 1 : 0;
+  if (chunk.index < next) {
+    return Status::AlreadyExists(Cat(where, "already stored for run ", run_id, " (the next index is ", next, ")"));
+  }
+  if (chunk.index > next) {
+    return Status::InvalidArgument(
+        Cat(where, "index must be ", next, " (chunks of run ", run_id, " are appended in order from 0, without gaps)"));
+  }
+  if (any && last.Text(0, 1) != channels) {
+    return Status::InvalidArgument(Cat(where, "channels differ from those of the run's earlier chunks"));
+  }
+  VB_RETURN_IF_ERROR(conn_
+                         ->Exec("INSERT INTO trace_chunks (run_id, idx, t0, period, samples, channels, data, codec) "
+                                "VALUES ($1, $2, $3, $4, $5, $6, $7, $8)",
+                                Params()
+                                    .Int(run_id)
+                                    .Int(chunk.index)
+                                    .Double(chunk.t0_s)
+                                    .Double(chunk.sample_period_s)
+                                    .Int(chunk.samples)
+                                    .Text(channels)
+                                    .Bytes(encoded_.data(), encoded_.size())
+                                    .Int(static_cast<std::int64_t>(trace::Codec::kShuffledZstd)))
+                         .status());
+  return txn.Commit();
+}
+
+StatusOr<std::vector<TraceChunk>> PgStore::ReadTrace(std::int64_t run_id) {
+  std::vector<TraceChunk> out;
+  VB_RETURN_IF_ERROR(ReadChunks(run_id, [&](TraceChunk& c, std::int64_t) {
+    out.push_back(std::move(c));
+    c = TraceChunk();
+    return Status::Ok();
+  }));
+  return out;
+}
+
+Status PgStore::ForEachTraceChunk(std::int64_t run_id,
+                                  const std::function<Status(const TraceChunk&, std::int64_t)>& fn) {
+  return ReadChunks(run_id, [&](TraceChunk& c, std::int64_t total) { return fn(c, total); });
+}
+
+Status PgStore::ReadChunks(std::int64_t run_id, const std::function<Status(TraceChunk&, std::int64_t)>& fn) {
+  // One snapshot for the listing and every chunk; the chunks' data is fetched one at a time, so only the
+  // current chunk's bytes are in memory.
+  pg::Transaction txn(conn_.get());
+  VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
+  VB_RETURN_IF_ERROR(StatusOf(run_id).status());
+  VB_PG_ASSIGN_OR_RETURN(Result meta, conn_->Exec("SELECT idx, t0, period, samples, channels, codec "
+                                                  "FROM trace_chunks WHERE run_id = $1 ORDER BY idx",
+                                                  Params().Int(run_id)));
+  std::int64_t total = 0;
+  for (int k = 0; k < meta.rows(); ++k) total += meta.Int(k, 3);
+  TraceChunk c;
+  for (int k = 0; k < meta.rows(); ++k) {
+    c.index = static_cast<std::int32_t>(meta.Int(k, 0));
+    c.t0_s = meta.Double(k, 1);
+    c.sample_period_s = meta.Double(k, 2);
+    c.samples = static_cast<std::int32_t>(meta.Int(k, 3));
+    c.channels = trace::SplitChannels(meta.Text(k, 4));
+    const std::string what = Cat("trace of run ", run_id, ", chunk ", c.index);
+    if (c.index != k) return Status::DataLoss(Cat(what, ": expected chunk ", k, " (a chunk is missing)"));
+    const std::size_t values = c.channels.size() * static_cast<std::size_t>(c.samples);
+    const std::int64_t codec = meta.Int(k, 5);
+    VB_PG_ASSIGN_OR_RETURN(Result data, conn_->Exec("SELECT data FROM trace_chunks WHERE run_id = $1 AND idx = $2",
+                                                    Params().Int(run_id).Int(c.index)));
+    if (data.rows() != 1) return Status::DataLoss(Cat(what, ": vanished while being read"));
+    const std::string_view bytes = data.Bytes(0, 0);
+    if (codec == static_cast<std::int64_t>(trace::Codec::kRawFloat64)) {
+      VB_RETURN_IF_ERROR(trace::CheckSize(bytes.size(), values, what));
+      c.data.resize(values);
+      if (!bytes.empty()) std::memcpy(c.data.data(), bytes.data(), bytes.size());
+      trace::FromLittleEndian(&c.data);
+    } else if (codec == static_cast<std::int64_t>(trace::Codec::kShuffledZstd)) {
+      c.data.resize(values);
+      VB_RETURN_IF_ERROR(codec_.Decode(bytes.data(), bytes.size(), c.channels.size(),
+                                       static_cast<std::size_t>(c.samples), c.data.data(), what));
+    } else {
+      return Status::DataLoss(Cat(what, ": unknown codec ", codec));
+    }
+    VB_RETURN_IF_ERROR(fn(c, total));
+  }
+  return txn.Commit();
+}
+
+// ---- Baselines and regressions (db/regress_tables.cc on SQLite) ----
+
+StatusOr<std::int32_t> PgStore::SaveBaseline(const std::string& name, const std::string& source,
+                                             const std::string& note, const std::vector<BaselineEntry>& entries) {
+  VB_RETURN_IF_ERROR(ValidateBaseline(name, entries));
+  pg::Transaction txn(conn_.get());
+  VB_RETURN_IF_ERROR(txn.Begin());
+  // Two hosts saving under one name at once: the second waits here, then numbers after the first.
+  VB_RETURN_IF_ERROR(conn_->Exec("SELECT pg_advisory_xact_lock(hashtext($1))", Params().Text(name)).status());
+  VB_PG_ASSIGN_OR_RETURN(const std::int64_t last, conn_->QueryInt("SELECT COALESCE(MAX(version), 0)::int8 FROM "
+                                                                  "baselines WHERE name = $1",
+                                                                  Params().Text(name)));
+  const std::int64_t version = last + 1;
+  VB_PG_ASSIGN_OR_RETURN(const std::int64_t id,
+                         conn_->QueryInt("INSERT INTO baselines (name, version, created, source, note) VALUES "
+                                         "($1, $2, " VB_PG_NOW ", $3, $4) RETURNING id",
+                                         Params().Text(name).Int(version).Text(source).Text(note)));
+  for (const BaselineEntry& e : entries) {
+    VB_RETURN_IF_ERROR(
+        conn_
+            ->Exec("INSERT INTO baseline_metrics (baseline_id, case_name, metric, mean, spread, n) "
+                   "VALUES ($1, $2, $3, $4, $5, $6)",
+                   Params().Int(id).Text(e.case_name).Text(e.metric).Double(e.mean).Double(e.spread).Int(e.n))
+            .status());
+  }
+  VB_RETURN_IF_ERROR(txn.Commit());
+  return static_cast<std::int32_t>(version);
+}
+
+StatusOr<BaselineRecord> PgStore::GetBaseline(const std::string& name, std::int32_t version) {
+  if (version < 0) return Status::InvalidArgument(Cat("version: must be >= 1 (0 = newest), got ", version));
+  pg::Transaction txn(conn_.get());
+  VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
+  StatusOr<Result> head = version == 0 ? conn_->Exec(
+                                             "SELECT id, version, created, source, note FROM baselines WHERE name = $1 "
+                                             "ORDER BY version DESC LIMIT 1",
+                                             Params().Text(name))
+                                       : conn_->Exec(
+                                             "SELECT id, version, created, source, note FROM baselines WHERE name = $1 "
+                                             "AND version = $2",
+                                             Params().Text(name).Int(version));
+  if (!head.ok()) return head.status();
+  if (head->rows() == 0) {
+    return Status::NotFound(version == 0 ? Cat("baseline '", name, "' not found")
+                                         : Cat("baseline '", name, "' has no version ", version));
+  }
+  BaselineRecord b;
+  const std::int64_t id = head->Int(0, 0);
+  b.name = name;
+  b.version = static_cast<std::int32_t>(head->Int(0, 1));
+  b.created_unix_s = head->Double(0, 2);
+  b.source = head->Text(0, 3);
+  b.note = head->Text(0, 4);
+  VB_PG_ASSIGN_OR_RETURN(Result m, conn_->Exec("SELECT case_name, metric, mean, spread, n FROM baseline_metrics "
+                                               "WHERE baseline_id = $1 ORDER BY case_name COLLATE \"C\", "
+                                               "metric COLLATE \"C\"",
+                                               Params().Int(id)));
+  for (int k = 0; k < m.rows(); ++k) {
+    b.entries.push_back(
+        {m.Text(k, 0), m.Text(k, 1), m.Double(k, 2), m.Double(k, 3), static_cast<std::int32_t>(m.Int(k, 4))});
+  }
+  VB_RETURN_IF_ERROR(txn.Commit());
+  return b;
+}
+
+StatusOr<std::vector<BaselineRecord>> PgStore::ListBaselines() {
+  VB_PG_ASSIGN_OR_RETURN(Result r, conn_->Exec("SELECT name, version, created, source, note FROM baselines "
+                                               "ORDER BY name COLLATE \"C\", version"));
+  std::vector<BaselineRecord> out;
+  for (int k = 0; k < r.rows(); ++k) {
+    BaselineRecord b;
+    b.name = r.Text(k, 0);
+    b.version = static_cast<std::int32_t>(r.Int(k, 1));
+    b.created_unix_s = r.Double(k, 2);
+    b.source = r.Text(k, 3);
+    b.note = r.Text(k, 4);
+    out.push_back(std::move(b));
+  }
+  return out;
+}
+
+constexpr const char* kRegressionColumns =
+    "id, suite, baseline_name, baseline_version, batch_id, night, created, verdict";
+
+RegressionRecord ReadRegression(const Result& r, int k) {
+  RegressionRecord out;
+  out.id = r.Int(k, 0);
+  out.suite = r.Text(k, 1);
+  out.baseline_name = r.Text(k, 2);
+  out.baseline_version = static_cast<std::int32_t>(r.Int(k, 3));
+  out.batch_id = r.Int(k, 4);
+  out.night = r.Text(k, 5);
+  out.created_unix_s = r.Double(k, 6);
+  out.verdict = r.Text(k, 7);
+  return out;
+}
+
+StatusOr<std::int64_t> PgStore::SaveRegression(const RegressionRecord& record) {
+  if (record.suite.empty()) return Status::InvalidArgument("regression.suite: must not be empty");
+  if (record.verdict.empty()) return Status::InvalidArgument("regression.verdict: must not be empty");
+  return conn_->QueryInt(
+      "INSERT INTO regressions (suite, baseline_name, baseline_version, batch_id, night, created, "
+      "verdict, result_json) VALUES ($1, $2, $3, $4, $5, CASE WHEN $6 > 0 THEN $6 ELSE " VB_PG_NOW
+      " END, $7, $8) RETURNING id",
+      Params()
+          .Text(record.suite)
+          .Text(record.baseline_name)
+          .Int(record.baseline_version)
+          .Int(record.batch_id)
+          .Text(record.night)
+          .Double(record.created_unix_s)
+          .Text(record.verdict)
+          .Text(record.result_json));
+}
+
+StatusOr<RegressionRecord> PgStore::GetRegression(std::int64_t id) {
+  static const std::string sql = Cat("SELECT ", kRegressionColumns, ", result_json FROM regressions WHERE id = $1");
+  VB_PG_ASSIGN_OR_RETURN(Result r, conn_->Exec(sql, Params().Int(id)));
+  if (r.rows() == 0) return Status::NotFound(Cat("regression ", id, " not found"));
+  RegressionRecord out = ReadRegression(r, 0);
+  out.result_json = r.Text(0, 8);
+  return out;
+}
+
+StatusOr<std::vector<RegressionRecord>> PgStore::ListRegressions(bool nights_only, std::int32_t limit) {
+  if (limit < 1 || limit > kMaxListLimit)
+    return Status::InvalidArgument(Cat("limit: must be in 1..", kMaxListLimit, ", got ", limit));
+  VB_PG_ASSIGN_OR_RETURN(Result r,
+                         conn_->Exec(Cat("SELECT ", kRegressionColumns, " FROM regressions",
+                                         nights_only ? " WHERE night != ''" : "", " ORDER BY id DESC LIMIT $1"),
+                                     Params().Int(limit)));
+  std::vector<RegressionRecord> out;
+  for (int k = 0; k < r.rows(); ++k) out.push_back(ReadRegression(r, k));
+  return out;
+}
+
+// ---- Retention (the rules of SqliteStore::Prune, db/store.cc) ----
+
+StatusOr<PruneResult> PgStore::Prune(const PruneRequest& request) {
+  if (!std::isfinite(request.finished_before_unix_s) || request.finished_before_unix_s <= 0) {
+    return Status::InvalidArgument(
+        Cat("finished_before_unix_s: must be a finite time > 0, got ", FormatExact(request.finished_before_unix_s)));
+  }
+  if (request.keep_last < 0) return Status::InvalidArgument(Cat("keep_last: must be >= 0, got ", request.keep_last));
+  for (std::size_t k = 0; k < request.protected_batches.size(); ++k) {
+    if (request.protected_batches[k] <= 0) {
+      return Status::InvalidArgument(
+          Cat("protected_batches[", k, "]: must be a batch id > 0, got ", request.protected_batches[k]));
+    }
+  }
+  pg::Transaction txn(conn_.get());
+  VB_RETURN_IF_ERROR(txn.Begin(request.dry_run ? TxnKind::kRead : TxnKind::kWrite));
+  std::map<std::int64_t, std::string> protected_batches;
+  for (std::int64_t b : request.protected_batches)
+    protected_batches.emplace(b, request.protected_why.empty() ? "protected by the caller" : request.protected_why);
+  {
+    VB_PG_ASSIGN_OR_RETURN(Result r, conn_->Exec("SELECT id, batch_id, night, suite FROM regressions "
+                                                 "WHERE batch_id != 0 ORDER BY id"));
+    for (int k = 0; k < r.rows(); ++k) {
+      const std::string night = r.Text(k, 2);
+      protected_batches.emplace(r.Int(k, 1), night.empty()
+                                                 ? Cat("regression result ", r.Int(k, 0), " (suite ", r.Text(k, 3), ")")
+                                                 : Cat("regression night ", night, " (result ", r.Int(k, 0), ")"));
+    }
+  }
+  {
+    VB_PG_ASSIGN_OR_RETURN(Result r, conn_->Exec("SELECT name, version, source FROM baselines ORDER BY id"));
+    for (int k = 0; k < r.rows(); ++k) {
+      const std::int64_t batch = LocalBatchOfBaselineSource(r.Text(k, 2));
+      if (batch != 0) protected_batches.emplace(batch, Cat("baseline '", r.Text(k, 0), "' v", r.Int(k, 1)));
+    }
+  }
+  PruneResult out;
+  std::vector<std::int64_t> doomed;
+  std::set<std::int64_t> touched_batches;
+  {
+    // No row locks: only finished runs are deleted, and nothing writes to a finished run any more.
+    VB_PG_ASSIGN_OR_RETURN(Result r, conn_->Exec("SELECT id, batch_id, name, status, finished FROM runs "
+                                                 "ORDER BY id DESC"));
+    std::int32_t finished_seen = 0;
+    for (int k = 0; k < r.rows(); ++k) {
+      PruneDecision d;
+      d.run_id = r.Int(k, 0);
+      d.batch_id = r.Int(k, 1);
+      d.name = r.Text(k, 2);
+      StatusOr<RunStatus> status = ParseRunStatus(r.Text(k, 3));
+      if (!status.ok()) return Status::DataLoss(Cat("run ", d.run_id, ": ", status.status().message()));
+      d.status = *status;
+      d.finished_unix_s = r.Double(k, 4);
+      const bool final_status =
+          d.status == RunStatus::kDone || d.status == RunStatus::kFailed || d.status == RunStatus::kCancelled;
+      if (!final_status) {
+        d.why = Cat(RunStatusName(d.status), ": only finished runs are pruned");
+        out.kept.push_back(std::move(d));
+        continue;
+      }
+      ++finished_seen;
+      if (d.finished_unix_s >= request.finished_before_unix_s) {
+        ++out.newer_kept;
+        continue;
+      }
+      if (auto p = protected_batches.find(d.batch_id); p != protected_batches.end()) {
+        d.why = Cat(p->second, " references batch ", d.batch_id);
+        out.kept.push_back(std::move(d));
+        continue;
+      }
+      if (finished_seen <= request.keep_last) {
+        d.why = Cat("one of the newest ", request.keep_last, " finished runs (--keep-last)");
+        out.kept.push_back(std::move(d));
+        continue;
+      }
+      d.why = Cat(RunStatusName(d.status), ", finished ", FormatUtc(d.finished_unix_s), ", before the cutoff ",
+                  FormatUtc(request.finished_before_unix_s));
+      doomed.push_back(d.run_id);
+      touched_batches.insert(d.batch_id);
+      out.deleted.push_back(std::move(d));
+    }
+  }
+  for (std::int64_t id : doomed) {
+    VB_PG_ASSIGN_OR_RETURN(const std::int64_t bytes,
+                           conn_->QueryInt("SELECT COALESCE(SUM(octet_length(data)), 0)::int8 FROM trace_chunks "
+                                           "WHERE run_id = $1",
+                                           Params().Int(id)));
+    out.trace_bytes += bytes;
+  }
+  if (!request.dry_run) {
+    for (std::int64_t id : doomed) {
+      VB_RETURN_IF_ERROR(conn_->Exec("DELETE FROM runs WHERE id = $1", Params().Int(id)).status());
+    }
+    for (std::int64_t b : touched_batches) {
+      VB_PG_ASSIGN_OR_RETURN(Result del, conn_->Exec("DELETE FROM batches WHERE id = $1 AND NOT EXISTS "
+                                                     "(SELECT 1 FROM runs WHERE batch_id = $1)",
+                                                     Params().Int(b)));
+      out.batches_deleted += del.affected();
+    }
+  } else {
+    for (std::int64_t b : touched_batches) {
+      VB_PG_ASSIGN_OR_RETURN(std::int64_t remaining,
+                             conn_->QueryInt("SELECT count(*) FROM runs WHERE batch_id = $1", Params().Int(b)));
+      for (const PruneDecision& d : out.deleted) remaining -= d.batch_id == b;
+      out.batches_deleted += remaining == 0;
+    }
+  }
+  VB_RETURN_IF_ERROR(txn.Commit());
+  return out;
+}
+
+}  // namespace
+
+StatusOr<std::unique_ptr<Store>> OpenPgStore(const std::string& location) {
+  if (!pg::IsPostgresLocation(location)) {
+    return Status::InvalidArgument(
+        Cat("location: not a PostgreSQL connection string (postgresql://... or "
+            "\"host=... dbname=...\"): \"",
+            location, "\""));
+  }
+  VB_PG_ASSIGN_OR_RETURN(std::unique_ptr<pg::Connection> conn, pg::Connection::Open(location));
+  VB_PG_ASSIGN_OR_RETURN(const int version, pg_schema::Migrate(conn.get(), pg_schema::Migrations()));
+  return std::unique_ptr<Store>(std::make_unique<PgStore>(std::move(conn), version));
+}
+
+}  // namespace vb::db
