@@ -20,6 +20,10 @@ std::vector<db::Metric> RecordedMetrics(const experiment::Metrics& metrics) {
   return out;
 }
 
+bool IsStaleWrite(const Status& st) {
+  return st.code() == StatusCode::kFailedPrecondition && st.message().rfind("stale write", 0) == 0;
+}
+
 namespace {
 
 // The final state a run's summary maps to; the one place that decides it.
@@ -29,6 +33,16 @@ db::RunStatus StatusOf(experiment::RunSummary::Termination t) {
     case experiment::RunSummary::Termination::kFailed: return db::RunStatus::kFailed;
     default: return db::RunStatus::kDone;
   }
+}
+
+// A stale write: stop writing (no retry), log it; the run's state is whoever holds it now.
+Outcome Stale(Outcome out, const db::RunRecord& run, const Status& st) {
+  spdlog::warn("run {} (fence {}): stopped writing, the run is no longer this attempt's: {}",
+               static_cast<long long>(run.id), static_cast<long long>(run.fence), st.message());
+  out.stale = true;
+  out.recorded = false;
+  out.status = db::RunStatus::kRunning;  // as far as this attempt knows; the store has the truth
+  return out;
 }
 
 }  // namespace
@@ -47,9 +61,13 @@ Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& se
     }
     auto st = store->Finish(db::LeaseOf(run), status, out.reason, metrics);
     out.recorded = st.ok();
-    if (!st.ok())
-      spdlog::error("run {}: cannot record the result: {}", static_cast<long long>(run.id),
-                   st.message().c_str());
+    if (IsStaleWrite(st)) {
+      out.stale = true;
+      spdlog::warn("run {} (fence {}): result not recorded, the run is no longer this attempt's: {}",
+                   static_cast<long long>(run.id), static_cast<long long>(run.fence), st.message());
+    } else if (!st.ok()) {
+      spdlog::error("run {}: cannot record the result: {}", static_cast<long long>(run.id), st.message().c_str());
+    }
     return std::move(out);
   };
   const bool stopping = ctx.stop != nullptr && ctx.stop->load();
@@ -58,6 +76,7 @@ Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& se
   auto spec = experiment::ParseSpecJson(run.spec_json);
   if (!spec.ok()) return finish(db::RunStatus::kFailed, "stored spec does not parse: " + spec.status().message(), {});
   if (setup.kind == "emulated" && !setup.plant_from_spec) *spec->mutable_bench()->mutable_model() = setup.model;
+  if (setup.paced) spec->set_realtime(true);
 
   // 2. The experiment and the bench.
   auto e = experiment::BuildExperiment(*spec);
@@ -105,10 +124,14 @@ Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& se
   }
   if (out.summary.termination != experiment::RunSummary::Termination::kDone && e->duration_s > 0) {
     const double reached = std::clamp(out.summary.duration_s / e->duration_s, 0.0, 1.0);
-    if (auto st = store->SetProgress(db::LeaseOf(run), reached); !st.ok())
+    if (auto st = store->SetProgress(db::LeaseOf(run), reached); IsStaleWrite(st)) {
+      return Stale(std::move(out), run, st);
+    } else if (!st.ok()) {
       spdlog::warn("run {}: cannot record its progress: {}", static_cast<long long>(run.id), st.message().c_str());
+    }
   }
   const Status stored = db::AppendRecordedTrace(store, db::LeaseOf(run), out.trace);
+  if (IsStaleWrite(stored)) return Stale(std::move(out), run, stored);
   db::RunStatus status = StatusOf(out.summary.termination);
   std::string reason = out.summary.message;
   if (status == db::RunStatus::kCancelled) {

@@ -26,6 +26,7 @@ struct Outcome {
   db::RunStatus status = db::RunStatus::kFailed;  // as recorded
   std::string reason;
   bool recorded = false;             // false: left running for recovery (stopped), or the store refused
+  bool stale = false;                // the store refused a write as stale: the run is another attempt's now
   experiment::RunSummary summary;    // empty when the run never started (bad spec, bench not there)
   experiment::Trace trace;           // what was recorded (also appended to the store)
 };
@@ -37,6 +38,10 @@ struct ExecuteContext {
 };
 
 Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& setup, const ExecuteContext& ctx);
+
+// A write the store refused because the lease no longer holds the run (db::Lease): the run was re-queued or
+// re-assigned while this attempt ran. The attempt stops writing, logs it, and does not retry (docs/lab.md).
+bool IsStaleWrite(const Status& st);
 
 // The metrics a run records: the finite ones of experiment::MetricList, in its order.
 std::vector<db::Metric> RecordedMetrics(const experiment::Metrics& metrics);

@@ -11,7 +11,11 @@ Worker::Worker(BenchSetup setup, Registry* registry) : setup_(std::move(setup)),
 Worker::~Worker() { Stop(); }
 
 StatusOr<std::optional<Outcome>> Worker::ClaimAndExecute(db::Store* store) {
-  auto claimed = store->ClaimNext(db::BenchClaim(setup_.bench_class, setup_.name));
+  db::ClaimRequest request = db::BenchClaim(setup_.bench_class, setup_.name);
+  request.host = policy_.host;
+  request.lease_ttl_s = policy_.lease_ttl_s;
+  request.aging_s = policy_.aging_s;
+  auto claimed = store->ClaimNext(request);
   if (!claimed.ok()) return claimed.status();
   if (!claimed->has_value()) return std::optional<Outcome>();
   current_fence_.store((*claimed)->fence);
@@ -23,6 +27,14 @@ StatusOr<std::optional<Outcome>> Worker::ClaimAndExecute(db::Store* store) {
   Outcome out = Execute(store, **claimed, setup_, ctx);
   current_run_.store(0);
   return std::optional<Outcome>(std::move(out));
+}
+
+bool Worker::CancelIfCurrent(const db::Lease& lease) {
+  if (lease.run_id == 0 || current_run_.load() != lease.run_id || current_fence_.load() != lease.fence) return false;
+  experiment::RunMonitor* m = monitor_.load();
+  if (m == nullptr) return false;
+  m->cancel.store(true);
+  return true;
 }
 
 void Worker::Start(std::string db_path) {

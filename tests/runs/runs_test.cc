@@ -304,7 +304,12 @@ TEST(Enqueue, APerUserDiskBudgetCountsStoredTracesAndTheNewRunsUncompressed) {
     x ^= x << 13, x ^= x >> 7, x ^= x << 17;
     c.data.push_back(std::bit_cast<double>(x & 0x7fefffffffffffffULL));
   }
-  ASSERT_TRUE((*store)->AppendTraceChunk(vb::db::testing::CurrentLease(*store, q->run_ids[0]), c).ok());
+  // Only the attempt holding a run writes its trace: claim it first.
+  auto queued = (*store)->GetRun(q->run_ids[0]);
+  ASSERT_TRUE(queued.ok());
+  auto claimed = (*store)->ClaimNext(db::BenchClaim(queued->bench_kind, "bench-1"));
+  ASSERT_TRUE(claimed.ok() && claimed->has_value());
+  ASSERT_TRUE((*store)->AppendTraceChunk(db::LeaseOf(**claimed), c).ok());
   auto used = (*store)->StoredTraceBytes("alice");
   ASSERT_TRUE(used.ok());
   EXPECT_GT(*used, 700000);
