@@ -129,6 +129,7 @@ Json RunJson(const RunView& r, const experiment::RunSummary* summary) {
   j["reason"] = r.reason;
   if (r.id != 0) {
     j["bench"] = r.bench;
+    if (!r.host.empty()) j["host"] = r.host;
     j["submitter"] = r.submitter;
     j["priority"] = r.priority;
     j["progress"] = r.progress;
