@@ -4,6 +4,7 @@
 // once, and the stopped host's late writes are refused and recorded.
 #include <gtest/gtest.h>
 #include <signal.h>
+#include <unistd.h>
 
 #include <chrono>
 #include <filesystem>
@@ -12,6 +13,7 @@
 #include "client/client.h"
 #include "db/store.h"
 #include "experiment/spec.h"
+#include "server/config.h"
 #include "server_process.h"
 
 namespace vb {
@@ -213,6 +215,54 @@ TEST_F(LabTest, AStoppedHostLosesItsRunAndItsLateWritesAreRefused) {
   ASSERT_TRUE(trace.ok()) << trace.status().message();
   ASSERT_FALSE(trace->empty());
   EXPECT_EQ((*trace)[0].t0_s, 0.0);
+}
+
+std::string ErrorOf(const v1::ServerConfig& c) {
+  auto s = server::SettingsFromConfig(c, "");
+  return s.ok() ? std::string("(accepted)") : s.status().message();
+}
+
+TEST(LabConfig, DefaultsAndErrorsNamingTheField) {
+  auto none = server::SettingsFromConfig(testing::MinimalConfig(), "");
+  ASSERT_TRUE(none.ok()) << none.status().message();
+  EXPECT_FALSE(none->lab.enabled);
+  EXPECT_TRUE(none->nights.lab_host.empty());
+
+  auto c = testing::MinimalConfig();
+  c.mutable_lab();  // an empty block: a lab host with every default
+  auto defaults = server::SettingsFromConfig(c, "");
+  ASSERT_TRUE(defaults.ok()) << defaults.status().message();
+  EXPECT_TRUE(defaults->lab.enabled);
+  char hostname[256] = {};
+  ASSERT_EQ(gethostname(hostname, sizeof hostname - 1), 0);
+  EXPECT_EQ(defaults->lab.host, hostname);
+  EXPECT_EQ(defaults->lab.lease_ttl_s, 10.0);
+  EXPECT_DOUBLE_EQ(defaults->lab.heartbeat_s, 10.0 / 3.0);
+  EXPECT_EQ(defaults->lab.aging_s, 60.0);
+
+  c.mutable_lab()->set_host("rig-7");
+  c.mutable_lab()->set_lease_ttl_s(4);
+  c.mutable_lab()->set_aging_s(-1);
+  auto set = server::SettingsFromConfig(c, "");
+  ASSERT_TRUE(set.ok()) << set.status().message();
+  EXPECT_EQ(set->lab.host, "rig-7");
+  EXPECT_DOUBLE_EQ(set->lab.heartbeat_s, 4.0 / 3.0);
+  EXPECT_EQ(set->lab.aging_s, 0.0);  // < 0: no aging
+
+  auto slow = c;
+  slow.mutable_lab()->set_heartbeat_s(3);
+  EXPECT_EQ(ErrorOf(slow).rfind("lab.heartbeat_s: ", 0), 0u) << ErrorOf(slow);
+  auto negative = c;
+  negative.mutable_lab()->set_lease_ttl_s(-1);
+  EXPECT_EQ(ErrorOf(negative).rfind("lab.lease_ttl_s: ", 0), 0u) << ErrorOf(negative);
+
+  auto paced = testing::MinimalConfig();
+  paced.mutable_benches(0)->set_pace("realtime");
+  auto p = server::SettingsFromConfig(paced, "");
+  ASSERT_TRUE(p.ok()) << p.status().message();
+  EXPECT_TRUE(p->benches[0].paced);
+  paced.mutable_benches(0)->set_pace("fast");
+  EXPECT_EQ(ErrorOf(paced).rfind("benches[0].pace: ", 0), 0u) << ErrorOf(paced);
 }
 
 }  // namespace
