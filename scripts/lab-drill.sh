@@ -191,7 +191,14 @@ stale=$(db_query "SELECT count(*) FROM stale_writes WHERE run_id IN ($RUNS_Q)")
 lost=$((RUNS - done_n))
 [[ $stored == "$RUNS" ]] || echo "lab-drill: $stored runs stored, $RUNS submitted" >&2
 not_done=$(db_query "SELECT status || ' ' || count(*) FROM runs WHERE status != 'done' AND id IN ($RUNS_Q) GROUP BY status")
-[[ -z $not_done ]] || echo "lab-drill: not done: $not_done" >&2
+if [[ -n $not_done ]]; then
+  # What happened to them, for the log: each such run's history (at most 10 runs).
+  echo "lab-drill: not done: $not_done" >&2
+  db_query "SELECT r.id, h.status, h.reason FROM runs r JOIN status_history h ON h.run_id = r.id
+            WHERE r.id IN (SELECT id FROM runs WHERE status != 'done' AND id IN ($RUNS_Q) LIMIT 10)
+            ORDER BY r.id, h.id" |
+    sed 's/^/lab-drill:   run /' >&2
+fi
 # The drained rate (runs per wall second from the first submission to the empty queue) over one paced bench's
 # (1 / RUN_S: it runs RUN_S of bench time per run in RUN_S of wall time, nothing else counted).
 throughput_x=$(python3 -c "print(f'{$done_n / ($T1 - $T0) * $RUN_S:.2f}')")
