@@ -9,8 +9,10 @@
 # Usage: scripts/lab-drill.sh [--runs N] [--kills K] [--hosts H] [--benches-per-host B] [--run-s S]
 #                             [--kill-every S] [--build DIR] [--keep] [--seed N]
 # (--kill-every: mean seconds between two kills, default 1.4.)
-# Environment: LAB_DB_URL  the shared database: "sqlite:PATH" (default: a file in the work directory). The
-#              hosts and the final count take it from here; a PostgreSQL URL needs a build with that engine.
+# Environment: LAB_DB_URL  the shared database: "sqlite:PATH" (default: a file in the work directory), or
+#              "postgres" to start a throw-away PostgreSQL (initdb + pg_ctl in the work directory; as root it
+#              runs as `nobody`) and use its URL. The hosts and the final count take it from here; PostgreSQL
+#              needs a valvebench build with that engine (database_path then holds the postgresql:// URL).
 set -euo pipefail
 
 RUNS=1000 KILLS=5 HOSTS=3 BENCHES=2 RUN_S=0.1 BUILD="" KEEP=0 SEED=$RANDOM KILL_MIN_S=0.8 KILL_MAX_S=2.0
@@ -47,11 +49,7 @@ command -v python3 >/dev/null || { echo "lab-drill: python3 is needed to count t
 
 WORK=$(mktemp -d "${TMPDIR:-/tmp}/lab-drill.XXXXXX")
 LAB_DB_URL=${LAB_DB_URL:-sqlite:$WORK/lab.db}
-case "$LAB_DB_URL" in
-  sqlite:*) DB_PATH=${LAB_DB_URL#sqlite:} ;;
-  *) echo "lab-drill: LAB_DB_URL '$LAB_DB_URL': only sqlite:PATH is supported by this build" >&2; exit 2 ;;
-esac
-
+PG_DIR=""
 declare -a PIDS PORTS
 cleanup() {
   for pid in "${PIDS[@]:-}"; do
@@ -60,12 +58,45 @@ cleanup() {
     kill -TERM "$pid" 2>/dev/null || true
   done
   for pid in "${PIDS[@]:-}"; do [[ -n $pid ]] && wait "$pid" 2>/dev/null || true; done
+  [[ -z $PG_DIR ]] || "${PG_STOP[@]}" >/dev/null 2>&1 || true
   if [[ $KEEP == 1 ]]; then echo "lab-drill: kept $WORK" >&2; else rm -rf "$WORK"; fi
 }
 trap cleanup EXIT
+start_postgres() {  # a private PostgreSQL in $WORK/pg on a free port; sets LAB_DB_URL
+  local bin port as=()
+  bin=$(dirname "$(command -v pg_ctl || echo /usr/lib/postgresql/15/bin/pg_ctl)")
+  [[ -x $bin/initdb && -x $bin/pg_ctl ]] || { echo "lab-drill: PostgreSQL's initdb/pg_ctl not found" >&2; exit 3; }
+  PG_DIR=$WORK/pg
+  mkdir -p "$PG_DIR"
+  if [[ $(id -u) == 0 ]]; then  # postgres refuses to run as root
+    chown -R nobody "$WORK"
+    as=(setpriv --reuid=nobody --regid=nogroup --clear-groups --)
+  fi
+  port=$(free_port)
+  "${as[@]}" "$bin/initdb" -D "$PG_DIR/data" -U valvebench --auth=trust >"$WORK/pg-initdb.log" 2>&1 ||
+    { echo "lab-drill: initdb failed:" >&2; tail -5 "$WORK/pg-initdb.log" >&2; exit 3; }
+  "${as[@]}" "$bin/pg_ctl" -D "$PG_DIR/data" -l "$WORK/pg.log" -w \
+    -o "-p $port -k $PG_DIR -c listen_addresses=127.0.0.1 -c max_connections=200" start >/dev/null ||
+    { echo "lab-drill: PostgreSQL did not start:" >&2; tail -5 "$WORK/pg.log" >&2; exit 3; }
+  PG_STOP=("${as[@]}" "$bin/pg_ctl" -D "$PG_DIR/data" -m fast stop)
+  LAB_DB_URL="postgresql://valvebench@127.0.0.1:$port/postgres"
+}
+free_port() { python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])'; }
+[[ $LAB_DB_URL == postgres ]] && start_postgres
+case "$LAB_DB_URL" in
+  sqlite:*) DB_PATH=${LAB_DB_URL#sqlite:} ;;
+  postgresql://*) DB_PATH=$LAB_DB_URL
+    command -v psql >/dev/null || { echo "lab-drill: psql is needed to count the runs in PostgreSQL" >&2; exit 3; } ;;
+  *) echo "lab-drill: LAB_DB_URL '$LAB_DB_URL': give sqlite:PATH, postgres or a postgresql:// URL" >&2; exit 2 ;;
+esac
+
 
 # One SQL query against the shared database, result on stdout (rows as "a|b").
 db_query() {
+  if [[ $DB_PATH == postgresql://* ]]; then
+    psql -X -q -A -t -v ON_ERROR_STOP=1 -d "$DB_PATH" -c "$1"
+    return
+  fi
   python3 - "$DB_PATH" "$1" <<'PY'
 import sqlite3, sys
 con = sqlite3.connect(sys.argv[1], timeout=30)
@@ -76,7 +107,6 @@ PY
 
 TOKEN=lab-drill-operator
 TOKEN_SHA=$(printf %s "$TOKEN" | sha256sum | cut -d' ' -f1)
-free_port() { python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])'; }
 
 write_config() {  # host index -> its config file
   local h=$1 benches="" b
