@@ -217,6 +217,64 @@ TEST_F(LabTest, AStoppedHostLosesItsRunAndItsLateWritesAreRefused) {
   EXPECT_EQ((*trace)[0].t0_s, 0.0);
 }
 
+// A run executing on a host this server does not know in-process ("ghost", driven from the test through the
+// store as a host would): a watch through the server follows its progress and the samples of its stored chunks.
+TEST(LabWatch, ARunOnAnotherHostIsFollowedFromTheStore) {
+  const std::string dir = ::testing::TempDir() + "/vb-lab-watch-" + std::to_string(::getpid());
+  std::filesystem::remove_all(dir);
+  ServerProcess server(dir, R"("lab": {"host": "host-a", "lease_ttl_s": 5})");
+  const std::string addr = server.Start();
+  ASSERT_FALSE(addr.empty()) << server.Log();
+  auto store = db::Store::Open(server.db_path());
+  ASSERT_TRUE(store.ok()) << store.status().message();
+  db::RunRecord rec;
+  rec.key = NamedRun("far");
+  rec.bench_kind = "ghost-kind";  // no bench of host-a can take it
+  rec.spec_json = "{}";
+  std::vector<std::int64_t> ids;
+  ASSERT_TRUE((*store)->SubmitBatch("ghost-user", "far", "{}", {rec}, &ids).ok());
+  db::ClaimRequest claim = db::BenchClaim("ghost-kind", "ghost-bench");
+  claim.host = "ghost";
+  claim.lease_ttl_s = 60;
+  auto claimed = (*store)->ClaimNext(claim);
+  ASSERT_TRUE(claimed.ok() && claimed->has_value());
+  const db::Lease lease = db::LeaseOf(**claimed);
+  db::TraceChunk c;
+  c.sample_period_s = 1e-3;
+  c.samples = 100;
+  c.channels = {"t_s", "gate", "i_A", "x_m", "ref"};
+  for (int ch = 0; ch < 5; ++ch)
+    for (int k = 0; k < c.samples; ++k) c.data.push_back(ch == 0 ? k * 1e-3 : ch == 1 ? k % 2 : ch == 2 ? 0.01 * k : 0.0);
+  ASSERT_TRUE((*store)->AppendTraceChunk(lease, c).ok());
+  ASSERT_TRUE((*store)->SetProgress(lease, 0.5).ok());
+
+  auto viewer = MakeClient(addr, testing::kViewerToken);
+  double progress = 0.0;
+  std::vector<double> currents;
+  auto st = viewer.Watch(ids[0], 5.0, 1000.0, [&](const v1::RunEvent& ev) {
+    progress = ev.progress();
+    for (const auto& s : ev.samples()) currents.push_back(s.i_a());
+    return currents.size() < 100;
+  });
+  EXPECT_EQ(progress, 0.5);
+  ASSERT_EQ(currents.size(), 100u) << st.message();
+  EXPECT_DOUBLE_EQ(currents[0], 0.0);
+  EXPECT_DOUBLE_EQ(currents[99], 0.99);
+
+  // It ends on its host; the watch through host-a says so.
+  ASSERT_TRUE((*store)->Finish(lease, db::RunStatus::kDone, "", {}).ok());
+  v1::RunStatus last = v1::RUN_STATUS_UNSPECIFIED;
+  st = viewer.Watch(ids[0], 5.0, 0.0, [&](const v1::RunEvent& ev) {
+    last = ev.status();
+    return true;
+  });
+  EXPECT_TRUE(st.ok()) << st.message();
+  EXPECT_EQ(last, v1::DONE);
+  auto shown = viewer.GetRun(ids[0]);
+  ASSERT_TRUE(shown.ok());
+  EXPECT_EQ(shown->host(), "ghost");
+}
+
 std::string ErrorOf(const v1::ServerConfig& c) {
   auto s = server::SettingsFromConfig(c, "");
   return s.ok() ? std::string("(accepted)") : s.status().message();
