@@ -275,6 +275,55 @@ TEST(LabWatch, ARunOnAnotherHostIsFollowedFromTheStore) {
   EXPECT_EQ(shown->host(), "ghost");
 }
 
+// Nights run once per lab (docs/lab.md, "Nights"): two hosts with the same nights block both try tonight's night
+// at start; one claims and runs it, the other skips it; one regression result, one batch.
+TEST(LabNights, TwoHostsRunTonightsNightOnce) {
+  const std::string suites = std::string(VB_SOURCE_DIR) + "/examples/suites/";
+  const std::string nights = R"("nights": {"cron": "0 2 * * *", "suite_file": ")" + suites +
+                             R"(ci.json", "baseline_file": ")" + suites + R"(ci-baseline.json"})";
+  const std::string root = ::testing::TempDir() + "/vb-lab-nights-" + std::to_string(::getpid());
+  std::filesystem::remove_all(root);
+  std::vector<std::unique_ptr<ServerProcess>> hosts;
+  std::vector<std::string> addr;
+  for (const char* h : {"a", "b"}) {
+    const std::string dir = root + "/" + h;
+    std::filesystem::create_directories(dir);
+    if (std::string(h) == "b") std::filesystem::create_symlink(root + "/a/runs.db", dir + "/runs.db");
+    hosts.push_back(std::make_unique<ServerProcess>(
+        dir, nights + R"(, "lab": {"host": "host-)" + h + R"(", "lease_ttl_s": 2})"));
+    hosts.back()->AddArg("--run-night-now");
+    addr.push_back(hosts.back()->Start());
+    ASSERT_FALSE(addr.back().empty()) << hosts.back()->Log();
+  }
+  auto viewer = MakeClient(addr[1], testing::kViewerToken);
+  const auto until = Clock::now() + std::chrono::seconds(60);
+  int listed = 0;
+  while (Clock::now() < until && listed == 0) {
+    auto n = viewer.ListNights(10);
+    ASSERT_TRUE(n.ok()) << n.status().message();
+    listed = n->nights_size();
+    std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  }
+  ASSERT_EQ(listed, 1) << hosts[0]->Log() << hosts[1]->Log();
+  std::this_thread::sleep_for(std::chrono::seconds(1));  // the loser would have stored its night by now
+  auto n = viewer.ListNights(10);
+  ASSERT_TRUE(n.ok());
+  EXPECT_EQ(n->nights_size(), 1);
+  const std::string logs = hosts[0]->Log() + hosts[1]->Log();
+  auto count = [&](const std::string& what) {
+    int k = 0;
+    for (auto at = logs.find(what); at != std::string::npos; at = logs.find(what, at + 1)) ++k;
+    return k;
+  };
+  EXPECT_EQ(count("claimed by this host"), 1) << logs;
+  EXPECT_EQ(count("another host of the lab runs it"), 1) << logs;
+  v1::ListRunsRequest req;
+  req.set_tag("night");
+  auto runs = viewer.ListRuns(req);
+  ASSERT_TRUE(runs.ok());
+  EXPECT_EQ(runs->runs_size(), 9);  // one batch of the ci suite, not two
+}
+
 std::string ErrorOf(const v1::ServerConfig& c) {
   auto s = server::SettingsFromConfig(c, "");
   return s.ok() ? std::string("(accepted)") : s.status().message();
