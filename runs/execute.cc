@@ -103,7 +103,11 @@ Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& se
   if (safety) safety->set_cancel_flag(&monitor.cancel);  // cancel and shutdown act within a check period
   out.summary = experiment::Runner::Run(*e, *bench, &out.trace, &monitor, ctx.registry != nullptr ? &tap : nullptr);
   bench->SafeState();
-  if (ctx.current_monitor != nullptr) ctx.current_monitor->store(nullptr);
+  if (ctx.current_monitor != nullptr) {
+    std::unique_lock<std::mutex> lock;
+    if (ctx.current_monitor_mu != nullptr) lock = std::unique_lock<std::mutex>(*ctx.current_monitor_mu);
+    ctx.current_monitor->store(nullptr);
+  }
   if (ctx.registry != nullptr) ctx.registry->Remove(run.id);
 
   if (ctx.stop != nullptr && ctx.stop->load() &&

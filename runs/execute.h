@@ -12,6 +12,7 @@
 
 #include <atomic>
 #include <cstdint>
+#include <mutex>
 #include <string>
 
 #include "db/store.h"
@@ -35,6 +36,9 @@ struct ExecuteContext {
   Registry* registry = nullptr;                 // where watchers find the run; nullptr: nobody watches
   const std::atomic<bool>* stop = nullptr;      // shutdown: stop the run and leave it for recovery
   std::atomic<experiment::RunMonitor*>* current_monitor = nullptr;  // published while the run executes
+  // Held while current_monitor is cleared (the monitor is destroyed right after): whoever sets the published
+  // monitor's cancel flag from another thread holds it too, so it never writes to a monitor that is gone.
+  std::mutex* current_monitor_mu = nullptr;
 };
 
 Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& setup, const ExecuteContext& ctx);

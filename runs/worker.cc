@@ -24,6 +24,7 @@ StatusOr<std::optional<Outcome>> Worker::ClaimAndExecute(db::Store* store) {
   ctx.registry = registry_;
   ctx.stop = &stop_;
   ctx.current_monitor = &monitor_;
+  ctx.current_monitor_mu = &monitor_mu_;
   Outcome out = Execute(store, **claimed, setup_, ctx);
   current_run_.store(0);
   return std::optional<Outcome>(std::move(out));
@@ -31,8 +32,10 @@ StatusOr<std::optional<Outcome>> Worker::ClaimAndExecute(db::Store* store) {
 
 bool Worker::CancelIfCurrent(const db::Lease& lease) {
   if (lease.run_id == 0 || current_run_.load() != lease.run_id || current_fence_.load() != lease.fence) return false;
+  std::lock_guard<std::mutex> lock(monitor_mu_);
   experiment::RunMonitor* m = monitor_.load();
-  if (m == nullptr) return false;
+  // Re-checked under the lock: the run may have ended (and the worker taken the next) since the check above.
+  if (m == nullptr || current_run_.load() != lease.run_id || current_fence_.load() != lease.fence) return false;
   m->cancel.store(true);
   return true;
 }
@@ -43,7 +46,10 @@ void Worker::Start(std::string db_path) {
 
 void Worker::Stop() {
   stop_.store(true);
-  if (auto* m = monitor_.load()) m->cancel.store(true);
+  {
+    std::lock_guard<std::mutex> lock(monitor_mu_);
+    if (auto* m = monitor_.load()) m->cancel.store(true);
+  }
   if (registry_ != nullptr) registry_->NotifyWork();
   if (thread_.joinable()) thread_.join();
 }

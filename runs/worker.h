@@ -4,6 +4,7 @@
 #pragma once
 
 #include <atomic>
+#include <mutex>
 #include <cstdint>
 #include <optional>
 #include <string>
@@ -63,6 +64,7 @@ class Worker {
   std::atomic<std::int64_t> current_fence_{0};  // written before current_run_
   std::atomic<std::int64_t> current_run_{0};
   std::atomic<experiment::RunMonitor*> monitor_{nullptr};
+  std::mutex monitor_mu_;  // see ExecuteContext::current_monitor_mu
 };
 
 }  // namespace vb::runs
