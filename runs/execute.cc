@@ -108,7 +108,7 @@ Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& se
     if (ctx.current_monitor_mu != nullptr) lock = std::unique_lock<std::mutex>(*ctx.current_monitor_mu);
     ctx.current_monitor->store(nullptr);
   }
-  if (ctx.registry != nullptr) ctx.registry->Remove(run.id);
+  if (ctx.registry != nullptr) ctx.registry->Remove(run.id, &monitor);
 
   if (ctx.stop != nullptr && ctx.stop->load() &&
       out.summary.termination == experiment::RunSummary::Termination::kCancelled) {
