@@ -18,6 +18,7 @@
 #include "proto/api_convert.h"
 #include "runs/query.h"
 #include "server/grpc_status.h"
+#include "server/lab.h"
 
 namespace vb::server {
 
@@ -75,11 +76,20 @@ grpc::Status BenchServiceImpl::SubmitBatch(grpc::ServerContext* ctx, const v1::S
 }
 
 StatusOr<runs::Queued> BenchServiceImpl::Queue(const runs::Submission& submission) {
-  auto admitted = runs::Admit(submission, policy_);
-  if (!admitted.ok()) return admitted.status();
   auto store = pool_->Acquire();
   if (!store.ok()) return store.status();
-  auto queued = runs::Enqueue(store->get(), std::move(admitted.value()), policy_);
+  // In a lab a run may go to any host's bench (docs/lab.md): admission matches against them all.
+  runs::Policy lab_policy;
+  if (settings_->lab.enabled) {
+    auto hosts = (*store)->ListHosts();
+    if (!hosts.ok()) return hosts.status();
+    lab_policy = policy_;
+    for (auto& b : OtherHostsBenches(*hosts, settings_->lab.host)) lab_policy.benches.push_back(std::move(b));
+  }
+  const runs::Policy& policy = settings_->lab.enabled ? lab_policy : policy_;
+  auto admitted = runs::Admit(submission, policy);
+  if (!admitted.ok()) return admitted.status();
+  auto queued = runs::Enqueue(store->get(), std::move(admitted.value()), policy);
   if (queued.ok()) registry_->NotifyWork();
   return queued;
 }

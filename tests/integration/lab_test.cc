@@ -146,6 +146,25 @@ TEST_F(LabTest, EveryHostListsEveryHostsBenchesAndARunIsWatchedAndCancelledThrou
   EXPECT_EQ(r.host(), x == 0 ? "host-a" : "host-b");
 }
 
+// Admission in a lab matches runs against every host's benches: a run naming host b's bench is accepted
+// through host a and executes on host b; a bench no host has is still refused, naming the lab's benches.
+TEST_F(LabTest, AHostAcceptsARunOnlyAnotherHostsBenchCanTake) {
+  auto via_a = MakeClient(addr_[0], testing::kOperatorToken);
+  v1::ExperimentSpec spec = PacedRun(0.05);
+  spec.mutable_bench()->set_name("b-emu");
+  auto sub = via_a.Submit(spec);
+  ASSERT_TRUE(sub.ok()) << sub.status().message();
+  const v1::Run r = WaitEnded(via_a, sub->run_ids(0), 10.0);
+  EXPECT_EQ(r.status(), v1::DONE);
+  EXPECT_EQ(r.host(), "host-b");
+  EXPECT_EQ(r.bench(), "b-emu");
+  spec.mutable_bench()->set_name("c-emu");
+  auto refused = via_a.Submit(spec);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_EQ(refused.status().code(), StatusCode::kFailedPrecondition);
+  EXPECT_NE(refused.status().message().find("b-emu"), std::string::npos) << refused.status().message();
+}
+
 TEST_F(LabTest, ARunOfASigkilledHostFinishesOnTheOtherHostExactlyOnce) {
   auto via_a = MakeClient(addr_[0], testing::kOperatorToken);
   auto sub = via_a.Submit(PacedRun(1.5));
