@@ -37,6 +37,9 @@ StatusOr<RunView> FromRecord(db::Store* store, const db::RunRecord& r, bool with
   v.status = r.status;
   v.reason = r.reason;
   v.bench = r.bench_name;
+  v.host = r.host;
+  if (const auto spec = nlohmann::json::parse(r.spec_json, nullptr, false); spec.is_object())
+    if (auto d = spec.find("duration_s"); d != spec.end() && d->is_number()) v.duration_s = d->get<double>();
   v.submitter = r.submitter;
   v.priority = r.priority;
   v.progress = r.status == RunStatus::kDone ? 1.0 : r.progress;
@@ -72,6 +75,8 @@ RunView FromProto(const v1::Run& r) {
   v.reason = r.reason();
   for (const auto& [k, x] : r.metrics()) v.metrics[k] = x;
   v.bench = r.bench();
+  v.host = r.host();
+  v.duration_s = r.duration_s();
   v.submitter = r.submitter();
   v.priority = r.priority();
   v.progress = r.progress();

@@ -2,7 +2,10 @@
 
 #include <google/protobuf/util/json_util.h>
 
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
+#include <string>
 #include <iostream>
 
 #include "benchctl/cli_common.h"
@@ -70,9 +73,20 @@ int CmdBenches(Backend& backend, bool json) {
     std::cout << out << "\n";
     return kExitOk;
   }
-  for (const auto& x : r->benches())
-    std::printf("%-16s %-9s %-18s %-16s %s\n", x.name().c_str(), x.kind().c_str(), x.driver().c_str(),
-                x.model().c_str(), x.busy() ? ("busy (run " + std::to_string(x.current_run_id()) + ")").c_str() : "idle");
+  // A lab (docs/lab.md): every host's benches, with the host and whether it is alive (heartbeat within the TTL).
+  const bool lab = std::any_of(r->benches().begin(), r->benches().end(), [](const auto& x) { return !x.host().empty(); });
+  for (const auto& x : r->benches()) {
+    const std::string state = x.busy() ? "busy (run " + std::to_string(x.current_run_id()) + ")" : "idle";
+    if (lab) {
+      const std::string live = x.alive() ? "alive" : "DOWN, last heartbeat " + std::to_string(std::lround(x.heartbeat_age_s())) + " s ago";
+      std::printf("%-12s %-16s %-9s %-18s %-16s %-8s %-16s %s (%s)\n", x.host().c_str(), x.name().c_str(),
+                  x.kind().c_str(), x.driver().c_str(), x.model().c_str(), x.paced() ? "paced" : "", state.c_str(),
+                  live.c_str(), x.host_address().c_str());
+    } else {
+      std::printf("%-16s %-9s %-18s %-16s %s\n", x.name().c_str(), x.kind().c_str(), x.driver().c_str(),
+                  x.model().c_str(), state.c_str());
+    }
+  }
   PrintAttached(*r);
   return kExitOk;
 }

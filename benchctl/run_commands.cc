@@ -140,6 +140,45 @@ int CmdRun(Backend& backend, const RunOptions& o, const Output& out) {
   return code;
 }
 
+// Where each queued run stands (docs/lab.md): its position in claim order (priority, then age; aging not
+// counted) and when it should end: the bench time of the running runs left plus that of the queued runs up to
+// and including it, spread over the live benches. Bench time is wall time on paced and hardware benches; an
+// unpaced emulator runs faster, so the estimate is an upper bound there.
+struct QueueEstimate {
+  int position = 0;
+  double eta_s = -1.0;  // < 0: unknown
+};
+static std::map<std::int64_t, QueueEstimate> EstimateQueue(const std::vector<RunView>& runs, int live_benches) {
+  double ahead_s = 0.0;
+  bool known = live_benches > 0;
+  for (const auto& r : runs)
+    if (r.status == RunStatus::kRunning) {
+      if (r.duration_s <= 0) known = false;
+      ahead_s += std::max(0.0, r.duration_s * (1.0 - r.progress));
+    }
+  std::vector<const RunView*> queued;
+  for (const auto& r : runs)
+    if (r.status == RunStatus::kQueued) queued.push_back(&r);
+  std::stable_sort(queued.begin(), queued.end(), [](const RunView* a, const RunView* b) {
+    return a->priority != b->priority ? a->priority > b->priority : a->id < b->id;
+  });
+  std::map<std::int64_t, QueueEstimate> out;
+  for (std::size_t k = 0; k < queued.size(); ++k) {
+    if (queued[k]->duration_s <= 0) known = false;
+    ahead_s += std::max(0.0, queued[k]->duration_s);
+    out[queued[k]->id] = {static_cast<int>(k) + 1, known ? ahead_s / live_benches : -1.0};
+  }
+  return out;
+}
+
+static int LiveBenches(Backend& backend) {
+  auto b = backend.Benches();
+  if (!b.ok()) return 0;
+  int n = 0;
+  for (const auto& x : b->benches()) n += x.host().empty() || x.alive();
+  return n;
+}
+
 int CmdQueue(Backend& backend, const QueueOptions& o, const Output& out) {
   std::vector<RunView> runs;
   bool more = false;
@@ -163,10 +202,22 @@ int CmdQueue(Backend& backend, const QueueOptions& o, const Output& out) {
     if (!page.ok()) return Fail(page.status());
     runs = std::move(*page);
   }
+  const bool any_queued = std::any_of(runs.begin(), runs.end(), [](const RunView& r) { return r.status == RunStatus::kQueued; });
+  const int live = any_queued ? LiveBenches(backend) : 0;
+  const auto estimates = EstimateQueue(runs, live);
   if (out.json) {
     Json a = Json::array();
-    for (const auto& r : runs) a.push_back(RunJson(r, nullptr));
-    std::cout << Json{{"where", backend.Where()}, {"runs", a}, {"more", more}}.dump(2) << "\n";
+    for (const auto& r : runs) {
+      Json j = RunJson(r, nullptr);
+      if (auto e = estimates.find(r.id); e != estimates.end()) {
+        j["position"] = e->second.position;
+        j["eta_s"] = e->second.eta_s >= 0 ? Json(e->second.eta_s) : Json(nullptr);
+      }
+      a.push_back(std::move(j));
+    }
+    Json all{{"where", backend.Where()}, {"runs", a}, {"more", more}};
+    if (any_queued) all["live_benches"] = live;
+    std::cout << all.dump(2) << "\n";
     return kExitOk;
   }
   if (out.csv) {
@@ -183,14 +234,25 @@ int CmdQueue(Backend& backend, const QueueOptions& o, const Output& out) {
   for (const auto& [status, n] : count) counts += fmt::format("{}{} {}", counts.empty() ? "" : ", ", n, RunStatusName(status));
   std::printf("%zu runs on %s: %s%s\n", runs.size(), backend.Where().c_str(), counts.c_str(),
               count.count(RunStatus::kRunning) ? " (ETA: wall time left, from progress so far)" : "");
-  std::printf("%6s %6s  %-11s %8s %8s  %-16s %-20s %-10s %s\n", "id", "batch", "status", "progress", "ETA", "bench",
-              "controller", "submitter", "name");
+  if (any_queued)
+    std::printf("queued: position in claim order, ETA from the runs' durations over %d live bench%s\n", live,
+                live == 1 ? "" : "es");
+  const bool lab = std::any_of(runs.begin(), runs.end(), [](const RunView& r) { return !r.host.empty(); });
+  std::printf("%6s %6s  %-11s %8s %5s %8s  %-16s %s%-20s %-10s %s\n", "id", "batch", "status", "progress", "pos", "ETA",
+              "bench", lab ? "host         " : "", "controller", "submitter", "name");
   const double now = NowUnix();
-  for (const auto& r : runs)
-    std::printf("%6lld %6lld  %-11s %6.0f %% %8s  %-16s %-20s %-10s %s\n", static_cast<long long>(r.id),
-                static_cast<long long>(r.batch_id), RunStatusName(r.status), 100.0 * r.progress, Eta(r, now).c_str(),
-                r.bench.empty() ? "any" : r.bench.c_str(), r.controller.c_str(), r.submitter.c_str(),
+  for (const auto& r : runs) {
+    std::string pos = "-", eta = Eta(r, now);
+    if (auto e = estimates.find(r.id); e != estimates.end()) {
+      pos = std::to_string(e->second.position);
+      eta = e->second.eta_s >= 0 ? Duration(e->second.eta_s) : "?";
+    }
+    std::printf("%6lld %6lld  %-11s %6.0f %% %5s %8s  %-16s %s%-20s %-10s %s\n", static_cast<long long>(r.id),
+                static_cast<long long>(r.batch_id), RunStatusName(r.status), 100.0 * r.progress, pos.c_str(),
+                eta.c_str(), r.bench.empty() ? "any" : r.bench.c_str(),
+                lab ? fmt::format("{:<12.12} ", r.host).c_str() : "", r.controller.c_str(), r.submitter.c_str(),
                 r.key.DisplayName().c_str());
+  }
   if (more) std::fprintf(stderr, "(more runs: raise --limit)\n");
   return kExitOk;
 }

@@ -87,8 +87,9 @@ std::string RunText(const RunView& r, const experiment::RunSummary* summary, boo
   out += "\n";
   if (!r.reason.empty()) out += "  reason: " + r.reason + "\n";
   if (r.id != 0) {
-    out += fmt::format("  bench {}, submitter {}, priority {}\n", r.bench.empty() ? "any" : r.bench,
-                       r.submitter.empty() ? "-" : r.submitter, r.priority);
+    out += fmt::format("  bench {}{}, submitter {}, priority {}\n", r.bench.empty() ? "any" : r.bench,
+                       r.host.empty() ? "" : " on host " + r.host, r.submitter.empty() ? "-" : r.submitter,
+                       r.priority);
     out += "  submitted " + IsoLocalTime(r.submitted_unix_s);
     if (r.started_unix_s > 0.0) out += ", started " + IsoLocalTime(r.started_unix_s);
     if (r.finished_unix_s > 0.0) {
@@ -129,6 +130,7 @@ Json RunJson(const RunView& r, const experiment::RunSummary* summary) {
   j["reason"] = r.reason;
   if (r.id != 0) {
     j["bench"] = r.bench;
+    if (!r.host.empty()) j["host"] = r.host;
     j["submitter"] = r.submitter;
     j["priority"] = r.priority;
     j["progress"] = r.progress;

@@ -35,6 +35,8 @@ struct RunView {
   std::string reason;
   std::map<std::string, double> metrics;  // finite metrics only
   std::string bench;                   // the bench that ran it (or was requested; "" = any)
+  std::string host;                    // a lab: the host executing it, or that last did ("" = one machine)
+  double duration_s = 0.0;             // the spec's duration (0 = unknown)
   std::string submitter;
   int priority = 0;
   double progress = 0.0;               // 0..1

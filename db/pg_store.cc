@@ -630,9 +630,7 @@ StatusOr<std::vector<StaleWrite>> PgStore::StaleWrites(std::int32_t limit, std::
 }
 
 StatusOr<bool> PgStore::ClaimNight(const std::string& night, const std::string& host) {
-  bool well_formed = night.size() == 10 && night[4] == '-' && night[7] == '-';
-  for (std::size_t k : {0, 1, 2, 3, 5, 6, 8, 9}) well_formed = well_formed && night[k] >= '0' && night[k] <= '9';
-  if (!well_formed) return Status::InvalidArgument(Cat("night: must be YYYY-MM-DD, got \"", night, "\""));
+  VB_RETURN_IF_ERROR(CheckNightClaim(night, host));
   VB_PG_ASSIGN_OR_RETURN(Result r, conn_->Exec("INSERT INTO nights_claimed (night, host, at) VALUES ($1, $2, " VB_PG_NOW
                                                ") ON CONFLICT (night) DO NOTHING",
                                                Params().Text(night).Text(host)));

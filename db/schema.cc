@@ -163,12 +163,50 @@ constexpr const char* kV4 = R"sql(
 ALTER TABLE trace_chunks ADD COLUMN codec INTEGER NOT NULL DEFAULT 0 CHECK (codec IN (0, 1));
 )sql";
 
+// Version 5. The lab (docs/lab.md): several server processes ("hosts") share one store. A run carries the fencing
+// token of the attempt that holds it (`fence`, incremented by every claim), the host executing it and when its
+// lease lapses (`lease_expires`, unix s; 0 = no lease). `hosts` is one row per server process with its
+// heartbeat; `stale_writes` logs every write the store refused because its fence was no longer the run's;
+// `nights_claimed` lets exactly one host run each scheduled night.
+constexpr const char* kV5 = R"sql(
+ALTER TABLE runs ADD COLUMN fence INTEGER NOT NULL DEFAULT 0 CHECK (fence >= 0);
+ALTER TABLE runs ADD COLUMN host TEXT NOT NULL DEFAULT '';
+ALTER TABLE runs ADD COLUMN lease_expires REAL NOT NULL DEFAULT 0;
+CREATE INDEX runs_host ON runs (status, host);
+
+CREATE TABLE hosts (
+  name         TEXT PRIMARY KEY CHECK (length(name) > 0),
+  address      TEXT NOT NULL DEFAULT '',
+  benches_json TEXT NOT NULL DEFAULT '[]',
+  started      REAL NOT NULL,
+  heartbeat    REAL NOT NULL
+) WITHOUT ROWID;
+
+CREATE TABLE stale_writes (
+  id            INTEGER PRIMARY KEY,
+  run_id        INTEGER NOT NULL REFERENCES runs (id) ON DELETE CASCADE,
+  fence         INTEGER NOT NULL,
+  current_fence INTEGER NOT NULL,
+  host          TEXT NOT NULL DEFAULT '',
+  what          TEXT NOT NULL,
+  at            REAL NOT NULL
+);
+CREATE INDEX stale_writes_run ON stale_writes (run_id);
+
+CREATE TABLE nights_claimed (
+  night TEXT PRIMARY KEY,
+  host  TEXT NOT NULL,
+  at    REAL NOT NULL
+) WITHOUT ROWID;
+)sql";
+
 constexpr Migration kMigrations[] = {
     {1, "initial schema: batches, runs, run_tags, status_history, metrics, trace_chunks", kV1},
     {2, "baselines, baseline_metrics, regressions (benchctl baseline / regress / nights)",
      kV2},
     {3, "runs: key_name, repeat_index, split, t_start_s; run_sweep (a run's identity as fields)", kV3},
     {4, "trace_chunks: codec (compressed traces; older chunks stay raw float64)", kV4},
+    {5, "runs: fence, host, lease_expires; hosts, stale_writes, nights_claimed (the lab)", kV5},
 };
 
 }  // namespace

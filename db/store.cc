@@ -3,6 +3,7 @@
 #include "common/format.h"
 #include "db/store.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -47,7 +48,8 @@ constexpr int kMaxInterruptions = 3;
 // Column list shared by every query that builds a RunRecord (ReadRun() reads them in this order).
 constexpr const char* kRunColumns =
     "id, batch_id, name, controller, bench_kind, bench_name, spec_json, submitter, priority, status, reason, "
-    "requeue_on_interrupt, submitted, started, finished, progress, key_name, repeat_index, split, t_start_s";
+    "requeue_on_interrupt, submitted, started, finished, progress, key_name, repeat_index, split, t_start_s, "
+    "fence, host, lease_expires";
 
 double NowUnixS() {
   return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
@@ -136,16 +138,11 @@ class SqliteStore final : public Store {
   StatusOr<RunStatus> RequestCancel(std::int64_t run_id, const std::string& reason) override;
   StatusOr<bool> CancelRequested(std::int64_t run_id) override;
   StatusOr<int> RecoverAfterCrash(const std::string& host) override;
-  // TODO(lab): schema v5 and the lab's methods on SQLite (docs/lab.md); the lab branch replaces these.
-  Status Heartbeat(const HostRecord&, double) override { return Status::Internal("Heartbeat: not built yet on SQLite"); }
-  StatusOr<std::vector<HostRecord>> ListHosts() override { return Status::Internal("ListHosts: not built yet on SQLite"); }
-  StatusOr<std::vector<std::int64_t>> RequeueLapsed() override { return Status::Internal("RequeueLapsed: not built yet on SQLite"); }
-  StatusOr<std::vector<StaleWrite>> StaleWrites(std::int32_t, std::int64_t*) override {
-    return Status::Internal("StaleWrites: not built yet on SQLite");
-  }
-  StatusOr<bool> ClaimNight(const std::string&, const std::string&) override {
-    return Status::Internal("ClaimNight: not built yet on SQLite");
-  }
+  Status Heartbeat(const HostRecord& host, double lease_ttl_s) override;
+  StatusOr<std::vector<HostRecord>> ListHosts() override;
+  StatusOr<std::vector<std::int64_t>> RequeueLapsed() override;
+  StatusOr<std::vector<StaleWrite>> StaleWrites(std::int32_t limit, std::int64_t* total) override;
+  StatusOr<bool> ClaimNight(const std::string& night, const std::string& host) override;
   StatusOr<RunRecord> GetRun(std::int64_t run_id) override;
   StatusOr<std::vector<RunRecord>> ListRuns(const RunFilter& filter) override;
   StatusOr<std::vector<StatusChange>> History(std::int64_t run_id) override;
@@ -172,6 +169,15 @@ class SqliteStore final : public Store {
   StatusOr<RunRecord> ReadRun(const Stmt& row);  // a row of kRunColumns, with its tags
   StatusOr<RunRecord> LoadRun(std::int64_t run_id);
   StatusOr<std::int64_t> InterruptionsOfRun(std::int64_t run_id);  // 'interrupted' entries in its history
+  // The fencing check of every write for a claimed run (docs/lab.md, "Leases and fencing"), inside the caller's
+  // write transaction: Ok when `lease` still holds the run (it is running and its fence is the lease's).
+  // Otherwise the refusal is recorded in stale_writes, *txn is committed (the record stays even though the
+  // write does not happen) and FailedPrecondition "stale write: ..." is returned. NotFound for an unknown run.
+  Status CheckLease(const Lease& lease, const std::string& what, Transaction* txn);
+  // The runs in `ids` (running ones) stop being executed: interrupted, then cancelled (a cancel was asked),
+  // failed (their kMaxInterruptions-th interruption: a poison run) or re-queued. RecoverAfterCrash and
+  // RequeueLapsed; inside the caller's write transaction.
+  Status InterruptRunning(const std::vector<std::int64_t>& ids, const std::string& reason, double now);
   // The chunks of a run in order, in one read transaction; fn may take the chunk's contents (move from it).
   Status ReadChunks(std::int64_t run_id, const std::function<Status(TraceChunk&, std::int64_t)>& fn);
 
@@ -226,6 +232,9 @@ StatusOr<RunRecord> SqliteStore::ReadRun(const Stmt& row) {
   r.key.repeat = static_cast<int>(row.Int(17));
   r.split = row.Text(18);
   if (!row.IsNull(19)) r.t_start_s = row.Double(19);
+  r.fence = row.Int(20);
+  r.host = row.Text(21);
+  r.lease_expires_unix_s = row.Double(22);
 
   VB_DB_ASSIGN_OR_RETURN(Stmt sweep,
                          conn_.Prepare("SELECT field, value FROM run_sweep WHERE run_id = ?1 ORDER BY axis"));
@@ -330,26 +339,50 @@ StatusOr<std::optional<RunRecord>> SqliteStore::ClaimNext(const ClaimRequest& re
   // BEGIN IMMEDIATE takes the database's single write lock before the SELECT: two claimers (threads or
   // processes) are serialised here, so the run one of them sees as queued is still queued when it updates it.
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kWrite));
-  // Walks runs_queue (status, priority DESC, id) in order and stops at the first compatible run.
-  VB_DB_ASSIGN_OR_RETURN(Stmt pick, conn_.Prepare("SELECT id FROM runs WHERE status = 'queued' "
-                                                  "AND (bench_kind = '' OR bench_kind = ?1) "
-                                                  "AND (bench_name = '' OR bench_name = ?2) "
-                                                  "ORDER BY priority DESC, id LIMIT 1"));
+  if (!std::isfinite(request.lease_ttl_s) || request.lease_ttl_s < 0)
+    return Status::InvalidArgument(Cat("lease_ttl_s: must be finite and >= 0, got ", FormatExact(request.lease_ttl_s)));
+  if (!std::isfinite(request.aging_s) || request.aging_s < 0)
+    return Status::InvalidArgument(Cat("aging_s: must be finite and >= 0, got ", FormatExact(request.aging_s)));
+  const double now = NowUnixS();
+  // Without aging: walks runs_queue (status, priority DESC, id) in order and stops at the first compatible run.
+  // With aging: a queued run's priority rises by one for every aging_s it has waited since it was submitted
+  // (docs/lab.md, "Priorities and aging"), so every queued run is looked at (the order is not an index's).
+  const bool aging = request.aging_s > 0;
+  VB_DB_ASSIGN_OR_RETURN(
+      Stmt pick, conn_.Prepare(aging ? "SELECT id FROM runs WHERE status = 'queued' "
+                                       "AND (bench_kind = '' OR bench_kind = ?1) "
+                                       "AND (bench_name = '' OR bench_name = ?2) "
+                                       "ORDER BY priority + CAST(max(?3 - submitted, 0) / ?4 AS INTEGER) DESC, id "
+                                       "LIMIT 1"
+                                     : "SELECT id FROM runs WHERE status = 'queued' "
+                                       "AND (bench_kind = '' OR bench_kind = ?1) "
+                                       "AND (bench_name = '' OR bench_name = ?2) "
+                                       "ORDER BY priority DESC, id LIMIT 1"));
   pick.Bind(1, bench_kind);
   pick.Bind(2, bench_name);
+  if (aging) {
+    pick.Bind(3, now);
+    pick.Bind(4, request.aging_s);
+  }
   VB_DB_ASSIGN_OR_RETURN(const bool found, pick.Step());
   if (!found) return std::optional<RunRecord>();  // the destructor ends the (empty) transaction
   const std::int64_t id = pick.Int(0);
 
-  const double now = NowUnixS();
+  // The next attempt: a new fencing token; the lease (if any) lapses lease_ttl_s from now unless the host's
+  // heartbeats renew it.
   VB_DB_ASSIGN_OR_RETURN(Stmt claim, conn_.Prepare("UPDATE runs SET status = 'running', bench_name = ?2, "
                                                    "started = ?3, finished = 0, progress = 0, reason = '', "
-                                                   "cancel_requested = 0 WHERE id = ?1"));
+                                                   "cancel_requested = 0, fence = fence + 1, host = ?4, "
+                                                   "lease_expires = ?5 WHERE id = ?1"));
   claim.Bind(1, id);
   claim.Bind(2, bench_name);
   claim.Bind(3, now);
+  claim.Bind(4, request.host);
+  claim.Bind(5, request.lease_ttl_s > 0 ? now + request.lease_ttl_s : 0.0);
   VB_RETURN_IF_ERROR(claim.Run());
-  VB_RETURN_IF_ERROR(AddHistory(id, RunStatus::kRunning, now, Cat("claimed by bench ", bench_name)));
+  VB_RETURN_IF_ERROR(AddHistory(id, RunStatus::kRunning, now,
+                                request.host.empty() ? Cat("claimed by bench ", bench_name)
+                                                     : Cat("claimed by bench ", bench_name, " on host ", request.host)));
   VB_DB_ASSIGN_OR_RETURN(RunRecord run, LoadRun(id));
   VB_RETURN_IF_ERROR(txn.Commit());
   return std::optional<RunRecord>(std::move(run));
@@ -362,11 +395,7 @@ Status SqliteStore::SetProgress(const Lease& lease, double progress) {
   }
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kWrite));
-  VB_DB_ASSIGN_OR_RETURN(const RunStatus status, StatusOf(run_id));
-  if (status != RunStatus::kRunning) {
-    return Status::FailedPrecondition(Cat("run ", run_id, " is ", RunStatusName(status),
-                                          ", not running: only a running run reports progress"));
-  }
+  VB_RETURN_IF_ERROR(CheckLease(lease, "progress", &txn));
   VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("UPDATE runs SET progress = ?2 WHERE id = ?1"));
   st.Bind(1, run_id);
   st.Bind(2, progress);
@@ -393,15 +422,11 @@ Status SqliteStore::Finish(const Lease& lease, RunStatus final_status, const std
 
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kWrite));
-  VB_DB_ASSIGN_OR_RETURN(const RunStatus status, StatusOf(run_id));
-  if (status != RunStatus::kRunning) {
-    return Status::FailedPrecondition(
-        Cat("run ", run_id, " is ", RunStatusName(status), ", not running: only a running run can finish"));
-  }
+  VB_RETURN_IF_ERROR(CheckLease(lease, Cat("finish ", RunStatusName(final_status)), &txn));
   const double now = NowUnixS();
   VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("UPDATE runs SET status = ?2, reason = ?3, finished = ?4, "
-                                                "progress = CASE WHEN ?2 = 'done' THEN 1.0 ELSE progress END "
-                                                "WHERE id = ?1"));
+                                                "progress = CASE WHEN ?2 = 'done' THEN 1.0 ELSE progress END, "
+                                                "lease_expires = 0 WHERE id = ?1"));
   st.Bind(1, run_id);
   st.Bind(2, RunStatusName(final_status));
   st.Bind(3, reason);
@@ -469,76 +494,227 @@ StatusOr<std::int64_t> SqliteStore::InterruptionsOfRun(std::int64_t run_id) {
   return row ? st.Int(0) : 0;
 }
 
-StatusOr<int> SqliteStore::RecoverAfterCrash(const std::string& /*host*/) {
-  struct Running {
-    std::int64_t id;
-    bool requeue;
-    bool cancel_requested;
+Status SqliteStore::CheckLease(const Lease& lease, const std::string& what, Transaction* txn) {
+  VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT status, fence, host FROM runs WHERE id = ?1"));
+  st.Bind(1, lease.run_id);
+  VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+  if (!row) return RunNotFound(lease.run_id);
+  StatusOr<RunStatus> status = ParseRunStatus(st.Text(0));
+  if (!status.ok()) return Status::DataLoss(Cat("run ", lease.run_id, ": ", status.status().message()));
+  const std::int64_t fence = st.Int(1);
+  const std::string host = st.Text(2);
+  if (*status == RunStatus::kRunning && fence == lease.fence) return Status::Ok();
+  const std::string holder = *status != RunStatus::kRunning ? std::string("nobody")
+                                                            : host.empty() ? "another attempt" : "host " + host;
+  const std::string message =
+      Cat("stale write: ", what, " for run ", lease.run_id, " with fence ", lease.fence, " refused: the run is ",
+          RunStatusName(*status), (*status == RunStatus::kRunning ? "" : ", not running"), ", its fence is ", fence,
+          " (held by ", holder, "); the run is no longer this attempt's");
+  VB_DB_ASSIGN_OR_RETURN(Stmt log, conn_.Prepare("INSERT INTO stale_writes (run_id, fence, current_fence, host, "
+                                                 "what, at) VALUES (?1, ?2, ?3, ?4, ?5, ?6)"));
+  log.Bind(1, lease.run_id);
+  log.Bind(2, lease.fence);
+  log.Bind(3, fence);
+  log.Bind(4, *status == RunStatus::kRunning ? host : std::string());
+  log.Bind(5, what);
+  log.Bind(6, NowUnixS());
+  VB_RETURN_IF_ERROR(log.Run());
+  VB_RETURN_IF_ERROR(txn->Commit());
+  return Status::FailedPrecondition(message);
+}
+
+Status SqliteStore::InterruptRunning(const std::vector<std::int64_t>& ids, const std::string& reason, double now) {
+  for (const std::int64_t id : ids) {
+    bool requeue = false, cancel_requested = false;
     std::string cancel_reason;
-  };
+    {
+      VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT requeue_on_interrupt, cancel_requested, reason "
+                                                    "FROM runs WHERE id = ?1 AND status = 'running'"));
+      st.Bind(1, id);
+      VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+      if (!row) continue;
+      requeue = st.Int(0) != 0;
+      cancel_requested = st.Int(1) != 0;
+      cancel_reason = st.Text(2);
+    }
+    VB_DB_ASSIGN_OR_RETURN(Stmt stop, conn_.Prepare("UPDATE runs SET status = 'interrupted', reason = ?2, "
+                                                    "finished = ?3, lease_expires = 0 WHERE id = ?1"));
+    stop.Bind(1, id);
+    stop.Bind(2, reason);
+    stop.Bind(3, now);
+    VB_RETURN_IF_ERROR(stop.Run());
+    VB_RETURN_IF_ERROR(AddHistory(id, RunStatus::kInterrupted, now, reason));
+
+    std::int64_t times = 0;
+    if (cancel_requested) {
+      // Somebody asked to cancel it while it ran: it has stopped now, so the request is fulfilled.
+      const std::string why = cancel_reason.empty() ? "cancel requested before the server restarted" : cancel_reason;
+      VB_DB_ASSIGN_OR_RETURN(Stmt cancel,
+                             conn_.Prepare("UPDATE runs SET status = 'cancelled', reason = ?2 WHERE id = ?1"));
+      cancel.Bind(1, id);
+      cancel.Bind(2, why);
+      VB_RETURN_IF_ERROR(cancel.Run());
+      VB_RETURN_IF_ERROR(AddHistory(id, RunStatus::kCancelled, now, why));
+    } else if (requeue && [&] {
+                 auto n = InterruptionsOfRun(id);
+                 times = n.ok() ? *n : 0;
+                 return times >= kMaxInterruptions;
+               }()) {
+      const std::string why = Cat("the server stopped ", times, " times while this run ran: not re-queued again "
+                                  "(a run that takes the server down; see the server's log)");
+      VB_DB_ASSIGN_OR_RETURN(Stmt fail, conn_.Prepare("UPDATE runs SET status = 'failed', reason = ?2 WHERE id = ?1"));
+      fail.Bind(1, id);
+      fail.Bind(2, why);
+      VB_RETURN_IF_ERROR(fail.Run());
+      VB_RETURN_IF_ERROR(AddHistory(id, RunStatus::kFailed, now, why));
+    } else if (requeue) {
+      // Back in the queue with its id, priority and age; the bench it asked for (not the one that was running
+      // it), no host and no lease; its fence stays, so the interrupted attempt's late writes are refused, and the
+      // next claim takes fence + 1. The partial trace of the interrupted attempt is dropped: the rerun writes its
+      // own from chunk 0.
+      VB_DB_ASSIGN_OR_RETURN(Stmt requeue_st, conn_.Prepare("UPDATE runs SET status = 'queued', bench_name = "
+                                                            "requested_bench, started = 0, finished = 0, "
+                                                            "progress = 0, cancel_requested = 0, host = '', "
+                                                            "lease_expires = 0 WHERE id = ?1"));
+      requeue_st.Bind(1, id);
+      VB_RETURN_IF_ERROR(requeue_st.Run());
+      VB_DB_ASSIGN_OR_RETURN(Stmt drop, conn_.Prepare("DELETE FROM trace_chunks WHERE run_id = ?1"));
+      drop.Bind(1, id);
+      VB_RETURN_IF_ERROR(drop.Run());
+      VB_RETURN_IF_ERROR(AddHistory(id, RunStatus::kQueued, now, reason));
+    }
+  }
+  return Status::Ok();
+}
+
+StatusOr<int> SqliteStore::RecoverAfterCrash(const std::string& host) {
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kWrite));
-  std::vector<Running> running;
+  std::vector<std::int64_t> running;
   {
-    VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT id, requeue_on_interrupt, cancel_requested, reason "
-                                                  "FROM runs WHERE status = 'running' ORDER BY id"));
+    // "" = one machine: every running run is this server's. A host in a lab touches only its own runs.
+    VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare(host.empty() ? "SELECT id FROM runs WHERE status = 'running' "
+                                                                  "ORDER BY id"
+                                                                : "SELECT id FROM runs WHERE status = 'running' "
+                                                                  "AND host = ?1 ORDER BY id"));
+    if (!host.empty()) st.Bind(1, host);
     while (true) {
       VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
       if (!row) break;
-      running.push_back({st.Int(0), st.Int(1) != 0, st.Int(2) != 0, st.Text(3)});
+      running.push_back(st.Int(0));
     }
   }
-  const double now = NowUnixS();
-  Status count_error;
-  auto InterruptionsOf = [&](std::int64_t id) -> std::int64_t {
-    auto n = InterruptionsOfRun(id);
-    if (!n.ok()) count_error = n.status();
-    return n.ok() ? *n : 0;
-  };
-  for (const Running& r : running) {
-    VB_DB_ASSIGN_OR_RETURN(Stmt stop, conn_.Prepare("UPDATE runs SET status = 'interrupted', reason = ?2, "
-                                                    "finished = ?3 WHERE id = ?1"));
-    stop.Bind(1, r.id);
-    stop.Bind(2, kRecoverReason);
-    stop.Bind(3, now);
-    VB_RETURN_IF_ERROR(stop.Run());
-    VB_RETURN_IF_ERROR(AddHistory(r.id, RunStatus::kInterrupted, now, kRecoverReason));
-
-    if (r.cancel_requested) {
-      // Somebody asked to cancel it while it ran: it has stopped now, so the request is fulfilled.
-      const std::string reason = r.cancel_reason.empty() ? "cancel requested before the server restarted"
-                                                         : r.cancel_reason;
-      VB_DB_ASSIGN_OR_RETURN(Stmt cancel,
-                             conn_.Prepare("UPDATE runs SET status = 'cancelled', reason = ?2 WHERE id = ?1"));
-      cancel.Bind(1, r.id);
-      cancel.Bind(2, reason);
-      VB_RETURN_IF_ERROR(cancel.Run());
-      VB_RETURN_IF_ERROR(AddHistory(r.id, RunStatus::kCancelled, now, reason));
-    } else if (std::int64_t times = 0; r.requeue && (times = InterruptionsOf(r.id)) >= kMaxInterruptions) {
-      const std::string reason = Cat("the server stopped ", times, " times while this run ran: not re-queued again "
-                                     "(a run that takes the server down; see the server's log)");
-      VB_DB_ASSIGN_OR_RETURN(Stmt fail, conn_.Prepare("UPDATE runs SET status = 'failed', reason = ?2 WHERE id = ?1"));
-      fail.Bind(1, r.id);
-      fail.Bind(2, reason);
-      VB_RETURN_IF_ERROR(fail.Run());
-      VB_RETURN_IF_ERROR(AddHistory(r.id, RunStatus::kFailed, now, reason));
-    } else if (r.requeue) {
-      // Back in the queue with its id, priority and age; the bench it asked for (not the one that was running
-      // it); the partial trace of the interrupted attempt is dropped, the rerun writes its own from chunk 0.
-      VB_DB_ASSIGN_OR_RETURN(Stmt requeue, conn_.Prepare("UPDATE runs SET status = 'queued', bench_name = "
-                                                         "requested_bench, started = 0, finished = 0, "
-                                                         "progress = 0, cancel_requested = 0 WHERE id = ?1"));
-      requeue.Bind(1, r.id);
-      VB_RETURN_IF_ERROR(requeue.Run());
-      VB_DB_ASSIGN_OR_RETURN(Stmt drop, conn_.Prepare("DELETE FROM trace_chunks WHERE run_id = ?1"));
-      drop.Bind(1, r.id);
-      VB_RETURN_IF_ERROR(drop.Run());
-      VB_RETURN_IF_ERROR(AddHistory(r.id, RunStatus::kQueued, now, kRecoverReason));
-    }
-  }
-  VB_RETURN_IF_ERROR(count_error);
+  VB_RETURN_IF_ERROR(InterruptRunning(running, kRecoverReason, NowUnixS()));
   VB_RETURN_IF_ERROR(txn.Commit());
   return static_cast<int>(running.size());
+}
+
+// ---- The lab ----
+
+Status SqliteStore::Heartbeat(const HostRecord& host, double lease_ttl_s) {
+  if (host.name.empty()) return Status::InvalidArgument("host.name: must not be empty");
+  if (!std::isfinite(lease_ttl_s) || lease_ttl_s < 0)
+    return Status::InvalidArgument(Cat("lease_ttl_s: must be finite and >= 0, got ", FormatExact(lease_ttl_s)));
+  const double now = NowUnixS();
+  Transaction txn(&conn_);
+  VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kWrite));
+  VB_DB_ASSIGN_OR_RETURN(Stmt up, conn_.Prepare("INSERT INTO hosts (name, address, benches_json, started, heartbeat) "
+                                                "VALUES (?1, ?2, ?3, ?4, ?5) ON CONFLICT (name) DO UPDATE SET "
+                                                "address = excluded.address, benches_json = excluded.benches_json, "
+                                                "started = excluded.started, heartbeat = excluded.heartbeat"));
+  up.Bind(1, host.name);
+  up.Bind(2, host.address);
+  up.Bind(3, host.benches_json.empty() ? std::string("[]") : host.benches_json);
+  up.Bind(4, host.started_unix_s > 0 ? host.started_unix_s : now);
+  up.Bind(5, now);
+  VB_RETURN_IF_ERROR(up.Run());
+  if (lease_ttl_s > 0) {
+    VB_DB_ASSIGN_OR_RETURN(Stmt renew, conn_.Prepare("UPDATE runs SET lease_expires = ?2 WHERE status = 'running' "
+                                                     "AND host = ?1"));
+    renew.Bind(1, host.name);
+    renew.Bind(2, now + lease_ttl_s);
+    VB_RETURN_IF_ERROR(renew.Run());
+  }
+  return txn.Commit();
+}
+
+StatusOr<std::vector<HostRecord>> SqliteStore::ListHosts() {
+  Transaction txn(&conn_);
+  VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
+  VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT name, address, benches_json, started, heartbeat FROM hosts "
+                                                "ORDER BY name"));
+  std::vector<HostRecord> out;
+  while (true) {
+    VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+    if (!row) break;
+    out.push_back({st.Text(0), st.Text(1), st.Text(2), st.Double(3), st.Double(4)});
+  }
+  VB_RETURN_IF_ERROR(txn.Commit());
+  return out;
+}
+
+StatusOr<std::vector<std::int64_t>> SqliteStore::RequeueLapsed() {
+  const double now = NowUnixS();
+  Transaction txn(&conn_);
+  VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kWrite));
+  std::vector<std::int64_t> lapsed;
+  std::map<std::int64_t, std::string> host_of;
+  {
+    VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT id, host FROM runs WHERE status = 'running' AND "
+                                                  "lease_expires > 0 AND lease_expires < ?1 ORDER BY id"));
+    st.Bind(1, now);
+    while (true) {
+      VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+      if (!row) break;
+      lapsed.push_back(st.Int(0));
+      host_of[st.Int(0)] = st.Text(1);
+    }
+  }
+  for (const std::int64_t id : lapsed) {
+    const std::string& h = host_of[id];
+    VB_RETURN_IF_ERROR(InterruptRunning(
+        {id}, Cat("lease lapsed: host ", h.empty() ? std::string("(none)") : h, " stopped renewing it"), now));
+  }
+  VB_RETURN_IF_ERROR(txn.Commit());
+  return lapsed;
+}
+
+StatusOr<std::vector<StaleWrite>> SqliteStore::StaleWrites(std::int32_t limit, std::int64_t* total) {
+  if (limit < 1 || limit > kMaxListLimit)
+    return Status::InvalidArgument(Cat("limit: must be in 1..", kMaxListLimit, ", got ", limit));
+  Transaction txn(&conn_);
+  VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
+  if (total != nullptr) {
+    VB_DB_ASSIGN_OR_RETURN(Stmt count, conn_.Prepare("SELECT count(*) FROM stale_writes"));
+    VB_DB_ASSIGN_OR_RETURN(const bool row, count.Step());
+    *total = row ? count.Int(0) : 0;
+  }
+  VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT run_id, fence, current_fence, host, what, at FROM "
+                                                "stale_writes ORDER BY id LIMIT ?1"));
+  st.Bind(1, static_cast<std::int64_t>(limit));
+  std::vector<StaleWrite> out;
+  while (true) {
+    VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+    if (!row) break;
+    out.push_back({st.Int(0), st.Int(1), st.Int(2), st.Text(3), st.Text(4), st.Double(5)});
+  }
+  VB_RETURN_IF_ERROR(txn.Commit());
+  return out;
+}
+
+StatusOr<bool> SqliteStore::ClaimNight(const std::string& night, const std::string& host) {
+  VB_RETURN_IF_ERROR(CheckNightClaim(night, host));
+  Transaction txn(&conn_);
+  VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kWrite));
+  VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("INSERT INTO nights_claimed (night, host, at) VALUES (?1, ?2, ?3) "
+                                                "ON CONFLICT (night) DO NOTHING"));
+  st.Bind(1, night);
+  st.Bind(2, host);
+  st.Bind(3, NowUnixS());
+  VB_RETURN_IF_ERROR(st.Run());
+  const bool won = sqlite3_changes(conn_.raw()) == 1;
+  VB_RETURN_IF_ERROR(txn.Commit());
+  return won;
 }
 
 // ---- Reading runs ----
@@ -675,7 +851,7 @@ Status SqliteStore::AppendTraceChunk(const Lease& lease, const TraceChunk& chunk
 
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kWrite));
-  VB_RETURN_IF_ERROR(StatusOf(run_id).status());
+  VB_RETURN_IF_ERROR(CheckLease(lease, Cat("trace chunk ", chunk.index), &txn));
   {
     // The last chunk so far (primary key order); its channels must match (all chunks of a trace share them).
     VB_DB_ASSIGN_OR_RETURN(Stmt last, conn_.Prepare("SELECT idx, channels FROM trace_chunks WHERE run_id = ?1 "
@@ -917,6 +1093,14 @@ StatusOr<PruneResult> SqliteStore::Prune(const PruneRequest& request) {
 }
 
 }  // namespace
+
+Status CheckNightClaim(const std::string& night, const std::string& host) {
+  bool date_like = night.size() == 10 && night[4] == '-' && night[7] == '-';
+  for (std::size_t k : {0, 1, 2, 3, 5, 6, 8, 9}) date_like = date_like && night[k] >= '0' && night[k] <= '9';
+  if (!date_like) return Status::InvalidArgument(Cat("night: must be YYYY-MM-DD, got \"", night, "\""));
+  if (host.empty()) return Status::InvalidArgument("host: must not be empty");
+  return Status::Ok();
+}
 
 std::int64_t LocalBatchOfBaselineSource(const std::string& source) {
   // "local batch 12" (baseline set --batch 12 --local) or "suite ci (local batch 12, seed 1)" (--suite).

@@ -30,6 +30,9 @@ struct BenchSetup {
   // The local emulator (benchctl run --local): the plant and driver are the spec's own, so every spec fits
   // it; admission matches it to any spec without class, name or capability checks.
   bool plant_from_spec = false;
+  // An emulated bench paced to the wall clock (config "pace": "realtime"): every run on it is realtime, as on
+  // hardware (docs/lab.md).
+  bool paced = false;
 };
 
 // The local emulator bench of `benchctl run --local`: class "local", the spec's own plant, no interlocks.

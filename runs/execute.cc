@@ -20,6 +20,10 @@ std::vector<db::Metric> RecordedMetrics(const experiment::Metrics& metrics) {
   return out;
 }
 
+bool IsStaleWrite(const Status& st) {
+  return st.code() == StatusCode::kFailedPrecondition && st.message().rfind("stale write", 0) == 0;
+}
+
 namespace {
 
 // The final state a run's summary maps to; the one place that decides it.
@@ -48,15 +52,29 @@ class StoreChunks final : public experiment::BlockSink {
     chunk_.data.resize(chunk_.channels.size() * n);
     for (std::size_t c = 0; c < chunk_.channels.size(); ++c)
       for (std::size_t k = 0; k < n; ++k) chunk_.data[c * n + k] = block.Value(c, k);
-    return store_->AppendTraceChunk(lease_, chunk_);
+    error_ = store_->AppendTraceChunk(lease_, chunk_);
+    return error_;
   }
+  // The store's refusal, if it refused a chunk (then the stream stopped and the Runner failed the run).
+  const Status& error() const { return error_; }
 
  private:
   db::Store* store_;
   db::Lease lease_;
   db::TraceChunk chunk_;
   std::int32_t index_ = 0;
+  Status error_;
 };
+
+// A stale write: stop writing (no retry), log it; the run's state is whoever holds it now.
+Outcome Stale(Outcome out, const db::RunRecord& run, const Status& st) {
+  spdlog::warn("run {} (fence {}): stopped writing, the run is no longer this attempt's: {}",
+               static_cast<long long>(run.id), static_cast<long long>(run.fence), st.message());
+  out.stale = true;
+  out.recorded = false;
+  out.status = db::RunStatus::kRunning;  // as far as this attempt knows; the store has the truth
+  return out;
+}
 
 }  // namespace
 
@@ -74,9 +92,13 @@ Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& se
     }
     auto st = store->Finish(db::LeaseOf(run), status, out.reason, metrics);
     out.recorded = st.ok();
-    if (!st.ok())
-      spdlog::error("run {}: cannot record the result: {}", static_cast<long long>(run.id),
-                   st.message().c_str());
+    if (IsStaleWrite(st)) {
+      out.stale = true;
+      spdlog::warn("run {} (fence {}): result not recorded, the run is no longer this attempt's: {}",
+                   static_cast<long long>(run.id), static_cast<long long>(run.fence), st.message());
+    } else if (!st.ok()) {
+      spdlog::error("run {}: cannot record the result: {}", static_cast<long long>(run.id), st.message().c_str());
+    }
     return std::move(out);
   };
   const bool stopping = ctx.stop != nullptr && ctx.stop->load();
@@ -85,6 +107,7 @@ Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& se
   auto spec = experiment::ParseSpecJson(run.spec_json);
   if (!spec.ok()) return finish(db::RunStatus::kFailed, "stored spec does not parse: " + spec.status().message(), {});
   if (setup.kind == "emulated" && !setup.plant_from_spec) *spec->mutable_bench()->mutable_model() = setup.model;
+  if (setup.paced) spec->set_realtime(true);
 
   // 2. The experiment and the bench.
   auto e = experiment::BuildExperiment(*spec);
@@ -118,8 +141,12 @@ Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& se
   options.keep_whole_trace = ctx.keep_trace;
   out.summary = experiment::Runner::Run(*e, *bench, &out.trace, options);
   bench->SafeState();
-  if (ctx.current_monitor != nullptr) ctx.current_monitor->store(nullptr);
-  if (ctx.registry != nullptr) ctx.registry->Remove(run.id);
+  if (ctx.current_monitor != nullptr) {
+    std::unique_lock<std::mutex> lock;
+    if (ctx.current_monitor_mu != nullptr) lock = std::unique_lock<std::mutex>(*ctx.current_monitor_mu);
+    ctx.current_monitor->store(nullptr);
+  }
+  if (ctx.registry != nullptr) ctx.registry->Remove(run.id, &monitor);
 
   if (ctx.stop != nullptr && ctx.stop->load() &&
       out.summary.termination == experiment::RunSummary::Termination::kCancelled) {
@@ -139,10 +166,14 @@ Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& se
   }
   if (out.summary.termination != experiment::RunSummary::Termination::kDone && e->duration_s > 0) {
     const double reached = std::clamp(out.summary.duration_s / e->duration_s, 0.0, 1.0);
-    if (auto st = store->SetProgress(db::LeaseOf(run), reached); !st.ok())
+    if (auto st = store->SetProgress(db::LeaseOf(run), reached); IsStaleWrite(st)) {
+      return Stale(std::move(out), run, st);
+    } else if (!st.ok()) {
       spdlog::warn("run {}: cannot record its progress: {}", static_cast<long long>(run.id), st.message().c_str());
+    }
   }
   // The trace is in the store already (a chunk the store refused failed the run, "recording: ...").
+  if (IsStaleWrite(chunks.error())) return Stale(std::move(out), run, chunks.error());
   db::RunStatus status = StatusOf(out.summary.termination);
   std::string reason = out.summary.message;
   if (status == db::RunStatus::kCancelled) {

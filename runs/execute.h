@@ -14,6 +14,7 @@
 
 #include <atomic>
 #include <cstdint>
+#include <mutex>
 #include <string>
 
 #include "db/store.h"
@@ -28,6 +29,7 @@ struct Outcome {
   db::RunStatus status = db::RunStatus::kFailed;  // as recorded
   std::string reason;
   bool recorded = false;             // false: left running for recovery (stopped), or the store refused
+  bool stale = false;                // the store refused a write as stale: the run is another attempt's now
   experiment::RunSummary summary;    // empty when the run never started (bad spec, bench not there)
   experiment::Trace trace;           // what was recorded, when ExecuteContext::keep_trace (it is in the store)
 };
@@ -37,9 +39,16 @@ struct ExecuteContext {
   const std::atomic<bool>* stop = nullptr;      // shutdown: stop the run and leave it for recovery
   std::atomic<experiment::RunMonitor*>* current_monitor = nullptr;  // published while the run executes
   bool keep_trace = false;                      // also keep the whole trace in Outcome::trace (memory grows)
+  // Held while current_monitor is cleared (the monitor is destroyed right after): whoever sets the published
+  // monitor's cancel flag from another thread holds it too, so it never writes to a monitor that is gone.
+  std::mutex* current_monitor_mu = nullptr;
 };
 
 Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& setup, const ExecuteContext& ctx);
+
+// A write the store refused because the lease no longer holds the run (db::Lease): the run was re-queued or
+// re-assigned while this attempt ran. The attempt stops writing, logs it, and does not retry (docs/lab.md).
+bool IsStaleWrite(const Status& st);
 
 // The metrics a run records: the finite ones of experiment::MetricList, in its order.
 std::vector<db::Metric> RecordedMetrics(const experiment::Metrics& metrics);

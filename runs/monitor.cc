@@ -43,6 +43,11 @@ void Registry::Remove(std::int64_t run_id) {
   running_.erase(run_id);
 }
 
+void Registry::Remove(std::int64_t run_id, const experiment::RunMonitor* monitor) {
+  std::lock_guard<std::mutex> lock(mu_);
+  if (auto it = running_.find(run_id); it != running_.end() && it->second.monitor == monitor) running_.erase(it);
+}
+
 bool Registry::Cancel(std::int64_t run_id) {
   std::lock_guard<std::mutex> lock(mu_);
   auto it = running_.find(run_id);

@@ -72,6 +72,9 @@ class Registry {
  public:
   void Add(std::int64_t run_id, experiment::RunMonitor* monitor, LiveTap* tap, double duration_s);
   void Remove(std::int64_t run_id);
+  // Removes the run only if `monitor` is the one registered for it: a run re-claimed on this host while an
+  // older attempt still ran here (a lab, docs/lab.md) stays visible when the older attempt ends.
+  void Remove(std::int64_t run_id, const experiment::RunMonitor* monitor);
   // True if the run is executing here (its loop is told to stop).
   bool Cancel(std::int64_t run_id);
   // Progress 0..1 of a run executing here.

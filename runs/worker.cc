@@ -13,7 +13,11 @@ Worker::Worker(BenchSetup setup, Registry* registry) : setup_(std::move(setup)),
 Worker::~Worker() { Stop(); }
 
 StatusOr<std::optional<Outcome>> Worker::ClaimAndExecute(db::Store* store) {
-  auto claimed = store->ClaimNext(db::BenchClaim(setup_.bench_class, setup_.name));
+  db::ClaimRequest request = db::BenchClaim(setup_.bench_class, setup_.name);
+  request.host = policy_.host;
+  request.lease_ttl_s = policy_.lease_ttl_s;
+  request.aging_s = policy_.aging_s;
+  auto claimed = store->ClaimNext(request);
   if (!claimed.ok()) return claimed.status();
   if (!claimed->has_value()) return std::optional<Outcome>();
   current_fence_.store((*claimed)->fence);
@@ -23,9 +27,20 @@ StatusOr<std::optional<Outcome>> Worker::ClaimAndExecute(db::Store* store) {
   ctx.stop = &stop_;
   ctx.current_monitor = &monitor_;
   ctx.keep_trace = keep_traces_;
+  ctx.current_monitor_mu = &monitor_mu_;
   Outcome out = Execute(store, **claimed, setup_, ctx);
   current_run_.store(0);
   return std::optional<Outcome>(std::move(out));
+}
+
+bool Worker::CancelIfCurrent(const db::Lease& lease) {
+  if (lease.run_id == 0 || current_run_.load() != lease.run_id || current_fence_.load() != lease.fence) return false;
+  std::lock_guard<std::mutex> lock(monitor_mu_);
+  experiment::RunMonitor* m = monitor_.load();
+  // Re-checked under the lock: the run may have ended (and the worker taken the next) since the check above.
+  if (m == nullptr || current_run_.load() != lease.run_id || current_fence_.load() != lease.fence) return false;
+  m->cancel.store(true);
+  return true;
 }
 
 void Worker::Start(std::string db_path) {
@@ -34,7 +49,10 @@ void Worker::Start(std::string db_path) {
 
 void Worker::Stop() {
   stop_.store(true);
-  if (auto* m = monitor_.load()) m->cancel.store(true);
+  {
+    std::lock_guard<std::mutex> lock(monitor_mu_);
+    if (auto* m = monitor_.load()) m->cancel.store(true);
+  }
   if (registry_ != nullptr) registry_->NotifyWork();
   if (thread_.joinable()) thread_.join();
 }

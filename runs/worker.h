@@ -4,6 +4,7 @@
 #pragma once
 
 #include <atomic>
+#include <mutex>
 #include <cstdint>
 #include <optional>
 #include <string>
@@ -16,6 +17,14 @@
 
 namespace vb::runs {
 
+// How a worker claims (db::ClaimRequest): its host, the lease TTL and aging in a lab (docs/lab.md); all empty/0
+// on one machine.
+struct ClaimPolicy {
+  std::string host;
+  double lease_ttl_s = 0.0;
+  double aging_s = 0.0;
+};
+
 class Worker {
  public:
   // registry may be nullptr (nobody watches, nobody signals work: Start() is then not useful).
@@ -23,6 +32,12 @@ class Worker {
   ~Worker();
   Worker(const Worker&) = delete;
   Worker& operator=(const Worker&) = delete;
+
+  // Before Start(): claim as a host of a lab.
+  void set_claim_policy(ClaimPolicy policy) { policy_ = std::move(policy); }
+  // Stops the run in progress if it is still the attempt `lease` names (another host took it over, or its cancel
+  // was requested through the store); true if it was.
+  bool CancelIfCurrent(const db::Lease& lease);
 
   // One step on the calling thread: nullopt when no run is waiting for this bench.
   StatusOr<std::optional<Outcome>> ClaimAndExecute(db::Store* store);
@@ -45,12 +60,14 @@ class Worker {
 
   BenchSetup setup_;
   bool keep_traces_ = false;
+  ClaimPolicy policy_;
   Registry* registry_;
   std::thread thread_;
   std::atomic<bool> stop_{false};
   std::atomic<std::int64_t> current_fence_{0};  // written before current_run_
   std::atomic<std::int64_t> current_run_{0};
   std::atomic<experiment::RunMonitor*> monitor_{nullptr};
+  std::mutex monitor_mu_;  // see ExecuteContext::current_monitor_mu
 };
 
 }  // namespace vb::runs

@@ -3,6 +3,8 @@
 #include <fmt/format.h>
 #include <google/protobuf/util/json_util.h>
 
+#include <unistd.h>
+
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -159,6 +161,37 @@ StatusOr<RetentionSetup> RetentionFromConfig(const valvebench::v1::ServerConfig&
   return out;
 }
 
+// lab: checked at start; a heartbeat that cannot keep a lease alive would have every run re-queued under it.
+StatusOr<LabSetup> LabFromConfig(const valvebench::v1::ServerConfig& c) {
+  LabSetup out;
+  if (!c.has_lab()) return out;
+  const auto& l = c.lab();
+  out.enabled = true;
+  out.host = l.host();
+  if (out.host.empty()) {
+    char name[256] = {};
+    if (gethostname(name, sizeof name - 1) != 0 || name[0] == '\0')
+      return Status::InvalidArgument("lab.host: not set, and this machine's hostname cannot be read; set it");
+    out.host = name;
+  }
+  if (out.host.size() > 200) return Status::InvalidArgument("lab.host: at most 200 characters");
+  out.advertised_address = l.advertised_address();
+  if (!std::isfinite(l.lease_ttl_s()) || l.lease_ttl_s() < 0)
+    return Status::InvalidArgument("lab.lease_ttl_s: must be a number of seconds > 0, got " + FormatExact(l.lease_ttl_s()));
+  if (l.lease_ttl_s() > 0) out.lease_ttl_s = l.lease_ttl_s();
+  if (!std::isfinite(l.heartbeat_s()) || l.heartbeat_s() < 0)
+    return Status::InvalidArgument("lab.heartbeat_s: must be a number of seconds > 0, got " + FormatExact(l.heartbeat_s()));
+  out.heartbeat_s = l.heartbeat_s() > 0 ? l.heartbeat_s() : out.lease_ttl_s / 3.0;
+  if (out.heartbeat_s * 2 > out.lease_ttl_s)
+    return Status::InvalidArgument("lab.heartbeat_s: " + FormatExact(out.heartbeat_s) +
+                                   " s is more than half of lab.lease_ttl_s (" + FormatExact(out.lease_ttl_s) +
+                                   " s): one late heartbeat would let the leases lapse");
+  if (!std::isfinite(l.aging_s()))
+    return Status::InvalidArgument("lab.aging_s: must be finite (< 0: no aging), got " + FormatExact(l.aging_s()));
+  out.aging_s = l.aging_s() < 0 ? 0.0 : l.aging_s() > 0 ? l.aging_s() : 60.0;
+  return out;
+}
+
 }  // namespace
 
 StatusOr<regress::Baseline> LoadBaselineFile(const std::string& path) {
@@ -210,6 +243,8 @@ StatusOr<Settings> SettingsFromConfig(const valvebench::v1::ServerConfig& c, con
     setup.name = b.name();
     setup.kind = kind;
     setup.config = b;
+    if (kind != "emulated" && !b.pace().empty())
+      return Status::InvalidArgument(field + ".pace: only emulated benches are paced (hardware runs in real time)");
     if (kind != "emulated") {
       auto hw = HardwareSetup(b, field, &setup);
       if (!hw.ok()) return hw;
@@ -217,6 +252,12 @@ StatusOr<Settings> SettingsFromConfig(const valvebench::v1::ServerConfig& c, con
       continue;
     }
     setup.model = b.model();
+    if (b.pace() == "realtime") {
+      setup.paced = true;
+    } else if (!b.pace().empty()) {
+      return Status::InvalidArgument(field + ".pace: unknown pace '" + b.pace() +
+                                     "' (\"realtime\": wall-clock speed, as hardware; \"\": as fast as it goes)");
+    }
     auto plant = experiment::BuildPlant(b.model());
     if (!plant.ok()) return plant.status().WithContext(field);
     auto driver = experiment::BuildDriver(b.driver());
@@ -265,6 +306,10 @@ StatusOr<Settings> SettingsFromConfig(const valvebench::v1::ServerConfig& c, con
   auto retention = RetentionFromConfig(c);
   if (!retention.ok()) return retention.status();
   s.retention = std::move(*retention);
+  auto lab = LabFromConfig(c);
+  if (!lab.ok()) return lab.status();
+  s.lab = std::move(*lab);
+  if (s.lab.enabled) s.nights.lab_host = s.lab.host;
   return s;
 }
 

@@ -23,6 +23,7 @@ struct NightsSetup {
   std::string suite_path;
   std::string baseline_path;
   bool utc = true;              // the only time zone supported
+  std::string lab_host;         // in a lab: this host's name; a night runs only where ClaimNight wins it
 };
 
 // Retention on a schedule (config "retention"; docs/store.md "Retention", docs/server.md).
@@ -31,6 +32,16 @@ struct RetentionSetup {
   double older_than_days = 0.0;  // > 0
   int keep_last = 0;             // >= 0
   std::string cron = "30 3 * * *";  // validated 5-field expression, UTC
+};
+
+// The lab (config "lab"; docs/lab.md). Disabled: one machine, no host name, no leases.
+struct LabSetup {
+  bool enabled = false;
+  std::string host;                // default: hostname
+  std::string advertised_address;  // "" = the bound listen address (filled in by main once bound)
+  double lease_ttl_s = 10.0;
+  double heartbeat_s = 10.0 / 3.0;
+  double aging_s = 60.0;           // 0 = no aging
 };
 
 struct Settings {
@@ -44,6 +55,7 @@ struct Settings {
   runs::Policy AdmitPolicy() const;
   NightsSetup nights;
   RetentionSetup retention;
+  LabSetup lab;
 };
 
 StatusOr<Settings> LoadSettings(const std::string& config_path);

@@ -21,6 +21,7 @@
 #include <thread>
 
 #include "server/config.h"
+#include "server/lab.h"
 #include "server/nights.h"
 #include "server/retention.h"
 #include "server/service.h"
@@ -67,7 +68,9 @@ int main(int argc, char** argv) {
                  store.status().message().c_str());
     return 3;
   }
-  auto recovered = (*store)->RecoverAfterCrash("");
+  // In a lab only this host's runs: the others' are running on their hosts (docs/lab.md).
+  const std::string host = settings->lab.enabled ? settings->lab.host : std::string();
+  auto recovered = (*store)->RecoverAfterCrash(host);
   if (!recovered.ok()) {
     spdlog::error("recovery failed: {}", recovered.status().message().c_str());
     return 3;
@@ -78,7 +81,11 @@ int main(int argc, char** argv) {
 
   vb::runs::Registry registry;
   std::vector<std::unique_ptr<vb::runs::Worker>> workers;
-  for (const auto& b : settings->benches) workers.push_back(std::make_unique<vb::runs::Worker>(b, &registry));
+  for (const auto& b : settings->benches) {
+    workers.push_back(std::make_unique<vb::runs::Worker>(b, &registry));
+    if (settings->lab.enabled)
+      workers.back()->set_claim_policy({settings->lab.host, settings->lab.lease_ttl_s, settings->lab.aging_s});
+  }
   vb::server::StorePool pool(settings->database_path);
   vb::server::BenchServiceImpl service(&settings.value(), &pool, &registry, &workers);
 
@@ -110,6 +117,22 @@ int main(int argc, char** argv) {
   // NOT_FOUND (issue 14); the overall status ("") is SERVING by default.
   server->GetHealthCheckService()->SetServingStatus(valvebench::v1::BenchService::service_full_name(), true);
 
+  // The address with the port actually bound (a config may ask for port 0: any free port).
+  std::string bound = settings->listen_address;
+  if (const size_t colon = bound.rfind(':'); colon != std::string::npos && bound.rfind("unix:", 0) != 0)
+    bound = bound.substr(0, colon + 1) + std::to_string(port);
+  std::unique_ptr<vb::server::LabHost> lab;
+  if (settings->lab.enabled) {
+    vb::server::LabSetup lab_setup = settings->lab;
+    if (lab_setup.advertised_address.empty()) lab_setup.advertised_address = bound;
+    lab = std::make_unique<vb::server::LabHost>(lab_setup, settings->database_path,
+                                                vb::server::BenchesJson(settings->benches), &registry, &workers);
+    if (auto st = lab->Start(); !st.ok()) {
+      spdlog::error("{}", st.message());
+      server->Shutdown();
+      return 3;
+    }
+  }
   for (auto& w : workers) w->Start(settings->database_path);
   std::unique_ptr<vb::server::NightScheduler> nights;
   if (settings->nights.enabled) {
@@ -122,13 +145,12 @@ int main(int argc, char** argv) {
     retention = std::make_unique<vb::server::RetentionScheduler>(settings->retention, settings->nights, &pool);
     retention->Start();
   }
-  // The address with the port actually bound (a config may ask for port 0: any free port).
-  std::string bound = settings->listen_address;
-  if (const size_t colon = bound.rfind(':'); colon != std::string::npos && bound.rfind("unix:", 0) != 0)
-    bound = bound.substr(0, colon + 1) + std::to_string(port);
   spdlog::info("listening on {} ({}), {} bench(es), database {}", bound.c_str(),
                settings->tls_cert_pem.empty() ? "insecure" : "TLS", workers.size(),
                vb::db::DisplayLocation(settings->database_path).c_str());
+  if (lab)
+    spdlog::info("lab: host {} (lease {} s, heartbeat {} s, aging {} s)", settings->lab.host, settings->lab.lease_ttl_s,
+                 settings->lab.heartbeat_s, settings->lab.aging_s);
   if (nights) spdlog::info("nights: '{}' (UTC), suite {}",
                            settings->nights.cron.c_str(), settings->nights.suite_path.c_str());
 
@@ -143,6 +165,12 @@ int main(int argc, char** argv) {
   if (retention) retention->Stop();
   server->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(2));
   for (auto& w : workers) w->Stop();
+  if (lab) {
+    // The runs this host stopped go back to the lab's queue now rather than when their leases lapse.
+    lab->Stop();
+    if (auto again = (*store)->RecoverAfterCrash(host); again.ok() && *again > 0)
+      spdlog::info("lab: {} run(s) stopped by the shutdown re-queued for the lab", *again);
+  }
   server->Wait();
   return 0;
 }

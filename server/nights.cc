@@ -48,7 +48,8 @@ void NightScheduler::Loop(bool run_now) {
   }
   auto night = [this](double fire_unix_s) {
     auto id = RunNight(fire_unix_s);
-    if (!id.ok()) spdlog::error("night: {}", id.status().message().c_str());
+    if (id.status().code() == StatusCode::kAlreadyExists) spdlog::info("{}", id.status().message());
+    else if (!id.ok()) spdlog::error("night: {}", id.status().message().c_str());
   };
   if (run_now) night(clock_());
   for (;;) {
@@ -91,6 +92,16 @@ StatusOr<std::int64_t> NightScheduler::SaveNight(const std::string& date, std::i
 
 StatusOr<std::int64_t> NightScheduler::RunNight(double fire_unix_s) {
   const std::string date = regress::DateOf(fire_unix_s, setup_.utc);
+  if (!setup_.lab_host.empty()) {
+    // A lab runs each night once, not once per host (docs/lab.md, "Nights"): the host that claims it runs it;
+    // its runs go to the shared queue, so every host's benches take them.
+    auto store = pool_->Acquire();
+    if (!store.ok()) return store.status();
+    auto won = (*store)->ClaimNight(date, setup_.lab_host);
+    if (!won.ok()) return won.status().WithContext("night " + date);
+    if (!*won) return Status::AlreadyExists("night " + date + ": another host of the lab runs it; skipped here");
+    spdlog::info("night {}: claimed by this host ({})", date, setup_.lab_host);
+  }
   const double started_unix_s = clock_();
   std::int64_t batch_id = 0;
   std::string suite_name, baseline_name;

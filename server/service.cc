@@ -3,7 +3,12 @@
 
 #include <google/protobuf/util/json_util.h>
 
+#include <nlohmann/json.hpp>
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
 #include <chrono>
+#include <map>
 #include <cmath>
 #include <thread>
 
@@ -14,6 +19,7 @@
 #include "proto/api_convert.h"
 #include "runs/query.h"
 #include "server/grpc_status.h"
+#include "server/lab.h"
 
 namespace vb::server {
 
@@ -71,11 +77,20 @@ grpc::Status BenchServiceImpl::SubmitBatch(grpc::ServerContext* ctx, const v1::S
 }
 
 StatusOr<runs::Queued> BenchServiceImpl::Queue(const runs::Submission& submission) {
-  auto admitted = runs::Admit(submission, policy_);
-  if (!admitted.ok()) return admitted.status();
   auto store = pool_->Acquire();
   if (!store.ok()) return store.status();
-  auto queued = runs::Enqueue(store->get(), std::move(admitted.value()), policy_);
+  // In a lab a run may go to any host's bench (docs/lab.md): admission matches against them all.
+  runs::Policy lab_policy;
+  if (settings_->lab.enabled) {
+    auto hosts = (*store)->ListHosts();
+    if (!hosts.ok()) return hosts.status();
+    lab_policy = policy_;
+    for (auto& b : OtherHostsBenches(*hosts, settings_->lab.host)) lab_policy.benches.push_back(std::move(b));
+  }
+  const runs::Policy& policy = settings_->lab.enabled ? lab_policy : policy_;
+  auto admitted = runs::Admit(submission, policy);
+  if (!admitted.ok()) return admitted.status();
+  auto queued = runs::Enqueue(store->get(), std::move(admitted.value()), policy);
   if (queued.ok()) registry_->NotifyWork();
   return queued;
 }
@@ -97,6 +112,10 @@ grpc::Status BenchServiceImpl::FillRun(db::Store* store, const db::RunRecord& r,
   if (std::isfinite(r.t_start_s)) out->set_t_start_s(r.t_start_s);
   out->set_controller(r.controller);
   out->set_bench(r.bench_name);
+  out->set_host(r.host);
+  out->set_fence(r.fence);
+  if (const auto spec = nlohmann::json::parse(r.spec_json, nullptr, false); spec.is_object())
+    if (auto d = spec.find("duration_s"); d != spec.end() && d->is_number()) out->set_duration_s(d->get<double>());
   out->set_submitter(r.submitter);
   out->set_priority(r.priority);
   out->set_status(api::ToProto(r.status));
@@ -197,6 +216,42 @@ grpc::Status BenchServiceImpl::CancelRun(grpc::ServerContext* ctx, const v1::Can
   return FillRun(store->get(), *now, true, resp);
 }
 
+namespace {
+
+constexpr int kStoredSamplePolls = 5;  // a run on another host: its stored chunks are read every 5th poll (4 Hz)
+
+// Samples of the stored trace chunks from *next_chunk on, thinned, into ev; advances *next_chunk.
+Status StoredSamples(db::Store* store, std::int64_t run_id, std::int32_t* next_chunk, runs::SampleThinner* thinner,
+                     v1::RunEvent* ev) {
+  return store->ForEachTraceChunk(run_id, [&](const db::TraceChunk& c, std::int64_t) {
+    if (c.index < *next_chunk) return Status::Ok();
+    auto column = [&](const char* name) -> const double* {
+      for (std::size_t k = 0; k < c.channels.size(); ++k)
+        if (c.channels[k] == name) return c.data.data() + k * static_cast<std::size_t>(c.samples);
+      return nullptr;
+    };
+    const double* t = column("t_s");
+    const double* gate = column("gate");
+    const double* i = column("i_A");
+    const double* x = column("x_m");
+    const double* ref = column("ref");
+    for (std::int32_t k = 0; k < c.samples; ++k) {
+      const double t_s = t != nullptr ? t[k] : c.t0_s + k * c.sample_period_s;
+      if (!thinner->Keep(t_s)) continue;
+      auto* ls = ev->add_samples();
+      ls->set_t_s(t_s);
+      ls->set_gate(gate != nullptr ? static_cast<int>(gate[k]) : 0);
+      ls->set_i_a(i != nullptr ? i[k] : std::nan(""));
+      ls->set_x_m(x != nullptr ? x[k] : std::nan(""));
+      ls->set_ref(ref != nullptr ? ref[k] : std::nan(""));
+    }
+    *next_chunk = c.index + 1;
+    return Status::Ok();
+  });
+}
+
+}  // namespace
+
 grpc::Status BenchServiceImpl::WatchRun(grpc::ServerContext* ctx, const v1::WatchRunRequest* req,
                                         grpc::ServerWriter<v1::RunEvent>* writer) {
   Principal who;
@@ -207,6 +262,9 @@ grpc::Status BenchServiceImpl::WatchRun(grpc::ServerContext* ctx, const v1::Watc
   auto store = pool_->Acquire();
   if (!store.ok()) return ToGrpcStatus(store.status());
   std::uint64_t seq = 0;
+  std::int32_t next_chunk = 0;      // a run on another host: the first stored chunk not yet sent
+  std::int64_t watched_fence = -1;
+  int polls = 0;
   bool first = true;
   db::RunStatus last_status = db::RunStatus::kQueued;
   double last_progress = -1.0;
@@ -232,8 +290,19 @@ grpc::Status BenchServiceImpl::WatchRun(grpc::ServerContext* ctx, const v1::Watc
     ev.set_reason(r->reason);
     double progress = r->status == db::RunStatus::kDone ? 1.0 : r->progress;
     if (r->status == db::RunStatus::kRunning) {
-      registry_->Progress(r->id, &progress);
-      if (req->sample_rate_hz() > 0.0) {  // 0 (or less): no live samples (proto: "0 = none")
+      const bool here = registry_->Progress(r->id, &progress);
+      if (!here && req->sample_rate_hz() > 0.0 && ++polls % kStoredSamplePolls == 0) {
+        // Executing on another host of the lab: its progress comes from the store (that host writes it), and
+        // samples from the trace chunks stored so far (docs/lab.md, "Watching a run on another host").
+        if (r->fence != watched_fence) {  // a new attempt writes its trace from chunk 0 again
+          watched_fence = r->fence;
+          next_chunk = 0;
+        }
+        if (auto st = StoredSamples(store->get(), r->id, &next_chunk, &thinner, &ev); !st.ok())
+          spdlog::warn("watch of run {}: stored trace not readable yet: {}", static_cast<long long>(r->id),
+                       st.message());
+      }
+      if (here && req->sample_rate_hz() > 0.0) {  // 0 (or less): no live samples (proto: "0 = none")
         std::vector<runs::LiveSample> samples;
         registry_->SamplesSince(r->id, &seq, &samples);
         for (const auto& s : samples) {
@@ -344,11 +413,67 @@ grpc::Status BenchServiceImpl::CompareRuns(grpc::ServerContext* ctx, const v1::C
   return grpc::Status::OK;
 }
 
+// Every host's benches (docs/lab.md, "Hosts"): what each host last wrote with its heartbeat, its liveness
+// (heartbeat age against the lease TTL: a host silent for longer has lost its leases), and the run each bench is
+// executing according to the store.
+grpc::Status BenchServiceImpl::LabBenches(v1::ListBenchesResponse* resp) {
+  auto store = pool_->Acquire();
+  if (!store.ok()) return ToGrpcStatus(store.status());
+  auto hosts = (*store)->ListHosts();
+  if (!hosts.ok()) return ToGrpcStatus(hosts.status());
+  std::map<std::pair<std::string, std::string>, std::int64_t> running;  // (host, bench) -> run
+  db::RunFilter f;
+  f.status = db::RunStatus::kRunning;
+  f.limit = 1000;
+  for (;;) {
+    auto page = (*store)->ListRuns(f);
+    if (!page.ok()) return ToGrpcStatus(page.status());
+    for (const auto& r : *page) running[{r.host, r.bench_name}] = r.id;
+    if (static_cast<int>(page->size()) < f.limit) break;
+    f.after_id = page->back().id;
+  }
+  const double now =
+      std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+  for (const auto& h : *hosts) {
+    const auto benches = nlohmann::json::parse(h.benches_json, nullptr, false);
+    if (!benches.is_array()) continue;
+    const double age = std::max(0.0, now - h.heartbeat_unix_s);
+    for (const auto& b : benches) {
+      if (!b.is_object()) continue;
+      auto* out = resp->add_benches();
+      out->set_name(b.value("name", ""));
+      out->set_kind(b.value("kind", ""));
+      out->set_driver(b.value("driver", ""));
+      out->set_model(b.value("model", ""));
+      out->set_max_supply_v(b.value("max_supply_V", 0.0));
+      out->set_max_carrier_hz(b.value("max_carrier_Hz", 0.0));
+      out->set_max_sample_rate_hz(b.value("max_sample_rate_Hz", 0.0));
+      out->set_max_control_rate_hz(b.value("max_control_rate_Hz", 0.0));
+      out->set_measures_position(b.value("measures_position", false));
+      out->set_device(b.value("device", ""));
+      out->set_paced(b.value("paced", false));
+      out->set_host(h.name);
+      out->set_host_address(h.address);
+      out->set_heartbeat_age_s(age);
+      out->set_alive(age <= settings_->lab.lease_ttl_s);
+      if (auto it = running.find({h.name, out->name()}); it != running.end()) {
+        out->set_busy(true);
+        out->set_current_run_id(it->second);
+      }
+    }
+  }
+  return grpc::Status::OK;
+}
+
 grpc::Status BenchServiceImpl::ListBenches(grpc::ServerContext* ctx, const v1::ListBenchesRequest* /*req*/,
                                            v1::ListBenchesResponse* resp) {
   Principal who;
   if (auto st = Authorize(ctx, Role::kViewer, &who); !st.ok()) return st;
-  for (const auto& w : *workers_) {
+  if (settings_->lab.enabled) {
+    if (auto st = LabBenches(resp); !st.ok()) return st;
+  }
+  static const std::vector<std::unique_ptr<runs::Worker>> kNone;
+  for (const auto& w : settings_->lab.enabled ? kNone : *workers_) {
     const BenchSetup& b = w->setup();
     auto* out = resp->add_benches();
     out->set_name(b.name);

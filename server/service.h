@@ -84,6 +84,7 @@ class BenchServiceImpl final : public valvebench::v1::BenchService::Service {
   grpc::Status Authorize(grpc::ServerContext* ctx, Role need, Principal* who) const;
   grpc::Status Submit(const runs::Submission& submission, valvebench::v1::SubmitRunResponse* resp);
   grpc::Status FillRun(db::Store* store, const db::RunRecord& r, bool full, valvebench::v1::Run* out);
+  grpc::Status LabBenches(valvebench::v1::ListBenchesResponse* resp);
 
   const Settings* settings_;
   const runs::Policy policy_;

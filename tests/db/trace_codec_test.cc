@@ -298,7 +298,7 @@ TEST(TraceCodecTest, Version3RawTracesStayReadableAfterTheMigrationBesideNewComp
   auto opened = Store::Open(path);
   ASSERT_TRUE(opened.ok()) << opened.status().ToString();
   auto& store = *opened;
-  EXPECT_EQ(store->schema_version(), 4);
+  EXPECT_EQ(store->schema_version(), 5);
   // The same run goes on with a new chunk: compressed, and the trace reads back whole, both codecs in one.
   TraceChunk next;
   next.index = 1;

@@ -111,6 +111,11 @@ class ServerProcess {
     return status;
   }
 
+  // Sends sig without waiting (SIGSTOP, SIGCONT).
+  void Signal(int sig) {
+    if (pid_ > 0) ::kill(pid_, sig);
+  }
+
   // More command-line arguments for the next Start(), e.g. "--run-night-now".
   void AddArg(std::string arg) { extra_args_.push_back(std::move(arg)); }
   const std::string& address() const { return address_; }

@@ -210,6 +210,22 @@ TEST(Registry, ProgressFollowsTheSamplesBetweenTicks) {
   EXPECT_DOUBLE_EQ(progress, 0.75);
 }
 
+// A run re-claimed on the same host while its older attempt still runs there (docs/lab.md): the older attempt's
+// end does not unregister the newer one.
+TEST(Registry, AnOlderAttemptEndingLeavesTheNewerOneRegistered) {
+  Registry registry;
+  experiment::RunMonitor older, newer;
+  LiveTap tap_old(1), tap_new(1);
+  registry.Add(9, &older, &tap_old, 1.0);
+  registry.Add(9, &newer, &tap_new, 1.0);
+  registry.Remove(9, &older);
+  ASSERT_TRUE(registry.Cancel(9));
+  EXPECT_TRUE(newer.cancel.load());
+  EXPECT_FALSE(older.cancel.load());
+  registry.Remove(9, &newer);
+  EXPECT_FALSE(registry.Cancel(9));
+}
+
 // The live stream carries the reference (issue 14: LiveSample.ref was always 0): a PI current law on the
 // seed-001 profile, 0.9 A for 6 ms then 0.5 A.
 TEST(LiveTap, SamplesCarryTheReferenceOfTheControlledVariable) {
@@ -314,7 +330,12 @@ TEST(Enqueue, APerUserDiskBudgetCountsStoredTracesAndTheNewRunsUncompressed) {
     x ^= x << 13, x ^= x >> 7, x ^= x << 17;
     c.data.push_back(std::bit_cast<double>(x & 0x7fefffffffffffffULL));
   }
-  ASSERT_TRUE((*store)->AppendTraceChunk(vb::db::testing::CurrentLease(*store, q->run_ids[0]), c).ok());
+  // Only the attempt holding a run writes its trace: claim it first.
+  auto queued = (*store)->GetRun(q->run_ids[0]);
+  ASSERT_TRUE(queued.ok());
+  auto claimed = (*store)->ClaimNext(db::BenchClaim(queued->bench_kind, "bench-1"));
+  ASSERT_TRUE(claimed.ok() && claimed->has_value());
+  ASSERT_TRUE((*store)->AppendTraceChunk(db::LeaseOf(**claimed), c).ok());
   auto used = (*store)->StoredTraceBytes("alice");
   ASSERT_TRUE(used.ok());
   EXPECT_GT(*used, 700000);

@@ -1,0 +1,242 @@
+#!/usr/bin/env bash
+# The lab drill (docs/lab.md, "The drill"): several valvebench-server hosts share one database, runs are
+# submitted through different hosts, hosts are SIGKILLed (and restarted) and SIGSTOPped (and continued, after
+# their leases lapsed) at random, and at the end every run must have finished exactly once. The last line is
+#   lab-drill: hosts=3 benches=6 runs=1000 done=1000 lost=0 duplicated=0 kills=K stale_writes_refused=S throughput_x=X
+# Exit 0 only if nothing was lost or run twice (and every kill asked for happened before the queue drained); 1
+# otherwise; 2 bad usage; 3 environment (a host did not start, a submission failed).
+#
+# Usage: scripts/lab-drill.sh [--runs N] [--kills K] [--hosts H] [--benches-per-host B] [--run-s S]
+#                             [--kill-every S] [--build DIR] [--keep] [--seed N]
+# (--kill-every: mean seconds between two kills, default 1.4.)
+# Environment: LAB_DB_URL  the shared database: "sqlite:PATH" (default: a file in the work directory), or
+#              "postgres" to start a throw-away PostgreSQL (initdb + pg_ctl in the work directory; as root it
+#              runs as `nobody`) and use its URL. The hosts and the final count take it from here; PostgreSQL
+#              needs a valvebench build with that engine (database_path then holds the postgresql:// URL).
+set -euo pipefail
+
+RUNS=1000 KILLS=5 HOSTS=3 BENCHES=2 RUN_S=0.1 BUILD="" KEEP=0 SEED=$RANDOM KILL_MIN_S=0.8 KILL_MAX_S=2.0
+LEASE_TTL_S=1.0 HEARTBEAT_S=0.25
+while [[ $# -gt 0 ]]; do
+  case "$1" in
+    --runs) RUNS=$2; shift 2 ;;
+    --kills) KILLS=$2; shift 2 ;;
+    --hosts) HOSTS=$2; shift 2 ;;
+    --benches-per-host) BENCHES=$2; shift 2 ;;
+    --run-s) RUN_S=$2; shift 2 ;;
+    --build) BUILD=$2; shift 2 ;;
+    --seed) SEED=$2; shift 2 ;;
+    --kill-every) KILL_MIN_S=$(python3 -c "print($2 * 0.6)"); KILL_MAX_S=$(python3 -c "print($2 * 1.4)"); shift 2 ;;
+    --keep) KEEP=1; shift ;;
+    -h|--help) sed -n 2,14p "$0"; exit 0 ;;
+    *) echo "lab-drill: unknown option '$1' (see --help)" >&2; exit 2 ;;
+  esac
+done
+for v in RUNS KILLS HOSTS BENCHES; do
+  [[ ${!v} =~ ^[0-9]+$ && ${!v} -gt 0 ]] || { echo "lab-drill: --${v,,}: must be a whole number > 0, got '${!v}'" >&2; exit 2; }
+done
+[[ $RUN_S =~ ^[0-9]*\.?[0-9]+$ ]] || { echo "lab-drill: --run-s: must be a number of seconds > 0, got '$RUN_S'" >&2; exit 2; }
+RANDOM=$SEED
+
+ROOT=$(cd "$(dirname "$0")/.." && pwd)
+BUILD=${BUILD:-$ROOT/build}
+SERVER=$BUILD/bin/valvebench-server
+BENCHCTL=$BUILD/bin/benchctl
+for b in "$SERVER" "$BENCHCTL"; do
+  [[ -x $b ]] || { echo "lab-drill: $b not built (cmake --build $BUILD)" >&2; exit 3; }
+done
+command -v python3 >/dev/null || { echo "lab-drill: python3 is needed to count the runs in the database" >&2; exit 3; }
+
+WORK=$(mktemp -d "${TMPDIR:-/tmp}/lab-drill.XXXXXX")
+LAB_DB_URL=${LAB_DB_URL:-sqlite:$WORK/lab.db}
+PG_DIR=""
+declare -a PIDS PORTS
+cleanup() {
+  for pid in "${PIDS[@]:-}"; do
+    [[ -n $pid ]] || continue
+    kill -CONT "$pid" 2>/dev/null || true
+    kill -TERM "$pid" 2>/dev/null || true
+  done
+  for pid in "${PIDS[@]:-}"; do [[ -n $pid ]] && wait "$pid" 2>/dev/null || true; done
+  [[ -z $PG_DIR ]] || "${PG_STOP[@]}" >/dev/null 2>&1 || true
+  if [[ $KEEP == 1 ]]; then echo "lab-drill: kept $WORK" >&2; else rm -rf "$WORK"; fi
+}
+trap cleanup EXIT
+start_postgres() {  # a private PostgreSQL in $WORK/pg on a free port; sets LAB_DB_URL
+  local bin port as=()
+  bin=$(dirname "$(command -v pg_ctl || echo /usr/lib/postgresql/15/bin/pg_ctl)")
+  [[ -x $bin/initdb && -x $bin/pg_ctl ]] || { echo "lab-drill: PostgreSQL's initdb/pg_ctl not found" >&2; exit 3; }
+  PG_DIR=$WORK/pg
+  mkdir -p "$PG_DIR"
+  if [[ $(id -u) == 0 ]]; then  # postgres refuses to run as root
+    chown -R nobody "$WORK"
+    as=(setpriv --reuid=nobody --regid=nogroup --clear-groups --)
+  fi
+  port=$(free_port)
+  "${as[@]}" "$bin/initdb" -D "$PG_DIR/data" -U valvebench --auth=trust >"$WORK/pg-initdb.log" 2>&1 ||
+    { echo "lab-drill: initdb failed:" >&2; tail -5 "$WORK/pg-initdb.log" >&2; exit 3; }
+  "${as[@]}" "$bin/pg_ctl" -D "$PG_DIR/data" -l "$WORK/pg.log" -w \
+    -o "-p $port -k $PG_DIR -c listen_addresses=127.0.0.1 -c max_connections=200" start >/dev/null ||
+    { echo "lab-drill: PostgreSQL did not start:" >&2; tail -5 "$WORK/pg.log" >&2; exit 3; }
+  PG_STOP=("${as[@]}" "$bin/pg_ctl" -D "$PG_DIR/data" -m fast stop)
+  LAB_DB_URL="postgresql://valvebench@127.0.0.1:$port/postgres"
+}
+free_port() { python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])'; }
+[[ $LAB_DB_URL == postgres ]] && start_postgres
+case "$LAB_DB_URL" in
+  sqlite:*) DB_PATH=${LAB_DB_URL#sqlite:} ;;
+  postgresql://*) DB_PATH=$LAB_DB_URL
+    command -v psql >/dev/null || { echo "lab-drill: psql is needed to count the runs in PostgreSQL" >&2; exit 3; } ;;
+  *) echo "lab-drill: LAB_DB_URL '$LAB_DB_URL': give sqlite:PATH, postgres or a postgresql:// URL" >&2; exit 2 ;;
+esac
+
+
+# One SQL query against the shared database, result on stdout (rows as "a|b").
+db_query() {
+  if [[ $DB_PATH == postgresql://* ]]; then
+    psql -X -q -A -t -v ON_ERROR_STOP=1 -d "$DB_PATH" -c "$1"
+    return
+  fi
+  python3 - "$DB_PATH" "$1" <<'PY'
+import sqlite3, sys
+con = sqlite3.connect(sys.argv[1], timeout=30)
+for row in con.execute(sys.argv[2]):
+    print("|".join(str(v) for v in row))
+PY
+}
+
+TOKEN=lab-drill-operator
+TOKEN_SHA=$(printf %s "$TOKEN" | sha256sum | cut -d' ' -f1)
+
+write_config() {  # host index -> its config file
+  local h=$1 benches="" b
+  for ((b = 1; b <= BENCHES; b++)); do
+    benches+="${benches:+,}{\"name\": \"h$h-emu-$b\", \"kind\": \"emulated\", \"pace\": \"realtime\",
+      \"model\": {\"preset\": \"taghizadeh2009\"}, \"driver\": {\"kind\": \"low_side_flyback\"}}"
+  done
+  cat > "$WORK/host$h.json" <<EOF
+{"listen_address": "127.0.0.1:${PORTS[$h]}", "database_path": "$DB_PATH",
+ "benches": [$benches],
+ "tokens": [{"user": "drill", "role": "operator", "token_sha256": "$TOKEN_SHA"}],
+ "limits": {"max_queued_runs_per_user": 100000},
+ "lab": {"host": "host$h", "lease_ttl_s": $LEASE_TTL_S, "heartbeat_s": $HEARTBEAT_S}}
+EOF
+}
+
+start_host() {
+  local h=$1
+  "$SERVER" --config "$WORK/host$h.json" >>"$WORK/host$h.log" 2>&1 &
+  PIDS[$h]=$!
+  local k
+  for ((k = 0; k < 200; k++)); do
+    grep -q "listening on" "$WORK/host$h.log" 2>/dev/null && [[ $(grep -c "listening on" "$WORK/host$h.log") -ge ${STARTS[$h]} ]] && return 0
+    kill -0 "${PIDS[$h]}" 2>/dev/null || break
+    sleep 0.05
+  done
+  echo "lab-drill: host$h did not start; its log:" >&2
+  tail -20 "$WORK/host$h.log" >&2
+  exit 3
+}
+
+declare -a STARTS
+for ((h = 1; h <= HOSTS; h++)); do
+  PORTS[$h]=$(free_port)
+  write_config "$h"
+  STARTS[$h]=1
+done
+# The first host creates (migrates) the database; the others then open it.
+start_host 1
+for ((h = 2; h <= HOSTS; h++)); do start_host "$h"; done
+
+# Short runs: RUN_S of bench time, paced by the benches to the wall clock; submitted in batches of 100 repeats
+# through the hosts in turn.
+cat > "$WORK/run.json" <<EOF
+{"name": "drill", "bench": {"kind": "emulated", "model": {"preset": "taghizadeh2009"}, "driver": {"kind": "low_side_flyback"}},
+ "conditions": {"supply_V": 24.0, "supply_pressure_Pa": 400000.0},
+ "controller": {"open_loop_pwm": {"segments": [{"start_s": 0.0, "frequency_Hz": 200.0, "duty": 0.4}]}},
+ "duration_s": $RUN_S, "recording": {"rate_Hz": 2000.0}, "tags": ["lab-drill"], "repeats": 100}
+EOF
+T0=$(date +%s.%N)
+left=$RUNS
+batch=0
+while ((left > 0)); do
+  per=$(( (RUNS + HOSTS - 1) / HOSTS ))
+  per=$((per < 100 ? per : 100))
+  n=$((left < per ? left : per))
+  h=$((batch % HOSTS + 1))
+  sed "s/\"repeats\": 100/\"repeats\": $n/" "$WORK/run.json" > "$WORK/batch.json"
+  # A host may be stopped by the chaos below only after submission; all hosts are up here.
+  VALVEBENCH_TOKEN=$TOKEN "$BENCHCTL" run "$WORK/batch.json" --server "127.0.0.1:${PORTS[$h]}" --json >/dev/null ||
+    { echo "lab-drill: submitting through host$h failed" >&2; exit 3; }
+  left=$((left - n))
+  batch=$((batch + 1))
+done
+echo "lab-drill: $RUNS runs submitted through $HOSTS hosts in $batch batches" >&2
+
+remaining() { db_query "SELECT count(*) FROM runs WHERE status IN ('queued', 'running', 'interrupted')"; }
+
+# Chaos: while runs remain (and at least KILLS times), a random host is SIGKILLed and restarted, or SIGSTOPped
+# for longer than the lease TTL (its leases lapse, another host re-queues its runs) and continued.
+kills=0
+while :; do
+  rem=$(remaining)
+  if ((kills >= KILLS)) && ((rem == 0)); then break; fi
+  if ((rem == 0)); then
+    echo "lab-drill: the queue drained after $kills of $KILLS kills: use more runs or fewer kills" >&2
+    break
+  fi
+  if ((kills < KILLS)); then
+    sleep "$(python3 -c "import random; random.seed($SEED + $kills); print(round(random.uniform($KILL_MIN_S, $KILL_MAX_S), 2))")"
+    h=$((RANDOM % HOSTS + 1))
+    if ((RANDOM % 2 == 0)); then
+      kill -KILL "${PIDS[$h]}"
+      wait "${PIDS[$h]}" 2>/dev/null || true
+      echo "lab-drill: SIGKILL host$h" >&2
+      STARTS[$h]=$((STARTS[$h] + 1))
+      start_host "$h"
+    else
+      kill -STOP "${PIDS[$h]}"
+      echo "lab-drill: SIGSTOP host$h" >&2
+      sleep "$(python3 -c "print($LEASE_TTL_S * 1.5 + 0.3)")"
+      kill -CONT "${PIDS[$h]}"
+    fi
+    kills=$((kills + 1))
+  else
+    sleep 0.1
+  fi
+done
+T1=$(date +%s.%N)
+
+# Stop the hosts cleanly, then count from the database.
+for ((h = 1; h <= HOSTS; h++)); do kill -TERM "${PIDS[$h]}" 2>/dev/null || true; done
+for ((h = 1; h <= HOSTS; h++)); do wait "${PIDS[$h]}" 2>/dev/null || true; PIDS[$h]=""; done
+
+RUNS_Q="SELECT id FROM runs WHERE id IN (SELECT run_id FROM run_tags WHERE tag = 'lab-drill')"
+stored=$(db_query "SELECT count(*) FROM ($RUNS_Q)")
+done_n=$(db_query "SELECT count(*) FROM runs WHERE status = 'done' AND id IN ($RUNS_Q)")
+# Run twice: more than one 'done' in a run's history, or more than one attempt that stored a final state.
+duplicated=$(db_query "SELECT count(*) FROM (SELECT run_id FROM status_history WHERE status IN ('done', 'failed', 'cancelled')
+                       AND run_id IN ($RUNS_Q) GROUP BY run_id HAVING count(*) > 1)")
+stale=$(db_query "SELECT count(*) FROM stale_writes WHERE run_id IN ($RUNS_Q)")
+lost=$((RUNS - done_n))
+[[ $stored == "$RUNS" ]] || echo "lab-drill: $stored runs stored, $RUNS submitted" >&2
+not_done=$(db_query "SELECT status || ' ' || count(*) FROM runs WHERE status != 'done' AND id IN ($RUNS_Q) GROUP BY status")
+if [[ -n $not_done ]]; then
+  # What happened to them, for the log: each such run's history (at most 10 runs).
+  echo "lab-drill: not done: $not_done" >&2
+  db_query "SELECT r.id, h.status, h.reason FROM runs r JOIN status_history h ON h.run_id = r.id
+            WHERE r.id IN (SELECT id FROM runs WHERE status != 'done' AND id IN ($RUNS_Q) LIMIT 10)
+            ORDER BY r.id, h.id" |
+    sed 's/^/lab-drill:   run /' >&2
+fi
+# The drained rate (runs per wall second from the first submission to the empty queue) over one paced bench's
+# (1 / RUN_S: it runs RUN_S of bench time per run in RUN_S of wall time, nothing else counted).
+throughput_x=$(python3 -c "print(f'{$done_n / ($T1 - $T0) * $RUN_S:.2f}')")
+wall=$(python3 -c "print(f'{$T1 - $T0:.1f}')")
+echo "lab-drill: drained in $wall s; work directory $WORK" >&2
+echo "lab-drill: hosts=$HOSTS benches=$((HOSTS * BENCHES)) runs=$RUNS done=$done_n lost=$lost duplicated=$duplicated kills=$kills stale_writes_refused=$stale throughput_x=$throughput_x"
+if ((kills < KILLS)); then
+  echo "lab-drill: FAILED: only $kills of $KILLS kills happened before the queue drained (the drill did not test them)" >&2
+  exit 1
+fi
+if ((lost == 0 && duplicated == 0)); then exit 0; else exit 1; fi

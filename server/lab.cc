@@ -1,0 +1,173 @@
+#include "server/lab.h"
+
+#include <nlohmann/json.hpp>
+#include <spdlog/spdlog.h>
+
+#include <chrono>
+
+#include "db/open_store.h"
+#include "runs/execute.h"
+
+namespace vb::server {
+
+namespace {
+
+double NowUnixS() {
+  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+}
+
+constexpr double kWatchPeriod_s = 0.1;     // cancel requests through the store act within this
+constexpr int kProgressEveryWatches = 5;   // progress to the store every 0.5 s
+
+}  // namespace
+
+std::string BenchesJson(const std::vector<BenchSetup>& benches) {
+  nlohmann::json a = nlohmann::json::array();
+  for (const BenchSetup& b : benches) {
+    a.push_back({{"name", b.name},
+                 {"kind", b.kind},
+                 {"bench_class", b.bench_class},
+                 {"model", b.preset},
+                 {"driver", b.kind == "emulated" ? std::string(model::DriverKindName(b.emulated.driver.kind))
+                                                 : b.caps.driver},
+                 {"paced", b.paced},
+                 {"device", b.device},
+                 {"max_supply_V", b.caps.max_supply_V},
+                 {"max_carrier_Hz", b.caps.max_carrier_Hz},
+                 {"max_sample_rate_Hz", b.caps.max_sample_rate_Hz},
+                 {"max_control_rate_Hz", b.caps.max_control_rate_Hz},
+                 {"measures_position",
+                  b.kind == "emulated" ? b.emulated.plant.has_moving_part : b.caps.measures_position},
+                 // What admission on another host checks a run against (experiment::CheckCapabilities).
+                 {"caps", {{"kind", b.caps.kind},
+                           {"driver", b.caps.driver},
+                           {"max_supply_V", b.caps.max_supply_V},
+                           {"min_carrier_Hz", b.caps.min_carrier_Hz},
+                           {"max_carrier_Hz", b.caps.max_carrier_Hz},
+                           {"max_sample_rate_Hz", b.caps.max_sample_rate_Hz},
+                           {"max_control_rate_Hz", b.caps.max_control_rate_Hz},
+                           {"measures_position", b.caps.measures_position},
+                           {"measures_velocity", b.caps.measures_velocity},
+                           {"max_current_A", b.caps.max_current_A},
+                           {"device_loops", b.caps.device_loops},
+                           {"max_device_loop_Hz", b.caps.max_device_loop_Hz}}}});
+  }
+  return a.dump();
+}
+
+std::vector<BenchSetup> OtherHostsBenches(const std::vector<db::HostRecord>& hosts, const std::string& own_host) {
+  std::vector<BenchSetup> out;
+  for (const auto& h : hosts) {
+    if (h.name == own_host) continue;
+    const auto benches = nlohmann::json::parse(h.benches_json, nullptr, false);
+    if (!benches.is_array()) continue;
+    for (const auto& b : benches) {
+      if (!b.is_object() || !b.contains("caps") || !b["caps"].is_object()) continue;  // written by an older build
+      const auto& c = b["caps"];
+      BenchSetup s;
+      s.name = b.value("name", "");
+      s.kind = b.value("kind", "");
+      s.bench_class = b.value("bench_class", "");
+      s.preset = b.value("model", "");
+      s.paced = b.value("paced", false);
+      s.device = b.value("device", "");
+      s.caps.kind = c.value("kind", "");
+      s.caps.driver = c.value("driver", "");
+      s.caps.max_supply_V = c.value("max_supply_V", 0.0);
+      s.caps.min_carrier_Hz = c.value("min_carrier_Hz", 0.0);
+      s.caps.max_carrier_Hz = c.value("max_carrier_Hz", 0.0);
+      s.caps.max_sample_rate_Hz = c.value("max_sample_rate_Hz", 0.0);
+      s.caps.max_control_rate_Hz = c.value("max_control_rate_Hz", 0.0);
+      s.caps.measures_position = c.value("measures_position", false);
+      s.caps.measures_velocity = c.value("measures_velocity", false);
+      s.caps.max_current_A = c.value("max_current_A", 0.0);
+      if (c.contains("device_loops") && c["device_loops"].is_array())
+        for (const auto& l : c["device_loops"])
+          if (l.is_string()) s.caps.device_loops.push_back(l.get<std::string>());
+      s.caps.max_device_loop_Hz = c.value("max_device_loop_Hz", 0.0);
+      if (!s.name.empty() && !s.bench_class.empty()) out.push_back(std::move(s));
+    }
+  }
+  return out;
+}
+
+LabHost::LabHost(LabSetup setup, std::string db_path, std::string benches_json, runs::Registry* registry,
+                 const std::vector<std::unique_ptr<runs::Worker>>* workers)
+    : setup_(std::move(setup)),
+      db_path_(std::move(db_path)),
+      benches_json_(std::move(benches_json)),
+      started_unix_s_(NowUnixS()),
+      registry_(registry),
+      workers_(workers),
+      stop_([] { return NowUnixS(); }) {}
+
+LabHost::~LabHost() { Stop(); }
+
+Status LabHost::Beat(db::Store* store) {
+  db::HostRecord me;
+  me.name = setup_.host;
+  me.address = setup_.advertised_address;
+  me.benches_json = benches_json_;
+  me.started_unix_s = started_unix_s_;
+  VB_RETURN_IF_ERROR(store->Heartbeat(me, setup_.lease_ttl_s));
+  auto lapsed = store->RequeueLapsed();
+  if (!lapsed.ok()) return lapsed.status();
+  if (!lapsed->empty()) {
+    std::string ids;
+    for (auto id : *lapsed) ids += (ids.empty() ? "" : ", ") + std::to_string(id);
+    spdlog::warn("lab: {} run(s) whose host stopped renewing their lease re-queued: {}", lapsed->size(), ids);
+    registry_->NotifyWork();
+  }
+  return Status::Ok();
+}
+
+Status LabHost::Start() {
+  auto store = db::OpenStore(db_path_);
+  if (!store.ok()) return store.status();
+  store_ = std::move(store).value();
+  VB_RETURN_IF_ERROR(Beat(store_.get()).WithContext("lab: first heartbeat of host " + setup_.host));
+  thread_ = std::thread([this] { Loop(); });
+  return Status::Ok();
+}
+
+void LabHost::Stop() {
+  stop_.Stop();
+  if (thread_.joinable()) thread_.join();
+}
+
+void LabHost::WatchRuns(db::Store* store, bool write_progress) {
+  for (const auto& w : *workers_) {
+    const db::Lease lease = w->current_lease();
+    if (lease.run_id == 0) continue;
+    auto cancel = store->CancelRequested(lease.run_id);
+    if (cancel.ok() && *cancel && w->CancelIfCurrent(lease))
+      spdlog::info("run {}: cancel requested through the store: stopping it", static_cast<long long>(lease.run_id));
+    if (!write_progress) continue;
+    double progress = 0.0;
+    if (!registry_->Progress(lease.run_id, &progress)) continue;
+    Status st = store->SetProgress(lease, std::min(1.0, std::max(0.0, progress)));
+    if (runs::IsStaleWrite(st)) {
+      spdlog::warn("run {} (fence {}): {}; stopping this attempt", static_cast<long long>(lease.run_id),
+                   static_cast<long long>(lease.fence), st.message());
+      w->CancelIfCurrent(lease);
+    }
+  }
+}
+
+void LabHost::Loop() {
+  using Clock = std::chrono::steady_clock;
+  auto next_beat = Clock::now() + std::chrono::duration_cast<Clock::duration>(
+                                      std::chrono::duration<double>(setup_.heartbeat_s));
+  int watches = 0;
+  while (stop_.SleepFor(kWatchPeriod_s)) {
+    if (Clock::now() >= next_beat) {
+      // Scheduled from the previous target, not from now: a slow heartbeat does not push the next one later.
+      next_beat += std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(setup_.heartbeat_s));
+      if (next_beat < Clock::now()) next_beat = Clock::now();
+      if (Status st = Beat(store_.get()); !st.ok()) spdlog::error("lab: heartbeat failed: {}", st.message());
+    }
+    WatchRuns(store_.get(), ++watches % kProgressEveryWatches == 0);
+  }
+}
+
+}  // namespace vb::server

@@ -1,0 +1,59 @@
+// This server as one host of a lab (config "lab"; docs/lab.md): a thread that keeps the host's registration and
+// leases alive and watches the runs its benches execute.
+//   - every heartbeat_s: Heartbeat (the host row with its benches, and the leases of its running runs renewed to
+//     now + lease_ttl_s), then RequeueLapsed (any host re-queues the runs of hosts that stopped heartbeating);
+//   - every 100 ms, for each bench's run in progress: a cancel requested through the store (CancelRun on another
+//     host) stops it; its progress is written to the store every 0.5 s so watchers on other hosts follow it; a
+//     progress write refused as stale (the lease lapsed, the run is someone else's now) stops it too.
+// Nothing here touches the control loop: it sets the run's cancel flag, as CancelRun does.
+#pragma once
+
+#include <memory>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "runs/monitor.h"
+#include "runs/worker.h"
+#include "server/config.h"
+#include "server/stop_signal.h"
+
+namespace vb::server {
+
+// The host's benches as HostRecord::benches_json: [{"name", "kind", "model", "driver", "paced", "device",
+// "max_supply_V", "max_carrier_Hz", "max_sample_rate_Hz", "max_control_rate_Hz", "measures_position"}, ...].
+std::string BenchesJson(const std::vector<BenchSetup>& benches);
+// The benches the other hosts registered (their heartbeats' benches_json, with capabilities), as BenchSetups that
+// admission matches runs against: a run any host of the lab can take is accepted by every host.
+std::vector<BenchSetup> OtherHostsBenches(const std::vector<db::HostRecord>& hosts, const std::string& own_host);
+
+class LabHost {
+ public:
+  LabHost(LabSetup setup, std::string db_path, std::string benches_json, runs::Registry* registry,
+          const std::vector<std::unique_ptr<runs::Worker>>* workers);
+  ~LabHost();
+  LabHost(const LabHost&) = delete;
+  LabHost& operator=(const LabHost&) = delete;
+
+  // The first heartbeat happens before Start returns (so `benches` on any host lists this one at once); an error
+  // there (the database refuses it) is returned and no thread is started.
+  Status Start();
+  void Stop();
+
+ private:
+  void Loop();
+  Status Beat(db::Store* store);
+  void WatchRuns(db::Store* store, bool write_progress);
+
+  LabSetup setup_;
+  std::string db_path_;
+  std::string benches_json_;
+  double started_unix_s_;
+  runs::Registry* registry_;
+  const std::vector<std::unique_ptr<runs::Worker>>* workers_;
+  std::unique_ptr<db::Store> store_;
+  std::thread thread_;
+  StopSignal stop_;
+};
+
+}  // namespace vb::server
