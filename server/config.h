@@ -44,6 +44,8 @@ struct Settings {
   runs::Policy AdmitPolicy() const;
   NightsSetup nights;
   RetentionSetup retention;
+  // The web dashboard's "host:port" (config "web"; docs/web.md); empty = no dashboard.
+  std::string web_listen_address;
 };
 
 StatusOr<Settings> LoadSettings(const std::string& config_path);
