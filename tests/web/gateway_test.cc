@@ -377,3 +377,44 @@ TEST_F(WebGatewayTest, QueueListsRunningAndQueuedRunsInClaimOrder) {
 }
 
 }  // namespace
+
+namespace {
+
+// With the server's tls block, the dashboard is HTTPS with the same certificate (a client that trusts it gets
+// in, a plaintext one does not) and its cookie is Secure.
+TEST(WebTls, TheDashboardUsesTheServersCertificate) {
+  const std::string dir = ::testing::TempDir() + "/web-tls";
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  const std::string gen = "openssl req -x509 -newkey rsa:2048 -nodes -days 2 -subj /CN=localhost "
+                          "-addext subjectAltName=DNS:localhost,IP:127.0.0.1 -keyout " + dir + "/key.pem -out " +
+                          dir + "/cert.pem > /dev/null 2>&1";
+  ASSERT_EQ(std::system(gen.c_str()), 0) << "openssl is installed by scripts/setup.sh";
+  vb::testing::ServerProcess server(
+      dir, R"("tls": {"cert_file": "cert.pem", "key_file": "key.pem"}, "web": {"listen_address": "127.0.0.1:0"})");
+  ASSERT_FALSE(server.Start().empty()) << server.Log();
+  int port = 0;
+  const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+  while (port == 0 && std::chrono::steady_clock::now() < until) {
+    const std::string log = server.Log();
+    const std::string key = "web dashboard on https://127.0.0.1:";
+    if (const auto at = log.find(key); at != std::string::npos) port = std::stoi(log.substr(at + key.size()));
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  ASSERT_GT(port, 0) << server.Log();
+  httplib::SSLClient tls("127.0.0.1", port);
+  tls.set_ca_cert_path(dir + "/cert.pem");
+  tls.enable_server_certificate_verification(true);
+  auto benches = tls.Get("/api/benches", Bearer(kViewerToken));
+  ASSERT_TRUE(benches) << httplib::to_string(benches.error());
+  EXPECT_EQ(benches->status, 200);
+  auto login = tls.Post("/api/login", std::string(R"({"token": ")") + kViewerToken + "\"}", "application/json");
+  ASSERT_TRUE(login);
+  EXPECT_NE(login->get_header_value("Set-Cookie").find("; Secure"), std::string::npos);
+  httplib::Client plain("127.0.0.1", port);
+  plain.set_read_timeout(2, 0);
+  auto refused = plain.Get("/api/benches", Bearer(kViewerToken));
+  EXPECT_TRUE(!refused || refused->status != 200);
+}
+
+}  // namespace
