@@ -108,9 +108,12 @@ def go(hash_):
     driver.execute_script("location.hash = arguments[0];", hash_)
 
 
-def shot(name):
+def shot(name, scroll_to=None):
     driver.set_window_size(1400, 900)
     time.sleep(0.4)
+    if scroll_to:
+        driver.execute_script("document.querySelector(arguments[0]).scrollIntoView();", scroll_to)
+        time.sleep(0.2)
     driver.save_screenshot(os.path.join(shots, "web-%s.png" % name))
 
 
@@ -224,6 +227,7 @@ try:
     check("the run page links the export", driver.find_element(By.ID, "export-csv").get_attribute("href")
           .endswith("/api/runs/%s/trace.csv" % done_id))
     shot("run")
+    shot("run-traces", "#traces")
     no_overflow("run")
 
     for page in ("#/runs", "#/nights", "#/diagnosis", "#/submit"):

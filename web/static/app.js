@@ -25,7 +25,7 @@ function fmt(v, digits) {
   if (v === null || v === undefined || v === '' || (typeof v === 'number' && !isFinite(v))) return '–';
   const x = Number(v);
   if (Number.isInteger(x) && Math.abs(x) < 1e9) return String(x);
-  return x.toPrecision(digits || 4);
+  return String(parseFloat(x.toPrecision(digits || 4)));
 }
 function when(unix_s) {
   if (!unix_s) return '–';
@@ -98,6 +98,9 @@ function showLoggedIn() { $('#login').hidden = true; $('#session').hidden = fals
 function showLoggedOut() { $('#login').hidden = false; $('#session').hidden = true; }
 
 // ---- charts (dygraphs, Debian's libjs-dygraphs, embedded in the server)
+// The gate's axis: 0 and 1, nothing between.
+const GATE_AXIS = {valueRange: [-0.05, 1.3], ticker: () => [{v: 0, label: '0'}, {v: 1, label: '1'}]};
+
 // A page left while its data was on the way draws nothing (its divs are no longer in the document).
 const DETACHED = {updateOptions() {}, destroy() {}};
 function chart(div, rows, labels, opts) {
@@ -171,7 +174,7 @@ function liveView(runId, box, onEnd) {
   box.append(el('div', {class: 'actions'}, 'status ', status, ' · ', counter), el('div', {class: 'charts'}, cur, pos));
   const rowsI = [], rowsX = [];
   const gI = chart(cur, [], ['t [s]', 'i_A', 'ref', 'gate'], {ylabel: 'A', series: {gate: {axis: 'y2', stepPlot: true}},
-    axes: {y2: {valueRange: [-0.1, 1.1]}}, y2label: 'gate'});
+    axes: {y2: GATE_AXIS}, y2label: 'gate'});
   const gX = chart(pos, [], ['t [s]', 'x_m'], {ylabel: 'm'});
   let dirty = false, n = 0, lastT = -Infinity;
   const timer = setInterval(() => {
@@ -396,8 +399,10 @@ async function traceCharts(id, box, cu) {
     const pick = (rows) => rows.map((row) => [row[0]].concat(present.map((n) => row[col(n) + 1])));
     const div = el('div', {class: 'chart trace-chart'});
     box.append(div);
+    const withGate = present.includes('gate') && present.length > 1;
     const g = chart(div, pick(t.rows), ['t [s]'].concat(present), {ylabel: unit,
-      series: {gate: {stepPlot: true}},
+      series: withGate ? {gate: {stepPlot: true, axis: 'y2'}} : {},
+      axes: withGate ? {y2: GATE_AXIS} : {}, y2label: withGate ? 'gate' : undefined,
       zoomCallback: async (lo, hi) => {
         if (syncing) return;
         syncing = true;
