@@ -349,6 +349,31 @@ TEST_F(WebGatewayTest, TheCookieAuthorisesReadsOnlyNeverAChange) {
   EXPECT_EQ(write->status, 401);
 }
 
+TEST_F(WebGatewayTest, ListsCheckTheirParametersAndPassTheRestToTheService) {
+  auto nights = http_->Get("/api/nights?limit=5", Bearer(kViewerToken));
+  ASSERT_TRUE(nights);
+  EXPECT_EQ(nights->status, 200);
+  EXPECT_EQ(nights->body, "{}");  // no night has run: protobuf JSON leaves the empty list out
+  auto bad_limit = http_->Get("/api/nights?limit=-1", Bearer(kViewerToken));
+  ASSERT_TRUE(bad_limit);
+  EXPECT_EQ(bad_limit->status, 400);
+  auto bad_status = http_->Get("/api/runs?status=DONEISH", Bearer(kViewerToken));
+  ASSERT_TRUE(bad_status);
+  EXPECT_EQ(bad_status->status, 400);
+  EXPECT_EQ(Json::parse(bad_status->body)["message"].get<std::string>().rfind("status: unknown run status 'DONEISH'", 0),
+            0u);
+  const std::string id = Submit(SpecFile("standard/e3.json"))["run_ids"][0];
+  WaitEnded(id);
+  auto done = http_->Get("/api/runs?status=DONE&batch_id=1", Bearer(kViewerToken));
+  ASSERT_TRUE(done);
+  const Json runs = Json::parse(done->body)["runs"];
+  ASSERT_EQ(runs.size(), 1u);
+  EXPECT_EQ(runs[0]["id"], id);
+  auto other_batch = http_->Get("/api/runs?batch_id=2", Bearer(kViewerToken));
+  ASSERT_TRUE(other_batch);
+  EXPECT_EQ(other_batch->body, "{}");
+}
+
 TEST_F(WebGatewayTest, QueueListsRunningAndQueuedRunsInClaimOrder) {
   Json spec = Json::parse(SpecFile("standard/e3.json"));
   spec["realtime"] = true;

@@ -228,6 +228,7 @@ async function rerun(id) {
 }
 
 // ---- Lab: benches, queue, live runs
+const MAX_LIVE = 4;
 function pageLab(main) {
   const benches = el('div', {class: 'scroll'}), queue = el('div', {class: 'scroll'}), live = el('div');
   main.replaceChildren(el('h1', {text: 'Lab'}),
@@ -265,6 +266,13 @@ function pageLab(main) {
     for (const r of q.running) {
       const id = String(r.run.id);
       if (watching.has(id)) continue;
+      // A browser keeps about 6 connections per server over HTTP/1.1, and each live view holds one: at most
+      // MAX_LIVE here, the rest are a click away (their run page streams them).
+      const open = Array.from(watching.values()).filter((b) => !b.dataset.ended).length;
+      if (open >= MAX_LIVE) {
+        if (!live.querySelector('p.more')) live.append(el('p', {class: 'muted more', text: 'More runs are running: open them from the queue to watch them live.'}));
+        continue;
+      }
       const box = el('div', {class: 'live-run', 'data-run': id},
         el('h2', {}, runLink(id, 'Run ' + id), ' ', r.run.name, ' on ', r.run.bench || '?'));
       live.append(box);
@@ -275,6 +283,7 @@ function pageLab(main) {
       if (ids.has(id) || box.dataset.ended) continue;
       box.dataset.ended = '1';
       box.append(el('p', {class: 'muted', text: 'finished: see the run page'}));
+      setTimeout(() => { box.remove(); watching.delete(id); }, 15000);
     }
     if (watching.size === 0 && !live.querySelector('p.muted.none'))
       live.replaceChildren(el('p', {class: 'muted none', text: 'No run is running.'}));
