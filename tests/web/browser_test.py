@@ -44,7 +44,19 @@ def sha(t):
     return hashlib.sha256(t.encode()).hexdigest()
 
 
+# A regression night at start (--run-night-now) whose PI law got worse than the baseline: a regressed night for
+# the Nights page (as tests/integration/nights_test.cc makes one).
+suites = os.path.abspath(os.path.join(examples_dir, "suites"))
+shutil.copy(os.path.join(suites, "ci.json"), work)
+with open(os.path.join(suites, "ci-current-hold.json")) as f:
+    hold = f.read()
+law = hold.find('"pi_current": {}', hold.find('"name": "pi"'))
+assert law >= 0, "examples/suites/ci-current-hold.json changed: no pi variant"
+with open(os.path.join(work, "ci-current-hold.json"), "w") as f:
+    f.write(hold[:law] + '"pi_current": {"ki_V_per_A_s": 4080}' + hold[law + len('"pi_current": {}'):])
 config = {"listen_address": "127.0.0.1:0", "database_path": "runs.db",
+          "nights": {"cron": "0 2 * * *", "suite_file": "ci.json",
+                     "baseline_file": os.path.join(suites, "ci-baseline.json")},
           "benches": [{"name": "emu-1", "kind": "emulated", "model": {"preset": "taghizadeh2009"}},
                       {"name": "emu-2", "kind": "emulated", "model": {"preset": "taghizadeh2009"}}],
           "tokens": [{"user": "olga", "role": "operator", "token_sha256": sha(OPERATOR)},
@@ -53,7 +65,7 @@ config = {"listen_address": "127.0.0.1:0", "database_path": "runs.db",
 with open(os.path.join(work, "server.json"), "w") as f:
     json.dump(config, f)
 log = open(os.path.join(work, "server.log"), "w+")
-proc = subprocess.Popen([server_bin, "--config", os.path.join(work, "server.json")], stderr=log,
+proc = subprocess.Popen([server_bin, "--config", os.path.join(work, "server.json"), "--run-night-now"], stderr=log,
                         stdout=subprocess.DEVNULL)
 failures = []
 driver = None
@@ -129,6 +141,13 @@ try:
     check("server serves the dashboard", base is not None, open(os.path.join(work, "server.log")).read())
     if base is None:
         raise SystemExit(1)
+
+    for _ in range(300):  # the night's runs first, so that the benches are idle for what follows
+        if api("GET", "/api/nights", VIEWER).get("nights"):
+            break
+        time.sleep(0.1)
+    night = api("GET", "/api/nights", VIEWER).get("nights", [{}])[0]
+    check("the night ran and regressed", night.get("verdict") == "regressed", night)
 
     opts = webdriver.ChromeOptions()
     opts.binary_location = CHROMIUM
@@ -230,6 +249,28 @@ try:
     shot("run-traces", "#traces")
     no_overflow("run")
 
+    # 7. The nightly history: the regressed night with its verdict and links to its runs and comparison.
+    go("#/nights")
+    row = wait(lambda: driver.find_elements(By.CSS_SELECTOR, "#nights tr")[1:] or None, what="nights table")
+    text = row[0].text if row else ""
+    check("the nights page shows the regressed night", "regressed" in text and night.get("date", "?") in text, text)
+    links = [a.get_attribute("href") for a in row[0].find_elements(By.TAG_NAME, "a")] if row else []
+    check("the night links to its runs, its failed runs and its comparison",
+          any(h.endswith("#/runs?batch=%s" % night.get("batch_id")) for h in links) and
+          any(h.endswith("#/compare?batch=%s" % night.get("batch_id")) for h in links), links)
+    cases = night.get("regressed_cases", [])
+    check("the night names its regressed case", cases == ["current-hold/pi"] or (len(cases) == 1 and "pi" in cases[0]), cases)
+    case_links = row[0].find_elements(By.CSS_SELECTOR, "td.regressed-cases a") if row else []
+    shot("nights")
+    if case_links:
+        case_links[0].click()
+        runs_rows = wait(lambda: driver.find_elements(By.CSS_SELECTOR, "#runs tr")[1:] or None, what="regressed runs")
+        names = [r.find_elements(By.TAG_NAME, "td")[3].text for r in runs_rows or []]
+        check("the regressed case links to its runs in the night's batch", len(names) >= 1 and
+              all(n.startswith(cases[0]) for n in names), names)
+    else:
+        check("the night links its regressed case", False, row[0].text if row else "")
+
     for page in ("#/runs", "#/nights", "#/diagnosis", "#/submit"):
         go(page)
         time.sleep(0.6)
@@ -242,7 +283,7 @@ try:
     errors = console_errors()
     check("no console error while operating", not errors, errors)
 
-    # 7. A viewer follows the lab but cannot submit: the server's PERMISSION_DENIED shows on the page.
+    # 8. A viewer follows the lab but cannot submit: the server's PERMISSION_DENIED shows on the page.
     driver.find_element(By.ID, "logout").click()
     driver.find_element(By.ID, "token").send_keys(VIEWER)
     driver.find_element(By.ID, "login-button").click()

@@ -294,16 +294,18 @@ function pageLab(main) {
 // ---- Runs: a filtered list, selection for comparison
 async function pageRuns(main, m, params) {
   const batch = params.get('batch') || '', status = params.get('status') || '', tag = params.get('tag') || '';
+  const name = params.get('name') || '';  // a suite case (RunKey.name), e.g. from the Nights page
   const form = el('form', {class: 'actions', onsubmit: (ev) => {
     ev.preventDefault();
     const q = new URLSearchParams();
-    for (const k of ['batch', 'status', 'tag']) { const v = $('#f-' + k).value.trim(); if (v) q.set(k, v); }
+    for (const k of ['batch', 'status', 'tag', 'name']) { const v = $('#f-' + k).value.trim(); if (v) q.set(k, v); }
     location.hash = '#/runs?' + q.toString();
   }},
   'batch ', el('input', {id: 'f-batch', type: 'text', size: 6, value: batch}),
   ' status ', el('select', {id: 'f-status'}, ['', 'QUEUED', 'RUNNING', 'DONE', 'FAILED', 'CANCELLED', 'INTERRUPTED']
     .map((s) => el('option', {value: s, selected: s === status, text: s || 'any'}))),
   ' tag ', el('input', {id: 'f-tag', type: 'text', size: 12, value: tag}),
+  ' case ', el('input', {id: 'f-name', type: 'text', size: 16, value: name}),
   el('button', {type: 'submit', text: 'Filter'}));
   const table = el('div', {class: 'scroll'});
   const compare = el('button', {class: 'primary', id: 'compare-selected', text: 'Compare selected', onclick: () => {
@@ -325,7 +327,8 @@ async function pageRuns(main, m, params) {
       runs = runs.concat(data.runs || []);
     }
     runs.reverse();  // newest first
-    table.replaceChildren(runs.length === 0 ? el('p', {class: 'muted', text: 'No runs match.'}) : el('table', {},
+    if (name) runs = runs.filter((r) => (r.key || {}).name === name);
+    table.replaceChildren(runs.length === 0 ? el('p', {class: 'muted', text: 'No runs match.'}) : el('table', {id: 'runs'},
       el('tr', {}, ['', 'run', 'batch', 'name', 'controller', 'status', 'bench', 'submitter', 'submitted', 'rmse', 'effort_l2']
         .map((h) => el('th', {text: h}))),
       runs.map((r) => el('tr', {},
@@ -549,7 +552,7 @@ async function pageNights(main) {
     const nights = n.nights || [];
     box.replaceChildren(nights.length === 0 ? el('p', {class: 'muted', text: 'No night has run yet (config "nights").'}) :
       el('table', {id: 'nights'}, el('tr', {}, ['date', 'verdict', 'regressed', 'unchanged', 'improved', 'suite', 'baseline',
-        'started', 'finished', 'runs', 'summary'].map((h) => el('th', {text: h}))),
+        'started', 'finished', 'runs', 'regressed runs', 'summary'].map((h) => el('th', {text: h}))),
       nights.map((x) => el('tr', {}, el('td', {text: x.date}), el('td', {}, el('span', {class: 'verdict-' + x.verdict, text: x.verdict})),
         el('td', {class: 'num', text: String(x.regressed_count || 0)}), el('td', {class: 'num', text: String(x.unchanged || 0)}),
         el('td', {class: 'num', text: String(x.improved || 0)}), el('td', {text: x.suite || ''}), el('td', {text: x.baseline || ''}),
@@ -557,7 +560,9 @@ async function pageNights(main) {
         el('td', {}, x.batch_id && x.batch_id !== '0' ? [el('a', {href: '#/runs?batch=' + x.batch_id, text: 'batch ' + x.batch_id}),
           ' ', el('a', {href: '#/runs?batch=' + x.batch_id + '&status=FAILED', text: 'failed'}),
           ' ', el('a', {href: '#/compare?batch=' + x.batch_id, text: 'compare'})] : '–'),
-        el('td', {text: x.summary || ''})))));
+        el('td', {class: 'regressed-cases'}, (x.regressed_cases || []).map((c, k) => [k ? ', ' : '',
+          el('a', {href: '#/runs?batch=' + x.batch_id + '&name=' + encodeURIComponent(c), text: c})])),
+        el('td', {class: 'wrap', text: x.summary || ''})))));
   } catch (e) { showError(e, box); }
 }
 
