@@ -569,6 +569,20 @@ class Routes {
     double rate_Hz = 200.0;
     if (!NumberParam(req, res, "rate_Hz", &rate_Hz)) return;
     if (rate_Hz < 0.0 || rate_Hz > 1000.0) return BadRequest(res, "rate_Hz: must be 0..1000");
+    // An interactive run is cancelled when its submitter's watch goes away (docs/server.md); a page's stream ends
+    // with every navigation and every watch window, so the page does not watch those: benchctl does.
+    v1::Run run;
+    if (auto st = FetchRun(req, PathId(req), &run); !st.ok() || run.spec().interactive()) {
+      const std::string data =
+          st.ok() ? Json{{"code", "FAILED_PRECONDITION"},
+                         {"message", "run " + std::to_string(run.id()) +
+                                         " is interactive: follow it with benchctl watch (a watch from this page "
+                                         "would cancel it when the page goes away)"}}.dump()
+                  : Json{{"code", CodeName(st.error_code())}, {"message", st.error_message()}}.dump();
+      res.set_header("Cache-Control", "no-cache");
+      res.set_content("event: error\ndata: " + data + "\n\n", "text/event-stream");
+      return;
+    }
     struct Watch {
       grpc::ClientContext ctx;
       std::unique_ptr<grpc::ClientReader<v1::RunEvent>> reader;

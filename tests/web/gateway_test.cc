@@ -297,6 +297,24 @@ TEST_F(WebGatewayTest, LiveSamplesArriveAsServerSentEventsUntilTheEnd) {
   EXPECT_NE(anonymous->body.find("UNAUTHENTICATED"), std::string::npos);
 }
 
+// An interactive run is cancelled when its submitter's watch goes away: the page's streams come and go, so the
+// gateway does not watch those runs, and the run is not cancelled by a page that looked at it.
+TEST_F(WebGatewayTest, InteractiveRunsAreNotWatchedFromThePage) {
+  Json spec = Json::parse(SpecFile("standard/e3.json"));
+  spec["realtime"] = true;
+  spec["interactive"] = true;
+  spec["duration_s"] = 2;
+  const std::string id = Submit(spec.dump())["run_ids"][0];
+  httplib::Client c("127.0.0.1", port_);
+  c.set_read_timeout(2, 0);
+  auto res = c.Get("/api/runs/" + id + "/events", Bearer(kOperatorToken));
+  ASSERT_TRUE(res);
+  EXPECT_EQ(res->get_header_value("Content-Type"), "text/event-stream");
+  EXPECT_NE(res->body.find("event: error"), std::string::npos) << res->body;
+  EXPECT_NE(res->body.find("is interactive: follow it with benchctl watch"), std::string::npos) << res->body;
+  EXPECT_EQ(WaitEnded(id)["run"]["status"], "DONE");
+}
+
 TEST_F(WebGatewayTest, CancelAndRerunGoThroughTheService) {
   Json spec = Json::parse(SpecFile("standard/e3.json"));
   spec["realtime"] = true;
