@@ -144,6 +144,8 @@ TEST_F(WebGatewayTest, TokensAndRolesAreTheServices) {
   ASSERT_EQ(b["benches"].size(), 2u);
   EXPECT_EQ(b["benches"][0]["name"], "emu-a");
   EXPECT_EQ(b["benches"][0]["max_supply_V"], 1000);  // proto field names, not lowerCamelCase
+  EXPECT_GT(b["benches"][0]["max_current_A"].get<double>(), 0.0);  // the interlock's current limit
+  EXPECT_EQ(b["benches"][0]["max_duty"], 1);
   auto refused = http_->Post("/api/runs", Bearer(kViewerToken), R"({"spec": )" + SpecFile("standard/e3.json") + "}",
                              "application/json");
   ASSERT_TRUE(refused);

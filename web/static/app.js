@@ -228,6 +228,18 @@ async function rerun(id) {
 }
 
 // ---- Lab: benches, queue, live runs
+// The interlocks beyond the current limit (0 or absent = off; docs/server.md "safety").
+function hz(v) {
+  if (!v) return '–';
+  return v >= 1e6 ? fmt(v / 1e6) + ' MHz' : v >= 1e3 ? fmt(v / 1e3) + ' kHz' : fmt(v) + ' Hz';
+}
+function interlocks(b) {
+  const out = [];
+  if (b.max_duty !== undefined && b.max_duty < 1) out.push('duty ≤ ' + fmt(b.max_duty));
+  if (b.max_on_time_s) out.push('on ≤ ' + fmt(b.max_on_time_s) + ' s');
+  if (b.max_coil_temp_C) out.push('coil ≤ ' + fmt(b.max_coil_temp_C) + ' °C');
+  return out.join(', ') || '–';
+}
 const MAX_LIVE = 4;
 function pageLab(main) {
   const benches = el('div', {class: 'scroll'}), queue = el('div', {class: 'scroll'}), live = el('div');
@@ -240,14 +252,15 @@ function pageLab(main) {
     const [b, q] = await Promise.all([api('GET', '/api/benches'), api('GET', '/api/queue')]);
     const runName = new Map(q.running.map((r) => [String(r.run.id), r.run.name]));
     benches.replaceChildren(el('table', {},
-      el('tr', {}, ['bench', 'kind', 'model', 'driver', 'state', 'max supply [V]', 'max carrier [Hz]',
-        'max sample rate [Hz]', 'max control rate [Hz]', 'position'].map((h) => el('th', {text: h}))),
+      el('tr', {}, ['bench', 'kind', 'model', 'driver', 'state', 'max supply [V]', 'trips at [A]', 'interlocks',
+        'max carrier / sample / control rate', 'position'].map((h) => el('th', {text: h}))),
       (b.benches || []).map((x) => el('tr', {},
         el('td', {text: x.name}), el('td', {text: x.kind}), el('td', {text: x.model || '–'}), el('td', {text: x.driver}),
         el('td', {}, x.busy ? ['running ', runLink(x.current_run_id), ' ', runName.get(String(x.current_run_id)) || '']
           : 'idle'),
-        el('td', {class: 'num', text: fmt(x.max_supply_V)}), el('td', {class: 'num', text: fmt(x.max_carrier_Hz)}),
-        el('td', {class: 'num', text: fmt(x.max_sample_rate_Hz)}), el('td', {class: 'num', text: fmt(x.max_control_rate_Hz)}),
+        el('td', {class: 'num', text: fmt(x.max_supply_V)}), el('td', {class: 'num', text: fmt(x.max_current_A)}),
+        el('td', {text: interlocks(x)}),
+        el('td', {text: [x.max_carrier_Hz, x.max_sample_rate_Hz, x.max_control_rate_Hz].map(hz).join(' / ')}),
         el('td', {text: x.measures_position ? 'measured' : 'none'})))));
     const rows = [];
     for (const r of q.running) rows.push(['running', r.run, duration(r.eta_s)]);
