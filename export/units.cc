@@ -36,13 +36,14 @@ std::string ChannelUnit(const std::string& channel, const std::string& controlle
   for (const auto& [name, unit] : kNamed)
     if (channel == name) return std::string(unit);
   if (channel == "ref") return ControlledUnit(controller);
-  static const std::array<std::pair<std::string_view, std::string_view>, 11> kSuffix = {{{"_kg_per_s", "kg/s"},
+  static const std::array<std::pair<std::string_view, std::string_view>, 12> kSuffix = {{{"_kg_per_s", "kg/s"},
                                                                                          {"_mps", "m/s"},
                                                                                          {"_V2s", "V^2 s"},
                                                                                          {"_pct", "%"},
                                                                                          {"_Pa", "Pa"},
                                                                                          {"_Hz", "Hz"},
                                                                                          {"_J", "J"},
+                                                                                         {"_W", "W"},
                                                                                          {"_V", "V"},
                                                                                          {"_A", "A"},
                                                                                          {"_m", "m"},

@@ -70,8 +70,9 @@ StatusOr<std::vector<std::string>> ExportPlots(const std::string& html_path, con
   const fs::path profile = fs::temp_directory_path() / ("vb-report-export-" + std::to_string(::getpid()));
   const std::string browser = *chromium + " --headless --no-sandbox --disable-gpu --hide-scrollbars --user-data-dir=" +
                               Quoted(profile.string()) + " 2>/dev/null ";
-  // '#all': the page draws every run's traces, not only the first ones.
-  auto dom = Run(browser + "--dump-dom " + Quoted("file://" + html.string() + "#all"));
+  // '#all-svg': the page draws every run's traces, not only the first ones, as SVG (page.cc: dygraphs draws on a
+  // canvas, which has no vector form).
+  auto dom = Run(browser + "--dump-dom " + Quoted("file://" + html.string() + "#all-svg"));
   if (!dom.ok()) return dom.status();
   const std::string svg_out = svg_dir.empty() ? (fs::temp_directory_path() / ("vb-svg-" + std::to_string(::getpid()))).string() : svg_dir;
   fs::create_directories(svg_out, ec);

@@ -1,7 +1,9 @@
-// The HTML page of a report: CSS, the data as JSON, and the renderer (vanilla JS, inline SVG, no network).
+// The HTML page of a report: CSS, the data as JSON, Debian's dygraphs inlined for the time series, and the
+// renderer (vanilla JS; inline SVG for the scatter, the bars and the --svg/--png files; no network).
 #include <ctime>
 #include <string>
 
+#include "report/dygraphs.h"
 #include "report/report.h"
 
 namespace vb::report {
@@ -30,6 +32,8 @@ svg.plot text { font: 11px system-ui, sans-serif; fill: #333; }
 svg.plot .grid { stroke: #eee; } svg.plot .axis { stroke: #999; fill: none; }
 svg.plot .sel { fill: rgba(80, 120, 220, 0.15); stroke: #57c; }
 .legend span { display: inline-block; margin-right: 14px; font-size: 12px; }
+.dyplot { width: 100%; max-width: 1200px; padding: 0; margin: 0 0 4px; }
+p.band { font-size: 11px; color: #666; margin: 0 0 8px; }
 .legend i { display: inline-block; width: 14px; height: 3px; margin-right: 4px; vertical-align: middle; }
 )css";
 
@@ -99,9 +103,60 @@ constexpr const char* kJs = R"js(
     return [lo, hi];
   }
 
+  // Time series are drawn by Debian's dygraphs, inlined in the page (the library the web dashboard serves,
+  // docs/report.md "Chart library"). The SVG drawing below is for '#svg' pages only: `benchctl report --svg/--png`
+  // loads the page so and writes each plot as a vector file, which a canvas cannot give.
+  var SVG_MODE = /svg/.test(location.hash);
+  var ALL_RUNS = /all/.test(location.hash);
+
+  // A dygraphs plot of series that each have their own x: rows merged on one x axis, gaps bridged.
+  function DyPlot(parent, opt) {
+    var self = this;
+    plots++;
+    var div = html('div', null, parent, 'dyplot');
+    div.style.height = (opt.height || 240) + 'px';
+    var n = opt.series.length, rows = new Map(), labels = [opt.xLabel || 't [s]'], series = {}, colors = [];
+    opt.series.forEach(function (s, i) {
+      var name = s.name, k = 2;
+      while (labels.indexOf(name) >= 0) name = s.name + ' (' + (k++) + ')';
+      labels.push(name);
+      colors.push(s.color || COLORS[i % COLORS.length]);
+      series[name] = {stepPlot: !!s.step, strokeWidth: s.width || 1.3, drawPoints: !!opt.markers, pointSize: 2.5,
+                      strokePattern: s.dash ? s.dash.split(',').map(Number) : null};
+      for (var k2 = 0; k2 < s.x.length; k2++) {
+        var x = s.x[k2];
+        if (!finite(x)) continue;
+        var row = rows.get(x);
+        if (!row) { row = [x]; for (var j = 0; j < n; j++) row.push(null); rows.set(x, row); }
+        row[i + 1] = finite(s.y[k2]) ? s.y[k2] : null;
+      }
+    });
+    var data = Array.from(rows.values()).sort(function (a, b) { return a[0] - b[0]; });
+    if (data.length === 0) { var empty = [0]; for (var e = 0; e < n; e++) empty.push(null); data = [empty]; }
+    var link = opt.link || {plots: []};
+    var band = opt.band;
+    self.g = new Dygraph(div, data, {
+      labels: labels, colors: colors, series: series, xlabel: opt.xLabel || 't [s]', ylabel: opt.yLabel || '',
+      valueRange: opt.yRange || null, connectSeparatedPoints: true, legend: 'onmouseover', labelsSeparateLines: false,
+      axisLabelFontSize: 11, xLabelHeight: 14, yLabelWidth: 14, digitsAfterDecimal: 4,
+      underlayCallback: band ? function (ctx, area, g) {
+        var l = g.toDomXCoord(band[0]), r = g.toDomXCoord(band[1]);
+        ctx.fillStyle = 'rgba(255, 200, 0, 0.16)';
+        ctx.fillRect(l, area.y, r - l, area.h);
+      } : null,
+      // Drag across to zoom (every linked panel follows), double-click to reset.
+      zoomCallback: function (lo, hi) {
+        link.plots.forEach(function (p) { if (p !== self && p.g) p.g.updateOptions({dateWindow: [lo, hi]}); });
+      }
+    });
+    link.plots.push(self);
+    if (band) html('p', 'metric window ' + fmt(band[0]) + '-' + fmt(band[1]) + ' s shaded', parent, 'band');
+  }
+
   // A line plot. opt: {series: [{name, x, y, color, step}], xLabel, yLabel, height, markers, link}
   // link: a shared {range, full, plots} object so that stacked panels zoom together.
   function LinePlot(parent, opt) {
+    if (!SVG_MODE) return new DyPlot(parent, opt);
     var self = this;
     var W = opt.width || 1200, H = opt.height || 240, M = {l: 78, r: 16, t: 10, b: 38};
     var svg = svgEl('svg', {viewBox: '0 0 ' + W + ' ' + H, 'class': 'plot', preserveAspectRatio: 'xMinYMin meet'}, parent);
@@ -243,7 +298,7 @@ constexpr const char* kJs = R"js(
   // Every run is reachable: one collapsible block per run, the first `open` drawn at once, the rest when opened.
   function renderTraces(sec, box) {
     if (!sec.runs || sec.runs.length === 0) { html('p', 'No traces stored for these runs.', box, 'note'); return; }
-    var open = sec.open === undefined || location.hash === '#all' ? sec.runs.length : sec.open;
+    var open = sec.open === undefined || ALL_RUNS ? sec.runs.length : sec.open;
     sec.runs.forEach(function (run, i) {
       var d = html('details', null, box);
       html('summary', run.label + ' (' + run.samples + ' samples)', d);
@@ -472,7 +527,18 @@ std::string RenderHtml(const std::string& title, const Json& sections) {
   out += EscapeHtml(title);
   out += "</title>\n<link rel=\"icon\" href=\"data:,\">\n<style>";
   out += kCss;
-  out += "</style>\n</head>\n<body>\n<h1>";
+  out += "</style>\n";
+  // dygraphs as Debian ships it (MIT licence comment kept), without its source-map line: nothing to fetch.
+  for (const Asset& a : Assets()) {
+    std::string_view body = a.body();
+    if (const size_t map = body.rfind("//# sourceMappingURL="); map != std::string_view::npos) body = body.substr(0, map);
+    if (const size_t map = body.rfind("/*# sourceMappingURL="); map != std::string_view::npos) body = body.substr(0, map);
+    const bool css = std::string_view(a.url_path).ends_with(".css");
+    out += css ? "<style>" : "<script>";
+    out += body;
+    out += css ? "</style>\n" : "</script>\n";
+  }
+  out += "</head>\n<body>\n<h1>";
   out += EscapeHtml(title);
   out += "</h1>\n<p class=\"made\">page made " + MadeAt() + " by benchctl report</p>\n<div id=\"vb-status\">rendering... (needs JavaScript)</div>\n<div id=\"vb-report\"></div>\n";
   out += "<script type=\"application/json\" id=\"vb-data\">";

@@ -1,6 +1,7 @@
-// Self-contained HTML reports (docs/report.md): one file, no network access, the data as JSON inside it and a
-// small vanilla-JS renderer (report/page.cc) that draws inline SVG: zoomable traces, an RMSE-vs-effort scatter
-// with the Pareto front, static maps, regression tables and gap-diagnosis overlays.
+// Self-contained HTML reports (docs/report.md): one file, no network access, the data as JSON inside it, Debian's
+// dygraphs inlined for the time series (zoomable traces, overlays, static maps, gap-diagnosis overlays) and a
+// small vanilla-JS renderer (report/page.cc) for the RMSE-vs-effort scatter with the Pareto front, the bars and
+// the SVG files of --svg/--png.
 //
 // A report is a list of sections (JSON objects with a "kind"); the builders below make them from our types.
 // The page writes "rendered-ok" into #vb-status once every section drew without an exception, and

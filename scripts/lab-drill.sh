@@ -9,10 +9,9 @@
 # Usage: scripts/lab-drill.sh [--runs N] [--kills K] [--hosts H] [--benches-per-host B] [--run-s S]
 #                             [--kill-every S] [--build DIR] [--keep] [--seed N]
 # (--kill-every: mean seconds between two kills, default 1.4.)
-# Environment: LAB_DB_URL  the shared database: "sqlite:PATH" (default: a file in the work directory), or
-#              "postgres" to start a throw-away PostgreSQL (initdb + pg_ctl in the work directory; as root it
-#              runs as `nobody`) and use its URL. The hosts and the final count take it from here; PostgreSQL
-#              needs a valvebench build with that engine (database_path then holds the postgresql:// URL).
+# Environment: LAB_DB_URL  the shared database: "postgres" (the default) starts a throw-away PostgreSQL
+#              (initdb + pg_ctl in the work directory; as root it runs as `nobody`) and uses its URL; a
+#              postgresql:// URL uses that server; "sqlite:PATH" shares one SQLite file (one machine only).
 set -euo pipefail
 
 RUNS=1000 KILLS=5 HOSTS=3 BENCHES=2 RUN_S=0.1 BUILD="" KEEP=0 SEED=$RANDOM KILL_MIN_S=0.8 KILL_MAX_S=2.0
@@ -48,7 +47,7 @@ done
 command -v python3 >/dev/null || { echo "lab-drill: python3 is needed to count the runs in the database" >&2; exit 3; }
 
 WORK=$(mktemp -d "${TMPDIR:-/tmp}/lab-drill.XXXXXX")
-LAB_DB_URL=${LAB_DB_URL:-sqlite:$WORK/lab.db}
+LAB_DB_URL=${LAB_DB_URL:-postgres}
 PG_DIR=""
 declare -a PIDS PORTS
 cleanup() {
@@ -212,11 +211,11 @@ for ((h = 1; h <= HOSTS; h++)); do kill -TERM "${PIDS[$h]}" 2>/dev/null || true;
 for ((h = 1; h <= HOSTS; h++)); do wait "${PIDS[$h]}" 2>/dev/null || true; PIDS[$h]=""; done
 
 RUNS_Q="SELECT id FROM runs WHERE id IN (SELECT run_id FROM run_tags WHERE tag = 'lab-drill')"
-stored=$(db_query "SELECT count(*) FROM ($RUNS_Q)")
+stored=$(db_query "SELECT count(*) FROM ($RUNS_Q) AS drill_runs")
 done_n=$(db_query "SELECT count(*) FROM runs WHERE status = 'done' AND id IN ($RUNS_Q)")
 # Run twice: more than one 'done' in a run's history, or more than one attempt that stored a final state.
 duplicated=$(db_query "SELECT count(*) FROM (SELECT run_id FROM status_history WHERE status IN ('done', 'failed', 'cancelled')
-                       AND run_id IN ($RUNS_Q) GROUP BY run_id HAVING count(*) > 1)")
+                       AND run_id IN ($RUNS_Q) GROUP BY run_id HAVING count(*) > 1) AS twice")
 stale=$(db_query "SELECT count(*) FROM stale_writes WHERE run_id IN ($RUNS_Q)")
 lost=$((RUNS - done_n))
 [[ $stored == "$RUNS" ]] || echo "lab-drill: $stored runs stored, $RUNS submitted" >&2

@@ -34,6 +34,9 @@ packages=(
   python3-setuptools libhdf5-dev libmatio-dev
   # the HTML report test: the page must render without errors in a headless browser
   chromium
+  # the web dashboard (docs/web.md): HTTP server, the chart library it serves and the reports inline, and its
+  # browser test (chromium driven through chromium-driver by selenium)
+  libcpp-httplib-dev libjs-dygraphs chromium-driver python3-selenium
   # fuzzing (fuzz/, scripts/fuzz.sh): clang with libFuzzer and the sanitizer runtimes
   clang libclang-rt-14-dev
 )

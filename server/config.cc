@@ -310,6 +310,16 @@ StatusOr<Settings> SettingsFromConfig(const valvebench::v1::ServerConfig& c, con
   if (!lab.ok()) return lab.status();
   s.lab = std::move(*lab);
   if (s.lab.enabled) s.nights.lab_host = s.lab.host;
+  if (c.has_web()) {
+    const std::string& a = c.web().listen_address();
+    const size_t colon = a.rfind(':');
+    const std::string port = colon == std::string::npos ? "" : a.substr(colon + 1);
+    if (colon == std::string::npos || colon == 0 || port.empty() ||
+        port.find_first_not_of("0123456789") != std::string::npos || port.size() > 5 || std::stoi(port) > 65535)
+      return Status::InvalidArgument("web.listen_address: must be host:port (e.g. \"127.0.0.1:8080\"), got '" + a +
+                                     "'");
+    s.web_listen_address = a;
+  }
   return s;
 }
 

@@ -56,6 +56,8 @@ struct Settings {
   NightsSetup nights;
   RetentionSetup retention;
   LabSetup lab;
+  // The web dashboard's "host:port" (config "web"; docs/web.md); empty = no dashboard.
+  std::string web_listen_address;
 };
 
 StatusOr<Settings> LoadSettings(const std::string& config_path);

@@ -2,6 +2,8 @@
 // With a "nights" block in the config, a scheduler thread runs the regression suite at each cron fire (UTC;
 // server/nights.h). Test hook (hidden): --run-night-now runs one night right after start.
 // With a "retention" block, another thread prunes old finished runs at each of its cron fires (server/retention.h).
+// With a "web" block, the web dashboard (docs/web.md) on its own port: HTTP(S) in front of this BenchService
+// through its in-process channel, so the page gets the same tokens, roles and validation as gRPC callers.
 // Serves BenchService, grpc.health.v1 and server reflection; one worker per configured bench. Listens on
 // loopback unless the config says otherwise. SIGTERM/SIGINT: stop accepting, stop running experiments (the
 // benches go to their safe state; the runs are re-queued at the next start), exit 0.
@@ -27,6 +29,7 @@
 #include "server/service.h"
 #include "server/status_interceptor.h"
 #include "db/open_store.h"
+#include "web/gateway.h"
 
 int main(int argc, char** argv) {
   CLI::App app{"valvebench-server: the bench server"};
@@ -158,12 +161,35 @@ int main(int argc, char** argv) {
     spdlog::info("retention: '{}' (UTC), runs finished more than {} days before go, newest {} kept",
                  settings->retention.cron.c_str(), settings->retention.older_than_days, settings->retention.keep_last);
 
+  std::unique_ptr<vb::web::Gateway> web;
+  if (!settings->web_listen_address.empty()) {
+    grpc::ChannelArguments args;
+    args.SetMaxReceiveMessageSize(64 << 20);
+    vb::web::GatewayOptions wo;
+    wo.listen_address = settings->web_listen_address;
+    wo.tls_cert_pem = settings->tls_cert_pem;
+    wo.tls_key_pem = settings->tls_key_pem;
+    auto started = vb::web::Gateway::Start(wo, server->InProcessChannel(args));
+    if (!started.ok()) {
+      spdlog::error("{}", started.status().message().c_str());
+      if (nights) nights->Stop();
+      if (retention) retention->Stop();
+      server->Shutdown(std::chrono::system_clock::now());
+      for (auto& w : workers) w->Stop();
+      return 3;
+    }
+    web = std::move(*started);
+    std::string host = wo.listen_address.substr(0, wo.listen_address.rfind(':'));
+    spdlog::info("web dashboard on {}://{}:{}/", web->tls() ? "https" : "http", host.c_str(), web->port());
+  }
+
   int sig = 0;
   sigwait(&signals, &sig);
   spdlog::info("{}: shutting down", sig == SIGTERM ? "SIGTERM" : "SIGINT");
   if (nights) nights->Stop();
   if (retention) retention->Stop();
   server->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(2));
+  if (web) web->Stop();  // after Shutdown: that ends the live streams (SSE) the page's threads wait on
   for (auto& w : workers) w->Stop();
   if (lab) {
     // The runs this host stopped go back to the lab's queue now rather than when their leases lapse.

@@ -1,4 +1,5 @@
 // BenchServiceImpl::ListNights: the scheduled regression nights (server/nights.h) from the regressions table.
+#include <algorithm>
 #include <string>
 
 #include "regress/compare.h"
@@ -58,6 +59,13 @@ grpc::Status BenchServiceImpl::ListNights(grpc::ServerContext* ctx, const v1::Li
     n->set_started_unix_s(obj.value("started_unix_s", rec->created_unix_s));
     n->set_finished_unix_s(rec->created_unix_s);
     n->set_summary(Summary(obj, rec->verdict));
+    if (obj.contains("findings") && obj["findings"].is_array())  // each case once, in the result's order
+      for (const auto& f : obj["findings"]) {
+        const std::string c = f.value("case", std::string());
+        if (f.value("verdict", "") != "regressed" || c.empty()) continue;
+        if (std::find(n->regressed_cases().begin(), n->regressed_cases().end(), c) == n->regressed_cases().end())
+          n->add_regressed_cases(c);
+      }
     n->set_regression_id(rec->id);
     n->set_suite(rec->suite);
     n->set_baseline(rec->baseline_name.empty() ? ""

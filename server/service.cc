@@ -486,6 +486,10 @@ grpc::Status BenchServiceImpl::ListBenches(grpc::ServerContext* ctx, const v1::L
     out->set_max_control_rate_hz(b.caps.max_control_rate_Hz);
     out->set_measures_position(b.kind == "emulated" ? b.emulated.plant.has_moving_part : b.caps.measures_position);
     out->set_device(b.device);
+    out->set_max_current_a(b.safety.max_current_A > 0.0 ? b.safety.max_current_A : b.caps.max_current_A);
+    out->set_max_duty(b.safety.max_duty);
+    out->set_max_on_time_s(b.safety.max_on_time_s);
+    out->set_max_coil_temp_c(b.safety.max_coil_temp_C);
     const auto current = w->current_run();
     out->set_busy(current != 0);
     out->set_current_run_id(current);

@@ -12,7 +12,7 @@ CHANNEL_UNITS = {
     "flow_kg_per_s": "kg/s", "v2_int_V2s": "V^2 s", "energy_int_J": "J", "switch_count": "1",
 }
 _SUFFIX_UNITS = (("_kg_per_s", "kg/s"), ("_mps", "m/s"), ("_V2s", "V^2 s"), ("_pct", "%"), ("_Pa", "Pa"),
-                 ("_Hz", "Hz"), ("_J", "J"), ("_V", "V"), ("_A", "A"), ("_m", "m"), ("_s", "s"))
+                 ("_Hz", "Hz"), ("_J", "J"), ("_W", "W"), ("_V", "V"), ("_A", "A"), ("_m", "m"), ("_s", "s"))
 
 
 def controlled_unit(controller):

@@ -88,7 +88,11 @@ TEST_F(HeadlessReport, BatchRunRegressionAndDiagnosisPagesRenderWithoutErrors) {
       << batch.substr(0, 2000);
   EXPECT_NE(batch.find("Runs, conditions and specs"), std::string::npos);
   EXPECT_NE(batch.find("Static map"), std::string::npos);
-  EXPECT_NE(batch.find("<polyline"), std::string::npos);
+  EXPECT_NE(batch.find("<polyline"), std::string::npos);  // the Pareto front on the (SVG) scatter
+  // The 7 time-series panels (static map, 2 runs x 3 traces) are dygraphs plots: each draws on canvases.
+  EXPECT_EQ(Count(batch, "class=\"dyplot\""), 7u);
+  EXPECT_GE(Count(batch, "<canvas"), 14u);
+  EXPECT_NE(batch.find("dygraph-axis-label"), std::string::npos) << "dygraphs drew the axes";
   EXPECT_EQ(Count(batch, "<details"), 10u) << "9 runs, every one reachable, and the specs";
   // The diagnosis page: summary, shares, per-phase table, ranking, one overlay of three curves.
   const std::string diag = ExpectRenders(dir_ + "/diag.html", "diag");

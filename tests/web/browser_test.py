@@ -1,0 +1,316 @@
+#!/usr/bin/python3
+"""The web dashboard in a real browser (docs/web.md): Debian's chromium, driven by chromium-driver through
+python3-selenium, against a real valvebench-server on loopback. Logs in with a token, submits a run, sees live
+samples arrive, cancels it, opens a comparison and a run's traces, checks that no page logs a console error or
+overflows horizontally at 1400 px and 1024 px, and that a viewer token cannot submit. All traffic but loopback
+goes to a dead proxy, so a page that needed the network would fail here.
+
+Usage: browser_test.py SERVER_BINARY EXAMPLES_DIR WORK_DIR [SCREENSHOT_DIR]
+Exit 0 pass, 1 fail, 77 skipped (chromium, chromedriver or selenium missing)."""
+import hashlib
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+import time
+import urllib.request
+
+server_bin, examples_dir, work = sys.argv[1:4]
+shots = sys.argv[4] if len(sys.argv) > 4 else work
+
+CHROMIUM, DRIVER = "/usr/bin/chromium", "/usr/bin/chromedriver"
+missing = [p for p in (CHROMIUM, DRIVER) if not os.path.exists(p)]
+try:
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import WebDriverWait
+except ImportError:
+    missing.append("python3-selenium")
+if missing:
+    print("SKIP: the browser test needs %s (apt-get install chromium chromium-driver python3-selenium)"
+          % ", ".join(missing))
+    sys.exit(77)
+
+OPERATOR, VIEWER = "web-operator-token", "web-viewer-token"
+shutil.rmtree(work, ignore_errors=True)
+os.makedirs(work)
+os.makedirs(shots, exist_ok=True)
+
+
+def sha(t):
+    return hashlib.sha256(t.encode()).hexdigest()
+
+
+# A regression night at start (--run-night-now) whose PI law got worse than the baseline: a regressed night for
+# the Nights page (as tests/integration/nights_test.cc makes one).
+suites = os.path.abspath(os.path.join(examples_dir, "suites"))
+shutil.copy(os.path.join(suites, "ci.json"), work)
+with open(os.path.join(suites, "ci-current-hold.json")) as f:
+    hold = f.read()
+law = hold.find('"pi_current": {}', hold.find('"name": "pi"'))
+assert law >= 0, "examples/suites/ci-current-hold.json changed: no pi variant"
+with open(os.path.join(work, "ci-current-hold.json"), "w") as f:
+    f.write(hold[:law] + '"pi_current": {"ki_V_per_A_s": 4080}' + hold[law + len('"pi_current": {}'):])
+config = {"listen_address": "127.0.0.1:0", "database_path": "runs.db",
+          "nights": {"cron": "0 2 * * *", "suite_file": "ci.json",
+                     "baseline_file": os.path.join(suites, "ci-baseline.json")},
+          "benches": [{"name": "emu-1", "kind": "emulated", "model": {"preset": "taghizadeh2009"}},
+                      {"name": "emu-2", "kind": "emulated", "model": {"preset": "taghizadeh2009"}}],
+          "tokens": [{"user": "olga", "role": "operator", "token_sha256": sha(OPERATOR)},
+                     {"user": "vic", "role": "viewer", "token_sha256": sha(VIEWER)}],
+          "web": {"listen_address": "127.0.0.1:0"}}
+with open(os.path.join(work, "server.json"), "w") as f:
+    json.dump(config, f)
+log = open(os.path.join(work, "server.log"), "w+")
+proc = subprocess.Popen([server_bin, "--config", os.path.join(work, "server.json"), "--run-night-now"], stderr=log,
+                        stdout=subprocess.DEVNULL)
+failures = []
+driver = None
+t_start = time.time()
+
+
+def check(name, cond, detail=""):
+    print(("ok   " if cond else "FAIL ") + name + ("" if cond else ": " + str(detail)[:600]))
+    if not cond:
+        failures.append(name)
+
+
+def api(method, path, token, body=None):
+    req = urllib.request.Request(base + path, method=method, headers={"Authorization": "Bearer " + token,
+                                                                      "Content-Type": "application/json"},
+                                 data=None if body is None else json.dumps(body).encode())
+    with urllib.request.urlopen(req, timeout=10) as r:
+        return json.loads(r.read() or b"{}")
+
+
+def wait(cond, timeout=20, what="condition"):
+    try:
+        return WebDriverWait(driver, timeout, poll_frequency=0.1).until(lambda d: cond())
+    except Exception as e:  # noqa: BLE001 (selenium's TimeoutException and stale elements alike)
+        check("wait for " + what, False, repr(e))
+        return None
+
+
+def console_errors(allowed=()):
+    """SEVERE console entries since the last call, minus the allowed patterns."""
+    out = []
+    for e in driver.get_log("browser"):
+        if e.get("level") != "SEVERE":
+            continue
+        if any(re.search(a, e.get("message", "")) for a in allowed):
+            continue
+        out.append(e.get("message"))
+    return out
+
+
+def no_overflow(page):
+    for width in (1400, 1024):
+        driver.set_window_size(width, 900)
+        time.sleep(0.3)  # dygraphs redraws on resize
+        inner, scroll = driver.execute_script(
+            "return [window.innerWidth, document.documentElement.scrollWidth];")
+        check("%s: no horizontal overflow at %d px" % (page, width), scroll <= inner, "scrollWidth %d > %d" % (scroll, inner))
+    driver.set_window_size(1400, 900)
+
+
+def go(hash_):
+    driver.execute_script("location.hash = arguments[0];", hash_)
+
+
+def shot(name, scroll_to=None):
+    driver.set_window_size(1400, 900)
+    time.sleep(0.4)
+    if scroll_to:
+        driver.execute_script("document.querySelector(arguments[0]).scrollIntoView();", scroll_to)
+        time.sleep(0.2)
+    driver.save_screenshot(os.path.join(shots, "web-%s.png" % name))
+
+
+try:
+    base = None
+    for _ in range(400):
+        log.seek(0)
+        m = re.search(r"web dashboard on (http://\S+)/", log.read())
+        if m:
+            base = m.group(1)
+            break
+        time.sleep(0.05)
+    check("server serves the dashboard", base is not None, open(os.path.join(work, "server.log")).read())
+    if base is None:
+        raise SystemExit(1)
+
+    for _ in range(300):  # the night's runs first, so that the benches are idle for what follows
+        if api("GET", "/api/nights", VIEWER).get("nights"):
+            break
+        time.sleep(0.1)
+    night = api("GET", "/api/nights", VIEWER).get("nights", [{}])[0]
+    check("the night ran and regressed", night.get("verdict") == "regressed", night)
+
+    opts = webdriver.ChromeOptions()
+    opts.binary_location = CHROMIUM
+    for a in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", "--window-size=1400,900",
+              "--proxy-server=http://127.0.0.1:9", "--no-first-run", "--disable-extensions",
+              "--user-data-dir=" + os.path.join(work, "chromium-profile")):
+        opts.add_argument(a)
+    opts.set_capability("goog:loggingPrefs", {"browser": "ALL"})
+    driver = webdriver.Chrome(service=Service(DRIVER), options=opts)
+    driver.set_page_load_timeout(20)
+
+    # 1. Log in with the operator's token.
+    driver.get(base + "/")
+    driver.find_element(By.ID, "token").send_keys(OPERATOR)
+    driver.find_element(By.ID, "login-button").click()
+    rows = wait(lambda: driver.find_elements(By.CSS_SELECTOR, "#benches tr")[1:] or None, what="bench table")
+    check("the lab lists both benches", rows is not None and len(rows) == 2 and "idle" in rows[0].text,
+          rows and [r.text for r in rows])
+    check("the token stays in sessionStorage",
+          driver.execute_script("return sessionStorage.getItem('valvebench.token')") == OPERATOR)
+
+    # 2. Submit a long real-time run from the Submit page.
+    with open(os.path.join(examples_dir, "standard", "e3.json")) as f:
+        spec = json.load(f)
+    spec.update({"name": "web-live", "realtime": True, "duration_s": 30.0})
+    go("#/submit")
+    area = wait(lambda: driver.find_elements(By.ID, "spec") or None, what="spec editor")
+    driver.execute_script("document.getElementById('spec').value = arguments[0];", json.dumps(spec, indent=2))
+    driver.find_element(By.ID, "submit").click()
+    link = wait(lambda: driver.find_elements(By.CSS_SELECTOR, "#submit-result a[href^='#/run/']") or None,
+                what="submission result")
+    live_id = link[0].text.lstrip("#") if link else None
+    check("the submission is queued", live_id is not None and live_id.isdigit(),
+          driver.find_element(By.ID, "main").text[-600:])
+    if live_id is None:
+        raise RuntimeError("no run to follow")
+
+    # 3. The lab shows it running, with live samples that keep arriving (SSE).
+    go("#/")
+
+    def samples():
+        c = driver.find_elements(By.CSS_SELECTOR, ".live-run[data-run='%s'] .live-count" % live_id)
+        return int(c[0].get_attribute("data-samples") or 0) if c else 0
+    first = wait(lambda: samples() > 0 and samples(), what="first live samples")
+    time.sleep(1.0)
+    later = samples()
+    check("live samples arrive and keep arriving", bool(first) and later > first, (first, later))
+    bench_text = driver.find_element(By.CSS_SELECTOR, "#benches").text
+    check("the bench shows what it runs", ("running #%s" % live_id) in bench_text, bench_text)
+    queue_text = driver.find_element(By.CSS_SELECTOR, "#queue").text
+    check("the queue shows the run with an ETA", "web-live" in queue_text and re.search(r"\d+(\.\d)? s|min", queue_text),
+          queue_text)
+    shot("lab")
+    no_overflow("lab")
+
+    # 4. Open it and cancel it.
+    go("#/run/" + live_id)
+    btn = wait(lambda: driver.find_elements(By.ID, "cancel") or None, what="cancel button")
+    wait(lambda: int(driver.find_element(By.CSS_SELECTOR, "#traces .live-count").get_attribute("data-samples") or 0) > 0,
+         what="live samples on the run page")
+    shot("run-live")
+    if btn:
+        btn[0].click()
+    cancelled = wait(lambda: "CANCELLED" in driver.find_element(By.TAG_NAME, "h1").text, what="cancelled run")
+    check("the run is cancelled from the page", bool(cancelled), driver.find_element(By.TAG_NAME, "h1").text)
+    check("the store says cancelled", api("GET", "/api/runs/" + live_id, VIEWER)["run"]["status"] == "CANCELLED")
+
+    # 5. A comparison: seed 001's four current laws, then the compare page of that batch.
+    with open(os.path.join(examples_dir, "compare-current-controllers.json")) as f:
+        sub = api("POST", "/api/runs", OPERATOR, {"spec": json.load(f)})
+    batch = sub["batch_id"]
+    for _ in range(600):
+        runs = api("GET", "/api/runs?batch_id=%s" % batch, VIEWER).get("runs", [])
+        if runs and all(r["status"] not in ("QUEUED", "RUNNING") for r in runs):
+            break
+        time.sleep(0.1)
+    check("the comparison's runs finish", all(r["status"] == "DONE" for r in runs), [r["status"] for r in runs])
+    go("#/compare?batch=%s" % batch)
+    table = wait(lambda: driver.find_elements(By.CSS_SELECTOR, "#comparison tr")[1:] or None, what="comparison table")
+    check("the comparison has one row per law", table is not None and len(table) == 4, table and [r.text for r in table])
+    header = driver.find_element(By.CSS_SELECTOR, "#comparison tr").text
+    check("metric columns carry units", "rmse [A]" in header and "effort_l2 [V s^0.5]" in header, header)
+    plots = wait(lambda: len(driver.find_elements(By.CSS_SELECTOR, "#pareto canvas, #overlay-current canvas, "
+                                                  "#overlay-error canvas")) >= 3 or None, what="comparison plots")
+    legend = driver.find_element(By.ID, "overlay-current").text
+    check("the overlays show every run", all(("#%s" % r["id"]) in legend for r in runs) or plots is not None, legend)
+    shot("compare")
+    no_overflow("compare")
+
+    # 6. A finished run's page: metrics with units, traces, export links; zoom refetches at full resolution.
+    done_id = str(runs[0]["id"])
+    go("#/run/" + done_id)
+    wait(lambda: len(driver.find_elements(By.CSS_SELECTOR, ".trace-chart canvas")) >= 2 or None, what="trace charts")
+    metrics = driver.find_element(By.ID, "metrics").text
+    check("the run page shows metrics with units", re.search(r"rmse [-0-9.e]+ A", metrics), metrics[:300])
+    check("the run page links the export", driver.find_element(By.ID, "export-csv").get_attribute("href")
+          .endswith("/api/runs/%s/trace.csv" % done_id))
+    shot("run")
+    shot("run-traces", "#traces")
+    no_overflow("run")
+
+    # 7. The nightly history: the regressed night with its verdict and links to its runs and comparison.
+    go("#/nights")
+    row = wait(lambda: driver.find_elements(By.CSS_SELECTOR, "#nights tr")[1:] or None, what="nights table")
+    text = row[0].text if row else ""
+    check("the nights page shows the regressed night", "regressed" in text and night.get("date", "?") in text, text)
+    links = [a.get_attribute("href") for a in row[0].find_elements(By.TAG_NAME, "a")] if row else []
+    check("the night links to its runs, its failed runs and its comparison",
+          any(h.endswith("#/runs?batch=%s" % night.get("batch_id")) for h in links) and
+          any(h.endswith("#/compare?batch=%s" % night.get("batch_id")) for h in links), links)
+    cases = night.get("regressed_cases", [])
+    check("the night names its regressed case", cases == ["current-hold/pi"] or (len(cases) == 1 and "pi" in cases[0]), cases)
+    case_links = row[0].find_elements(By.CSS_SELECTOR, "td.regressed-cases a") if row else []
+    shot("nights")
+    if case_links:
+        case_links[0].click()
+        runs_rows = wait(lambda: driver.find_elements(By.CSS_SELECTOR, "#runs tr")[1:] or None, what="regressed runs")
+        names = [r.find_elements(By.TAG_NAME, "td")[3].text for r in runs_rows or []]
+        check("the regressed case links to its runs in the night's batch", len(names) >= 1 and
+              all(n.startswith(cases[0]) for n in names), names)
+    else:
+        check("the night links its regressed case", False, row[0].text if row else "")
+
+    for page in ("#/runs", "#/nights", "#/diagnosis", "#/submit"):
+        go(page)
+        time.sleep(0.6)
+        check(page + " renders without an error", not driver.find_elements(By.CSS_SELECTOR, "main .error"),
+              driver.find_element(By.ID, "main").text[:300])
+        no_overflow(page)
+    go("#/runs")
+    time.sleep(0.5)
+    shot("runs")
+    errors = console_errors()
+    check("no console error while operating", not errors, errors)
+
+    # 8. A viewer follows the lab but cannot submit: the server's PERMISSION_DENIED shows on the page.
+    driver.find_element(By.ID, "logout").click()
+    driver.find_element(By.ID, "token").send_keys(VIEWER)
+    driver.find_element(By.ID, "login-button").click()
+    wait(lambda: driver.find_elements(By.CSS_SELECTOR, "#session:not([hidden])") or None, what="viewer session")
+    before = len(api("GET", "/api/runs", VIEWER).get("runs", []))
+    go("#/submit")
+    wait(lambda: driver.find_elements(By.ID, "spec") or None, what="spec editor (viewer)")
+    driver.find_element(By.ID, "submit").click()
+    refused = wait(lambda: "PERMISSION_DENIED" in driver.find_element(By.ID, "submit-result").text, what="refusal")
+    check("a viewer cannot submit", bool(refused), driver.find_element(By.ID, "submit-result").text)
+    check("nothing was queued for the viewer", len(api("GET", "/api/runs", VIEWER).get("runs", [])) == before)
+    # The refused request is logged by chromium as a failed resource (403); nothing else may be.
+    errors = console_errors(allowed=(r"/api/runs - Failed to load resource: the server responded with a status of 403",))
+    check("no other console error as a viewer", not errors, errors)
+except SystemExit:
+    raise
+except Exception as e:  # noqa: BLE001
+    import traceback
+    traceback.print_exc()
+    check("the browser test ran to the end", False, repr(e))
+finally:
+    if driver is not None:
+        driver.quit()
+    proc.terminate()
+    try:
+        proc.wait(timeout=10)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+print("%d failure(s), %.1f s" % (len(failures), time.time() - t_start))
+sys.exit(1 if failures else 0)

@@ -1,0 +1,465 @@
+// The web gateway (web/gateway.h, docs/web.md) on the real valvebench-server over loopback, driven with
+// cpp-httplib's client: the embedded page and dygraphs, the service's own auth, roles and field-named errors,
+// traces (decimated, windowed, CSV), comparison units, SSE live samples, cancel and re-run, the cookie rule.
+#include <gtest/gtest.h>
+#include <httplib.h>
+
+#include <chrono>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <thread>
+
+#include "server/config.h"
+#include "tests/integration/server_process.h"
+#include "web/gateway.h"
+
+namespace {
+
+using Json = nlohmann::json;
+using vb::testing::kOperatorToken;
+using vb::testing::kViewerToken;
+
+std::string ReadFile(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+httplib::Headers Bearer(const char* token) { return {{"Authorization", std::string("Bearer ") + token}}; }
+
+class WebGatewayTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    const std::string dir = ::testing::TempDir() + "/web-gateway-" +
+                            ::testing::UnitTest::GetInstance()->current_test_info()->name();
+    std::filesystem::remove_all(dir);
+    server_ = std::make_unique<vb::testing::ServerProcess>(dir, R"("web": {"listen_address": "127.0.0.1:0"})");
+    ASSERT_FALSE(server_->Start().empty()) << server_->Log();
+    const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+    while (std::chrono::steady_clock::now() < until) {
+      const std::string log = server_->Log();
+      const auto at = log.find("web dashboard on http://127.0.0.1:");
+      if (at != std::string::npos) {
+        port_ = std::stoi(log.substr(at + std::string("web dashboard on http://127.0.0.1:").size()));
+        break;
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+    ASSERT_GT(port_, 0) << server_->Log();
+    http_ = std::make_unique<httplib::Client>("127.0.0.1", port_);
+    http_->set_read_timeout(30, 0);
+  }
+
+  Json Submit(const std::string& spec_json, const char* token = kOperatorToken) {
+    auto res = http_->Post("/api/runs", Bearer(token), R"({"spec": )" + spec_json + "}", "application/json");
+    EXPECT_TRUE(res);
+    if (!res) return {};
+    EXPECT_EQ(res->status, 201) << res->body;
+    return Json::parse(res->body);
+  }
+
+  Json WaitEnded(const std::string& run_id) {
+    const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+    Json run;
+    while (std::chrono::steady_clock::now() < until) {
+      auto res = http_->Get("/api/runs/" + run_id, Bearer(kViewerToken));
+      EXPECT_TRUE(res && res->status == 200);
+      if (!res) return {};
+      run = Json::parse(res->body);
+      const std::string s = run["run"]["status"];
+      if (s != "QUEUED" && s != "RUNNING") return run;
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+    ADD_FAILURE() << "run " << run_id << " did not end";
+    return run;
+  }
+
+  std::unique_ptr<vb::testing::ServerProcess> server_;
+  std::unique_ptr<httplib::Client> http_;
+  int port_ = 0;
+};
+
+std::string SpecFile(const char* rel) { return ReadFile(std::string(VB_SOURCE_DIR) + "/examples/" + rel); }
+
+TEST(WebHttpStatus, GrpcCodesMapToTheirHttpMeaning) {
+  EXPECT_EQ(vb::web::HttpStatusFor(grpc::StatusCode::OK), 200);
+  EXPECT_EQ(vb::web::HttpStatusFor(grpc::StatusCode::INVALID_ARGUMENT), 400);
+  EXPECT_EQ(vb::web::HttpStatusFor(grpc::StatusCode::UNAUTHENTICATED), 401);
+  EXPECT_EQ(vb::web::HttpStatusFor(grpc::StatusCode::PERMISSION_DENIED), 403);
+  EXPECT_EQ(vb::web::HttpStatusFor(grpc::StatusCode::NOT_FOUND), 404);
+  EXPECT_EQ(vb::web::HttpStatusFor(grpc::StatusCode::FAILED_PRECONDITION), 409);
+  EXPECT_EQ(vb::web::HttpStatusFor(grpc::StatusCode::RESOURCE_EXHAUSTED), 429);
+  EXPECT_EQ(vb::web::HttpStatusFor(grpc::StatusCode::UNAVAILABLE), 503);
+  EXPECT_EQ(vb::web::HttpStatusFor(grpc::StatusCode::INTERNAL), 500);
+}
+
+TEST(WebConfig, ListenAddressIsCheckedAtStart) {
+  auto c = vb::testing::MinimalConfig();
+  c.mutable_web()->set_listen_address("8080");
+  auto s = vb::server::SettingsFromConfig(c, "");
+  ASSERT_FALSE(s.ok());
+  EXPECT_EQ(s.status().message().rfind("web.listen_address: must be host:port", 0), 0u) << s.status().message();
+  c.mutable_web()->set_listen_address("127.0.0.1:99999");
+  EXPECT_FALSE(vb::server::SettingsFromConfig(c, "").ok());
+  c.mutable_web()->set_listen_address("127.0.0.1:8080");
+  auto ok = vb::server::SettingsFromConfig(c, "");
+  ASSERT_TRUE(ok.ok()) << ok.status().message();
+  EXPECT_EQ(ok->web_listen_address, "127.0.0.1:8080");
+  EXPECT_TRUE(vb::server::SettingsFromConfig(vb::testing::MinimalConfig(), "")->web_listen_address.empty());
+}
+
+TEST_F(WebGatewayTest, ServesThePageAndDebiansDygraphsFromTheBinary) {
+  auto page = http_->Get("/");
+  ASSERT_TRUE(page);
+  EXPECT_EQ(page->status, 200);
+  EXPECT_NE(page->body.find(R"(<script src="/dygraph.min.js">)"), std::string::npos);
+  EXPECT_EQ(page->get_header_value("Content-Type"), "text/html; charset=utf-8");
+  EXPECT_NE(page->get_header_value("Content-Security-Policy").find("default-src 'self'"), std::string::npos);
+  auto dy = http_->Get("/dygraph.min.js");
+  ASSERT_TRUE(dy);
+  EXPECT_EQ(dy->status, 200);
+  EXPECT_EQ(dy->body, ReadFile("/usr/share/javascript/dygraphs/dygraph.min.js"));
+  auto js = http_->Get("/app.js");
+  ASSERT_TRUE(js);
+  EXPECT_EQ(js->body, ReadFile(std::string(VB_SOURCE_DIR) + "/web/static/app.js"));
+  auto missing = http_->Get("/api/nothing");
+  ASSERT_TRUE(missing);
+  EXPECT_EQ(missing->status, 404);
+}
+
+TEST_F(WebGatewayTest, TokensAndRolesAreTheServices) {
+  auto none = http_->Get("/api/benches");
+  ASSERT_TRUE(none);
+  EXPECT_EQ(none->status, 401);
+  EXPECT_EQ(Json::parse(none->body)["code"], "UNAUTHENTICATED");
+  auto wrong = http_->Get("/api/benches", Bearer("not-a-token"));
+  ASSERT_TRUE(wrong);
+  EXPECT_EQ(wrong->status, 401);
+  auto viewer = http_->Get("/api/benches", Bearer(kViewerToken));
+  ASSERT_TRUE(viewer);
+  ASSERT_EQ(viewer->status, 200);
+  const Json b = Json::parse(viewer->body);
+  ASSERT_EQ(b["benches"].size(), 2u);
+  EXPECT_EQ(b["benches"][0]["name"], "emu-a");
+  EXPECT_EQ(b["benches"][0]["max_supply_V"], 1000);  // proto field names, not lowerCamelCase
+  EXPECT_GT(b["benches"][0]["max_current_A"].get<double>(), 0.0);  // the interlock's current limit
+  EXPECT_EQ(b["benches"][0]["max_duty"], 1);
+  auto refused = http_->Post("/api/runs", Bearer(kViewerToken), R"({"spec": )" + SpecFile("standard/e3.json") + "}",
+                             "application/json");
+  ASSERT_TRUE(refused);
+  EXPECT_EQ(refused->status, 403);
+  const Json e = Json::parse(refused->body);
+  EXPECT_EQ(e["code"], "PERMISSION_DENIED");
+  EXPECT_NE(e["message"].get<std::string>().find("needs the operator role"), std::string::npos);
+  // Nothing was queued by the refused submission.
+  auto runs = http_->Get("/api/runs", Bearer(kViewerToken));
+  ASSERT_TRUE(runs);
+  EXPECT_FALSE(Json::parse(runs->body).contains("runs"));
+}
+
+TEST_F(WebGatewayTest, BadSpecsGetTheFieldNamedErrorsOfTheCliAndTheService) {
+  Json spec = Json::parse(SpecFile("standard/e3.json"));
+  spec["conditions"]["suply_V"] = spec["conditions"]["supply_V"];
+  spec["conditions"].erase("supply_V");
+  auto typo = http_->Post("/api/runs", Bearer(kOperatorToken), Json{{"spec", spec}}.dump(), "application/json");
+  ASSERT_TRUE(typo);
+  EXPECT_EQ(typo->status, 400);
+  EXPECT_EQ(Json::parse(typo->body)["message"], "conditions.suply_V: unknown field; did you mean 'supply_V'?");
+  spec = Json::parse(SpecFile("standard/e3.json"));
+  spec["conditions"]["supply_V"] = -1;
+  auto negative = http_->Post("/api/runs", Bearer(kOperatorToken), Json{{"spec", spec}}.dump(), "application/json");
+  ASSERT_TRUE(negative);
+  EXPECT_EQ(negative->status, 400);
+  const Json e = Json::parse(negative->body);
+  EXPECT_EQ(e["code"], "INVALID_ARGUMENT");
+  EXPECT_EQ(e["message"].get<std::string>().rfind("conditions.supply_V:", 0), 0u) << e["message"];
+  auto not_json = http_->Post("/api/runs", Bearer(kOperatorToken), "{", "application/json");
+  ASSERT_TRUE(not_json);
+  EXPECT_EQ(not_json->status, 400);
+  EXPECT_EQ(Json::parse(not_json->body)["message"].get<std::string>().rfind("body: not JSON", 0), 0u);
+  auto extra = http_->Post("/api/runs", Bearer(kOperatorToken), R"({"spec": {}, "priority": 3})", "application/json");
+  ASSERT_TRUE(extra);
+  EXPECT_EQ(extra->status, 400);
+  EXPECT_EQ(Json::parse(extra->body)["message"].get<std::string>().rfind("priority: unknown field", 0), 0u);
+  auto bad_param = http_->Get("/api/runs/1/trace?max_points=lots", Bearer(kViewerToken));
+  ASSERT_TRUE(bad_param);
+  EXPECT_EQ(bad_param->status, 400);
+  EXPECT_EQ(Json::parse(bad_param->body)["message"], "max_points: not a number, got 'lots'");
+  auto unknown_run = http_->Get("/api/runs/999", Bearer(kViewerToken));
+  ASSERT_TRUE(unknown_run);
+  EXPECT_EQ(unknown_run->status, 404);
+}
+
+TEST_F(WebGatewayTest, TracesDecimatedWindowedAndExportedWhole) {
+  const Json sub = Submit(SpecFile("standard/e1.json"));  // 1 s at 50 kHz: 50001 samples
+  const std::string id = sub["run_ids"][0];
+  const Json run = WaitEnded(id);
+  ASSERT_EQ(run["run"]["status"], "DONE");
+  EXPECT_EQ(run["metric_units"]["effort_l2"], "V s^0.5");
+  EXPECT_EQ(run["channel_units"]["i_A"], "A");
+  auto whole = http_->Get("/api/runs/" + id + "/trace?max_points=1000", Bearer(kViewerToken));
+  ASSERT_TRUE(whole);
+  ASSERT_EQ(whole->status, 200) << whole->body;
+  const Json t = Json::parse(whole->body);
+  EXPECT_EQ(t["total_samples"], 50001);
+  EXPECT_TRUE(t["decimated"]);
+  EXPECT_LE(t["rows"].size(), 1000u);
+  EXPECT_GE(t["rows"].size(), 990u);
+  const auto& ch = t["channels"];
+  ASSERT_EQ(ch[0], "gate");  // t_s is the rows' first column, not a channel
+  const size_t i_col = std::find(ch.begin(), ch.end(), "i_A") - ch.begin() + 1;
+  // The envelope keeps the PWM's extremes: the decimated maximum of i_A is the trace's maximum.
+  auto csv = http_->Get("/api/runs/" + id + "/trace.csv", Bearer(kViewerToken));
+  ASSERT_TRUE(csv);
+  ASSERT_EQ(csv->status, 200);
+  std::istringstream lines(csv->body);
+  std::string line, header;
+  std::getline(lines, header);
+  EXPECT_EQ(header.rfind("t_s,gate,", 0), 0u) << header;
+  size_t rows = 0, i_index = 0;
+  {
+    std::istringstream h(header);
+    std::string name;
+    for (size_t k = 0; std::getline(h, name, ','); ++k)
+      if (name == "i_A") i_index = k;
+  }
+  double csv_max = -1e300, rows_max = -1e300;
+  while (std::getline(lines, line)) {
+    std::istringstream f(line);
+    std::string cell;
+    for (size_t k = 0; std::getline(f, cell, ','); ++k)
+      if (k == i_index) csv_max = std::max(csv_max, std::stod(cell));
+    ++rows;
+  }
+  EXPECT_EQ(rows, 50001u);
+  for (const auto& r : t["rows"]) rows_max = std::max(rows_max, r[i_col].get<double>());
+  EXPECT_NEAR(rows_max, csv_max, 1e-8 * std::abs(csv_max));
+  auto window = http_->Get("/api/runs/" + id + "/trace?t_from_s=0.1&t_to_s=0.1002", Bearer(kViewerToken));
+  ASSERT_TRUE(window);
+  const Json w = Json::parse(window->body);
+  EXPECT_FALSE(w["decimated"]);
+  ASSERT_GE(w["rows"].size(), 10u);
+  EXPECT_LE(w["rows"].size(), 13u);
+  EXPECT_NEAR(w["rows"][1][0].get<double>() - w["rows"][0][0].get<double>(), 2e-5, 1e-12);
+  auto cmp = http_->Get("/api/compare?runs=" + id, Bearer(kViewerToken));
+  ASSERT_TRUE(cmp);
+  ASSERT_EQ(cmp->status, 200) << cmp->body;
+  const Json c = Json::parse(cmp->body);
+  EXPECT_EQ(c["comparison"]["rows"].size(), 1u);
+  EXPECT_EQ(c["units"]["effort_l2"], "V s^0.5");
+  EXPECT_EQ(c["units"]["driver_loss_W"], "W");
+  EXPECT_FALSE(c["units"][c["comparison"]["effort_metric"].get<std::string>()].get<std::string>().empty());
+  auto bad = http_->Get("/api/compare?runs=1,x", Bearer(kViewerToken));
+  ASSERT_TRUE(bad);
+  EXPECT_EQ(bad->status, 400);
+}
+
+TEST_F(WebGatewayTest, LiveSamplesArriveAsServerSentEventsUntilTheEnd) {
+  Json spec = Json::parse(SpecFile("standard/e3.json"));
+  spec["realtime"] = true;
+  spec["duration_s"] = 0.6;
+  const std::string id = Submit(spec.dump())["run_ids"][0];
+  std::string stream;
+  auto res = http_->Get("/api/runs/" + id + "/events?rate_Hz=200", Bearer(kViewerToken),
+                        [&](const char* data, size_t n) {
+                          stream.append(data, n);
+                          return true;
+                        });
+  ASSERT_TRUE(res);
+  EXPECT_EQ(res->status, 200);
+  EXPECT_EQ(res->get_header_value("Content-Type"), "text/event-stream");
+  size_t samples = 0, events = 0;
+  std::istringstream lines(stream);
+  std::string line, event;
+  double last_t = -1.0;
+  bool increasing = true;
+  while (std::getline(lines, line)) {
+    if (line.rfind("event: ", 0) == 0) event = line.substr(7);
+    if (line.rfind("data: ", 0) != 0 || event != "run") continue;
+    const Json ev = Json::parse(line.substr(6));
+    ++events;
+    if (!ev.contains("samples")) continue;
+    for (const auto& s : ev["samples"]) {
+      increasing = increasing && s["t_s"].get<double>() > last_t;
+      last_t = s["t_s"].get<double>();
+      ++samples;
+    }
+  }
+  EXPECT_GE(events, 3u) << stream.substr(0, 2000);
+  // 0.6 s of run at 200 Hz: about 120 samples live (the first ones may come before the watch starts).
+  EXPECT_GE(samples, 40u) << stream.substr(0, 2000);
+  EXPECT_TRUE(increasing);
+  EXPECT_NE(stream.find("event: end\ndata: {\"status\":\"DONE\"}"), std::string::npos) << stream.substr(stream.size() - 400);
+  // The stream needs a token like any other call.
+  auto anonymous = http_->Get("/api/runs/" + id + "/events");
+  ASSERT_TRUE(anonymous);
+  EXPECT_NE(anonymous->body.find("event: error"), std::string::npos);
+  EXPECT_NE(anonymous->body.find("UNAUTHENTICATED"), std::string::npos);
+}
+
+// An interactive run is cancelled when its submitter's watch goes away: the page's streams come and go, so the
+// gateway does not watch those runs, and the run is not cancelled by a page that looked at it.
+TEST_F(WebGatewayTest, InteractiveRunsAreNotWatchedFromThePage) {
+  Json spec = Json::parse(SpecFile("standard/e3.json"));
+  spec["realtime"] = true;
+  spec["interactive"] = true;
+  spec["duration_s"] = 2;
+  const std::string id = Submit(spec.dump())["run_ids"][0];
+  httplib::Client c("127.0.0.1", port_);
+  c.set_read_timeout(2, 0);
+  auto res = c.Get("/api/runs/" + id + "/events", Bearer(kOperatorToken));
+  ASSERT_TRUE(res);
+  EXPECT_EQ(res->get_header_value("Content-Type"), "text/event-stream");
+  EXPECT_NE(res->body.find("event: error"), std::string::npos) << res->body;
+  EXPECT_NE(res->body.find("is interactive: follow it with benchctl watch"), std::string::npos) << res->body;
+  EXPECT_EQ(WaitEnded(id)["run"]["status"], "DONE");
+}
+
+TEST_F(WebGatewayTest, CancelAndRerunGoThroughTheService) {
+  Json spec = Json::parse(SpecFile("standard/e3.json"));
+  spec["realtime"] = true;
+  spec["duration_s"] = 20;
+  const std::string id = Submit(spec.dump())["run_ids"][0];
+  auto viewer_cancel = http_->Post("/api/runs/" + id + "/cancel", Bearer(kViewerToken), "{}", "application/json");
+  ASSERT_TRUE(viewer_cancel);
+  EXPECT_EQ(viewer_cancel->status, 403);
+  auto cancel = http_->Post("/api/runs/" + id + "/cancel", Bearer(kOperatorToken), R"({"reason": "from the test"})",
+                            "application/json");
+  ASSERT_TRUE(cancel);
+  ASSERT_EQ(cancel->status, 200) << cancel->body;
+  const Json ended = WaitEnded(id);
+  EXPECT_EQ(ended["run"]["status"], "CANCELLED");
+  auto again = http_->Post("/api/runs/" + id + "/cancel", Bearer(kOperatorToken), "{}", "application/json");
+  ASSERT_TRUE(again);
+  EXPECT_EQ(again->status, 409) << again->body;  // FAILED_PRECONDITION: already finished
+  auto rerun = http_->Post("/api/runs/" + id + "/rerun", Bearer(kOperatorToken), "", "application/json");
+  ASSERT_TRUE(rerun);
+  ASSERT_EQ(rerun->status, 201) << rerun->body;
+  const std::string new_id = Json::parse(rerun->body)["run_ids"][0];
+  EXPECT_NE(new_id, id);
+  auto fresh = http_->Get("/api/runs/" + new_id, Bearer(kViewerToken));
+  ASSERT_TRUE(fresh);
+  EXPECT_EQ(Json::parse(fresh->body)["run"]["spec"], ended["run"]["spec"]);
+  http_->Post("/api/runs/" + new_id + "/cancel", Bearer(kOperatorToken), "{}", "application/json");
+  auto viewer_rerun = http_->Post("/api/runs/" + id + "/rerun", Bearer(kViewerToken), "", "application/json");
+  ASSERT_TRUE(viewer_rerun);
+  EXPECT_EQ(viewer_rerun->status, 403);
+}
+
+TEST_F(WebGatewayTest, TheCookieAuthorisesReadsOnlyNeverAChange) {
+  auto bad = http_->Post("/api/login", R"({"token": "nope"})", "application/json");
+  ASSERT_TRUE(bad);
+  EXPECT_EQ(bad->status, 401);
+  EXPECT_FALSE(bad->has_header("Set-Cookie"));
+  auto login = http_->Post("/api/login", std::string(R"({"token": ")") + kOperatorToken + "\"}", "application/json");
+  ASSERT_TRUE(login);
+  ASSERT_EQ(login->status, 200);
+  const std::string cookie = login->get_header_value("Set-Cookie");
+  EXPECT_NE(cookie.find("HttpOnly"), std::string::npos);
+  EXPECT_NE(cookie.find("SameSite=Strict"), std::string::npos);
+  const httplib::Headers with_cookie = {{"Cookie", std::string("vb_token=") + kOperatorToken}};
+  auto read = http_->Get("/api/benches", with_cookie);
+  ASSERT_TRUE(read);
+  EXPECT_EQ(read->status, 200);
+  auto write = http_->Post("/api/runs", with_cookie, R"({"spec": )" + SpecFile("standard/e3.json") + "}",
+                           "application/json");
+  ASSERT_TRUE(write);
+  EXPECT_EQ(write->status, 401);
+}
+
+TEST_F(WebGatewayTest, ListsCheckTheirParametersAndPassTheRestToTheService) {
+  auto nights = http_->Get("/api/nights?limit=5", Bearer(kViewerToken));
+  ASSERT_TRUE(nights);
+  EXPECT_EQ(nights->status, 200);
+  EXPECT_EQ(nights->body, "{}");  // no night has run: protobuf JSON leaves the empty list out
+  auto bad_limit = http_->Get("/api/nights?limit=-1", Bearer(kViewerToken));
+  ASSERT_TRUE(bad_limit);
+  EXPECT_EQ(bad_limit->status, 400);
+  auto bad_status = http_->Get("/api/runs?status=DONEISH", Bearer(kViewerToken));
+  ASSERT_TRUE(bad_status);
+  EXPECT_EQ(bad_status->status, 400);
+  EXPECT_EQ(Json::parse(bad_status->body)["message"].get<std::string>().rfind("status: unknown run status 'DONEISH'", 0),
+            0u);
+  const std::string id = Submit(SpecFile("standard/e3.json"))["run_ids"][0];
+  WaitEnded(id);
+  auto done = http_->Get("/api/runs?status=DONE&batch_id=1", Bearer(kViewerToken));
+  ASSERT_TRUE(done);
+  const Json runs = Json::parse(done->body)["runs"];
+  ASSERT_EQ(runs.size(), 1u);
+  EXPECT_EQ(runs[0]["id"], id);
+  auto other_batch = http_->Get("/api/runs?batch_id=2", Bearer(kViewerToken));
+  ASSERT_TRUE(other_batch);
+  EXPECT_EQ(other_batch->body, "{}");
+}
+
+TEST_F(WebGatewayTest, QueueListsRunningAndQueuedRunsInClaimOrder) {
+  Json spec = Json::parse(SpecFile("standard/e3.json"));
+  spec["realtime"] = true;
+  spec["duration_s"] = 20;
+  spec["bench"]["name"] = "emu-a";
+  std::vector<std::string> ids;
+  for (int k = 0; k < 3; ++k) ids.push_back(Submit(spec.dump())["run_ids"][0]);
+  Json q;
+  const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+  while (std::chrono::steady_clock::now() < until) {
+    auto res = http_->Get("/api/queue", Bearer(kViewerToken));
+    ASSERT_TRUE(res);
+    ASSERT_EQ(res->status, 200) << res->body;
+    q = Json::parse(res->body);
+    if (q["running"].size() == 1 && q["running"][0]["eta_s"].is_number()) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  ASSERT_EQ(q["running"].size(), 1u) << q.dump();
+  EXPECT_EQ(q["running"][0]["run"]["id"], ids[0]);
+  EXPECT_GT(q["running"][0]["eta_s"].get<double>(), 5.0);
+  ASSERT_EQ(q["queued"].size(), 2u);
+  EXPECT_EQ(q["queued"][0]["position"], 1);
+  EXPECT_EQ(q["queued"][0]["run"]["id"], ids[1]);
+  EXPECT_EQ(q["queued"][1]["run"]["id"], ids[2]);
+  for (const auto& id : ids) http_->Post("/api/runs/" + id + "/cancel", Bearer(kOperatorToken), "{}", "application/json");
+}
+
+}  // namespace
+
+namespace {
+
+// With the server's tls block, the dashboard is HTTPS with the same certificate (a client that trusts it gets
+// in, a plaintext one does not) and its cookie is Secure.
+TEST(WebTls, TheDashboardUsesTheServersCertificate) {
+  const std::string dir = ::testing::TempDir() + "/web-tls";
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  const std::string gen = "openssl req -x509 -newkey rsa:2048 -nodes -days 2 -subj /CN=localhost "
+                          "-addext subjectAltName=DNS:localhost,IP:127.0.0.1 -keyout " + dir + "/key.pem -out " +
+                          dir + "/cert.pem > /dev/null 2>&1";
+  ASSERT_EQ(std::system(gen.c_str()), 0) << "openssl is installed by scripts/setup.sh";
+  vb::testing::ServerProcess server(
+      dir, R"("tls": {"cert_file": "cert.pem", "key_file": "key.pem"}, "web": {"listen_address": "127.0.0.1:0"})");
+  ASSERT_FALSE(server.Start().empty()) << server.Log();
+  int port = 0;
+  const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+  while (port == 0 && std::chrono::steady_clock::now() < until) {
+    const std::string log = server.Log();
+    const std::string key = "web dashboard on https://127.0.0.1:";
+    if (const auto at = log.find(key); at != std::string::npos) port = std::stoi(log.substr(at + key.size()));
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  ASSERT_GT(port, 0) << server.Log();
+  httplib::SSLClient tls("127.0.0.1", port);
+  tls.set_ca_cert_path(dir + "/cert.pem");
+  tls.enable_server_certificate_verification(true);
+  auto benches = tls.Get("/api/benches", Bearer(kViewerToken));
+  ASSERT_TRUE(benches) << httplib::to_string(benches.error());
+  EXPECT_EQ(benches->status, 200);
+  auto login = tls.Post("/api/login", std::string(R"({"token": ")") + kViewerToken + "\"}", "application/json");
+  ASSERT_TRUE(login);
+  EXPECT_NE(login->get_header_value("Set-Cookie").find("; Secure"), std::string::npos);
+  httplib::Client plain("127.0.0.1", port);
+  plain.set_read_timeout(2, 0);
+  auto refused = plain.Get("/api/benches", Bearer(kViewerToken));
+  EXPECT_TRUE(!refused || refused->status != 200);
+}
+
+}  // namespace

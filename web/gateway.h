@@ -1,0 +1,78 @@
+// The web dashboard's HTTP server (docs/web.md): the embedded pages and a JSON/SSE gateway in front of a
+// BenchService channel. Every /api request becomes the matching BenchService RPC with the caller's token
+// forwarded as "authorization: Bearer <token>" metadata, so authentication, roles, validation (field-named
+// errors), admission and limits are the gRPC API's own: the gateway holds no rule of its own beyond the queue
+// view's ordering (docs/web.md "Queue").
+//
+// Routes (JSON bodies are protobuf JSON with the .proto field names):
+//   GET  /, /app.js, /app.css, /dygraph.min.js, /dygraph.min.css   the page (embedded)
+//   POST /api/login {"token"}        checks the token (ListBenches), sets the vb_token cookie (for SSE)
+//   POST /api/logout                 clears it
+//   GET  /api/benches                ListBenches
+//   GET  /api/queue                  running and queued runs, queue positions, ETA of running runs
+//   GET  /api/runs?status=&batch_id=&tag=&bench=&page_size=&page_token=   ListRuns
+//   POST /api/runs {"spec", "batch_name"}                                 SubmitRun
+//   GET  /api/runs/ID                GetRun, with the unit of each metric
+//   POST /api/runs/ID/cancel {"reason"}                                   CancelRun
+//   POST /api/runs/ID/rerun          GetRun + SubmitRun of its exact spec
+//   GET  /api/runs/ID/trace?t_from_s=&t_to_s=&max_points=                 GetTrace, min/max-decimated rows
+//   GET  /api/runs/ID/trace.csv      GetTrace, every sample (export)
+//   GET  /api/runs/ID/events?rate_Hz=                                     WatchRun as Server-Sent Events
+//   GET  /api/compare?runs=1,2,3 | ?batch_id=N                            CompareRuns, with units
+//   GET  /api/nights?limit=          ListNights
+// Tokens: "Authorization: Bearer <token>" on any request; the vb_token cookie (HttpOnly, SameSite=Strict) only
+// on GET requests (EventSource cannot send headers; a cookie never authorises a change: docs/web.md "Auth").
+// Errors: {"code": "INVALID_ARGUMENT", "message": "..."} with the HTTP status of HttpStatusFor(code).
+#pragma once
+
+#include <grpcpp/grpcpp.h>
+
+#include <memory>
+#include <string>
+#include <thread>
+
+#include "common/status.h"
+
+namespace httplib {
+class Server;
+}
+
+namespace vb::web {
+
+struct GatewayOptions {
+  std::string listen_address;   // "host:port"; port 0 = any free port
+  std::string tls_cert_pem;     // both set = HTTPS (the gRPC server's certificate and key)
+  std::string tls_key_pem;
+  int threads = 32;             // HTTP worker threads; each open live view (SSE) holds one
+  double watch_window_s = 60.0; // an SSE stream ends after this long; the browser reconnects (docs/web.md "SSE")
+};
+
+// The HTTP status for a gRPC status code (UNAUTHENTICATED 401, PERMISSION_DENIED 403, INVALID_ARGUMENT 400,
+// NOT_FOUND 404, FAILED_PRECONDITION 409, RESOURCE_EXHAUSTED 429, UNAVAILABLE 503, ...).
+int HttpStatusFor(grpc::StatusCode code);
+
+class Gateway {
+ public:
+  // Binds and starts serving on a thread of its own. `channel` reaches the BenchService (in the server: its
+  // in-process channel). Unavailable when the address cannot be bound, InvalidArgument for a bad address or
+  // TLS material.
+  static StatusOr<std::unique_ptr<Gateway>> Start(const GatewayOptions& options, std::shared_ptr<grpc::Channel> channel);
+  ~Gateway();
+  Gateway(const Gateway&) = delete;
+  Gateway& operator=(const Gateway&) = delete;
+
+  int port() const { return port_; }
+  bool tls() const { return tls_; }
+  // Stops accepting and waits for the serving thread (open SSE streams end with their window).
+  void Stop();
+
+ private:
+  Gateway() = default;
+  std::unique_ptr<httplib::Server> http_;
+  std::shared_ptr<void> routes_;  // the handlers' state (gateway.cc)
+  std::thread thread_;
+  int port_ = 0;
+  bool tls_ = false;
+};
+
+}  // namespace vb::web

@@ -1,0 +1,628 @@
+// valvebench web dashboard (docs/web.md). A page of hash routes over the server's /api gateway, which is the
+// BenchService itself: this file holds no rule (validation, roles, limits are the server's answers).
+'use strict';
+
+const TOKEN_KEY = 'valvebench.token';
+const $ = (sel, root) => (root || document).querySelector(sel);
+let cleanups = [];  // run when the route changes: timers, EventSources, charts
+
+function el(tag, attrs, ...children) {
+  const e = document.createElement(tag);
+  for (const [k, v] of Object.entries(attrs || {})) {
+    if (v === undefined || v === null || v === false) continue;
+    if (k.startsWith('on')) e.addEventListener(k.slice(2), v);
+    else if (k === 'text') e.textContent = v;
+    else e.setAttribute(k, v === true ? '' : v);
+  }
+  for (const c of children.flat(Infinity)) if (c !== null && c !== undefined) e.append(c instanceof Node ? c : String(c));
+  return e;
+}
+
+// A number from protobuf JSON, which writes NaN and infinities as strings ("NaN"): null (a gap) for those.
+function num(v) { return typeof v === 'number' && isFinite(v) ? v : null; }
+
+function fmt(v, digits) {
+  if (v === null || v === undefined || v === '' || (typeof v === 'number' && !isFinite(v))) return '–';
+  const x = Number(v);
+  if (Number.isInteger(x) && Math.abs(x) < 1e9) return String(x);
+  return String(parseFloat(x.toPrecision(digits || 4)));
+}
+function when(unix_s) {
+  if (!unix_s) return '–';
+  return new Date(unix_s * 1000).toISOString().replace('T', ' ').replace(/\.\d+Z$/, ' UTC');
+}
+function duration(s) {
+  if (s === null || s === undefined || !isFinite(s)) return '–';
+  if (s < 60) return s.toFixed(1) + ' s';
+  if (s < 3600) return Math.floor(s / 60) + ' min ' + Math.round(s % 60) + ' s';
+  return (s / 3600).toFixed(1) + ' h';
+}
+function statusCell(s) { return el('span', {class: 'status-' + s, text: s}); }
+function runLink(id, text) { return el('a', {href: '#/run/' + id, text: text || ('#' + id)}); }
+
+// ---- session: the token in sessionStorage, sent as a bearer header; /api/login sets the cookie SSE needs.
+function token() { return sessionStorage.getItem(TOKEN_KEY) || ''; }
+
+class ApiError extends Error {
+  constructor(status, code, message) { super(message); this.status = status; this.code = code; }
+}
+
+async function api(method, path, body) {
+  const opts = {method, headers: {}};
+  if (token()) opts.headers['Authorization'] = 'Bearer ' + token();
+  if (body !== undefined) {
+    opts.headers['Content-Type'] = 'application/json';
+    opts.body = JSON.stringify(body);
+  }
+  const res = await fetch(path, opts);
+  const text = await res.text();
+  let data = null;
+  try { data = text ? JSON.parse(text) : null; } catch (e) { data = null; }
+  if (!res.ok) {
+    const code = data && data.code ? data.code : 'HTTP_' + res.status;
+    const message = data && data.message ? data.message : text || res.statusText;
+    throw new ApiError(res.status, code, message);
+  }
+  return data;
+}
+
+function flash(message, ok) {
+  const f = $('#flash');
+  f.textContent = message;
+  f.className = ok ? 'ok' : '';
+  f.hidden = !message;
+}
+function errorText(e) { return e instanceof ApiError ? e.code + ': ' + e.message : String(e); }
+function showError(e, where) {
+  const text = errorText(e);
+  if (where) where.replaceChildren(el('p', {class: 'error', text}));
+  else flash(text);
+  if (e instanceof ApiError && e.status === 401) showLoggedOut();
+}
+
+async function login(t) {
+  sessionStorage.setItem(TOKEN_KEY, t);
+  try {
+    await api('POST', '/api/login', {token: t});
+  } catch (e) {
+    sessionStorage.removeItem(TOKEN_KEY);
+    showLoggedOut();
+    flash(errorText(e));
+    return false;
+  }
+  showLoggedIn();
+  flash('');
+  return true;
+}
+function showLoggedIn() { $('#login').hidden = true; $('#session').hidden = false; }
+function showLoggedOut() { $('#login').hidden = false; $('#session').hidden = true; }
+
+// ---- charts (dygraphs, Debian's libjs-dygraphs, embedded in the server)
+// The gate's axis: 0 and 1, nothing between.
+const GATE_AXIS = {valueRange: [-0.05, 1.3], ticker: () => [{v: 0, label: '0'}, {v: 1, label: '1'}]};
+
+// A page left while its data was on the way draws nothing (its divs are no longer in the document).
+const DETACHED = {updateOptions() {}, destroy() {}};
+function chart(div, rows, labels, opts) {
+  if (!div.isConnected) return DETACHED;
+  const g = new Dygraph(div, rows.length ? rows : [[0].concat(labels.slice(1).map(() => null))], Object.assign({
+    labels, legend: 'always', labelsSeparateLines: false, connectSeparatedPoints: false,
+    xlabel: 't [s]', animatedZooms: false, labelsKMB: false, digitsAfterDecimal: 4,
+  }, opts || {}));
+  cleanups.push(() => g.destroy());
+  return g;
+}
+
+// Rows [t, a, b, ...] of several runs merged on one time axis (nulls where a run has no sample).
+function mergeSeries(series) {
+  const map = new Map();
+  series.forEach((s, k) => {
+    for (const [t, v] of s) {
+      let row = map.get(t);
+      if (!row) { row = new Array(series.length + 1).fill(null); row[0] = t; map.set(t, row); }
+      row[k + 1] = v;
+    }
+  });
+  return Array.from(map.values()).sort((a, b) => a[0] - b[0]);
+}
+
+// ---- routes
+const routes = [
+  [/^\/?$/, pageLab],
+  [/^\/runs$/, pageRuns],
+  [/^\/run\/(\d+)$/, pageRun],
+  [/^\/submit$/, pageSubmit],
+  [/^\/compare$/, pageCompare],
+  [/^\/nights$/, pageNights],
+  [/^\/diagnosis$/, pageDiagnosis],
+];
+
+function route() {
+  for (const c of cleanups) { try { c(); } catch (e) { /* already gone */ } }
+  cleanups = [];
+  flash('');
+  const hash = location.hash.replace(/^#/, '') || '/';
+  const [path, query] = hash.split('?');
+  const params = new URLSearchParams(query || '');
+  for (const a of document.querySelectorAll('#nav a'))
+    a.classList.toggle('active', a.getAttribute('href') === '#' + (path === '' ? '/' : path));
+  const main = $('#main');
+  if (!token()) { main.replaceChildren(el('p', {text: 'Enter a token (viewer, operator or admin) to follow the lab.'})); return; }
+  for (const [re, fn] of routes) {
+    const m = path.match(re);
+    if (m) { fn(main, m, params); return; }
+  }
+  main.replaceChildren(el('p', {class: 'error', text: 'No such page: ' + hash}));
+}
+
+function every(ms, fn) {
+  let stopped = false, timer = null;
+  const tick = async () => {
+    if (stopped) return;
+    try { await fn(); } catch (e) { showError(e); }
+    if (!stopped) timer = setTimeout(tick, ms);
+  };
+  cleanups.push(() => { stopped = true; clearTimeout(timer); });
+  tick();
+}
+
+// ---- live traces: WatchRun through Server-Sent Events
+function liveView(runId, box, onEnd) {
+  const counter = el('span', {class: 'muted live-count', text: '0 samples'});
+  const status = el('span', {class: 'live-status', text: '…'});
+  const cur = el('div', {class: 'chart-small'}), pos = el('div', {class: 'chart-small'});
+  box.append(el('div', {class: 'actions'}, 'status ', status, ' · ', counter), el('div', {class: 'charts'}, cur, pos));
+  const rowsI = [], rowsX = [];
+  const gI = chart(cur, [], ['t [s]', 'i_A', 'ref', 'gate'], {ylabel: 'A', series: {gate: {axis: 'y2', stepPlot: true}},
+    axes: {y2: GATE_AXIS}, y2label: 'gate'});
+  const gX = chart(pos, [], ['t [s]', 'x_m'], {ylabel: 'm'});
+  let dirty = false, n = 0, lastT = -Infinity;
+  const timer = setInterval(() => {
+    if (!dirty) return;
+    dirty = false;
+    gI.updateOptions({file: rowsI});
+    gX.updateOptions({file: rowsX});
+  }, 250);
+  const es = new EventSource('/api/runs/' + runId + '/events?rate_Hz=200');
+  const MAX = 20000;
+  es.addEventListener('run', (ev) => {
+    const e = JSON.parse(ev.data);
+    status.replaceChildren(statusCell(e.status), ' ' + Math.round(100 * (e.progress || 0)) + ' %');
+    for (const s of e.samples || []) {
+      if (s.t_s <= lastT) continue;  // a reconnected stream starts over from the run's buffer
+      lastT = s.t_s;
+      // proto3 JSON leaves out zeros: a missing field is 0; NaN (no reference) arrives as "NaN".
+      rowsI.push([s.t_s, s.i_A === undefined ? 0 : num(s.i_A), s.ref === undefined ? 0 : num(s.ref), s.gate || 0]);
+      rowsX.push([s.t_s, s.x_m === undefined ? 0 : num(s.x_m)]);
+      n++;
+    }
+    if (rowsI.length > MAX) { rowsI.splice(0, rowsI.length - MAX); rowsX.splice(0, rowsX.length - MAX); }
+    counter.textContent = n + ' samples';
+    counter.dataset.samples = String(n);
+    dirty = true;
+  });
+  es.addEventListener('end', (ev) => {
+    es.close();
+    const e = JSON.parse(ev.data);
+    status.replaceChildren(statusCell(e.status));
+    if (onEnd) onEnd(e.status);
+  });
+  es.addEventListener('error', (ev) => {
+    if (ev.data) { es.close(); status.replaceChildren(el('span', {class: 'error', text: JSON.parse(ev.data).message})); }
+  });
+  cleanups.push(() => { es.close(); clearInterval(timer); });
+}
+
+async function cancelRun(id) {
+  try {
+    const r = await api('POST', '/api/runs/' + id + '/cancel', {reason: 'cancelled from the web dashboard'});
+    flash('run ' + id + ': ' + r.status, true);
+  } catch (e) { showError(e); }
+}
+async function rerun(id) {
+  try {
+    const r = await api('POST', '/api/runs/' + id + '/rerun');
+    flash('re-run of run ' + id + ' queued as run ' + r.run_ids.join(', ') + ' (batch ' + r.batch_id + ')', true);
+    location.hash = '#/run/' + r.run_ids[0];
+  } catch (e) { showError(e); }
+}
+
+// ---- Lab: benches, queue, live runs
+// The interlocks beyond the current limit (0 or absent = off; docs/server.md "safety").
+function hz(v) {
+  if (!v) return '–';
+  return v >= 1e6 ? fmt(v / 1e6) + ' MHz' : v >= 1e3 ? fmt(v / 1e3) + ' kHz' : fmt(v) + ' Hz';
+}
+function interlocks(b) {
+  const out = [];
+  if (b.max_duty !== undefined && b.max_duty < 1) out.push('duty ≤ ' + fmt(b.max_duty));
+  if (b.max_on_time_s) out.push('on ≤ ' + fmt(b.max_on_time_s) + ' s');
+  if (b.max_coil_temp_C) out.push('coil ≤ ' + fmt(b.max_coil_temp_C) + ' °C');
+  return out.join(', ') || '–';
+}
+const MAX_LIVE = 4;
+function pageLab(main) {
+  const benches = el('div', {class: 'scroll'}), queue = el('div', {class: 'scroll'}), live = el('div');
+  main.replaceChildren(el('h1', {text: 'Lab'}),
+    el('section', {id: 'benches'}, el('h2', {text: 'Benches'}), benches),
+    el('section', {id: 'queue'}, el('h2', {text: 'Queue'}), queue),
+    el('section', {id: 'live'}, el('h2', {text: 'Running now'}), live));
+  const watching = new Map();
+  every(1500, async () => {
+    const [b, q] = await Promise.all([api('GET', '/api/benches'), api('GET', '/api/queue')]);
+    const runName = new Map(q.running.map((r) => [String(r.run.id), r.run.name]));
+    benches.replaceChildren(el('table', {},
+      el('tr', {}, ['bench', 'kind', 'model', 'driver', 'state', 'max supply [V]', 'trips at [A]', 'interlocks',
+        'max carrier / sample / control rate', 'position'].map((h) => el('th', {text: h}))),
+      (b.benches || []).map((x) => el('tr', {},
+        el('td', {text: x.name}), el('td', {text: x.kind}), el('td', {text: x.model || '–'}), el('td', {text: x.driver}),
+        el('td', {}, x.busy ? ['running ', runLink(x.current_run_id), ' ', runName.get(String(x.current_run_id)) || '']
+          : 'idle'),
+        el('td', {class: 'num', text: fmt(x.max_supply_V)}), el('td', {class: 'num', text: fmt(x.max_current_A)}),
+        el('td', {text: interlocks(x)}),
+        el('td', {text: [x.max_carrier_Hz, x.max_sample_rate_Hz, x.max_control_rate_Hz].map(hz).join(' / ')}),
+        el('td', {text: x.measures_position ? 'measured' : 'none'})))));
+    const rows = [];
+    for (const r of q.running) rows.push(['running', r.run, duration(r.eta_s)]);
+    for (const r of q.queued) rows.push([String(r.position), r.run, 'after ' + (r.position - 1 + q.running.length) + ' run(s)']);
+    queue.replaceChildren(rows.length === 0 ? el('p', {class: 'muted', text: 'Nothing queued or running.'}) :
+      el('table', {},
+        el('tr', {}, ['position', 'run', 'name', 'status', 'progress', 'ETA', 'bench', 'priority', 'submitter', 'submitted', '']
+          .map((h) => el('th', {text: h}))),
+        rows.map(([p, r, eta]) => el('tr', {'data-run': r.id},
+          el('td', {text: p}), el('td', {}, runLink(r.id)), el('td', {text: r.name}), el('td', {}, statusCell(r.status)),
+          el('td', {class: 'num', text: Math.round(100 * (r.progress || 0)) + ' %'}), el('td', {text: eta}),
+          el('td', {text: r.bench || 'any'}), el('td', {class: 'num', text: String(r.priority || 0)}),
+          el('td', {text: r.submitter}), el('td', {text: when(r.submitted_unix_s)}),
+          el('td', {}, el('button', {class: 'danger cancel', onclick: () => cancelRun(r.id), text: 'Cancel'}))))));
+    const ids = new Set(q.running.map((r) => String(r.run.id)));
+    for (const r of q.running) {
+      const id = String(r.run.id);
+      if (watching.has(id)) continue;
+      // A browser keeps about 6 connections per server over HTTP/1.1, and each live view holds one: at most
+      // MAX_LIVE here, the rest are a click away (their run page streams them).
+      const open = Array.from(watching.values()).filter((b) => !b.dataset.ended).length;
+      if (open >= MAX_LIVE) {
+        if (!live.querySelector('p.more')) live.append(el('p', {class: 'muted more', text: 'More runs are running: open them from the queue to watch them live.'}));
+        continue;
+      }
+      const box = el('div', {class: 'live-run', 'data-run': id},
+        el('h2', {}, runLink(id, 'Run ' + id), ' ', r.run.name, ' on ', r.run.bench || '?'));
+      live.append(box);
+      watching.set(id, box);
+      liveView(id, box);
+    }
+    for (const [id, box] of watching) {
+      if (ids.has(id) || box.dataset.ended) continue;
+      box.dataset.ended = '1';
+      box.append(el('p', {class: 'muted', text: 'finished: see the run page'}));
+      setTimeout(() => { box.remove(); watching.delete(id); }, 15000);
+    }
+    if (watching.size === 0 && !live.querySelector('p.muted.none'))
+      live.replaceChildren(el('p', {class: 'muted none', text: 'No run is running.'}));
+    else if (watching.size > 0) { const p = live.querySelector('p.none'); if (p) p.remove(); }
+  });
+}
+
+// ---- Runs: a filtered list, selection for comparison
+async function pageRuns(main, m, params) {
+  const batch = params.get('batch') || '', status = params.get('status') || '', tag = params.get('tag') || '';
+  const name = params.get('name') || '';  // a suite case (RunKey.name), e.g. from the Nights page
+  const form = el('form', {class: 'actions', onsubmit: (ev) => {
+    ev.preventDefault();
+    const q = new URLSearchParams();
+    for (const k of ['batch', 'status', 'tag', 'name']) { const v = $('#f-' + k).value.trim(); if (v) q.set(k, v); }
+    location.hash = '#/runs?' + q.toString();
+  }},
+  'batch ', el('input', {id: 'f-batch', type: 'text', size: 6, value: batch}),
+  ' status ', el('select', {id: 'f-status'}, ['', 'QUEUED', 'RUNNING', 'DONE', 'FAILED', 'CANCELLED', 'INTERRUPTED']
+    .map((s) => el('option', {value: s, selected: s === status, text: s || 'any'}))),
+  ' tag ', el('input', {id: 'f-tag', type: 'text', size: 12, value: tag}),
+  ' case ', el('input', {id: 'f-name', type: 'text', size: 16, value: name}),
+  el('button', {type: 'submit', text: 'Filter'}));
+  const table = el('div', {class: 'scroll'});
+  const compare = el('button', {class: 'primary', id: 'compare-selected', text: 'Compare selected', onclick: () => {
+    const ids = Array.from(main.querySelectorAll('input.pick:checked')).map((c) => c.value);
+    if (ids.length) location.hash = '#/compare?runs=' + ids.join(',');
+  }});
+  main.replaceChildren(el('h1', {text: 'Runs'}), el('section', {}, form, el('div', {class: 'actions'}, compare,
+    batch ? el('a', {href: '#/compare?batch=' + batch, text: 'compare batch ' + batch}) : null), table));
+  const q = new URLSearchParams({page_size: '200'});
+  if (batch) q.set('batch_id', batch);
+  if (status) q.set('status', status);
+  if (tag) q.set('tag', tag);
+  try {
+    let data = await api('GET', '/api/runs?' + q.toString());
+    let runs = data.runs || [];
+    while (data.next_page_token && runs.length < 2000) {
+      q.set('page_token', data.next_page_token);
+      data = await api('GET', '/api/runs?' + q.toString());
+      runs = runs.concat(data.runs || []);
+    }
+    runs.reverse();  // newest first
+    if (name) runs = runs.filter((r) => (r.key || {}).name === name);
+    table.replaceChildren(runs.length === 0 ? el('p', {class: 'muted', text: 'No runs match.'}) : el('table', {id: 'runs'},
+      el('tr', {}, ['', 'run', 'batch', 'name', 'controller', 'status', 'bench', 'submitter', 'submitted', 'rmse', 'effort_l2']
+        .map((h) => el('th', {text: h}))),
+      runs.map((r) => el('tr', {},
+        el('td', {}, el('input', {type: 'checkbox', class: 'pick', value: r.id})),
+        el('td', {}, runLink(r.id)), el('td', {}, el('a', {href: '#/runs?batch=' + r.batch_id, text: r.batch_id})),
+        el('td', {text: r.name}), el('td', {text: r.controller}), el('td', {}, statusCell(r.status)),
+        el('td', {text: r.bench}), el('td', {text: r.submitter}), el('td', {text: when(r.submitted_unix_s)}),
+        el('td', {class: 'num', text: fmt((r.metrics || {}).rmse)}),
+        el('td', {class: 'num', text: fmt((r.metrics || {}).effort_l2)})))));
+  } catch (e) { showError(e, table); }
+}
+
+// ---- Run page: spec, conditions, history, metrics with units, traces with zoom, export links, live view
+async function pageRun(main, m) {
+  const id = m[1];
+  main.replaceChildren(el('h1', {text: 'Run ' + id}), el('p', {class: 'muted', text: 'loading…'}));
+  let data;
+  try { data = await api('GET', '/api/runs/' + id); } catch (e) { showError(e, main); return; }
+  const r = data.run, units = data.metric_units || {}, cu = data.channel_units || {};
+  const ended = !['QUEUED', 'RUNNING'].includes(r.status);
+  const actions = el('div', {class: 'actions'},
+    ended ? null : el('button', {class: 'danger', id: 'cancel', onclick: () => cancelRun(id).then(() => route()), text: 'Cancel'}),
+    el('button', {id: 'rerun', onclick: () => rerun(id), text: 'Re-run'}),
+    ended ? el('a', {href: '/api/runs/' + id + '/trace.csv', id: 'export-csv', text: 'trace CSV'}) : null,
+    el('a', {href: '/api/runs/' + id, id: 'export-json', text: 'run JSON'}),
+    el('a', {href: '#/compare?runs=' + id, text: 'compare'}),
+    el('a', {href: '#/runs?batch=' + r.batch_id, text: 'batch ' + r.batch_id}));
+  const c = (r.spec && r.spec.conditions) || {};
+  const kv = el('div', {class: 'kv'});
+  for (const [k, v] of [['name', r.name], ['status', statusCell(r.status)], ['reason', r.reason || '–'],
+    ['controller', r.controller], ['bench', r.bench || 'any'], ['submitter', r.submitter],
+    ['priority', String(r.priority || 0)], ['tags', (r.tags || []).join(', ') || '–'],
+    ['conditions.supply_V', fmt(c.supply_V) + ' V'], ['conditions.supply_pressure_Pa', fmt(c.supply_pressure_Pa || 0) + ' Pa'],
+    ['duration_s', fmt(r.spec && r.spec.duration_s) + ' s'], ['submitted', when(r.submitted_unix_s)],
+    ['started', when(r.started_unix_s)], ['finished', when(r.finished_unix_s)],
+    ['progress', Math.round(100 * (r.progress || 0)) + ' %']]) kv.append(el('div', {text: k}), el('div', {}, v));
+  const history = el('table', {}, el('tr', {}, ['time', 'status', 'reason'].map((h) => el('th', {text: h}))),
+    (r.history || []).map((h) => el('tr', {}, el('td', {text: when(h.at_unix_s)}), el('td', {}, statusCell(h.status)),
+      el('td', {text: h.reason || ''}))));
+  const metricNames = Object.keys(r.metrics || {}).sort();
+  const metrics = metricNames.length === 0 ? el('p', {class: 'muted', text: 'No metrics (yet).'}) :
+    el('table', {id: 'metrics'}, el('tr', {}, ['metric', 'value', 'unit'].map((h) => el('th', {text: h}))),
+      metricNames.map((k) => el('tr', {}, el('td', {text: k}), el('td', {class: 'num', text: fmt(r.metrics[k], 6)}),
+        el('td', {text: units[k] || ''}))));
+  const traces = el('section', {id: 'traces'}, el('h2', {text: 'Traces'}));
+  main.replaceChildren(el('h1', {}, 'Run ' + id + ' ', statusCell(r.status)), actions,
+    el('div', {class: 'grid2'},
+      el('section', {}, el('h2', {text: 'Run'}), kv),
+      el('section', {}, el('h2', {text: 'History'}), el('div', {class: 'scroll'}, history),
+        el('h2', {text: 'Metrics'}), el('div', {class: 'scroll'}, metrics))),
+    traces,
+    el('section', {}, el('h2', {text: 'Spec (exact, single run)'}), el('pre', {text: JSON.stringify(r.spec, null, 2)})));
+  if (!ended) {
+    liveView(id, traces, () => setTimeout(route, 300));
+    return;
+  }
+  await traceCharts(id, traces, cu);
+}
+
+// The recorded trace, min/max-decimated by the server to ~4000 rows; zooming refetches the visible window at
+// full resolution (double-click: back to the whole run).
+async function traceCharts(id, box, cu) {
+  const note = el('p', {class: 'muted', text: 'loading trace…'});
+  box.append(note);
+  let t;
+  try { t = await api('GET', '/api/runs/' + id + '/trace?max_points=4000'); } catch (e) { showError(e, note); return; }
+  const col = (name) => t.channels.indexOf(name);
+  const groups = [
+    [['i_A', 'ref'], (cu.ref === 'A' || !cu.ref) ? 'A' : 'A (ref: ' + cu.ref + ')'],
+    [['x_m'].concat(cu.ref === 'm' ? ['ref'] : []), 'm'],
+    [['gate', 'v_coil_V'], 'V'],
+  ];
+  note.textContent = t.total_samples + ' samples at ' + fmt(1 / t.sample_period_s) + ' Hz' +
+    (t.decimated ? ' (shown as a min/max envelope; drag to zoom for every sample, double-click to reset)' : '');
+  const graphs = [];
+  let syncing = false;
+  for (const [names, unit] of groups) {
+    const present = names.filter((n) => col(n) >= 0 && !(n === 'ref' && unit === 'A' && cu.ref === 'm'));
+    if (present.length === 0) continue;
+    const pick = (rows) => rows.map((row) => [row[0]].concat(present.map((n) => row[col(n) + 1])));
+    const div = el('div', {class: 'chart trace-chart'});
+    box.append(div);
+    const withGate = present.includes('gate') && present.length > 1;
+    const g = chart(div, pick(t.rows), ['t [s]'].concat(present), {ylabel: unit,
+      series: withGate ? {gate: {stepPlot: true, axis: 'y2'}} : {},
+      axes: withGate ? {y2: GATE_AXIS} : {}, y2label: withGate ? 'gate' : undefined,
+      zoomCallback: async (lo, hi) => {
+        if (syncing) return;
+        syncing = true;
+        for (const o of graphs) if (o.g !== g) o.g.updateOptions({dateWindow: [lo, hi]});
+        syncing = false;
+        const full = lo <= t.rows[0][0] && hi >= t.rows[t.rows.length - 1][0];
+        try {
+          const w = full ? t : await api('GET', '/api/runs/' + id + '/trace?max_points=4000&t_from_s=' + lo + '&t_to_s=' + hi);
+          for (const o of graphs) o.g.updateOptions({file: o.pick(w.rows), dateWindow: full ? null : [lo, hi]});
+        } catch (e) { showError(e); }
+      }});
+    graphs.push({g, pick});
+  }
+}
+
+// ---- Submit: a spec as JSON; the server's validation answers (field-named errors)
+const EXAMPLE_SPEC = {
+  name: 'web-pi-current',
+  description: 'PI current control at 0.5 A on seed 000\'s valve, submitted from the web dashboard',
+  bench: {model: {preset: 'taghizadeh2009'}, driver: {kind: 'low_side_flyback'}},
+  conditions: {supply_V: 24.0, supply_pressure_Pa: 400000.0},
+  reference: {on_off_profile: {switching_value: 0.9, switching_time_s: 0.006, holding_value: 0.5}},
+  controller: {pi_current: {}},
+  duration_s: 0.1,
+  metric_window: {start_s: 0.02, end_s: 0.1},
+  recording: {rate_Hz: 50000.0},
+};
+function pageSubmit(main) {
+  const text = el('textarea', {id: 'spec', spellcheck: 'false'});
+  text.value = sessionStorage.getItem('valvebench.draft') || JSON.stringify(EXAMPLE_SPEC, null, 2);
+  const batch = el('input', {id: 'batch-name', type: 'text', size: 30, placeholder: 'batch name (default: the spec name)'});
+  const out = el('div', {id: 'submit-result'});
+  const submit = async (ev) => {
+    ev.preventDefault();
+    sessionStorage.setItem('valvebench.draft', text.value);
+    let spec;
+    try { spec = JSON.parse(text.value); } catch (e) {
+      out.replaceChildren(el('p', {class: 'error', text: 'spec: not JSON: ' + e.message})); return;
+    }
+    const body = {spec};
+    if (batch.value.trim()) body.batch_name = batch.value.trim();
+    try {
+      const r = await api('POST', '/api/runs', body);
+      out.replaceChildren(el('p', {class: 'ok'}, 'Queued batch ', el('a', {href: '#/runs?batch=' + r.batch_id, text: r.batch_id}),
+        ': runs ', r.run_ids.map((id, k) => [k ? ', ' : '', runLink(id)])));
+    } catch (e) { out.replaceChildren(el('p', {class: 'error', text: errorText(e)})); }
+  };
+  main.replaceChildren(el('h1', {text: 'Submit a spec'}),
+    el('section', {}, el('p', {class: 'muted'}, 'An experiment spec as protobuf JSON (docs/spec.md); variants, sweep ' +
+      'axes and repeats expand into a batch. The server validates it and names the field it refuses.'),
+    el('form', {onsubmit: submit}, text, el('div', {class: 'actions'}, batch,
+      el('button', {class: 'primary', id: 'submit', type: 'submit', text: 'Submit'}))), out));
+}
+
+// ---- Compare: overlays on shared axes, error traces, RMSE/effort scatter with the Pareto front
+async function pageCompare(main, m, params) {
+  const input = el('input', {id: 'compare-runs', type: 'text', size: 30, placeholder: 'run ids, e.g. 1,2,3',
+    value: params.get('runs') || ''});
+  const form = el('form', {class: 'actions', onsubmit: (ev) => {
+    ev.preventDefault();
+    location.hash = '#/compare?runs=' + input.value.replace(/\s+/g, '');
+  }}, 'runs ', input, el('button', {type: 'submit', text: 'Compare'}), el('span', {class: 'muted', text: 'or pick runs on the Runs page'}));
+  const body = el('div');
+  main.replaceChildren(el('h1', {text: 'Compare'}), el('section', {}, form), body);
+  const q = params.get('batch') ? 'batch_id=' + encodeURIComponent(params.get('batch'))
+    : params.get('runs') ? 'runs=' + encodeURIComponent(params.get('runs')) : null;
+  if (!q) return;
+  let cmp, ids;
+  try {
+    cmp = await api('GET', '/api/compare?' + q);
+    if (params.get('batch')) {
+      const l = await api('GET', '/api/runs?page_size=50&batch_id=' + encodeURIComponent(params.get('batch')));
+      ids = (l.runs || []).map((r) => String(r.id));
+    } else ids = params.get('runs').split(',');
+  } catch (e) { showError(e, body); return; }
+  const c = cmp.comparison, units = cmp.units || {};
+  const cols = c.columns || [];
+  const table = el('table', {id: 'comparison'},
+    el('tr', {}, el('th', {text: 'rank'}), el('th', {text: 'name'}), el('th', {text: 'controller'}), el('th', {text: 'runs'}),
+      el('th', {text: 'Pareto'}), cols.map((k) => el('th', {class: 'num', text: k + (units[k] ? ' [' + units[k] + ']' : '')}))),
+    (c.rows || []).map((r) => el('tr', {}, el('td', {text: r.rank || '–'}), el('td', {text: r.name}),
+      el('td', {text: r.controller}), el('td', {text: (r.runs || 0) + (r.failed ? ' (' + r.failed + ' failed)' : '')}),
+      el('td', {text: r.pareto ? 'yes' : ''}),
+      cols.map((k) => { const s = (r.metrics || {})[k]; return el('td', {class: 'num', text: s ? fmt(s.mean) + (s.n > 1 ? ' ± ' + fmt(s.spread, 2) : '') : '–'}); }))));
+  const scatter = el('div', {class: 'chart', id: 'pareto'});
+  const overI = el('div', {class: 'chart', id: 'overlay-current'});
+  const overX = el('div', {class: 'chart', id: 'overlay-position'});
+  const errs = el('div', {class: 'chart', id: 'overlay-error'});
+  body.append(el('section', {}, el('h2', {text: 'Metrics (rank by ' + (c.rank_metric || 'rmse') + ')'}), el('div', {class: 'scroll'}, table)),
+    el('section', {}, el('h2', {text: c.rank_metric + ' vs ' + c.effort_metric + ' (Pareto front joined)'}), scatter),
+    el('section', {}, el('h2', {text: 'Overlays on shared axes'}), overI, overX),
+    el('section', {}, el('h2', {text: 'Tracking error (controlled variable − reference)'}), errs));
+  // Scatter: one series per row; the front as a line through the Pareto rows.
+  const pts = (c.rows || []).map((r) => ({name: r.name, x: num(((r.metrics || {})[c.effort_metric] || {}).mean),
+    y: num(((r.metrics || {})[c.rank_metric] || {}).mean), pareto: r.pareto})).filter((p) => p.x !== null && p.y !== null);
+  if (pts.length) {
+    const names = pts.map((p) => p.name);
+    const rows = pts.map((p, k) => { const row = [p.x].concat(new Array(pts.length + 1).fill(null)); row[k + 1] = p.y; return row; });
+    const front = pts.filter((p) => p.pareto).sort((a, b) => a.x - b.x);
+    for (const p of front) { const row = [p.x].concat(new Array(pts.length + 1).fill(null)); row[pts.length + 1] = p.y; rows.push(row); }
+    rows.sort((a, b) => a[0] - b[0]);
+    const series = {'Pareto front': {drawPoints: false, strokeWidth: 1.5, connectSeparatedPoints: true}};
+    for (const n of names) series[n] = {strokeWidth: 0, drawPoints: true, pointSize: 5};
+    chart(scatter, rows, [c.effort_metric].concat(names, ['Pareto front']), {xlabel: c.effort_metric + ' [' + (units[c.effort_metric] || '') + ']',
+      ylabel: c.rank_metric + ' [' + (units[c.rank_metric] || '') + ']', series, drawPoints: true, strokeWidth: 0,
+      connectSeparatedPoints: false, legend: 'follow', labelsSeparateLines: true});
+  } else scatter.replaceChildren(el('p', {class: 'muted', text: 'No run has both metrics.'}));
+  // Overlays: each run's trace (decimated), merged on one time axis.
+  const shown = ids.slice(0, 12);
+  try {
+    const traces = await Promise.all(shown.map((id) => Promise.all([api('GET', '/api/runs/' + id),
+      api('GET', '/api/runs/' + id + '/trace?max_points=3000')])));
+    const labels = shown.map((id, k) => '#' + id + ' ' + traces[k][0].run.name);
+    const series = (name) => traces.map(([, t]) => { const j = t.channels.indexOf(name); return j < 0 ? [] : t.rows.map((r) => [r[0], r[j + 1]]); });
+    chart(overI, mergeSeries(series('i_A')), ['t [s]'].concat(labels), {ylabel: 'i_A [A]'});
+    chart(overX, mergeSeries(series('x_m')), ['t [s]'].concat(labels), {ylabel: 'x_m [m]'});
+    const err = traces.map(([run, t]) => {
+      const refUnit = (run.channel_units || {}).ref;
+      const y = t.channels.indexOf(refUnit === 'm' ? 'x_m' : 'i_A'), ref = t.channels.indexOf('ref');
+      if (!refUnit || y < 0 || ref < 0) return [];
+      return t.rows.map((r) => [r[0], (r[y + 1] === null || r[ref + 1] === null) ? null : r[y + 1] - r[ref + 1]]);
+    });
+    if (err.some((e) => e.length)) chart(errs, mergeSeries(err), ['t [s]'].concat(labels), {ylabel: 'error [A or m]'});
+    else errs.replaceChildren(el('p', {class: 'muted', text: 'No run has a reference.'}));
+    if (ids.length > shown.length) overI.before(el('p', {class: 'muted', text: 'first ' + shown.length + ' of ' + ids.length + ' runs shown'}));
+  } catch (e) { showError(e, overI); }
+}
+
+// ---- Nights: regression history, verdicts, links to the night's runs
+async function pageNights(main) {
+  const box = el('div', {class: 'scroll'});
+  main.replaceChildren(el('h1', {text: 'Nightly regressions'}), el('section', {}, box));
+  try {
+    const n = await api('GET', '/api/nights?limit=60');
+    const nights = n.nights || [];
+    box.replaceChildren(nights.length === 0 ? el('p', {class: 'muted', text: 'No night has run yet (config "nights").'}) :
+      el('table', {id: 'nights'}, el('tr', {}, ['date', 'verdict', 'regressed', 'unchanged', 'improved', 'suite', 'baseline',
+        'started', 'finished', 'runs', 'regressed runs', 'summary'].map((h) => el('th', {text: h}))),
+      nights.map((x) => el('tr', {}, el('td', {text: x.date}), el('td', {}, el('span', {class: 'verdict-' + x.verdict, text: x.verdict})),
+        el('td', {class: 'num', text: String(x.regressed_count || 0)}), el('td', {class: 'num', text: String(x.unchanged || 0)}),
+        el('td', {class: 'num', text: String(x.improved || 0)}), el('td', {text: x.suite || ''}), el('td', {text: x.baseline || ''}),
+        el('td', {text: when(x.started_unix_s)}), el('td', {text: when(x.finished_unix_s)}),
+        el('td', {}, x.batch_id && x.batch_id !== '0' ? [el('a', {href: '#/runs?batch=' + x.batch_id, text: 'batch ' + x.batch_id}),
+          ' ', el('a', {href: '#/runs?batch=' + x.batch_id + '&status=FAILED', text: 'failed'}),
+          ' ', el('a', {href: '#/compare?batch=' + x.batch_id, text: 'compare'})] : '–'),
+        el('td', {class: 'regressed-cases'}, (x.regressed_cases || []).map((c, k) => [k ? ', ' : '',
+          el('a', {href: '#/runs?batch=' + x.batch_id + '&name=' + encodeURIComponent(c), text: c})])),
+        el('td', {class: 'wrap', text: x.summary || ''})))));
+  } catch (e) { showError(e, box); }
+}
+
+// ---- Diagnosis: what the server stores for it today (imported measured runs); the diagnosis itself runs in
+// benchctl (docs/web.md "Diagnosis").
+async function pageDiagnosis(main) {
+  const box = el('div', {class: 'scroll'});
+  main.replaceChildren(el('h1', {text: 'Diagnosis'}), el('section', {},
+    el('p', {}, 'The sim-to-real gap diagnosis runs in benchctl (', el('code', {text: 'benchctl diagnose --runs ID,ID,…'}),
+      ', docs/gap.md); the server has no diagnosis RPC yet, so this page lists the measured runs stored for it ' +
+      '(imported datasets) and links each dataset to its runs, their traces and a comparison.'), box));
+  try {
+    const l = await api('GET', '/api/runs?tag=imported&page_size=1000');
+    const byBatch = new Map();
+    for (const r of l.runs || []) {
+      if (!byBatch.has(r.batch_id)) byBatch.set(r.batch_id, []);
+      byBatch.get(r.batch_id).push(r);
+    }
+    box.replaceChildren(byBatch.size === 0 ? el('p', {class: 'muted', text: 'No imported runs (benchctl import DIR).'}) :
+      el('table', {}, el('tr', {}, ['batch', 'dataset', 'runs', 'fit / holdout', 'command', ''].map((h) => el('th', {text: h}))),
+        Array.from(byBatch.entries()).map(([b, runs]) => {
+          const ds = ((runs[0].tags || []).find((t) => t.startsWith('dataset:')) || '').slice(8);
+          const fit = runs.filter((r) => r.split === 'fit').length, hold = runs.filter((r) => r.split === 'holdout').length;
+          return el('tr', {}, el('td', {}, el('a', {href: '#/runs?batch=' + b, text: b})), el('td', {text: ds}),
+            el('td', {class: 'num', text: String(runs.length)}), el('td', {text: fit + ' / ' + hold}),
+            el('td', {}, el('code', {text: 'benchctl diagnose --runs ' + runs.map((r) => r.id).join(',')})),
+            el('td', {}, el('a', {href: '#/compare?runs=' + runs.slice(0, 12).map((r) => r.id).join(','), text: 'overlay'})));
+        })));
+  } catch (e) { showError(e, box); }
+}
+
+// ---- start
+document.addEventListener('DOMContentLoaded', async () => {
+  $('#login').addEventListener('submit', async (ev) => {
+    ev.preventDefault();
+    const t = $('#token').value.trim();
+    if (!t) return;
+    $('#token').value = '';
+    if (await login(t)) route();
+  });
+  $('#logout').addEventListener('click', async () => {
+    try { await api('POST', '/api/logout'); } catch (e) { /* the cookie goes anyway with the session */ }
+    sessionStorage.removeItem(TOKEN_KEY);
+    showLoggedOut();
+    route();
+  });
+  window.addEventListener('hashchange', route);
+  if (token() && !(await login(token()))) return;
+  route();
+});
