@@ -27,6 +27,7 @@ try:
     from selenium.webdriver.chrome.service import Service
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support.ui import WebDriverWait
+    from selenium.common.exceptions import StaleElementReferenceException
 except ImportError:
     missing.append("python3-selenium")
 if missing:
@@ -88,8 +89,10 @@ def api(method, path, token, body=None):
 
 def wait(cond, timeout=20, what="condition"):
     try:
-        return WebDriverWait(driver, timeout, poll_frequency=0.1).until(lambda d: cond())
-    except Exception as e:  # noqa: BLE001 (selenium's TimeoutException and stale elements alike)
+        # The page re-renders as data arrives: an element found a moment ago may be gone; look again.
+        return WebDriverWait(driver, timeout, poll_frequency=0.1,
+                             ignored_exceptions=(StaleElementReferenceException,)).until(lambda d: cond())
+    except Exception as e:  # noqa: BLE001 (selenium's TimeoutException, and what the condition raises)
         check("wait for " + what, False, repr(e))
         return None
 
