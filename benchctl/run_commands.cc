@@ -1,5 +1,7 @@
 #include "benchctl/run_commands.h"
 
+#include "common/queue_estimate.h"
+
 #include <google/protobuf/util/json_util.h>
 
 #include <fmt/format.h>
@@ -60,9 +62,8 @@ std::string Duration(double s) {
 // A running run's remaining wall time, from its progress so far (by simulated time) and how long it has run.
 std::string Eta(const RunView& r, double now) {
   if (r.status != RunStatus::kRunning || r.started_unix_s <= 0.0) return "-";
-  if (r.progress <= 0.0) return "?";
-  const double elapsed = std::max(0.0, now - r.started_unix_s);
-  return Duration(elapsed * (1.0 - r.progress) / r.progress);
+  const double left_s = RunningEta_s({r.id, r.status, r.priority, r.duration_s, r.progress, r.started_unix_s}, now);
+  return left_s < 0 ? "?" : Duration(left_s);
 }
 
 Status WriteTraceCsv(const Trace& t, std::FILE* f, const std::string& what) {
@@ -140,35 +141,11 @@ int CmdRun(Backend& backend, const RunOptions& o, const Output& out) {
   return code;
 }
 
-// Where each queued run stands (docs/lab.md): its position in claim order (priority, then age; aging not
-// counted) and when it should end: the bench time of the running runs left plus that of the queued runs up to
-// and including it, spread over the live benches. Bench time is wall time on paced and hardware benches; an
-// unpaced emulator runs faster, so the estimate is an upper bound there.
-struct QueueEstimate {
-  int position = 0;
-  double eta_s = -1.0;  // < 0: unknown
-};
+// The queue estimate both `queue` and the web dashboard show (common/queue_estimate.h).
 static std::map<std::int64_t, QueueEstimate> EstimateQueue(const std::vector<RunView>& runs, int live_benches) {
-  double ahead_s = 0.0;
-  bool known = live_benches > 0;
-  for (const auto& r : runs)
-    if (r.status == RunStatus::kRunning) {
-      if (r.duration_s <= 0) known = false;
-      ahead_s += std::max(0.0, r.duration_s * (1.0 - r.progress));
-    }
-  std::vector<const RunView*> queued;
-  for (const auto& r : runs)
-    if (r.status == RunStatus::kQueued) queued.push_back(&r);
-  std::stable_sort(queued.begin(), queued.end(), [](const RunView* a, const RunView* b) {
-    return a->priority != b->priority ? a->priority > b->priority : a->id < b->id;
-  });
-  std::map<std::int64_t, QueueEstimate> out;
-  for (std::size_t k = 0; k < queued.size(); ++k) {
-    if (queued[k]->duration_s <= 0) known = false;
-    ahead_s += std::max(0.0, queued[k]->duration_s);
-    out[queued[k]->id] = {static_cast<int>(k) + 1, known ? ahead_s / live_benches : -1.0};
-  }
-  return out;
+  std::vector<QueueRunInfo> info;
+  for (const auto& r : runs) info.push_back({r.id, r.status, r.priority, r.duration_s, r.progress, r.started_unix_s});
+  return vb::EstimateQueue(info, live_benches);
 }
 
 static int LiveBenches(Backend& backend) {

@@ -14,6 +14,7 @@
 #include <set>
 #include <vector>
 
+#include "common/queue_estimate.h"
 #include "experiment/spec.h"
 #include "export/run_file.h"
 #include "valvebench/v1/api.grpc.pb.h"
@@ -361,8 +362,8 @@ class Routes {
     res.set_content(ToJson(out), kJson);
   }
 
-  // Running and queued runs with their place in the queue. The order is the store's claim order (priority
-  // first, then the oldest; db/store.cc ClaimNext): the one piece of a rule the gateway restates, for display.
+  // Running and queued runs with their place in the queue and their ETA: common/queue_estimate.h, the
+  // estimate `benchctl queue` shows, over the live benches ListBenches reports.
   void Queue(const httplib::Request& req, httplib::Response& res) {
     std::vector<v1::Run> running, queued;
     for (v1::RunStatus s : {v1::RUNNING, v1::QUEUED}) {
@@ -382,25 +383,43 @@ class Routes {
         token = out.next_page_token();
       } while (!token.empty());
     }
-    std::stable_sort(queued.begin(), queued.end(), [](const v1::Run& a, const v1::Run& b) {
-      return a.priority() != b.priority() ? a.priority() > b.priority() : a.id() < b.id();
+    int live = 0;
+    if (!queued.empty()) {
+      grpc::ClientContext ctx;
+      Authorize(req, &ctx);
+      Deadline(&ctx, 10.0);
+      v1::ListBenchesResponse benches;
+      if (stub_->ListBenches(&ctx, v1::ListBenchesRequest(), &benches).ok())
+        for (const auto& b : benches.benches()) live += b.host().empty() || b.alive();
+    }
+    auto info = [](const v1::Run& r) {
+      return QueueRunInfo{r.id(), r.status() == v1::RUNNING ? RunStatus::kRunning : RunStatus::kQueued, r.priority(),
+                          r.duration_s(), r.progress(), r.started_unix_s()};
+    };
+    std::vector<QueueRunInfo> all;
+    for (const auto* list : {&running, &queued})
+      for (const auto& r : *list) all.push_back(info(r));
+    const auto estimates = EstimateQueue(all, live);
+    std::stable_sort(queued.begin(), queued.end(), [&](const v1::Run& a, const v1::Run& b) {
+      return estimates.at(a.id()).position < estimates.at(b.id()).position;
     });
     const double now =
         std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
-    std::string out = R"({"now_unix_s":)" + fmt::format("{:.3f}", now) + R"(,"running":[)";
+    std::string out = R"({"now_unix_s":)" + fmt::format("{:.3f}", now) + R"(,"live_benches":)" +
+                      std::to_string(live) + R"(,"running":[)";
     for (size_t k = 0; k < running.size(); ++k) {
-      const v1::Run& r = running[k];
-      // ETA: wall time left from the progress so far (as `benchctl queue`); null before any progress.
-      double eta = NAN;
-      if (r.started_unix_s() > 0.0 && r.progress() > 0.0)
-        eta = std::max(0.0, now - r.started_unix_s()) * (1.0 - r.progress()) / r.progress();
-      out += (k ? "," : "") + std::string(R"({"run":)") + ToJson(r) + R"(,"eta_s":)";
-      AppendNumber(&out, eta);
+      const double eta = RunningEta_s(info(running[k]), now);
+      out += (k ? "," : "") + std::string(R"({"run":)") + ToJson(running[k]) + R"(,"eta_s":)";
+      AppendNumber(&out, eta < 0 ? NAN : eta);
       out += "}";
     }
     out += R"(],"queued":[)";
-    for (size_t k = 0; k < queued.size(); ++k)
-      out += (k ? "," : "") + fmt::format(R"({{"position":{},"run":{}}})", k + 1, ToJson(queued[k]));
+    for (size_t k = 0; k < queued.size(); ++k) {
+      const QueueEstimate& e = estimates.at(queued[k].id());
+      out += (k ? "," : "") + fmt::format(R"({{"position":{},"run":{},"eta_s":)", e.position, ToJson(queued[k]));
+      AppendNumber(&out, e.eta_s < 0 ? NAN : e.eta_s);
+      out += "}";
+    }
     out += "]}";
     res.set_content(out, kJson);
   }

@@ -264,7 +264,10 @@ function pageLab(main) {
         el('td', {text: x.measures_position ? 'measured' : 'none'})))));
     const rows = [];
     for (const r of q.running) rows.push(['running', r.run, duration(r.eta_s)]);
-    for (const r of q.queued) rows.push([String(r.position), r.run, 'after ' + (r.position - 1 + q.running.length) + ' run(s)']);
+    for (const r of q.queued) {
+      rows.push([String(r.position), r.run, r.eta_s == null ? 'after ' + (r.position - 1 + q.running.length) + ' run(s)'
+                                                            : duration(r.eta_s)]);
+    }
     queue.replaceChildren(rows.length === 0 ? el('p', {class: 'muted', text: 'Nothing queued or running.'}) :
       el('table', {},
         el('tr', {}, ['position', 'run', 'name', 'status', 'progress', 'ETA', 'bench', 'priority', 'submitter', 'submitted', '']
