@@ -14,7 +14,9 @@
 #include <fstream>
 #include <sstream>
 
+#include "client/client.h"
 #include "db/open_store.h"
+#include "experiment/spec.h"
 #include "server/config.h"
 #include "server_process.h"
 
@@ -22,6 +24,7 @@ namespace vb {
 namespace {
 
 using testing::ServerProcess;
+namespace v1 = valvebench::v1;
 
 struct Ran {
   int code = -1;
@@ -117,6 +120,82 @@ TEST(PgServer, RunsAreQueuedExecutedAndStoredInPostgresAcrossARestart) {
   EXPECT_EQ(log.find("hunter2"), std::string::npos) << log;
   server.Kill(SIGTERM);
   std::filesystem::remove_all(dir);
+}
+
+// The lab on PostgreSQL with three hosts (docs/lab.md): a run submitted through host a names host b's bench
+// and executes there; host c follows it live while it runs (samples from the trace chunks b streams to the
+// database), then shows, exports and compares it.
+TEST(PgLab, ARunSubmittedOnOneHostAndExecutedOnAnotherIsFollowedFromAThird) {
+  db::testing::PgServer* pg = db::testing::PgServer::Get();
+  if (pg == nullptr) GTEST_SKIP() << "PostgreSQL cannot start here: " << db::testing::PgServer::WhyUnavailable();
+  auto created = pg->CreateDatabase();
+  ASSERT_TRUE(created.ok()) << created.status().ToString();
+  const std::string root = ::testing::TempDir() + "/vb-pg-lab-" + std::to_string(getpid());
+  std::filesystem::remove_all(root);
+  std::vector<std::unique_ptr<ServerProcess>> hosts;
+  std::vector<std::string> addr;
+  for (const char* h : {"a", "b", "c"}) {
+    const std::string dir = root + "/" + h;
+    hosts.push_back(std::make_unique<ServerProcess>(
+        dir, std::string(R"("lab": {"host": "host-)") + h + R"(", "lease_ttl_s": 2, "heartbeat_s": 0.5})",
+        std::string(R"([{"name": ")") + h + R"(-emu", "kind": "emulated", "pace": "realtime",
+                        "model": {"preset": "taghizadeh2009"}}])"));
+    std::string config = ReadAll(dir + "/server.json");
+    const std::string from = R"("database_path": "runs.db")";
+    const auto at = config.find(from);
+    ASSERT_NE(at, std::string::npos);
+    config.replace(at, from.size(), std::string(R"("database_path": ")") + *created + "\"");
+    std::ofstream(dir + "/server.json") << config;
+    addr.push_back(hosts.back()->Start());
+    ASSERT_FALSE(addr.back().empty()) << ReadAll(dir + "/server-1.log");
+  }
+  auto client = [&](int host) {
+    client::ClientOptions o;
+    o.address = addr[static_cast<size_t>(host)];
+    o.token = testing::kOperatorToken;
+    o.deadline_s = 20.0;
+    return client::Client(o);
+  };
+  auto spec = experiment::ParseSpecJson(R"({"name": "lab3", "duration_s": 2.0,
+      "bench": {"kind": "emulated", "name": "b-emu"},
+      "conditions": {"supply_V": 24, "supply_pressure_Pa": 400000},
+      "controller": {"open_loop_pwm": {"segments": [{"start_s": 0, "frequency_Hz": 100, "duty": 0.5}]}},
+      "recording": {"rate_Hz": 20000}})");
+  ASSERT_TRUE(spec.ok()) << spec.status().message();
+  auto a = client(0), c = client(2);
+  auto sub = a.Submit(*spec);
+  ASSERT_TRUE(sub.ok()) << sub.status().message();
+  const std::int64_t id = sub->run_ids(0);
+
+  // Host c follows it while it runs on b: live samples arrive before the run ends.
+  int samples_while_running = 0;
+  bool saw_running = false;
+  v1::RunStatus last = v1::QUEUED;
+  auto watched = c.Watch(id, 20.0, 200.0, [&](const v1::RunEvent& ev) {
+    last = ev.status();
+    if (ev.status() == v1::RUNNING) {
+      saw_running = true;
+      samples_while_running += ev.samples_size();
+    }
+    return true;
+  });
+  EXPECT_TRUE(watched.ok()) << watched.message();
+  EXPECT_TRUE(saw_running);
+  EXPECT_GT(samples_while_running, 0) << "no live sample reached host c while the run executed on host b";
+  EXPECT_EQ(last, v1::DONE);
+
+  auto shown = c.GetRun(id);
+  ASSERT_TRUE(shown.ok()) << shown.status().message();
+  EXPECT_EQ(shown->status(), v1::DONE);
+  EXPECT_EQ(shown->host(), "host-b");
+  auto trace = c.GetTrace(id);
+  ASSERT_TRUE(trace.ok()) << trace.status().message();
+  EXPECT_EQ(trace->samples(), 40'001u);
+  auto compared = c.Compare(sub->batch_id(), {});
+  ASSERT_TRUE(compared.ok()) << compared.status().message();
+  EXPECT_GE(compared->ByteSizeLong(), 1u);
+  for (auto& h : hosts) h->Kill(SIGTERM);
+  std::filesystem::remove_all(root);
 }
 
 }  // namespace
