@@ -3,6 +3,7 @@
 // same rows. What differs is how concurrency is had: SQLite serialises writers with one lock, here many hosts
 // write at once, so the queue is claimed with FOR UPDATE SKIP LOCKED and every write for a claimed run locks the
 // run's row and checks its lease's fence in the same transaction. Times come from the database's clock.
+#include "db/checks.h"
 #include "db/pg_store.h"
 
 #include <cmath>
@@ -31,7 +32,6 @@ using TxnKind = pg::Transaction::Kind;
 // same time, whichever host's clock is off (docs/store.md, "PostgreSQL", "The clock").
 #define VB_PG_NOW "extract(epoch FROM now())::float8"
 
-constexpr std::int32_t kMaxListLimit = 1000;
 constexpr const char* kRecoverReason = "server restarted while running";
 constexpr int kMaxInterruptions = 3;  // as SQLite (db/store.cc): a run interrupted this often is failed
 // bytea values are limited to 1 GiB by PostgreSQL.
@@ -71,85 +71,12 @@ bool SplitPrefixed(std::string_view s, char tail, std::vector<std::pair<std::str
   return true;
 }
 
-// The checks of SqliteStore (db/store.cc), with its messages.
-Status ValidateBatch(const std::string& submitter, const std::vector<RunRecord>& runs) {
-  if (submitter.empty()) return Status::InvalidArgument("submitter: must not be empty");
-  if (runs.empty()) return Status::InvalidArgument("runs: a batch needs at least one run");
-  for (std::size_t k = 0; k < runs.size(); ++k) {
-    const RunRecord& r = runs[k];
-    const std::string field = Cat("runs[", k, "]");
-    if (r.key.name.empty()) return Status::InvalidArgument(field + ".key.name: must not be empty");
-    if (r.key.repeat < -1) return Status::InvalidArgument(Cat(field, ".key.repeat: must be >= -1, got ", r.key.repeat));
-    for (std::size_t a = 0; a < r.key.sweep.size(); ++a) {
-      if (r.key.sweep[a].field.empty())
-        return Status::InvalidArgument(Cat(field, ".key.sweep[", a, "].field: must not be empty"));
-      if (!std::isfinite(r.key.sweep[a].value))
-        return Status::InvalidArgument(Cat(field, ".key.sweep[", a, "].value: must be finite"));
-    }
-    if (!r.split.empty() && r.split != "fit" && r.split != "holdout")
-      return Status::InvalidArgument(
-          Cat(field, ".split: must be \"fit\", \"holdout\" or empty, got \"", r.split, "\""));
-    if (r.spec_json.empty()) return Status::InvalidArgument(field + ".spec_json: must not be empty");
-    if (!r.submitter.empty() && r.submitter != submitter) {
-      return Status::InvalidArgument(
-          Cat(field, ".submitter: \"", r.submitter, "\" differs from the batch's \"", submitter, "\""));
-    }
-    std::unordered_set<std::string_view> tags;
-    for (std::size_t j = 0; j < r.tags.size(); ++j) {
-      const std::string tag_field = Cat(field, ".tags[", j, "]");
-      if (r.tags[j].empty()) return Status::InvalidArgument(tag_field + ": must not be empty");
-      if (!tags.insert(r.tags[j]).second) {
-        return Status::InvalidArgument(Cat(tag_field, ": duplicate tag \"", r.tags[j], "\""));
-      }
-    }
-  }
-  return Status::Ok();
-}
-
-Status ValidateFilter(const RunFilter& f) {
-  if (f.limit < 1 || f.limit > kMaxListLimit) {
-    return Status::InvalidArgument(Cat("filter.limit: must be in 1..", kMaxListLimit, ", got ", f.limit));
-  }
-  if (f.after_id < 0) return Status::InvalidArgument(Cat("filter.after_id: must be >= 0, got ", f.after_id));
-  if (f.batch_id < 0) return Status::InvalidArgument(Cat("filter.batch_id: must be >= 0, got ", f.batch_id));
-  if (!std::isfinite(f.submitted_after_unix_s) || f.submitted_after_unix_s < 0) {
-    return Status::InvalidArgument(
-        Cat("filter.submitted_after_unix_s: must be finite and >= 0, got ", FormatExact(f.submitted_after_unix_s)));
-  }
-  if (!std::isfinite(f.submitted_before_unix_s) || f.submitted_before_unix_s < 0) {
-    return Status::InvalidArgument(
-        Cat("filter.submitted_before_unix_s: must be finite and >= 0, got ", FormatExact(f.submitted_before_unix_s)));
-  }
-  return Status::Ok();
-}
-
 Status ValidateSeconds(const char* field, double v) {
   if (!std::isfinite(v) || v < 0)
     return Status::InvalidArgument(Cat(field, ": must be finite and >= 0, got ", FormatExact(v)));
   return Status::Ok();
 }
 
-Status ValidateBaseline(const std::string& name, const std::vector<BaselineEntry>& entries) {
-  if (name.empty()) return Status::InvalidArgument("baseline.name: must not be empty");
-  for (char c : name)
-    if (static_cast<unsigned char>(c) < 0x20)
-      return Status::InvalidArgument("baseline.name: must not contain control characters");
-  if (entries.empty()) return Status::InvalidArgument("baseline.entries: a baseline needs at least one metric value");
-  std::set<std::pair<std::string, std::string>> seen;
-  for (std::size_t k = 0; k < entries.size(); ++k) {
-    const BaselineEntry& e = entries[k];
-    const std::string where = Cat("baseline.entries[", k, "]");
-    if (e.case_name.empty()) return Status::InvalidArgument(where + ".case_name: must not be empty");
-    if (e.metric.empty()) return Status::InvalidArgument(where + ".metric: must not be empty");
-    if (!std::isfinite(e.mean)) return Status::InvalidArgument(where + ".mean: must be finite");
-    if (!std::isfinite(e.spread) || e.spread < 0)
-      return Status::InvalidArgument(where + ".spread: must be finite and >= 0");
-    if (e.n < 1) return Status::InvalidArgument(where + ".n: must be >= 1");
-    if (!seen.insert({e.case_name, e.metric}).second)
-      return Status::InvalidArgument(Cat(where, ": duplicate (", e.case_name, ", ", e.metric, ")"));
-  }
-  return Status::Ok();
-}
 
 class PgStore final : public Store {
  public:
@@ -271,7 +198,7 @@ StatusOr<RunRecord> PgStore::LoadRun(std::int64_t run_id) {
 StatusOr<std::int64_t> PgStore::SubmitBatch(const std::string& submitter, const std::string& name,
                                             const std::string& batch_spec_json, std::vector<RunRecord> runs,
                                             std::vector<std::int64_t>* run_ids) {
-  VB_RETURN_IF_ERROR(ValidateBatch(submitter, runs));
+  VB_RETURN_IF_ERROR(checks::ValidateBatch(submitter, runs));
   pg::Transaction txn(conn_.get());
   VB_RETURN_IF_ERROR(txn.Begin());
   VB_PG_ASSIGN_OR_RETURN(
@@ -326,9 +253,7 @@ StatusOr<std::int64_t> PgStore::SubmitBatch(const std::string& submitter, const 
 }
 
 StatusOr<std::optional<RunRecord>> PgStore::ClaimNext(const ClaimRequest& request) {
-  if (request.bench_name.empty()) return Status::InvalidArgument("bench_name: must name the bench that claims the run");
-  VB_RETURN_IF_ERROR(ValidateSeconds("lease_ttl_s", request.lease_ttl_s));
-  VB_RETURN_IF_ERROR(ValidateSeconds("aging_s", request.aging_s));
+  VB_RETURN_IF_ERROR(checks::CheckClaim(request));
   pg::Transaction txn(conn_.get());
   VB_RETURN_IF_ERROR(txn.Begin());
   // The inner SELECT locks the first compatible queued run that no other claimer has locked (SKIP LOCKED): two
@@ -390,9 +315,7 @@ Status PgStore::CheckLease(pg::Transaction* txn, const Lease& lease, const char*
 }
 
 Status PgStore::SetProgress(const Lease& lease, double progress) {
-  if (!(progress >= 0.0 && progress <= 1.0)) {
-    return Status::InvalidArgument(Cat("progress: must be in [0, 1], got ", FormatExact(progress)));
-  }
+  VB_RETURN_IF_ERROR(checks::CheckProgress(progress));
   pg::Transaction txn(conn_.get());
   VB_RETURN_IF_ERROR(txn.Begin());
   VB_RETURN_IF_ERROR(CheckLease(&txn, lease, "reports progress", "progress"));
@@ -404,18 +327,7 @@ Status PgStore::SetProgress(const Lease& lease, double progress) {
 Status PgStore::Finish(const Lease& lease, RunStatus final_status, const std::string& reason,
                        const std::vector<Metric>& metrics) {
   const std::int64_t run_id = lease.run_id;
-  if (final_status != RunStatus::kDone && final_status != RunStatus::kFailed && final_status != RunStatus::kCancelled) {
-    return Status::InvalidArgument(
-        Cat("final_status: must be done, failed or cancelled, got ", RunStatusName(final_status)));
-  }
-  std::unordered_set<std::string_view> names;
-  for (std::size_t k = 0; k < metrics.size(); ++k) {
-    const std::string field = Cat("metrics[", k, "].name");
-    if (metrics[k].name.empty()) return Status::InvalidArgument(field + ": must not be empty");
-    if (!names.insert(metrics[k].name).second) {
-      return Status::InvalidArgument(Cat(field, ": duplicate metric \"", metrics[k].name, "\""));
-    }
-  }
+  VB_RETURN_IF_ERROR(checks::CheckFinish(final_status, metrics));
   pg::Transaction txn(conn_.get());
   VB_RETURN_IF_ERROR(txn.Begin());
   VB_RETURN_IF_ERROR(CheckLease(&txn, lease, "can finish", Cat("finish ", RunStatusName(final_status))));
@@ -611,8 +523,7 @@ StatusOr<std::vector<std::int64_t>> PgStore::RequeueLapsed() {
 }
 
 StatusOr<std::vector<StaleWrite>> PgStore::StaleWrites(std::int32_t limit, std::int64_t* total) {
-  if (limit < 1 || limit > kMaxListLimit)
-    return Status::InvalidArgument(Cat("limit: must be in 1..", kMaxListLimit, ", got ", limit));
+  VB_RETURN_IF_ERROR(checks::CheckListLimit(limit));
   pg::Transaction txn(conn_.get());
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
   VB_PG_ASSIGN_OR_RETURN(Result r, conn_->Exec("SELECT run_id, fence, current_fence, host, what, at FROM stale_writes "
@@ -630,7 +541,7 @@ StatusOr<std::vector<StaleWrite>> PgStore::StaleWrites(std::int32_t limit, std::
 }
 
 StatusOr<bool> PgStore::ClaimNight(const std::string& night, const std::string& host) {
-  VB_RETURN_IF_ERROR(CheckNightClaim(night, host));
+  VB_RETURN_IF_ERROR(checks::CheckNightClaim(night, host));
   VB_PG_ASSIGN_OR_RETURN(Result r, conn_->Exec("INSERT INTO nights_claimed (night, host, at) VALUES ($1, $2, " VB_PG_NOW
                                                ") ON CONFLICT (night) DO NOTHING",
                                                Params().Text(night).Text(host)));
@@ -642,7 +553,7 @@ StatusOr<bool> PgStore::ClaimNight(const std::string& night, const std::string& 
 StatusOr<RunRecord> PgStore::GetRun(std::int64_t run_id) { return LoadRun(run_id); }
 
 StatusOr<std::vector<RunRecord>> PgStore::ListRuns(const RunFilter& f) {
-  VB_RETURN_IF_ERROR(ValidateFilter(f));
+  VB_RETURN_IF_ERROR(checks::ValidateFilter(f));
   Params p;
   int n = 0;
   auto next = [&n] { return Cat("$", ++n); };
@@ -849,7 +760,7 @@ Status PgStore::ReadChunks(std::int64_t run_id, const std::function<Status(Trace
 
 StatusOr<std::int32_t> PgStore::SaveBaseline(const std::string& name, const std::string& source,
                                              const std::string& note, const std::vector<BaselineEntry>& entries) {
-  VB_RETURN_IF_ERROR(ValidateBaseline(name, entries));
+  VB_RETURN_IF_ERROR(checks::ValidateBaseline(name, entries));
   pg::Transaction txn(conn_.get());
   VB_RETURN_IF_ERROR(txn.Begin());
   // Two hosts saving under one name at once: the second waits here, then numbers after the first.
@@ -943,8 +854,7 @@ RegressionRecord ReadRegression(const Result& r, int k) {
 }
 
 StatusOr<std::int64_t> PgStore::SaveRegression(const RegressionRecord& record) {
-  if (record.suite.empty()) return Status::InvalidArgument("regression.suite: must not be empty");
-  if (record.verdict.empty()) return Status::InvalidArgument("regression.verdict: must not be empty");
+  VB_RETURN_IF_ERROR(checks::CheckRegression(record));
   return conn_->QueryInt(
       "INSERT INTO regressions (suite, baseline_name, baseline_version, batch_id, night, created, "
       "verdict, result_json) VALUES ($1, $2, $3, $4, $5, CASE WHEN $6 > 0 THEN $6 ELSE " VB_PG_NOW
@@ -970,8 +880,7 @@ StatusOr<RegressionRecord> PgStore::GetRegression(std::int64_t id) {
 }
 
 StatusOr<std::vector<RegressionRecord>> PgStore::ListRegressions(bool nights_only, std::int32_t limit) {
-  if (limit < 1 || limit > kMaxListLimit)
-    return Status::InvalidArgument(Cat("limit: must be in 1..", kMaxListLimit, ", got ", limit));
+  VB_RETURN_IF_ERROR(checks::CheckListLimit(limit));
   VB_PG_ASSIGN_OR_RETURN(Result r,
                          conn_->Exec(Cat("SELECT ", kRegressionColumns, " FROM regressions",
                                          nights_only ? " WHERE night != ''" : "", " ORDER BY id DESC LIMIT $1"),
@@ -984,17 +893,7 @@ StatusOr<std::vector<RegressionRecord>> PgStore::ListRegressions(bool nights_onl
 // ---- Retention (the rules of SqliteStore::Prune, db/store.cc) ----
 
 StatusOr<PruneResult> PgStore::Prune(const PruneRequest& request) {
-  if (!std::isfinite(request.finished_before_unix_s) || request.finished_before_unix_s <= 0) {
-    return Status::InvalidArgument(
-        Cat("finished_before_unix_s: must be a finite time > 0, got ", FormatExact(request.finished_before_unix_s)));
-  }
-  if (request.keep_last < 0) return Status::InvalidArgument(Cat("keep_last: must be >= 0, got ", request.keep_last));
-  for (std::size_t k = 0; k < request.protected_batches.size(); ++k) {
-    if (request.protected_batches[k] <= 0) {
-      return Status::InvalidArgument(
-          Cat("protected_batches[", k, "]: must be a batch id > 0, got ", request.protected_batches[k]));
-    }
-  }
+  VB_RETURN_IF_ERROR(checks::CheckPrune(request));
   pg::Transaction txn(conn_.get());
   VB_RETURN_IF_ERROR(txn.Begin(request.dry_run ? TxnKind::kRead : TxnKind::kWrite));
   std::map<std::int64_t, std::string> protected_batches;

@@ -13,26 +13,6 @@ using sql::Stmt;
 // The tables themselves are created by migration 2 (db/schema.cc).
 
 
-Status ValidateBaseline(const std::string& name, const std::vector<BaselineEntry>& entries) {
-  if (name.empty()) return Status::InvalidArgument("baseline.name: must not be empty");
-  for (char c : name)
-    if (static_cast<unsigned char>(c) < 0x20)
-      return Status::InvalidArgument("baseline.name: must not contain control characters");
-  if (entries.empty()) return Status::InvalidArgument("baseline.entries: a baseline needs at least one metric value");
-  std::set<std::pair<std::string, std::string>> seen;
-  for (std::size_t k = 0; k < entries.size(); ++k) {
-    const BaselineEntry& e = entries[k];
-    const std::string where = Cat("baseline.entries[", k, "]");
-    if (e.case_name.empty()) return Status::InvalidArgument(where + ".case_name: must not be empty");
-    if (e.metric.empty()) return Status::InvalidArgument(where + ".metric: must not be empty");
-    if (!std::isfinite(e.mean)) return Status::InvalidArgument(where + ".mean: must be finite");
-    if (!std::isfinite(e.spread) || e.spread < 0) return Status::InvalidArgument(where + ".spread: must be finite and >= 0");
-    if (e.n < 1) return Status::InvalidArgument(where + ".n: must be >= 1");
-    if (!seen.insert({e.case_name, e.metric}).second)
-      return Status::InvalidArgument(Cat(where, ": duplicate (", e.case_name, ", ", e.metric, ")"));
-  }
-  return Status::Ok();
-}
 
 StatusOr<int> InsertBaseline(sql::Connection* conn, const std::string& name, const std::string& source,
                              const std::string& note, const std::vector<BaselineEntry>& entries, double now) {

@@ -13,7 +13,6 @@
 
 namespace vb::db::regress_tables {
 
-Status ValidateBaseline(const std::string& name, const std::vector<BaselineEntry>& entries);
 StatusOr<int> InsertBaseline(sql::Connection* conn, const std::string& name, const std::string& source,
                              const std::string& note, const std::vector<BaselineEntry>& entries, double now);
 StatusOr<BaselineRecord> LoadBaseline(sql::Connection* conn, const std::string& name, int version);

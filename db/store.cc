@@ -15,6 +15,7 @@
 #include <unordered_set>
 #include <utility>
 
+#include "db/checks.h"
 #include "db/checkpointer.h"
 #include "db/regress_tables.h"
 #include "db/schema.h"
@@ -39,7 +40,6 @@ constexpr int kCheckpointEveryPages = 1000;
 constexpr int kWalWaitAbovePages = 8000;
 constexpr std::int64_t kWalLimitBytes =
     static_cast<std::int64_t>(kWalWaitAbovePages + kCheckpointEveryPages) * kPageSizeBytes;
-constexpr std::int32_t kMaxListLimit = 1000;  // RunFilter::limit upper bound
 constexpr const char* kRecoverReason = "server restarted while running";
 // A run interrupted by a server stop this many times is failed, not re-queued again: whatever it does (a spec
 // that exhausts memory, a bench that crashes the process) would take the server down at every start.
@@ -56,58 +56,6 @@ double NowUnixS() {
 }
 
 Status RunNotFound(std::int64_t id) { return Status::NotFound(Cat("run ", id, " not found")); }
-
-// Output-only RunRecord fields (id, batch_id, status, reason, times, progress) are ignored on submit, as
-// output-only fields of an API resource are; everything else is checked here.
-Status ValidateBatch(const std::string& submitter, const std::vector<RunRecord>& runs) {
-  if (submitter.empty()) return Status::InvalidArgument("submitter: must not be empty");
-  if (runs.empty()) return Status::InvalidArgument("runs: a batch needs at least one run");
-  for (std::size_t k = 0; k < runs.size(); ++k) {
-    const RunRecord& r = runs[k];
-    const std::string field = Cat("runs[", k, "]");
-    if (r.key.name.empty()) return Status::InvalidArgument(field + ".key.name: must not be empty");
-    if (r.key.repeat < -1) return Status::InvalidArgument(Cat(field, ".key.repeat: must be >= -1, got ", r.key.repeat));
-    for (std::size_t a = 0; a < r.key.sweep.size(); ++a) {
-      if (r.key.sweep[a].field.empty())
-        return Status::InvalidArgument(Cat(field, ".key.sweep[", a, "].field: must not be empty"));
-      if (!std::isfinite(r.key.sweep[a].value))
-        return Status::InvalidArgument(Cat(field, ".key.sweep[", a, "].value: must be finite"));
-    }
-    if (!r.split.empty() && r.split != "fit" && r.split != "holdout")
-      return Status::InvalidArgument(Cat(field, ".split: must be \"fit\", \"holdout\" or empty, got \"", r.split, "\""));
-    if (r.spec_json.empty()) return Status::InvalidArgument(field + ".spec_json: must not be empty");
-    if (!r.submitter.empty() && r.submitter != submitter) {
-      return Status::InvalidArgument(
-          Cat(field, ".submitter: \"", r.submitter, "\" differs from the batch's \"", submitter, "\""));
-    }
-    std::unordered_set<std::string_view> tags;
-    for (std::size_t j = 0; j < r.tags.size(); ++j) {
-      const std::string tag_field = Cat(field, ".tags[", j, "]");
-      if (r.tags[j].empty()) return Status::InvalidArgument(tag_field + ": must not be empty");
-      if (!tags.insert(r.tags[j]).second) {
-        return Status::InvalidArgument(Cat(tag_field, ": duplicate tag \"", r.tags[j], "\""));
-      }
-    }
-  }
-  return Status::Ok();
-}
-
-Status ValidateFilter(const RunFilter& f) {
-  if (f.limit < 1 || f.limit > kMaxListLimit) {
-    return Status::InvalidArgument(Cat("filter.limit: must be in 1..", kMaxListLimit, ", got ", f.limit));
-  }
-  if (f.after_id < 0) return Status::InvalidArgument(Cat("filter.after_id: must be >= 0, got ", f.after_id));
-  if (f.batch_id < 0) return Status::InvalidArgument(Cat("filter.batch_id: must be >= 0, got ", f.batch_id));
-  if (!std::isfinite(f.submitted_after_unix_s) || f.submitted_after_unix_s < 0) {
-    return Status::InvalidArgument(
-        Cat("filter.submitted_after_unix_s: must be finite and >= 0, got ", FormatExact(f.submitted_after_unix_s)));
-  }
-  if (!std::isfinite(f.submitted_before_unix_s) || f.submitted_before_unix_s < 0) {
-    return Status::InvalidArgument(
-        Cat("filter.submitted_before_unix_s: must be finite and >= 0, got ", FormatExact(f.submitted_before_unix_s)));
-  }
-  return Status::Ok();
-}
 
 class SqliteStore final : public Store {
  public:
@@ -269,7 +217,7 @@ StatusOr<RunRecord> SqliteStore::LoadRun(std::int64_t run_id) {
 StatusOr<std::int64_t> SqliteStore::SubmitBatch(const std::string& submitter, const std::string& name,
                                                 const std::string& batch_spec_json, std::vector<RunRecord> runs,
                                                 std::vector<std::int64_t>* run_ids) {
-  VB_RETURN_IF_ERROR(ValidateBatch(submitter, runs));
+  VB_RETURN_IF_ERROR(checks::ValidateBatch(submitter, runs));
   const double now = NowUnixS();
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kWrite));
@@ -334,15 +282,11 @@ StatusOr<std::int64_t> SqliteStore::SubmitBatch(const std::string& submitter, co
 StatusOr<std::optional<RunRecord>> SqliteStore::ClaimNext(const ClaimRequest& request) {
   const std::string& bench_kind = request.bench_kind;
   const std::string& bench_name = request.bench_name;
-  if (bench_name.empty()) return Status::InvalidArgument("bench_name: must name the bench that claims the run");
+  VB_RETURN_IF_ERROR(checks::CheckClaim(request));
   Transaction txn(&conn_);
   // BEGIN IMMEDIATE takes the database's single write lock before the SELECT: two claimers (threads or
   // processes) are serialised here, so the run one of them sees as queued is still queued when it updates it.
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kWrite));
-  if (!std::isfinite(request.lease_ttl_s) || request.lease_ttl_s < 0)
-    return Status::InvalidArgument(Cat("lease_ttl_s: must be finite and >= 0, got ", FormatExact(request.lease_ttl_s)));
-  if (!std::isfinite(request.aging_s) || request.aging_s < 0)
-    return Status::InvalidArgument(Cat("aging_s: must be finite and >= 0, got ", FormatExact(request.aging_s)));
   const double now = NowUnixS();
   // Without aging: walks runs_queue (status, priority DESC, id) in order and stops at the first compatible run.
   // With aging: a queued run's priority rises by one for every aging_s it has waited since it was submitted
@@ -390,9 +334,7 @@ StatusOr<std::optional<RunRecord>> SqliteStore::ClaimNext(const ClaimRequest& re
 
 Status SqliteStore::SetProgress(const Lease& lease, double progress) {
   const std::int64_t run_id = lease.run_id;
-  if (!(progress >= 0.0 && progress <= 1.0)) {
-    return Status::InvalidArgument(Cat("progress: must be in [0, 1], got ", FormatExact(progress)));
-  }
+  VB_RETURN_IF_ERROR(checks::CheckProgress(progress));
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kWrite));
   VB_RETURN_IF_ERROR(CheckLease(lease, "progress", &txn));
@@ -406,19 +348,7 @@ Status SqliteStore::SetProgress(const Lease& lease, double progress) {
 Status SqliteStore::Finish(const Lease& lease, RunStatus final_status, const std::string& reason,
                            const std::vector<Metric>& metrics) {
   const std::int64_t run_id = lease.run_id;
-  if (final_status != RunStatus::kDone && final_status != RunStatus::kFailed &&
-      final_status != RunStatus::kCancelled) {
-    return Status::InvalidArgument(
-        Cat("final_status: must be done, failed or cancelled, got ", RunStatusName(final_status)));
-  }
-  std::unordered_set<std::string_view> names;
-  for (std::size_t k = 0; k < metrics.size(); ++k) {
-    const std::string field = Cat("metrics[", k, "].name");
-    if (metrics[k].name.empty()) return Status::InvalidArgument(field + ": must not be empty");
-    if (!names.insert(metrics[k].name).second) {
-      return Status::InvalidArgument(Cat(field, ": duplicate metric \"", metrics[k].name, "\""));
-    }
-  }
+  VB_RETURN_IF_ERROR(checks::CheckFinish(final_status, metrics));
 
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kWrite));
@@ -680,8 +610,7 @@ StatusOr<std::vector<std::int64_t>> SqliteStore::RequeueLapsed() {
 }
 
 StatusOr<std::vector<StaleWrite>> SqliteStore::StaleWrites(std::int32_t limit, std::int64_t* total) {
-  if (limit < 1 || limit > kMaxListLimit)
-    return Status::InvalidArgument(Cat("limit: must be in 1..", kMaxListLimit, ", got ", limit));
+  VB_RETURN_IF_ERROR(checks::CheckListLimit(limit));
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
   if (total != nullptr) {
@@ -703,7 +632,7 @@ StatusOr<std::vector<StaleWrite>> SqliteStore::StaleWrites(std::int32_t limit, s
 }
 
 StatusOr<bool> SqliteStore::ClaimNight(const std::string& night, const std::string& host) {
-  VB_RETURN_IF_ERROR(CheckNightClaim(night, host));
+  VB_RETURN_IF_ERROR(checks::CheckNightClaim(night, host));
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kWrite));
   VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("INSERT INTO nights_claimed (night, host, at) VALUES (?1, ?2, ?3) "
@@ -728,7 +657,7 @@ StatusOr<RunRecord> SqliteStore::GetRun(std::int64_t run_id) {
 }
 
 StatusOr<std::vector<RunRecord>> SqliteStore::ListRuns(const RunFilter& f) {
-  VB_RETURN_IF_ERROR(ValidateFilter(f));
+  VB_RETURN_IF_ERROR(checks::ValidateFilter(f));
   // One SQL text per combination of filters in use, each prepared once and cached like the others.
   std::string q = Cat("SELECT ", kRunColumns, " FROM runs WHERE id > :after_id");
   if (f.status) q += " AND status = :status";
@@ -962,17 +891,7 @@ Status SqliteStore::ReadChunks(std::int64_t run_id, const std::function<Status(T
 std::string UtcDate(double unix_s) { return FormatUtc(unix_s); }
 
 StatusOr<PruneResult> SqliteStore::Prune(const PruneRequest& request) {
-  if (!std::isfinite(request.finished_before_unix_s) || request.finished_before_unix_s <= 0) {
-    return Status::InvalidArgument(Cat("finished_before_unix_s: must be a finite time > 0, got ",
-                                       FormatExact(request.finished_before_unix_s)));
-  }
-  if (request.keep_last < 0) return Status::InvalidArgument(Cat("keep_last: must be >= 0, got ", request.keep_last));
-  for (std::size_t k = 0; k < request.protected_batches.size(); ++k) {
-    if (request.protected_batches[k] <= 0) {
-      return Status::InvalidArgument(Cat("protected_batches[", k, "]: must be a batch id > 0, got ",
-                                         request.protected_batches[k]));
-    }
-  }
+  VB_RETURN_IF_ERROR(checks::CheckPrune(request));
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(request.dry_run ? TxnKind::kRead : TxnKind::kWrite));
 
@@ -1094,14 +1013,6 @@ StatusOr<PruneResult> SqliteStore::Prune(const PruneRequest& request) {
 
 }  // namespace
 
-Status CheckNightClaim(const std::string& night, const std::string& host) {
-  bool date_like = night.size() == 10 && night[4] == '-' && night[7] == '-';
-  for (std::size_t k : {0, 1, 2, 3, 5, 6, 8, 9}) date_like = date_like && night[k] >= '0' && night[k] <= '9';
-  if (!date_like) return Status::InvalidArgument(Cat("night: must be YYYY-MM-DD, got \"", night, "\""));
-  if (host.empty()) return Status::InvalidArgument("host: must not be empty");
-  return Status::Ok();
-}
-
 std::int64_t LocalBatchOfBaselineSource(const std::string& source) {
   // "local batch 12" (baseline set --batch 12 --local) or "suite ci (local batch 12, seed 1)" (--suite).
   constexpr std::string_view kMarker = "local batch ";
@@ -1174,7 +1085,7 @@ StatusOr<std::unique_ptr<Store>> Store::Open(const std::string& path) {
 // Baselines and regressions: the SQL is in db/regress_tables.cc; each method is one transaction here.
 StatusOr<std::int32_t> SqliteStore::SaveBaseline(const std::string& name, const std::string& source,
                                                  const std::string& note, const std::vector<BaselineEntry>& entries) {
-  VB_RETURN_IF_ERROR(regress_tables::ValidateBaseline(name, entries));
+  VB_RETURN_IF_ERROR(checks::ValidateBaseline(name, entries));
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kWrite));
   VB_DB_ASSIGN_OR_RETURN(const int version,
@@ -1200,8 +1111,7 @@ StatusOr<std::vector<BaselineRecord>> SqliteStore::ListBaselines() {
 }
 
 StatusOr<std::int64_t> SqliteStore::SaveRegression(const RegressionRecord& record) {
-  if (record.suite.empty()) return Status::InvalidArgument("regression.suite: must not be empty");
-  if (record.verdict.empty()) return Status::InvalidArgument("regression.verdict: must not be empty");
+  VB_RETURN_IF_ERROR(checks::CheckRegression(record));
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kWrite));
   VB_DB_ASSIGN_OR_RETURN(const std::int64_t id, regress_tables::InsertRegression(&conn_, record, NowUnixS()));
@@ -1218,8 +1128,7 @@ StatusOr<RegressionRecord> SqliteStore::GetRegression(std::int64_t id) {
 }
 
 StatusOr<std::vector<RegressionRecord>> SqliteStore::ListRegressions(bool nights_only, std::int32_t limit) {
-  if (limit < 1 || limit > kMaxListLimit)
-    return Status::InvalidArgument(Cat("limit: must be in 1..", kMaxListLimit, ", got ", limit));
+  VB_RETURN_IF_ERROR(checks::CheckListLimit(limit));
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
   VB_DB_ASSIGN_OR_RETURN(std::vector<RegressionRecord> out,

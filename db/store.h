@@ -278,7 +278,4 @@ class Store {
 // batch 12, seed 1)"), else 0. benchctl writes these sources (benchctl/regress_commands.cc).
 std::int64_t LocalBatchOfBaselineSource(const std::string& source);
 
-// ClaimNight's arguments, checked the same way by every engine: a YYYY-MM-DD night and a host name.
-Status CheckNightClaim(const std::string& night, const std::string& host);
-
 }  // namespace vb::db
