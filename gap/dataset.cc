@@ -437,12 +437,19 @@ Status ParseRun(const ManifestContext& m, const fs::path& dir, const json& j, co
 
   VB_RETURN_IF_ERROR(GetNumber(m, j, "supply_V", path + ".supply_V", &run->supply_V));
   if (!(run->supply_V > 0.0)) return m.Error(path + ".supply_V", FormatNumber(run->supply_V) + " must be > 0");
+  // The same upper bounds as valve-runs/2 below (and the server's imports): no bench sees more.
+  if (run->supply_V > 1e4)
+    return m.Error(path + ".supply_V", FormatNumber(run->supply_V) + " V is outside (0, 10000] V");
   VB_RETURN_IF_ERROR(GetNumber(m, j, "supply_pressure_Pa", path + ".supply_pressure_Pa", &run->supply_pressure_Pa));
   if (!(run->supply_pressure_Pa >= 0.0)) {
     return m.Error(path + ".supply_pressure_Pa", FormatNumber(run->supply_pressure_Pa) + " must be >= 0");
   }
+  if (run->supply_pressure_Pa > 1e8)
+    return m.Error(path + ".supply_pressure_Pa", FormatNumber(run->supply_pressure_Pa) + " Pa is outside [0, 1e+08] Pa");
   VB_RETURN_IF_ERROR(GetNumber(m, j, "t_start_s", path + ".t_start_s", &run->t_start_s));
   if (!(run->t_start_s >= 0.0)) return m.Error(path + ".t_start_s", FormatNumber(run->t_start_s) + " must be >= 0");
+  if (run->t_start_s > 1e9)
+    return m.Error(path + ".t_start_s", FormatNumber(run->t_start_s) + " s is outside [0, 1e+09] s");
 
   VB_RETURN_IF_ERROR(GetString(m, j, "split", path + ".split", false, &s));
   run->split = s.value_or("");

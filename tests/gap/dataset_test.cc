@@ -145,6 +145,16 @@ TEST_F(DatasetTest, LoadsEveryField) {
   EXPECT_EQ(b.gate, (std::vector<int8_t>{1, 0, 0}));
 }
 
+// valve-runs/1 bounds its conditions like valve-runs/2: no absurd supply, pressure or start time.
+TEST_F(DatasetTest, ConditionsBeyondAnyBenchAreRefusedNamingTheField) {
+  ExpectManifestError([](json& m) { m["runs"][1]["supply_V"] = 1e308; },
+                      "ds/manifest.json: runs[1].supply_V: 1e+308 V is outside (0, 10000] V");
+  ExpectManifestError([](json& m) { m["runs"][1]["supply_pressure_Pa"] = 1e300; },
+                      "ds/manifest.json: runs[1].supply_pressure_Pa: 1e+300 Pa is outside [0, 1e+08] Pa");
+  ExpectManifestError([](json& m) { m["runs"][1]["t_start_s"] = 1e12; },
+                      "ds/manifest.json: runs[1].t_start_s: 1e+12 s is outside [0, 1e+09] s");
+}
+
 // A run file over the size limit is refused from its size, before it is read: a 600 MiB sparse file takes no
 // disk and would take seconds and 600 MiB of memory to read.
 TEST_F(DatasetTest, AFileOverTheSizeLimitIsRefusedBeforeItIsRead) {
