@@ -21,6 +21,7 @@
 #include "client/client.h"
 #include "experiment/spec.h"
 #include "gap/diagnose.h"
+#include "gap/stored_runs.h"
 #include "gap/suggest.h"
 #include "gap/identify.h"
 #include "gap/readings_csv.h"
@@ -268,16 +269,8 @@ int DiagnoseAndReport(const gap::Dataset& ds_in, const Nominal& nominal, const s
 
 namespace {
 
-// The diagnosis of stored runs, from the local store or a server (the same fields either way).
-struct StoredRunInfo {
-  double started_unix_s = 0.0;
-  std::optional<double> t_start_s;
-  std::string split, preset;
-};
-
-// A stored run as a measured waveform run of a dataset: its gate and current, its conditions; no split and its
-// own start time (callers place it in their session).
-StatusOr<gap::RunData> StoredRun(Backend& backend, std::int64_t id, StoredRunInfo* info) {
+// A stored run, from the local store or a server (the same fields either way), as the diagnosis takes it.
+StatusOr<gap::StoredRun> FetchStoredRun(Backend& backend, std::int64_t id) {
   const std::string where = "run " + std::to_string(id);
   auto run = backend.GetRun(id);
   if (!run.ok()) return run.status().WithContext(where);
@@ -287,58 +280,36 @@ StatusOr<gap::RunData> StoredRun(Backend& backend, std::int64_t id, StoredRunInf
   if (!trace.ok()) return trace.status().WithContext(where);
   if (!trace->columns.count("gate") || !trace->columns.count("i_A"))
     return Status::InvalidArgument(where + ": the trace has no gate and i_A channels");
-  gap::RunData r;
-  r.id = std::to_string(id) + ":" + run->key.DisplayName();
-  r.file = where;
-  r.supply_V = spec.conditions().supply_v();
-  r.supply_pressure_Pa = spec.conditions().supply_pressure_pa();
-  r.sample_period_s = trace->sample_period_s;
-  r.i_A = trace->columns.at("i_A");
-  for (std::size_t j = 0; j < r.i_A.size(); ++j) {
-    const double g = trace->columns.at("gate")[j];
-    if (g != 0.0 && g != 1.0)
-      return Status::InvalidArgument(where + ": gate[" + std::to_string(j) + "] is " + std::to_string(g) +
-                                     "; the diagnosis needs a low-side switch command (0 or 1)");
-    r.gate.push_back(static_cast<std::int8_t>(g));
-    r.t_s.push_back(static_cast<double>(j) * r.sample_period_s);
-  }
-  if (info != nullptr) {
-    info->started_unix_s = run->started_unix_s;
-    info->t_start_s = run->t_start_s;
-    info->split = run->split;
-    info->preset = spec.bench().model().preset().empty() ? "taghizadeh2009" : spec.bench().model().preset();
-  }
-  return r;
+  gap::StoredRun s;
+  s.id = id;
+  s.name = run->key.DisplayName();
+  s.supply_V = spec.conditions().supply_v();
+  s.supply_pressure_Pa = spec.conditions().supply_pressure_pa();
+  s.preset = spec.bench().model().preset();
+  s.started_unix_s = run->started_unix_s;
+  s.t_start_s = run->t_start_s;
+  s.split = run->split;
+  s.sample_period_s = trace->sample_period_s;
+  s.gate = std::move(trace->columns.at("gate"));
+  s.i_A = std::move(trace->columns.at("i_A"));
+  return s;
 }
 
 int StoredDiagnose(Backend& backend, const std::vector<std::int64_t>& run_ids, const std::string& model,
                    const DiagnoseOutput& out) {
-  gap::Dataset ds;
-  ds.format = std::string(gap::kFormatValveRuns1);
-  double first_start_unix = -1.0;
-  for (std::size_t k = 0; k < run_ids.size(); ++k) {
-    StoredRunInfo info;
-    auto r = StoredRun(backend, run_ids[k], &info);
-    if (!r.ok()) return Fail(r.status());
-    // Imported runs carry their session's start time and split as fields (docs/server.md); other runs take
-    // the start from when they ran.
-    if (first_start_unix < 0.0) first_start_unix = info.started_unix_s;
-    r->t_start_s = info.t_start_s ? *info.t_start_s : info.started_unix_s - first_start_unix;
-    r->split = info.split == "fit" || info.split == "holdout" ? info.split : "";
-    if (k == 0) ds.model = info.preset;
-    ds.runs.push_back(std::move(*r));
+  std::vector<gap::StoredRun> stored;
+  for (std::int64_t id : run_ids) {
+    auto s = FetchStoredRun(backend, id);
+    if (!s.ok()) return Fail(s.status());
+    stored.push_back(std::move(*s));
   }
-  std::stable_sort(ds.runs.begin(), ds.runs.end(),
-                   [](const gap::RunData& a, const gap::RunData& b) { return a.t_start_s < b.t_start_s; });
-  // A split only if every run has one (as for a manifest); otherwise the diagnosis makes its own.
-  const bool all_split = std::all_of(ds.runs.begin(), ds.runs.end(), [](const gap::RunData& r) { return !r.split.empty(); });
-  if (!all_split)
-    for (auto& r : ds.runs) r.split.clear();
-  auto nominal = LoadNominal(model.empty() ? ds.model : model);
+  auto ds = gap::DatasetOfStoredRuns(std::move(stored));
+  if (!ds.ok()) return Fail(ds.status());
+  auto nominal = LoadNominal(model.empty() ? ds->model : model);
   if (!nominal.ok()) return Fail(nominal.status());
   gap::DiagnoseOptions options;
-  options.model_name = model.empty() ? ds.model : model;
-  return DiagnoseAndReport(ds, *nominal, "stored runs (" + backend.Where() + ")", out, options);
+  options.model_name = model.empty() ? ds->model : model;
+  return DiagnoseAndReport(*ds, *nominal, "stored runs (" + backend.Where() + ")", out, options);
 }
 
 int ImportDataset(Backend& backend, const std::string& dataset_dir, bool json) {
@@ -505,12 +476,15 @@ int GapCli::Diagnose(const ClientFactory& make_client) {
     for (const auto& r : ds->runs)
       if (std::isfinite(r.t_start_s) && !r.t_s.empty()) t = std::max(t, r.t_start_s + r.t_s.back());
     for (std::int64_t id : add_runs_) {
-      auto r = StoredRun(*backend, id, nullptr);
-      if (!r.ok()) return Fail(r.status().WithContext("--add-runs"));
-      r->split = "holdout";
-      r->t_start_s = t + 1.0;
-      t = r->t_start_s + (r->t_s.empty() ? 0.0 : r->t_s.back());
-      ds->runs.push_back(std::move(*r));
+      auto fetched = FetchStoredRun(*backend, id);
+      if (!fetched.ok()) return Fail(fetched.status().WithContext("--add-runs"));
+      auto one = gap::DatasetOfStoredRuns({std::move(*fetched)});
+      if (!one.ok()) return Fail(one.status().WithContext("--add-runs"));
+      gap::RunData r = std::move(one->runs.front());
+      r.split = "holdout";
+      r.t_start_s = t + 1.0;
+      t = r.t_start_s + (r.t_s.empty() ? 0.0 : r.t_s.back());
+      ds->runs.push_back(std::move(r));
     }
   }
   auto nominal = NominalFor(*ds, model_);

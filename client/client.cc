@@ -220,6 +220,19 @@ StatusOr<v1::ListBenchesResponse> Client::Benches() {
   return resp;
 }
 
+StatusOr<v1::DiagnoseRunsResponse> Client::DiagnoseRuns(const std::vector<std::int64_t>& run_ids,
+                                                        const std::string& model, double deadline_s) {
+  grpc::ClientContext ctx;
+  Prepare(&ctx, deadline_s);
+  v1::DiagnoseRunsRequest req;
+  for (std::int64_t id : run_ids) req.add_run_ids(id);
+  req.set_model(model);
+  v1::DiagnoseRunsResponse resp;
+  auto st = stub_->DiagnoseRuns(&ctx, req, &resp);
+  if (!st.ok()) return Error(st);
+  return resp;
+}
+
 StatusOr<v1::SubmitRunResponse> Client::ImportRuns(const v1::ImportRunsRequest& request, double deadline_s) {
   // A request that fits one message goes as one (the server checks all of it before storing anything);
   // a larger one is streamed (ImportRunsStream): the header with every run's metadata, then the samples in

@@ -51,6 +51,9 @@ class Client {
   StatusOr<valvebench::v1::CompareRunsResponse> Compare(std::int64_t batch_id, const std::vector<std::int64_t>& run_ids);
   StatusOr<valvebench::v1::ListBenchesResponse> Benches();
   StatusOr<valvebench::v1::ListNightsResponse> ListNights(int limit);
+  // The gap diagnosis of stored runs, computed by the server (seconds to a minute).
+  StatusOr<valvebench::v1::DiagnoseRunsResponse> DiagnoseRuns(const std::vector<std::int64_t>& run_ids,
+                                                              const std::string& model = "", double deadline_s = 300.0);
   StatusOr<valvebench::v1::SubmitRunResponse> ImportRuns(const valvebench::v1::ImportRunsRequest& request,
                                                          double deadline_s = 300.0);
 

@@ -69,6 +69,9 @@ class BenchServiceImpl final : public valvebench::v1::BenchService::Service {
                           valvebench::v1::SubmitRunResponse* resp) override;
   grpc::Status ImportRunsStream(grpc::ServerContext* ctx, grpc::ServerReader<valvebench::v1::ImportRunsPart>* reader,
                                 valvebench::v1::SubmitRunResponse* resp) override;
+  // server/diagnose_service.cc
+  grpc::Status DiagnoseRuns(grpc::ServerContext* ctx, const valvebench::v1::DiagnoseRunsRequest* req,
+                            valvebench::v1::DiagnoseRunsResponse* resp) override;
   // server/nights_service.cc
   grpc::Status ListNights(grpc::ServerContext* ctx, const valvebench::v1::ListNightsRequest* req,
                           valvebench::v1::ListNightsResponse* resp) override;

@@ -312,6 +312,7 @@ class Routes {
     s.Get(R"(/api/runs/(\d{1,15})/trace\.csv)", [this](const auto& q, auto& r) { TraceCsv(q, r); });
     s.Get(R"(/api/runs/(\d{1,15})/events)", [this](const auto& q, auto& r) { Events(q, r); });
     s.Get("/api/compare", [this](const auto& q, auto& r) { Compare(q, r); });
+    s.Get("/api/diagnose", [this](const auto& q, auto& r) { Diagnose(q, r); });
     s.Get("/api/nights", [this](const auto& q, auto& r) { Nights(q, r); });
     s.set_error_handler([](const httplib::Request& req, httplib::Response& res) {
       if (res.body.empty() && res.status == 404)
@@ -650,23 +651,47 @@ class Routes {
         [w](bool) { w->ctx.TryCancel(); });
   }
 
+  // "runs=1,2,3" into `ids`; false (the answer sent) when it is not a list of run ids.
+  static bool RunIdsParam(const httplib::Request& req, httplib::Response& res,
+                          google::protobuf::RepeatedField<std::int64_t>* ids) {
+    if (!req.has_param("runs")) return true;
+    const std::string list = req.get_param_value("runs");
+    size_t pos = 0;
+    while (pos <= list.size()) {
+      const size_t end = std::min(list.find(',', pos), list.size());
+      const std::string item = list.substr(pos, end - pos);
+      if (item.empty() || item.size() > 15 || item.find_first_not_of("0123456789") != std::string::npos) {
+        BadRequest(res, "runs: must be run ids separated by commas, got '" + list + "'");
+        return false;
+      }
+      ids->Add(std::stoll(item));
+      pos = end + 1;
+    }
+    return true;
+  }
+
+  // The gap diagnosis of stored runs: DiagnoseRuns, run by the server (seconds to a minute).
+  void Diagnose(const httplib::Request& req, httplib::Response& res) {
+    v1::DiagnoseRunsRequest r;
+    if (!RunIdsParam(req, res, r.mutable_run_ids())) return;
+    if (req.has_param("model")) r.set_model(req.get_param_value("model"));
+    grpc::ClientContext ctx;
+    Authorize(req, &ctx);
+    Deadline(&ctx, 300.0);
+    v1::DiagnoseRunsResponse out;
+    auto st = stub_->DiagnoseRuns(&ctx, r, &out);
+    if (!st.ok()) return SendError(res, st);
+    Json j = {{"report", out.report()}};
+    j["diagnosis"] = Json::parse(out.report_json(), nullptr, false);
+    res.set_content(j.dump(), kJson);
+  }
+
   void Compare(const httplib::Request& req, httplib::Response& res) {
     v1::CompareRunsRequest r;
     long long batch = 0;
     if (!IntParam(req, res, "batch_id", &batch)) return;
     r.set_batch_id(batch);
-    if (req.has_param("runs")) {
-      const std::string list = req.get_param_value("runs");
-      size_t pos = 0;
-      while (pos <= list.size()) {
-        const size_t end = std::min(list.find(',', pos), list.size());
-        const std::string item = list.substr(pos, end - pos);
-        if (item.empty() || item.size() > 15 || item.find_first_not_of("0123456789") != std::string::npos)
-          return BadRequest(res, "runs: must be run ids separated by commas, got '" + list + "'");
-        r.add_run_ids(std::stoll(item));
-        pos = end + 1;
-      }
-    }
+    if (!RunIdsParam(req, res, r.mutable_run_ids())) return;
     grpc::ClientContext ctx;
     Authorize(req, &ctx);
     Deadline(&ctx, 30.0);

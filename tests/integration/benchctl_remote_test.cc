@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "../common/run_command.h"
+#include "client/client.h"
 #include "server_process.h"
 
 namespace vb {
@@ -241,6 +242,27 @@ TEST(BenchctlRemote, ImportThenDiagnoseStoredRuns) {
   const auto diag = nlohmann::json::parse(d.out);
   EXPECT_EQ(diag["verdict"], "supply_resistance");
   EXPECT_FALSE(diag.contains("split_note")) << "the manifest's split travels with the runs";
+
+  // The same diagnosis computed by the server (DiagnoseRuns, what the web page's "diagnose" calls): the same
+  // dataset and the same numbers as benchctl's.
+  client::ClientOptions viewer;
+  viewer.address = addr;
+  viewer.token = testing::kViewerToken;
+  client::Client c(viewer);
+  std::vector<std::int64_t> id_list;
+  for (const auto& id : j["run_ids"]) id_list.push_back(id.get<std::int64_t>());
+  auto on_server = c.DiagnoseRuns(id_list);
+  ASSERT_TRUE(on_server.ok()) << on_server.status().message();
+  const auto sj = nlohmann::json::parse(on_server->report_json());
+  EXPECT_EQ(sj["verdict"], diag["verdict"]);
+  ASSERT_TRUE(sj.contains("gap") && sj.contains("how_far")) << on_server->report_json().substr(0, 400);
+  for (const char* key : {"gap", "how_far", "verdict_reason"}) EXPECT_EQ(sj[key].dump(), diag[key].dump()) << key;
+  EXPECT_NE(on_server->report().find("supply_resistance"), std::string::npos) << on_server->report();
+  auto twice = c.DiagnoseRuns({id_list[0], id_list[0]});
+  ASSERT_FALSE(twice.ok());
+  EXPECT_NE(twice.status().message().find("run_ids[1]"), std::string::npos) << twice.status().message();
+  auto none = c.DiagnoseRuns({});
+  EXPECT_EQ(none.status().code(), StatusCode::kInvalidArgument);
 
   // A bad dataset is refused before anything is sent, naming the file and line.
   const std::string bad = dir + "/bad";

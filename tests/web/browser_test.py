@@ -274,6 +274,27 @@ try:
     else:
         check("the night links its regressed case", False, row[0].text if row else "")
 
+    # 7b. The diagnosis: practice set p07 imported with benchctl, diagnosed on the server from the page.
+    p07 = os.path.abspath(os.path.join(examples_dir, "..", "..", "shared", "gapbench", "practice", "p07"))
+    benchctl = os.path.join(os.path.dirname(server_bin), "benchctl")
+    grpc_addr = re.search(r"listening on (\S+) ", open(os.path.join(work, "server.log")).read())
+    if os.path.isdir(p07) and os.path.exists(benchctl) and grpc_addr:
+        imported = subprocess.run([benchctl, "import", p07, "--json", "--server", grpc_addr.group(1),
+                                   "--token", OPERATOR], capture_output=True, text=True, timeout=120)
+        check("benchctl imports p07", imported.returncode == 0, imported.stdout + imported.stderr)
+        go("#/diagnosis")
+        button = wait(lambda: driver.find_elements(By.CSS_SELECTOR, "button.diagnose") or None, what="diagnose button")
+        if button:
+            button[0].click()
+        verdict = wait(lambda: driver.find_elements(By.CSS_SELECTOR, "#diagnosis-report .verdict") or None,
+                       timeout=120, what="diagnosis verdict")
+        text = verdict[0].text if verdict else ""
+        check("the page diagnoses the imported runs on the server", text == "supply_resistance", text)
+        shot("diagnosis")
+        no_overflow("#/diagnosis with its report")
+    else:
+        print("note: no ../shared/gapbench/practice/p07 or benchctl beside the server: the diagnosis step is skipped")
+
     for page in ("#/runs", "#/nights", "#/diagnosis", "#/submit"):
         go(page)
         time.sleep(0.6)

@@ -582,14 +582,26 @@ async function pageNights(main) {
   } catch (e) { showError(e, box); }
 }
 
-// ---- Diagnosis: what the server stores for it today (imported measured runs); the diagnosis itself runs in
-// benchctl (docs/web.md "Diagnosis").
+// ---- Diagnosis: the imported measured runs by dataset; "diagnose" runs the sim-to-real gap diagnosis on the
+// server (DiagnoseRuns, the same as benchctl diagnose --runs; docs/web.md "Diagnosis").
+async function runDiagnosis(ids, out) {
+  out.replaceChildren(el('p', {class: 'muted', text: 'Diagnosing ' + ids.length + ' runs on the server (seconds to a minute) …'}));
+  try {
+    const d = await api('GET', '/api/diagnose?runs=' + ids.join(','));
+    const v = d.diagnosis || {};
+    out.replaceChildren(
+      el('p', {}, el('strong', {text: 'Verdict: '}), el('span', {class: 'verdict', text: String(v.verdict || '–')})),
+      el('pre', {class: 'report', text: d.report}));
+  } catch (e) { showError(e, out); }
+}
+
 async function pageDiagnosis(main) {
   const box = el('div', {class: 'scroll'});
+  const out = el('div', {id: 'diagnosis-report', class: 'scroll'});
   main.replaceChildren(el('h1', {text: 'Diagnosis'}), el('section', {},
-    el('p', {}, 'The sim-to-real gap diagnosis runs in benchctl (', el('code', {text: 'benchctl diagnose --runs ID,ID,…'}),
-      ', docs/gap.md); the server has no diagnosis RPC yet, so this page lists the measured runs stored for it ' +
-      '(imported datasets) and links each dataset to its runs, their traces and a comparison.'), box));
+    el('p', {}, 'The sim-to-real gap diagnosis of stored measured runs: where they depart from the model, which ' +
+      'unmodelled effect explains it and how far it closes the gap on held-out runs (docs/gap.md). It runs on the ' +
+      'server, as ', el('code', {text: 'benchctl diagnose --runs ID,ID,…'}), ' does.'), box, out));
   try {
     const l = await api('GET', '/api/runs?tag=imported&page_size=1000');
     const byBatch = new Map();
@@ -598,13 +610,14 @@ async function pageDiagnosis(main) {
       byBatch.get(r.batch_id).push(r);
     }
     box.replaceChildren(byBatch.size === 0 ? el('p', {class: 'muted', text: 'No imported runs (benchctl import DIR).'}) :
-      el('table', {}, el('tr', {}, ['batch', 'dataset', 'runs', 'fit / holdout', 'command', ''].map((h) => el('th', {text: h}))),
+      el('table', {}, el('tr', {}, ['batch', 'dataset', 'runs', 'fit / holdout', 'diagnosis', ''].map((h) => el('th', {text: h}))),
         Array.from(byBatch.entries()).map(([b, runs]) => {
           const ds = ((runs[0].tags || []).find((t) => t.startsWith('dataset:')) || '').slice(8);
           const fit = runs.filter((r) => r.split === 'fit').length, hold = runs.filter((r) => r.split === 'holdout').length;
           return el('tr', {}, el('td', {}, el('a', {href: '#/runs?batch=' + b, text: b})), el('td', {text: ds}),
             el('td', {class: 'num', text: String(runs.length)}), el('td', {text: fit + ' / ' + hold}),
-            el('td', {}, el('code', {text: 'benchctl diagnose --runs ' + runs.map((r) => r.id).join(',')})),
+            el('td', {}, el('button', {type: 'button', class: 'diagnose', 'data-batch': String(b),
+              onclick: () => runDiagnosis(runs.map((r) => r.id), out), text: 'diagnose'})),
             el('td', {}, el('a', {href: '#/compare?runs=' + runs.slice(0, 12).map((r) => r.id).join(','), text: 'overlay'})));
         })));
   } catch (e) { showError(e, box); }

@@ -1,0 +1,50 @@
+#include "gap/stored_runs.h"
+
+#include <algorithm>
+
+namespace vb::gap {
+
+StatusOr<Dataset> DatasetOfStoredRuns(std::vector<StoredRun> runs) {
+  if (runs.empty()) return Status::InvalidArgument("run_ids: at least one run is needed");
+  Dataset ds;
+  ds.format = std::string(kFormatValveRuns1);
+  const double first_start_unix = runs.front().started_unix_s;
+  for (std::size_t k = 0; k < runs.size(); ++k) {
+    StoredRun& s = runs[k];
+    const std::string where = "run " + std::to_string(s.id);
+    if (s.gate.size() != s.i_A.size() || s.gate.empty())
+      return Status::InvalidArgument(where + ": the trace has no gate and i_A channels of one length");
+    RunData r;
+    r.id = std::to_string(s.id) + ":" + s.name;
+    r.file = where;
+    r.supply_V = s.supply_V;
+    r.supply_pressure_Pa = s.supply_pressure_Pa;
+    r.sample_period_s = s.sample_period_s;
+    r.i_A = std::move(s.i_A);
+    r.gate.reserve(s.gate.size());
+    r.t_s.reserve(s.gate.size());
+    for (std::size_t j = 0; j < s.gate.size(); ++j) {
+      const double g = s.gate[j];
+      if (g != 0.0 && g != 1.0)
+        return Status::InvalidArgument(where + ": gate[" + std::to_string(j) + "] is " + std::to_string(g) +
+                                       "; the diagnosis needs a low-side switch command (0 or 1)");
+      r.gate.push_back(static_cast<std::int8_t>(g));
+      r.t_s.push_back(static_cast<double>(j) * r.sample_period_s);
+    }
+    // Imported runs carry their session's start time and split as fields (docs/server.md); other runs take
+    // the start from when they ran.
+    r.t_start_s = s.t_start_s ? *s.t_start_s : s.started_unix_s - first_start_unix;
+    r.split = s.split == "fit" || s.split == "holdout" ? s.split : "";
+    if (k == 0) ds.model = s.preset.empty() ? "taghizadeh2009" : s.preset;
+    ds.runs.push_back(std::move(r));
+  }
+  std::stable_sort(ds.runs.begin(), ds.runs.end(),
+                   [](const RunData& a, const RunData& b) { return a.t_start_s < b.t_start_s; });
+  // A split only if every run has one (as for a manifest); otherwise the diagnosis makes its own.
+  const bool all_split = std::all_of(ds.runs.begin(), ds.runs.end(), [](const RunData& r) { return !r.split.empty(); });
+  if (!all_split)
+    for (auto& r : ds.runs) r.split.clear();
+  return ds;
+}
+
+}  // namespace vb::gap

@@ -1,0 +1,96 @@
+// BenchService::DiagnoseRuns: the gap diagnosis of stored runs on the server (docs/gap.md, "Stored runs"), the
+// same dataset (gap::DatasetOfStoredRuns) and the same diagnosis and report as `benchctl diagnose --runs`.
+#include <google/protobuf/util/json_util.h>
+
+#include <map>
+
+#include "gap/diagnose.h"
+#include "gap/stored_runs.h"
+#include "model/params.h"
+#include "server/grpc_status.h"
+#include "server/service.h"
+
+namespace vb::server {
+
+namespace v1 = valvebench::v1;
+
+namespace {
+
+constexpr int kMaxRuns = 100;
+
+// One stored run, from the store: its conditions from its spec, its gate and current from its trace.
+StatusOr<gap::StoredRun> LoadStoredRun(db::Store* store, std::int64_t id) {
+  const std::string where = "run " + std::to_string(id);
+  auto run = store->GetRun(id);
+  if (!run.ok()) return run.status();
+  if (run->status != db::RunStatus::kDone) return Status::FailedPrecondition(where + ": not done");
+  v1::ExperimentSpec spec;
+  if (!google::protobuf::util::JsonStringToMessage(run->spec_json, &spec).ok())
+    return Status::DataLoss(where + ": its stored spec does not parse");
+  gap::StoredRun s;
+  s.id = id;
+  s.name = run->key.DisplayName();
+  s.supply_V = spec.conditions().supply_v();
+  s.supply_pressure_Pa = spec.conditions().supply_pressure_pa();
+  s.preset = spec.bench().model().preset();
+  s.started_unix_s = run->started_unix_s;
+  if (std::isfinite(run->t_start_s)) s.t_start_s = run->t_start_s;
+  s.split = run->split;
+  bool has_gate = false, has_current = false;
+  VB_RETURN_IF_ERROR(store->ForEachTraceChunk(id, [&](const db::TraceChunk& c, std::int64_t /*total*/) {
+    s.sample_period_s = c.sample_period_s;
+    const auto n = static_cast<std::size_t>(c.samples);
+    for (std::size_t ch = 0; ch < c.channels.size(); ++ch) {
+      std::vector<double>* column = c.channels[ch] == "gate" ? &s.gate : c.channels[ch] == "i_A" ? &s.i_A : nullptr;
+      if (column == nullptr) continue;
+      (c.channels[ch] == "gate" ? has_gate : has_current) = true;
+      column->insert(column->end(), c.data.begin() + static_cast<std::ptrdiff_t>(ch * n),
+                     c.data.begin() + static_cast<std::ptrdiff_t>((ch + 1) * n));
+    }
+    return Status::Ok();
+  }));
+  if (!has_gate || !has_current) return Status::InvalidArgument(where + ": the trace has no gate and i_A channels");
+  return s;
+}
+
+}  // namespace
+
+grpc::Status BenchServiceImpl::DiagnoseRuns(grpc::ServerContext* ctx, const v1::DiagnoseRunsRequest* req,
+                                            v1::DiagnoseRunsResponse* resp) {
+  Principal who;
+  if (auto st = Authorize(ctx, Role::kViewer, &who); !st.ok()) return st;
+  if (req->run_ids_size() == 0) return ToGrpcStatus(Status::InvalidArgument("run_ids: at least one run is needed"));
+  if (req->run_ids_size() > kMaxRuns)
+    return ToGrpcStatus(Status::InvalidArgument("run_ids: " + std::to_string(req->run_ids_size()) +
+                                                " runs, at most " + std::to_string(kMaxRuns)));
+  std::map<std::int64_t, int> seen;
+  for (int k = 0; k < req->run_ids_size(); ++k)
+    if (auto [it, fresh] = seen.emplace(req->run_ids(k), k); !fresh)
+      return ToGrpcStatus(Status::InvalidArgument("run_ids[" + std::to_string(k) + "]: run " +
+                                                  std::to_string(req->run_ids(k)) + " is also run_ids[" +
+                                                  std::to_string(it->second) + "]"));
+  std::vector<gap::StoredRun> stored;
+  {
+    auto store = pool_->Acquire();
+    if (!store.ok()) return ToGrpcStatus(store.status());
+    for (int k = 0; k < req->run_ids_size(); ++k) {
+      auto s = LoadStoredRun(store->get(), req->run_ids(k));
+      if (!s.ok()) return ToGrpcStatus(s.status().WithContext("run_ids[" + std::to_string(k) + "]"));
+      stored.push_back(std::move(*s));
+    }
+  }
+  auto ds = gap::DatasetOfStoredRuns(std::move(stored));
+  if (!ds.ok()) return ToGrpcStatus(ds.status());
+  const std::string model_name = req->model().empty() ? ds->model : req->model();
+  auto nominal = model::Preset(model_name);
+  if (!nominal.ok()) return ToGrpcStatus(Status::InvalidArgument("model: unknown preset '" + model_name + "'"));
+  gap::DiagnoseOptions options;
+  options.model_name = model_name;
+  auto d = gap::Diagnose(*ds, *nominal, options);
+  if (!d.ok()) return ToGrpcStatus(d.status().WithContext("stored runs"));
+  resp->set_report(gap::DiagnosisReport(*d));
+  resp->set_report_json(gap::DiagnosisJson(*d));
+  return grpc::Status::OK;
+}
+
+}  // namespace vb::server
