@@ -76,7 +76,9 @@ int CmdBenches(Backend& backend, bool json) {
   // A lab (docs/lab.md): every host's benches, with the host and whether it is alive (heartbeat within the TTL).
   const bool lab = std::any_of(r->benches().begin(), r->benches().end(), [](const auto& x) { return !x.host().empty(); });
   for (const auto& x : r->benches()) {
-    const std::string state = x.busy() ? "busy (run " + std::to_string(x.current_run_id()) + ")" : "idle";
+    const std::string state = x.busy()             ? "busy (run " + std::to_string(x.current_run_id()) + ")"
+                              : !x.fault().empty() ? "FAULTED: " + x.fault()
+                                                   : "idle";
     if (lab) {
       const std::string live = x.alive() ? "alive" : "DOWN, last heartbeat " + std::to_string(std::lround(x.heartbeat_age_s())) + " s ago";
       std::printf("%-12s %-16s %-9s %-18s %-16s %-8s %-16s %s (%s)\n", x.host().c_str(), x.name().c_str(),

@@ -30,7 +30,22 @@ StatusOr<std::optional<Outcome>> Worker::ClaimAndExecute(db::Store* store) {
   ctx.current_monitor_mu = &monitor_mu_;
   Outcome out = Execute(store, **claimed, setup_, ctx);
   current_run_.store(0);
+  {
+    // A failure at the bench (not opened, an interlock tripped) marks it faulted until a run ends well again.
+    std::lock_guard<std::mutex> lock(fault_mu_);
+    if (out.status == db::RunStatus::kDone) {
+      fault_.clear();
+    } else if (out.status == db::RunStatus::kFailed &&
+               (out.reason.rfind("bench " + setup_.name + ":", 0) == 0 || out.reason.find("safety: ") != std::string::npos)) {
+      fault_ = out.reason;
+    }
+  }
   return std::optional<Outcome>(std::move(out));
+}
+
+std::string Worker::fault() const {
+  std::lock_guard<std::mutex> lock(fault_mu_);
+  return fault_;
 }
 
 bool Worker::CancelIfCurrent(const db::Lease& lease) {

@@ -52,6 +52,9 @@ class Worker {
   // Keep each run's whole trace in its Outcome (benchctl's local mode, for --trace-csv): memory grows with it.
   void set_keep_traces(bool keep) { keep_traces_ = keep; }
   std::int64_t current_run() const { return current_run_.load(); }
+  // Why the bench is faulted: its last run failed at the bench (it could not be opened, or an interlock
+  // tripped), with that run's reason; "" once a run finishes normally again (docs/server.md, "Benches").
+  std::string fault() const;
   // The lease of the run in progress (run_id 0 when none): its writes carry it (db::Lease).
   db::Lease current_lease() const { return {current_run_.load(), current_fence_.load()}; }
 
@@ -60,6 +63,8 @@ class Worker {
 
   BenchSetup setup_;
   bool keep_traces_ = false;
+  mutable std::mutex fault_mu_;
+  std::string fault_;
   ClaimPolicy policy_;
   Registry* registry_;
   std::thread thread_;

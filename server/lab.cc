@@ -107,7 +107,13 @@ Status LabHost::Beat(db::Store* store) {
   db::HostRecord me;
   me.name = setup_.host;
   me.address = setup_.advertised_address;
-  me.benches_json = benches_json_;
+  // Each bench's fault, as it is now (the rest of the description does not change).
+  auto benches = nlohmann::json::parse(benches_json_, nullptr, false);
+  if (benches.is_array() && workers_ != nullptr)
+    for (auto& b : benches)
+      for (const auto& w : *workers_)
+        if (b.is_object() && w->setup().name == b.value("name", "")) b["fault"] = w->fault();
+  me.benches_json = benches.is_array() ? benches.dump() : benches_json_;
   me.started_unix_s = started_unix_s_;
   VB_RETURN_IF_ERROR(store->Heartbeat(me, setup_.lease_ttl_s));
   auto lapsed = store->RequeueLapsed();

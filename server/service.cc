@@ -452,6 +452,7 @@ grpc::Status BenchServiceImpl::LabBenches(v1::ListBenchesResponse* resp) {
       out->set_measures_position(b.value("measures_position", false));
       out->set_device(b.value("device", ""));
       out->set_paced(b.value("paced", false));
+      out->set_fault(b.value("fault", ""));
       out->set_host(h.name);
       out->set_host_address(h.address);
       out->set_heartbeat_age_s(age);
@@ -490,6 +491,7 @@ grpc::Status BenchServiceImpl::ListBenches(grpc::ServerContext* ctx, const v1::L
     out->set_max_duty(b.safety.max_duty);
     out->set_max_on_time_s(b.safety.max_on_time_s);
     out->set_max_coil_temp_c(b.safety.max_coil_temp_C);
+    out->set_fault(w->fault());
     const auto current = w->current_run();
     out->set_busy(current != 0);
     out->set_current_run_id(current);

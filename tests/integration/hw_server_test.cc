@@ -2,6 +2,7 @@
 // the reason, exit 2), ListBenches with the attached USB devices, and a run on a hardware bench whose device is
 // not there ending failed with a clear reason (on a machine without a USB bus: that it has none).
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include <fstream>
 
@@ -68,6 +69,18 @@ TEST(HwServer, CapabilitiesDecideAtSubmissionAndAMissingDeviceFailsTheRunCleanly
   EXPECT_EQ(missing.exit_code, 1) << missing.out;
   Result shown = Benchctl("queue --status failed --json " + op);
   EXPECT_NE(shown.out.find("bench rig-hid: hid 2e8a:10c0 serial NO-SUCH-BENCH"), std::string::npos) << shown.out;
+  // The bench is faulted now, with that reason; the others are not.
+  Result faulted = Benchctl("benches --json " + op);
+  ASSERT_EQ(faulted.exit_code, 0) << faulted.out;
+  const auto j = nlohmann::json::parse(faulted.out.substr(faulted.out.find('{')));
+  for (const auto& b : j["benches"]) {
+    const std::string fault = b.value("fault", "");
+    if (b["name"] == "rig-hid") {
+      EXPECT_NE(fault.find("bench rig-hid: hid 2e8a:10c0 serial NO-SUCH-BENCH"), std::string::npos) << faulted.out;
+    } else {
+      EXPECT_EQ(fault, "") << b.dump();
+    }
+  }
 }
 
 TEST(HwServer, BadHardwareConfigNamesTheField) {

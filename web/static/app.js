@@ -257,7 +257,8 @@ function pageLab(main) {
       (b.benches || []).map((x) => el('tr', {},
         el('td', {text: x.name}), el('td', {text: x.kind}), el('td', {text: x.model || '–'}), el('td', {text: x.driver}),
         el('td', {}, x.busy ? ['running ', runLink(x.current_run_id), ' ', runName.get(String(x.current_run_id)) || '']
-          : 'idle'),
+          : x.fault ? el('span', {class: 'status-FAILED', title: x.fault, text: 'faulted: ' + x.fault.slice(0, 80)})
+            : 'idle'),
         el('td', {class: 'num', text: fmt(x.max_supply_V)}), el('td', {class: 'num', text: fmt(x.max_current_A)}),
         el('td', {text: interlocks(x)}),
         el('td', {text: [x.max_carrier_Hz, x.max_sample_rate_Hz, x.max_control_rate_Hz].map(hz).join(' / ')}),
