@@ -280,15 +280,7 @@ StatusOr<gap::StoredRun> FetchStoredRun(Backend& backend, std::int64_t id) {
   if (!trace.ok()) return trace.status().WithContext(where);
   if (!trace->columns.count("gate") || !trace->columns.count("i_A"))
     return Status::InvalidArgument(where + ": the trace has no gate and i_A channels");
-  gap::StoredRun s;
-  s.id = id;
-  s.name = run->key.DisplayName();
-  s.supply_V = spec.conditions().supply_v();
-  s.supply_pressure_Pa = spec.conditions().supply_pressure_pa();
-  s.preset = spec.bench().model().preset();
-  s.started_unix_s = run->started_unix_s;
-  s.t_start_s = run->t_start_s;
-  s.split = run->split;
+  gap::StoredRun s = gap::StoredRunOf(id, run->key, spec, run->started_unix_s, run->t_start_s, run->split);
   s.sample_period_s = trace->sample_period_s;
   s.gate = std::move(trace->columns.at("gate"));
   s.i_A = std::move(trace->columns.at("i_A"));

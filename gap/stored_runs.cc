@@ -4,6 +4,20 @@
 
 namespace vb::gap {
 
+StoredRun StoredRunOf(std::int64_t id, const RunKey& key, const valvebench::v1::ExperimentSpec& spec,
+                      double started_unix_s, std::optional<double> t_start_s, std::string split) {
+  StoredRun s;
+  s.id = id;
+  s.name = key.DisplayName();
+  s.supply_V = spec.conditions().supply_v();
+  s.supply_pressure_Pa = spec.conditions().supply_pressure_pa();
+  s.preset = spec.bench().model().preset();
+  s.started_unix_s = started_unix_s;
+  s.t_start_s = t_start_s;
+  s.split = std::move(split);
+  return s;
+}
+
 StatusOr<Dataset> DatasetOfStoredRuns(std::vector<StoredRun> runs) {
   if (runs.empty()) return Status::InvalidArgument("run_ids: at least one run is needed");
   Dataset ds;

@@ -7,8 +7,10 @@
 #include <string>
 #include <vector>
 
+#include "common/run_key.h"
 #include "common/status.h"
 #include "gap/dataset.h"
+#include "valvebench/v1/spec.pb.h"
 
 namespace vb::gap {
 
@@ -24,6 +26,11 @@ struct StoredRun {
   double sample_period_s = 0.0;
   std::vector<double> gate, i_A;     // the trace's channels
 };
+
+// A stored run's identity and conditions, from its record and its spec (conditions, model preset); the caller
+// adds the trace (sample_period_s, gate, i_A). One place for benchctl's fetch and the server's store read.
+StoredRun StoredRunOf(std::int64_t id, const RunKey& key, const valvebench::v1::ExperimentSpec& spec,
+                      double started_unix_s, std::optional<double> t_start_s, std::string split);
 
 // Each run becomes a measured waveform run: a low-side switch command (gate 0 or 1, else InvalidArgument naming
 // the run and the sample), its current and conditions. Imported runs keep their session times and splits;

@@ -27,15 +27,10 @@ StatusOr<gap::StoredRun> LoadStoredRun(db::Store* store, std::int64_t id) {
   v1::ExperimentSpec spec;
   if (!google::protobuf::util::JsonStringToMessage(run->spec_json, &spec).ok())
     return Status::DataLoss(where + ": its stored spec does not parse");
-  gap::StoredRun s;
-  s.id = id;
-  s.name = run->key.DisplayName();
-  s.supply_V = spec.conditions().supply_v();
-  s.supply_pressure_Pa = spec.conditions().supply_pressure_pa();
-  s.preset = spec.bench().model().preset();
-  s.started_unix_s = run->started_unix_s;
-  if (std::isfinite(run->t_start_s)) s.t_start_s = run->t_start_s;
-  s.split = run->split;
+  gap::StoredRun s = gap::StoredRunOf(id, run->key, spec, run->started_unix_s,
+                                      std::isfinite(run->t_start_s) ? std::optional<double>(run->t_start_s)
+                                                                    : std::nullopt,
+                                      run->split);
   bool has_gate = false, has_current = false;
   VB_RETURN_IF_ERROR(store->ForEachTraceChunk(id, [&](const db::TraceChunk& c, std::int64_t /*total*/) {
     s.sample_period_s = c.sample_period_s;
