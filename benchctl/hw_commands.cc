@@ -60,6 +60,9 @@ valvebench::v1::ListBenchesResponse LocalBenches() {
   return r;
 }
 
+// A fault reason in the table: the table stays within 120 columns; --json has it whole.
+std::string Clip(const std::string& s, std::size_t n) { return s.size() <= n ? s : s.substr(0, n - 3) + "..."; }
+
 int CmdBenches(Backend& backend, bool json) {
   auto r = backend.Benches();
   if (!r.ok()) return Fail(r.status());
@@ -77,7 +80,7 @@ int CmdBenches(Backend& backend, bool json) {
   const bool lab = std::any_of(r->benches().begin(), r->benches().end(), [](const auto& x) { return !x.host().empty(); });
   for (const auto& x : r->benches()) {
     const std::string state = x.busy()             ? "busy (run " + std::to_string(x.current_run_id()) + ")"
-                              : !x.fault().empty() ? "FAULTED: " + x.fault()
+                              : !x.fault().empty() ? "FAULTED: " + Clip(x.fault(), 60)
                                                    : "idle";
     if (lab) {
       const std::string live = x.alive() ? "alive" : "DOWN, last heartbeat " + std::to_string(std::lround(x.heartbeat_age_s())) + " s ago";
