@@ -578,9 +578,26 @@ StatusOr<std::vector<CandidateResult>> Attribute(const Dataset& ds, const std::v
   return results;
 }
 
+namespace {
+bool IsParametricSingle(const Candidate& c) {
+  return c.effects.empty() && c.param_members.empty() && c.params.size() == 1 && c.name.rfind("param:", 0) == 0;
+}
+}  // namespace
+
+std::vector<std::string> Members(const Candidate& c) {
+  if (IsParametricSingle(c)) return {c.name};
+  std::vector<std::string> out = c.effects;
+  for (const auto& p : c.param_members) out.push_back("param:" + p);
+  return out;
+}
+
 Candidate PairCandidate(const Candidate& a, const Candidate& b) {
   Candidate c{a.name + "+" + b.name, a.effects, a.params};
   c.effects.insert(c.effects.end(), b.effects.begin(), b.effects.end());
+  for (const Candidate* side : {&a, &b}) {
+    if (IsParametricSingle(*side)) c.param_members.push_back(side->params.front().name);
+    c.param_members.insert(c.param_members.end(), side->param_members.begin(), side->param_members.end());
+  }
   for (const auto& p : b.params) {
     const bool dup = std::any_of(c.params.begin(), c.params.end(), [&](const FreeParam& q) { return q.name == p.name; });
     if (!dup) c.params.push_back(p);

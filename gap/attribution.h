@@ -44,7 +44,14 @@ struct Candidate {
   std::vector<std::string> effects;  // effects switched on
   std::vector<FreeParam> params;
   std::vector<std::pair<std::string, double>> fixed = {};  // set before the free ones (e.g. a reference temperature)
+  // Nominal parameters that are causes in their own right in a combination ("eddy_currents+param:k" has {"k"});
+  // a single param:NAME candidate needs none (its name says it). R freed beside an effect is not one.
+  std::vector<std::string> param_members = {};
 };
+
+// The causes a candidate names, in order: its effects, then "param:NAME" for each parametric member (a single
+// param:NAME candidate is its own member).
+std::vector<std::string> Members(const Candidate& c);
 
 struct CandidateResult {
   std::string name;
@@ -131,8 +138,8 @@ StatusOr<std::vector<CandidateResult>> Attribute(const Dataset& ds, const std::v
                                                  const std::vector<Candidate>& candidates, double noise_floor_A,
                                                  const AttributionOptions& options = {});
 
-// Pairs of structural effects (each with both effects' parameters and R free), for when no single effect
-// closes the gap.
+// Two candidates as one (each one's parameters free, shared ones once; a parametric single becomes a
+// parametric member), for when no single cause closes the gap.
 Candidate PairCandidate(const Candidate& a, const Candidate& b);
 
 // Ranking order: candidates that may be the verdict first, then by score.

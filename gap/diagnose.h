@@ -137,10 +137,32 @@ struct Diagnosis {
   struct Drift {
     std::string param;
     double value = 0.0, nominal = 0.0;
+    double gap_A = NAN;          // the drift's own holdout gap (noise-free, the effects switched off)
+    double effects_gap_A = NAN;  // the verdict's effects' own holdout gap, the drift at nominal
   };
   std::vector<Drift> nuisance;
   double verdict_alone_holdout_A = NAN;
+  // A verdict of several causes: what each closes on its own, the others switched off (the fitted model's own
+  // values otherwise), and its own noise-free holdout gap. Together: the verdict's row.
+  struct MemberShare {
+    std::string name;
+    double holdout_rmse_after_A = NAN;
+    double closed = 0.0;
+    double gap_A = NAN;
+  };
+  std::vector<MemberShare> members;
+  // Several causes: the combination the beam chose (empty: a single was best) and the other combinations of its
+  // size the holdout runs cannot tell from it; they become `confusable` when it is the verdict.
+  std::string chosen_combination;
+  std::vector<std::string> combination_alternatives;
 };
+
+// Several causes (docs/gap.md): an addition to a model that does not halve what the model leaves on the holdout
+// runs is still taken when it is specific: what the model leaves (before_A) is significant, the energy the
+// addition removes is itself a significant gap, and it is at least twice what the next-best addition to the same
+// model removes (next_after_A; infinite when there is none, and then it is not taken). A patch of the model's
+// own form error is generic; a second cause's signature is its own.
+bool SpecificAddition(double before_A, double after_A, double next_after_A, double floor_A);
 
 StatusOr<Diagnosis> Diagnose(const Dataset& dataset, const model::PlantParams& nominal,
                              const DiagnoseOptions& options = {});

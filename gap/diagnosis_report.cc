@@ -107,9 +107,17 @@ std::string DiagnosisJson(const Diagnosis& d) {
   if (!d.nuisance.empty()) {
     nlohmann::ordered_json drift = nlohmann::ordered_json::array();
     for (const auto& n : d.nuisance)
-      drift.push_back({{"param", n.param}, {"value", n.value}, {"nominal", n.nominal}, {"factor", n.value / n.nominal}});
+      drift.push_back({{"param", n.param}, {"value", n.value}, {"nominal", n.nominal}, {"factor", n.value / n.nominal},
+                       {"gap_A", n.gap_A}, {"effects_gap_A", n.effects_gap_A}});
     j["nuisance"] = drift;
     j["verdict_alone_holdout_rmse_A"] = d.verdict_alone_holdout_A;
+  }
+  if (!d.members.empty()) {
+    nlohmann::ordered_json members = nlohmann::ordered_json::array();
+    for (const auto& m : d.members)
+      members.push_back({{"cause", m.name}, {"holdout_rmse_after_A", m.holdout_rmse_after_A}, {"closed", m.closed},
+                         {"gap_A", m.gap_A}});
+    j["members"] = members;
   }
   nlohmann::ordered_json limits = nlohmann::ordered_json::array();
   for (const auto& l : d.detection_limits) {
@@ -261,11 +269,21 @@ std::string DiagnosisReport(const Diagnosis& d) {
     }
   }
   os << Wrap({"verdict: " + d.verdict + (d.verdict_reason.empty() ? "" : " (" + d.verdict_reason + ")")}, 2, 120, 0);
+  if (!d.members.empty()) {
+    std::string each;
+    for (const auto& m : d.members)
+      each += fmt::format("{}{} {:.0f} % (holdout {:.2f} mA; its own gap {:.2f} mA)", each.empty() ? "" : ", ", m.name,
+                          100.0 * m.closed, m.holdout_rmse_after_A * 1e3, m.gap_A * 1e3);
+    os << Wrap({fmt::format("each cause on its own closes: {}; together {:.0f} % (holdout {:.2f} mA)", each,
+                            100.0 * d.ranking.front().closed, d.ranking.front().holdout_rmse_after_A * 1e3)},
+               2, 120, 0);
+  }
   for (const auto& n : d.nuisance)
     os << Wrap({fmt::format("nuisance drift beside it: {} = {:.4g} ({:+.1f} % from nominal); the verdict alone leaves "
-                            "{:.2f} mA on the holdout runs, with the drift {:.2f} mA",
+                            "{:.2f} mA on the holdout runs, with the drift {:.2f} mA (the drift's own gap {:.2f} mA, "
+                            "the effects' {:.2f} mA)",
                             n.param, n.value, 100.0 * (n.value / n.nominal - 1.0), d.verdict_alone_holdout_A * 1e3,
-                            d.ranking.front().holdout_rmse_after_A * 1e3)},
+                            d.ranking.front().holdout_rmse_after_A * 1e3, n.gap_A * 1e3, n.effects_gap_A * 1e3)},
                2, 120, 0);
   for (const auto& w : d.warnings) os << Wrap({"warning: " + w}, 2, 120, 0);
   return os.str();
