@@ -114,6 +114,11 @@ c = json.load(open(sys.argv[1]))
 assert c["tokens"] == [], "demo tokens shipped: %r" % c["tokens"]
 assert c["database_path"] == "/var/lib/valvebench/runs.db", c["database_path"]
 EOF
+# apt's resolver takes it as `apt install ./valvebench_*.deb` would (simulated: nothing is installed here).
+if command -v apt-get >/dev/null; then
+  apt-get install -s --no-install-recommends "$deb" >"$work/apt-sim.log" 2>&1 || { cat "$work/apt-sim.log"; fail "apt-get install -s"; }
+  grep -q "^Inst valvebench ($version " "$work/apt-sim.log" || { cat "$work/apt-sim.log"; fail "apt would not install it"; }
+fi
 say "inspected: fields, $(wc -l <"$work/contents.txt") paths, conffiles, maintainer scripts, unit, config"
 
 # ---- 3. install the previous version ----------------------------------------------------------------------
