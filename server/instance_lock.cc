@@ -138,8 +138,9 @@ StatusOr<std::unique_ptr<InstanceLock>> InstanceLock::Acquire(const std::string&
       if (flock(lock->store_fd_, LOCK_EX | LOCK_NB) != 0) {
         const std::string text = ReadText(lock->store_fd_);
         return Status::FailedPrecondition(
-            "database " + where + " is in use by " + (text.empty() ? LabHolders(store_path.substr(0, store_path.size() - 5)) : text) +
-            " (lock " + store_path + "): one server per store; stop that server first, or give this one another "
+            "database " + where + " is in use by " +
+            (text.empty() ? LabHolders(store_path.substr(0, store_path.size() - 5)) : text) + " (lock " + store_path +
+            "): one server per store; stop that server first, or give this one another "
             "database_path");
       }
       WriteText(lock->store_fd_, me + " (not in a lab), since " + NowUtc());
@@ -186,8 +187,8 @@ StatusOr<std::unique_ptr<InstanceLock>> InstanceLock::Acquire(const std::string&
                  "SET tcp_user_timeout = 10000"));
   auto query = [conn](const std::string& sql, const std::string& param, std::string* value) -> Status {
     const char* p[] = {param.c_str()};
-    PGresult* r = PQexecParams(conn, sql.c_str(), param.empty() ? 0 : 1, nullptr, param.empty() ? nullptr : p,
-                               nullptr, nullptr, 0);
+    PGresult* r = PQexecParams(conn, sql.c_str(), param.empty() ? 0 : 1, nullptr, param.empty() ? nullptr : p, nullptr,
+                               nullptr, 0);
     if (PQresultStatus(r) != PGRES_TUPLES_OK) {
       std::string msg = PQresultErrorMessage(r);
       while (!msg.empty() && msg.back() == '\n') msg.pop_back();
@@ -205,8 +206,10 @@ StatusOr<std::unique_ptr<InstanceLock>> InstanceLock::Acquire(const std::string&
         "SELECT string_agg(coalesce(nullif(a.application_name, ''), 'pid ' || a.pid || ' on the database') || "
         "' (connected from ' || coalesce(host(a.client_addr), 'a local socket') || ')', '; ') "
         "FROM pg_locks l JOIN pg_stat_activity a ON a.pid = l.pid WHERE l.locktype = 'advisory' AND l.granted "
-        "AND l.objsubid = 2 AND l.classid = " + std::to_string(key_class) + "::oid AND l.objid = (" + objid + ")::oid AND a.pid <> pg_backend_pid()";
-    if (!query(sql, param, &text).ok() || text.empty()) return std::string("another process (not visible to this role)");
+        "AND l.objsubid = 2 AND l.classid = " +
+        std::to_string(key_class) + "::oid AND l.objid = (" + objid + ")::oid AND a.pid <> pg_backend_pid()";
+    if (!query(sql, param, &text).ok() || text.empty())
+      return std::string("another process (not visible to this role)");
     return text;
   };
   const std::string store_key = std::to_string(kPgStoreClass) + ", 0";

@@ -48,8 +48,8 @@ class InstanceLock {
  private:
   InstanceLock() = default;
   std::string description_;
-  int store_fd_ = -1;  // SQLite: the store's lock file
-  int host_fd_ = -1;   // SQLite lab: the host's lock file
+  int store_fd_ = -1;   // SQLite: the store's lock file
+  int host_fd_ = -1;    // SQLite lab: the host's lock file
   void* pg_ = nullptr;  // PostgreSQL: the PGconn holding the advisory locks
 };
 

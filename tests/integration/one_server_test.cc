@@ -97,8 +97,8 @@ TEST(OneServer, ASecondServerOnAHeldSqliteStoreExitsNamingTheHolder) {
   EXPECT_EQ(refused.out.find("listening on"), std::string::npos) << refused.out;
 
   // benchctl --local is a client of the store, not a server: it runs on the held file as before.
-  const auto local = testing::RunCommand(VB_BENCHCTL " run --local --db " + first.db_path() + " " VB_SOURCE_DIR
-                                         "/examples/standard/e1.json");
+  const auto local = testing::RunCommand(VB_BENCHCTL " run --local --db " + first.db_path() +
+                                         " " VB_SOURCE_DIR "/examples/standard/e1.json");
   EXPECT_EQ(local.exit_code, 0) << local.out;
 
   // A holder that died blocks nobody: its lock went with it (its text stays in the file, unread).
