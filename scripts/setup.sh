@@ -40,6 +40,8 @@ packages=(
   # the Debian package (packaging/, CPack): dpkg-shlibdeps computes its Depends; its test installs it, which
   # runs its maintainer scripts (adduser)
   dpkg-dev adduser
+  # packaging/bare_install_check.sh (by hand): the package on a debootstrapped bare Debian 12
+  debootstrap
   # fuzzing (fuzz/, scripts/fuzz.sh): clang with libFuzzer and the sanitizer runtimes
   clang libclang-rt-14-dev
 )

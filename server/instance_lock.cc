@@ -94,7 +94,7 @@ std::string LabHolders(const std::string& real) {
     if (flock(fd, LOCK_SH | LOCK_NB) != 0) held.push_back(ReadText(fd));
     close(fd);
   }
-  if (held.empty()) return "lab hosts (which, is not known: their lock files are gone)";
+  if (held.empty()) return "another valvebench-server (starting: it has not written its pid yet)";
   std::string out;
   for (const auto& h : held) out += (out.empty() ? "" : "; ") + (h.empty() ? "a lab host" : h);
   return out;
