@@ -27,7 +27,8 @@ configure_file("${VB_PACKAGING_DIR}/valvebench.service.in"
 list(APPEND CMAKE_INSTALL_MANIFEST_FILES "${_config}" "${_dest}${_prefix}/lib/systemd/system/valvebench.service")
 message(STATUS "Installing: ${_config}")
 message(STATUS "Installing: ${_dest}${_prefix}/lib/systemd/system/valvebench.service")
-if(NOT _prefix STREQUAL "/usr")
-  # The package's postinst creates /var/lib/valvebench for its service user; a tree in DIR gets it here.
+if(NOT _prefix STREQUAL "/usr" OR _dest STREQUAL "")
+  # The package's postinst creates /var/lib/valvebench for its service user (staged with DESTDIR, it is not
+  # made here, so dpkg does not own it); a tree in DIR, or a plain install into /usr, gets it here.
   file(MAKE_DIRECTORY "${_dest}${VB_STATE_DIR}")
 endif()
