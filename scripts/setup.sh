@@ -37,6 +37,11 @@ packages=(
   # the web dashboard (docs/web.md): HTTP server, the chart library it serves and the reports inline, and its
   # browser test (chromium driven through chromium-driver by selenium)
   libcpp-httplib-dev libjs-dygraphs chromium-driver python3-selenium
+  # the Debian package (packaging/, CPack): dpkg-shlibdeps computes its Depends; its test installs it, which
+  # runs its maintainer scripts (adduser)
+  dpkg-dev adduser
+  # packaging/bare_install_check.sh (by hand): the package on a debootstrapped bare Debian 12
+  debootstrap
   # fuzzing (fuzz/, scripts/fuzz.sh): clang with libFuzzer and the sanitizer runtimes
   clang libclang-rt-14-dev
 )

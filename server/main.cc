@@ -23,6 +23,7 @@
 #include <thread>
 
 #include "server/config.h"
+#include "server/instance_lock.h"
 #include "server/lab.h"
 #include "server/nights.h"
 #include "server/retention.h"
@@ -65,6 +66,15 @@ int main(int argc, char** argv) {
     spdlog::error("--run-night-now: the config has no \"nights\" block");
     return 2;
   }
+  // One server per store, or per lab host identity (server/instance_lock.h): taken before the store is opened,
+  // so a second server neither migrates nor recovers the first one's running runs.
+  auto instance = vb::server::InstanceLock::Acquire(settings->database_path,
+                                                    settings->lab.enabled ? settings->lab.host : std::string());
+  if (!instance.ok()) {
+    spdlog::error("{}", instance.status().message());
+    return 3;
+  }
+  spdlog::info("this server holds {}", (*instance)->description());
   auto store = vb::db::OpenStore(settings->database_path);
   if (!store.ok()) {
     spdlog::error("{}: {}", vb::db::DisplayLocation(settings->database_path).c_str(),
@@ -104,6 +114,8 @@ int main(int argc, char** argv) {
     creds = grpc::InsecureServerCredentials();
   }
   int port = 0;
+  // No SO_REUSEPORT (gRPC's default on Linux): a second server on a held port must fail to bind, not share it.
+  builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
   builder.AddListeningPort(settings->listen_address, creds, &port);
   builder.RegisterService(&service);
   builder.SetMaxReceiveMessageSize(64 << 20);
@@ -113,7 +125,7 @@ int main(int argc, char** argv) {
   builder.experimental().SetInterceptorCreators(std::move(interceptors));
   std::unique_ptr<grpc::Server> server = builder.BuildAndStart();
   if (server == nullptr || port == 0) {
-    spdlog::error("cannot listen on {}", settings->listen_address.c_str());
+    spdlog::error("cannot listen on {} (is the port in use by another server?)", settings->listen_address.c_str());
     return 3;
   }
   // Health by service name (grpc.health.v1 Check with service "valvebench.v1.BenchService") answers SERVING, not

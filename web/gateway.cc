@@ -789,6 +789,12 @@ StatusOr<std::unique_ptr<Gateway>> Gateway::Start(const GatewayOptions& options,
   auto routes = std::make_shared<Routes>(std::move(channel), options, g->tls_);
   routes->Install(*g->http_);
   g->routes_ = routes;  // the handlers point into it
+  // SO_REUSEADDR (a restarted server rebinds at once) but not cpp-httplib's default SO_REUSEPORT, which lets a
+  // second server bind the same port and take half the connections: one server per port.
+  g->http_->set_socket_options([](socket_t sock) {
+    int yes = 1;
+    setsockopt(sock, SOL_SOCKET, SO_REUSEADDR, &yes, sizeof yes);
+  });
   if (port == 0) {
     g->port_ = g->http_->bind_to_any_port(host);
     if (g->port_ <= 0) return Status::Unavailable("web.listen_address: cannot listen on " + options.listen_address);

@@ -127,6 +127,7 @@ class ServerProcess {
   }
   std::string db_path() const { return dir_ + "/runs.db"; }
   const std::string& dir() const { return dir_; }
+  pid_t pid() const { return pid_; }  // 0 when not running
 
  private:
   static std::string Token(const char* user, const char* role, const char* token) {
