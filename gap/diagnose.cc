@@ -317,6 +317,20 @@ Status SelectCombination(const Dataset& ds, const std::vector<bool>& fit_mask, c
       add_pair(PairCandidate(WarmStarted(*base_c, base_row), found ? WarmStarted(*ec, *e) : *ec));
     }
   }
+  // The best parametric single beside each pool member: a drifted parameter beside an effect is a cause like any
+  // other (practice2m r01's soft spring beside eddy currents; a smaller flux area beside a supply resistance in
+  // perf_multicause), and the effect may be the weaker of the two. The best only: the nine parameters overlap
+  // (k and delta; mu_r, l_c and x_t), and its single fit already says which the data ask for.
+  const CandidateResult* best_param = nullptr;
+  for (const auto& row : d->ranking)
+    if (IsParametric(row.name) && row.status.ok() && row.disqualified.empty() && row.name != "param:R" &&
+        (best_param == nullptr || row.score < best_param->score))
+      best_param = &row;
+  if (best_param != nullptr && best_param->name != base_row.name) {
+    const Candidate* pc = candidate_of(best_param->name);
+    for (const CandidateResult* e : pool)
+      if (pc != nullptr) add_pair(PairCandidate(WarmStarted(*candidate_of(e->name), *e), WarmStarted(*pc, *best_param)));
+  }
   VB_RETURN_IF_ERROR(fit_all(pairs));
   std::vector<std::size_t> good;
   for (std::size_t k = 0; k < tried.size(); ++k)
