@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdlib>
 #include <cstdio>
 #include <numeric>
 #include <sstream>
@@ -42,8 +43,9 @@ std::size_t GateOn(const RunData& r) {
 
 // The internal parameters, in a fixed order. Each is searched in log coordinates inside a box around its start
 // value, except A_net (it may be 0 or change sign: linear).
-enum P { kR, kL0, kL1, kRp, kF0, kAnet, kK, kM, kB, kBs, kCount };
-const char* const kNames[kCount] = {"R", "L0", "L1", "R_p", "F0", "A_net", "k", "m", "b", "B_sat"};
+// kTanh is the saturation's form (magnetic_saturation.tanh: 0 Frohlich's knee, 1 tanh), chosen, never searched.
+enum P { kR, kL0, kL1, kRp, kF0, kAnet, kK, kM, kB, kBs, kTanh, kCount };
+const char* const kNames[kCount] = {"R", "L0", "L1", "R_p", "F0", "A_net", "k", "m", "b", "B_sat", "tanh"};
 
 struct Box {
   double lo = 0.0, hi = 0.0;
@@ -78,6 +80,7 @@ StatusOr<model::PlantParams> PlantOf(const model::PlantParams& family, const std
   p.effects = family.effects;
   p.effects.eddy_R_p_ohm = v[kRp];
   p.effects.saturation_B_T = v[kBs];  // 0: no saturation
+  p.effects.saturation_tanh = v[kTanh] >= 0.5 ? 1.0 : 0.0;
   if (auto st = model::Validate(p); !st.ok()) return st;
   return p;
 }
@@ -171,10 +174,39 @@ struct Stage {
     if (!pred.ok()) return 1.0;
     return RmsOver(*ds, *pred, mask);
   }
-  void Run(int max_evaluations) {
+  void Run(int max_evaluations, int global_evaluations = 0) {
     const unsigned k = static_cast<unsigned>(free.size());
     std::vector<double> u(k);
     for (unsigned j = 0; j < k; ++j) u[j] = std::clamp(ToU(free[j], value[free[j]]), 0.0, 1.0);
+    if (global_evaluations > 0) {
+      // A seeded controlled random search over the whole box first (NLopt CRS2 with local mutation): the dip's
+      // time has several basins (lift against flight), which a local search from one start does not leave.
+      struct GCtx {
+        Stage* s;
+        double best;
+        std::vector<double> at;
+      } g{this, INFINITY, u};
+      auto gf = [](const std::vector<double>& x, std::vector<double>&, void* data) -> double {
+        auto* c = static_cast<GCtx*>(data);
+        if (Clock::now() > c->s->deadline) throw nlopt::forced_stop();
+        const double e = c->s->Rms(c->s->At(x));
+        if (e < c->best) c->best = e, c->at = x;
+        return e;
+      };
+      nlopt::srand(1);
+      nlopt::opt go(nlopt::GN_CRS2_LM, k);
+      go.set_lower_bounds(std::vector<double>(k, 0.0));
+      go.set_upper_bounds(std::vector<double>(k, 1.0));
+      go.set_min_objective(gf, &g);
+      go.set_maxeval(global_evaluations);
+      double gmin = INFINITY;
+      std::vector<double> x = u;
+      try {
+        go.optimize(x, gmin);
+      } catch (const std::exception&) {
+      }
+      if (g.best < INFINITY) u = g.at;
+    }
     struct Ctx {
       Stage* s;
     } ctx{this};
@@ -431,7 +463,7 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds, const mode
   st.value = v;
   st.plant_of = [&family](const std::array<double, kCount>& x) { return PlantOf(family, x); };
   auto set_box = [&](int p, double lo_f, double hi_f) { st.box[p] = {st.value[p] / lo_f, st.value[p] * hi_f, true}; };
-  auto record = [&](const std::string& name, Clock::time_point since, int evals, double best) {
+  auto record_outer = [&](const std::string& name, Clock::time_point since, int evals, double best) {
     id.stages.push_back({name, best, evals, Seconds(since)});
     char buf[200];
     std::snprintf(buf, sizeof buf, "stage %s: fit runs %.3f mA RMS after %d evaluations (%.1f s)", name.c_str(),
@@ -471,105 +503,173 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds, const mode
     st.best = INFINITY;
     const int before = st.evaluations;
     st.Run(150);
-    record("1 electrical (R, L0" + std::string(eddy ? ", R_p" : "") + ") on the samples before motion", since,
+    record_outer("1 electrical (R, L0" + std::string(eddy ? ", R_p" : "") + ") on the samples before motion", since,
            st.evaluations - before, st.best);
     st.ds = &ds;
     st.mask = fit;
     st.plant_of = [&family](const std::array<double, kCount>& x) { return PlantOf(family, x); };
   }
-  // Stage 2, magnetic and mechanical on whole curves. The motion time is the landmark a wrong mass misses by a
-  // whole basin: the mass is first scanned over two decades, then BOBYQA.
   bool any_motion = std::any_of(marks.begin(), marks.end(), [](const SwitchOnMarks& m) { return m.pulls_in; });
-  if (any_motion) {
-    const auto since = Clock::now();
-    const int before = st.evaluations;
-    st.best = INFINITY;
-    // L1 lies between L0 and what the held gap allows.
-    st.box[kL1] = {1.01 * st.value[kL0], 0.98 * r_max * st.value[kL0], true};
-    st.value[kL1] = std::clamp(st.value[kL1], st.box[kL1].lo, st.box[kL1].hi);
-    set_box(kF0, 3.0, 3.0);
-    set_box(kK, 30.0, 30.0);
-    set_box(kM, 30.0, 30.0);
-    set_box(kB, 100.0, 100.0);
-    if (pressures) {
-      const double a = std::max(std::abs(st.value[kAnet]), 1e-9);
-      st.box[kAnet] = {st.value[kAnet] - 3.0 * a, st.value[kAnet] + 3.0 * a, false};
+  double f_pull_max = INFINITY;  // the pull (seed 000 eq. 8, unsaturated) at the weakest pulling-in run's final current
+  for (std::size_t r = 0; r < ds.runs.size(); ++r)
+    if (fit[r] && marks[r].pulls_in) {
+      const double i = ds.runs[r].supply_V / v[kR];
+      f_pull_max = std::min(f_pull_max, 0.5 * i * i * dLdx0);
     }
-    {
-      double best_m = st.value[kM], best_e = INFINITY;
-      const double m0 = st.value[kM];
-      for (int j = -4; j <= 4; ++j) {
-        auto x = st.value;
-        x[kM] = m0 * std::pow(10.0, 0.25 * j);
-        const double e = st.Rms(x);
-        if (e < best_e) best_e = e, best_m = x[kM];
-      }
-      st.value[kM] = best_m;
-      set_box(kM, 10.0, 10.0);
-    }
-    st.free = {kL1, kF0, kK, kM, kB};
-    if (pressures) st.free.push_back(kAnet);
-    st.Run(400);
-    record("2 magnetic and mechanical (L1, F0, k, m, b" + std::string(pressures ? ", A_net" : "") + ") on whole curves",
-           since, st.evaluations - before, st.best);
-  }
-  // Stage 3: everything together.
-  {
-    const auto since = Clock::now();
-    const int before = st.evaluations;
-    st.best = INFINITY;
-    st.free = {kR, kL0};
-    set_box(kR, 1.1, 1.1);
-    set_box(kL0, 1.5, 1.5);
-    if (eddy) {
-      st.free.push_back(kRp);
-      set_box(kRp, 3.0, 3.0);
-    }
+  if (!std::isfinite(f_pull_max)) f_pull_max = 3.0 * v[kF0];
+  // Stages 2 and 3 from one start of the spring's stiffness (k x_stroke / F0 = ratio); the whole search is a few
+  // seconds, so several starts are affordable and the best end wins (the dip's time trades lift against flight,
+  // which makes basins).
+  auto stages_23 = [&](Stage st, const std::array<double, 3>& kmb, const std::string& tag) {
+    auto set_box = [&](int p, double lo_f, double hi_f) { st.box[p] = {st.value[p] / lo_f, st.value[p] * hi_f, true}; };
+    auto record = [&](const std::string& name, Clock::time_point since, int evals, double best) {
+      record_outer(name + tag, since, evals, best);
+    };
+    st.value[kK] = kmb[0];
+    st.value[kM] = kmb[1];
+    st.value[kB] = kmb[2];
+    // Stage 2, magnetic and mechanical on whole curves, from a start the grid scan below chose.
     if (any_motion) {
-      for (int p : {kL1, kF0, kK, kM, kB}) st.free.push_back(p);
-      st.box[kL1] = {std::max(1.01 * st.value[kL0] / 1.5, st.value[kL1] / 1.5), std::min(0.98 * r_max * st.value[kL0] / 1.5, st.value[kL1] * 1.5), true};
-      if (!(st.box[kL1].hi > st.box[kL1].lo)) st.box[kL1] = {st.value[kL1] * 0.99, st.value[kL1] * 1.01, true};
+      const auto since = Clock::now();
+      const int before = st.evaluations;
+      st.best = INFINITY;
+      // L1 lies between L0 and what the held gap allows.
+      st.box[kL1] = {1.01 * st.value[kL0], 0.98 * r_max * st.value[kL0], true};
       st.value[kL1] = std::clamp(st.value[kL1], st.box[kL1].lo, st.box[kL1].hi);
-      set_box(kF0, 1.5, 1.5);
-      set_box(kK, 3.0, 3.0);
-      set_box(kM, 3.0, 3.0);
-      set_box(kB, 10.0, 10.0);
+      // Every pulling-in fit run lifts: F0 + A_net P stays below the pull at its final current, so the pull at
+      // the weakest such run's final current bounds the preload and (over the highest pressure) the area.
+      st.box[kF0] = {st.value[kF0] / 3.0, std::max(st.value[kF0] * 1.5, 1.2 * f_pull_max), true};
+      set_box(kK, 30.0, 30.0);
+      set_box(kM, 30.0, 30.0);
+      set_box(kB, 100.0, 100.0);
       if (pressures) {
-        st.free.push_back(kAnet);
-        const double a = std::max(std::abs(st.value[kAnet]), 1e-9);
-        st.box[kAnet] = {st.value[kAnet] - a, st.value[kAnet] + a, false};
+        const double a = std::max({std::abs(st.value[kAnet]), 1.2 * f_pull_max / pmax, 1e-12});
+        st.box[kAnet] = {-a, a, false};
       }
+      set_box(kM, 100.0, 100.0);
+      st.free = {kL1, kF0, kK, kM, kB};
+      if (pressures) st.free.push_back(kAnet);
+      st.Run(400);
+      record("2 magnetic and mechanical (L1, F0, k, m, b" + std::string(pressures ? ", A_net" : "") + ") on whole curves",
+             since, st.evaluations - before, st.best);
     }
-    st.Run(500);
-    record("3 all together", since, st.evaluations - before, st.best);
+    // Stage 3: everything together.
+    {
+      const auto since = Clock::now();
+      const int before = st.evaluations;
+      st.best = INFINITY;
+      st.free = {kR, kL0};
+      set_box(kR, 1.1, 1.1);
+      set_box(kL0, 1.5, 1.5);
+      if (eddy) {
+        st.free.push_back(kRp);
+        set_box(kRp, 3.0, 3.0);
+      }
+      if (any_motion) {
+        for (int p : {kL1, kF0, kK, kM, kB}) st.free.push_back(p);
+        st.box[kL1] = {std::max(1.01 * st.value[kL0] / 1.5, st.value[kL1] / 1.5), std::min(0.98 * r_max * st.value[kL0] / 1.5, st.value[kL1] * 1.5), true};
+        if (!(st.box[kL1].hi > st.box[kL1].lo)) st.box[kL1] = {st.value[kL1] * 0.99, st.value[kL1] * 1.01, true};
+        st.value[kL1] = std::clamp(st.value[kL1], st.box[kL1].lo, st.box[kL1].hi);
+        set_box(kF0, 1.5, 1.5);
+        set_box(kK, 3.0, 3.0);
+        set_box(kM, 3.0, 3.0);
+        set_box(kB, 10.0, 10.0);
+        if (pressures) {
+          st.free.push_back(kAnet);
+          const double a = std::max(std::abs(st.value[kAnet]), 1e-9);
+          st.box[kAnet] = {st.value[kAnet] - a, st.value[kAnet] + a, false};
+        }
+      }
+      st.Run(500);
+      record("3 all together", since, st.evaluations - before, st.best);
+    }
+    return st;
+  };
+  std::vector<Stage> ends;
+  int evaluations = st.evaluations;
+  {
+    Stage best_st = st;
+    best_st.best = INFINITY;
+    // The starts: a grid over the spring (k x_stroke / F0 from 0.05 to 5), the damping (0.01 to 10 x its start)
+    // and the mass (0.1 to 10 x its start), 180 evaluations; the three best grid points with distinct spring and
+    // damping start stages 2 and 3 (the dip's time trades lift against flight, and the damping against both:
+    // basins a local search from one start does not leave).
+    std::vector<std::pair<double, std::array<double, 3>>> grid;
+    if (any_motion) {
+      Stage g = st;
+      g.mask = fit;
+      const double r_hi = 0.98 * r_max * g.value[kL0];
+      g.value[kL1] = std::clamp(g.value[kL1], 1.01 * g.value[kL0], r_hi);
+      for (double kr : {0.05, 0.15, 0.5, 1.5, 5.0})
+        for (double bf : {0.01, 0.1, 1.0, 10.0})
+          for (int j = -4; j <= 4; ++j) {
+            auto x = g.value;
+            x[kK] = kr * x[kF0] / stroke;
+            x[kB] = v[kB] * bf;
+            x[kM] = v[kM] * std::pow(10.0, 0.25 * j);
+            grid.push_back({g.Rms(x), {x[kK], x[kM], x[kB]}});
+          }
+      evaluations += g.evaluations - st.evaluations;
+      std::sort(grid.begin(), grid.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+      std::vector<std::pair<double, std::array<double, 3>>> picked;
+      for (const auto& gp : grid) {
+        bool distinct = true;
+        for (const auto& q : picked) distinct = distinct && !(q.second[0] == gp.second[0] && q.second[2] == gp.second[2]);
+        if (distinct) picked.push_back(gp);
+        if (picked.size() == 3) break;
+      }
+      grid = picked;
+    } else {
+      grid.push_back({0.0, {v[kK], v[kM], v[kB]}});
+    }
+    for (std::size_t gi = 0; gi < grid.size(); ++gi) {
+      const auto& kmb = grid[gi].second;
+      char tag[96];
+      std::snprintf(tag, sizeof tag, " [start %zu: k %.3g, m %.3g, b %.3g]", gi + 1, kmb[0], kmb[1], kmb[2]);
+      Stage s = stages_23(st, kmb, tag);
+      evaluations += s.evaluations - st.evaluations;
+      ends.push_back(s);
+      if (s.best < best_st.best) best_st = s;
+    }
+    st = best_st;
   }
   // Stage 4: the core's saturation (the magnetic_saturation effect, B_sat free) joins when it is decisive.
   bool saturation = false;
   {
-    const auto since = Clock::now();
-    Stage s4 = st;
-    s4.best = INFINITY;
-    const int before = s4.evaluations;
-    auto p = PlantOf(family, st.value);
-    double imax = 0.0;
-    for (const auto& r : ds.runs) imax = std::max(imax, r.supply_V / st.value[kR]);
-    // Saturation sets in where the core's flux L_c i reaches lambda_s = N A_e B_sat: start at the largest current.
-    const double Lc = st.value[kL0] * (1.0 - 1.0 / (p.ok() ? p->mu_r : 100.0));
-    s4.value[kBs] = p.ok() ? Lc * imax / (p->N_turns * p->A_e_m2) : 1.0;
-    s4.box[kBs] = {s4.value[kBs] / 30.0, s4.value[kBs] * 30.0, true};
-    s4.free.push_back(kBs);
-    s4.Run(700);
-    record("4 with magnetic saturation (B_sat)", since, s4.evaluations - before, s4.best);
-    st.evaluations = s4.evaluations;
+    // From every start's end: the basins differ in how they share the dip's time between lift and flight, and
+    // the saturating core changes the lift current.
+    Stage best4 = st;
+    best4.best = INFINITY;
+    for (std::size_t e = 0; e < 2 * ends.size(); ++e) {
+      const auto since = Clock::now();
+      Stage s4 = ends[e / 2];
+      s4.value[kTanh] = static_cast<double>(e % 2);  // both forms the effect has: the knee, then tanh
+      s4.best = INFINITY;
+      const int before = s4.evaluations;
+      auto p = PlantOf(family, s4.value);
+      double imax = 0.0;
+      for (const auto& r : ds.runs) imax = std::max(imax, r.supply_V / s4.value[kR]);
+      // Saturation sets in where the core's flux L_c i reaches lambda_s = N A_e B_sat: start at the largest current.
+      const double Lc = s4.value[kL0] * (1.0 - 1.0 / (p.ok() ? p->mu_r : 100.0));
+      s4.value[kBs] = p.ok() ? Lc * imax / (p->N_turns * p->A_e_m2) : 1.0;
+      s4.box[kBs] = {s4.value[kBs] / 30.0, s4.value[kBs] * 30.0, true};
+      s4.free.push_back(kBs);
+      s4.Run(700);
+      record_outer("4 with magnetic saturation (B_sat, " + std::string(e % 2 ? "tanh" : "knee") + ") from end " +
+                       std::to_string(e / 2 + 1), since,
+                   s4.evaluations - before, s4.best);
+      evaluations += s4.evaluations - before;
+      if (s4.best < best4.best) best4 = s4;
+    }
     // Decisive: one more free parameter always lowers the error a little; it joins when it removes at least a
     // tenth of the error above the noise floor (the margin below which the diagnosis calls candidates
     // confusable, gap/diagnose.cc Decide).
-    if (st.best - s4.best > 0.1 * (st.best - id.noise_floor_A)) {
+    if (st.best - best4.best > 0.1 * (st.best - id.noise_floor_A)) {
       saturation = true;
-      st.value = s4.value;
-      st.best = s4.best;
+      st = best4;
     }
   }
+  st.evaluations = evaluations;
   v = st.value;
   for (int p = 0; p < kCount; ++p) id.fitted[kNames[p]] = v[p];
   auto plant = PlantOf(family, v);
@@ -581,7 +681,10 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds, const mode
                {"delta", plant->delta_m}, {"m", plant->m_kg}, {"b", plant->b_N_s_per_m}, {"A1", plant->A1_m2},
                {"A2", plant->A2_m2}};
   if (eddy) id.values["eddy_currents.R_p"] = plant->effects.eddy_R_p_ohm;
-  if (saturation) id.values["magnetic_saturation.B_sat"] = plant->effects.saturation_B_T;
+  if (saturation) {
+    id.values["magnetic_saturation.B_sat"] = plant->effects.saturation_B_T;
+    id.values["magnetic_saturation.tanh"] = plant->effects.saturation_tanh;
+  }
 
   // ---- uncertainty: Gauss-Newton on the fit runs' residuals in log coordinates ------------------------------
   {
@@ -684,6 +787,18 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds, const mode
     id.notes.push_back("magnetic saturation joined the model (stage 4 fits the runs better); B_sat is tied to the "
                        "held A_e and the solved N (only lambda_s = N A_e B_sat acts)");
   if (!any_motion) id.notes.push_back("no fit run pulls in: the mechanical parameters are not identified");
+  for (const auto& d : id.determined)
+    if (!d.determined && (d.name == "m*x_max^2" || d.name == "F0*x_max" || d.name == "k*x_max^2")) {
+      double vmin = INFINITY, vmax = -INFINITY;
+      for (std::size_t r = 0; r < ds.runs.size(); ++r)
+        if (fit[r]) vmin = std::min(vmin, ds.runs[r].supply_V), vmax = std::max(vmax, ds.runs[r].supply_V);
+      id.notes.push_back(d.name + " is not determined: the lift (preload against the pull) and the flight (mass, "
+                         "stiffness) trade off in the dip's time" +
+                         std::string(vmax > vmin ? "" : "; the fit runs share one supply, and a pulling-in run at "
+                                                        "another supply would separate them (the current then rises "
+                                                        "at another rate)"));
+      break;
+    }
 
   // ---- prediction of every run and the landmarks ------------------------------------------------------------
   say("predicting every run");

@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cctype>
 #include <cmath>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <string>
@@ -110,16 +111,16 @@ INSTANTIATE_TEST_SUITE_P(Practice3, MovingValveWithheld, ::testing::Values("m02"
 model::PlantParams OtherValve() {
   model::PlantParams p = Family();
   p.R_ohm = 62.0;
-  p.N_turns = 1500.0;
+  p.N_turns = 1332.0;     // L0 = 0.093 H: a 1.5 ms time constant
   p.mu_r = 90.0;
   p.x_max_m = 0.25e-3;
   p.x_t_m = 0.32e-3;
-  p.k_N_per_m = 6000.0;
-  p.delta_m = 1.4e-3;
-  p.m_kg = 0.012;
+  p.k_N_per_m = 4000.0;
+  p.delta_m = 0.49e-3;    // 2 N preload
+  p.m_kg = 0.006;
   p.b_N_s_per_m = 0.5;
   p.A1_m2 = 20e-6;
-  p.A2_m2 = 32e-6;
+  p.A2_m2 = 24e-6;        // 0.4 N per bar against the pull
   p.effects.eddy_R_p_ohm = 1500.0;
   return p;
 }
@@ -128,6 +129,11 @@ fs::path TempDir(const std::string& name) {
   const fs::path d = fs::temp_directory_path() / ("vb_moving_" + std::to_string(::getpid()) + "_" + name);
   fs::remove_all(d);
   return d;
+}
+
+// The synthetic sets are removed after each test unless VB_KEEP_SYNTHETIC is set (to look at them with benchctl).
+void Cleanup(const fs::path& d) {
+  if (std::getenv("VB_KEEP_SYNTHETIC") == nullptr) fs::remove_all(d);
 }
 
 std::vector<SwitchOnRunPlan> Pressures(double supply_V, std::vector<double> bar, const std::string& split = "") {
@@ -148,12 +154,15 @@ TEST(MovingValveSynthetic, GeneratorWritesWhatTheScopeRecords) {
   // Every value is a multiple of the scope's step.
   for (double i : ds->runs[0].i_A) EXPECT_NEAR(std::round(i * 480.0), i * 480.0, 1e-3);
   EXPECT_TRUE(IsSwitchOnSession(*ds, Family()));
-  fs::remove_all(dir);
+  Cleanup(dir);
 }
 
 TEST(MovingValveSynthetic, OtherValveIdentifiedAndPredictedAtAnotherPressureAndSupply) {
   const fs::path dir = TempDir("id");
+  // Fit runs at two supplies: at one supply the lift force and the mass trade off (a later lift, a faster
+  // flight), and the report says the mass is not determined.
   auto runs = Pressures(24.0, {1, 2.5, 4}, "fit");
+  runs.push_back({"on_20V_3bar", 20.0, 3e5, -1.0, "fit"});
   runs.push_back({"on_hold_7bar", 24.0, 7e5, -1.0, "holdout"});
   runs.push_back({"on_hold_18V", 18.0, 2e5, -1.0, "holdout"});
   ScopeChain scope;
@@ -173,9 +182,9 @@ TEST(MovingValveSynthetic, OtherValveIdentifiedAndPredictedAtAnotherPressureAndS
   // The stroke is held at the family's: the mass is found as m x_max^2, the product the current sees.
   for (const auto& d : id->determined)
     if (d.name == "m*x_max^2") {
-      EXPECT_NEAR(d.value / (0.012 * 0.25e-3 * 0.25e-3), 1.0, 0.3);
+      EXPECT_NEAR(d.value / (0.006 * 0.25e-3 * 0.25e-3), 1.0, 0.3);
     }
-  fs::remove_all(dir);
+  Cleanup(dir);
 }
 
 struct Change {
@@ -221,8 +230,8 @@ TEST_P(MovingValveSyntheticChange, NamedAgainstAReferenceIdentifiedFromScratch) 
   const Diagnosis d = DiagnoseAgainst(tgt.string(), ref.string());
   EXPECT_NE(d.verdict.find(c.accept), std::string::npos) << c.name << ": verdict " << d.verdict << " ("
                                                           << d.verdict_reason << ")";
-  fs::remove_all(ref);
-  fs::remove_all(tgt);
+  Cleanup(ref);
+  Cleanup(tgt);
 }
 
 INSTANTIATE_TEST_SUITE_P(OtherValve, MovingValveSyntheticChange, ::testing::Range(0, 5),
@@ -239,8 +248,8 @@ TEST(MovingValve, OneRunSaysNothingCanBeHeldOut) {
   EXPECT_EQ(d.verdict, "unknown");
   EXPECT_NE(d.verdict_reason.find("nothing can be held out"), std::string::npos) << d.verdict_reason;
   EXPECT_TRUE(d.ranking.empty());
-  fs::remove_all(ref);
-  fs::remove_all(tgt);
+  Cleanup(ref);
+  Cleanup(tgt);
 }
 
 TEST(MovingValve, RefusesWhatIsNotASwitchOnSession) {
