@@ -108,11 +108,16 @@ StatusOr<ScopeRun> ConvertScopeCsv(const std::string& csv_path, const std::strin
       }
       sep = s;
       data = true;
-      for (auto it = pre.rbegin(); it != pre.rend(); ++it)
-        if (it->size() == f.size()) {
+      // The column names: the header line (of as many fields as the rows) that names the current's channel;
+      // scopes put names and units on separate lines ("X,CH1,CH2" then "Second,Volt,Volt").
+      for (auto it = pre.rbegin(); it != pre.rend(); ++it) {
+        if (it->size() != f.size()) continue;
+        if (col_names.empty()) col_names = *it;
+        if (std::find(it->begin(), it->end(), o.current_channel) != it->end()) {
           col_names = *it;
           break;
         }
+      }
       auto t_idx = o.time_column.empty() ? StatusOr<int>(0) : resolve(o.time_column, col_names, f.size(), "--time-column");
       if (!t_idx.ok()) return t_idx.status();
       auto c_idx = resolve(o.current_channel, col_names, f.size(), "--channel");
@@ -233,9 +238,13 @@ StatusOr<ScopeRun> ConvertScopeCsv(const std::string& csv_path, const std::strin
                                 {"supply_pressure_Pa", o.supply_pressure_Pa}, {"t_start_s", t_start}};
   if (!o.split.empty()) run["split"] = o.split;
   m["runs"].push_back(run);
-  std::ofstream mf(manifest_path);
-  mf << m.dump(1) << "\n";
-  if (!mf) return Status::InvalidArgument(manifest_path.string() + ": cannot write");
+  csv.close();
+  {
+    std::ofstream mf(manifest_path);
+    mf << m.dump(1) << "\n";
+    mf.close();
+    if (!mf) return Status::InvalidArgument(manifest_path.string() + ": cannot write");
+  }
   out.samples = t.size();
   out.sample_period_s = dt;
   out.gate_on_s = on_s - t.front();

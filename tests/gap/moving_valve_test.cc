@@ -12,6 +12,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <sstream>
 #include <string>
 
 #include <unistd.h>
@@ -19,6 +20,7 @@
 #include "gap/dataset.h"
 #include "gap/diagnose.h"
 #include "gap/moving_valve.h"
+#include "gap/scope_csv.h"
 #include "gap/switch_on_synth.h"
 #include "model/params.h"
 
@@ -261,6 +263,88 @@ TEST(MovingValve, RefusesWhatIsNotASwitchOnSession) {
   auto id = IdentifyMovingValve(ds, Family());
   ASSERT_FALSE(id.ok());
   EXPECT_NE(id.status().message().find("--params"), std::string::npos);
+}
+
+// ---- scope captures in (benchctl convert --channel) -------------------------------------------------------------
+
+// A capture as a bench scope exports it: header lines, a column-name line, the time from -pre-trigger, a gate
+// drive channel and a shunt voltage.
+std::string ScopeCapture(double shunt_ohm, const std::string& bad_cell = "") {
+  std::ostringstream os;
+  os << "Model,DS1104Z\nX,CH1,CH2\nSecond,Volt,Volt\n";
+  for (int k = 0; k < 200; ++k) {
+    const double t = -1e-4 + k * 1e-5;
+    const bool on = t >= 0.0;
+    const double i = on ? 0.3 * (1.0 - std::exp(-t / 1e-3)) : 0.0;
+    os << t << "," << (on ? 5.0 : 0.0) << ",";
+    if (k == 50 && !bad_cell.empty())
+      os << bad_cell;
+    else
+      os << i * shunt_ohm;
+    os << "\n";
+  }
+  return os.str();
+}
+
+TEST(ScopeCsv, CaptureBecomesARunOfADataset) {
+  const fs::path dir = TempDir("scope");
+  fs::create_directories(dir);
+  const fs::path csv = dir / "cap1.csv";
+  std::ofstream(csv) << ScopeCapture(0.5);
+  ScopeCsvOptions o;
+  o.current_channel = "CH2";
+  o.shunt_ohm = 0.5;
+  o.gate_channel = "CH1";
+  o.supply_V = 12.0;
+  o.supply_pressure_Pa = 2e5;
+  o.split = "fit";
+  o.noise_A = 1e-3;
+  o.averaged = 8;
+  auto run = ConvertScopeCsv(csv.string(), (dir / "ds").string(), o);
+  ASSERT_TRUE(run.ok()) << run.status().message();
+  EXPECT_EQ(run->samples, 200u);
+  EXPECT_NEAR(run->sample_period_s, 1e-5, 1e-12);
+  EXPECT_NEAR(run->gate_on_s, 1e-4, 1e-9);
+  // A second capture, by trigger time, is appended after the first.
+  o.gate_channel.clear();
+  o.trigger_s = 0.0;
+  o.run_id = "cap2";
+  ASSERT_TRUE(ConvertScopeCsv(csv.string(), (dir / "ds").string(), o).ok());
+  auto ds = LoadDataset((dir / "ds").string(), model::PresetNames());
+  ASSERT_TRUE(ds.ok()) << ds.status().message();
+  ASSERT_EQ(ds->runs.size(), 2u);
+  EXPECT_EQ(ds->runs[0].gate, ds->runs[1].gate);
+  EXPECT_NEAR(ds->runs[0].i_A.back(), 0.3 * (1.0 - std::exp(-(199 * 1e-5 - 1e-4) / 1e-3)), 1e-6);
+  EXPECT_GT(ds->runs[1].t_start_s, ds->runs[0].t_start_s);
+  EXPECT_TRUE(IsSwitchOnSession(*ds, Family()));
+  Cleanup(dir);
+}
+
+TEST(ScopeCsv, ErrorsNameLineAndColumn) {
+  const fs::path dir = TempDir("scope_bad");
+  fs::create_directories(dir);
+  const fs::path csv = dir / "cap.csv";
+  std::ofstream(csv) << ScopeCapture(1.0, "0.1x");
+  ScopeCsvOptions o;
+  o.current_channel = "CH2";
+  o.shunt_ohm = 1.0;
+  o.trigger_s = 0.0;
+  o.supply_V = 12.0;
+  auto run = ConvertScopeCsv(csv.string(), (dir / "ds").string(), o);
+  ASSERT_FALSE(run.ok());
+  // 3 header lines, then data: the 51st data row is line 54.
+  EXPECT_NE(run.status().message().find("cap.csv:54: column CH2: '0.1x' is not a number"), std::string::npos)
+      << run.status().message();
+  o.current_channel = "CH9";
+  run = ConvertScopeCsv(csv.string(), (dir / "ds").string(), o);
+  ASSERT_FALSE(run.ok());
+  EXPECT_NE(run.status().message().find("no column 'CH9'"), std::string::npos) << run.status().message();
+  o.current_channel = "CH2";
+  o.probe_A_per_V = 10.0;  // and a shunt: one of the two
+  run = ConvertScopeCsv(csv.string(), (dir / "ds").string(), o);
+  ASSERT_FALSE(run.ok());
+  EXPECT_NE(run.status().message().find("exactly one of --shunt-ohm"), std::string::npos);
+  Cleanup(dir);
 }
 
 }  // namespace
