@@ -763,6 +763,7 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds_in, const model::PlantParams& nom
 
   Decide(&d);
   if (d.reference.from_scratch) PreferDeterminedChange(&d, ds);
+  PreferDeclaredTemperature(&d, ds);
   const CandidateResult& best = d.ranking.front();
 
   if (opt.fit_nuisance) {

@@ -997,32 +997,57 @@ std::vector<Candidate> MovingValveCandidates(const model::PlantParams& ref, cons
   return out;
 }
 
+namespace {
+
+bool Confusable(const Diagnosis& d, const std::string& name) {
+  return std::find(d.confusable.begin(), d.confusable.end(), name) != d.confusable.end();
+}
+
+// Makes a confusable candidate the verdict: its row ranks first (the overlays, the model written and the nuisance
+// fit follow the first row) and the old verdict becomes confusable.
+void MakeVerdict(Diagnosis* d, const std::string& name, const std::string& why) {
+  int row = -1;
+  for (std::size_t k = 0; k < d->ranking.size(); ++k)
+    if (d->ranking[k].name == name) row = static_cast<int>(k);
+  if (row < 0) return;
+  const std::string old = d->verdict;
+  d->confusable.erase(std::remove(d->confusable.begin(), d->confusable.end(), name), d->confusable.end());
+  if (!Confusable(*d, old)) d->confusable.push_back(old);
+  std::rotate(d->ranking.begin(), d->ranking.begin() + row, d->ranking.begin() + row + 1);
+  if (static_cast<std::size_t>(row) < d->candidates.size())
+    std::rotate(d->candidates.begin(), d->candidates.begin() + row, d->candidates.begin() + row + 1);
+  d->chosen = 0;
+  if (d->parametric >= 0 && d->parametric < row) ++d->parametric;
+  else if (d->parametric == row) d->parametric = 0;
+  d->verdict = name;
+  d->verdict_reason += "; " + why;
+}
+
+}  // namespace
+
+void PreferDeclaredTemperature(Diagnosis* d, const Dataset& target) {
+  if (d->chosen < 0 || !d->has_reference || !std::isfinite(d->reference.temperature_C)) return;
+  if (d->verdict != "sensor_gain" && d->verdict != "sensor_offset") return;
+  double dT = 0.0;
+  for (const auto& r : target.runs)
+    if (std::isfinite(r.temperature_C())) dT = std::max(dT, std::abs(r.temperature_C() - d->reference.temperature_C));
+  // 1 K: copper's 0.39 %/K then moves R by 0.4 %, about what a reading's noise lets these fits see.
+  if (!(dT > 1.0)) return;
+  for (const char* alt : {"resistance_temperature", "param:R"})
+    if (Confusable(*d, alt)) {
+      char why[200];
+      std::snprintf(why, sizeof why,
+                    "named the winding's resistance rather than the sense chain: the runs declare a winding %.1f K "
+                    "from the reference's, which predicts it, and the data cannot tell the two apart", dT);
+      MakeVerdict(d, alt, why);
+      return;
+    }
+}
+
 void PreferDeterminedChange(Diagnosis* d, const Dataset& target) {
   if (d->chosen < 0 || d->ranking.empty()) return;
-  auto row_of = [&](const std::string& name) -> int {
-    for (std::size_t k = 0; k < d->ranking.size(); ++k)
-      if (d->ranking[k].name == name) return static_cast<int>(k);
-    return -1;
-  };
-  auto confusable = [&](const std::string& name) {
-    return std::find(d->confusable.begin(), d->confusable.end(), name) != d->confusable.end();
-  };
-  auto make_verdict = [&](const std::string& name, const std::string& why) {
-    const std::string old = d->verdict;
-    const int row = row_of(name);
-    if (row < 0) return;
-    d->confusable.erase(std::remove(d->confusable.begin(), d->confusable.end(), name), d->confusable.end());
-    if (std::find(d->confusable.begin(), d->confusable.end(), old) == d->confusable.end()) d->confusable.push_back(old);
-    // The named row ranks first (the overlays, the model written and the nuisance fit follow the first row).
-    std::rotate(d->ranking.begin(), d->ranking.begin() + row, d->ranking.begin() + row + 1);
-    if (static_cast<std::size_t>(row) < d->candidates.size())
-      std::rotate(d->candidates.begin(), d->candidates.begin() + row, d->candidates.begin() + row + 1);
-    d->chosen = 0;
-    if (d->parametric >= 0 && d->parametric < row) ++d->parametric;
-    else if (d->parametric == row) d->parametric = 0;
-    d->verdict = name;
-    d->verdict_reason += "; " + why;
-  };
+  auto confusable = [&](const std::string& name) { return Confusable(*d, name); };
+  auto make_verdict = [&](const std::string& name, const std::string& why) { MakeVerdict(d, name, why); };
   if (d->verdict == "param:k" && confusable("param:delta"))
     make_verdict("param:delta",
                  "named the preload rather than the stiffness: both change the force on the closed plunger that "

@@ -119,6 +119,12 @@ std::string MovingIdentificationReport(const MovingIdentification& id);
 //    constant force either way (seed 000 eq. 9-10: k delta and (A2 - A1) P add), so the verdict names both.
 void PreferDeterminedChange(Diagnosis* d, const Dataset& target);
 
+// Against a reference (any device): a sense-chain verdict (sensor_gain, sensor_offset) confusable with the
+// winding's resistance (resistance_temperature, param:R) becomes the resistance when the runs declare a winding
+// more than 1 K from the reference's: the declared conditions predict that change, and on a coil R and the
+// gain are degenerate (issue 25: 3 of 11 hot-vs-cold strokes of a held solenoid came out a lone sensor term).
+void PreferDeclaredTemperature(Diagnosis* d, const Dataset& target);
+
 std::vector<Candidate> MovingValveCandidates(const model::PlantParams& reference, const Dataset& target,
                                              const std::vector<bool>& fit_mask, double reference_C);
 

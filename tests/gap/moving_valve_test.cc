@@ -265,6 +265,36 @@ TEST(MovingValve, RefusesWhatIsNotASwitchOnSession) {
   EXPECT_NE(id.status().message().find("--params"), std::string::npos);
 }
 
+// The declared conditions decide between confusable changes: a warmer winding predicts R, not the sense gain.
+TEST(PreferDeclared, WarmerWindingNamesTheResistanceOverAConfusableSenseGain) {
+  Diagnosis d;
+  d.has_reference = true;
+  d.reference.temperature_C = 26.0;
+  for (const char* n : {"sensor_gain", "resistance_temperature", "param:R"}) {
+    CandidateResult r;
+    r.name = n;
+    d.ranking.push_back(r);
+    d.candidates.push_back(Candidate{n, {}, {}});
+  }
+  d.chosen = 0;
+  d.verdict = "sensor_gain";
+  d.confusable = {"resistance_temperature", "param:R"};
+  Dataset target;
+  RunData hot;
+  hot.coil_C = 41.0;
+  target.runs.push_back(hot);
+  Diagnosis same = d;
+  PreferDeclaredTemperature(&d, target);
+  EXPECT_EQ(d.verdict, "resistance_temperature");
+  EXPECT_EQ(d.ranking.front().name, "resistance_temperature");
+  EXPECT_EQ(d.candidates.front().name, "resistance_temperature");
+  EXPECT_NE(std::find(d.confusable.begin(), d.confusable.end(), "sensor_gain"), d.confusable.end());
+  // At the reference's temperature nothing predicts a change of R: the ranking stands.
+  target.runs.front().coil_C = 26.5;
+  PreferDeclaredTemperature(&same, target);
+  EXPECT_EQ(same.verdict, "sensor_gain");
+}
+
 // ---- scope captures in (benchctl convert --channel) -------------------------------------------------------------
 
 // A capture as a bench scope exports it: header lines, a column-name line, the time from -pre-trigger, a gate
