@@ -300,9 +300,14 @@ SwitchOnMarks FindSwitchOnMarks(const std::vector<double>& i_A, const std::vecto
 
 bool IsSwitchOnSession(const Dataset& ds, const model::PlantParams& family) {
   if (!family.has_moving_part || family.law != model::InductanceLaw::kReluctance || ds.runs.empty()) return false;
-  for (const auto& r : ds.runs)
+  for (const auto& r : ds.runs) {
     if (r.kind != RunKind::kWaveform || std::isfinite(r.stroke_m) || r.gate.empty() || GateOn(r) >= r.gate.size())
       return false;
+    // A switch-on: the gate rises once (PWM sessions are identified with --params).
+    int rises = 0;
+    for (std::size_t k = 1; k < r.gate.size(); ++k) rises += r.gate[k] != 0 && r.gate[k - 1] == 0;
+    if (rises != 1 || r.gate.front() != 0) return false;
+  }
   return true;
 }
 

@@ -94,8 +94,9 @@ struct MovingIdentification {
   double seconds = 0.0;
 };
 
-// True when the dataset is a moving valve seen through its switch-on current: waveform runs, a family with a
-// moving part and the reluctance law, no held stroke. IdentifyMovingValve refuses anything else.
+// True when the dataset is a moving valve seen through its switch-on current: waveform runs whose gate rises once
+// (from 0), a family with a moving part and the reluctance law, no held stroke. IdentifyMovingValve refuses
+// anything else.
 bool IsSwitchOnSession(const Dataset& ds, const model::PlantParams& family);
 
 // Identifies the valve on the fit runs (the manifest's split; every run when none is held out) and predicts

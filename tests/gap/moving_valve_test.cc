@@ -254,6 +254,14 @@ TEST(MovingValve, OneRunSaysNothingCanBeHeldOut) {
   Cleanup(tgt);
 }
 
+TEST(MovingValve, APwmSessionIsNotASwitchOnSession) {
+  const fs::path dir = kPractice3.parent_path() / "practice" / "p05";
+  if (!fs::is_directory(dir)) GTEST_SKIP() << dir << " is missing";
+  auto ds = LoadDataset(dir.string(), model::PresetNames());
+  ASSERT_TRUE(ds.ok()) << ds.status().message();
+  EXPECT_FALSE(IsSwitchOnSession(*ds, Family()));
+}
+
 TEST(MovingValve, RefusesWhatIsNotASwitchOnSession) {
   Dataset ds;
   ds.format = "valve-runs/2";
