@@ -213,6 +213,8 @@ const Change kChanges[] = {
        }
      },
      "pressure"},
+    {"gain", [](model::PlantParams* p, std::vector<SwitchOnRunPlan>*) { p->effects.sensor_gain = 0.96; }, "sensor_gain"},
+    {"smaller_R", [](model::PlantParams* p, std::vector<SwitchOnRunPlan>*) { p->R_ohm *= 0.975; }, "R"},
 };
 
 class MovingValveSyntheticChange : public ::testing::TestWithParam<int> {};
@@ -236,7 +238,7 @@ TEST_P(MovingValveSyntheticChange, NamedAgainstAReferenceIdentifiedFromScratch) 
   Cleanup(tgt);
 }
 
-INSTANTIATE_TEST_SUITE_P(OtherValve, MovingValveSyntheticChange, ::testing::Range(0, 5),
+INSTANTIATE_TEST_SUITE_P(OtherValve, MovingValveSyntheticChange, ::testing::Range(0, 7),
                          [](const ::testing::TestParamInfo<int>& i) { return std::string(kChanges[i.param].name); });
 
 TEST(MovingValve, OneRunSaysNothingCanBeHeldOut) {
