@@ -30,9 +30,13 @@ std::vector<std::string> MakeSplit(const Dataset& ds, std::string* note) {
     return split;
   }
   if (given) {
-    // Every run may be fitted: still hold some out, or nothing would be measured on unseen runs.
-    for (std::size_t k = 0; k < ds.runs.size(); ++k) split.push_back(k % 4 == 3 ? "holdout" : "fit");
-    *note = "the manifest holds no run out: every fourth run is held out";
+    // Every run may be fitted: still hold some out, or nothing would be measured on unseen runs (with two or
+    // three runs, the last one; one run cannot be split).
+    const std::size_t n = ds.runs.size();
+    for (std::size_t k = 0; k < n; ++k) split.push_back(k % 4 == 3 || (n > 1 && n < 4 && k == n - 1) ? "holdout" : "fit");
+    *note = n == 1  ? "one run: nothing can be held out"
+            : n < 4 ? "the manifest holds no run out: the last run is held out"
+                    : "the manifest holds no run out: every fourth run is held out";
     return split;
   }
   std::map<double, int> count;
@@ -709,6 +713,8 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds_in, const model::PlantParams& nom
                        ": nothing can be held out, so no candidate can be judged on data it was not fitted to; "
                        "record another run (another pressure or supply, or the same conditions again) and diagnose "
                        "them together";
+    if (IsSwitchOnSession(ds, nominal))
+      d.verdict_reason += "; the valve itself (not the preset) is identified from scratch by `benchctl identify DIR`";
     d.warnings.push_back(d.verdict_reason);
     return d;
   }

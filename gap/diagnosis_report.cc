@@ -2,6 +2,7 @@
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <sstream>
@@ -170,9 +171,12 @@ std::string DiagnosisReport(const Diagnosis& d) {
                   d.model.c_str(), d.device.empty() ? "" : ", device ", d.device.c_str(), d.noise_floor_A * 1e3);
     os << buf;
   }
-  std::snprintf(buf, sizeof buf, "gap: fit runs %.2f mA RMS, holdout %.2f mA RMS: %s (threshold %.1fx the floor)\n",
-                d.fit_rmse_A * 1e3, d.holdout_rmse_A * 1e3, d.significant ? "SIGNIFICANT" : "not significant",
-                kSignificance);
+  const bool any_holdout =
+      std::any_of(d.runs.begin(), d.runs.end(), [](const RunGap& r) { return r.split == "holdout"; });
+  char holdout[48] = "no holdout run";
+  if (any_holdout) std::snprintf(holdout, sizeof holdout, "holdout %.2f mA RMS", d.holdout_rmse_A * 1e3);
+  std::snprintf(buf, sizeof buf, "gap: fit runs %.2f mA RMS, %s: %s (threshold %.1fx the floor)\n",
+                d.fit_rmse_A * 1e3, holdout, d.significant ? "SIGNIFICANT" : "not significant", kSignificance);
   os << buf;
   if (!d.split_note.empty()) os << d.split_note << "\n";
   if (d.form_floor_A > d.noise_floor_A) {

@@ -412,4 +412,25 @@ TEST(BenchctlCli, ConvertScopeCapture) {
   std::filesystem::remove_all(dir);
 }
 
+// diagnose on one switch-on curve: says nothing can be held out, ranks nothing (never "0.00 -> 0.00").
+TEST(BenchctlCli, DiagnoseOneRunSaysNothingCanBeHeldOut) {
+  const std::string m01 = std::string(VB_SHARED_DIR) + "/gapbench/practice3/m01";
+  if (!std::filesystem::is_directory(m01)) GTEST_SKIP() << "no practice3 data";
+  const std::string dir = ::testing::TempDir() + "/one-run-" + std::to_string(::getpid());
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  std::filesystem::copy_file(m01 + "/on1_1bar_12V.csv", dir + "/on1_1bar_12V.csv");
+  std::ifstream in(m01 + "/manifest.json");
+  auto m = nlohmann::json::parse(in);
+  m["runs"] = nlohmann::json::array({m["runs"][0]});
+  std::ofstream(dir + "/manifest.json") << m.dump(1);
+  Result r = RunBenchctl("diagnose " + dir);
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  EXPECT_NE(r.out.find("nothing can be held out"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("no holdout run"), std::string::npos) << r.out;
+  EXPECT_EQ(r.out.find("0.00 ->"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("benchctl identify"), std::string::npos) << r.out;
+  std::filesystem::remove_all(dir);
+}
+
 }  // namespace
