@@ -189,6 +189,37 @@ TEST(MovingValveSynthetic, OtherValveIdentifiedAndPredictedAtAnotherPressureAndS
   Cleanup(dir);
 }
 
+// The same valve with a saturating core (tanh form) and a softer spring: the saturation must join the
+// identified model (it is decisive) and the holdout runs stay within 5 mA.
+TEST(MovingValveSynthetic, SaturatingCoreJoinsTheModelWhenDecisive) {
+  const fs::path dir = TempDir("sat");
+  model::PlantParams truth = OtherValve();
+  truth.effects.saturation_B_T = 0.5;
+  truth.effects.saturation_tanh = 1.0;
+  truth.k_N_per_m = 2500.0;
+  truth.delta_m = 0.6e-3;
+  auto runs = Pressures(24.0, {1, 2.5, 4}, "fit");
+  runs.push_back({"on_20V_2bar", 20.0, 2e5, -1.0, "fit"});
+  runs.push_back({"on_hold_6bar", 24.0, 6e5, -1.0, "holdout"});
+  runs.push_back({"on_hold_12V", 12.0, 1e5, -1.0, "holdout"});
+  ScopeChain scope;
+  scope.seed = 21;
+  ASSERT_TRUE(WriteSwitchOnSession(dir.string(), truth, runs, scope, "saturating").ok());
+  auto ds = LoadDataset(dir.string(), model::PresetNames());
+  ASSERT_TRUE(ds.ok()) << ds.status().message();
+  auto id = IdentifyMovingValve(*ds, Family());
+  ASSERT_TRUE(id.ok()) << id.status().message();
+  EXPECT_NE(std::find(id->effects.begin(), id->effects.end(), "magnetic_saturation"), id->effects.end())
+      << MovingIdentificationReport(*id);
+  for (const auto& r : id->landmarks) {
+    EXPECT_EQ(r.measured.pulls_in, r.predicted.pulls_in) << r.run;
+    if (r.split == "holdout") {
+      EXPECT_LT(r.rmse_A, 5e-3) << r.run << "\n" << MovingIdentificationReport(*id);
+    }
+  }
+  Cleanup(dir);
+}
+
 struct Change {
   const char* name;
   void (*apply)(model::PlantParams*, std::vector<SwitchOnRunPlan>*);
