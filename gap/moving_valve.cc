@@ -877,7 +877,9 @@ std::string MovingIdentificationJson(const MovingIdentification& id) {
   if (!id.split_note.empty()) j["split_note"] = id.split_note;
   nlohmann::ordered_json lm = nlohmann::ordered_json::array();
   auto marks = [&](const SwitchOnMarks& m) {
-    return nlohmann::ordered_json{{"pulls_in", m.pulls_in}, {"pull_in_s", num(m.pull_in_s)},
+    return nlohmann::ordered_json{{"pulls_in", m.pulls_in},
+                                  {"pull_in", m.pulls_in ? "pulls in" : "does not pull in"},
+                                  {"pull_in_s", num(m.pull_in_s)},
                                   {"dip_depth_A", num(m.dip_depth_A)}, {"final_A", num(m.final_A)}};
   };
   for (const auto& r : id.landmarks)
@@ -1066,14 +1068,35 @@ void PreferDeterminedChange(Diagnosis* d, const Dataset& target) {
                  "the switch-on sees, and the runs do not resolve the stiffness's change along the stroke");
   const bool force = d->verdict == "param:delta" || d->verdict == "supply_pressure";
   const std::string other = d->verdict == "param:delta" ? "supply_pressure" : "param:delta";
-  if (!force || !confusable(other)) return;
   double pmin = INFINITY, pmax = -INFINITY;
   for (const auto& r : target.runs) pmin = std::min(pmin, r.supply_pressure_Pa), pmax = std::max(pmax, r.supply_pressure_Pa);
+  // The pressure the fitted area implies: (A2 - A1) P is the force; the declared P with the fitted area is the
+  // reference's area at f P.
+  std::string implied;
+  for (const auto& row : d->ranking) {
+    if (row.name != "supply_pressure" || !row.status.ok()) continue;
+    const auto a2 = row.params.find("A2");
+    const auto r1 = d->reference.params.find("A1"), r2 = d->reference.params.find("A2");
+    if (a2 == row.params.end() || r1 == d->reference.params.end() || r2 == d->reference.params.end()) break;
+    const double f = (a2->second - r1->second) / (r2->second - r1->second);
+    if (!std::isfinite(f)) break;
+    char buf[200];
+    if (pmax == pmin)
+      std::snprintf(buf, sizeof buf, " (as supply_pressure: %.2f bar acting where %.2f bar is declared)", f * pmax / 1e5,
+                    pmax / 1e5);
+    else
+      std::snprintf(buf, sizeof buf, " (as supply_pressure: %.2fx the declared pressures)", f);
+    implied = buf;
+  }
+  if (!force || !confusable(other)) {
+    if (d->verdict == "supply_pressure") d->verdict_reason += implied;
+    return;
+  }
   if (pmax > pmin) return;  // several declared pressures: a pressure error scales with them, a preload does not
   d->verdict = "supply_pressure or param:delta";
   d->verdict_reason += "; every run declares one pressure, so a supply pressure other than declared and a changed "
                        "spring preload are the same constant force on the plunger (seed 000 eq. 9-10): runs at "
-                       "another declared pressure would tell them apart";
+                       "another declared pressure would tell them apart" + implied;
   d->confusable.erase(std::remove(d->confusable.begin(), d->confusable.end(), other), d->confusable.end());
 }
 
