@@ -1060,6 +1060,16 @@ void PreferDeclaredTemperature(Diagnosis* d, const Dataset& target) {
 
 void PreferDeterminedChange(Diagnosis* d, const Dataset& target) {
   if (d->chosen < 0 || d->ranking.empty()) return;
+  if (d->verdict == "stuck") {
+    for (const char* f : {"supply_pressure", "param:delta", "param:k"})
+      if (Confusable(*d, f)) {
+        d->verdict_reason += "; the plunger no longer moves: held by friction or a blockage, or by a force above the "
+                             "pull (a pressure or preload far off), which the current alone cannot tell apart (no "
+                             "dip at any run)";
+        break;
+      }
+    return;
+  }
   auto confusable = [&](const std::string& name) { return Confusable(*d, name); };
   auto make_verdict = [&](const std::string& name, const std::string& why) { MakeVerdict(d, name, why); };
   if (d->verdict == "param:k" && confusable("param:delta"))
