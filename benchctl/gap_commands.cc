@@ -24,6 +24,8 @@
 #include "gap/stored_runs.h"
 #include "gap/suggest.h"
 #include "gap/identify.h"
+#include "gap/moving_valve.h"
+#include "gap/scope_csv.h"
 #include "gap/readings_csv.h"
 #include "model/driver.h"
 #include "model/params.h"
@@ -387,9 +389,9 @@ GapCli::GapCli(CLI::App* app, SharedOptions shared) : shared_(shared) {
   identify_ = app->add_subcommand("identify", "fit a device's parameters to measured runs (seed 000 sec. 4)");
   identify_->add_option("dataset", dataset_dir_, "dataset directory (valve-runs/1 or /2)")->required();
   identify_->add_option("--params", params_,
-                        "parameters to fit: NAME[=LO:HI][@START], e.g. R=5:200,L=0.01:2,sensor_offset.offset_A")
-      ->delimiter(',')
-      ->required();
+                        "parameters to fit: NAME[=LO:HI][@START], e.g. R=5:200,L=0.01:2,sensor_offset.offset_A; "
+                        "without it, a moving valve's switch-on runs are identified from scratch")
+      ->delimiter(',');
   identify_->add_option("--fix", fixed_, "parameters held at a value: NAME=VALUE,...")->delimiter(',');
   identify_->add_flag("--global", global_, "a global search before the local fit (default: when a box spans > 3.5x or crosses 0)");
   identify_->add_flag("--no-global", no_global_, "local fit only (from the start values), no global search first");
@@ -398,7 +400,7 @@ GapCli::GapCli(CLI::App* app, SharedOptions shared) : shared_(shared) {
   identify_->add_option("--out", out_path_, "old name of --model-out");
   identify_->add_flag("--json", *shared_.json, "machine-readable output on stdout");
 
-  convert_ = app->add_subcommand("convert", "readings CSV (one periodic steady-state reading per row) -> valve-runs/2 datasets");
+  convert_ = app->add_subcommand("convert", "readings CSV (one periodic steady-state reading per row) -> valve-runs/2 datasets; with --channel, a scope capture -> one run of a dataset");
   convert_->add_option("csv", csv_path_, "the readings file (docs/real-data.md gives its columns)")->required();
   convert_->add_option("outdir", out_dir_, "where the datasets go, one directory per session")->required();
   convert_->add_option("--shunt-ohm", shunt_ohm_, "sense resistor in the switch's source path [ohm]")->capture_default_str();
@@ -407,6 +409,22 @@ GapCli::GapCli(CLI::App* app, SharedOptions shared) : shared_(shared) {
   convert_->add_option("--averaged", averaged_, "PWM periods averaged into one reading")->capture_default_str();
   convert_->add_option("--model", convert_model_, "model the datasets name (preset, or NAME.json beside them)")->capture_default_str();
   convert_->add_flag("--json", *shared_.json, "machine-readable output on stdout");
+  // A scope's CSV export of one switch-on capture (gap/scope_csv.h): one run appended to OUTDIR's dataset.
+  convert_->add_option("--channel", scope_channel_, "scope CSV: the current's column (name or 1-based index); "
+                                                    "with it, CSV is one scope capture and OUTDIR one dataset");
+  convert_->add_option("--time-column", scope_time_column_, "scope CSV: the time column [s] (default: the first)");
+  convert_->add_option("--probe-A-per-V", scope_probe_A_per_V_, "scope CSV: a current probe's scale (instead of --shunt-ohm)");
+  convert_->add_option("--gate-channel", scope_gate_channel_, "scope CSV: the gate drive's column (its rising edge)");
+  convert_->add_option("--gate-threshold-V", scope_gate_threshold_V_, "scope CSV: gate high above this (default: mid-range)");
+  convert_->add_option("--trigger-s", scope_trigger_s_, "scope CSV: the gate's rising edge in the time column (instead of --gate-channel)");
+  convert_->add_option("--supply-V", scope_supply_V_, "scope CSV: the supply during the capture [V]");
+  convert_->add_option("--pressure-Pa", scope_pressure_Pa_, "scope CSV: the supply pressure (gauge) [Pa]");
+  convert_->add_option("--run-id", scope_run_id_, "scope CSV: the run's id (default: the file name)");
+  convert_->add_option("--split", scope_split_, "scope CSV: fit or holdout");
+  convert_->add_option("--t-start-s", scope_t_start_s_, "scope CSV: when the capture was taken [s] (default: after the last run)");
+  convert_->add_option("--device", scope_device_, "scope CSV: the device's name (a new dataset)");
+  convert_->add_option("--noise-A", scope_noise_A_, "scope CSV: white noise of one sweep [A] (declared in a new dataset)");
+  convert_->add_option("--lsb-A", scope_lsb_A_, "scope CSV: the capture's resolution [A] (declared in a new dataset)");
 
   import_ = app->add_subcommand("import", "store a dataset's waveform runs on the server");
   import_->add_option("dataset", dataset_dir_, "dataset directory (manifest.json and its files)")->required();
@@ -489,9 +507,19 @@ int GapCli::Diagnose(const ClientFactory& make_client) {
     if (!ref.ok()) return Fail(ref.status().WithContext("--reference"));
     reference = std::move(*ref);
     if (nominal->driver) reference.driver = *nominal->driver;
-    const auto names = reference_params_.empty() ? DefaultReferenceParams(reference, nominal->plant) : reference_params_;
-    auto fit = IdentifyOptionsFrom(names, {}, gap::IdentifyOptions::Global::kAuto, "--reference-params");
+    // A moving valve's switch-on runs with no --reference-params: the reference is identified from scratch.
+    const bool scratch = reference_params_.empty() && gap::IsSwitchOnSession(reference, nominal->plant);
+    const auto names = !reference_params_.empty() ? reference_params_
+                       : scratch                  ? std::vector<std::string>{}
+                                                  : DefaultReferenceParams(reference, nominal->plant);
+    auto fit = scratch ? StatusOr<gap::IdentifyOptions>(gap::IdentifyOptions{})
+                       : IdentifyOptionsFrom(names, {}, gap::IdentifyOptions::Global::kAuto, "--reference-params");
     if (!fit.ok()) return Fail(fit.status());
+    if (scratch) {
+      fit->scratch_progress = [](const std::string& line) {
+        std::fprintf(stderr, "benchctl: reference: %s\n", line.c_str());
+      };
+    }
     options.reference = &reference;
     options.reference_fit = *fit;
   }
@@ -505,6 +533,28 @@ int GapCli::Identify() {
   if (!nominal.ok()) return Fail(nominal.status());
   if (nominal->driver) ds->driver = *nominal->driver;
   if (global_ && no_global_) return Fail(Status::InvalidArgument("identify: --global and --no-global exclude each other"));
+  if (params_.empty() && fixed_.empty() && gap::IsSwitchOnSession(*ds, nominal->plant)) {
+    // A moving valve seen through its switch-on current: identified from scratch (docs/real-data.md, "Moving valves").
+    gap::MovingIdentifyOptions mo;
+    mo.progress = [](const std::string& line) { std::fprintf(stderr, "benchctl: identify: %s\n", line.c_str()); };
+    std::fprintf(stderr, "benchctl: identifying a moving valve from scratch on %zu runs of %s (model family %s)\n",
+                 ds->runs.size(), dataset_dir_.c_str(), ds->model.c_str());
+    auto id = gap::IdentifyMovingValve(*ds, nominal->plant, mo);
+    if (!id.ok()) return Fail(id.status());
+    const std::string model_out = ModelOut(out_path_, "identify --out");
+    if (!model_out.empty()) {
+      auto spec = WithValues(nominal->spec, id->effects, id->values, ds->driver,
+                             "identified from scratch by benchctl identify on " + dataset_dir_);
+      if (auto st = WriteSpec(spec, model_out); !st.ok()) return Fail(st);
+    }
+    if (*shared_.json) {
+      std::cout << gap::MovingIdentificationJson(*id) << "\n";
+    } else {
+      std::cout << gap::MovingIdentificationReport(*id);
+      if (!model_out.empty()) std::cout << "identified model written to " << model_out << "\n";
+    }
+    return kExitOk;
+  }
   auto options = IdentifyOptionsFrom(params_, fixed_,
                                      global_      ? gap::IdentifyOptions::Global::kOn
                                      : no_global_ ? gap::IdentifyOptions::Global::kOff
@@ -534,6 +584,38 @@ int GapCli::Identify() {
 }
 
 int GapCli::Convert() {
+  if (!scope_channel_.empty()) {
+    gap::ScopeCsvOptions so;
+    so.current_channel = scope_channel_;
+    so.time_column = scope_time_column_;
+    so.shunt_ohm = convert_->count("--shunt-ohm") > 0 ? shunt_ohm_ : 0.0;
+    so.probe_A_per_V = scope_probe_A_per_V_;
+    so.gate_channel = scope_gate_channel_;
+    so.gate_threshold_V = scope_gate_threshold_V_;
+    so.trigger_s = scope_trigger_s_;
+    so.supply_V = scope_supply_V_;
+    so.supply_pressure_Pa = scope_pressure_Pa_;
+    so.run_id = scope_run_id_;
+    so.split = scope_split_;
+    so.t_start_s = scope_t_start_s_;
+    so.device = scope_device_;
+    so.model = convert_->count("--model") > 0 ? convert_model_ : "taghizadeh2009";
+    so.noise_A = scope_noise_A_;
+    so.averaged = convert_->count("--averaged") > 0 ? averaged_ : 0;
+    so.lsb_A = scope_lsb_A_;
+    auto run = gap::ConvertScopeCsv(csv_path_, out_dir_, so);
+    if (!run.ok()) return Fail(run.status());
+    if (*shared_.json) {
+      nlohmann::ordered_json j = {{"directory", run->directory}, {"run", run->run_id}, {"file", run->file},
+                                  {"samples", run->samples}, {"sample_period_s", run->sample_period_s},
+                                  {"gate_on_s", run->gate_on_s}};
+      std::cout << j.dump(2) << "\n";
+    } else {
+      std::printf("run %s: %zu samples every %.6g s, gate on at %.6g s, written to %s\n", run->run_id.c_str(),
+                  run->samples, run->sample_period_s, run->gate_on_s, run->directory.c_str());
+    }
+    return kExitOk;
+  }
   gap::ReadingsCsvOptions o;
   o.shunt_ohm = shunt_ohm_;
   o.amp_ref_ohm = amp_ref_ohm_;

@@ -14,6 +14,7 @@
 #include <CLI/CLI.hpp>
 
 #include <cstdint>
+#include <cmath>
 #include <string>
 #include <vector>
 
@@ -49,6 +50,10 @@ class GapCli {
   double shunt_ohm_ = 0.2, amp_ref_ohm_ = 1000.0, adc_lsb_V_ = 1e-3;
   int averaged_ = 16;
   std::string convert_model_ = "ts98_coil";
+  // convert of a scope capture (--channel given): gap/scope_csv.h
+  std::string scope_channel_, scope_time_column_, scope_gate_channel_, scope_run_id_, scope_split_, scope_device_;
+  double scope_probe_A_per_V_ = 0.0, scope_gate_threshold_V_ = NAN, scope_trigger_s_ = NAN, scope_supply_V_ = 0.0,
+         scope_pressure_Pa_ = 0.0, scope_t_start_s_ = NAN, scope_noise_A_ = NAN, scope_lsb_A_ = NAN;
 };
 
 }  // namespace vb::benchctl

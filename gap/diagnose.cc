@@ -1,6 +1,7 @@
 #include "gap/diagnose.h"
 
 #include "common/format.h"
+#include "gap/moving_valve.h"
 #include "gap/predict.h"
 
 #include <fmt/format.h>
@@ -29,9 +30,13 @@ std::vector<std::string> MakeSplit(const Dataset& ds, std::string* note) {
     return split;
   }
   if (given) {
-    // Every run may be fitted: still hold some out, or nothing would be measured on unseen runs.
-    for (std::size_t k = 0; k < ds.runs.size(); ++k) split.push_back(k % 4 == 3 ? "holdout" : "fit");
-    *note = "the manifest holds no run out: every fourth run is held out";
+    // Every run may be fitted: still hold some out, or nothing would be measured on unseen runs (with two or
+    // three runs, the last one; one run cannot be split).
+    const std::size_t n = ds.runs.size();
+    for (std::size_t k = 0; k < n; ++k) split.push_back(k % 4 == 3 || (n > 1 && n < 4 && k == n - 1) ? "holdout" : "fit");
+    *note = n == 1  ? "one run: nothing can be held out"
+            : n < 4 ? "the manifest holds no run out: the last run is held out"
+                    : "the manifest holds no run out: every fourth run is held out";
     return split;
   }
   std::map<double, int> count;
@@ -44,10 +49,15 @@ std::vector<std::string> MakeSplit(const Dataset& ds, std::string* note) {
       held = v;
     }
   if (count.size() < 2) {
-    // One supply voltage: hold out every fourth run.
-    for (std::size_t k = 0; k < ds.runs.size(); ++k)
-      split.push_back(!ds.runs[k].split.empty() ? ds.runs[k].split : (k % 4 == 3 ? "holdout" : "fit"));
-    *note = "no split in the manifest: every fourth run is held out";
+    // One supply voltage: hold out every fourth run; with two or three runs, the last one.
+    const std::size_t n = ds.runs.size();
+    for (std::size_t k = 0; k < n; ++k)
+      split.push_back(!ds.runs[k].split.empty() ? ds.runs[k].split
+                      : (k % 4 == 3 || (n > 1 && n < 4 && k == n - 1)) ? "holdout"
+                                                                       : "fit");
+    *note = n == 1   ? "one run: nothing can be held out"
+            : n < 4  ? "no split in the manifest: the last run is held out"
+                     : "no split in the manifest: every fourth run is held out";
     return split;
   }
   for (const auto& r : ds.runs) split.push_back(!r.split.empty() ? r.split : (r.supply_V == held ? "holdout" : "fit"));
@@ -794,6 +804,31 @@ void Decide(Diagnosis* out) {
 
 StatusOr<FittedDevice> ReferenceDevice(const Dataset& reference, const model::PlantParams& nominal,
                                        const IdentifyOptions& fit, ReferenceFit* out) {
+  if (fit.params.empty() && fit.fixed.empty() && IsSwitchOnSession(reference, nominal)) {
+    // A moving valve with no parameter list: identified from scratch from its switch-on curves.
+    MovingIdentifyOptions mo;
+    mo.budget_s = std::min(fit.budget_s, 55.0);
+    mo.solver = fit.attribution.solver;
+    mo.progress = fit.scratch_progress;
+    auto id = IdentifyMovingValve(reference, nominal, mo);
+    if (!id.ok()) return id.status().WithContext("reference " + reference.directory);
+    FittedDevice dev{id->plant, reference.driver};
+    if (out != nullptr) {
+      out->directory = reference.directory;
+      out->fit_rmse_A = id->fit_rmse_A;
+      out->params = id->values;
+      out->from_scratch = true;
+      for (const auto& h : id->held) out->notes.push_back(h.name + " held at " + FormatNumber(h.value));
+      for (const auto& n : id->notes) out->notes.push_back(n);
+      double tmin = INFINITY, tmax = -INFINITY;
+      for (const auto& r : reference.runs) {
+        tmin = std::min(tmin, r.temperature_C());
+        tmax = std::max(tmax, r.temperature_C());
+      }
+      out->temperature_C = std::isfinite(tmin) && tmax - tmin <= 1.0 ? 0.5 * (tmin + tmax) : NAN;
+    }
+    return dev;
+  }
   auto id = Identify(reference, nominal, fit);
   if (!id.ok()) return id.status().WithContext("reference " + reference.directory);
   FittedDevice dev;
@@ -850,6 +885,7 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds_in, const model::PlantParams& nom
   for (const auto& sp : split) fit_mask.push_back(sp != "holdout");
   const std::vector<Candidate> catalog =
       !opt.candidates.empty() ? opt.candidates
+      : d.reference.from_scratch ? MovingValveCandidates(nominal, ds, fit_mask, d.reference.temperature_C)
       : ds.format == kFormatValveRuns1
           ? DefaultCandidates(nominal)
           : DefaultCandidates(nominal, ds, fit_mask, d.has_reference ? d.reference.temperature_C : NAN);
@@ -871,6 +907,19 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds_in, const model::PlantParams& nom
   if (!opt.attribute) {
     d.verdict = "unknown";
     d.verdict_reason = "attribution not run";
+    return d;
+  }
+  if (std::find(fit_mask.begin(), fit_mask.end(), false) == fit_mask.end()) {
+    // Every run is fitted: a candidate's worth is its error on runs it was not fitted to, and there are none.
+    // No ranking (it would read "holdout 0.00 -> 0.00" for every candidate).
+    d.verdict = "unknown";
+    d.verdict_reason = std::string(ds.runs.size() == 1 ? "one run" : "no holdout run") +
+                       ": nothing can be held out, so no candidate can be judged on data it was not fitted to; "
+                       "record another run (another pressure or supply, or the same conditions again) and diagnose "
+                       "them together";
+    if (IsSwitchOnSession(ds, nominal))
+      d.verdict_reason += "; the valve itself (not the preset) is identified from scratch by `benchctl identify DIR`";
+    d.warnings.push_back(d.verdict_reason);
     return d;
   }
 
@@ -923,6 +972,8 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds_in, const model::PlantParams& nom
     }
 
   Decide(&d);
+  if (d.reference.from_scratch) PreferDeterminedChange(&d, ds);
+  PreferDeclaredTemperature(&d, ds);
   const CandidateResult& best = d.ranking.front();
 
   if (opt.fit_nuisance) {

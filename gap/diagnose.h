@@ -93,6 +93,9 @@ struct ReferenceFit {
   double temperature_C = NAN;       // the reference runs' temperature when they share one
   double fit_rmse_A = 0.0;          // the reference's own fit error: the model-form floor
   std::map<std::string, double> params;  // identified on the reference
+  // Identified from scratch (gap/moving_valve.h): a moving valve's switch-on runs with no parameter list.
+  bool from_scratch = false;
+  std::vector<std::string> notes;        // what the from-scratch identification held and could not determine
 };
 
 struct Diagnosis {

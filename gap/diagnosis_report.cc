@@ -2,6 +2,7 @@
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <sstream>
@@ -76,6 +77,10 @@ std::string DiagnosisJson(const Diagnosis& d) {
                       {"temperature_C", NumOrNull(d.reference.temperature_C)},
                       {"fit_rmse_A", d.reference.fit_rmse_A},
                       {"params", params}};
+    if (d.reference.from_scratch) {
+      j["reference"]["from_scratch"] = true;
+      j["reference"]["notes"] = d.reference.notes;
+    }
   }
   j["gap"] = {{"fit_rmse_A", d.fit_rmse_A}, {"holdout_rmse_A", d.holdout_rmse_A}, {"significant", d.significant}};
   nlohmann::ordered_json where = nlohmann::ordered_json::array();
@@ -162,20 +167,24 @@ std::string DiagnosisReport(const Diagnosis& d) {
     os << buf;
     os << "reference " << d.reference.directory;
     if (std::isfinite(d.reference.temperature_C)) os << " at " << FormatNumber(d.reference.temperature_C) << " C";
-    os << ", identified there:";
+    os << (d.reference.from_scratch ? ", identified there from scratch:" : ", identified there:");
     for (const auto& [k, v] : d.reference.params) {
       std::snprintf(buf, sizeof buf, " %s=%.5g", k.c_str(), v);
       os << buf;
     }
     os << "\n";
+    for (const auto& n : d.reference.notes) os << "  reference: " << n << "\n";
   } else {
     std::snprintf(buf, sizeof buf, "model %s%s%s; noise floor %.3f mA (from the data and the declared sense chain)\n",
                   d.model.c_str(), d.device.empty() ? "" : ", device ", d.device.c_str(), d.noise_floor_A * 1e3);
     os << buf;
   }
-  std::snprintf(buf, sizeof buf, "gap: fit runs %.2f mA RMS, holdout %.2f mA RMS: %s (threshold %.1fx the floor)\n",
-                d.fit_rmse_A * 1e3, d.holdout_rmse_A * 1e3, d.significant ? "SIGNIFICANT" : "not significant",
-                kSignificance);
+  const bool any_holdout =
+      std::any_of(d.runs.begin(), d.runs.end(), [](const RunGap& r) { return r.split == "holdout"; });
+  char holdout[48] = "no holdout run";
+  if (any_holdout) std::snprintf(holdout, sizeof holdout, "holdout %.2f mA RMS", d.holdout_rmse_A * 1e3);
+  std::snprintf(buf, sizeof buf, "gap: fit runs %.2f mA RMS, %s: %s (threshold %.1fx the floor)\n",
+                d.fit_rmse_A * 1e3, holdout, d.significant ? "SIGNIFICANT" : "not significant", kSignificance);
   os << buf;
   if (!d.split_note.empty()) os << d.split_note << "\n";
   if (d.form_floor_A > d.noise_floor_A) {

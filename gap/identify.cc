@@ -120,7 +120,9 @@ StatusOr<std::pair<std::string, double>> ParseFixed(const std::string& text, con
 
 StatusOr<Identification> Identify(const Dataset& ds, const model::PlantParams& nominal, const IdentifyOptions& options) {
   if (options.params.empty())
-    return Status::InvalidArgument("--params: name at least one parameter (e.g. R,L or R=5:100,L=0.01:2)");
+    return Status::InvalidArgument("--params: name at least one parameter (e.g. R,L or R=5:100,L=0.01:2); without "
+                                   "--params only a moving valve's switch-on runs (a gate that rises once, "
+                                   "docs/real-data.md) are identified from scratch");
   Identification id;
   id.model = ds.model;
 

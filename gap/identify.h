@@ -5,6 +5,7 @@
 // fit so that a device far from the starting model is found in one call (docs/real-data.md).
 #pragma once
 
+#include <functional>
 #include <map>
 #include <string>
 #include <utility>
@@ -40,6 +41,8 @@ struct IdentifyOptions {
   double budget_s = 600.0;            // wall time for the whole identification
   int global_evaluations_per_param = 150;
   AttributionOptions attribution;
+  // Progress lines of a from-scratch identification (gap/moving_valve.h), when no parameter is named.
+  std::function<void(const std::string&)> scratch_progress;
 };
 
 // What the data says about each fitted parameter.

@@ -356,4 +356,81 @@ TEST(BenchctlCli, IdentifyFitsNamedParametersAndWritesAModel) {
   EXPECT_NE(bad.out.find("flux_capacitor"), std::string::npos) << bad.out;
 }
 
+// identify without --params on a moving valve's switch-on runs: from scratch, progress on stderr, the holdout
+// runs predicted (practice3 m01: 6 bar, and 0.75x supply that does not pull in), a model written.
+TEST(BenchctlCli, IdentifyFromScratchOnSwitchOnRuns) {
+  const std::string m01 = std::string(VB_SHARED_DIR) + "/gapbench/practice3/m01";
+  const std::string out = ::testing::TempDir() + "/m01-identified.json";
+  Result r = RunBenchctl("identify " + m01 + " --json --model-out " + out);
+  if (r.out.find("does not exist") != std::string::npos) GTEST_SKIP() << "no practice3 data";
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  EXPECT_NE(r.out.find("benchctl: identify: stage 1 electrical"), std::string::npos) << r.out;
+  auto j = nlohmann::json::parse(r.out.substr(r.out.find("\n{") + 1));
+  EXPECT_LT(j["holdout_rmse_after_A"].get<double>(), 5e-3);
+  bool low_supply_seen = false;
+  for (const auto& lm : j["landmarks"]) {
+    if (lm["split"] != "holdout") continue;
+    EXPECT_LT(lm["rmse_A"].get<double>(), 5e-3) << lm.dump();
+    if (lm["supply_V"].get<double>() < 10.0) {
+      low_supply_seen = true;
+      EXPECT_FALSE(lm["measured"]["pulls_in"].get<bool>());
+      EXPECT_FALSE(lm["predicted"]["pulls_in"].get<bool>());
+      EXPECT_TRUE(lm["predicted"]["pull_in_s"].is_null());
+    }
+  }
+  EXPECT_TRUE(low_supply_seen);
+  EXPECT_FALSE(j["held"].empty());
+  // The model written predicts the runs as identify said.
+  Result check = RunBenchctl("diagnose " + m01 + " --model " + out + " --json");
+  ASSERT_EQ(check.exit_code, 0) << check.out;
+  auto d = nlohmann::json::parse(check.out.substr(check.out.find('{')));
+  EXPECT_LT(d["gap"]["holdout_rmse_A"].get<double>(), 5e-3) << check.out.substr(0, 2000);
+  EXPECT_EQ(d["verdict"], "none");
+}
+
+// convert --channel: a scope capture becomes a run; a bad cell is named by line and column.
+TEST(BenchctlCli, ConvertScopeCapture) {
+  const std::string dir = ::testing::TempDir() + "/scope-cli-" + std::to_string(::getpid());
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  {
+    std::ofstream f(dir + "/cap.csv");
+    f << "X,CH1,CH2\nSecond,Volt,Volt\n";
+    for (int k = 0; k < 100; ++k) f << (k - 10) * 1e-5 << "," << (k >= 10 ? 5 : 0) << "," << (k >= 10 ? 0.01 * (k - 10) : 0.0) << "\n";
+    std::ofstream b(dir + "/bad.csv");
+    b << "X,CH1,CH2\n0,0,0\n1e-5,0,zz\n";
+  }
+  Result r = RunBenchctl("convert " + dir + "/cap.csv " + dir + "/ds --channel CH2 --shunt-ohm 0.5 --gate-channel CH1 "
+                         "--supply-V 12 --pressure-Pa 1e5 --json");
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  auto j = nlohmann::json::parse(r.out.substr(r.out.find('{')));
+  EXPECT_EQ(j["samples"].get<int>(), 100);
+  EXPECT_NEAR(j["gate_on_s"].get<double>(), 1e-4, 1e-9);
+  Result bad = RunBenchctl("convert " + dir + "/bad.csv " + dir + "/ds2 --channel CH2 --shunt-ohm 1 --trigger-s 0 --supply-V 12");
+  EXPECT_EQ(bad.exit_code, 2) << bad.out;
+  EXPECT_NE(bad.out.find("bad.csv:3: column CH2: 'zz' is not a number"), std::string::npos) << bad.out;
+  std::filesystem::remove_all(dir);
+}
+
+// diagnose on one switch-on curve: says nothing can be held out, ranks nothing (never "0.00 -> 0.00").
+TEST(BenchctlCli, DiagnoseOneRunSaysNothingCanBeHeldOut) {
+  const std::string m01 = std::string(VB_SHARED_DIR) + "/gapbench/practice3/m01";
+  if (!std::filesystem::is_directory(m01)) GTEST_SKIP() << "no practice3 data";
+  const std::string dir = ::testing::TempDir() + "/one-run-" + std::to_string(::getpid());
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  std::filesystem::copy_file(m01 + "/on1_1bar_12V.csv", dir + "/on1_1bar_12V.csv");
+  std::ifstream in(m01 + "/manifest.json");
+  auto m = nlohmann::json::parse(in);
+  m["runs"] = nlohmann::json::array({m["runs"][0]});
+  std::ofstream(dir + "/manifest.json") << m.dump(1);
+  Result r = RunBenchctl("diagnose " + dir);
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  EXPECT_NE(r.out.find("nothing can be held out"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("no holdout run"), std::string::npos) << r.out;
+  EXPECT_EQ(r.out.find("0.00 ->"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("benchctl identify"), std::string::npos) << r.out;
+  std::filesystem::remove_all(dir);
+}
+
 }  // namespace

@@ -1,0 +1,1113 @@
+#include "gap/moving_valve.h"
+
+#include <nlohmann/json.hpp>
+#include <nlopt.hpp>
+
+#include <Eigen/Dense>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdlib>
+#include <cstdio>
+#include <numeric>
+#include <sstream>
+#include <thread>
+
+#include "gap/predict.h"
+#include "model/plant.h"
+
+namespace vb::gap {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+constexpr double kMu0 = 4e-7 * M_PI;
+
+double Seconds(Clock::time_point since) { return std::chrono::duration<double>(Clock::now() - since).count(); }
+
+std::vector<double> Smooth3(const std::vector<double>& v) {
+  std::vector<double> s(v.size());
+  for (std::size_t k = 0; k < v.size(); ++k) {
+    const std::size_t a = k > 0 ? k - 1 : k, b = k + 1 < v.size() ? k + 1 : k;
+    s[k] = (v[a] + v[k] + v[b]) / 3.0;
+  }
+  return s;
+}
+
+std::size_t GateOn(const RunData& r) {
+  std::size_t on = 0;
+  while (on < r.gate.size() && r.gate[on] == 0) ++on;
+  return on;
+}
+
+// The internal parameters, in a fixed order. Each is searched in log coordinates inside a box around its start
+// value, except A_net (it may be 0 or change sign: linear).
+// kTanh is the saturation's form (magnetic_saturation.tanh: 0 Frohlich's knee, 1 tanh), chosen, never searched.
+enum P { kR, kL0, kL1, kRp, kF0, kAnet, kK, kM, kB, kBs, kTanh, kCount };
+const char* const kNames[kCount] = {"R", "L0", "L1", "R_p", "F0", "A_net", "k", "m", "b", "B_sat", "tanh"};
+
+struct Box {
+  double lo = 0.0, hi = 0.0;
+  bool log = true;
+};
+
+// The valve the internal parameters describe: the family's plant with its held values (x_min, x_max, l_c, A_e,
+// x_t / x_max, A1) and the reluctance law solved for mu_r and N from L0 = L(x_min) and L1 = L(x_max):
+//   1/L(x) = (l_c + 2 mu_r (x_t - x)) / K  (seed 000 eq. 4), so L1 / L0 = (l_c + 2 mu_r x_t) / (l_c + 2 mu_r (x_t - x_max))
+//   -> mu_r = l_c (r - 1) / (2 (x_t - r (x_t - x_max))), K = L0 (l_c + 2 mu_r x_t), N = sqrt(K / (A_e mu_r mu0)).
+StatusOr<model::PlantParams> PlantOf(const model::PlantParams& family, const std::array<double, kCount>& v) {
+  model::PlantParams p = family;
+  p.law = model::InductanceLaw::kReluctance;
+  p.has_moving_part = true;
+  p.R_ohm = v[kR];
+  const double r = v[kL1] / v[kL0];
+  const double xt = p.x_t_m - p.x_min_m, xs = p.x_max_m - p.x_min_m;  // gap and stroke from the lower stop
+  const double denom = 2.0 * (xt - r * (xt - xs));
+  if (!(r > 1.0) || !(denom > 0.0))
+    return Status::InvalidArgument("L1/L0 = " + std::to_string(r) + " is outside what the held gap allows");
+  p.mu_r = p.l_c_m * (r - 1.0) / denom;
+  const double K = v[kL0] * (p.l_c_m + 2.0 * p.mu_r * xt);
+  p.N_turns = std::sqrt(K / (p.A_e_m2 * p.mu_r * kMu0));
+  p.k_N_per_m = v[kK];
+  // F0 = k (x_min + delta): the spring's force on the plunger at rest on the lower stop.
+  p.delta_m = v[kF0] / v[kK] - p.x_min_m;
+  // The pressure force (A1 - A2) P (seed 000 eq. 10) opposes the pull when A_net = A2 - A1 > 0.
+  p.A1_m2 = family.A1_m2 + std::max(0.0, -v[kAnet]);
+  p.A2_m2 = p.A1_m2 + v[kAnet];
+  p.m_kg = v[kM];
+  p.b_N_s_per_m = v[kB];
+  p.effects = family.effects;
+  p.effects.eddy_R_p_ohm = v[kRp];
+  p.effects.saturation_B_T = v[kBs];  // 0: no saturation
+  p.effects.saturation_tanh = v[kTanh] >= 0.5 ? 1.0 : 0.0;
+  if (auto st = model::Validate(p); !st.ok()) return st;
+  return p;
+}
+
+// The runs' predictions on `threads` threads: the runs are independent (the identified model has no slow state
+// carried from run to run).
+StatusOr<std::vector<std::vector<double>>> PredictRuns(const Dataset& ds, const model::PlantParams& plant,
+                                                       const std::vector<bool>& need, const model::SolverOptions& solver,
+                                                       int threads) {
+  std::vector<std::size_t> idx;
+  for (std::size_t r = 0; r < ds.runs.size(); ++r)
+    if (need.empty() || need[r]) idx.push_back(r);
+  std::vector<std::vector<double>> out(ds.runs.size());
+  const int nt = std::clamp(threads, 1, std::max<int>(1, static_cast<int>(idx.size())));
+  std::vector<Status> st(nt, Status::Ok());
+  auto work = [&](int t) {
+    PredictOptions po;
+    po.solver = solver;
+    for (std::size_t j = static_cast<std::size_t>(t); j < idx.size(); j += static_cast<std::size_t>(nt)) {
+      std::vector<bool> one(ds.runs.size(), false);
+      one[idx[j]] = true;
+      auto p = Predict(ds, plant, po, one);
+      if (!p.ok()) {
+        st[t] = p.status();
+        return;
+      }
+      out[idx[j]] = std::move(p->i_A[idx[j]]);
+    }
+  };
+  if (nt == 1) {
+    work(0);
+  } else {
+    std::vector<std::thread> pool;
+    for (int t = 0; t < nt; ++t) pool.emplace_back(work, t);
+    for (auto& th : pool) th.join();
+  }
+  for (const auto& s : st)
+    if (!s.ok()) return s;
+  return out;
+}
+
+double RmsOver(const Dataset& ds, const std::vector<std::vector<double>>& pred, const std::vector<bool>& which) {
+  double e2 = 0.0;
+  std::size_t n = 0;
+  for (std::size_t r = 0; r < ds.runs.size(); ++r) {
+    if (!which[r] || pred[r].size() != ds.runs[r].i_A.size()) continue;
+    for (std::size_t k = 0; k < pred[r].size(); ++k) {
+      const double e = ds.runs[r].i_A[k] - pred[r][k];
+      e2 += e * e;
+    }
+    n += pred[r].size();
+  }
+  return n > 0 ? std::sqrt(e2 / static_cast<double>(n)) : NAN;
+}
+
+// One stage of the fit: BOBYQA over the free parameters in normalised coordinates, the others held.
+struct Stage {
+  const Dataset* ds = nullptr;
+  std::vector<bool> mask;
+  const model::PlantParams* family = nullptr;
+  std::function<StatusOr<model::PlantParams>(const std::array<double, kCount>&)> plant_of;
+  std::array<double, kCount> value{};
+  std::array<Box, kCount> box{};
+  std::vector<int> free;
+  model::SolverOptions solver;
+  int threads = 2;
+  Clock::time_point deadline;
+  int evaluations = 0;
+  double best = INFINITY;
+
+  double ToU(int p, double v) const {
+    const Box& b = box[p];
+    return b.log ? std::log(v / b.lo) / std::log(b.hi / b.lo) : (v - b.lo) / (b.hi - b.lo);
+  }
+  double FromU(int p, double u) const {
+    const Box& b = box[p];
+    u = std::clamp(u, 0.0, 1.0);
+    return b.log ? b.lo * std::pow(b.hi / b.lo, u) : b.lo + u * (b.hi - b.lo);
+  }
+  std::array<double, kCount> At(const std::vector<double>& u) const {
+    std::array<double, kCount> v = value;
+    for (std::size_t j = 0; j < free.size(); ++j) v[free[j]] = FromU(free[j], u[j]);
+    return v;
+  }
+  // The fit runs' RMS error (a large value where the parameters make no valve or the simulation fails).
+  double Rms(const std::array<double, kCount>& v) {
+    ++evaluations;
+    auto p = plant_of(v);
+    if (!p.ok()) return 1.0;
+    auto pred = PredictRuns(*ds, *p, mask, solver, threads);
+    if (!pred.ok()) return 1.0;
+    return RmsOver(*ds, *pred, mask);
+  }
+  void Run(int max_evaluations, int global_evaluations = 0) {
+    const unsigned k = static_cast<unsigned>(free.size());
+    std::vector<double> u(k);
+    for (unsigned j = 0; j < k; ++j) u[j] = std::clamp(ToU(free[j], value[free[j]]), 0.0, 1.0);
+    if (global_evaluations > 0) {
+      // A seeded controlled random search over the whole box first (NLopt CRS2 with local mutation): the dip's
+      // time has several basins (lift against flight), which a local search from one start does not leave.
+      struct GCtx {
+        Stage* s;
+        double best;
+        std::vector<double> at;
+      } g{this, INFINITY, u};
+      auto gf = [](const std::vector<double>& x, std::vector<double>&, void* data) -> double {
+        auto* c = static_cast<GCtx*>(data);
+        if (Clock::now() > c->s->deadline) throw nlopt::forced_stop();
+        const double e = c->s->Rms(c->s->At(x));
+        if (e < c->best) c->best = e, c->at = x;
+        return e;
+      };
+      nlopt::srand(1);
+      nlopt::opt go(nlopt::GN_CRS2_LM, k);
+      go.set_lower_bounds(std::vector<double>(k, 0.0));
+      go.set_upper_bounds(std::vector<double>(k, 1.0));
+      go.set_min_objective(gf, &g);
+      go.set_maxeval(global_evaluations);
+      double gmin = INFINITY;
+      std::vector<double> x = u;
+      try {
+        go.optimize(x, gmin);
+      } catch (const std::exception&) {
+      }
+      if (g.best < INFINITY) u = g.at;
+    }
+    struct Ctx {
+      Stage* s;
+    } ctx{this};
+    auto f = [](const std::vector<double>& x, std::vector<double>&, void* data) -> double {
+      Stage* s = static_cast<Ctx*>(data)->s;
+      if (Clock::now() > s->deadline) throw nlopt::forced_stop();
+      const double e = s->Rms(s->At(x));
+      if (e < s->best) s->best = e;
+      return e;
+    };
+    nlopt::opt o(nlopt::LN_BOBYQA, k);
+    o.set_lower_bounds(std::vector<double>(k, 0.0));
+    o.set_upper_bounds(std::vector<double>(k, 1.0));
+    o.set_min_objective(f, &ctx);
+    o.set_maxeval(max_evaluations);
+    o.set_xtol_rel(1e-5);
+    o.set_initial_step(std::vector<double>(k, 0.08));
+    double minf = INFINITY;
+    std::vector<double> x = u;
+    try {
+      o.optimize(x, minf);
+    } catch (const std::exception&) {
+      // Out of time or a roundoff stop: NLopt leaves the best point it reached in x.
+    }
+    const auto v = At(x);
+    const double e = Rms(v);
+    if (e <= best + 1e-15 || !std::isfinite(best)) best = e;
+    value = v;
+  }
+};
+
+// The samples of a run up to index `end` (exclusive): the part of a switch-on before the plunger moves.
+RunData Truncated(const RunData& r, std::size_t end) {
+  RunData t = r;
+  end = std::min(end, r.i_A.size());
+  t.t_s.resize(end);
+  t.i_A.resize(end);
+  t.gate.resize(end);
+  if (!t.i_sd_A.empty()) t.i_sd_A.resize(end);
+  if (!t.repeats.empty()) t.repeats.resize(end);
+  if (!t.x_m.empty()) t.x_m.resize(end);
+  if (!t.v_coil_V.empty()) t.v_coil_V.resize(end);
+  return t;
+}
+
+std::string Fmt(double v) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%.4g", v);
+  return b;
+}
+
+}  // namespace
+
+SwitchOnMarks FindSwitchOnMarks(const std::vector<double>& i_A, const std::vector<std::int8_t>& gate, double dt_s,
+                                double threshold_A) {
+  SwitchOnMarks m;
+  std::size_t on = 0;
+  while (on < gate.size() && gate[on] == 0) ++on;
+  if (on >= gate.size() || i_A.size() != gate.size()) return m;
+  std::size_t off = on;
+  while (off < gate.size() && gate[off] != 0) ++off;
+  const std::vector<double> s = Smooth3(i_A);
+  double peak = -INFINITY, low = 0.0;
+  std::size_t low_k = 0;
+  bool falling = false;
+  for (std::size_t k = on; k < off; ++k) {
+    if (!falling) {
+      peak = std::max(peak, s[k]);
+      if (s[k] < peak - threshold_A) {
+        falling = true;
+        low = s[k];
+        low_k = k;
+      }
+    } else if (s[k] < low) {
+      low = s[k];
+      low_k = k;
+    } else if (s[k] > low + threshold_A) {
+      m.pulls_in = true;
+      m.pull_in_s = static_cast<double>(low_k - on) * dt_s;
+      m.dip_depth_A = peak - low;
+      m.peak_A = peak;
+      break;
+    }
+  }
+  const std::size_t from = off >= on + 5 ? off - 5 : on;
+  double sum = 0.0;
+  for (std::size_t k = from; k < off; ++k) sum += i_A[k];
+  if (off > from) m.final_A = sum / static_cast<double>(off - from);
+  return m;
+}
+
+bool IsSwitchOnSession(const Dataset& ds, const model::PlantParams& family) {
+  if (!family.has_moving_part || family.law != model::InductanceLaw::kReluctance || ds.runs.empty()) return false;
+  for (const auto& r : ds.runs) {
+    if (r.kind != RunKind::kWaveform || std::isfinite(r.stroke_m) || r.gate.empty() || GateOn(r) >= r.gate.size())
+      return false;
+    // A switch-on: the gate rises once (PWM sessions are identified with --params).
+    int rises = 0;
+    for (std::size_t k = 1; k < r.gate.size(); ++k) rises += r.gate[k] != 0 && r.gate[k - 1] == 0;
+    if (rises != 1 || r.gate.front() != 0) return false;
+  }
+  return true;
+}
+
+StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds, const model::PlantParams& family,
+                                                   const MovingIdentifyOptions& options) {
+  const auto t0 = Clock::now();
+  if (!IsSwitchOnSession(ds, family))
+    return Status::InvalidArgument(
+        "identify from scratch: needs waveform runs of a moving valve from rest with a gate step (no held stroke) "
+        "and a model family with the reluctance law (taghizadeh2009); give --params for anything else");
+  MovingIdentification id;
+  id.model = ds.model;
+  id.device = ds.device;
+  auto say = [&](const std::string& s) {
+    if (options.progress) options.progress(s);
+  };
+  // The split: the manifest's; every run is fitted when it holds none out (then nothing is predicted unseen).
+  std::vector<bool> fit(ds.runs.size(), true), hold(ds.runs.size(), false);
+  for (std::size_t r = 0; r < ds.runs.size(); ++r) {
+    hold[r] = ds.runs[r].split == "holdout";
+    fit[r] = !hold[r];
+  }
+  id.fit_runs = static_cast<int>(std::count(fit.begin(), fit.end(), true));
+  id.holdout_runs = static_cast<int>(ds.runs.size()) - id.fit_runs;
+  if (id.fit_runs == 0) return Status::InvalidArgument("identify: every run is a holdout run: nothing to fit on");
+  if (id.holdout_runs == 0) id.split_note = "the manifest holds no run out: every run is fitted, none predicted unseen";
+  // The noise floor from the data (white noise from second differences), and what the dataset declares.
+  double n2 = 0.0;
+  for (const auto& r : ds.runs) {
+    double s = SecondDifferenceSigma(r.i_A);
+    const auto se = DeclaredStandardErrors(ds, r);
+    if (!se.empty()) s = std::max(s, se.front());
+    n2 += s * s;
+  }
+  id.noise_floor_A = std::max(std::sqrt(n2 / static_cast<double>(ds.runs.size())), 1e-6);
+  // A dip must fall and rise by 4x the noise floor: at that size a dip made by noise has a probability below
+  // 1e-4 per sample (Gaussian), so across a 1000-sample curve a false pull-in is unlikely.
+  const double threshold = 4.0 * id.noise_floor_A;
+
+  // ---- start values read off the curves -----------------------------------------------------------------
+  std::array<double, kCount> v{};
+  std::vector<double> Rs;
+  std::vector<std::pair<double, double>> lift;  // (pressure, magnetic force at the first peak / dLdx0)
+  std::vector<double> taus, motion_s, jumps, jump_A, tail_L_over_R;
+  std::vector<SwitchOnMarks> marks(ds.runs.size());
+  for (std::size_t r = 0; r < ds.runs.size(); ++r) {
+    const RunData& run = ds.runs[r];
+    marks[r] = FindSwitchOnMarks(run.i_A, run.gate, run.sample_period_s, threshold);
+    if (!fit[r]) continue;
+    const SwitchOnMarks& m = marks[r];
+    const std::size_t on = GateOn(run);
+    // R: supply over the final current (an upper bound where the current still rises).
+    if (m.final_A > 10.0 * id.noise_floor_A) Rs.push_back(run.supply_V / m.final_A);
+    // The jump at the edge (the sample at the edge holds the new gate): V / (R + R_p) through the eddy branch; a
+    // pure inductance starts at 0. Kept as (current, supply).
+    if (on + 1 < run.i_A.size()) jumps.push_back(run.i_A[on] / run.supply_V);
+    jump_A.push_back(run.i_A[on]);
+  }
+  if (Rs.empty()) return Status::InvalidArgument("identify: no fit run reaches a final current above the noise");
+  std::sort(Rs.begin(), Rs.end());
+  v[kR] = Rs[Rs.size() / 2];
+  for (std::size_t r = 0; r < ds.runs.size(); ++r) {
+    if (!fit[r]) continue;
+    const RunData& run = ds.runs[r];
+    const SwitchOnMarks& m = marks[r];
+    const std::size_t on = GateOn(run);
+    const double i_inf = run.supply_V / v[kR];
+    // tau from the time the current reaches half of its first peak (or of the final current): i = i_inf (1 - e^-t/tau).
+    const double target = 0.5 * (m.pulls_in ? m.peak_A : m.final_A);
+    for (std::size_t k = on; k < run.i_A.size(); ++k)
+      if (run.i_A[k] >= target && target < i_inf) {
+        const double t = static_cast<double>(k - on + 1) * run.sample_period_s;
+        taus.push_back(-t / std::log(1.0 - target / i_inf));
+        break;
+      }
+    if (!m.pulls_in) continue;
+    // The tail after the arrival: i_inf - i decays with L1 / R (log-linear fit over the samples still 5 noise
+    // floors below i_inf).
+    const std::size_t kd = on + static_cast<std::size_t>(std::llround(m.pull_in_s / run.sample_period_s));
+    double sx = 0, sy = 0, sxx = 0, sxy = 0;
+    int n = 0;
+    for (std::size_t k = kd; k < run.i_A.size() && run.gate[k]; ++k) {
+      const double e = i_inf - run.i_A[k];
+      if (e < 5.0 * id.noise_floor_A) break;
+      const double t = run.t_s[k], y = std::log(e);
+      sx += t, sy += y, sxx += t * t, sxy += t * y, ++n;
+    }
+    if (n > 10) {
+      const double slope = (n * sxy - sx * sy) / (n * sxx - sx * sx);
+      if (slope < 0.0) tail_L_over_R.push_back(-1.0 / slope);
+    }
+    // The time from the first peak (the plunger moving) to its arrival.
+    for (std::size_t k = on; k < run.i_A.size(); ++k)
+      if (run.i_A[k] >= m.peak_A - 0.5 * threshold) {
+        motion_s.push_back(m.pull_in_s - static_cast<double>(k - on) * run.sample_period_s);
+        break;
+      }
+  }
+  auto median = [](std::vector<double> x, double fallback) {
+    if (x.empty()) return fallback;
+    std::sort(x.begin(), x.end());
+    return x[x.size() / 2];
+  };
+  v[kL0] = v[kR] * median(taus, family.K_reluctance_H_m() / (family.l_c_m + 2 * family.mu_r * family.x_t_m) / family.R_ohm);
+  const double r_max = (family.x_t_m - family.x_min_m) / (family.x_t_m - family.x_max_m);
+  v[kL1] = std::clamp(v[kR] * median(tail_L_over_R, 1.5 * v[kL0] / v[kR]), 1.05 * v[kL0], 0.9 * r_max * v[kL0]);
+  const double jump = median(jumps, 0.0);
+  // An eddy branch when the jump exceeds 3 noise floors (one sample per run, the median over the fit runs: a
+  // false jump at 3 sigma has a probability of 0.13 % per run).
+  const bool eddy = median(jump_A, 0.0) > 3.0 * id.noise_floor_A && jump > 0.0;
+  v[kRp] = eddy ? std::max(1.0 / jump - v[kR], v[kR]) : 1e6;
+  // The magnetic force at the first peak (seed 000 eq. 8 at the lower stop): 1/2 i^2 dL/dx with
+  // dL/dx(x_min) = L0 (1 - L0 / L1) / x_stroke for the reluctance law; the force there balances F0 + A_net P.
+  const double stroke = family.x_max_m - family.x_min_m;
+  const double dLdx0 = v[kL0] * (1.0 - v[kL0] / v[kL1]) / stroke;
+  for (std::size_t r = 0; r < ds.runs.size(); ++r)
+    if (fit[r] && marks[r].pulls_in)
+      lift.emplace_back(ds.runs[r].supply_pressure_Pa, 0.5 * marks[r].peak_A * marks[r].peak_A * dLdx0);
+  double pmin = INFINITY, pmax = -INFINITY;
+  for (const auto& [p, f] : lift) pmin = std::min(pmin, p), pmax = std::max(pmax, p);
+  const bool pressures = lift.size() >= 2 && pmax - pmin > 0.0;
+  const double A_family = family.A2_m2 - family.A1_m2;
+  if (pressures) {  // least squares F = F0 + A_net P
+    double sx = 0, sy = 0, sxx = 0, sxy = 0;
+    for (const auto& [p, f] : lift) sx += p, sy += f, sxx += p * p, sxy += p * f;
+    const double n = static_cast<double>(lift.size());
+    v[kAnet] = (n * sxy - sx * sy) / (n * sxx - sx * sx);
+    v[kF0] = (sy - v[kAnet] * sx) / n;
+  } else {
+    v[kAnet] = A_family;
+    v[kF0] = lift.empty() ? 0.5 * 0.5 * (ds.runs.front().supply_V / v[kR]) * (ds.runs.front().supply_V / v[kR]) * dLdx0
+                          : lift.front().second - A_family * lift.front().first;
+  }
+  if (!(v[kF0] > 0.0)) v[kF0] = lift.empty() ? 1.0 : 0.5 * lift.front().second;
+  // The spring: the family's ratio of stroke force to preload (k x_stroke / F0); the mass from the motion time
+  // under a net force of a quarter of the preload (x = a t^2 / 2); the damping a tenth of the preload at the
+  // mean speed. Rough on purpose: stage 2 searches decades around them.
+  const double ratio = family.k_N_per_m * stroke / (family.k_N_per_m * (family.x_min_m + family.delta_m));
+  v[kK] = std::max(ratio, 0.05) * v[kF0] / stroke;
+  const double T = median(motion_s, 1e-3);
+  v[kM] = std::max(0.25 * v[kF0] * T * T / (2.0 * stroke), 1e-6);
+  v[kB] = std::max(0.1 * v[kF0] * T / stroke, 1e-3);
+  for (int p = 0; p < kCount; ++p) id.start[kNames[p]] = v[p];
+  {
+    char buf[300];
+    std::snprintf(buf, sizeof buf,
+                  "start values from the curves: R %.4g ohm (final current), L0 %.4g H (rise), L1 %.4g H (tail), R_p %s, "
+                  "F0 %.3g N, A_net %.3g m^2 (first peaks%s)",
+                  v[kR], v[kL0], v[kL1], eddy ? Fmt(v[kRp]).c_str() : "none", v[kF0], v[kAnet],
+                  pressures ? " vs pressure" : "; one pressure: A_net held");
+    say(buf);
+  }
+
+  // ---- the stages ----------------------------------------------------------------------------------------
+  const auto deadline = t0 + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(options.budget_s));
+  Stage st;
+  st.ds = &ds;
+  st.family = &family;
+  st.solver = options.solver;
+  st.threads = options.threads;
+  st.deadline = deadline;
+  st.value = v;
+  st.plant_of = [&family](const std::array<double, kCount>& x) { return PlantOf(family, x); };
+  auto set_box = [&](int p, double lo_f, double hi_f) { st.box[p] = {st.value[p] / lo_f, st.value[p] * hi_f, true}; };
+  auto record_outer = [&](const std::string& name, Clock::time_point since, int evals, double best) {
+    id.stages.push_back({name, best, evals, Seconds(since)});
+    char buf[200];
+    std::snprintf(buf, sizeof buf, "stage %s: fit runs %.3f mA RMS after %d evaluations (%.1f s)", name.c_str(),
+                  best * 1e3, evals, Seconds(since));
+    say(buf);
+  };
+
+  // Stage 1, electrical: the samples before the plunger moves (up to 85 % of the first peak) with the plunger
+  // held at the lower stop, where the coil is L0 with the eddy branch.
+  {
+    const auto since = Clock::now();
+    Dataset early = ds;
+    std::vector<bool> mask(ds.runs.size(), false);
+    for (std::size_t r = 0; r < ds.runs.size(); ++r) {
+      if (!fit[r]) continue;
+      mask[r] = true;
+      const RunData& run = ds.runs[r];
+      if (!marks[r].pulls_in) continue;
+      std::size_t end = GateOn(run);
+      while (end < run.i_A.size() && run.i_A[end] < 0.85 * marks[r].peak_A) ++end;
+      early.runs[r] = Truncated(run, end);
+    }
+    st.ds = &early;
+    st.mask = mask;
+    st.plant_of = [&family](const std::array<double, kCount>& x) -> StatusOr<model::PlantParams> {
+      auto p = PlantOf(family, x);
+      if (!p.ok()) return p;
+      return model::AtState(*p, model::HeldState{family.x_min_m, NAN});
+    };
+    st.free = {kR, kL0};
+    set_box(kR, 1.3, 1.3);
+    set_box(kL0, 3.0, 3.0);
+    if (eddy) {
+      st.free.push_back(kRp);
+      set_box(kRp, 10.0, 10.0);
+    }
+    st.best = INFINITY;
+    const int before = st.evaluations;
+    st.Run(150);
+    record_outer("1 electrical (R, L0" + std::string(eddy ? ", R_p" : "") + ") on the samples before motion", since,
+           st.evaluations - before, st.best);
+    st.ds = &ds;
+    st.mask = fit;
+    st.plant_of = [&family](const std::array<double, kCount>& x) { return PlantOf(family, x); };
+  }
+  bool any_motion = std::any_of(marks.begin(), marks.end(), [](const SwitchOnMarks& m) { return m.pulls_in; });
+  double f_pull_max = INFINITY;  // the pull (seed 000 eq. 8, unsaturated) at the weakest pulling-in run's final current
+  for (std::size_t r = 0; r < ds.runs.size(); ++r)
+    if (fit[r] && marks[r].pulls_in) {
+      const double i = ds.runs[r].supply_V / v[kR];
+      f_pull_max = std::min(f_pull_max, 0.5 * i * i * dLdx0);
+    }
+  if (!std::isfinite(f_pull_max)) f_pull_max = 3.0 * v[kF0];
+  // Stages 2 and 3 from one start of the spring's stiffness (k x_stroke / F0 = ratio); the whole search is a few
+  // seconds, so several starts are affordable and the best end wins (the dip's time trades lift against flight,
+  // which makes basins).
+  auto stages_23 = [&](Stage st, const std::array<double, 3>& kmb, const std::string& tag) {
+    auto set_box = [&](int p, double lo_f, double hi_f) { st.box[p] = {st.value[p] / lo_f, st.value[p] * hi_f, true}; };
+    auto record = [&](const std::string& name, Clock::time_point since, int evals, double best) {
+      record_outer(name + tag, since, evals, best);
+    };
+    st.value[kK] = kmb[0];
+    st.value[kM] = kmb[1];
+    st.value[kB] = kmb[2];
+    // Stage 2, magnetic and mechanical on whole curves, from a start the grid scan below chose.
+    if (any_motion) {
+      const auto since = Clock::now();
+      const int before = st.evaluations;
+      st.best = INFINITY;
+      // L1 lies between L0 and what the held gap allows.
+      st.box[kL1] = {1.01 * st.value[kL0], 0.98 * r_max * st.value[kL0], true};
+      st.value[kL1] = std::clamp(st.value[kL1], st.box[kL1].lo, st.box[kL1].hi);
+      // Every pulling-in fit run lifts: F0 + A_net P stays below the pull at its final current, so the pull at
+      // the weakest such run's final current bounds the preload and (over the highest pressure) the area.
+      st.box[kF0] = {st.value[kF0] / 3.0, std::max(st.value[kF0] * 1.5, 1.2 * f_pull_max), true};
+      set_box(kK, 30.0, 30.0);
+      set_box(kM, 30.0, 30.0);
+      set_box(kB, 100.0, 100.0);
+      if (pressures) {
+        const double a = std::max({std::abs(st.value[kAnet]), 1.2 * f_pull_max / pmax, 1e-12});
+        st.box[kAnet] = {-a, a, false};
+      }
+      set_box(kM, 100.0, 100.0);
+      st.free = {kL1, kF0, kK, kM, kB};
+      if (pressures) st.free.push_back(kAnet);
+      st.Run(400);
+      record("2 magnetic and mechanical (L1, F0, k, m, b" + std::string(pressures ? ", A_net" : "") + ") on whole curves",
+             since, st.evaluations - before, st.best);
+    }
+    // Stage 3: everything together.
+    {
+      const auto since = Clock::now();
+      const int before = st.evaluations;
+      st.best = INFINITY;
+      st.free = {kR, kL0};
+      set_box(kR, 1.1, 1.1);
+      set_box(kL0, 1.5, 1.5);
+      if (eddy) {
+        st.free.push_back(kRp);
+        set_box(kRp, 3.0, 3.0);
+      }
+      if (any_motion) {
+        for (int p : {kL1, kF0, kK, kM, kB}) st.free.push_back(p);
+        st.box[kL1] = {std::max(1.01 * st.value[kL0] / 1.5, st.value[kL1] / 1.5), std::min(0.98 * r_max * st.value[kL0] / 1.5, st.value[kL1] * 1.5), true};
+        if (!(st.box[kL1].hi > st.box[kL1].lo)) st.box[kL1] = {st.value[kL1] * 0.99, st.value[kL1] * 1.01, true};
+        st.value[kL1] = std::clamp(st.value[kL1], st.box[kL1].lo, st.box[kL1].hi);
+        set_box(kF0, 1.5, 1.5);
+        set_box(kK, 3.0, 3.0);
+        set_box(kM, 3.0, 3.0);
+        set_box(kB, 10.0, 10.0);
+        if (pressures) {
+          st.free.push_back(kAnet);
+          const double a = std::max(std::abs(st.value[kAnet]), 1e-9);
+          st.box[kAnet] = {st.value[kAnet] - a, st.value[kAnet] + a, false};
+        }
+      }
+      st.Run(500);
+      record("3 all together", since, st.evaluations - before, st.best);
+    }
+    return st;
+  };
+  std::vector<Stage> ends;
+  int evaluations = st.evaluations;
+  {
+    Stage best_st = st;
+    best_st.best = INFINITY;
+    // The starts: a grid over the spring (k x_stroke / F0 from 0.05 to 5), the damping (0.01 to 10 x its start)
+    // and the mass (0.1 to 10 x its start), 180 evaluations; the three best grid points with distinct spring and
+    // damping start stages 2 and 3 (the dip's time trades lift against flight, and the damping against both:
+    // basins a local search from one start does not leave).
+    std::vector<std::pair<double, std::array<double, 3>>> grid;
+    if (any_motion) {
+      Stage g = st;
+      g.mask = fit;
+      const double r_hi = 0.98 * r_max * g.value[kL0];
+      g.value[kL1] = std::clamp(g.value[kL1], 1.01 * g.value[kL0], r_hi);
+      for (double kr : {0.05, 0.15, 0.5, 1.5, 5.0})
+        for (double bf : {0.01, 0.1, 1.0, 10.0})
+          for (int j = -4; j <= 4; ++j) {
+            auto x = g.value;
+            x[kK] = kr * x[kF0] / stroke;
+            x[kB] = v[kB] * bf;
+            x[kM] = v[kM] * std::pow(10.0, 0.25 * j);
+            grid.push_back({g.Rms(x), {x[kK], x[kM], x[kB]}});
+          }
+      evaluations += g.evaluations - st.evaluations;
+      std::sort(grid.begin(), grid.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+      std::vector<std::pair<double, std::array<double, 3>>> picked;
+      for (const auto& gp : grid) {
+        bool distinct = true;
+        for (const auto& q : picked) distinct = distinct && !(q.second[0] == gp.second[0] && q.second[2] == gp.second[2]);
+        if (distinct) picked.push_back(gp);
+        if (picked.size() == 3) break;
+      }
+      grid = picked;
+    } else {
+      grid.push_back({0.0, {v[kK], v[kM], v[kB]}});
+    }
+    for (std::size_t gi = 0; gi < grid.size(); ++gi) {
+      const auto& kmb = grid[gi].second;
+      char tag[96];
+      std::snprintf(tag, sizeof tag, " [start %zu: k %.3g, m %.3g, b %.3g]", gi + 1, kmb[0], kmb[1], kmb[2]);
+      Stage s = stages_23(st, kmb, tag);
+      evaluations += s.evaluations - st.evaluations;
+      ends.push_back(s);
+      if (s.best < best_st.best) best_st = s;
+    }
+    st = best_st;
+  }
+  // Stage 4: the core's saturation (the magnetic_saturation effect, B_sat free) joins when it is decisive.
+  bool saturation = false;
+  {
+    // From every start's end: the basins differ in how they share the dip's time between lift and flight, and
+    // the saturating core changes the lift current.
+    Stage best4 = st;
+    best4.best = INFINITY;
+    for (std::size_t e = 0; e < 2 * ends.size(); ++e) {
+      const auto since = Clock::now();
+      Stage s4 = ends[e / 2];
+      s4.value[kTanh] = static_cast<double>(e % 2);  // both forms the effect has: the knee, then tanh
+      s4.best = INFINITY;
+      const int before = s4.evaluations;
+      auto p = PlantOf(family, s4.value);
+      double imax = 0.0;
+      for (const auto& r : ds.runs) imax = std::max(imax, r.supply_V / s4.value[kR]);
+      // Saturation sets in where the core's flux L_c i reaches lambda_s = N A_e B_sat: start at the largest current.
+      const double Lc = s4.value[kL0] * (1.0 - 1.0 / (p.ok() ? p->mu_r : 100.0));
+      s4.value[kBs] = p.ok() ? Lc * imax / (p->N_turns * p->A_e_m2) : 1.0;
+      s4.box[kBs] = {s4.value[kBs] / 30.0, s4.value[kBs] * 30.0, true};
+      s4.free.push_back(kBs);
+      s4.Run(700);
+      record_outer("4 with magnetic saturation (B_sat, " + std::string(e % 2 ? "tanh" : "knee") + ") from end " +
+                       std::to_string(e / 2 + 1), since,
+                   s4.evaluations - before, s4.best);
+      evaluations += s4.evaluations - before;
+      if (s4.best < best4.best) best4 = s4;
+    }
+    // Decisive: one more free parameter always lowers the error a little; it joins when it removes at least a
+    // tenth of the error above the noise floor (the margin below which the diagnosis calls candidates
+    // confusable, gap/diagnose.cc Decide).
+    if (st.best - best4.best > 0.1 * (st.best - id.noise_floor_A)) {
+      saturation = true;
+      st = best4;
+    }
+  }
+  st.evaluations = evaluations;
+  v = st.value;
+  for (int p = 0; p < kCount; ++p) id.fitted[kNames[p]] = v[p];
+  auto plant = PlantOf(family, v);
+  if (!plant.ok()) return plant.status().WithContext("identified valve");
+  id.plant = *plant;
+  if (eddy) id.effects.push_back("eddy_currents");
+  if (saturation) id.effects.push_back("magnetic_saturation");
+  id.values = {{"R", plant->R_ohm}, {"N", plant->N_turns}, {"mu_r", plant->mu_r}, {"k", plant->k_N_per_m},
+               {"delta", plant->delta_m}, {"m", plant->m_kg}, {"b", plant->b_N_s_per_m}, {"A1", plant->A1_m2},
+               {"A2", plant->A2_m2}};
+  if (eddy) id.values["eddy_currents.R_p"] = plant->effects.eddy_R_p_ohm;
+  if (saturation) {
+    id.values["magnetic_saturation.B_sat"] = plant->effects.saturation_B_T;
+    id.values["magnetic_saturation.tanh"] = plant->effects.saturation_tanh;
+  }
+
+  // ---- uncertainty: Gauss-Newton on the fit runs' residuals in log coordinates ------------------------------
+  {
+    say("uncertainty: Gauss-Newton on the fit runs");
+    std::vector<int> free = st.free;
+    auto residuals = [&](const std::array<double, kCount>& x, std::vector<double>* out) -> bool {
+      auto p = PlantOf(family, x);
+      if (!p.ok()) return false;
+      auto pred = PredictRuns(ds, *p, fit, options.solver, options.threads);
+      if (!pred.ok()) return false;
+      out->clear();
+      for (std::size_t r = 0; r < ds.runs.size(); ++r)
+        if (fit[r])
+          for (std::size_t k = 0; k < pred->at(r).size(); ++k) out->push_back(ds.runs[r].i_A[k] - pred->at(r)[k]);
+      return true;
+    };
+    std::vector<double> base;
+    bool ok = residuals(v, &base);
+    const std::size_t n = base.size(), q = free.size();
+    Eigen::MatrixXd J(n, q);
+    for (std::size_t j = 0; ok && j < q; ++j) {
+      auto x = v;
+      const int p = free[j];
+      const double h = 1e-3;  // in log (relative) units, linear for A_net
+      if (p == kAnet) {
+        x[p] += h * std::max(std::abs(v[p]), 1e-9);
+      } else {
+        x[p] *= std::exp(h);
+      }
+      std::vector<double> e;
+      ok = residuals(x, &e) && e.size() == n;
+      for (std::size_t k = 0; ok && k < n; ++k) J(static_cast<Eigen::Index>(k), static_cast<Eigen::Index>(j)) = -(e[k] - base[k]) / h;
+    }
+    std::vector<double> rel_sigma(kCount, NAN);
+    if (ok && n > q) {
+      double s2 = 0.0;
+      for (double e : base) s2 += e * e;
+      s2 /= static_cast<double>(n - q);
+      const Eigen::MatrixXd H = J.transpose() * J;
+      Eigen::FullPivLU<Eigen::MatrixXd> lu(H);
+      if (lu.isInvertible()) {
+        const Eigen::MatrixXd C = lu.inverse() * s2;
+        for (std::size_t j = 0; j < q; ++j) rel_sigma[free[j]] = std::sqrt(std::max(0.0, C(j, j)));
+      }
+    }
+    struct Row {
+      int p;
+      const char* name;
+      const char* unit;
+      const char* meaning;
+      double scale;  // value = internal x scale (products with the held stroke)
+    };
+    const double xs = stroke;
+    const Row rows[] = {
+        {kR, "R", "ohm", "coil resistance", 1.0},
+        {kL0, "L0", "H", "inductance with the plunger at rest (closed gap)", 1.0},
+        {kL1, "L1", "H", "inductance with the plunger pulled in (open gap)", 1.0},
+        {kRp, "R_p", "ohm", "eddy-current branch across the coil (eddy_currents.R_p)", 1.0},
+        {kF0, "F0*x_max", "J", "spring preload force times the stroke (k (x_min + delta) x_max)", xs},
+        {kAnet, "A_net*x_max", "m^3", "pressure area (A2 - A1) times the stroke", xs},
+        {kK, "k*x_max^2", "J", "spring stiffness times the stroke squared", xs * xs},
+        {kM, "m*x_max^2", "kg m^2", "moving mass times the stroke squared", xs * xs},
+        {kB, "b*x_max^2", "N s m", "viscous damping times the stroke squared", xs * xs},
+        {kBs, "B_sat", "T", "core saturation (magnetic_saturation.B_sat; with N and A_e as solved and held)", 1.0},
+    };
+    for (const Row& row : rows) {
+      if (row.p == kRp && !eddy) continue;
+      if (row.p == kBs && !saturation) continue;
+      if (row.p == kAnet && !pressures) continue;
+      if (!any_motion && row.p >= kL1 && row.p != kRp) continue;
+      DeterminedValue d{row.name, row.unit, row.meaning, v[row.p] * row.scale, NAN, false};
+      const double rs = rel_sigma[row.p];
+      if (std::isfinite(rs)) {
+        d.sigma = row.p == kAnet ? rs * std::max(std::abs(v[row.p]), 1e-9) * row.scale : rs * std::abs(d.value);
+        // Determined: the 1-sigma is below half the value (a factor the data pins to better than 1.5x).
+        d.determined = row.p == kAnet ? d.sigma < 0.5 * std::abs(d.value) || d.sigma < 1e-12 : rs < 0.5;
+      }
+      id.determined.push_back(d);
+    }
+  }
+  // ---- what is held and why -----------------------------------------------------------------------------
+  id.held = {
+      {"x_max", family.x_max_m,
+       "the stroke: the current sees the motion only in units of travel, so every mechanical value comes as a product "
+       "with x_max (the table above); a stroke measured on the valve scales them back"},
+      {"x_min", family.x_min_m, "the lower stop (the closed valve), the origin of the travel"},
+      {"x_t", family.x_t_m, "the air gap at rest: with l_c and A_e it only shapes L(x), which L0 and L1 fix"},
+      {"l_c", family.l_c_m, "core path length: enters only through L0 and L1 (mu_r and N are solved from them)"},
+      {"A_e", family.A_e_m2, "flux area: enters only through L0 and L1 (N is solved from it)"},
+      {"A1", id.plant.A1_m2, "only the difference A2 - A1 acts (seed 000 eq. 10); A1 is held, A2 follows"},
+  };
+  if (!pressures)
+    id.held.push_back({"A2 - A1", v[kAnet], "the fit runs share one pressure: the pressure force cannot be told "
+                                            "from the preload, so the area is held at the family's"});
+  if (!eddy)
+    id.notes.push_back("no jump at the gate edge above the noise: no eddy-current branch");
+  if (!saturation)
+    id.notes.push_back("magnetic saturation did not fit the runs better: not in the identified model");
+  else
+    id.notes.push_back("magnetic saturation joined the model (stage 4 fits the runs better); B_sat is tied to the "
+                       "held A_e and the solved N (only lambda_s = N A_e B_sat acts)");
+  if (!any_motion) id.notes.push_back("no fit run pulls in: the mechanical parameters are not identified");
+  for (const auto& d : id.determined)
+    if (!d.determined && (d.name == "m*x_max^2" || d.name == "F0*x_max" || d.name == "k*x_max^2")) {
+      double vmin = INFINITY, vmax = -INFINITY;
+      for (std::size_t r = 0; r < ds.runs.size(); ++r)
+        if (fit[r]) vmin = std::min(vmin, ds.runs[r].supply_V), vmax = std::max(vmax, ds.runs[r].supply_V);
+      id.notes.push_back(d.name + " is not determined: the lift (preload against the pull) and the flight (mass, "
+                         "stiffness) trade off in the dip's time" +
+                         std::string(vmax > vmin ? "" : "; the fit runs share one supply, and a pulling-in run at "
+                                                        "another supply would separate them (the current then rises "
+                                                        "at another rate)"));
+      break;
+    }
+
+  // ---- prediction of every run and the landmarks ------------------------------------------------------------
+  say("predicting every run");
+  auto pred = PredictRuns(ds, id.plant, {}, options.solver, options.threads);
+  if (!pred.ok()) return pred.status().WithContext("identified valve");
+  id.fit_rmse_A = RmsOver(ds, *pred, fit);
+  if (id.holdout_runs > 0) {
+    id.holdout_rmse_after_A = RmsOver(ds, *pred, hold);
+    auto before = PredictRuns(ds, family, hold, options.solver, options.threads);
+    if (before.ok()) id.holdout_rmse_before_A = RmsOver(ds, *before, hold);
+  }
+  for (std::size_t r = 0; r < ds.runs.size(); ++r) {
+    const RunData& run = ds.runs[r];
+    RunMarks rm;
+    rm.run = run.id;
+    rm.split = hold[r] ? "holdout" : "fit";
+    rm.supply_V = run.supply_V;
+    rm.pressure_Pa = run.supply_pressure_Pa;
+    rm.measured = marks[r];
+    rm.predicted = FindSwitchOnMarks((*pred)[r], run.gate, run.sample_period_s, threshold);
+    std::vector<bool> one(ds.runs.size(), false);
+    one[r] = true;
+    rm.rmse_A = RmsOver(ds, *pred, one);
+    id.landmarks.push_back(rm);
+  }
+  id.evaluations = st.evaluations;
+  id.seconds = Seconds(t0);
+  if (Clock::now() > deadline)
+    id.notes.push_back("the wall-time budget (" + Fmt(options.budget_s) + " s) ended a stage early: the fit may "
+                       "not have converged");
+  return id;
+}
+
+std::string MovingIdentificationJson(const MovingIdentification& id) {
+  nlohmann::ordered_json j;
+  j["model"] = id.model;
+  j["device"] = id.device;
+  j["from_scratch"] = true;
+  j["noise_floor_A"] = id.noise_floor_A;
+  nlohmann::ordered_json start = nlohmann::ordered_json::object(), fitted = nlohmann::ordered_json::object();
+  for (const auto& [k, v] : id.start) start[k] = v;
+  for (const auto& [k, v] : id.fitted) fitted[k] = v;
+  j["start"] = start;
+  j["fitted"] = fitted;
+  nlohmann::ordered_json values = nlohmann::ordered_json::object();
+  for (const auto& [k, v] : id.values) values[k] = v;
+  j["params"] = values;
+  j["effects"] = id.effects;
+  nlohmann::ordered_json det = nlohmann::ordered_json::array();
+  for (const auto& d : id.determined)
+    det.push_back({{"name", d.name}, {"unit", d.unit}, {"meaning", d.meaning}, {"value", d.value},
+                   {"sigma", std::isfinite(d.sigma) ? nlohmann::ordered_json(d.sigma) : nlohmann::ordered_json(nullptr)},
+                   {"determined", d.determined}});
+  j["determined"] = det;
+  nlohmann::ordered_json held = nlohmann::ordered_json::array();
+  for (const auto& h : id.held) held.push_back({{"name", h.name}, {"value", h.value}, {"why", h.why}});
+  j["held"] = held;
+  j["notes"] = id.notes;
+  nlohmann::ordered_json stages = nlohmann::ordered_json::array();
+  for (const auto& s : id.stages)
+    stages.push_back({{"stage", s.name}, {"fit_rmse_A", s.fit_rmse_A}, {"evaluations", s.evaluations}, {"seconds", s.seconds}});
+  j["stages"] = stages;
+  auto num = [](double x) { return std::isfinite(x) ? nlohmann::ordered_json(x) : nlohmann::ordered_json(nullptr); };
+  j["fit_rmse_A"] = id.fit_rmse_A;
+  j["holdout_rmse_before_A"] = num(id.holdout_rmse_before_A);
+  j["holdout_rmse_after_A"] = num(id.holdout_rmse_after_A);
+  if (!id.split_note.empty()) j["split_note"] = id.split_note;
+  nlohmann::ordered_json lm = nlohmann::ordered_json::array();
+  auto marks = [&](const SwitchOnMarks& m) {
+    return nlohmann::ordered_json{{"pulls_in", m.pulls_in},
+                                  {"pull_in", m.pulls_in ? "pulls in" : "does not pull in"},
+                                  {"pull_in_s", num(m.pull_in_s)},
+                                  {"dip_depth_A", num(m.dip_depth_A)}, {"final_A", num(m.final_A)}};
+  };
+  for (const auto& r : id.landmarks)
+    lm.push_back({{"run", r.run}, {"split", r.split}, {"supply_V", r.supply_V}, {"supply_pressure_Pa", r.pressure_Pa},
+                  {"rmse_A", r.rmse_A}, {"measured", marks(r.measured)}, {"predicted", marks(r.predicted)}});
+  j["landmarks"] = lm;
+  j["evaluations"] = id.evaluations;
+  j["seconds"] = id.seconds;
+  return j.dump(2);
+}
+
+std::string MovingIdentificationReport(const MovingIdentification& id) {
+  std::ostringstream os;
+  char buf[400];
+  std::snprintf(buf, sizeof buf, "model family %s, identified from scratch; noise floor %.3f mA; %d model evaluations, %.1f s\n",
+                id.model.c_str(), id.noise_floor_A * 1e3, id.evaluations, id.seconds);
+  os << buf;
+  if (!id.split_note.empty()) os << id.split_note << "\n";
+  for (const auto& s : id.stages) {
+    std::snprintf(buf, sizeof buf, "  stage %-70s %8.3f mA  (%d evaluations)\n", s.name.c_str(), s.fit_rmse_A * 1e3, s.evaluations);
+    os << buf;
+  }
+  os << "what the switch-on current determines:\n";
+  for (const auto& d : id.determined) {
+    if (d.determined)
+      std::snprintf(buf, sizeof buf, "  %-12s %12.5g %-7s +- %-10.3g %s\n", d.name.c_str(), d.value, d.unit.c_str(), d.sigma,
+                    d.meaning.c_str());
+    else
+      std::snprintf(buf, sizeof buf, "  %-12s %12.5g %-7s (not determined by these runs) %s\n", d.name.c_str(), d.value,
+                    d.unit.c_str(), d.meaning.c_str());
+    os << buf;
+  }
+  os << "held at stated values:\n";
+  for (const auto& h : id.held) {
+    std::snprintf(buf, sizeof buf, "  %-8s = %-10.4g ", h.name.c_str(), h.value);
+    os << buf << h.why << "\n";
+  }
+  for (const auto& n : id.notes) os << "note: " << n << "\n";
+  os << "the family's parameters as set:";
+  for (const auto& [k, v] : id.values) os << " " << k << "=" << Fmt(v);
+  os << "\n";
+  if (std::isfinite(id.holdout_rmse_after_A))
+    std::snprintf(buf, sizeof buf, "fit runs %.3f mA RMS; holdout runs %.3f mA RMS (the family's preset: %.3f mA)\n",
+                  id.fit_rmse_A * 1e3, id.holdout_rmse_after_A * 1e3, id.holdout_rmse_before_A * 1e3);
+  else
+    std::snprintf(buf, sizeof buf, "fit runs %.3f mA RMS; no holdout run\n", id.fit_rmse_A * 1e3);
+  os << buf;
+  os << "landmarks, measured / predicted:\n";
+  os << "  run              split    supply  pressure   pull-in [ms]     dip depth [mA]   final [mA]      RMSE [mA]\n";
+  auto pin = [](const SwitchOnMarks& m) {
+    char b[40];
+    if (m.pulls_in)
+      std::snprintf(b, sizeof b, "%.3f", m.pull_in_s * 1e3);
+    else
+      std::snprintf(b, sizeof b, "no pull-in");
+    return std::string(b);
+  };
+  auto dip = [](const SwitchOnMarks& m) {
+    char b[40];
+    if (m.pulls_in)
+      std::snprintf(b, sizeof b, "%.1f", m.dip_depth_A * 1e3);
+    else
+      std::snprintf(b, sizeof b, "-");
+    return std::string(b);
+  };
+  for (const auto& r : id.landmarks) {
+    std::snprintf(buf, sizeof buf, "  %-16s %-8s %5.2f V %5.2f bar  %7s / %-10s %6s / %-6s %6.1f / %-6.1f %7.3f\n",
+                  r.run.c_str(), r.split.c_str(), r.supply_V, r.pressure_Pa / 1e5, pin(r.measured).c_str(),
+                  pin(r.predicted).c_str(), dip(r.measured).c_str(), dip(r.predicted).c_str(), r.measured.final_A * 1e3,
+                  r.predicted.final_A * 1e3, r.rmse_A * 1e3);
+    os << buf;
+  }
+  return os.str();
+}
+
+std::vector<Candidate> MovingValveCandidates(const model::PlantParams& ref, const Dataset& target,
+                                             const std::vector<bool>& fit_mask, double reference_C) {
+  std::vector<Candidate> out;
+  const FreeParam R{"R", ref.R_ohm * 0.8, ref.R_ohm * 1.2, ref.R_ohm, false};
+  out.push_back({"param:R", {}, {R}, {}});
+  // A supply pressure other than declared: the pressure force (A1 - A2) P scaled by a factor f in [0, 10] is
+  // A2 moved to A1 + f (A2 - A1) (seed 000 eq. 10); one factor for every run.
+  const double a = ref.A2_m2 - ref.A1_m2;
+  bool pressurised = false;
+  for (const auto& r : target.runs) pressurised = pressurised || r.supply_pressure_Pa > 0.0;
+  if (a != 0.0 && pressurised) {
+    const double lo = a > 0 ? ref.A1_m2 : std::max(0.0, ref.A1_m2 + 10.0 * a);
+    const double hi = a > 0 ? ref.A1_m2 + 10.0 * a : ref.A1_m2;
+    out.push_back({"supply_pressure", {}, {{"A2", lo, hi, ref.A2_m2, false}}, {}});
+  }
+  // The spring: its preload (delta; the force k delta) and its stiffness; the moving mass and the damping.
+  const double F0 = ref.k_N_per_m * (ref.x_min_m + ref.delta_m);
+  // delta from no preload (-x_min) to twice the identified preload force.
+  const double d0 = ref.delta_m, dlo = std::min(-ref.x_min_m, d0), dhi = std::max(2.0 * d0 + ref.x_min_m, d0);
+  if (dhi > dlo) out.push_back({"param:delta", {}, {{"delta", dlo, dhi, d0, false}}, {}});
+  out.push_back({"param:k", {}, {{"k", ref.k_N_per_m * 0.3, ref.k_N_per_m * 3.0, ref.k_N_per_m, true}}, {}});
+  out.push_back({"param:m", {}, {{"m", ref.m_kg * 0.3, ref.m_kg * 3.0, ref.m_kg, true}}, {}});
+  out.push_back({"param:b", {}, {{"b", std::max(ref.b_N_s_per_m * 0.1, 1e-6), std::max(ref.b_N_s_per_m * 10.0, 1e-4),
+                                   std::max(ref.b_N_s_per_m, 1e-6), true}}, {}});
+  // A plunger that no longer moves: static and kinetic friction above the largest magnetic force this coil can
+  // make (1/2 (V/R)^2 dL/dx at the open gap, where dL/dx is largest, plus the preload); R free.
+  double vmax = 0.0;
+  for (const auto& r : target.runs) vmax = std::max(vmax, r.supply_V);
+  model::Plant plant(ref);
+  const double imax = vmax / ref.R_ohm * 1.25;
+  const double Fmax = plant.MagneticForce_N(imax, ref.x_max_m) + std::abs(F0) + 1.0;
+  const double Fstuck = std::min(100.0, std::max(10.0 * Fmax, 1.0));
+  out.push_back({"stuck", {"coulomb_friction"}, {R},
+                 {{"coulomb_friction.F_c", Fstuck}, {"coulomb_friction.F_s", Fstuck}}});
+  // Dry friction that still lets it move (bounded by the preload force: more would hold it).
+  const double Ff = std::clamp(std::abs(F0), 1e-3, 100.0);
+  out.push_back({"coulomb_friction", {"coulomb_friction"},
+                 {R, {"coulomb_friction.F_c", 0.0, Ff, 0.1 * Ff, false, 0.0}, {"coulomb_friction.F_s", 0.0, Ff, 0.15 * Ff, false, 0.0}}, {}});
+  // The sense chain.
+  double peak = 0.0;
+  for (const auto& r : target.runs)
+    for (double i : r.i_A) peak = std::max(peak, std::abs(i));
+  const double off = std::max(0.3 * peak, 1e-3);
+  out.push_back({"sensor_offset", {"sensor_offset"}, {R, {"sensor_offset.offset_A", -off, off, 0.0, false, 0.0}}, {}});
+  out.push_back({"sensor_gain", {"sensor_gain"}, {R, {"sensor_gain.gain", 0.7, 1.4, 1.0, false, 1.0}}, {}});
+  // The winding's temperature where the runs declare one.
+  std::vector<double> T;
+  for (std::size_t r = 0; r < target.runs.size(); ++r)
+    if (std::isfinite(target.runs[r].temperature_C()) && (fit_mask.empty() || fit_mask[r])) T.push_back(target.runs[r].temperature_C());
+  if (!T.empty() && std::isfinite(reference_C))
+    out.push_back({"resistance_temperature", {"resistance_temperature"},
+                   {{"resistance_temperature.alpha", 0.0, 0.02, 3.93e-3, false, 0.0}},
+                   {{"resistance_temperature.T_ref", reference_C}}});
+  return out;
+}
+
+namespace {
+
+bool Confusable(const Diagnosis& d, const std::string& name) {
+  return std::find(d.confusable.begin(), d.confusable.end(), name) != d.confusable.end();
+}
+
+// Makes a confusable candidate the verdict: its row ranks first (the overlays, the model written and the nuisance
+// fit follow the first row) and the old verdict becomes confusable.
+void MakeVerdict(Diagnosis* d, const std::string& name, const std::string& why) {
+  int row = -1;
+  for (std::size_t k = 0; k < d->ranking.size(); ++k)
+    if (d->ranking[k].name == name) row = static_cast<int>(k);
+  if (row < 0) return;
+  const std::string old = d->verdict;
+  d->confusable.erase(std::remove(d->confusable.begin(), d->confusable.end(), name), d->confusable.end());
+  if (!Confusable(*d, old)) d->confusable.push_back(old);
+  std::rotate(d->ranking.begin(), d->ranking.begin() + row, d->ranking.begin() + row + 1);
+  if (static_cast<std::size_t>(row) < d->candidates.size())
+    std::rotate(d->candidates.begin(), d->candidates.begin() + row, d->candidates.begin() + row + 1);
+  d->chosen = 0;
+  if (d->parametric >= 0 && d->parametric < row) ++d->parametric;
+  else if (d->parametric == row) d->parametric = 0;
+  d->verdict = name;
+  d->verdict_reason += "; " + why;
+}
+
+}  // namespace
+
+void PreferDeclaredTemperature(Diagnosis* d, const Dataset& target) {
+  if (d->chosen < 0 || !d->has_reference || !std::isfinite(d->reference.temperature_C)) return;
+  if (d->verdict != "sensor_gain" && d->verdict != "sensor_offset") return;
+  double dT = 0.0;
+  for (const auto& r : target.runs)
+    if (std::isfinite(r.temperature_C())) dT = std::max(dT, std::abs(r.temperature_C() - d->reference.temperature_C));
+  // 1 K: copper's 0.39 %/K then moves R by 0.4 %, about what a reading's noise lets these fits see.
+  if (!(dT > 1.0)) return;
+  for (const char* alt : {"resistance_temperature", "param:R"})
+    if (Confusable(*d, alt)) {
+      char why[200];
+      std::snprintf(why, sizeof why,
+                    "named the winding's resistance rather than the sense chain: the runs declare a winding %.1f K "
+                    "from the reference's, which predicts it, and the data cannot tell the two apart", dT);
+      MakeVerdict(d, alt, why);
+      return;
+    }
+}
+
+void PreferDeterminedChange(Diagnosis* d, const Dataset& target) {
+  if (d->chosen < 0 || d->ranking.empty()) return;
+  if (d->verdict == "stuck") {
+    for (const char* f : {"supply_pressure", "param:delta", "param:k"})
+      if (Confusable(*d, f)) {
+        d->verdict_reason += "; the plunger no longer moves: held by friction or a blockage, or by a force above the "
+                             "pull (a pressure or preload far off), which the current alone cannot tell apart (no "
+                             "dip at any run)";
+        break;
+      }
+    return;
+  }
+  auto confusable = [&](const std::string& name) { return Confusable(*d, name); };
+  auto make_verdict = [&](const std::string& name, const std::string& why) { MakeVerdict(d, name, why); };
+  if (d->verdict == "param:k" && confusable("param:delta"))
+    make_verdict("param:delta",
+                 "named the preload rather than the stiffness: both change the force on the closed plunger that "
+                 "the switch-on sees, and the runs do not resolve the stiffness's change along the stroke");
+  const bool force = d->verdict == "param:delta" || d->verdict == "supply_pressure";
+  const std::string other = d->verdict == "param:delta" ? "supply_pressure" : "param:delta";
+  double pmin = INFINITY, pmax = -INFINITY;
+  for (const auto& r : target.runs) pmin = std::min(pmin, r.supply_pressure_Pa), pmax = std::max(pmax, r.supply_pressure_Pa);
+  // The pressure the fitted area implies: (A2 - A1) P is the force; the declared P with the fitted area is the
+  // reference's area at f P.
+  std::string implied;
+  for (const auto& row : d->ranking) {
+    if (row.name != "supply_pressure" || !row.status.ok()) continue;
+    const auto a2 = row.params.find("A2");
+    const auto r1 = d->reference.params.find("A1"), r2 = d->reference.params.find("A2");
+    if (a2 == row.params.end() || r1 == d->reference.params.end() || r2 == d->reference.params.end()) break;
+    const double f = (a2->second - r1->second) / (r2->second - r1->second);
+    if (!std::isfinite(f)) break;
+    char buf[200];
+    if (pmax == pmin)
+      std::snprintf(buf, sizeof buf, " (as supply_pressure: %.2f bar acting where %.2f bar is declared)", f * pmax / 1e5,
+                    pmax / 1e5);
+    else
+      std::snprintf(buf, sizeof buf, " (as supply_pressure: %.2fx the declared pressures)", f);
+    implied = buf;
+  }
+  if (!force || !confusable(other)) {
+    if (d->verdict == "supply_pressure") d->verdict_reason += implied;
+    return;
+  }
+  if (pmax > pmin) return;  // several declared pressures: a pressure error scales with them, a preload does not
+  d->verdict = "supply_pressure or param:delta";
+  d->verdict_reason += "; every run declares one pressure, so a supply pressure other than declared and a changed "
+                       "spring preload are the same constant force on the plunger (seed 000 eq. 9-10): runs at "
+                       "another declared pressure would tell them apart" + implied;
+  d->confusable.erase(std::remove(d->confusable.begin(), d->confusable.end(), other), d->confusable.end());
+}
+
+}  // namespace vb::gap

@@ -1,0 +1,132 @@
+// A moving valve identified from scratch from its switch-on current (issue 25): the lab's view of an unknown
+// industrial valve through a scope, runs at several supply pressures and supplies. No --params: the model
+// family (taghizadeh2009: a reluctance coil, a plunger on a preloaded spring, a pressure force) gives the
+// structure, the curves give the start values, and the fit is staged:
+//   1. electrical: R, the closed-gap inductance L0 and the eddy-current branch R_p on the samples before the
+//      plunger moves (a coil with a constant inductance there);
+//   2. magnetic and mechanical: the open-gap inductance L1, the preload force F0 = k delta, the pressure area
+//      A_net = A2 - A1, the spring k, the mass m and the damping b on whole curves, every fit run's conditions
+//      (pressure, supply) at once, R, L0, R_p held;
+//   3. everything together from there.
+// Current-only data see the stroke only through products (docs/real-data.md, "Moving valves"): in units of
+// travel s = x / x_max the motion is (m x_max^2) s'' = 1/2 i^2 L(s)^2 (1/L0 - 1/L1) - (k x_max^2) s - F0 x_max
+// - A_net P x_max - (b x_max^2) s' (seed 000 eq. 4, 8-11), so the stroke x_max and the magnetic geometry
+// (l_c, A_e, x_t) are held at the family's values and the report names the combinations the data determine.
+#pragma once
+
+#include <functional>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "common/status.h"
+#include "gap/attribution.h"
+#include "gap/dataset.h"
+#include "gap/diagnose.h"
+#include "model/params.h"
+
+namespace vb::gap {
+
+// Landmarks of a switch-on curve: the plunger's arrival shows as the dip after the current's first peak.
+struct SwitchOnMarks {
+  bool pulls_in = false;     // a dip deeper than the threshold was found
+  double pull_in_s = NAN;    // time of the dip's minimum after the gate's rising edge
+  double dip_depth_A = NAN;  // first peak minus the dip's minimum
+  double peak_A = NAN;       // the first peak's current (where the plunger is already moving)
+  double final_A = NAN;      // mean of the last 5 samples with the gate on
+};
+// threshold_A: a fall and a rise must each exceed it (4x the noise floor: shallower is not told from noise).
+SwitchOnMarks FindSwitchOnMarks(const std::vector<double>& i_A, const std::vector<std::int8_t>& gate, double dt_s,
+                                double threshold_A);
+
+struct RunMarks {
+  std::string run, split;
+  double supply_V = 0.0, pressure_Pa = 0.0;
+  SwitchOnMarks measured, predicted;
+  double rmse_A = 0.0;
+};
+
+// A quantity the current determines (a parameter or a product of parameters with the held stroke), with its
+// 1-sigma (Gauss-Newton at the optimum, NaN when not determined).
+struct DeterminedValue {
+  std::string name, unit, meaning;
+  double value = 0.0, sigma = NAN;
+  bool determined = true;
+};
+struct HeldValue {
+  std::string name;
+  double value = 0.0;
+  std::string why;
+};
+
+struct MovingIdentifyOptions {
+  double budget_s = 55.0;   // wall time for all stages
+  int threads = 2;          // runs simulated concurrently
+  model::SolverOptions solver = AttributionOptions::FastSolver();
+  std::function<void(const std::string&)> progress;  // one line per stage (benchctl prints it on stderr)
+};
+
+struct MovingIdentification {
+  std::string model, device;
+  double noise_floor_A = 0.0;
+  std::string split_note;
+  std::map<std::string, double> start;     // the start values read off the curves (internal parameters)
+  std::map<std::string, double> fitted;    // the internal parameters: R, L0, L1, R_p, F0, A_net, k, m, b
+  std::map<std::string, double> values;    // the family's parameters that were set (R, N, mu_r, k, delta, m, ...)
+  std::vector<std::string> effects;        // effects switched on (eddy_currents)
+  model::PlantParams plant;                // the identified plant
+  std::vector<DeterminedValue> determined;
+  std::vector<HeldValue> held;
+  std::vector<std::string> notes;
+  struct Stage {
+    std::string name;
+    double fit_rmse_A = 0.0;
+    int evaluations = 0;
+    double seconds = 0.0;
+  };
+  std::vector<Stage> stages;
+  double fit_rmse_A = 0.0;
+  double holdout_rmse_before_A = NAN;  // the family's preset on the holdout runs (NaN: no holdout runs)
+  double holdout_rmse_after_A = NAN;   // the identified valve on the holdout runs
+  int fit_runs = 0, holdout_runs = 0;
+  std::vector<RunMarks> landmarks;
+  int evaluations = 0;
+  double seconds = 0.0;
+};
+
+// True when the dataset is a moving valve seen through its switch-on current: waveform runs whose gate rises once
+// (from 0), a family with a moving part and the reluctance law, no held stroke. IdentifyMovingValve refuses
+// anything else.
+bool IsSwitchOnSession(const Dataset& ds, const model::PlantParams& family);
+
+// Identifies the valve on the fit runs (the manifest's split; every run when none is held out) and predicts
+// every run with it.
+StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds, const model::PlantParams& family,
+                                                   const MovingIdentifyOptions& options = {});
+
+std::string MovingIdentificationJson(const MovingIdentification& id);
+std::string MovingIdentificationReport(const MovingIdentification& id);
+
+// The candidates for "what changed" on a moving valve identified from scratch (gap/diagnose.h, reference
+// path): the coil resistance, the supply pressure (the declared one scaled: the pressure area), the spring
+// preload, stiffness, mass and damping, a plunger that no longer moves (`stuck`), dry friction, and the sense
+// chain's offset and gain; resistance_temperature where runs declare temperatures.
+// Among confusable candidates on a moving valve, the one the data determine (called by Diagnose after its
+// verdict when the reference was identified from scratch):
+//  - a spring stiffness (param:k) confusable with the preload (param:delta) becomes the preload: both change the
+//    force on the closed plunger, which the switch-on sees (the dip's time); k also changes it along the stroke,
+//    which the runs did not resolve, or k would not be confusable;
+//  - a preload confusable with a supply pressure other than declared, on runs that all declare one pressure: one
+//    constant force either way (seed 000 eq. 9-10: k delta and (A2 - A1) P add), so the verdict names both.
+void PreferDeterminedChange(Diagnosis* d, const Dataset& target);
+
+// Against a reference (any device): a sense-chain verdict (sensor_gain, sensor_offset) confusable with the
+// winding's resistance (resistance_temperature, param:R) becomes the resistance when the runs declare a winding
+// more than 1 K from the reference's: the declared conditions predict that change, and on a coil R and the
+// gain are degenerate (issue 25: 3 of 11 hot-vs-cold strokes of a held solenoid came out a lone sensor term).
+void PreferDeclaredTemperature(Diagnosis* d, const Dataset& target);
+
+std::vector<Candidate> MovingValveCandidates(const model::PlantParams& reference, const Dataset& target,
+                                             const std::vector<bool>& fit_mask, double reference_C);
+
+}  // namespace vb::gap
