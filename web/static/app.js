@@ -189,11 +189,13 @@ function liveView(runId, box, onEnd) {
     const e = JSON.parse(ev.data);
     status.replaceChildren(statusCell(e.status), ' ' + Math.round(100 * (e.progress || 0)) + ' %');
     for (const s of e.samples || []) {
-      if (s.t_s <= lastT) continue;  // a reconnected stream starts over from the run's buffer
-      lastT = s.t_s;
-      // proto3 JSON leaves out zeros: a missing field is 0; NaN (no reference) arrives as "NaN".
-      rowsI.push([s.t_s, s.i_A === undefined ? 0 : num(s.i_A), s.ref === undefined ? 0 : num(s.ref), s.gate || 0]);
-      rowsX.push([s.t_s, s.x_m === undefined ? 0 : num(s.x_m)]);
+      // The server writes zeros too (the first sample is at t_s = 0); a missing field is still read as 0, and
+      // NaN (no reference) arrives as "NaN".
+      const t = typeof s.t_s === 'number' ? s.t_s : 0;
+      if (!(t > lastT)) continue;  // a reconnected stream starts over from the run's buffer
+      lastT = t;
+      rowsI.push([t, s.i_A === undefined ? 0 : num(s.i_A), s.ref === undefined ? 0 : num(s.ref), num(s.gate || 0)]);
+      rowsX.push([t, s.x_m === undefined ? 0 : num(s.x_m)]);
       n++;
     }
     if (rowsI.length > MAX) { rowsI.splice(0, rowsI.length - MAX); rowsX.splice(0, rowsX.length - MAX); }
