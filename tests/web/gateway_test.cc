@@ -299,6 +299,50 @@ TEST_F(WebGatewayTest, LiveSamplesArriveAsServerSentEventsUntilTheEnd) {
   EXPECT_NE(anonymous->body.find("UNAUTHENTICATED"), std::string::npos);
 }
 
+// A run watched from before its start (issue 24, M3): proto3 JSON leaves out fields at zero (a sample at t_s = 0,
+// a plunger at x_m = 0 before it moves, the gate off), and a chart fed such a sample stays blank: every live
+// sample carries every field.
+TEST_F(WebGatewayTest, LiveSamplesCarryEveryFieldFromTheStart) {
+  Json spec = Json::parse(SpecFile("standard/e3.json"));
+  spec["realtime"] = true;
+  spec["bench"]["name"] = "emu-a";
+  spec["duration_s"] = 30;
+  const std::string blocker = Submit(spec.dump())["run_ids"][0];
+  spec["duration_s"] = 0.3;
+  const std::string id = Submit(spec.dump())["run_ids"][0];
+  std::string stream;
+  std::thread watch([&] {
+    httplib::Client c("127.0.0.1", port_);
+    c.set_read_timeout(30, 0);
+    c.Get("/api/runs/" + id + "/events?rate_Hz=200", Bearer(kViewerToken), [&](const char* data, size_t n) {
+      stream.append(data, n);
+      return true;
+    });
+  });
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));
+  auto cancel = http_->Post("/api/runs/" + blocker + "/cancel", Bearer(kOperatorToken), "{}", "application/json");
+  ASSERT_TRUE(cancel && cancel->status == 200);
+  watch.join();
+  size_t samples = 0, missing = 0;
+  std::string example;
+  std::istringstream lines(stream);
+  for (std::string line; std::getline(lines, line);) {
+    if (line.rfind("data: {\"run_id\"", 0) != 0) continue;
+    const Json ev = Json::parse(line.substr(6));
+    for (const auto& sample : ev["samples"]) {
+      ++samples;
+      for (const char* field : {"t_s", "gate", "i_A", "x_m", "ref"}) {
+        if (!sample.contains(field)) {
+          ++missing;
+          example = sample.dump();
+        }
+      }
+    }
+  }
+  EXPECT_GE(samples, 20u) << stream.substr(0, 1500);
+  EXPECT_EQ(missing, 0u) << example;
+}
+
 // An interactive run is cancelled when its submitter's watch goes away: the page's streams come and go, so the
 // gateway does not watch those runs, and the run is not cancelled by a page that looked at it.
 TEST_F(WebGatewayTest, InteractiveRunsAreNotWatchedFromThePage) {

@@ -189,8 +189,8 @@ function liveView(runId, box, onEnd) {
     const e = JSON.parse(ev.data);
     status.replaceChildren(statusCell(e.status), ' ' + Math.round(100 * (e.progress || 0)) + ' %');
     for (const s of e.samples || []) {
-      // The server writes zeros too (the first sample is at t_s = 0); a missing field is still read as 0, and
-      // NaN (no reference) arrives as "NaN".
+      // The server writes fields at zero too (proto3 JSON would leave them out: t_s = 0, x_m = 0 at rest); a
+      // missing one is still read as 0, and NaN (no reference) arrives as "NaN".
       const t = typeof s.t_s === 'number' ? s.t_s : 0;
       if (!(t > lastT)) continue;  // a reconnected stream starts over from the run's buffer
       lastT = t;
@@ -201,7 +201,7 @@ function liveView(runId, box, onEnd) {
     if (rowsI.length > MAX) { rowsI.splice(0, rowsI.length - MAX); rowsX.splice(0, rowsX.length - MAX); }
     counter.textContent = n + ' samples';
     counter.dataset.samples = String(n);
-    dirty = true;
+    dirty = rowsI.length > 0;  // a queued run's events carry no samples; dygraphs refuses an empty file
   });
   es.addEventListener('end', (ev) => {
     es.close();
