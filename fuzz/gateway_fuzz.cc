@@ -63,7 +63,7 @@ class FakeService final : public v1::BenchService::Service {
     v1::RunEvent ev;
     ev.set_run_id(1);
     ev.set_status(v1::DONE);
-    ev.add_samples()->set_i_A(0.5);
+    ev.add_samples()->set_i_a(0.5);
     w->Write(ev);
     return grpc::Status::OK;
   }
