@@ -6,8 +6,9 @@
 //
 // Routes (JSON bodies are protobuf JSON with the .proto field names):
 //   GET  /, /app.js, /app.css, /dygraph.min.js, /dygraph.min.css   the page (embedded)
-//   POST /api/login {"token"}        checks the token (ListBenches), sets the vb_token cookie (for SSE)
-//   POST /api/logout                 clears it
+//   POST /api/login {"token"}        checks the token (ListBenches), sets the vb_session cookie (a server-side
+//                                    session id, for SSE and the CSV link)
+//   POST /api/logout                 revokes the session
 //   GET  /api/benches                ListBenches
 //   GET  /api/queue                  running and queued runs, queue positions, ETA of running runs
 //   GET  /api/runs?status=&batch_id=&tag=&bench=&page_size=&page_token=   ListRuns
@@ -20,8 +21,9 @@
 //   GET  /api/runs/ID/events?rate_Hz=                                     WatchRun as Server-Sent Events
 //   GET  /api/compare?runs=1,2,3 | ?batch_id=N                            CompareRuns, with units
 //   GET  /api/nights?limit=          ListNights
-// Tokens: "Authorization: Bearer <token>" on any request; the vb_token cookie (HttpOnly, SameSite=Strict) only
-// on GET requests (EventSource cannot send headers; a cookie never authorises a change: docs/web.md "Auth").
+// Tokens: "Authorization: Bearer <token>" on any request; the vb_session cookie (HttpOnly, SameSite=Strict) only
+// on GET .../events and .../trace.csv, from this origin (EventSource and a link cannot send headers; docs/web.md
+// "Sessions"). Every request passes the door's checks first (docs/web.md "Door", "Limits").
 // Errors: {"code": "INVALID_ARGUMENT", "message": "..."} with the HTTP status of HttpStatusFor(code).
 #pragma once
 
