@@ -108,6 +108,24 @@ TEST(WebConfig, ListenAddressIsCheckedAtStart) {
   ASSERT_TRUE(ok.ok()) << ok.status().message();
   EXPECT_EQ(ok->web_listen_address, "127.0.0.1:8080");
   EXPECT_TRUE(vb::server::SettingsFromConfig(vb::testing::MinimalConfig(), "")->web_listen_address.empty());
+  // The door's limits: named in the error, live views below the workers.
+  auto refused = [&](auto&& set, const std::string& field) {
+    auto bad = c;
+    set(*bad.mutable_web());
+    auto s = vb::server::SettingsFromConfig(bad, "");
+    ASSERT_FALSE(s.ok()) << field;
+    EXPECT_EQ(s.status().message().rfind(field, 0), 0u) << s.status().message();
+  };
+  refused([](auto& w) { w.set_head_timeout_s(-1); }, "web.head_timeout_s");
+  refused([](auto& w) { w.set_max_streams(64); }, "web.max_streams");  // = the default 64 workers
+  refused([](auto& w) { w.set_workers(8); }, "web.max_streams");       // below the default 48 streams
+  refused([](auto& w) { w.add_allowed_origins("https://proxy.lab/"); }, "web.allowed_origins");
+  c.mutable_web()->set_workers(16);
+  c.mutable_web()->set_max_streams(12);
+  c.mutable_web()->add_allowed_origins("https://proxy.lab:8443");
+  auto limits = vb::server::SettingsFromConfig(c, "");
+  ASSERT_TRUE(limits.ok()) << limits.status().message();
+  EXPECT_EQ(limits->web.workers(), 16);
 }
 
 TEST_F(WebGatewayTest, ServesThePageAndDebiansDygraphsFromTheBinary) {
