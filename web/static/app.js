@@ -211,6 +211,10 @@ function liveView(runId, box, onEnd) {
   });
   es.addEventListener('error', (ev) => {
     if (ev.data) { es.close(); status.replaceChildren(el('span', {class: 'error', text: JSON.parse(ev.data).message})); }
+    // A refusal (429: too many live views open) closes the EventSource for good: say so.
+    else if (es.readyState === EventSource.CLOSED) {
+      status.replaceChildren(el('span', {class: 'error', text: 'live view refused (too many open); reload to retry'}));
+    }
   });
   cleanups.push(() => { es.close(); clearInterval(timer); });
 }
