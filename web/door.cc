@@ -82,7 +82,13 @@ class DoorStream : public httplib::Stream {
  public:
   DoorStream(int fd, SSL* ssl, std::string buffered, size_t body_budget, Clock::time_point deadline,
              DoorRequestState* state)
-      : fd_(fd), ssl_(ssl), buf_(std::move(buffered)), budget_(body_budget), deadline_(deadline), state_(state) {}
+      : fd_(fd),
+        ssl_(ssl),
+        buf_(std::move(buffered)),
+        budget_(body_budget),
+        deadline_(deadline),
+        start_(Clock::now()),
+        state_(state) {}
 
   bool is_readable() const override { return pos_ < buf_.size() || (ssl_ && SSL_pending(ssl_) > 0); }
   bool is_writable() const override {
@@ -109,7 +115,11 @@ class DoorStream : public httplib::Stream {
     for (;;) {
       if (!(ssl_ && SSL_pending(ssl_) > 0)) {
         pollfd p{fd_, POLLIN, 0};
-        const int r = poll(&p, 1, MsUntil(deadline_));
+        // A body trickled in holds a worker: after a grace of kBodyGrace_s it must keep up kMinBodyRate (a spec
+        // is a few KiB), and it never gets past body_timeout_s.
+        const auto by_rate = start_ + std::chrono::milliseconds(static_cast<long long>(
+                                          1000.0 * (kBodyGrace_s + static_cast<double>(read_) / kMinBodyRate)));
+        const int r = poll(&p, 1, MsUntil(std::min(deadline_, by_rate)));
         if (r == 0) {
           state_->body_timed_out = true;
           state_->close_after = true;
@@ -134,6 +144,7 @@ class DoorStream : public httplib::Stream {
         if (n < 0) return -1;
       }
       budget_ -= static_cast<size_t>(n);
+      read_ += static_cast<size_t>(n);
       return n;
     }
   }
@@ -185,7 +196,11 @@ class DoorStream : public httplib::Stream {
   size_t pos_ = 0;
   size_t budget_;
   Clock::time_point deadline_;
+  Clock::time_point start_;
+  size_t read_ = 0;  // body bytes read from the socket
   DoorRequestState* state_;
+  static constexpr double kBodyGrace_s = 10.0;
+  static constexpr double kMinBodyRate = 64 * 1024.0;  // bytes/s
 };
 
 Door::Door(const DoorLimits& limits, SSL_CTX* ssl_ctx, ServeFn serve)

@@ -337,6 +337,27 @@ TEST_F(WebDoorTest, SlowClientsDoNotStopThePage) {
   ExpectUp();
 }
 
+// A complete head, then a body trickled in a byte a second: the worker it holds is let go (408) once the body
+// falls behind the minimum rate after its grace (10 s), well before the 60 s cap.
+TEST_F(WebDoorTest, ATrickledBodyIsCutOffByItsMinimumRate) {
+  const int fd = Connect(port_);
+  ASSERT_GE(fd, 0);
+  SendAll(fd, "POST /api/runs HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\nContent-Length: 1000\r\n\r\n{");
+  std::string a;
+  const auto t0 = Clock::now();
+  while (a.empty() && Clock::now() - t0 < std::chrono::seconds(40)) {
+    SendAll(fd, " ");
+    a = ReadAnswer(fd, 1.0);
+  }
+  ::close(fd);
+  const double s = std::chrono::duration<double>(Clock::now() - t0).count();
+  std::cout << "trickled body answered after " << s << " s\n";
+  EXPECT_EQ(StatusOf(a), 408) << a.substr(0, 300);
+  EXPECT_NE(a.find("body: not received in time"), std::string::npos) << a.substr(0, 300);
+  EXPECT_LT(s, 30.0);  // the rate rule, not the 60 s cap
+  ExpectUp();
+}
+
 // H2/M1: live views are capped per session and in all (429 beyond), so 200 attempted streams leave workers for
 // the page, which still answers at once.
 TEST_F(WebDoorTest, ManyLiveViewsLeaveThePageAnswering) {
