@@ -403,6 +403,58 @@ TEST_F(WebDoorTest, ManyLiveViewsLeaveThePageAnswering) {
   ExpectUp();
 }
 
+// The total cap on live views, below the per-session ones: with max_streams 10, four sessions share ten.
+TEST_F(WebDoorTest, LiveViewsAreCappedInAll) {
+  server_.reset();
+  StartServer(R"(, "max_streams": 10)");
+  httplib::Client c("127.0.0.1", port_);
+  std::ifstream in(std::string(VB_SOURCE_DIR) + "/examples/standard/e3.json");
+  std::stringstream ss;
+  ss << in.rdbuf();
+  Json spec = Json::parse(ss.str());
+  spec["realtime"] = true;
+  spec["duration_s"] = 30;
+  auto sub = c.Post("/api/runs", {{"Authorization", std::string("Bearer ") + kOperatorToken}},
+                    R"({"spec": )" + spec.dump() + "}", "application/json");
+  ASSERT_TRUE(sub && sub->status == 201) << (sub ? sub->body : "");
+  const std::string id = Json::parse(sub->body)["run_ids"][0].get<std::string>();
+  const char* tokens[] = {kViewerToken, kOperatorToken, vb::testing::kOperator2Token, vb::testing::kAdminToken};
+  std::vector<int> open_fds;
+  int refused = 0;
+  for (int k = 0; k < 20; ++k) {
+    const int fd = Connect(port_);
+    ASSERT_GE(fd, 0);
+    SendAll(fd, "GET /api/runs/" + id + "/events?rate_Hz=10 HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer " +
+                    tokens[k % 4] + "\r\n\r\n");
+    const std::string a = ReadHead(fd, 5.0);
+    if (StatusOf(a) == 200) {
+      open_fds.push_back(fd);
+    } else {
+      refused += StatusOf(a) == 429;
+      ::close(fd);
+    }
+  }
+  EXPECT_EQ(open_fds.size(), 10u);
+  EXPECT_EQ(refused, 10);
+  // A stream that ends gives its place back.
+  ::close(open_fds.back());
+  open_fds.pop_back();
+  bool again = false;
+  for (int attempt = 0; attempt < 50 && !again; ++attempt) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    const int fd = Connect(port_);
+    SendAll(fd, "GET /api/runs/" + id + "/events?rate_Hz=10 HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer " +
+                    std::string(kViewerToken) + "\r\n\r\n");
+    again = StatusOf(ReadHead(fd, 5.0)) == 200;
+    if (again) open_fds.push_back(fd); else ::close(fd);
+  }
+  EXPECT_TRUE(again) << "a closed stream's place was not given back";
+  for (int fd : open_fds) ::close(fd);
+  c.Post("/api/runs/" + id + "/cancel", {{"Authorization", std::string("Bearer ") + kOperatorToken}}, "{}",
+         "application/json");
+  ExpectUp();
+}
+
 // The request path without sockets (the fuzz target's way in) answers the issue's requests too.
 TEST(WebRawGateway, AnswersWithoutASocket) {
   auto channel = grpc::CreateChannel("127.0.0.1:1", grpc::InsecureChannelCredentials());
