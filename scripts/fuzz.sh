@@ -23,6 +23,7 @@ targets=(
   fuzz_readings_csv:readings_csv:4096
   fuzz_hid_protocol:hid_protocol:128
   fuzz_u3_protocol:u3_protocol:128
+  fuzz_gateway:gateway:16384
 )
 mkdir -p "$build/artifacts"
 failed=0

@@ -319,6 +319,21 @@ StatusOr<Settings> SettingsFromConfig(const valvebench::v1::ServerConfig& c, con
       return Status::InvalidArgument("web.listen_address: must be host:port (e.g. \"127.0.0.1:8080\"), got '" + a +
                                      "'");
     s.web_listen_address = a;
+    const auto& w = c.web();
+    if (w.head_timeout_s() < 0 || !std::isfinite(w.head_timeout_s()) || w.head_timeout_s() > 3600)
+      return Status::InvalidArgument("web.head_timeout_s: must be 0 (default 10) to 3600 s");
+    if (w.max_connections_per_client() < 0) return Status::InvalidArgument("web.max_connections_per_client: must be >= 0");
+    if (w.max_streams() < 0) return Status::InvalidArgument("web.max_streams: must be >= 0");
+    if (w.max_streams_per_session() < 0) return Status::InvalidArgument("web.max_streams_per_session: must be >= 0");
+    if (w.workers() < 0 || w.workers() > 1024) return Status::InvalidArgument("web.workers: must be 0 (default 64) to 1024");
+    const int workers = w.workers() ? w.workers() : 64, streams = w.max_streams() ? w.max_streams() : 48;
+    if (streams >= workers)
+      return Status::InvalidArgument("web.max_streams: must stay below web.workers (" + std::to_string(workers) +
+                                     "): the page's other requests need a worker");
+    for (const auto& o : w.allowed_origins())
+      if (!(o.rfind("http://", 0) == 0 || o.rfind("https://", 0) == 0) || o.back() == '/')
+        return Status::InvalidArgument("web.allowed_origins: '" + o + "' is not scheme://host[:port]");
+    s.web = w;
   }
   return s;
 }

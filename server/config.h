@@ -58,6 +58,7 @@ struct Settings {
   LabSetup lab;
   // The web dashboard's "host:port" (config "web"; docs/web.md); empty = no dashboard.
   std::string web_listen_address;
+  valvebench::v1::WebConfig web;  // the whole block, limits checked (0 = default)
 };
 
 StatusOr<Settings> LoadSettings(const std::string& config_path);

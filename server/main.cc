@@ -181,6 +181,13 @@ int main(int argc, char** argv) {
     wo.listen_address = settings->web_listen_address;
     wo.tls_cert_pem = settings->tls_cert_pem;
     wo.tls_key_pem = settings->tls_key_pem;
+    const auto& w = settings->web;
+    if (w.head_timeout_s() > 0) wo.limits.head_timeout_s = w.head_timeout_s();
+    if (w.max_connections_per_client() > 0) wo.limits.max_connections_per_client = w.max_connections_per_client();
+    if (w.workers() > 0) wo.limits.workers = w.workers();
+    if (w.max_streams() > 0) wo.max_streams = w.max_streams();
+    if (w.max_streams_per_session() > 0) wo.max_streams_per_session = w.max_streams_per_session();
+    wo.allowed_origins.assign(w.allowed_origins().begin(), w.allowed_origins().end());
     auto started = vb::web::Gateway::Start(wo, server->InProcessChannel(args));
     if (!started.ok()) {
       spdlog::error("{}", started.status().message().c_str());

@@ -200,7 +200,14 @@ grpc::Status BenchServiceImpl::CancelRun(grpc::ServerContext* ctx, const v1::Can
   if (r->submitter != who.user && !who.AtLeast(Role::kAdmin))
     return PermissionDenied("user " + who.user + " may cancel only their own runs (run " +
                             std::to_string(r->id) + " is " + r->submitter + "'s)");
-  auto st = (*store)->RequestCancel(r->id, req->reason().empty() ? "cancelled by " + who.user : req->reason());
+  // Who cancelled is always recorded, from the token, ahead of the caller's own words (which cannot replace it).
+  std::string words = req->reason();
+  if (words.size() > 500) {
+    size_t cut = 500;
+    while (cut > 0 && (static_cast<unsigned char>(words[cut]) & 0xC0) == 0x80) --cut;  // not inside a UTF-8 character
+    words.resize(cut);
+  }
+  auto st = (*store)->RequestCancel(r->id, "cancelled by " + who.user + (words.empty() ? "" : ": " + words));
   if (!st.ok()) return ToGrpcStatus(st.status());
   if (*st == db::RunStatus::kRunning) {
     registry_->Cancel(r->id);

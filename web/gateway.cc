@@ -4,12 +4,17 @@
 #include <google/protobuf/util/json_util.h>
 #include <httplib.h>
 #include <openssl/pem.h>
+#include <openssl/rand.h>
+#include <spdlog/spdlog.h>
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <deque>
 #include <map>
+#include <regex>
+#include <mutex>
 #include <nlohmann/json.hpp>
 #include <set>
 #include <vector>
@@ -19,6 +24,7 @@
 #include "export/run_file.h"
 #include "valvebench/v1/api.grpc.pb.h"
 #include "web/assets.h"
+#include "web/door.h"
 
 namespace vb::web {
 
@@ -70,24 +76,123 @@ const char* CodeName(grpc::StatusCode code) {
 }
 
 constexpr char kJson[] = "application/json";
-constexpr char kCookie[] = "vb_token";
+constexpr char kCookie[] = "vb_session";
+constexpr int kMaxJsonDepth = 64;  // a spec nests 4 deep; a deeper body is refused before any recursive walk
+
+// Text for a JSON answer: invalid UTF-8 (in a message quoting the request) becomes U+FFFD instead of throwing.
+std::string Dump(const Json& j) { return j.dump(-1, ' ', false, Json::error_handler_t::replace); }
 
 void SendError(httplib::Response& res, grpc::StatusCode code, const std::string& message) {
   res.status = HttpStatusFor(code);
-  res.set_content(Json{{"code", CodeName(code)}, {"message", message}}.dump(), kJson);
+  res.set_content(Dump(Json{{"code", CodeName(code)}, {"message", message}}), kJson);
+}
+void SendErrorStatus(httplib::Response& res, int http_status, const char* code, const std::string& message) {
+  res.status = http_status;
+  res.set_content(Dump(Json{{"code", code}, {"message", message}}), kJson);
 }
 void SendError(httplib::Response& res, const grpc::Status& st) { SendError(res, st.error_code(), st.error_message()); }
 void BadRequest(httplib::Response& res, const std::string& message) {
   SendError(res, grpc::StatusCode::INVALID_ARGUMENT, message);
 }
 
-std::string ToJson(const google::protobuf::Message& m) {
+// `with_zeros`: fields at their default (0, false, "") are written too; proto3 JSON leaves them out otherwise,
+// and a live sample at t_s = 0 would arrive without its time (the page's charts need every field).
+std::string ToJson(const google::protobuf::Message& m, bool with_zeros = false) {
   google::protobuf::util::JsonPrintOptions o;
   o.preserve_proto_field_names = true;  // the names specs are written with (supply_V, not supplyV)
+  o.always_print_primitive_fields = with_zeros;
   std::string out;
   (void)google::protobuf::util::MessageToJsonString(m, &out, o);
   return out;
 }
+
+}  // namespace
+
+bool ValidUtf8(std::string_view s) {
+  size_t k = 0;
+  const size_t n = s.size();
+  while (k < n) {
+    const auto c = static_cast<unsigned char>(s[k]);
+    if (c < 0x80) {
+      ++k;
+      continue;
+    }
+    size_t len;
+    std::uint32_t cp;
+    if ((c & 0xE0) == 0xC0) {
+      len = 2;
+      cp = c & 0x1F;
+    } else if ((c & 0xF0) == 0xE0) {
+      len = 3;
+      cp = c & 0x0F;
+    } else if ((c & 0xF8) == 0xF0) {
+      len = 4;
+      cp = c & 0x07;
+    } else {
+      return false;
+    }
+    if (k + len > n) return false;
+    for (size_t j = 1; j < len; ++j) {
+      const auto d = static_cast<unsigned char>(s[k + j]);
+      if ((d & 0xC0) != 0x80) return false;
+      cp = (cp << 6) | (d & 0x3F);
+    }
+    // Overlong forms, UTF-16 surrogates and code points past U+10FFFF are not UTF-8.
+    if ((len == 2 && cp < 0x80) || (len == 3 && cp < 0x800) || (len == 4 && cp < 0x10000) || cp > 0x10FFFF ||
+        (cp >= 0xD800 && cp <= 0xDFFF))
+      return false;
+    k += len;
+  }
+  return true;
+}
+
+int JsonDepth(std::string_view s) {
+  int depth = 0, max_depth = 0;
+  bool in_string = false, escaped = false;
+  for (const char c : s) {
+    if (in_string) {
+      if (escaped) {
+        escaped = false;
+      } else if (c == '\\') {
+        escaped = true;
+      } else if (c == '"') {
+        in_string = false;
+      }
+      continue;
+    }
+    if (c == '"') {
+      in_string = true;
+    } else if (c == '[' || c == '{') {
+      max_depth = std::max(max_depth, ++depth);
+    } else if (c == ']' || c == '}') {
+      --depth;
+    }
+  }
+  return max_depth;
+}
+
+std::string BearerTokenOf(std::string_view header, std::string* problem) {
+  constexpr std::string_view kBearer = "Bearer ";
+  if (header.substr(0, kBearer.size()) != kBearer) {
+    *problem = "Authorization: must be 'Bearer <token>'";
+    return "";
+  }
+  const std::string_view t = header.substr(kBearer.size());
+  if (t.empty() || t.size() > 4096) {
+    *problem = "Authorization: the bearer token must be 1-4096 characters";
+    return "";
+  }
+  for (const char c : t) {
+    if (c < 0x21 || c > 0x7e) {
+      *problem = "Authorization: the bearer token must be visible ASCII characters (no space, tab, control or "
+                 "non-ASCII byte)";
+      return "";
+    }
+  }
+  return std::string(t);
+}
+
+namespace {
 
 // A token fit for a cookie and a metadata value: printable, no separators.
 bool TokenShapeOk(const std::string& t) {
@@ -112,14 +217,16 @@ std::string CookieToken(const httplib::Request& req) {
 
 // The caller's "authorization" value for the RPC: the Authorization header as sent, else (GET only) the cookie.
 // Nothing at all when neither is there: the service answers UNAUTHENTICATED, as it does for gRPC callers.
+// The header was checked by the door (Routes::Admit: visible ASCII only, what gRPC metadata may carry); it is
+// checked again here so that no other path can forward it unchecked.
 void Authorize(const httplib::Request& req, grpc::ClientContext* ctx) {
   if (req.has_header("Authorization")) {
-    ctx->AddMetadata("authorization", req.get_header_value("Authorization"));
+    std::string problem;
+    const std::string token = BearerTokenOf(req.get_header_value("Authorization"), &problem);
+    if (!token.empty()) ctx->AddMetadata("authorization", "Bearer " + token);
     return;
   }
-  if (req.method != "GET") return;
-  const std::string t = CookieToken(req);
-  if (TokenShapeOk(t)) ctx->AddMetadata("authorization", "Bearer " + t);
+  // A session cookie was turned into the header by Routes::Admit, on the routes it may authorise.
 }
 
 void Deadline(grpc::ClientContext* ctx, double seconds) {
@@ -162,6 +269,14 @@ bool BodyJson(const httplib::Request& req, httplib::Response& res, Json* out) {
     *out = Json::object();
     return true;
   }
+  if (!ValidUtf8(req.body)) {
+    BadRequest(res, "body: not valid UTF-8");
+    return false;
+  }
+  if (JsonDepth(req.body) > kMaxJsonDepth) {
+    BadRequest(res, "body: JSON nested deeper than " + std::to_string(kMaxJsonDepth) + " levels");
+    return false;
+  }
   try {
     *out = Json::parse(req.body);
   } catch (const Json::exception& e) {
@@ -177,52 +292,6 @@ bool BodyJson(const httplib::Request& req, httplib::Response& res, Json* out) {
 
 std::string RunStatusText(v1::RunStatus s) { return v1::RunStatus_Name(s); }
 
-// A whole recorded trace, from GetTrace's chunks.
-struct Trace {
-  std::vector<std::string> channels;
-  double t0_s = 0.0, period_s = 0.0;
-  std::vector<std::vector<double>> columns;
-  size_t samples() const { return columns.empty() ? 0 : columns[0].size(); }
-  // The channels but the time (t_s is recorded as a channel; rows carry t0_s + k * period_s instead).
-  std::vector<size_t> ValueChannels() const {
-    std::vector<size_t> out;
-    for (size_t ch = 0; ch < channels.size(); ++ch)
-      if (channels[ch] != "t_s") out.push_back(ch);
-    return out;
-  }
-};
-
-grpc::Status ReadTrace(v1::BenchService::Stub* stub, const httplib::Request& req, std::int64_t run_id, Trace* t) {
-  grpc::ClientContext ctx;
-  Authorize(req, &ctx);
-  Deadline(&ctx, 60.0);
-  v1::GetTraceRequest r;
-  r.set_run_id(run_id);
-  auto reader = stub->GetTrace(&ctx, r);
-  v1::TraceChunk c;
-  bool first = true;
-  while (reader->Read(&c)) {
-    if (first) {
-      t->channels.assign(c.channels().begin(), c.channels().end());
-      t->t0_s = c.t0_s();
-      t->period_s = c.sample_period_s();
-      t->columns.assign(t->channels.size(), {});
-      for (auto& col : t->columns) col.reserve(static_cast<size_t>(std::max<std::int64_t>(0, c.total_samples())));
-      first = false;
-    }
-    const size_t n = static_cast<size_t>(c.samples());
-    if (static_cast<size_t>(c.channels_size()) != t->channels.size() || c.data().size() != n * t->channels.size() * 8)
-      return grpc::Status(grpc::StatusCode::DATA_LOSS, fmt::format("trace chunk {}: inconsistent size", c.index()));
-    for (size_t ch = 0; ch < t->channels.size(); ++ch) {
-      auto& col = t->columns[ch];
-      const size_t at = col.size();
-      col.resize(at + n);
-      std::memcpy(col.data() + at, c.data().data() + ch * n * 8, n * 8);  // little-endian float64 (api.proto)
-    }
-  }
-  return reader->Finish();
-}
-
 void AppendNumber(std::string* out, double v) {
   if (std::isfinite(v)) {
     fmt::format_to(std::back_inserter(*out), "{:.10g}", v);
@@ -231,58 +300,217 @@ void AppendNumber(std::string* out, double v) {
   }
 }
 
-// Rows [t_s, ch0, ch1, ...] of the samples with t in [t_from, t_to]; at most max_points rows: beyond that each
+// The rows [t_s, ch0, ch1, ...] of a stored trace's samples with t in [t_from, t_to], read from GetTrace chunk by
+// chunk (memory: one chunk and the rows, whatever the trace's length). At most max_points rows: beyond that each
 // bucket of samples gives two rows, every channel's minimum at the bucket's start and its maximum at its middle
 // (the envelope of a PWM current survives; a bucket is narrower than a pixel at the default 4000 points).
-std::string TraceRowsJson(const Trace& t, double t_from, double t_to, size_t max_points, bool* decimated) {
-  const size_t n = t.samples();
-  size_t k0 = 0, k1 = n;
-  if (t.period_s > 0.0 && n > 0) {
-    if (std::isfinite(t_from)) k0 = static_cast<size_t>(std::clamp(std::floor((t_from - t.t0_s) / t.period_s), 0.0, double(n)));
-    if (std::isfinite(t_to)) k1 = static_cast<size_t>(std::clamp(std::ceil((t_to - t.t0_s) / t.period_s) + 1, 0.0, double(n)));
-  }
-  if (k1 < k0) k1 = k0;
-  const std::vector<size_t> value_channels = t.ValueChannels();
-  std::string out = "[";
+struct TraceRowsOut {
+  std::vector<std::string> channels;  // the rows' columns after t_s
+  double t0_s = 0.0, period_s = 0.0;
+  std::int64_t total_samples = 0;
+  bool decimated = false;
+  std::string rows = "[";
+};
+
+grpc::Status ReadTraceRows(v1::BenchService::Stub* stub, const httplib::Request& req, std::int64_t run_id,
+                           double t_from, double t_to, size_t max_points, TraceRowsOut* out) {
+  grpc::ClientContext ctx;
+  Authorize(req, &ctx);
+  Deadline(&ctx, 120.0);
+  v1::GetTraceRequest r;
+  r.set_run_id(run_id);
+  auto reader = stub->GetTrace(&ctx, r);
+  v1::TraceChunk c;
+  std::vector<std::string> all;       // every channel, t_s included
+  std::vector<size_t> value_channels; // their indexes but t_s
+  size_t k0 = 0, k1 = 0, count = 0, buckets = 1;
+  std::int64_t k = 0;                 // the next sample's index
+  // The decimation bucket being filled: [a, e), its channels' extremes.
+  size_t bucket = 0, a = 0, e = 0;
+  std::vector<double> lo, hi;
+  bool bucket_open = false;
   auto row = [&](double time, auto&& value) {
-    if (out.size() > 1) out += ',';
-    out += '[';
-    AppendNumber(&out, time);
-    for (size_t ch : value_channels) {
-      out += ',';
-      AppendNumber(&out, value(ch));
+    if (out->rows.size() > 1) out->rows += ',';
+    out->rows += '[';
+    AppendNumber(&out->rows, time);
+    for (size_t j = 0; j < value_channels.size(); ++j) {
+      out->rows += ',';
+      AppendNumber(&out->rows, value(j));
     }
-    out += ']';
+    out->rows += ']';
   };
-  const size_t count = k1 - k0;
-  *decimated = count > max_points;
-  if (!*decimated) {
-    for (size_t k = k0; k < k1; ++k) row(t.t0_s + k * t.period_s, [&](size_t ch) { return t.columns[ch][k]; });
-  } else {
-    const size_t buckets = std::max<size_t>(1, max_points / 2);
-    for (size_t b = 0; b < buckets; ++b) {
-      const size_t a = k0 + count * b / buckets, e = k0 + count * (b + 1) / buckets;
-      if (a >= e) continue;
-      auto extreme = [&](size_t ch, bool want_max) {
-        double m = t.columns[ch][a];
-        for (size_t k = a; k < e; ++k) {
-          const double v = t.columns[ch][k];
-          if (std::isnan(m) || (want_max ? v > m : v < m)) m = v;
+  auto bounds = [&](size_t b) {
+    a = k0 + count * b / buckets;
+    e = k0 + count * (b + 1) / buckets;
+  };
+  auto flush = [&] {
+    if (!bucket_open) return;
+    row(out->t0_s + a * out->period_s, [&](size_t j) { return lo[j]; });
+    row(out->t0_s + (a + (e - a) / 2) * out->period_s, [&](size_t j) { return hi[j]; });
+    bucket_open = false;
+  };
+  bool first = true;
+  grpc::Status bad;
+  while (reader->Read(&c)) {
+    if (first) {
+      first = false;
+      all.assign(c.channels().begin(), c.channels().end());
+      for (size_t ch = 0; ch < all.size(); ++ch)
+        if (all[ch] != "t_s") {
+          value_channels.push_back(ch);
+          out->channels.push_back(all[ch]);
         }
-        return m;
-      };
-      row(t.t0_s + a * t.period_s, [&](size_t ch) { return extreme(ch, false); });
-      row(t.t0_s + (a + (e - a) / 2) * t.period_s, [&](size_t ch) { return extreme(ch, true); });
+      out->t0_s = c.t0_s();
+      out->period_s = c.sample_period_s();
+      const size_t n = static_cast<size_t>(std::max<std::int64_t>(0, c.total_samples()));
+      k0 = 0;
+      k1 = n;
+      if (out->period_s > 0.0 && n > 0) {
+        if (std::isfinite(t_from))
+          k0 = static_cast<size_t>(std::clamp(std::floor((t_from - out->t0_s) / out->period_s), 0.0, double(n)));
+        if (std::isfinite(t_to))
+          k1 = static_cast<size_t>(std::clamp(std::ceil((t_to - out->t0_s) / out->period_s) + 1, 0.0, double(n)));
+      }
+      if (k1 < k0) k1 = k0;
+      count = k1 - k0;
+      out->decimated = count > max_points;
+      buckets = std::max<size_t>(1, max_points / 2);
+      bucket = 0;
+      bounds(0);
+      lo.assign(value_channels.size(), 0.0);
+      hi.assign(value_channels.size(), 0.0);
+    }
+    const size_t ns = static_cast<size_t>(std::max(0, c.samples()));
+    if (static_cast<size_t>(c.channels_size()) != all.size() || c.data().size() != ns * all.size() * 8) {
+      bad = grpc::Status(grpc::StatusCode::DATA_LOSS, fmt::format("trace chunk {}: inconsistent size", c.index()));
+      ctx.TryCancel();
+      while (reader->Read(&c)) {
+      }
+      break;
+    }
+    const char* data = c.data().data();
+    auto value = [&](size_t j, size_t i) {
+      double v;
+      std::memcpy(&v, data + (value_channels[j] * ns + i) * 8, 8);  // little-endian float64 (api.proto)
+      return v;
+    };
+    for (size_t i = 0; i < ns; ++i, ++k) {
+      const size_t kk = static_cast<size_t>(k);
+      if (kk < k0 || kk >= k1) continue;
+      if (!out->decimated) {
+        row(out->t0_s + kk * out->period_s, [&](size_t j) { return value(j, i); });
+        continue;
+      }
+      while (kk >= e && bucket < buckets) {  // past this bucket: the next non-empty one
+        flush();
+        bounds(++bucket);
+      }
+      for (size_t j = 0; j < value_channels.size(); ++j) {
+        const double v = value(j, i);
+        if (!bucket_open) {
+          lo[j] = hi[j] = v;
+        } else {
+          if (std::isnan(lo[j]) || v < lo[j]) lo[j] = v;
+          if (std::isnan(hi[j]) || v > hi[j]) hi[j] = v;
+        }
+      }
+      bucket_open = true;
     }
   }
-  out += ']';
-  return out;
+  const grpc::Status st = reader->Finish();
+  if (!bad.ok()) return bad;
+  if (!st.ok()) return st;
+  flush();
+  out->rows += ']';
+  out->total_samples = k;
+  return grpc::Status::OK;
 }
+
+constexpr double kSessionLife_s = 12 * 3600;
+
+// Server-side sessions: a random id in the cookie, the token here. Revoked by logout, by a 401 from the service
+// (the token was removed), by age; lost with a restart (log in again).
+class Sessions {
+ public:
+  std::string Create(const std::string& token) {
+    unsigned char raw[32];
+    if (RAND_bytes(raw, sizeof(raw)) != 1) throw std::runtime_error("no random bytes for a session id");
+    std::string id;
+    for (unsigned char b : raw) id += fmt::format("{:02x}", b);
+    std::lock_guard<std::mutex> lock(mu_);
+    Prune();
+    if (by_id_.size() >= kMaxSessions) by_id_.erase(by_id_.begin());  // a flood of logins: some session goes
+    by_id_[id] = {token, Clock::now() + std::chrono::seconds(static_cast<long long>(kSessionLife_s))};
+    return id;
+  }
+  std::string TokenOf(const std::string& id) {
+    std::lock_guard<std::mutex> lock(mu_);
+    auto it = by_id_.find(id);
+    if (it == by_id_.end()) return "";
+    if (Clock::now() > it->second.expires) {
+      by_id_.erase(it);
+      return "";
+    }
+    return it->second.token;
+  }
+  void Revoke(const std::string& id) {
+    std::lock_guard<std::mutex> lock(mu_);
+    by_id_.erase(id);
+  }
+
+ private:
+  using Clock = std::chrono::steady_clock;
+  static constexpr size_t kMaxSessions = 10000;
+  void Prune() {
+    const auto now = Clock::now();
+    for (auto it = by_id_.begin(); it != by_id_.end();) it = now > it->second.expires ? by_id_.erase(it) : std::next(it);
+  }
+  struct Session {
+    std::string token;
+    Clock::time_point expires;
+  };
+  std::mutex mu_;
+  std::map<std::string, Session> by_id_;
+};
+
+// Failed logins per client address: kMax within kWindow_s, then refused until the oldest ages out.
+class FailedLogins {
+ public:
+  static constexpr int kMax = 10;
+  static constexpr double kWindow_s = 300;
+  void Failed(const std::string& client) {
+    std::lock_guard<std::mutex> lock(mu_);
+    auto& q = by_client_[client];
+    q.push_back(Clock::now());
+    while (q.size() > static_cast<size_t>(kMax)) q.pop_front();
+    if (by_client_.size() > 10000) by_client_.erase(by_client_.begin());
+  }
+  // Seconds until the next attempt is allowed; 0 = now.
+  double Blocked_s(const std::string& client) {
+    std::lock_guard<std::mutex> lock(mu_);
+    auto it = by_client_.find(client);
+    if (it == by_client_.end() || it->second.size() < static_cast<size_t>(kMax)) return 0;
+    const double age = std::chrono::duration<double>(Clock::now() - it->second.front()).count();
+    if (age >= kWindow_s) {
+      by_client_.erase(it);
+      return 0;
+    }
+    return kWindow_s - age;
+  }
+
+ private:
+  using Clock = std::chrono::steady_clock;
+  std::mutex mu_;
+  std::map<std::string, std::deque<Clock::time_point>> by_client_;
+};
 
 class Routes {
  public:
   Routes(std::shared_ptr<grpc::Channel> channel, const GatewayOptions& options, bool tls)
-      : stub_(v1::BenchService::NewStub(channel)), options_(options), tls_(tls) {}
+      : stub_(v1::BenchService::NewStub(channel)),
+        options_(options),
+        tls_(tls),
+        max_body_bytes_(options.limits.max_body_bytes) {}
 
   void Install(httplib::Server& s) {
     s.set_default_headers({{"X-Content-Type-Options", "nosniff"},
@@ -290,6 +518,15 @@ class Routes {
                            {"Content-Security-Policy",
                             "default-src 'self'; style-src 'self' 'unsafe-inline'; img-src 'self' data:; "
                             "frame-ancestors 'none'"}});
+    if (tls_) {
+      httplib::Headers h = {{"X-Content-Type-Options", "nosniff"},
+                            {"Referrer-Policy", "no-referrer"},
+                            {"Content-Security-Policy",
+                             "default-src 'self'; style-src 'self' 'unsafe-inline'; img-src 'self' data:; "
+                             "frame-ancestors 'none'"},
+                            {"Strict-Transport-Security", "max-age=31536000"}};
+      s.set_default_headers(h);
+    }
     for (const Asset& a : Assets()) {
       s.Get(a.url_path, [&a](const httplib::Request&, httplib::Response& res) {
         res.set_header("Cache-Control", "no-cache");
@@ -297,9 +534,12 @@ class Routes {
       });
     }
     s.Post("/api/login", [this](const auto& q, auto& r) { Login(q, r); });
-    s.Post("/api/logout", [this](const auto&, auto& r) {
-      r.set_header("Set-Cookie", CookieHeader("", 0));
-      r.set_content("{}", kJson);
+    s.Post("/api/logout", [this](const auto& q, auto& r) { Logout(q, r); });
+    s.set_post_routing_handler([this](const auto& q, auto& r) {
+      try {
+        AfterRoute(q, r);
+      } catch (...) {
+      }
     });
     s.Get("/api/benches", [this](const auto& q, auto& r) { Benches(q, r); });
     s.Get("/api/queue", [this](const auto& q, auto& r) { Queue(q, r); });
@@ -314,29 +554,175 @@ class Routes {
     s.Get("/api/compare", [this](const auto& q, auto& r) { Compare(q, r); });
     s.Get("/api/diagnose", [this](const auto& q, auto& r) { Diagnose(q, r); });
     s.Get("/api/nights", [this](const auto& q, auto& r) { Nights(q, r); });
+    s.set_pre_routing_handler([this](const httplib::Request& req, httplib::Response& res) {
+      return Admit(req, res) ? httplib::Server::HandlerResponse::Unhandled : httplib::Server::HandlerResponse::Handled;
+    });
+    // Runs outside cpp-httplib's try block (when the answer is written): must not throw.
     s.set_error_handler([](const httplib::Request& req, httplib::Response& res) {
-      if (res.body.empty() && res.status == 404)
-        SendError(res, grpc::StatusCode::NOT_FOUND, "no such page or API route: " + req.method + " " + req.path);
+      try {
+        if (!res.body.empty() || res.content_provider_) return;
+        DoorRequestState* door = CurrentDoorRequest();
+        if (door && door->body_too_large) {
+          res.status = 413;
+          SendErrorStatus(res, 413, "RESOURCE_EXHAUSTED", "body: larger than the limit");
+        } else if (door && door->body_timed_out) {
+          SendErrorStatus(res, 408, "DEADLINE_EXCEEDED", "body: not received in time");
+        } else if (res.status == 404) {
+          SendError(res, grpc::StatusCode::NOT_FOUND, "no such page or API route: " + req.method + " " + req.path);
+        } else if (res.status == 413) {
+          SendErrorStatus(res, 413, "RESOURCE_EXHAUSTED", "body: larger than the limit");
+        } else {
+          SendErrorStatus(res, res.status, res.status >= 500 ? "INTERNAL" : "INVALID_ARGUMENT",
+                          fmt::format("the request could not be read (HTTP {})", res.status));
+        }
+      } catch (...) {
+        res.body = R"({"code":"INTERNAL","message":"internal error"})";
+      }
     });
     s.set_exception_handler([](const httplib::Request&, httplib::Response& res, std::exception_ptr ep) {
-      std::string what = "internal error";
       try {
-        if (ep) std::rethrow_exception(ep);
-      } catch (const std::exception& e) {
-        what = e.what();
+        std::string what = "internal error";
+        try {
+          if (ep) std::rethrow_exception(ep);
+        } catch (const std::exception& e) {
+          what = std::string("internal error: ") + e.what();
+        } catch (...) {
+        }
+        SendError(res, grpc::StatusCode::INTERNAL, what);
       } catch (...) {
+        res.status = 500;
+        res.body = R"({"code":"INTERNAL","message":"internal error"})";
       }
-      SendError(res, grpc::StatusCode::INTERNAL, what);
     });
   }
 
  private:
-  std::string CookieHeader(const std::string& token, int max_age_s) const {
-    return fmt::format("{}={}; Path=/api; Max-Age={}; HttpOnly; SameSite=Strict{}", kCookie, token, max_age_s,
+  // The door's checks of every request before its route runs (docs/web.md "Door"): true lets it through, false
+  // has the answer (a 4xx JSON error) in `res`.
+  bool Admit(const httplib::Request& req, httplib::Response& res) {
+    DoorRequestState* door = CurrentDoorRequest();
+    if (door) door->head_parsed = true;
+    auto refuse = [&](int status, const char* code, const std::string& message) {
+      SendErrorStatus(res, status, code, message);
+      res.set_header("Connection", "close");
+      if (door) door->close_after = true;  // the body, if any, was not read
+      return false;
+    };
+    if (!ValidUtf8(req.path)) return refuse(400, "INVALID_ARGUMENT", "path: not valid UTF-8");
+    for (const char c : req.path)
+      if (static_cast<unsigned char>(c) < 0x20 || c == 0x7f)
+        return refuse(400, "INVALID_ARGUMENT", "path: control character");
+    for (const auto& [key, value] : req.params)
+      if (!ValidUtf8(key) || !ValidUtf8(value))
+        return refuse(400, "INVALID_ARGUMENT", "query parameter '" + key + "': not valid UTF-8");
+    for (const auto& [name, value] : req.headers) {
+      for (const char c : value)
+        if ((static_cast<unsigned char>(c) < 0x20 && c != '\t') || c == 0x7f)
+          return refuse(400, "INVALID_ARGUMENT", "header " + name + ": control character in its value");
+      if (!ValidUtf8(value)) return refuse(400, "INVALID_ARGUMENT", "header " + name + ": not valid UTF-8");
+    }
+    if (req.headers.count("Authorization") > 1)
+      return refuse(400, "INVALID_ARGUMENT", "Authorization: sent more than once");
+    if (req.has_header("Authorization")) {
+      std::string problem;
+      if (BearerTokenOf(req.get_header_value("Authorization"), &problem).empty())
+        return refuse(401, "UNAUTHENTICATED", problem);
+    }
+    const bool has_body_framing = req.has_header("Content-Length") || req.has_header("Transfer-Encoding");
+    if (req.method == "POST" || req.method == "PUT" || req.method == "PATCH" || req.method == "DELETE" ||
+        has_body_framing) {
+      if (req.headers.count("Content-Length") > 1 || req.headers.count("Transfer-Encoding") > 1)
+        return refuse(400, "INVALID_ARGUMENT", "Content-Length, Transfer-Encoding: sent more than once");
+      if (req.has_header("Transfer-Encoding")) {
+        if (req.get_header_value("Transfer-Encoding") != "chunked")
+          return refuse(400, "INVALID_ARGUMENT", "Transfer-Encoding: only 'chunked' is accepted");
+        if (req.has_header("Content-Length"))
+          return refuse(400, "INVALID_ARGUMENT", "Content-Length: not with Transfer-Encoding: chunked");
+      } else if (!req.has_header("Content-Length")) {
+        return refuse(411, "INVALID_ARGUMENT", "Content-Length: required on a " + req.method + " (0 for no body)");
+      } else {
+        const std::string len = req.get_header_value("Content-Length");
+        if (len.empty() || len.size() > 15 || len.find_first_not_of("0123456789") != std::string::npos)
+          return refuse(400, "INVALID_ARGUMENT", "Content-Length: not a number");
+        if (std::stoull(len) > max_body_bytes_)
+          return refuse(413, "RESOURCE_EXHAUSTED",
+                        fmt::format("body: {} bytes, more than the limit of {}", len, max_body_bytes_));
+      }
+      const std::string encoding = req.get_header_value("Content-Encoding");
+      if (!encoding.empty() && encoding != "identity")
+        return refuse(415, "INVALID_ARGUMENT", "Content-Encoding: compressed bodies are not accepted");
+      if (req.is_multipart_form_data())
+        return refuse(415, "INVALID_ARGUMENT", "Content-Type: multipart bodies are not accepted (send JSON)");
+    }
+    // The session cookie authorises what the page cannot send a header with, and nothing else: the live view
+    // (EventSource) and the CSV download (a link), both GET. Never from another origin's page (another port of
+    // the same host is same-site, so SameSite=Strict alone lets it through).
+    const std::string session = CookieToken(req);
+    if (!req.has_header("Authorization") && !session.empty() && req.method == "GET" && CookieRoute(req.path)) {
+      if (!SameOrigin(req))
+        return refuse(403, "PERMISSION_DENIED", "cookie: not accepted from a page of another origin (" +
+                                                     req.get_header_value("Origin") +
+                                                     req.get_header_value("Sec-Fetch-Site") + ")");
+      const std::string token = sessions_.TokenOf(session);
+      // The request object is cpp-httplib's own (non-const); its handlers get it as const.
+      if (!token.empty()) const_cast<httplib::Request&>(req).set_header("Authorization", "Bearer " + token);
+    }
+    return true;
+  }
+
+  static bool CookieRoute(const std::string& path) {
+    static const std::regex re(R"(/api/runs/\d{1,15}/(events|trace\.csv))");
+    return std::regex_match(path, re);
+  }
+
+  // No Origin / Sec-Fetch-Site (not a browser, or a same-origin navigation over plain HTTP), or this dashboard's
+  // own origin (scheme://Host), or one of GatewayOptions::allowed_origins.
+  bool SameOrigin(const httplib::Request& req) const {
+    if (req.has_header("Origin")) {
+      const std::string o = req.get_header_value("Origin");
+      if (o == std::string(tls_ ? "https://" : "http://") + req.get_header_value("Host")) return true;
+      return std::find(options_.allowed_origins.begin(), options_.allowed_origins.end(), o) !=
+             options_.allowed_origins.end();
+    }
+    if (req.has_header("Sec-Fetch-Site")) {
+      const std::string site = req.get_header_value("Sec-Fetch-Site");
+      return site == "same-origin" || site == "none";
+    }
+    return true;
+  }
+
+  // After each answer: API JSON is not cached; a session whose token the service no longer knows (removed from
+  // the configuration) is revoked.
+  void AfterRoute(const httplib::Request& req, httplib::Response& res) {
+    if (req.path.rfind("/api/", 0) == 0 && !res.has_header("Cache-Control")) res.set_header("Cache-Control", "no-store");
+    if (res.status == 401) {  // the service refused the session's token itself (not a route the cookie cannot open)
+      const std::string session = CookieToken(req);
+      const std::string token = session.empty() ? "" : sessions_.TokenOf(session);
+      if (!token.empty() && req.get_header_value("Authorization") == "Bearer " + token) sessions_.Revoke(session);
+    }
+  }
+
+  std::string CookieHeader(const std::string& session, int max_age_s) const {
+    return fmt::format("{}={}; Path=/api; Max-Age={}; HttpOnly; SameSite=Strict{}", kCookie, session, max_age_s,
                        tls_ ? "; Secure" : "");
   }
 
+  // Login: a JSON body only (a cross-site form can post text/plain, not application/json without a CORS
+  // preflight this server never grants), from this dashboard's origin, at most kMaxFailedLogins failures per
+  // client address in kFailedLoginWindow; each failure is logged. The cookie holds a random session id, not the
+  // token: logout revokes it.
   void Login(const httplib::Request& req, httplib::Response& res) {
+    if (req.get_header_value("Content-Type").rfind("application/json", 0) != 0)
+      return SendErrorStatus(res, 415, "INVALID_ARGUMENT", "Content-Type: must be application/json");
+    if (!SameOrigin(req))
+      return SendErrorStatus(res, 403, "PERMISSION_DENIED",
+                             "Origin: " + req.get_header_value("Origin") + " may not log in to this dashboard");
+    if (double wait_s = logins_.Blocked_s(req.remote_addr); wait_s > 0) {
+      res.set_header("Retry-After", std::to_string(static_cast<int>(std::ceil(wait_s))));
+      return SendErrorStatus(res, 429, "RESOURCE_EXHAUSTED",
+                             fmt::format("too many failed logins from {}; try again in {:.0f} s", req.remote_addr,
+                                         std::ceil(wait_s)));
+    }
     Json body;
     if (!BodyJson(req, res, &body)) return;
     if (!body.contains("token") || !body["token"].is_string())
@@ -348,8 +734,21 @@ class Routes {
     Deadline(&ctx, 10.0);
     v1::ListBenchesResponse out;
     auto st = stub_->ListBenches(&ctx, v1::ListBenchesRequest(), &out);
-    if (!st.ok()) return SendError(res, st);
-    res.set_header("Set-Cookie", CookieHeader(token, 12 * 3600));
+    if (!st.ok()) {
+      if (st.error_code() == grpc::StatusCode::UNAUTHENTICATED) {
+        logins_.Failed(req.remote_addr);
+        spdlog::warn("web: failed login from {} ({})", req.remote_addr.c_str(), st.error_message().c_str());
+      }
+      return SendError(res, st);
+    }
+    res.set_header("Set-Cookie", CookieHeader(sessions_.Create(token), static_cast<int>(kSessionLife_s)));
+    res.set_content("{}", kJson);
+  }
+
+  void Logout(const httplib::Request& req, httplib::Response& res) {
+    const std::string session = CookieToken(req);
+    if (!session.empty()) sessions_.Revoke(session);
+    res.set_header("Set-Cookie", CookieHeader("", 0));
     res.set_content("{}", kJson);
   }
 
@@ -461,7 +860,7 @@ class Routes {
       if (key != "spec" && key != "batch_name")
         return BadRequest(res, key + ": unknown field (the body is {\"spec\": {...}, \"batch_name\": \"...\"})");
     if (!body.contains("spec") || !body["spec"].is_object()) return BadRequest(res, "spec: must be a JSON object");
-    auto spec = experiment::ParseSpecJson(body["spec"].dump());
+    auto spec = experiment::ParseSpecJson(Dump(body["spec"]));
     if (!spec.ok()) return BadRequest(res, spec.status().message());
     v1::SubmitRunRequest r;
     *r.mutable_spec() = *spec;
@@ -504,8 +903,8 @@ class Routes {
     Json channel_units = Json::object();
     for (const char* ch : {"gate", "v_coil_V", "i_A", "x_m", "v_mps", "ref", "u"})
       channel_units[ch] = exportfile::ChannelUnit(ch, run.controller());
-    res.set_content(R"({"run":)" + ToJson(run) + R"(,"metric_units":)" + units.dump() + R"(,"channel_units":)" +
-                        channel_units.dump() + "}",
+    res.set_content(R"({"run":)" + ToJson(run) + R"(,"metric_units":)" + Dump(units) + R"(,"channel_units":)" +
+                        Dump(channel_units) + "}",
                     kJson);
   }
 
@@ -545,41 +944,111 @@ class Routes {
         !NumberParam(req, res, "max_points", &max_points))
       return;
     if (max_points < 10 || max_points > 200000) return BadRequest(res, "max_points: must be 10..200000");
-    Trace t;
-    auto st = ReadTrace(stub_.get(), req, PathId(req), &t);
+    TraceRowsOut t;
+    auto st = ReadTraceRows(stub_.get(), req, PathId(req), t_from, t_to, static_cast<size_t>(max_points), &t);
     if (!st.ok()) return SendError(res, st);
-    bool decimated = false;
-    const std::string rows = TraceRowsJson(t, t_from, t_to, static_cast<size_t>(max_points), &decimated);
-    std::vector<std::string> names;  // the rows' columns after t_s
-    for (size_t ch : t.ValueChannels()) names.push_back(t.channels[ch]);
-    Json head{{"channels", names}, {"t0_s", t.t0_s}, {"sample_period_s", t.period_s},
-              {"total_samples", t.samples()}, {"decimated", decimated}};
-    std::string out = head.dump();
+    Json head{{"channels", t.channels}, {"t0_s", t.t0_s}, {"sample_period_s", t.period_s},
+              {"total_samples", t.total_samples}, {"decimated", t.decimated}};
+    std::string out = Dump(head);
     out.pop_back();
-    out += R"(,"rows":)" + rows + "}";
+    out += R"(,"rows":)" + t.rows + "}";
     res.set_content(out, kJson);
   }
 
+  // The whole trace as CSV, streamed: GetTrace's chunks are read one at a time as the client takes the rows, so
+  // memory stays at a chunk or two whatever the trace's size (docs/web.md "Limits"). The first chunk is read
+  // before answering, so a refusal (token, role, no such run) is still a JSON error with its status; an error
+  // later ends the download without its final chunk, which the browser reports as a failed download.
   void TraceCsv(const httplib::Request& req, httplib::Response& res) {
-    Trace t;
     const std::int64_t id = PathId(req);
-    auto st = ReadTrace(stub_.get(), req, id, &t);
-    if (!st.ok()) return SendError(res, st);
-    const std::vector<size_t> value_channels = t.ValueChannels();
-    std::string out = "t_s";
-    for (size_t ch : value_channels) out += "," + t.channels[ch];
-    out += "\n";
-    out.reserve(out.size() + t.samples() * (value_channels.size() + 1) * 14);
-    for (size_t k = 0; k < t.samples(); ++k) {
-      AppendNumber(&out, t.t0_s + k * t.period_s);
-      for (size_t ch : value_channels) {
-        out += ',';
-        AppendNumber(&out, t.columns[ch][k]);
+    struct Download {
+      grpc::ClientContext ctx;
+      std::unique_ptr<grpc::ClientReader<v1::TraceChunk>> reader;
+      v1::TraceChunk chunk;
+      std::vector<std::string> channels;
+      std::vector<size_t> value_channels;
+      double t0_s = 0, period_s = 0;
+      std::int64_t k = 0;  // the next sample's index
+      bool header_sent = false, have_chunk = false, finished = false;
+      grpc::Status Finish() {
+        finished = true;
+        return reader->Finish();
       }
-      out += '\n';
-    }
+      ~Download() {
+        if (finished || !reader) return;
+        ctx.TryCancel();  // the client went away mid-download: end the RPC before its reader goes
+        while (reader->Read(&chunk)) {
+        }
+        (void)reader->Finish();
+      }
+    };
+    auto d = std::make_shared<Download>();
+    Authorize(req, &d->ctx);
+    Deadline(&d->ctx, 3600.0);
+    v1::GetTraceRequest r;
+    r.set_run_id(id);
+    d->reader = stub_->GetTrace(&d->ctx, r);
+    if (!d->reader->Read(&d->chunk)) return SendError(res, d->Finish());
+    d->have_chunk = true;
+    d->channels.assign(d->chunk.channels().begin(), d->chunk.channels().end());
+    for (size_t ch = 0; ch < d->channels.size(); ++ch)
+      if (d->channels[ch] != "t_s") d->value_channels.push_back(ch);
+    d->t0_s = d->chunk.t0_s();
+    d->period_s = d->chunk.sample_period_s();
     res.set_header("Content-Disposition", fmt::format("attachment; filename=\"run{}.csv\"", id));
-    res.set_content(out, "text/csv; charset=utf-8");
+    res.set_header("Cache-Control", "no-store");
+    res.set_chunked_content_provider(
+        "text/csv; charset=utf-8",
+        [d](size_t, httplib::DataSink& sink) {
+          try {
+            std::string out;
+            if (!d->header_sent) {
+              out = "t_s";
+              for (size_t ch : d->value_channels) out += "," + d->channels[ch];
+              out += "\n";
+              d->header_sent = true;
+            }
+            if (!d->have_chunk) {
+              if (!d->reader->Read(&d->chunk)) {
+                const grpc::Status st = d->Finish();
+                if (!st.ok()) return false;  // cut short: no final chunk
+                if (!out.empty() && !sink.write(out.data(), out.size())) return false;
+                sink.done();
+                return true;
+              }
+            }
+            d->have_chunk = false;
+            const v1::TraceChunk& c = d->chunk;
+            const size_t n = static_cast<size_t>(std::max(0, c.samples()));
+            if (static_cast<size_t>(c.channels_size()) != d->channels.size() ||
+                c.data().size() != n * d->channels.size() * 8) {
+              d->ctx.TryCancel();
+              return false;
+            }
+            out.reserve(out.size() + n * (d->value_channels.size() + 1) * 14);
+            const char* data = c.data().data();
+            for (size_t i = 0; i < n; ++i) {
+              AppendNumber(&out, d->t0_s + static_cast<double>(d->k + static_cast<std::int64_t>(i)) * d->period_s);
+              for (size_t ch : d->value_channels) {
+                double v;
+                std::memcpy(&v, data + (ch * n + i) * 8, 8);  // little-endian float64, channel-major (api.proto)
+                out += ',';
+                AppendNumber(&out, v);
+              }
+              out += '\n';
+            }
+            d->k += static_cast<std::int64_t>(n);
+            if (!sink.write(out.data(), out.size())) {
+              d->ctx.TryCancel();
+              return false;
+            }
+            return true;
+          } catch (...) {
+            d->ctx.TryCancel();
+            return false;
+          }
+        },
+        [](bool) {});
   }
 
   // WatchRun re-emitted as Server-Sent Events: "event: run" with each RunEvent (protobuf JSON), then
@@ -594,20 +1063,31 @@ class Routes {
     v1::Run run;
     if (auto st = FetchRun(req, PathId(req), &run); !st.ok() || run.spec().interactive()) {
       const std::string data =
-          st.ok() ? Json{{"code", "FAILED_PRECONDITION"},
+          st.ok() ? Dump(Json{{"code", "FAILED_PRECONDITION"},
                          {"message", "run " + std::to_string(run.id()) +
                                          " is interactive: follow it with benchctl watch (a watch from this page "
-                                         "would cancel it when the page goes away)"}}.dump()
-                  : Json{{"code", CodeName(st.error_code())}, {"message", st.error_message()}}.dump();
+                                         "would cancel it when the page goes away)"}})
+                  : Dump(Json{{"code", CodeName(st.error_code())}, {"message", st.error_message()}});
       res.set_header("Cache-Control", "no-cache");
       res.set_content("event: error\ndata: " + data + "\n\n", "text/event-stream");
+      return;
+    }
+    std::string why;
+    auto slot = TakeStream(SessionKey(req), &why);
+    if (!slot) {
+      SendErrorStatus(res, 429, "RESOURCE_EXHAUSTED", why);
+      res.set_header("Retry-After", "5");
+      if (DoorRequestState* door = CurrentDoorRequest()) door->close_after = true;  // its connection goes too
+      res.set_header("Connection", "close");
       return;
     }
     struct Watch {
       grpc::ClientContext ctx;
       std::unique_ptr<grpc::ClientReader<v1::RunEvent>> reader;
+      std::shared_ptr<void> slot;  // the live view's place, held until the stream is gone
     };
     auto w = std::make_shared<Watch>();
+    w->slot = std::move(slot);
     Authorize(req, &w->ctx);
     Deadline(&w->ctx, options_.watch_window_s);
     v1::WatchRunRequest r;
@@ -633,7 +1113,7 @@ class Routes {
           while (w->reader->Read(&ev)) {
             last_status = RunStatusText(ev.status());
             ended = ev.status() != v1::QUEUED && ev.status() != v1::RUNNING;
-            if (!send("run", ToJson(ev))) {  // the page went away
+            if (!send("run", ToJson(ev, /*with_zeros=*/true))) {  // the page went away
               w->ctx.TryCancel();
               (void)w->reader->Finish();
               return false;
@@ -641,9 +1121,9 @@ class Routes {
           }
           const grpc::Status st = w->reader->Finish();
           if (!st.ok() && st.error_code() != grpc::StatusCode::DEADLINE_EXCEEDED) {
-            send("error", Json{{"code", CodeName(st.error_code())}, {"message", st.error_message()}}.dump());
+            send("error", Dump(Json{{"code", CodeName(st.error_code())}, {"message", st.error_message()}}));
           } else if (ended) {
-            send("end", Json{{"status", last_status}}.dump());
+            send("end", Dump(Json{{"status", last_status}}));
           }
           sink.done();
           return true;
@@ -683,7 +1163,7 @@ class Routes {
     if (!st.ok()) return SendError(res, st);
     Json j = {{"report", out.report()}};
     j["diagnosis"] = Json::parse(out.report_json(), nullptr, false);
-    res.set_content(j.dump(), kJson);
+    res.set_content(Dump(j), kJson);
   }
 
   void Compare(const httplib::Request& req, httplib::Response& res) {
@@ -711,7 +1191,7 @@ class Routes {
       for (const auto& s : seen) u += (u.empty() ? "" : " or ") + s;
       units[col] = u;
     }
-    res.set_content(R"({"comparison":)" + ToJson(out) + R"(,"units":)" + units.dump() + "}", kJson);
+    res.set_content(R"({"comparison":)" + ToJson(out) + R"(,"units":)" + Dump(units) + "}", kJson);
   }
 
   void Nights(const httplib::Request& req, httplib::Response& res) {
@@ -729,9 +1209,52 @@ class Routes {
     res.set_content(ToJson(out), kJson);
   }
 
+  // Who a live view belongs to, for the per-session cap: the token (from the header or the cookie), hashed.
+  static std::string SessionKey(const httplib::Request& req) {
+    std::string problem;
+    std::string t = req.has_header("Authorization") ? BearerTokenOf(req.get_header_value("Authorization"), &problem)
+                                                    : CookieToken(req);
+    return std::to_string(std::hash<std::string>()(t));
+  }
+
+  // A place for a live view (GatewayOptions::max_streams, max_streams_per_session), or null with `why`.
+  std::shared_ptr<void> TakeStream(const std::string& session, std::string* why) {
+    std::lock_guard<std::mutex> lock(streams_mu_);
+    int& mine = streams_per_session_[session];
+    if (streams_ >= options_.max_streams || mine >= options_.max_streams_per_session) {
+      *why = streams_ >= options_.max_streams
+                 ? fmt::format("live views: {} open, the dashboard's limit; try again in a moment", streams_)
+                 : fmt::format("live views: {} open for this session, its limit; close some tabs", mine);
+      if (mine == 0) streams_per_session_.erase(session);
+      return nullptr;
+    }
+    ++mine;
+    ++streams_;
+    struct Slot {
+      Slot(Routes* r, std::string s) : routes(r), session(std::move(s)) {}
+      Slot(const Slot&) = delete;
+      Slot& operator=(const Slot&) = delete;
+      Routes* routes;
+      std::string session;
+      ~Slot() {
+        std::lock_guard<std::mutex> lock(routes->streams_mu_);
+        --routes->streams_;
+        auto it = routes->streams_per_session_.find(session);
+        if (it != routes->streams_per_session_.end() && --it->second <= 0) routes->streams_per_session_.erase(it);
+      }
+    };
+    return std::make_shared<Slot>(this, session);
+  }
+
   std::unique_ptr<v1::BenchService::Stub> stub_;
+  Sessions sessions_;
+  FailedLogins logins_;
+  std::mutex streams_mu_;
+  int streams_ = 0;
+  std::map<std::string, int> streams_per_session_;
   GatewayOptions options_;
   bool tls_;
+  size_t max_body_bytes_;
 };
 
 // PEM text -> OpenSSL objects for httplib::SSLServer (which takes ownership of neither).
@@ -776,16 +1299,25 @@ StatusOr<std::unique_ptr<Gateway>> Gateway::Start(const GatewayOptions& options,
     BIO_free(kb);
     if (!m.cert) return Status::InvalidArgument("tls.cert_file: not a PEM certificate");
     if (!m.key) return Status::InvalidArgument("tls.key_file: not a PEM private key");
-    auto ssl = std::make_unique<httplib::SSLServer>(m.cert, m.key);
+    auto ssl = std::make_unique<DoorServer<httplib::SSLServer>>(m.cert, m.key);
     if (!ssl->is_valid()) return Status::InvalidArgument("tls: the certificate and key do not make a TLS server");
+    ssl->InitDoor(options.limits, ssl->ssl_context());
     g->http_ = std::move(ssl);
     g->tls_ = true;
   } else {
-    g->http_ = std::make_unique<httplib::Server>();
+    auto plain = std::make_unique<DoorServer<httplib::Server>>();
+    plain->InitDoor(options.limits, nullptr);
+    g->http_ = std::move(plain);
   }
-  const int threads = std::max(4, options.threads);
-  g->http_->new_task_queue = [threads] { return new httplib::ThreadPool(static_cast<size_t>(threads)); };
-  g->http_->set_payload_max_length(8u << 20);
+  if (options.max_streams >= options.limits.workers)
+    return Status::InvalidArgument(fmt::format("web: max_streams ({}) must stay below the workers ({})",
+                                               options.max_streams, options.limits.workers));
+  g->http_->set_payload_max_length(options.limits.max_body_bytes);
+  g->http_->set_read_timeout(5, 0);   // SO_RCVTIMEO on each socket: one blocking read (a TLS record) at most
+  g->http_->set_write_timeout(10, 0); // SO_SNDTIMEO: a reader that stops reading lets its worker go
+  // What the answers' Keep-Alive header announces; the door enforces both.
+  g->http_->set_keep_alive_timeout(static_cast<time_t>(std::ceil(options.limits.idle_timeout_s)));
+  g->http_->set_keep_alive_max_count(static_cast<size_t>(std::max(1, options.limits.max_requests_per_connection)));
   auto routes = std::make_shared<Routes>(std::move(channel), options, g->tls_);
   routes->Install(*g->http_);
   g->routes_ = routes;  // the handlers point into it
@@ -814,5 +1346,26 @@ void Gateway::Stop() {
 }
 
 Gateway::~Gateway() { Stop(); }
+
+RawGateway::RawGateway(std::shared_ptr<grpc::Channel> channel, const GatewayOptions& options) {
+  auto server = std::make_unique<DoorServer<httplib::Server>>();
+  server->set_payload_max_length(options.limits.max_body_bytes);
+  auto routes = std::make_shared<Routes>(std::move(channel), options, false);
+  routes->Install(*server);
+  routes_ = routes;
+  http_ = std::move(server);
+}
+
+RawGateway::~RawGateway() = default;
+
+std::string RawGateway::Serve(const std::string& raw) {
+  auto* server = static_cast<DoorServer<httplib::Server>*>(http_.get());
+  MemoryStream strm(raw);
+  for (int k = 0; k < 64 && !strm.consumed(); ++k) {
+    bool closed = false;
+    if (!server->ServeStream(strm, false, closed) || closed) break;
+  }
+  return strm.output();
+}
 
 }  // namespace vb::web

@@ -6,8 +6,9 @@
 //
 // Routes (JSON bodies are protobuf JSON with the .proto field names):
 //   GET  /, /app.js, /app.css, /dygraph.min.js, /dygraph.min.css   the page (embedded)
-//   POST /api/login {"token"}        checks the token (ListBenches), sets the vb_token cookie (for SSE)
-//   POST /api/logout                 clears it
+//   POST /api/login {"token"}        checks the token (ListBenches), sets the vb_session cookie (a server-side
+//                                    session id, for SSE and the CSV link)
+//   POST /api/logout                 revokes the session
 //   GET  /api/benches                ListBenches
 //   GET  /api/queue                  running and queued runs, queue positions, ETA of running runs
 //   GET  /api/runs?status=&batch_id=&tag=&bench=&page_size=&page_token=   ListRuns
@@ -20,8 +21,9 @@
 //   GET  /api/runs/ID/events?rate_Hz=                                     WatchRun as Server-Sent Events
 //   GET  /api/compare?runs=1,2,3 | ?batch_id=N                            CompareRuns, with units
 //   GET  /api/nights?limit=          ListNights
-// Tokens: "Authorization: Bearer <token>" on any request; the vb_token cookie (HttpOnly, SameSite=Strict) only
-// on GET requests (EventSource cannot send headers; a cookie never authorises a change: docs/web.md "Auth").
+// Tokens: "Authorization: Bearer <token>" on any request; the vb_session cookie (HttpOnly, SameSite=Strict) only
+// on GET .../events and .../trace.csv, from this origin (EventSource and a link cannot send headers; docs/web.md
+// "Sessions"). Every request passes the door's checks first (docs/web.md "Door", "Limits").
 // Errors: {"code": "INVALID_ARGUMENT", "message": "..."} with the HTTP status of HttpStatusFor(code).
 #pragma once
 
@@ -29,9 +31,12 @@
 
 #include <memory>
 #include <string>
+#include <string_view>
+#include <vector>
 #include <thread>
 
 #include "common/status.h"
+#include "web/limits.h"
 
 namespace httplib {
 class Server;
@@ -43,8 +48,34 @@ struct GatewayOptions {
   std::string listen_address;   // "host:port"; port 0 = any free port
   std::string tls_cert_pem;     // both set = HTTPS (the gRPC server's certificate and key)
   std::string tls_key_pem;
-  int threads = 32;             // HTTP worker threads; each open live view (SSE) holds one
   double watch_window_s = 60.0; // an SSE stream ends after this long; the browser reconnects (docs/web.md "SSE")
+  DoorLimits limits;            // connections, heads, bodies, workers (web/limits.h)
+  // Live views (SSE) open at once, in all and per session (token); each holds a worker, so the total stays below
+  // limits.workers: the page's other requests always find one. Beyond: 429.
+  int max_streams = 48;
+  int max_streams_per_session = 8;
+  // Origins besides the dashboard's own accepted on login and on cookie-authorised costly calls.
+  std::vector<std::string> allowed_origins;
+};
+
+// The door's checks, public for the tests and the fuzz target.
+bool ValidUtf8(std::string_view s);
+// The deepest nesting of [ and { outside strings (a pre-scan: the body is not parsed yet).
+int JsonDepth(std::string_view s);
+// The token of "Bearer <token>", or "" with `problem` saying why not (visible ASCII only: gRPC metadata).
+std::string BearerTokenOf(std::string_view header, std::string* problem);
+
+// The gateway's request handling without sockets, for the fuzz target (fuzz/gateway_fuzz.cc): `raw` is read as
+// the bytes of one connection (requests one after another), the answers' bytes come back.
+class RawGateway {
+ public:
+  explicit RawGateway(std::shared_ptr<grpc::Channel> channel, const GatewayOptions& options = {});
+  ~RawGateway();
+  std::string Serve(const std::string& raw);
+
+ private:
+  std::shared_ptr<void> routes_;
+  std::unique_ptr<httplib::Server> http_;
 };
 
 // The HTTP status for a gRPC status code (UNAUTHENTICATED 401, PERMISSION_DENIED 403, INVALID_ARGUMENT 400,

@@ -218,6 +218,30 @@ try:
     check("the run is cancelled from the page", bool(cancelled), driver.find_element(By.TAG_NAME, "h1").text)
     check("the store says cancelled", api("GET", "/api/runs/" + live_id, VIEWER)["run"]["status"] == "CANCELLED")
 
+    # 4b. A run watched from its start (issue 24, M3): its first sample is at t_s = 0, which proto3 JSON would
+    # leave out; the charts must draw it and every later one, without a console error.
+    # The run waits behind another on the same bench while the page opens its stream, so the page sees it start.
+    console_errors()  # what came before is checked elsewhere
+    on_emu1 = dict(spec.get("bench", {}), name="emu-1")
+    blocker = api("POST", "/api/runs", OPERATOR, {"spec": dict(spec, name="web-blocker", duration_s=30.0,
+                                                                bench=on_emu1)})["run_ids"][0]
+    start_id = api("POST", "/api/runs", OPERATOR, {"spec": dict(spec, name="web-from-start", duration_s=3.0,
+                                                                 bench=on_emu1)})["run_ids"][0]
+    go("#/run/" + start_id)
+    wait(lambda: driver.find_elements(By.CSS_SELECTOR, "#traces .live-count") or None, what="the queued run's live view")
+    time.sleep(1.0)
+    check("the run waits in the queue", api("GET", "/api/runs/" + start_id, VIEWER)["run"]["status"] == "QUEUED")
+    api("POST", "/api/runs/%s/cancel" % blocker, OPERATOR, {})
+    got = wait(lambda: int(driver.find_element(By.CSS_SELECTOR, "#traces .live-count").get_attribute("data-samples")
+                           or 0) > 50, what="live samples of a run watched from its start")
+    time.sleep(0.6)  # two chart updates (every 250 ms)
+    errs = console_errors()
+    check("a run watched from its start charts live without a console error", bool(got) and not errs, errs)
+    for _ in range(100):
+        if api("GET", "/api/runs/" + start_id, VIEWER)["run"]["status"] not in ("QUEUED", "RUNNING"):
+            break
+        time.sleep(0.1)
+
     # 5. A comparison: seed 001's four current laws, then the compare page of that batch.
     with open(os.path.join(examples_dir, "compare-current-controllers.json")) as f:
         sub = api("POST", "/api/runs", OPERATOR, {"spec": json.load(f)})

@@ -108,6 +108,24 @@ TEST(WebConfig, ListenAddressIsCheckedAtStart) {
   ASSERT_TRUE(ok.ok()) << ok.status().message();
   EXPECT_EQ(ok->web_listen_address, "127.0.0.1:8080");
   EXPECT_TRUE(vb::server::SettingsFromConfig(vb::testing::MinimalConfig(), "")->web_listen_address.empty());
+  // The door's limits: named in the error, live views below the workers.
+  auto refused = [&](auto&& set, const std::string& field) {
+    auto bad = c;
+    set(*bad.mutable_web());
+    auto s = vb::server::SettingsFromConfig(bad, "");
+    ASSERT_FALSE(s.ok()) << field;
+    EXPECT_EQ(s.status().message().rfind(field, 0), 0u) << s.status().message();
+  };
+  refused([](auto& w) { w.set_head_timeout_s(-1); }, "web.head_timeout_s");
+  refused([](auto& w) { w.set_max_streams(64); }, "web.max_streams");  // = the default 64 workers
+  refused([](auto& w) { w.set_workers(8); }, "web.max_streams");       // below the default 48 streams
+  refused([](auto& w) { w.add_allowed_origins("https://proxy.lab/"); }, "web.allowed_origins");
+  c.mutable_web()->set_workers(16);
+  c.mutable_web()->set_max_streams(12);
+  c.mutable_web()->add_allowed_origins("https://proxy.lab:8443");
+  auto limits = vb::server::SettingsFromConfig(c, "");
+  ASSERT_TRUE(limits.ok()) << limits.status().message();
+  EXPECT_EQ(limits->web.workers(), 16);
 }
 
 TEST_F(WebGatewayTest, ServesThePageAndDebiansDygraphsFromTheBinary) {
@@ -299,6 +317,50 @@ TEST_F(WebGatewayTest, LiveSamplesArriveAsServerSentEventsUntilTheEnd) {
   EXPECT_NE(anonymous->body.find("UNAUTHENTICATED"), std::string::npos);
 }
 
+// A run watched from before its start (issue 24, M3): proto3 JSON leaves out fields at zero (a sample at t_s = 0,
+// a plunger at x_m = 0 before it moves, the gate off), and a chart fed such a sample stays blank: every live
+// sample carries every field.
+TEST_F(WebGatewayTest, LiveSamplesCarryEveryFieldFromTheStart) {
+  Json spec = Json::parse(SpecFile("standard/e3.json"));
+  spec["realtime"] = true;
+  spec["bench"]["name"] = "emu-a";
+  spec["duration_s"] = 30;
+  const std::string blocker = Submit(spec.dump())["run_ids"][0];
+  spec["duration_s"] = 0.3;
+  const std::string id = Submit(spec.dump())["run_ids"][0];
+  std::string stream;
+  std::thread watch([&] {
+    httplib::Client c("127.0.0.1", port_);
+    c.set_read_timeout(30, 0);
+    c.Get("/api/runs/" + id + "/events?rate_Hz=200", Bearer(kViewerToken), [&](const char* data, size_t n) {
+      stream.append(data, n);
+      return true;
+    });
+  });
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));
+  auto cancel = http_->Post("/api/runs/" + blocker + "/cancel", Bearer(kOperatorToken), "{}", "application/json");
+  ASSERT_TRUE(cancel && cancel->status == 200);
+  watch.join();
+  size_t samples = 0, missing = 0;
+  std::string example;
+  std::istringstream lines(stream);
+  for (std::string line; std::getline(lines, line);) {
+    if (line.rfind("data: {\"run_id\"", 0) != 0) continue;
+    const Json ev = Json::parse(line.substr(6));
+    for (const auto& sample : ev["samples"]) {
+      ++samples;
+      for (const char* field : {"t_s", "gate", "i_A", "x_m", "ref"}) {
+        if (!sample.contains(field)) {
+          ++missing;
+          example = sample.dump();
+        }
+      }
+    }
+  }
+  EXPECT_GE(samples, 20u) << stream.substr(0, 1500);
+  EXPECT_EQ(missing, 0u) << example;
+}
+
 // An interactive run is cancelled when its submitter's watch goes away: the page's streams come and go, so the
 // gateway does not watch those runs, and the run is not cancelled by a page that looked at it.
 TEST_F(WebGatewayTest, InteractiveRunsAreNotWatchedFromThePage) {
@@ -331,6 +393,8 @@ TEST_F(WebGatewayTest, CancelAndRerunGoThroughTheService) {
   ASSERT_EQ(cancel->status, 200) << cancel->body;
   const Json ended = WaitEnded(id);
   EXPECT_EQ(ended["run"]["status"], "CANCELLED");
+  // Who cancelled is recorded ahead of the caller's words, which cannot replace it.
+  EXPECT_EQ(ended["run"]["reason"].get<std::string>().rfind("cancelled by olga: from the test", 0), 0u) << ended.dump();
   auto again = http_->Post("/api/runs/" + id + "/cancel", Bearer(kOperatorToken), "{}", "application/json");
   ASSERT_TRUE(again);
   EXPECT_EQ(again->status, 409) << again->body;  // FAILED_PRECONDITION: already finished
@@ -348,7 +412,9 @@ TEST_F(WebGatewayTest, CancelAndRerunGoThroughTheService) {
   EXPECT_EQ(viewer_rerun->status, 403);
 }
 
-TEST_F(WebGatewayTest, TheCookieAuthorisesReadsOnlyNeverAChange) {
+// The cookie holds a server-side session id (never the token), authorises only what the page cannot send a
+// header with (the live view, the CSV download), never from another origin, and logout revokes it.
+TEST_F(WebGatewayTest, TheSessionCookieAuthorisesTheStreamAndTheDownloadOnlyAndLogoutRevokesIt) {
   auto bad = http_->Post("/api/login", R"({"token": "nope"})", "application/json");
   ASSERT_TRUE(bad);
   EXPECT_EQ(bad->status, 401);
@@ -359,14 +425,77 @@ TEST_F(WebGatewayTest, TheCookieAuthorisesReadsOnlyNeverAChange) {
   const std::string cookie = login->get_header_value("Set-Cookie");
   EXPECT_NE(cookie.find("HttpOnly"), std::string::npos);
   EXPECT_NE(cookie.find("SameSite=Strict"), std::string::npos);
-  const httplib::Headers with_cookie = {{"Cookie", std::string("vb_token=") + kOperatorToken}};
+  EXPECT_EQ(cookie.find(kOperatorToken), std::string::npos) << cookie;  // not the token
+  ASSERT_EQ(cookie.rfind("vb_session=", 0), 0u) << cookie;
+  const std::string session = cookie.substr(11, cookie.find(';') - 11);
+  EXPECT_EQ(session.size(), 64u);
+  const httplib::Headers with_cookie = {{"Cookie", "vb_session=" + session}};
+
+  Json spec = Json::parse(SpecFile("standard/e3.json"));
+  spec["duration_s"] = 0.05;
+  const std::string id = Submit(spec.dump())["run_ids"][0];
+  WaitEnded(id);
+  auto csv = http_->Get("/api/runs/" + id + "/trace.csv", with_cookie);
+  ASSERT_TRUE(csv);
+  EXPECT_EQ(csv->status, 200) << csv->body.substr(0, 300);
+  // Other reads and every change need the header.
   auto read = http_->Get("/api/benches", with_cookie);
   ASSERT_TRUE(read);
-  EXPECT_EQ(read->status, 200);
+  EXPECT_EQ(read->status, 401);
   auto write = http_->Post("/api/runs", with_cookie, R"({"spec": )" + SpecFile("standard/e3.json") + "}",
                            "application/json");
   ASSERT_TRUE(write);
   EXPECT_EQ(write->status, 401);
+  // A page of another origin (another port of this host is same-site, not same-origin) gets nothing with it.
+  httplib::Headers cross = with_cookie;
+  cross.emplace("Origin", "http://127.0.0.1:1");
+  auto from_elsewhere = http_->Get("/api/runs/" + id + "/trace.csv", cross);
+  ASSERT_TRUE(from_elsewhere);
+  EXPECT_EQ(from_elsewhere->status, 403);
+  httplib::Headers same = with_cookie;
+  same.emplace("Origin", "http://127.0.0.1:" + std::to_string(port_));
+  auto from_here = http_->Get("/api/runs/" + id + "/trace.csv", same);
+  ASSERT_TRUE(from_here);
+  EXPECT_EQ(from_here->status, 200);
+  // Logout revokes the session: the same cookie no longer authorises anything.
+  auto logout = http_->Post("/api/logout", with_cookie, "", "application/json");
+  ASSERT_TRUE(logout);
+  EXPECT_EQ(logout->status, 200);
+  auto after = http_->Get("/api/runs/" + id + "/trace.csv", with_cookie);
+  ASSERT_TRUE(after);
+  EXPECT_EQ(after->status, 401) << after->body;
+  // The old raw-token cookie is nothing.
+  auto raw = http_->Get("/api/runs/" + id + "/trace.csv", {{"Cookie", std::string("vb_token=") + kOperatorToken}});
+  ASSERT_TRUE(raw);
+  EXPECT_EQ(raw->status, 401);
+}
+
+// Login CSRF: a cross-site form can post text/plain, and a page of another origin sends its Origin; both are
+// refused. Failed logins are limited per address and logged.
+TEST_F(WebGatewayTest, LoginWantsJsonFromThisOriginAndFailuresAreLimited) {
+  const std::string body = std::string(R"({"token": ")") + kViewerToken + "\"}";
+  auto form = http_->Post("/api/login", body, "text/plain");
+  ASSERT_TRUE(form);
+  EXPECT_EQ(form->status, 415);
+  EXPECT_FALSE(form->has_header("Set-Cookie"));
+  auto cross = http_->Post("/api/login", {{"Origin", "http://evil.example"}}, body, "application/json");
+  ASSERT_TRUE(cross);
+  EXPECT_EQ(cross->status, 403);
+  EXPECT_FALSE(cross->has_header("Set-Cookie"));
+  for (int k = 0; k < 10; ++k) {
+    auto bad = http_->Post("/api/login", R"({"token": "guess)" + std::to_string(k) + "\"}", "application/json");
+    ASSERT_TRUE(bad);
+    EXPECT_EQ(bad->status, 401);
+  }
+  auto blocked = http_->Post("/api/login", body, "application/json");  // even the right token, for a while
+  ASSERT_TRUE(blocked);
+  EXPECT_EQ(blocked->status, 429) << blocked->body;
+  EXPECT_TRUE(blocked->has_header("Retry-After"));
+  EXPECT_NE(server_->Log().find("web: failed login from 127.0.0.1"), std::string::npos);
+  // API JSON is not cached.
+  auto api = http_->Get("/api/benches", Bearer(kViewerToken));
+  ASSERT_TRUE(api);
+  EXPECT_EQ(api->get_header_value("Cache-Control"), "no-store");
 }
 
 TEST_F(WebGatewayTest, ListsCheckTheirParametersAndPassTheRestToTheService) {
@@ -453,6 +582,14 @@ TEST(WebTls, TheDashboardUsesTheServersCertificate) {
   auto benches = tls.Get("/api/benches", Bearer(kViewerToken));
   ASSERT_TRUE(benches) << httplib::to_string(benches.error());
   EXPECT_EQ(benches->status, 200);
+  EXPECT_EQ(benches->get_header_value("Strict-Transport-Security"), "max-age=31536000");
+  // The door's checks hold under TLS too (the head is read by the door, the handshake as well).
+  auto tab = tls.Get("/api/benches", {{"Authorization", "Bearer a\tb"}});
+  ASSERT_TRUE(tab);
+  EXPECT_EQ(tab->status, 401);
+  auto kept = tls.Get("/api/benches", Bearer(kViewerToken));  // the same kept-alive connection
+  ASSERT_TRUE(kept);
+  EXPECT_EQ(kept->status, 200);
   auto login = tls.Post("/api/login", std::string(R"({"token": ")") + kViewerToken + "\"}", "application/json");
   ASSERT_TRUE(login);
   EXPECT_NE(login->get_header_value("Set-Cookie").find("; Secure"), std::string::npos);

@@ -189,17 +189,19 @@ function liveView(runId, box, onEnd) {
     const e = JSON.parse(ev.data);
     status.replaceChildren(statusCell(e.status), ' ' + Math.round(100 * (e.progress || 0)) + ' %');
     for (const s of e.samples || []) {
-      if (s.t_s <= lastT) continue;  // a reconnected stream starts over from the run's buffer
-      lastT = s.t_s;
-      // proto3 JSON leaves out zeros: a missing field is 0; NaN (no reference) arrives as "NaN".
-      rowsI.push([s.t_s, s.i_A === undefined ? 0 : num(s.i_A), s.ref === undefined ? 0 : num(s.ref), s.gate || 0]);
-      rowsX.push([s.t_s, s.x_m === undefined ? 0 : num(s.x_m)]);
+      // The server writes fields at zero too (proto3 JSON would leave them out: t_s = 0, x_m = 0 at rest); a
+      // missing one is still read as 0, and NaN (no reference) arrives as "NaN".
+      const t = typeof s.t_s === 'number' ? s.t_s : 0;
+      if (!(t > lastT)) continue;  // a reconnected stream starts over from the run's buffer
+      lastT = t;
+      rowsI.push([t, s.i_A === undefined ? 0 : num(s.i_A), s.ref === undefined ? 0 : num(s.ref), num(s.gate || 0)]);
+      rowsX.push([t, s.x_m === undefined ? 0 : num(s.x_m)]);
       n++;
     }
     if (rowsI.length > MAX) { rowsI.splice(0, rowsI.length - MAX); rowsX.splice(0, rowsX.length - MAX); }
     counter.textContent = n + ' samples';
     counter.dataset.samples = String(n);
-    dirty = true;
+    dirty = rowsI.length > 0;  // a queued run's events carry no samples; dygraphs refuses an empty file
   });
   es.addEventListener('end', (ev) => {
     es.close();
@@ -209,6 +211,10 @@ function liveView(runId, box, onEnd) {
   });
   es.addEventListener('error', (ev) => {
     if (ev.data) { es.close(); status.replaceChildren(el('span', {class: 'error', text: JSON.parse(ev.data).message})); }
+    // A refusal (429: too many live views open) closes the EventSource for good: say so.
+    else if (es.readyState === EventSource.CLOSED) {
+      status.replaceChildren(el('span', {class: 'error', text: 'live view refused (too many open); reload to retry'}));
+    }
   });
   cleanups.push(() => { es.close(); clearInterval(timer); });
 }
