@@ -119,7 +119,6 @@ class ServerProcess {
   // More command-line arguments for the next Start(), e.g. "--run-night-now".
   void AddArg(std::string arg) { extra_args_.push_back(std::move(arg)); }
   const std::string& address() const { return address_; }
-  pid_t pid() const { return pid_; }
   std::string Log() const {
     std::ifstream in(log_);
     std::stringstream ss;
