@@ -428,8 +428,9 @@ Status Transaction::Begin(Kind kind) {
   const std::string begin = kind == Kind::kRead ? "BEGIN ISOLATION LEVEL REPEATABLE READ READ ONLY" : "BEGIN";
   VB_RETURN_IF_ERROR(conn_->EnsureConnected());  // a lost connection (restarted server) is re-made here
   Status st = conn_->Script(begin);
-  if (st.code() == StatusCode::kUnavailable) {
-    // The connection died between the check and BEGIN: nothing was done yet, so once more on a new one.
+  if (st.code() == StatusCode::kUnavailable && !conn_->timed_out()) {
+    // The connection died between the check and BEGIN: nothing was done yet, so once more on a new one. Not
+    // after a deadline: a server that does not answer would only be waited for twice.
     VB_RETURN_IF_ERROR(conn_->EnsureConnected());
     st = conn_->Script(begin);
   }

@@ -134,6 +134,8 @@ class Connection {
   bool in_transaction() const;
   // False once the connection is known lost (until EnsureConnected re-makes it).
   bool connected() const;
+  // True when the last statement passed its deadline (the server did not answer; the connection is dropped).
+  bool timed_out() const { return broken_; }
   // Set by Transaction: inside one, a lost connection is an error (the transaction is gone), never re-made.
   void set_in_transaction_block(bool open) { txn_ = open; }
   pg_conn* raw() { return conn_; }

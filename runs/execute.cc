@@ -58,13 +58,14 @@ class StoreChunks final : public experiment::BlockSink {
     for (std::size_t c = 0; c < chunk_.channels.size(); ++c)
       for (std::size_t k = 0; k < n; ++k) chunk_.data[c * n + k] = block.Value(c, k);
     if (backlog_.empty()) {
+      const auto call_began = FaultLog::Clock::now();
       const Status st = store_->AppendTraceChunk(lease_, chunk_);
       if (db::ClassifyWrite(st) != db::WriteFault::kTransient) {
         if (st.ok() && faults_ != nullptr) faults_->Recovered();
         error_ = st;
         return error_;
       }
-      if (faults_ != nullptr) faults_->Failed(st);
+      if (faults_ != nullptr) faults_->Failed(st, call_began);
       last_transient_ = st;
       backlog_.push_back(chunk_);
     } else {
@@ -79,6 +80,7 @@ class StoreChunks final : public experiment::BlockSink {
   // stay kept); a fenced or permanent refusal is returned.
   Status TryFlush() {
     while (!backlog_.empty()) {
+      const auto call_began = FaultLog::Clock::now();
       const Status st = store_->AppendTraceChunk(lease_, backlog_.front());
       // AlreadyExists for a kept chunk (each was tried before): that earlier try committed and only its
       // answer was lost.
@@ -88,7 +90,7 @@ class StoreChunks final : public experiment::BlockSink {
         continue;
       }
       if (db::ClassifyWrite(st) != db::WriteFault::kTransient) return st;
-      if (faults_ != nullptr) faults_->Failed(st);
+      if (faults_ != nullptr) faults_->Failed(st, call_began);
       last_transient_ = st;
       return Status::Ok();
     }
@@ -222,7 +224,12 @@ Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& se
   LiveTap tap(decimation, &e->reference);
   if (ctx.registry != nullptr) ctx.registry->Add(run.id, &monitor, &tap, e->duration_s);
   if (ctx.current_monitor != nullptr) ctx.current_monitor->store(&monitor);
+  const auto cancel_asked = FaultLog::Clock::now();
   auto cancel_requested = store->CancelRequested(run.id);
+  // Only read to start a run already cancelled as cancelled; unavailable, the run starts (the lab thread reads
+  // cancels again every 0.1 s), but the fault is counted.
+  if (ctx.faults != nullptr && db::ClassifyWrite(cancel_requested.status()) == db::WriteFault::kTransient)
+    ctx.faults->Failed(cancel_requested.status(), cancel_asked);
   if (stopping || (cancel_requested.ok() && *cancel_requested)) monitor.cancel.store(true);
   bench->set_cancel_flag(&monitor.cancel);  // cancel and shutdown stop a long bench step (hw::Bench)
   StoreChunks chunks(store, db::LeaseOf(run), ctx.faults);

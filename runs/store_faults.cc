@@ -10,9 +10,9 @@
 
 namespace vb::runs {
 
-void FaultLog::Failed(const Status& st) {
+void FaultLog::Failed(const Status& st, Clock::time_point call_began) {
   if (failures_++ == 0) {
-    began_ = std::chrono::steady_clock::now();
+    began_ = call_began;
     spdlog::warn("{}: store unavailable, retrying (logged again when it is back): {}", who_, st.message());
   }
 }
@@ -34,12 +34,13 @@ Status RetryWrite(const std::function<Status()>& write, const RetryPolicy& polic
   const Clock::time_point start = Clock::now();
   double wait_s = policy.first_wait_s;
   while (true) {
+    const Clock::time_point call_began = Clock::now();
     Status st = write();
     if (db::ClassifyWrite(st) != db::WriteFault::kTransient) {
       if (log != nullptr && st.ok()) log->Recovered();
       return st;
     }
-    if (log != nullptr) log->Failed(st);
+    if (log != nullptr) log->Failed(st, call_began);
     const double waited_s = std::chrono::duration<double>(Clock::now() - start).count();
     if (waited_s >= policy.give_up_s || (policy.stop != nullptr && policy.stop->load())) return st;
     // Sleep in short steps so a stop is seen at once.

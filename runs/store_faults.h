@@ -21,8 +21,11 @@ class FaultLog {
  public:
   // `who` names the caller in the log lines: "bench emu-1", "lab".
   explicit FaultLog(std::string who) : who_(std::move(who)) {}
-  // A transient failure: logged (warning) only when it begins a fault; later ones are counted.
-  void Failed(const Status& st);
+  using Clock = std::chrono::steady_clock;
+  // A transient failure of a call that began at `call_began`: logged (warning) only when it begins a fault
+  // (which then began when that call did: a call that waited 13 s for a stopped server counts them); later
+  // ones are counted.
+  void Failed(const Status& st, Clock::time_point call_began = Clock::now());
   // A call that worked: if a fault was in progress, logs its end with its duration and count.
   void Recovered();
   bool in_fault() const { return failures_ > 0; }

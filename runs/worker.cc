@@ -105,11 +105,12 @@ void Worker::Loop(const std::string& db_path) {
   std::unique_ptr<db::Store> store;
   while (!stop_.load()) {
     if (store == nullptr) {
+      const auto call_began = FaultLog::Clock::now();
       auto opened = db::OpenStore(db_path);
       if (opened.ok()) {
         store = std::move(opened).value();
       } else if (db::ClassifyWrite(opened.status()) == db::WriteFault::kTransient) {
-        faults_.Failed(opened.status());
+        faults_.Failed(opened.status(), call_began);
       } else {
         spdlog::error("bench {}: cannot open the store: {}", setup_.name, opened.status().message());
       }
@@ -118,10 +119,11 @@ void Worker::Loop(const std::string& db_path) {
         continue;
       }
     }
+    const auto call_began = FaultLog::Clock::now();
     auto done = ClaimAndExecute(store.get());
     if (!done.ok()) {
       if (db::ClassifyWrite(done.status()) == db::WriteFault::kTransient) {
-        faults_.Failed(done.status());
+        faults_.Failed(done.status(), call_began);
       } else {
         spdlog::error("bench {}: claim failed: {}", setup_.name, done.status().message());
       }

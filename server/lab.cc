@@ -161,9 +161,10 @@ void LabHost::WatchRuns(db::Store* store, bool write_progress) {
   for (const auto& w : *workers_) {
     const db::Lease lease = w->executing_lease();
     if (lease.run_id == 0) continue;
+    const auto asked = runs::FaultLog::Clock::now();
     auto cancel = store->CancelRequested(lease.run_id);
     if (db::ClassifyWrite(cancel.status()) == db::WriteFault::kTransient) {
-      faults_.Failed(cancel.status());
+      faults_.Failed(cancel.status(), asked);
       return;  // the store is unavailable: the next watch tries again
     }
     if (cancel.ok() && *cancel && w->CancelIfCurrent(lease))
@@ -173,6 +174,7 @@ void LabHost::WatchRuns(db::Store* store, bool write_progress) {
     if (!registry_->Progress(lease.run_id, &progress)) continue;
     // Under the worker's lock: the run cannot end (and write its result) while its progress is being written.
     db::Lease written;
+    const auto writing = runs::FaultLog::Clock::now();
     Status st = w->WithExecutingLease([&](const db::Lease& current) {
       if (current.run_id != lease.run_id || current.fence != lease.fence) return Status::Ok();  // another run now
       written = current;
@@ -182,7 +184,7 @@ void LabHost::WatchRuns(db::Store* store, bool write_progress) {
       case db::WriteFault::kNone:
         break;
       case db::WriteFault::kTransient:  // progress is only for watchers: the next one is 0.5 s away
-        faults_.Failed(st);
+        faults_.Failed(st, writing);
         return;
       case db::WriteFault::kFenced:
         spdlog::warn("run {} (fence {}): {}; stopping this attempt", static_cast<long long>(written.run_id),
@@ -206,8 +208,9 @@ void LabHost::Loop() {
       // Scheduled from the previous target, not from now: a slow heartbeat does not push the next one later.
       next_beat += std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(setup_.heartbeat_s));
       if (next_beat < Clock::now()) next_beat = Clock::now();
+      const auto beat_began = runs::FaultLog::Clock::now();
       if (Status st = Beat(store_.get()); db::ClassifyWrite(st) == db::WriteFault::kTransient) {
-        faults_.Failed(st);  // logged once when the fault begins, and with its duration when it ends
+        faults_.Failed(st, beat_began);  // logged once when the fault begins, and with its duration when it ends
       } else if (!st.ok()) {
         spdlog::error("lab: heartbeat failed: {}", st.message());
       }

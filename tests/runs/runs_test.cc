@@ -6,9 +6,13 @@
 #include <bit>
 #include <chrono>
 #include <cmath>
+#include <sstream>
 #include <thread>
 
 #include <unistd.h>
+
+#include <spdlog/sinks/ostream_sink.h>
+#include <spdlog/spdlog.h>
 
 #include "common/format.h"
 #include "db/store.h"
@@ -625,6 +629,64 @@ TEST(StoreFaults, ARunIsNoLongerExecutingWhileItsResultWaitsForTheStore) {
   ASSERT_TRUE(o.ok() && o->has_value());
   EXPECT_TRUE((*o)->released);
   EXPECT_EQ(worker.executing_lease().run_id, 0);
+}
+
+TEST(StoreFaults, AFaultIsLoggedOnceWhenItBeginsAndOnceWithItsLengthWhenItEnds) {
+  std::ostringstream out;
+  auto sink = std::make_shared<spdlog::sinks::ostream_sink_mt>(out);
+  auto previous = spdlog::default_logger();
+  spdlog::set_default_logger(std::make_shared<spdlog::logger>("test", sink));
+  {
+    FaultLog log("bench emu-1");
+    log.Recovered();  // no fault: nothing
+    for (int k = 0; k < 100; ++k) log.Failed(Status::Unavailable("store unavailable: down"));
+    EXPECT_TRUE(log.in_fault());
+    log.Recovered();
+    log.Recovered();
+    EXPECT_FALSE(log.in_fault());
+  }
+  spdlog::set_default_logger(previous);
+  const std::string text = out.str();
+  EXPECT_EQ(std::count(text.begin(), text.end(), '\n'), 2) << text;
+  EXPECT_NE(text.find("bench emu-1: store unavailable, retrying"), std::string::npos) << text;
+  EXPECT_NE(text.find("bench emu-1: store reachable again after"), std::string::npos) << text;
+  EXPECT_NE(text.find("(100 call(s) failed meanwhile)"), std::string::npos) << text;
+}
+
+TEST(StoreFaults, RetryWriteRetriesOnlyTransientErrorsAndGivesUpWhenTold) {
+  RetryPolicy fast;
+  fast.first_wait_s = 0.001;
+  fast.max_wait_s = 0.002;
+  int calls = 0;
+  // Transient twice, then done.
+  Status st = RetryWrite(
+      [&] { return ++calls < 3 ? Status::Unavailable("store unavailable: x") : Status::Ok(); }, fast, nullptr);
+  EXPECT_TRUE(st.ok());
+  EXPECT_EQ(calls, 3);
+  // Aborted (a deadlock, a lock timeout) is transient too.
+  calls = 0;
+  st = RetryWrite([&] { return ++calls < 2 ? Status::Aborted("deadlock") : Status::Ok(); }, fast, nullptr);
+  EXPECT_TRUE(st.ok());
+  EXPECT_EQ(calls, 2);
+  // Fenced and permanent errors: once, returned as they are.
+  for (const Status& once : {Status::FailedPrecondition("stale write: x"), Status::InvalidArgument("progress: x"),
+                             Status::Internal("bug")}) {
+    calls = 0;
+    st = RetryWrite([&] { ++calls; return once; }, fast, nullptr);
+    EXPECT_EQ(st.code(), once.code());
+    EXPECT_EQ(calls, 1);
+  }
+  // Given up after give_up_s, or at once when stopping: the last transient error.
+  fast.give_up_s = 0.05;
+  st = RetryWrite([] { return Status::Unavailable("store unavailable: down"); }, fast, nullptr);
+  EXPECT_EQ(st.code(), StatusCode::kUnavailable);
+  std::atomic<bool> stop{true};
+  fast.give_up_s = 1e9;
+  fast.stop = &stop;
+  calls = 0;
+  st = RetryWrite([&] { ++calls; return Status::Unavailable("store unavailable: down"); }, fast, nullptr);
+  EXPECT_EQ(st.code(), StatusCode::kUnavailable);
+  EXPECT_EQ(calls, 1);
 }
 
 }  // namespace store_faults
