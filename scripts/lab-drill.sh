@@ -4,7 +4,8 @@
 # their leases lapsed) at random, the database itself fails (restarted, down for a while, the hosts' sessions
 # terminated, stopped), and at the end every run must have finished exactly once. The last line is
 #   lab-drill: hosts=3 benches=6 runs=1000 done=1000 lost=0 duplicated=0 failed=0 stuck=0 kills=K db_faults=F
-#              stale_writes_refused=S throughput_x=X
+#              interrupted=I stale_writes_refused=S throughput_x=X
+# (interrupted: attempts that did not finish and were run again.)
 # and each database fault gets a line with its length and the lab's stall around it (the longest gap between
 # two runs finishing, from the last before the fault to the first after it).
 # Exit 0 only if nothing was lost, run twice, failed or left stuck (and every fault asked for happened before the
@@ -305,6 +306,9 @@ duplicated=$(db_query "SELECT count(*) FROM (SELECT run_id FROM status_history W
 stale=$(db_query "SELECT count(*) FROM stale_writes WHERE run_id IN ($RUNS_Q)")
 lost=$((RUNS - done_n))
 failed=$(db_query "SELECT count(*) FROM runs WHERE status = 'failed' AND id IN ($RUNS_Q)")
+# Attempts that did not finish (a killed or stopped host, a result dropped): each is an 'interrupted' in the
+# run's history, and the run ran again.
+interrupted=$(db_query "SELECT count(*) FROM status_history WHERE status = 'interrupted' AND run_id IN ($RUNS_Q)")
 [[ $stored == "$RUNS" ]] || echo "lab-drill: $stored runs stored, $RUNS submitted" >&2
 not_done=$(db_query "SELECT status || ' ' || count(*) FROM runs WHERE status != 'done' AND id IN ($RUNS_Q) GROUP BY status")
 if [[ -n $not_done ]]; then
@@ -340,7 +344,7 @@ for kind, a, b in faults:
     print(f"lab-drill: db fault {kind} at +{a - t0:.1f} s: {b - a:.1f} s; the lab's stall {stall:.1f} s")
 PY
 fi
-echo "lab-drill: hosts=$HOSTS benches=$((HOSTS * BENCHES)) runs=$RUNS done=$done_n lost=$lost duplicated=$duplicated failed=$failed stuck=$stuck kills=$kills db_faults=$db_faults stale_writes_refused=$stale throughput_x=$throughput_x"
+echo "lab-drill: hosts=$HOSTS benches=$((HOSTS * BENCHES)) runs=$RUNS done=$done_n lost=$lost duplicated=$duplicated failed=$failed stuck=$stuck kills=$kills db_faults=$db_faults interrupted=$interrupted stale_writes_refused=$stale throughput_x=$throughput_x"
 if ((event < ${#EVENTS[@]})); then
   echo "lab-drill: FAILED: only $event of ${#EVENTS[@]} faults happened before the queue drained (the drill did not test them)" >&2
   exit 1
