@@ -209,6 +209,16 @@ echo "lab-drill: $RUNS runs submitted through $HOSTS hosts in $batch batches" >&
 
 remaining() { db_query "SELECT count(*) FROM runs WHERE status IN ('queued', 'running', 'interrupted')"; }
 
+children_of() {  # the ids of the processes whose parent is $1, from /proc (no procps on a bare Debian)
+  local parent=$1 f line fields
+  for f in /proc/[0-9]*/stat; do
+    { read -r line < "$f"; } 2>/dev/null || continue
+    read -r -a fields <<< "${line##*) }"
+    if [[ ${fields[1]} == "$parent" ]]; then f=${f#/proc/}; echo "${f%/stat}"; fi
+  done
+  return 0
+}
+
 # The database's faults (docs/lab.md, "When the database fails"). Each appends "kind start end" (unix seconds:
 # the fault's own span, e.g. from pg_ctl stop to pg_ctl start returning) to $WORK/db-faults.
 db_fault() {
@@ -226,7 +236,7 @@ db_fault() {
     sigstop)
       # The postmaster and every process it started (backends, checkpointer, ...), by their ids.
       pm=$(head -1 "$PG_DIR/data/postmaster.pid")
-      PG_STOPPED=("$pm" $(ps -o pid= --ppid "$pm"))
+      mapfile -t PG_STOPPED < <(echo "$pm"; children_of "$pm")
       kill -STOP "${PG_STOPPED[@]}"
       sleep "$DB_STOP_S"
       kill -CONT "${PG_STOPPED[@]}"
