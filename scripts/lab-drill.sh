@@ -20,6 +20,7 @@
 #    outage     pg_ctl stop -m fast, --outage-s seconds (default 4), pg_ctl start
 #    terminate  pg_terminate_backend of every session of the hosts
 #    sigstop    SIGSTOP of the postmaster and all its processes for --db-stop-s seconds (default 15), SIGCONT
+#    sigstop-postmaster  the same for the postmaster alone (sessions go on; new connections wait)
 #  or "all"; only with the drill's own PostgreSQL (LAB_DB_URL=postgres).
 #  --drain-s: after the last fault the queue must drain within this many seconds (default 120), else the runs
 #  left are reported as stuck.)
@@ -62,8 +63,8 @@ declare -a DB_FAULT_LIST=()
 if [[ -n $DB_FAULTS ]]; then
   IFS=, read -r -a DB_FAULT_LIST <<< "$DB_FAULTS"
   for f in "${DB_FAULT_LIST[@]}"; do
-    [[ $f =~ ^(restart|outage|terminate|sigstop)$ ]] ||
-      { echo "lab-drill: --db-faults: '$f' is not one of restart, outage, terminate, sigstop (or all)" >&2; exit 2; }
+    [[ $f =~ ^(restart|outage|terminate|sigstop|sigstop-postmaster)$ ]] ||
+      { echo "lab-drill: --db-faults: '$f' is not one of restart, outage, terminate, sigstop, sigstop-postmaster (or all)" >&2; exit 2; }
   done
   [[ ${LAB_DB_URL:-postgres} == postgres ]] ||
     { echo "lab-drill: --db-faults needs the drill's own PostgreSQL (LAB_DB_URL=postgres), not '$LAB_DB_URL'" >&2; exit 2; }
@@ -233,10 +234,11 @@ db_fault() {
     terminate)
       db_query "SELECT count(pg_terminate_backend(pid)) FROM pg_stat_activity WHERE backend_type = 'client backend'
                 AND pid <> pg_backend_pid()" >"$WORK/terminated" ;;
-    sigstop)
-      # The postmaster and every process it started (backends, checkpointer, ...), by their ids.
+    sigstop|sigstop-postmaster)
+      # The postmaster and every process it started (backends, checkpointer, ...), or the postmaster alone
+      # (existing sessions go on, new connections wait), by their ids.
       pm=$(head -1 "$PG_DIR/data/postmaster.pid")
-      mapfile -t PG_STOPPED < <(echo "$pm"; children_of "$pm")
+      if [[ $kind == sigstop ]]; then mapfile -t PG_STOPPED < <(echo "$pm"; children_of "$pm"); else PG_STOPPED=("$pm"); fi
       kill -STOP "${PG_STOPPED[@]}"
       sleep "$DB_STOP_S"
       kill -CONT "${PG_STOPPED[@]}"
@@ -347,11 +349,13 @@ for kind, a, b in faults:
     a, b = float(a), float(b)
     i = bisect.bisect_right(done, a) - 1          # the last finish before the fault began
     j = bisect.bisect_left(done, b)               # the first finish after it ended
-    if i < 0 or j >= len(done):
+    if i < 0 or i + 1 >= len(done):
         print(f"lab-drill: db fault {kind} at +{a - t0:.1f} s: {b - a:.1f} s; no finish on both sides to measure the stall")
         continue
-    stall = max(done[k + 1] - done[k] for k in range(i, j))
-    print(f"lab-drill: db fault {kind} at +{a - t0:.1f} s: {b - a:.1f} s; the lab's stall {stall:.1f} s")
+    drained = j >= len(done)  # the last run finished before the fault ended (runs went on during it)
+    stall = max(done[k + 1] - done[k] for k in range(i, min(j, len(done) - 1)))
+    print(f"lab-drill: db fault {kind} at +{a - t0:.1f} s: {b - a:.1f} s; the lab's stall {stall:.1f} s" +
+          (" (the queue drained during the fault)" if drained else ""))
 PY
 fi
 echo "lab-drill: hosts=$HOSTS benches=$((HOSTS * BENCHES)) runs=$RUNS done=$done_n lost=$lost duplicated=$duplicated failed=$failed stuck=$stuck kills=$kills db_faults=$db_faults interrupted=$interrupted stale_writes_refused=$stale throughput_x=$throughput_x"
