@@ -245,11 +245,15 @@ Status Connection::Setup() {
   PQsetNoticeProcessor(conn_, DropNotice, nullptr);
   broken_ = false;
   deadline_s_ = 10 + kDeadlineMargin_s;  // for the SET and SELECT below, until the session's own is known
+  in_setup_ = true;  // a connection lost here is reported, not re-made from inside its own making
   // UTC and UTF-8 whatever the server's defaults; times are stored as unix seconds anyway.
-  VB_RETURN_IF_ERROR(Script("SET TIME ZONE 'UTC'; SET client_encoding = 'UTF8'"));
-  VB_PG_ASSIGN_OR_RETURN(const std::int64_t timeout_ms,
-                         QueryInt("SELECT setting::int8 FROM pg_settings WHERE name = 'statement_timeout'"));
-  deadline_s_ = timeout_ms > 0 ? static_cast<double>(timeout_ms) / 1000.0 + kDeadlineMargin_s : 0.0;
+  Status st = Script("SET TIME ZONE 'UTC'; SET client_encoding = 'UTF8'");
+  StatusOr<std::int64_t> timeout_ms = std::int64_t{0};
+  if (st.ok()) timeout_ms = QueryInt("SELECT setting::int8 FROM pg_settings WHERE name = 'statement_timeout'");
+  in_setup_ = false;
+  VB_RETURN_IF_ERROR(st);
+  if (!timeout_ms.ok()) return timeout_ms.status();
+  deadline_s_ = *timeout_ms > 0 ? static_cast<double>(*timeout_ms) / 1000.0 + kDeadlineMargin_s : 0.0;
   return Status::Ok();
 }
 
@@ -272,8 +276,9 @@ Status Connection::EnsureConnected() {
     }
   }
   if (!broken_ && PQstatus(conn_) == CONNECTION_OK) return Status::Ok();
-  if (txn_) {
-    return Status::Unavailable(Cat("store unavailable: ", location_, ": connection lost inside a transaction: ",
+  if (txn_ || in_setup_) {
+    return Status::Unavailable(Cat("store unavailable: ", location_, ": connection lost ",
+                                   txn_ ? "inside a transaction: " : "while being set up: ",
                                    broken_ ? std::string("a statement passed its deadline")
                                            : FirstLine(PQerrorMessage(conn_))));
   }
@@ -376,7 +381,7 @@ StatusOr<Result> Connection::Exec(const std::string& sql, const Params& params) 
   // or a server restarted just then): it changed nothing, so once more on a new connection. Only for queries
   // that read: a write's COMMIT may have landed before the connection went.
   // Not after a deadline: a server that does not answer would only be waited for twice.
-  if (!txn_ && !r.ok() && r.status().code() == StatusCode::kUnavailable && !broken_ &&
+  if (!txn_ && !in_setup_ && !r.ok() && r.status().code() == StatusCode::kUnavailable && !broken_ &&
       PQstatus(conn_) != CONNECTION_OK && sql.rfind("SELECT ", 0) == 0) {
     r = ExecOnce(sql, params);
   }

@@ -156,6 +156,7 @@ class Connection {
   std::unordered_map<std::string, std::string> prepared_;  // SQL text -> statement name
   bool txn_ = false;
   bool broken_ = false;     // a statement passed its deadline: the connection is unusable until re-made
+  bool in_setup_ = false;   // inside Setup()
   double deadline_s_ = 0;
 };
 
