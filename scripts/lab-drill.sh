@@ -21,7 +21,7 @@
 #    terminate  pg_terminate_backend of every session of the hosts
 #    sigstop    SIGSTOP of the postmaster and all its processes for --db-stop-s seconds (default 15), SIGCONT
 #    sigstop-postmaster  the same for the postmaster alone (sessions go on; new connections wait)
-#  or "all"; only with the drill's own PostgreSQL (LAB_DB_URL=postgres).
+#  or "all" (the first four); only with the drill's own PostgreSQL (LAB_DB_URL=postgres).
 #  --drain-s: after the last fault the queue must drain within this many seconds (default 120), else the runs
 #  left are reported as stuck.)
 # Environment: LAB_DB_URL  the shared database: "postgres" (the default) starts a throw-away PostgreSQL
@@ -46,7 +46,7 @@ while [[ $# -gt 0 ]]; do
     --db-stop-s) DB_STOP_S=$2; shift 2 ;;
     --drain-s) DRAIN_S=$2; shift 2 ;;
     --keep) KEEP=1; shift ;;
-    -h|--help) sed -n 2,30p "$0"; exit 0 ;;
+    -h|--help) sed -n 2,29p "$0"; exit 0 ;;
     *) echo "lab-drill: unknown option '$1' (see --help)" >&2; exit 2 ;;
   esac
 done
