@@ -2,11 +2,17 @@
 
 #include <libpq-fe.h>
 
+#include <poll.h>
+
+#include <algorithm>
 #include <bit>
+#include <cerrno>
+#include <chrono>
 #include <cmath>
 #include <cstring>
 #include <utility>
 
+#include "common/format.h"
 #include "db/text.h"
 
 namespace vb::db::pg {
@@ -188,21 +194,67 @@ std::int64_t Result::affected() const {
 
 // ---- Connection ----
 
+namespace {
+
+std::string FirstLine(std::string msg) {
+  if (const std::size_t nl = msg.find('\n'); nl != std::string::npos) msg.resize(nl);
+  while (!msg.empty() && (msg.back() == '\n' || msg.back() == ' ')) msg.pop_back();
+  return msg;
+}
+
+// A statement in a message: its first 60 characters (the whole text, quoted in every error, made the messages
+// unreadable: issue 30).
+std::string Clip(std::string_view sql) {
+  if (sql.size() <= 60) return Cat("\"", sql, "\"");
+  return Cat("\"", sql.substr(0, 57), "...\"");
+}
+
+bool Failed(const PGresult* r) {
+  const ExecStatusType st = r != nullptr ? PQresultStatus(r) : PGRES_FATAL_ERROR;
+  return st != PGRES_TUPLES_OK && st != PGRES_COMMAND_OK;
+}
+
+}  // namespace
+
 StatusOr<std::unique_ptr<Connection>> Connection::Open(const std::string& location) {
   const std::string where = DescribeLocation(location);
-  PGconn* conn = PQconnectdb(location.c_str());
+  // Our defaults first, then the location (expanded): libpq keeps the last value of a keyword, so the
+  // location's own settings win.
+  std::vector<const char*> keys, values;
+  for (const auto& kv : kDefaultConnInfo) {
+    keys.push_back(kv[0]);
+    values.push_back(kv[1]);
+  }
+  keys.push_back("dbname");
+  values.push_back(location.c_str());
+  keys.push_back(nullptr);
+  values.push_back(nullptr);
+  PGconn* conn = PQconnectdbParams(keys.data(), values.data(), /*expand_dbname=*/1);
   if (conn == nullptr) return Status::ResourceExhausted(Cat(where, ": out of memory connecting"));
   if (PQstatus(conn) != CONNECTION_OK) {
-    std::string msg = PQerrorMessage(conn);
-    while (!msg.empty() && (msg.back() == '\n' || msg.back() == ' ')) msg.pop_back();
+    std::string msg = FirstLine(PQerrorMessage(conn));
     PQfinish(conn);
-    return Status::Unavailable(Cat(where, ": cannot connect: ", msg));
+    return Status::Unavailable(Cat("store unavailable: ", where, ": cannot connect: ", msg));
   }
-  PQsetNoticeProcessor(conn, DropNotice, nullptr);
   auto c = std::unique_ptr<Connection>(new Connection(conn, where));
-  // UTC and UTF-8 whatever the server's defaults; times are stored as unix seconds anyway.
-  VB_RETURN_IF_ERROR(c->Script("SET TIME ZONE 'UTC'; SET client_encoding = 'UTF8'"));
+  VB_RETURN_IF_ERROR(c->Setup());
   return c;
+}
+
+Status Connection::Setup() {
+  PQsetNoticeProcessor(conn_, DropNotice, nullptr);
+  broken_ = false;
+  deadline_s_ = 10 + kDeadlineMargin_s;  // for the SET and SELECT below, until the session's own is known
+  in_setup_ = true;  // a connection lost here is reported, not re-made from inside its own making
+  // UTC and UTF-8 whatever the server's defaults; times are stored as unix seconds anyway.
+  Status st = Script("SET TIME ZONE 'UTC'; SET client_encoding = 'UTF8'");
+  StatusOr<std::int64_t> timeout_ms = std::int64_t{0};
+  if (st.ok()) timeout_ms = QueryInt("SELECT setting::int8 FROM pg_settings WHERE name = 'statement_timeout'");
+  in_setup_ = false;
+  VB_RETURN_IF_ERROR(st);
+  if (!timeout_ms.ok()) return timeout_ms.status();
+  deadline_s_ = *timeout_ms > 0 ? static_cast<double>(*timeout_ms) / 1000.0 + kDeadlineMargin_s : 0.0;
+  return Status::Ok();
 }
 
 Connection::~Connection() {
@@ -210,28 +262,49 @@ Connection::~Connection() {
 }
 
 bool Connection::in_transaction() const { return PQtransactionStatus(conn_) != PQTRANS_IDLE; }
+bool Connection::connected() const { return !broken_ && PQstatus(conn_) == CONNECTION_OK; }
 
 Status Connection::EnsureConnected() {
-  if (PQstatus(conn_) == CONNECTION_OK) return Status::Ok();
+  if (!broken_ && PQstatus(conn_) == CONNECTION_OK && PQtransactionStatus(conn_) == PQTRANS_IDLE) {
+    // Idle: nothing should be on the socket. A server that ended the session (restart, terminated backend)
+    // left its error message and EOF there; reading them marks the connection bad without a round trip.
+    for (int k = 0; k < 4; ++k) {
+      pollfd p{PQsocket(conn_), POLLIN, 0};
+      if (p.fd < 0 || poll(&p, 1, 0) <= 0) break;
+      if (PQconsumeInput(conn_) == 0) break;
+      while (PGresult* r = PQgetResult(conn_)) PQclear(r);  // nothing expected; keep the connection idle
+    }
+  }
+  if (!broken_ && PQstatus(conn_) == CONNECTION_OK) return Status::Ok();
+  if (txn_ || in_setup_) {
+    return Status::Unavailable(Cat("store unavailable: ", location_, ": connection lost ",
+                                   txn_ ? "inside a transaction: " : "while being set up: ",
+                                   broken_ ? std::string("a statement passed its deadline")
+                                           : FirstLine(PQerrorMessage(conn_))));
+  }
   PQreset(conn_);
   prepared_.clear();
+  broken_ = false;
   if (PQstatus(conn_) != CONNECTION_OK) {
-    return Status::Unavailable(Cat(location_, ": connection lost and cannot reconnect: ", PQerrorMessage(conn_)));
+    return Status::Unavailable(
+        Cat("store unavailable: ", location_, ": connection lost and cannot reconnect: ", FirstLine(PQerrorMessage(conn_))));
   }
-  PQsetNoticeProcessor(conn_, DropNotice, nullptr);
-  return Script("SET TIME ZONE 'UTC'; SET client_encoding = 'UTF8'");
+  return Setup();
 }
 
-Status Connection::Error(pg_result* r, std::string_view what) const {
-  std::string msg = r != nullptr ? PQresultErrorMessage(r) : PQerrorMessage(conn_);
-  while (!msg.empty() && (msg.back() == '\n' || msg.back() == ' ')) msg.pop_back();
+Status Connection::Error(pg_result* r, std::string_view sql) const {
+  std::string msg = FirstLine(r != nullptr ? PQresultErrorMessage(r) : PQerrorMessage(conn_));
+  if (msg.empty()) msg = FirstLine(PQerrorMessage(conn_));
   const char* state = r != nullptr ? PQresultErrorField(r, PG_DIAG_SQLSTATE) : nullptr;
   const std::string sqlstate = state != nullptr ? state : "";
-  std::string text = Cat(location_, ": ", what, ": ", msg);
-  if (!sqlstate.empty()) text += Cat(" (sqlstate ", sqlstate, ")");
-  if (PQstatus(conn_) != CONNECTION_OK || sqlstate.rfind("08", 0) == 0 || sqlstate.rfind("57P", 0) == 0) {
-    return Status::Unavailable(std::move(text));
+  const std::string code = sqlstate.empty() ? std::string() : Cat(" (sqlstate ", sqlstate, ")");
+  // The database cannot be reached or does not answer: connection exceptions (08), the server shutting down
+  // or starting (57P01-57P05), a statement cancelled by statement_timeout (57014), too many connections (53300).
+  if (PQstatus(conn_) != CONNECTION_OK || broken_ || sqlstate.rfind("08", 0) == 0 ||
+      sqlstate.rfind("57P", 0) == 0 || sqlstate == "57014" || sqlstate == "53300") {
+    return Status::Unavailable(Cat("store unavailable: ", location_, ": ", msg, code));
   }
+  std::string text = Cat(location_, ": ", Clip(sql), ": ", msg, code);
   if (sqlstate.rfind("40", 0) == 0 || sqlstate == "55P03") return Status::Aborted(std::move(text));
   if (sqlstate == "23505") return Status::AlreadyExists(std::move(text));
   if (sqlstate.rfind("23", 0) == 0 || sqlstate.rfind("22", 0) == 0) return Status::InvalidArgument(std::move(text));
@@ -240,43 +313,106 @@ Status Connection::Error(pg_result* r, std::string_view what) const {
   return Status::Internal(std::move(text));
 }
 
+pg_result* Connection::Collect(bool* timed_out) {
+  *timed_out = false;
+  using Clock = std::chrono::steady_clock;
+  const bool bounded = deadline_s_ > 0;
+  const Clock::time_point deadline =
+      Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(deadline_s_));
+  PGresult* keep = nullptr;
+  while (true) {
+    while (PQisBusy(conn_)) {
+      int wait_ms = -1;
+      if (bounded) {
+        const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()).count();
+        wait_ms = static_cast<int>(std::max<long long>(0, left));
+      }
+      pollfd p{PQsocket(conn_), POLLIN, 0};
+      const int n = p.fd < 0 ? -1 : poll(&p, 1, wait_ms);
+      if (n == 0) {  // the deadline passed without an answer: the connection cannot be used again
+        if (keep != nullptr) PQclear(keep);
+        broken_ = true;
+        *timed_out = true;
+        return nullptr;
+      }
+      if (n < 0 && errno == EINTR) continue;
+      if (n < 0 || PQconsumeInput(conn_) == 0) break;  // broken: PQgetResult reports it
+    }
+    PGresult* r = PQgetResult(conn_);
+    if (r == nullptr) break;
+    if (keep == nullptr || (!Failed(keep) && Failed(r))) {
+      if (keep != nullptr) PQclear(keep);
+      keep = r;
+    } else if (!Failed(keep)) {
+      PQclear(keep);
+      keep = r;
+    } else {
+      PQclear(r);  // keep the first failure
+    }
+    if (PQstatus(conn_) != CONNECTION_OK) break;
+  }
+  return keep;
+}
+
+StatusOr<pg_result*> Connection::Run(const std::string& sql, const std::function<int()>& send) {
+  if (broken_ || PQstatus(conn_) != CONNECTION_OK) {
+    return Status::Unavailable(Cat("store unavailable: ", location_, ": connection lost: ",
+                                   broken_ ? std::string("a statement passed its deadline")
+                                           : FirstLine(PQerrorMessage(conn_))));
+  }
+  if (send() == 0) return Error(nullptr, sql);
+  bool timed_out = false;
+  PGresult* r = Collect(&timed_out);
+  if (timed_out) {
+    return Status::Unavailable(Cat("store unavailable: ", location_, ": no answer within ", FormatNumber(deadline_s_),
+                                   " s (the server is stopped, hung or out of reach); the connection is dropped"));
+  }
+  if (Failed(r)) {
+    Status s = Error(r, sql);
+    if (r != nullptr) PQclear(r);
+    return s;
+  }
+  return r;
+}
+
 StatusOr<Result> Connection::Exec(const std::string& sql, const Params& params) {
+  StatusOr<Result> r = ExecOnce(sql, params);
+  // A query on its own (no transaction) whose connection turned out lost as it was sent (a session terminated
+  // or a server restarted just then): it changed nothing, so once more on a new connection. Only for queries
+  // that read: a write's COMMIT may have landed before the connection went.
+  // Not after a deadline: a server that does not answer would only be waited for twice.
+  if (!txn_ && !in_setup_ && !r.ok() && r.status().code() == StatusCode::kUnavailable && !broken_ &&
+      PQstatus(conn_) != CONNECTION_OK && sql.rfind("SELECT ", 0) == 0) {
+    r = ExecOnce(sql, params);
+  }
+  return r;
+}
+
+StatusOr<Result> Connection::ExecOnce(const std::string& sql, const Params& params) {
   if (!txn_) VB_RETURN_IF_ERROR(EnsureConnected());  // a statement on its own may run on a new connection
   auto it = prepared_.find(sql);
   if (it == prepared_.end()) {
     const std::string name = Cat("vb", prepared_.size());
-    PGresult* prep =
-        PQprepare(conn_, name.c_str(), sql.c_str(), static_cast<int>(params.size()), params.types().data());
-    if (prep == nullptr || PQresultStatus(prep) != PGRES_COMMAND_OK) {
-      Status s = Error(prep, Cat("\"", sql, "\""));
-      if (prep != nullptr) PQclear(prep);
-      return s;
-    }
+    VB_PG_ASSIGN_OR_RETURN(PGresult * prep, Run(sql, [&] {
+                             return PQsendPrepare(conn_, name.c_str(), sql.c_str(), static_cast<int>(params.size()),
+                                                  params.types().data());
+                           }));
     PQclear(prep);
     it = prepared_.emplace(sql, name).first;
   }
   std::vector<const char*> values;
   std::vector<int> lengths, formats;
   params.Arrays(&values, &lengths, &formats);
-  PGresult* r = PQexecPrepared(conn_, it->second.c_str(), static_cast<int>(params.size()), values.data(),
-                               lengths.data(), formats.data(), /*resultFormat=*/1);
-  const ExecStatusType st = r != nullptr ? PQresultStatus(r) : PGRES_FATAL_ERROR;
-  if (st != PGRES_TUPLES_OK && st != PGRES_COMMAND_OK) {
-    Status s = Error(r, Cat("\"", sql, "\""));
-    if (r != nullptr) PQclear(r);
-    return s;
-  }
+  VB_PG_ASSIGN_OR_RETURN(PGresult * r, Run(sql, [&] {
+                           return PQsendQueryPrepared(conn_, it->second.c_str(), static_cast<int>(params.size()),
+                                                      values.data(), lengths.data(), formats.data(),
+                                                      /*resultFormat=*/1);
+                         }));
   return Result(r);
 }
 
 Status Connection::Script(const std::string& sql) {
-  PGresult* r = PQexec(conn_, sql.c_str());
-  const ExecStatusType st = r != nullptr ? PQresultStatus(r) : PGRES_FATAL_ERROR;
-  if (st != PGRES_TUPLES_OK && st != PGRES_COMMAND_OK) {
-    Status s = Error(r, sql.size() > 80 ? Cat("\"", sql.substr(0, 77), "...\"") : Cat("\"", sql, "\""));
-    if (r != nullptr) PQclear(r);
-    return s;
-  }
+  VB_PG_ASSIGN_OR_RETURN(PGresult * r, Run(sql, [&] { return PQsendQuery(conn_, sql.c_str()); }));
   PQclear(r);
   return Status::Ok();
 }
@@ -294,8 +430,16 @@ Transaction::~Transaction() {
 }
 
 Status Transaction::Begin(Kind kind) {
+  const std::string begin = kind == Kind::kRead ? "BEGIN ISOLATION LEVEL REPEATABLE READ READ ONLY" : "BEGIN";
   VB_RETURN_IF_ERROR(conn_->EnsureConnected());  // a lost connection (restarted server) is re-made here
-  VB_RETURN_IF_ERROR(conn_->Script(kind == Kind::kRead ? "BEGIN ISOLATION LEVEL REPEATABLE READ READ ONLY" : "BEGIN"));
+  Status st = conn_->Script(begin);
+  if (st.code() == StatusCode::kUnavailable && !conn_->timed_out()) {
+    // The connection died between the check and BEGIN: nothing was done yet, so once more on a new one. Not
+    // after a deadline: a server that does not answer would only be waited for twice.
+    VB_RETURN_IF_ERROR(conn_->EnsureConnected());
+    st = conn_->Script(begin);
+  }
+  VB_RETURN_IF_ERROR(st);
   open_ = true;
   conn_->set_in_transaction_block(true);
   return Status::Ok();
@@ -310,7 +454,8 @@ Status Transaction::Commit() {
 
 Status Transaction::Rollback() {
   open_ = false;
-  Status s = conn_->Script("ROLLBACK");
+  // On a lost connection there is nothing to roll back (the server rolled the transaction back).
+  Status s = conn_->connected() ? conn_->Script("ROLLBACK") : Status::Ok();
   conn_->set_in_transaction_block(false);
   return s;
 }

@@ -10,6 +10,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 #include <string_view>
@@ -84,38 +85,79 @@ class Result {
   std::unique_ptr<pg_result, Clear> r_;
 };
 
+// Defaults every connection gets unless its location sets the same libpq keyword (docs/lab.md, "When the
+// database fails"): a database that does not answer is seen, not waited for.
+//   connect_timeout=5; keepalives=1, keepalives_idle=10, keepalives_interval=5, keepalives_count=3 (a peer
+//   gone without closing the connection is noticed in ~25 s even on an idle connection);
+//   options="-c statement_timeout=10s -c lock_timeout=5s" (the server ends a statement running or waiting for a
+//   lock longer than that).
+// A statement also has a deadline on this side, statement_timeout + 3 s: a server that is there but does not
+// answer at all (stopped, SIGSTOP, a cut network) cannot enforce its own timeout. A statement_timeout of 0 set
+// by the location means no deadline.
+inline constexpr const char* kDefaultConnInfo[][2] = {
+    {"connect_timeout", "5"},      {"keepalives", "1"},        {"keepalives_idle", "10"},
+    {"keepalives_interval", "5"},  {"keepalives_count", "3"},
+    {"options", "-c statement_timeout=10s -c lock_timeout=5s"}};
+inline constexpr double kDeadlineMargin_s = 3.0;
+
 class Connection {
  public:
-  // Connects (Unavailable naming the location, without its password, if it cannot). Notices are dropped.
+  // Connects (Unavailable naming the location, without its password, if it cannot), with kDefaultConnInfo
+  // under the location's own keywords. Notices are dropped.
   static StatusOr<std::unique_ptr<Connection>> Open(const std::string& location);
   ~Connection();
   Connection(const Connection&) = delete;
   Connection& operator=(const Connection&) = delete;
 
   // One statement with parameters; prepared on first use of this SQL text on this connection. Errors are
-  // Status codes by SQLSTATE (connection: Unavailable; serialization/deadlock: Aborted; unique: AlreadyExists;
-  // other constraints and bad data: InvalidArgument; disk/memory: ResourceExhausted; else Internal).
+  // Status codes by kind, never to be told apart by their text: the database cannot be reached or did not
+  // answer (connection lost or refused, server shutting down or starting, statement timeout, too many
+  // connections, no answer by the deadline): Unavailable, message starting "store unavailable: ", without the
+  // statement; serialization failure, deadlock, lock timeout: Aborted (retry); unique: AlreadyExists; other
+  // constraints and bad data: InvalidArgument; disk/memory: ResourceExhausted; else Internal (these name the
+  // statement by its first 60 characters). Outside a transaction, a query (SELECT ...) whose connection is
+  // found lost as it is sent is run once more on a new connection.
   StatusOr<Result> Exec(const std::string& sql, const Params& params = Params());
   // Several statements without parameters (migrations, BEGIN/COMMIT).
   Status Script(const std::string& sql);
   // The first column of the first row as an integer (Internal if there is no row).
   StatusOr<std::int64_t> QueryInt(const std::string& sql, const Params& params = Params());
 
-  // Re-connects if the connection was lost (a restarted server); prepared statements are prepared again.
+  // Re-connects if the connection was lost (a restarted server, a terminated session, a statement past its
+  // deadline); prepared statements are prepared again. An idle connection is checked first without a round
+  // trip: a server that closed it (restart, pg_terminate_backend) left an error and EOF on the socket, so the
+  // first call after the database returns runs on a new connection instead of failing.
   Status EnsureConnected();
+  // The deadline of one statement on this side (0: none), from the session's statement_timeout.
+  double deadline_s() const { return deadline_s_; }
   const std::string& location() const { return location_; }  // as described by DescribeLocation
   bool in_transaction() const;
+  // False once the connection is known lost (until EnsureConnected re-makes it).
+  bool connected() const;
+  // True when the last statement passed its deadline (the server did not answer; the connection is dropped).
+  bool timed_out() const { return broken_; }
   // Set by Transaction: inside one, a lost connection is an error (the transaction is gone), never re-made.
   void set_in_transaction_block(bool open) { txn_ = open; }
   pg_conn* raw() { return conn_; }
 
  private:
   Connection(pg_conn* conn, std::string location) : conn_(conn), location_(std::move(location)) {}
-  Status Error(pg_result* r, std::string_view what) const;
+  Status Error(pg_result* r, std::string_view sql) const;
+  // After a connect or reconnect: session settings, and the deadline from the session's statement_timeout.
+  Status Setup();
+  // Waits (up to the deadline) for the results of the command just sent: the first failed one, or the last.
+  // nullptr with *timed_out when the deadline passed (the connection is then dropped: broken_).
+  pg_result* Collect(bool* timed_out);
+  StatusOr<Result> ExecOnce(const std::string& sql, const Params& params);
+  // Sends with `send` (a PQsend* call) and collects; the error names `sql`.
+  StatusOr<pg_result*> Run(const std::string& sql, const std::function<int()>& send);
   pg_conn* conn_;
   std::string location_;
   std::unordered_map<std::string, std::string> prepared_;  // SQL text -> statement name
   bool txn_ = false;
+  bool broken_ = false;     // a statement passed its deadline: the connection is unusable until re-made
+  bool in_setup_ = false;   // inside Setup()
+  double deadline_s_ = 0;
 };
 
 // BEGIN ... COMMIT; the destructor rolls back a transaction that was begun and not committed.

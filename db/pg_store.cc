@@ -93,7 +93,7 @@ class PgStore final : public Store {
   StatusOr<RunStatus> RequestCancel(std::int64_t run_id, const std::string& reason) override;
   StatusOr<bool> CancelRequested(std::int64_t run_id) override;
   StatusOr<int> RecoverAfterCrash(const std::string& host) override;
-  Status Heartbeat(const HostRecord& host, double lease_ttl_s) override;
+  Status Heartbeat(const HostRecord& host, double lease_ttl_s, const std::vector<Lease>& executing) override;
   StatusOr<std::vector<HostRecord>> ListHosts() override;
   StatusOr<std::vector<std::int64_t>> RequeueLapsed() override;
   StatusOr<std::vector<StaleWrite>> StaleWrites(std::int32_t limit, std::int64_t* total) override;
@@ -330,6 +330,17 @@ Status PgStore::Finish(const Lease& lease, RunStatus final_status, const std::st
   VB_RETURN_IF_ERROR(checks::CheckFinish(final_status, metrics));
   pg::Transaction txn(conn_.get());
   VB_RETURN_IF_ERROR(txn.Begin());
+  {
+    // A retry of a Finish whose COMMIT was sent but whose answer was lost (the connection dropped): if the run
+    // is already in exactly the state this attempt writes, that first try committed. Nothing to do, and not a
+    // stale write (docs/lab.md, "When the database fails").
+    VB_PG_ASSIGN_OR_RETURN(Result r, conn_->Exec("SELECT status, fence, reason FROM runs WHERE id = $1 FOR UPDATE",
+                                                 Params().Int(run_id)));
+    if (r.rows() == 1 && r.Int(0, 1) == lease.fence && r.Text(0, 0) == RunStatusName(final_status) &&
+        r.Text(0, 2) == reason) {
+      return Status::Ok();
+    }
+  }
   VB_RETURN_IF_ERROR(CheckLease(&txn, lease, "can finish", Cat("finish ", RunStatusName(final_status))));
   VB_RETURN_IF_ERROR(conn_
                          ->Exec("UPDATE runs SET status = $2, reason = $3, finished = " VB_PG_NOW ", "
@@ -468,7 +479,7 @@ StatusOr<int> PgStore::RecoverAfterCrash(const std::string& host) {
 
 // ---- The lab ----
 
-Status PgStore::Heartbeat(const HostRecord& host, double lease_ttl_s) {
+Status PgStore::Heartbeat(const HostRecord& host, double lease_ttl_s, const std::vector<Lease>& executing) {
   if (host.name.empty()) return Status::InvalidArgument("host.name: must not be empty");
   VB_RETURN_IF_ERROR(ValidateSeconds("lease_ttl_s", lease_ttl_s));
   if (!std::isfinite(host.started_unix_s) || host.started_unix_s < 0) {
@@ -490,11 +501,14 @@ Status PgStore::Heartbeat(const HostRecord& host, double lease_ttl_s) {
                                     .Double(host.started_unix_s))
                          .status());
   if (lease_ttl_s > 0) {
-    VB_RETURN_IF_ERROR(conn_
-                           ->Exec("UPDATE runs SET lease_expires = " VB_PG_NOW " + $2 "
-                                  "WHERE status = 'running' AND host = $1",
-                                  Params().Text(host.name).Double(lease_ttl_s))
-                           .status());
+    // Only the runs the host says it executes (a few: one per bench), each with its attempt's fence.
+    for (const Lease& lease : executing) {
+      VB_RETURN_IF_ERROR(conn_
+                             ->Exec("UPDATE runs SET lease_expires = " VB_PG_NOW " + $2 "
+                                    "WHERE status = 'running' AND host = $1 AND id = $3 AND fence = $4",
+                                    Params().Text(host.name).Double(lease_ttl_s).Int(lease.run_id).Int(lease.fence))
+                             .status());
+    }
   }
   return txn.Commit();
 }

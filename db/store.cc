@@ -86,7 +86,7 @@ class SqliteStore final : public Store {
   StatusOr<RunStatus> RequestCancel(std::int64_t run_id, const std::string& reason) override;
   StatusOr<bool> CancelRequested(std::int64_t run_id) override;
   StatusOr<int> RecoverAfterCrash(const std::string& host) override;
-  Status Heartbeat(const HostRecord& host, double lease_ttl_s) override;
+  Status Heartbeat(const HostRecord& host, double lease_ttl_s, const std::vector<Lease>& executing) override;
   StatusOr<std::vector<HostRecord>> ListHosts() override;
   StatusOr<std::vector<std::int64_t>> RequeueLapsed() override;
   StatusOr<std::vector<StaleWrite>> StaleWrites(std::int32_t limit, std::int64_t* total) override;
@@ -352,6 +352,15 @@ Status SqliteStore::Finish(const Lease& lease, RunStatus final_status, const std
 
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kWrite));
+  {
+    // A retry of a Finish that committed but whose caller did not learn it: the run is already in exactly the
+    // state this attempt writes. Nothing to do, and not a stale write (as on PostgreSQL; docs/lab.md).
+    VB_DB_ASSIGN_OR_RETURN(Stmt done, conn_.Prepare("SELECT status, fence, reason FROM runs WHERE id = ?1"));
+    done.Bind(1, run_id);
+    VB_DB_ASSIGN_OR_RETURN(const bool row, done.Step());
+    if (row && done.Text(0) == RunStatusName(final_status) && done.Int(1) == lease.fence && done.Text(2) == reason)
+      return Status::Ok();
+  }
   VB_RETURN_IF_ERROR(CheckLease(lease, Cat("finish ", RunStatusName(final_status)), &txn));
   const double now = NowUnixS();
   VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("UPDATE runs SET status = ?2, reason = ?3, finished = ?4, "
@@ -541,7 +550,7 @@ StatusOr<int> SqliteStore::RecoverAfterCrash(const std::string& host) {
 
 // ---- The lab ----
 
-Status SqliteStore::Heartbeat(const HostRecord& host, double lease_ttl_s) {
+Status SqliteStore::Heartbeat(const HostRecord& host, double lease_ttl_s, const std::vector<Lease>& executing) {
   if (host.name.empty()) return Status::InvalidArgument("host.name: must not be empty");
   if (!std::isfinite(lease_ttl_s) || lease_ttl_s < 0)
     return Status::InvalidArgument(Cat("lease_ttl_s: must be finite and >= 0, got ", FormatExact(lease_ttl_s)));
@@ -559,11 +568,15 @@ Status SqliteStore::Heartbeat(const HostRecord& host, double lease_ttl_s) {
   up.Bind(5, now);
   VB_RETURN_IF_ERROR(up.Run());
   if (lease_ttl_s > 0) {
-    VB_DB_ASSIGN_OR_RETURN(Stmt renew, conn_.Prepare("UPDATE runs SET lease_expires = ?2 WHERE status = 'running' "
-                                                     "AND host = ?1"));
-    renew.Bind(1, host.name);
-    renew.Bind(2, now + lease_ttl_s);
-    VB_RETURN_IF_ERROR(renew.Run());
+    for (const Lease& lease : executing) {
+      VB_DB_ASSIGN_OR_RETURN(Stmt renew, conn_.Prepare("UPDATE runs SET lease_expires = ?2 WHERE status = 'running' "
+                                                       "AND host = ?1 AND id = ?3 AND fence = ?4"));
+      renew.Bind(1, host.name);
+      renew.Bind(2, now + lease_ttl_s);
+      renew.Bind(3, lease.run_id);
+      renew.Bind(4, lease.fence);
+      VB_RETURN_IF_ERROR(renew.Run());
+    }
   }
   return txn.Commit();
 }
@@ -1012,6 +1025,17 @@ StatusOr<PruneResult> SqliteStore::Prune(const PruneRequest& request) {
 }
 
 }  // namespace
+
+WriteFault ClassifyWrite(const Status& st) {
+  switch (st.code()) {
+    case StatusCode::kOk: return WriteFault::kNone;
+    case StatusCode::kUnavailable:
+    case StatusCode::kAborted: return WriteFault::kTransient;
+    case StatusCode::kFailedPrecondition:
+    case StatusCode::kNotFound: return WriteFault::kFenced;
+    default: return WriteFault::kPermanent;
+  }
+}
 
 std::int64_t LocalBatchOfBaselineSource(const std::string& source) {
   // "local batch 12" (baseline set --batch 12 --local) or "suite ci (local batch 12, seed 1)" (--suite).

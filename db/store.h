@@ -225,9 +225,12 @@ class Store {
   virtual StatusOr<int> RecoverAfterCrash(const std::string& host) = 0;
 
   // ---- The lab (docs/lab.md) ----
-  // Registers or refreshes `host` (its heartbeat is the store's clock now) and renews the leases of the runs it
-  // is executing to now + lease_ttl_s.
-  virtual Status Heartbeat(const HostRecord& host, double lease_ttl_s) = 0;
+  // Registers or refreshes `host` (its heartbeat is the store's clock now) and renews to now + lease_ttl_s the
+  // leases in `executing`: the runs the host is really executing right now, each still running on this host
+  // with that fence. A run of the host that is not listed (its experiment ended and its result is not written
+  // yet, or a claim whose answer was lost) is not renewed: its lease lapses and RequeueLapsed re-queues it,
+  // so no run stays running with nobody executing it (issue 30).
+  virtual Status Heartbeat(const HostRecord& host, double lease_ttl_s, const std::vector<Lease>& executing) = 0;
   virtual StatusOr<std::vector<HostRecord>> ListHosts() = 0;
   // Runs whose lease lapsed (their host stopped heartbeating): treated as RecoverAfterCrash treats a run of a
   // crashed host (interrupted, then re-queued or failed as poison). Any host may call it. Returns their ids.
@@ -273,6 +276,18 @@ class Store {
   // field for a bad request.
   virtual StatusOr<PruneResult> Prune(const PruneRequest& request) = 0;
 };
+
+// What a writer does with a store error, decided by its code alone (never its text; docs/lab.md, "When the
+// database fails").
+enum class WriteFault {
+  kNone,       // it worked
+  kTransient,  // Unavailable (the database cannot be reached or did not answer in time) or Aborted
+               // (serialization failure, deadlock, lock timeout): the same write may succeed later; retry
+  kFenced,     // FailedPrecondition or NotFound for a write carrying a Lease: a stale write, the run is no
+               // longer this attempt's (re-queued, re-assigned, finished); stop writing for it, never retry
+  kPermanent,  // anything else: bad data or a bug; retrying cannot help
+};
+WriteFault ClassifyWrite(const Status& st);
 
 // The batch a baseline's source names when its runs are in the local store ("local batch 12", "suite ci (local
 // batch 12, seed 1)"), else 0. benchctl writes these sources (benchctl/regress_commands.cc).

@@ -3,10 +3,12 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <deque>
 
 #include <spdlog/spdlog.h>
 
 #include "common/format.h"
+#include "db/text.h"
 #include "db/trace_writer.h"
 #include "experiment/spec.h"
 #include "hw/safety.h"
@@ -20,9 +22,7 @@ std::vector<db::Metric> RecordedMetrics(const experiment::Metrics& metrics) {
   return out;
 }
 
-bool IsStaleWrite(const Status& st) {
-  return st.code() == StatusCode::kFailedPrecondition && st.message().rfind("stale write", 0) == 0;
-}
+bool IsStaleWrite(const Status& st) { return db::ClassifyWrite(st) == db::WriteFault::kFenced; }
 
 namespace {
 
@@ -36,10 +36,15 @@ db::RunStatus StatusOf(experiment::RunSummary::Termination t) {
 }
 
 // The trace's blocks as store chunks, appended with the run's lease while the run executes (on the trace
-// stream's thread; the worker's thread does not touch the store until the Runner returns).
+// stream's thread; the worker's thread does not touch the store until the Runner returns). A chunk the store
+// cannot take now (unavailable) is kept, in order, and written before the next one; the loop is not held up
+// by the retries. Past kMaxBacklog chunks kept the stream stops (the run cannot be recorded: it is released).
 class StoreChunks final : public experiment::BlockSink {
  public:
-  StoreChunks(db::Store* store, db::Lease lease) : store_(store), lease_(lease) {
+  static constexpr std::size_t kMaxBacklog = 64;  // chunks of up to 16384 samples x 12 channels: ~100 MB
+
+  StoreChunks(db::Store* store, db::Lease lease, FaultLog* faults)
+      : store_(store), lease_(lease), faults_(faults) {
     chunk_.channels = experiment::Trace::ChannelNames();
   }
   Status OnBlock(const experiment::Trace& block, std::uint64_t /*first_sample*/) override {
@@ -52,17 +57,67 @@ class StoreChunks final : public experiment::BlockSink {
     chunk_.data.resize(chunk_.channels.size() * n);
     for (std::size_t c = 0; c < chunk_.channels.size(); ++c)
       for (std::size_t k = 0; k < n; ++k) chunk_.data[c * n + k] = block.Value(c, k);
-    error_ = store_->AppendTraceChunk(lease_, chunk_);
+    if (backlog_.empty()) {
+      const auto call_began = FaultLog::Clock::now();
+      const Status st = store_->AppendTraceChunk(lease_, chunk_);
+      if (db::ClassifyWrite(st) != db::WriteFault::kTransient) {
+        if (st.ok() && faults_ != nullptr) faults_->Recovered();
+        error_ = st;
+        return error_;
+      }
+      if (faults_ != nullptr) faults_->Failed(st, call_began);
+      last_transient_ = st;
+      backlog_.push_back(chunk_);
+    } else {
+      backlog_.push_back(chunk_);  // after the ones kept before it, then one try to write them all
+      error_ = TryFlush();
+      if (!error_.ok()) return error_;
+    }
+    if (backlog_.size() > kMaxBacklog) error_ = last_transient_;
     return error_;
+  }
+  // Writes the kept chunks, once each in order, stopping at the first that fails transiently. Ok then (they
+  // stay kept); a fenced or permanent refusal is returned.
+  Status TryFlush() {
+    while (!backlog_.empty()) {
+      const auto call_began = FaultLog::Clock::now();
+      const Status st = store_->AppendTraceChunk(lease_, backlog_.front());
+      // AlreadyExists for a kept chunk (each was tried before): that earlier try committed and only its
+      // answer was lost.
+      if (st.ok() || st.code() == StatusCode::kAlreadyExists) {
+        if (faults_ != nullptr) faults_->Recovered();
+        backlog_.pop_front();
+        continue;
+      }
+      if (db::ClassifyWrite(st) != db::WriteFault::kTransient) return st;
+      if (faults_ != nullptr) faults_->Failed(st, call_began);
+      last_transient_ = st;
+      return Status::Ok();
+    }
+    return Status::Ok();
+  }
+  // After the run: the kept chunks, retried per `policy`. Ok when every chunk is stored.
+  Status Flush(const RetryPolicy& policy) {
+    if (!error_.ok() || backlog_.empty()) return error_;
+    return RetryWrite(
+        [&]() -> Status {
+          VB_RETURN_IF_ERROR(TryFlush());
+          return backlog_.empty() ? Status::Ok() : last_transient_;
+        },
+        policy, faults_);
   }
   // The store's refusal, if it refused a chunk (then the stream stopped and the Runner failed the run).
   const Status& error() const { return error_; }
+  std::size_t kept() const { return backlog_.size(); }
 
  private:
   db::Store* store_;
   db::Lease lease_;
+  FaultLog* faults_;
   db::TraceChunk chunk_;
   std::int32_t index_ = 0;
+  std::deque<db::TraceChunk> backlog_;
+  Status last_transient_;
   Status error_;
 };
 
@@ -76,11 +131,27 @@ Outcome Stale(Outcome out, const db::RunRecord& run, const Status& st) {
   return out;
 }
 
+// The store stayed unavailable past the retry policy's bound (or the server is stopping): the result is
+// dropped, not written as a failure. The run stays running under a lease nobody renews (ExecuteContext::ended),
+// so it lapses and the lab re-runs it (on one machine: the next start re-queues it).
+Outcome Released(Outcome out, const db::RunRecord& run, const Status& st, const char* what) {
+  spdlog::warn("run {} (fence {}): {} not written, the store stayed unavailable: {}; the run is released (its "
+               "lease lapses and the lab runs it again)",
+               static_cast<long long>(run.id), static_cast<long long>(run.fence), what, st.message());
+  out.released = true;
+  out.recorded = false;
+  out.status = db::RunStatus::kRunning;
+  return out;
+}
+
 }  // namespace
 
 Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& setup, const ExecuteContext& ctx) {
   Outcome out;
   out.run_id = run.id;
+  RetryPolicy policy = ctx.retry;
+  policy.stop = ctx.stop;
+  bool ended_called = false;
   auto finish = [&](db::RunStatus status, std::string reason, const std::vector<db::Metric>& metrics) {
     out.status = status;
     out.reason = std::move(reason);
@@ -90,14 +161,38 @@ Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& se
       out.summary.termination = experiment::RunSummary::Termination::kFailed;
       out.summary.message = out.reason;
     }
-    auto st = store->Finish(db::LeaseOf(run), status, out.reason, metrics);
+    if (!ended_called) {
+      ended_called = true;
+      if (ctx.ended) ctx.ended();
+    }
+    auto st = RetryWrite([&] { return store->Finish(db::LeaseOf(run), status, out.reason, metrics); }, policy,
+                         ctx.faults);
     out.recorded = st.ok();
-    if (IsStaleWrite(st)) {
-      out.stale = true;
-      spdlog::warn("run {} (fence {}): result not recorded, the run is no longer this attempt's: {}",
-                   static_cast<long long>(run.id), static_cast<long long>(run.fence), st.message());
-    } else if (!st.ok()) {
-      spdlog::error("run {}: cannot record the result: {}", static_cast<long long>(run.id), st.message().c_str());
+    switch (db::ClassifyWrite(st)) {
+      case db::WriteFault::kNone:
+        break;
+      case db::WriteFault::kFenced:
+        out.stale = true;
+        spdlog::warn("run {} (fence {}): result not recorded, the run is no longer this attempt's: {}",
+                     static_cast<long long>(run.id), static_cast<long long>(run.fence), st.message());
+        break;
+      case db::WriteFault::kTransient:
+        return Released(std::move(out), run, st, "its result");
+      case db::WriteFault::kPermanent: {
+        // Bad data or a bug (not the transport): the run fails with the reason rather than staying running.
+        spdlog::error("run {}: cannot record the result: {}", static_cast<long long>(run.id), st.message().c_str());
+        const std::string why = "cannot record the result: " + st.message();
+        if (status != db::RunStatus::kFailed || !metrics.empty()) {
+          auto failed = RetryWrite([&] { return store->Finish(db::LeaseOf(run), db::RunStatus::kFailed, why, {}); },
+                                   policy, ctx.faults);
+          if (failed.ok()) {
+            out.status = db::RunStatus::kFailed;
+            out.reason = why;
+            out.recorded = true;
+          }
+        }
+        break;
+      }
     }
     return std::move(out);
   };
@@ -129,10 +224,15 @@ Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& se
   LiveTap tap(decimation, &e->reference);
   if (ctx.registry != nullptr) ctx.registry->Add(run.id, &monitor, &tap, e->duration_s);
   if (ctx.current_monitor != nullptr) ctx.current_monitor->store(&monitor);
+  const auto cancel_asked = FaultLog::Clock::now();
   auto cancel_requested = store->CancelRequested(run.id);
+  // Only read to start a run already cancelled as cancelled; unavailable, the run starts (the lab thread reads
+  // cancels again every 0.1 s), but the fault is counted.
+  if (ctx.faults != nullptr && db::ClassifyWrite(cancel_requested.status()) == db::WriteFault::kTransient)
+    ctx.faults->Failed(cancel_requested.status(), cancel_asked);
   if (stopping || (cancel_requested.ok() && *cancel_requested)) monitor.cancel.store(true);
   bench->set_cancel_flag(&monitor.cancel);  // cancel and shutdown stop a long bench step (hw::Bench)
-  StoreChunks chunks(store, db::LeaseOf(run));
+  StoreChunks chunks(store, db::LeaseOf(run), ctx.faults);
   experiment::RunOptions options;
   options.monitor = &monitor;
   options.extra_sink = ctx.registry != nullptr ? &tap : nullptr;
@@ -147,6 +247,8 @@ Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& se
     ctx.current_monitor->store(nullptr);
   }
   if (ctx.registry != nullptr) ctx.registry->Remove(run.id, &monitor);
+  ended_called = true;
+  if (ctx.ended) ctx.ended();
 
   if (ctx.stop != nullptr && ctx.stop->load() &&
       out.summary.termination == experiment::RunSummary::Termination::kCancelled) {
@@ -164,16 +266,25 @@ Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& se
       out.summary.message = "cancelled at t = " + FormatNumber(out.summary.duration_s) + " s of " +
                             FormatNumber(e->duration_s) + " s";
   }
+  // The trace is in the store already, but for chunks kept while the store was unavailable: written now. A
+  // chunk the store refused failed the run ("recording: ..."): as stale, as released (unavailable too long), or
+  // as failed (bad data).
+  if (Status st = chunks.Flush(policy); IsStaleWrite(st)) {
+    return Stale(std::move(out), run, st);
+  } else if (db::ClassifyWrite(st) == db::WriteFault::kTransient) {
+    return Released(std::move(out), run, st, db::Cat(chunks.kept(), " trace chunk(s) and the result").c_str());
+  }
   if (out.summary.termination != experiment::RunSummary::Termination::kDone && e->duration_s > 0) {
     const double reached = std::clamp(out.summary.duration_s / e->duration_s, 0.0, 1.0);
-    if (auto st = store->SetProgress(db::LeaseOf(run), reached); IsStaleWrite(st)) {
+    if (auto st = RetryWrite([&] { return store->SetProgress(db::LeaseOf(run), reached); }, policy, ctx.faults);
+        IsStaleWrite(st)) {
       return Stale(std::move(out), run, st);
+    } else if (db::ClassifyWrite(st) == db::WriteFault::kTransient) {
+      return Released(std::move(out), run, st, "its progress and result");
     } else if (!st.ok()) {
       spdlog::warn("run {}: cannot record its progress: {}", static_cast<long long>(run.id), st.message().c_str());
     }
   }
-  // The trace is in the store already (a chunk the store refused failed the run, "recording: ...").
-  if (IsStaleWrite(chunks.error())) return Stale(std::move(out), run, chunks.error());
   db::RunStatus status = StatusOf(out.summary.termination);
   std::string reason = out.summary.message;
   if (status == db::RunStatus::kCancelled) {

@@ -8,12 +8,17 @@
 //      streams to the store in chunks while it runs (docs/store.md, "Traces while the run executes"), so a
 //      run's memory does not grow with its length and a watcher elsewhere sees the chunks as they land;
 //   4. finish the run with its status, reason and finite metrics.
+// Every store write on the way survives a store that is unavailable for a while (ExecuteContext::retry): a
+// chunk that cannot be written is kept and written later; the result is retried until written, or, past the
+// policy's bound, dropped: the run is then left running under a lease nobody renews, so it lapses and the lab
+// re-runs it. A run is never failed because the store could not be reached.
 // A run stopped by `stop` (server shutdown) is not finished: it stays running in the store, and the next
 // start marks it interrupted and re-queues it (docs/decisions.md, "A server stopped mid-run").
 #pragma once
 
 #include <atomic>
 #include <cstdint>
+#include <functional>
 #include <mutex>
 #include <string>
 
@@ -21,6 +26,7 @@
 #include "experiment/runner.h"
 #include "runs/bench_setup.h"
 #include "runs/monitor.h"
+#include "runs/store_faults.h"
 
 namespace vb::runs {
 
@@ -30,6 +36,8 @@ struct Outcome {
   std::string reason;
   bool recorded = false;             // false: left running for recovery (stopped), or the store refused
   bool stale = false;                // the store refused a write as stale: the run is another attempt's now
+  bool released = false;             // the store stayed unavailable: the result was dropped, the run is left to
+                                     // lapse and be re-run (never failed for a transport error)
   experiment::RunSummary summary;    // empty when the run never started (bad spec, bench not there)
   experiment::Trace trace;           // what was recorded, when ExecuteContext::keep_trace (it is in the store)
 };
@@ -42,12 +50,22 @@ struct ExecuteContext {
   // Held while current_monitor is cleared (the monitor is destroyed right after): whoever sets the published
   // monitor's cancel flag from another thread holds it too, so it never writes to a monitor that is gone.
   std::mutex* current_monitor_mu = nullptr;
+  // Called once the experiment has ended, before its result is written: from then on the run is not executing
+  // (its lease is no longer renewed by the host's heartbeat, and no progress is written for it).
+  std::function<void()> ended;
+  // Store writes on the run's path (trace chunks, progress, the result) that fail transiently are retried with
+  // this policy (its give_up_s bounds how long a result is kept when the store is unavailable; its stop is
+  // `stop`'s); the faults are logged through `faults` (nullptr: not logged). docs/lab.md, "When the database
+  // fails".
+  RetryPolicy retry;
+  FaultLog* faults = nullptr;
 };
 
 Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& setup, const ExecuteContext& ctx);
 
 // A write the store refused because the lease no longer holds the run (db::Lease): the run was re-queued or
 // re-assigned while this attempt ran. The attempt stops writing, logs it, and does not retry (docs/lab.md).
+// Decided by the status code (db::ClassifyWrite), not its text.
 bool IsStaleWrite(const Status& st);
 
 // The metrics a run records: the finite ones of experiment::MetricList, in its order.

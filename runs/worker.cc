@@ -8,7 +8,8 @@
 
 namespace vb::runs {
 
-Worker::Worker(BenchSetup setup, Registry* registry) : setup_(std::move(setup)), registry_(registry) {}
+Worker::Worker(BenchSetup setup, Registry* registry)
+    : setup_(std::move(setup)), registry_(registry), faults_("bench " + setup_.name) {}
 
 Worker::~Worker() { Stop(); }
 
@@ -20,15 +21,30 @@ StatusOr<std::optional<Outcome>> Worker::ClaimAndExecute(db::Store* store) {
   auto claimed = store->ClaimNext(request);
   if (!claimed.ok()) return claimed.status();
   if (!claimed->has_value()) return std::optional<Outcome>();
+  faults_.Recovered();
   current_fence_.store((*claimed)->fence);
   current_run_.store((*claimed)->id);
+  {
+    std::lock_guard<std::mutex> lock(executing_mu_);
+    executing_ = db::LeaseOf(**claimed);
+  }
   ExecuteContext ctx;
+  ctx.ended = [this] {
+    std::lock_guard<std::mutex> lock(executing_mu_);
+    executing_ = db::Lease{};
+  };
+  ctx.retry.give_up_s = policy_.hold_result_s;
+  ctx.faults = &faults_;
   ctx.registry = registry_;
   ctx.stop = &stop_;
   ctx.current_monitor = &monitor_;
   ctx.keep_trace = keep_traces_;
   ctx.current_monitor_mu = &monitor_mu_;
   Outcome out = Execute(store, **claimed, setup_, ctx);
+  {
+    std::lock_guard<std::mutex> lock(executing_mu_);
+    executing_ = db::Lease{};
+  }
   current_run_.store(0);
   {
     // A failure at the bench (not opened, an interlock tripped) marks it faulted until a run ends well again.
@@ -41,6 +57,17 @@ StatusOr<std::optional<Outcome>> Worker::ClaimAndExecute(db::Store* store) {
     }
   }
   return std::optional<Outcome>(std::move(out));
+}
+
+db::Lease Worker::executing_lease() const {
+  std::lock_guard<std::mutex> lock(executing_mu_);
+  return executing_;
+}
+
+Status Worker::WithExecutingLease(const std::function<Status(const db::Lease&)>& write) {
+  std::lock_guard<std::mutex> lock(executing_mu_);
+  if (executing_.run_id == 0) return Status::Ok();
+  return write(executing_);
 }
 
 std::string Worker::fault() const {
@@ -73,17 +100,36 @@ void Worker::Stop() {
 }
 
 void Worker::Loop(const std::string& db_path) {
-  auto store = db::OpenStore(db_path);
-  if (!store.ok()) {
-    spdlog::error("bench {}: cannot open the store: {}", setup_.name.c_str(),
-                 store.status().message().c_str());
-    return;
-  }
+  // The store may be unavailable at start or at any time: opening and claiming are retried (every 0.2 s, or
+  // when work is signalled), the fault logged once when it begins and once when it ends.
+  std::unique_ptr<db::Store> store;
   while (!stop_.load()) {
-    auto done = ClaimAndExecute(store->get());
-    if (!done.ok())
-      spdlog::error("bench {}: claim failed: {}", setup_.name.c_str(),
-                   done.status().message().c_str());
+    if (store == nullptr) {
+      const auto call_began = FaultLog::Clock::now();
+      auto opened = db::OpenStore(db_path);
+      if (opened.ok()) {
+        store = std::move(opened).value();
+      } else if (db::ClassifyWrite(opened.status()) == db::WriteFault::kTransient) {
+        faults_.Failed(opened.status(), call_began);
+      } else {
+        spdlog::error("bench {}: cannot open the store: {}", setup_.name, opened.status().message());
+      }
+      if (store == nullptr) {
+        if (registry_ != nullptr) registry_->WaitForWork(200);
+        continue;
+      }
+    }
+    const auto call_began = FaultLog::Clock::now();
+    auto done = ClaimAndExecute(store.get());
+    if (!done.ok()) {
+      if (db::ClassifyWrite(done.status()) == db::WriteFault::kTransient) {
+        faults_.Failed(done.status(), call_began);
+      } else {
+        spdlog::error("bench {}: claim failed: {}", setup_.name, done.status().message());
+      }
+    } else if (!done->has_value()) {
+      faults_.Recovered();
+    }
     if (!done.ok() || !done->has_value()) registry_->WaitForWork(200);
   }
 }

@@ -6,6 +6,7 @@
 #include <atomic>
 #include <mutex>
 #include <cstdint>
+#include <functional>
 #include <optional>
 #include <string>
 #include <thread>
@@ -14,6 +15,7 @@
 #include "runs/bench_setup.h"
 #include "runs/execute.h"
 #include "runs/monitor.h"
+#include "runs/store_faults.h"
 
 namespace vb::runs {
 
@@ -23,6 +25,9 @@ struct ClaimPolicy {
   std::string host;
   double lease_ttl_s = 0.0;
   double aging_s = 0.0;
+  // How long a run's result (and kept trace chunks) is retried while the store is unavailable before it is
+  // dropped and the run left to lapse and be re-run (docs/lab.md, "When the database fails").
+  double hold_result_s = 120.0;
 };
 
 class Worker {
@@ -57,6 +62,14 @@ class Worker {
   std::string fault() const;
   // The lease of the run in progress (run_id 0 when none): its writes carry it (db::Lease).
   db::Lease current_lease() const { return {current_run_.load(), current_fence_.load()}; }
+  // The lease of the run whose experiment is executing on the bench right now (run_id 0 when none): from its
+  // claim until its experiment ends, not while its result is being written (or kept, the store being
+  // unavailable). Only these leases are renewed by the host's heartbeat (db::Store::Heartbeat).
+  db::Lease executing_lease() const;
+  // Calls `write` with the executing lease, if any (else returns Ok without calling it), while the run cannot
+  // end: the end of the experiment waits for it. So a progress write never races the run's final write (a
+  // progress write after the result is not a stale write: issue 30).
+  Status WithExecutingLease(const std::function<Status(const db::Lease&)>& write);
 
  private:
   void Loop(const std::string& db_path);
@@ -73,6 +86,9 @@ class Worker {
   std::atomic<std::int64_t> current_run_{0};
   std::atomic<experiment::RunMonitor*> monitor_{nullptr};
   std::mutex monitor_mu_;  // see ExecuteContext::current_monitor_mu
+  mutable std::mutex executing_mu_;
+  db::Lease executing_;    // executing_lease()
+  FaultLog faults_;        // the worker's store faults (claims and its runs' writes), logged once each
 };
 
 }  // namespace vb::runs

@@ -115,7 +115,22 @@ Status LabHost::Beat(db::Store* store) {
         if (b.is_object() && w->setup().name == b.value("name", "")) b["fault"] = w->fault();
   me.benches_json = benches.is_array() ? benches.dump() : benches_json_;
   me.started_unix_s = started_unix_s_;
-  VB_RETURN_IF_ERROR(store->Heartbeat(me, setup_.lease_ttl_s));
+  // Only the runs whose experiments are executing here: a run that ended and whose result is not written yet
+  // is not kept alive (issue 30).
+  std::vector<db::Lease> executing;
+  if (workers_ != nullptr)
+    for (const auto& w : *workers_)
+      if (const db::Lease lease = w->executing_lease(); lease.run_id != 0) executing.push_back(lease);
+  VB_RETURN_IF_ERROR(store->Heartbeat(me, setup_.lease_ttl_s, executing));
+  const auto now = std::chrono::steady_clock::now();
+  if (faults_.in_fault()) {
+    // The store is back after a fault: every host's leases may have lapsed meanwhile. Re-queueing now would
+    // take the runs of hosts that simply have not had their first heartbeat since; give them one lease TTL.
+    reap_after_ = now + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                            std::chrono::duration<double>(setup_.lease_ttl_s));
+  }
+  faults_.Recovered();
+  if (now < reap_after_) return Status::Ok();
   auto lapsed = store->RequeueLapsed();
   if (!lapsed.ok()) return lapsed.status();
   if (!lapsed->empty()) {
@@ -132,6 +147,7 @@ Status LabHost::Start() {
   if (!store.ok()) return store.status();
   store_ = std::move(store).value();
   VB_RETURN_IF_ERROR(Beat(store_.get()).WithContext("lab: first heartbeat of host " + setup_.host));
+  faults_.Recovered();
   thread_ = std::thread([this] { Loop(); });
   return Status::Ok();
 }
@@ -143,19 +159,41 @@ void LabHost::Stop() {
 
 void LabHost::WatchRuns(db::Store* store, bool write_progress) {
   for (const auto& w : *workers_) {
-    const db::Lease lease = w->current_lease();
+    const db::Lease lease = w->executing_lease();
     if (lease.run_id == 0) continue;
+    const auto asked = runs::FaultLog::Clock::now();
     auto cancel = store->CancelRequested(lease.run_id);
+    if (db::ClassifyWrite(cancel.status()) == db::WriteFault::kTransient) {
+      faults_.Failed(cancel.status(), asked);
+      return;  // the store is unavailable: the next watch tries again
+    }
     if (cancel.ok() && *cancel && w->CancelIfCurrent(lease))
       spdlog::info("run {}: cancel requested through the store: stopping it", static_cast<long long>(lease.run_id));
     if (!write_progress) continue;
     double progress = 0.0;
     if (!registry_->Progress(lease.run_id, &progress)) continue;
-    Status st = store->SetProgress(lease, std::min(1.0, std::max(0.0, progress)));
-    if (runs::IsStaleWrite(st)) {
-      spdlog::warn("run {} (fence {}): {}; stopping this attempt", static_cast<long long>(lease.run_id),
-                   static_cast<long long>(lease.fence), st.message());
-      w->CancelIfCurrent(lease);
+    // Under the worker's lock: the run cannot end (and write its result) while its progress is being written.
+    db::Lease written;
+    const auto writing = runs::FaultLog::Clock::now();
+    Status st = w->WithExecutingLease([&](const db::Lease& current) {
+      if (current.run_id != lease.run_id || current.fence != lease.fence) return Status::Ok();  // another run now
+      written = current;
+      return store->SetProgress(current, std::min(1.0, std::max(0.0, progress)));
+    });
+    switch (db::ClassifyWrite(st)) {
+      case db::WriteFault::kNone:
+        break;
+      case db::WriteFault::kTransient:  // progress is only for watchers: the next one is 0.5 s away
+        faults_.Failed(st, writing);
+        return;
+      case db::WriteFault::kFenced:
+        spdlog::warn("run {} (fence {}): {}; stopping this attempt", static_cast<long long>(written.run_id),
+                     static_cast<long long>(written.fence), st.message());
+        w->CancelIfCurrent(written);
+        break;
+      case db::WriteFault::kPermanent:
+        spdlog::error("run {}: cannot write its progress: {}", static_cast<long long>(written.run_id), st.message());
+        break;
     }
   }
 }
@@ -170,7 +208,12 @@ void LabHost::Loop() {
       // Scheduled from the previous target, not from now: a slow heartbeat does not push the next one later.
       next_beat += std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(setup_.heartbeat_s));
       if (next_beat < Clock::now()) next_beat = Clock::now();
-      if (Status st = Beat(store_.get()); !st.ok()) spdlog::error("lab: heartbeat failed: {}", st.message());
+      const auto beat_began = runs::FaultLog::Clock::now();
+      if (Status st = Beat(store_.get()); db::ClassifyWrite(st) == db::WriteFault::kTransient) {
+        faults_.Failed(st, beat_began);  // logged once when the fault begins, and with its duration when it ends
+      } else if (!st.ok()) {
+        spdlog::error("lab: heartbeat failed: {}", st.message());
+      }
     }
     WatchRuns(store_.get(), ++watches % kProgressEveryWatches == 0);
   }

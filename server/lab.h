@@ -1,19 +1,24 @@
 // This server as one host of a lab (config "lab"; docs/lab.md): a thread that keeps the host's registration and
 // leases alive and watches the runs its benches execute.
-//   - every heartbeat_s: Heartbeat (the host row with its benches, and the leases of its running runs renewed to
-//     now + lease_ttl_s), then RequeueLapsed (any host re-queues the runs of hosts that stopped heartbeating);
+//   - every heartbeat_s: Heartbeat (the host row with its benches, and the leases of the runs its benches are
+//     executing renewed to now + lease_ttl_s), then RequeueLapsed (any host re-queues the runs of hosts that
+//     stopped heartbeating; after the store was unavailable, only one lease TTL after it is back);
+//   - the store unavailable: logged once when it begins and once, with its duration, when it ends; the thread
+//     goes on trying (timeouts bound every call: db/pg_conn.h);
 //   - every 100 ms, for each bench's run in progress: a cancel requested through the store (CancelRun on another
 //     host) stops it; its progress is written to the store every 0.5 s so watchers on other hosts follow it; a
 //     progress write refused as stale (the lease lapsed, the run is someone else's now) stops it too.
 // Nothing here touches the control loop: it sets the run's cancel flag, as CancelRun does.
 #pragma once
 
+#include <chrono>
 #include <memory>
 #include <string>
 #include <thread>
 #include <vector>
 
 #include "runs/monitor.h"
+#include "runs/store_faults.h"
 #include "runs/worker.h"
 #include "server/config.h"
 #include "server/stop_signal.h"
@@ -52,6 +57,9 @@ class LabHost {
   runs::Registry* registry_;
   const std::vector<std::unique_ptr<runs::Worker>>* workers_;
   std::unique_ptr<db::Store> store_;
+  runs::FaultLog faults_{"lab"};  // the store's faults as this thread meets them, logged once each
+  // After a fault, lapsed leases are re-queued only from here on (one lease TTL after the store came back).
+  std::chrono::steady_clock::time_point reap_after_{};
   std::thread thread_;
   StopSignal stop_;
 };

@@ -190,8 +190,8 @@ TEST_P(LabStoreTest, BadClaimRequestsNameTheField) {
   c = store_->ClaimNext(Claim("h", "b", 1.0, std::nan("")));
   EXPECT_EQ(c.status().code(), StatusCode::kInvalidArgument);
   EXPECT_NE(c.status().message().find("aging_s"), std::string::npos) << c.status().message();
-  EXPECT_EQ(store_->Heartbeat(HostRecord{}, 1.0).code(), StatusCode::kInvalidArgument);
-  EXPECT_EQ(store_->Heartbeat(HostRecord{"h", "", "[]", 0, 0}, -1.0).code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(store_->Heartbeat(HostRecord{}, 1.0, {}).code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(store_->Heartbeat(HostRecord{"h", "", "[]", 0, 0}, -1.0, {}).code(), StatusCode::kInvalidArgument);
 }
 
 // The scenario the fence exists for: host A stops (SIGSTOP), its lease lapses, the run is re-queued and host B
@@ -294,7 +294,7 @@ TEST_P(LabStoreTest, HeartbeatsKeepLeasesAndALapsedLeaseIsReQueuedWithItsIdPrior
   RunRecord a = ClaimOrDie(store_.get(), Claim("host-a", "bench-a", 0.3));
   // Heartbeats every 0.1 s for 0.6 s (twice the TTL): the lease holds.
   for (int k = 0; k < 6; ++k) {
-    ASSERT_TRUE(store_->Heartbeat(HostRecord{"host-a", "a:1", "[]", 0, 0}, 0.3).ok());
+    ASSERT_TRUE(store_->Heartbeat(HostRecord{"host-a", "a:1", "[]", 0, 0}, 0.3, {LeaseOf(a)}).ok());
     std::this_thread::sleep_for(100ms);
     auto lapsed = store_->RequeueLapsed();
     ASSERT_TRUE(lapsed.ok());
@@ -304,7 +304,7 @@ TEST_P(LabStoreTest, HeartbeatsKeepLeasesAndALapsedLeaseIsReQueuedWithItsIdPrior
   // Another host's heartbeat does not renew A's lease.
   auto other = Open();
   std::this_thread::sleep_for(450ms);
-  ASSERT_TRUE(other->Heartbeat(HostRecord{"host-b", "b:1", "[]", 0, 0}, 0.3).ok());
+  ASSERT_TRUE(other->Heartbeat(HostRecord{"host-b", "b:1", "[]", 0, 0}, 0.3, {LeaseOf(a)}).ok());
   auto lapsed = other->RequeueLapsed();
   ASSERT_TRUE(lapsed.ok());
   ASSERT_EQ(*lapsed, std::vector<std::int64_t>{ids[0]});
@@ -323,6 +323,56 @@ TEST_P(LabStoreTest, HeartbeatsKeepLeasesAndALapsedLeaseIsReQueuedWithItsIdPrior
   EXPECT_NE((*hist)[hist->size() - 2].reason.find("lease lapsed: host host-a"), std::string::npos);
   EXPECT_TRUE(other->RequeueLapsed()->empty());  // once
   EXPECT_EQ(ClaimOrDie(other.get(), Claim("host-b", "bench-b", 10.0)).fence, 2);
+}
+
+// Issue 30: a heartbeat renews only the leases the host says it is executing. A run of the host that is not
+// among them (its experiment ended and its result could not be written yet) lapses and is re-queued, so it is
+// never left running with nobody executing it; nor does a lease with an old fence renew a re-claimed run.
+TEST_P(LabStoreTest, AHeartbeatRenewsOnlyTheLeasesOfRunsItIsExecuting) {
+  SubmitRuns(2);
+  RunRecord executing = ClaimOrDie(store_.get(), Claim("host-a", "bench-a", 0.3));
+  RunRecord ended = ClaimOrDie(store_.get(), Claim("host-a", "bench-b", 0.3));
+  for (int k = 0; k < 6; ++k) {
+    ASSERT_TRUE(store_->Heartbeat(HostRecord{"host-a", "a:1", "[]", 0, 0}, 0.3, {LeaseOf(executing)}).ok());
+    std::this_thread::sleep_for(100ms);
+  }
+  auto lapsed = store_->RequeueLapsed();
+  ASSERT_TRUE(lapsed.ok()) << lapsed.status().ToString();
+  EXPECT_EQ(*lapsed, std::vector<std::int64_t>{ended.id});
+  EXPECT_EQ(store_->GetRun(executing.id)->status, RunStatus::kRunning);
+  EXPECT_EQ(store_->GetRun(ended.id)->status, RunStatus::kQueued);
+  // The re-queued run claimed again (fence 2): a heartbeat naming its old attempt does not renew the new one.
+  RunRecord again = ClaimOrDie(store_.get(), Claim("host-a", "bench-b", 0.3));
+  ASSERT_EQ(again.id, ended.id);
+  ASSERT_EQ(again.fence, 2);
+  for (int k = 0; k < 6; ++k) {
+    ASSERT_TRUE(
+        store_->Heartbeat(HostRecord{"host-a", "a:1", "[]", 0, 0}, 0.3, {LeaseOf(executing), LeaseOf(ended)}).ok());
+    std::this_thread::sleep_for(100ms);
+  }
+  lapsed = store_->RequeueLapsed();
+  ASSERT_TRUE(lapsed.ok());
+  EXPECT_EQ(*lapsed, std::vector<std::int64_t>{ended.id});
+}
+
+// Issue 30: a Finish retried after its answer was lost (the connection dropped after COMMIT) finds the run in
+// exactly the state it writes: Ok, written once, not a stale write. A different final state is still refused.
+TEST_P(LabStoreTest, ARetriedFinishWhoseFirstTryCommittedIsNotAStaleWrite) {
+  SubmitRuns(1);
+  RunRecord a = ClaimOrDie(store_.get(), Claim("host-a", "bench-a", 10.0));
+  ASSERT_TRUE(store_->Finish(LeaseOf(a), RunStatus::kDone, "ok", {{"rmse_A", 0.5}}).ok());
+  EXPECT_TRUE(store_->Finish(LeaseOf(a), RunStatus::kDone, "ok", {{"rmse_A", 0.5}}).ok());
+  EXPECT_EQ(store_->GetMetrics(a.id)->size(), 1u);
+  EXPECT_EQ(store_->Finish(LeaseOf(a), RunStatus::kFailed, "late", {}).code(), StatusCode::kFailedPrecondition);
+  EXPECT_EQ(store_->Finish(LeaseOf(a), RunStatus::kDone, "other reason", {}).code(),
+            StatusCode::kFailedPrecondition);
+  auto hist = store_->History(a.id);
+  ASSERT_TRUE(hist.ok());
+  EXPECT_EQ(std::count_if(hist->begin(), hist->end(), [](const StatusChange& c) { return c.status == RunStatus::kDone; }),
+            1);
+  std::int64_t total = 0;
+  ASSERT_TRUE(store_->StaleWrites(10, &total).ok());
+  EXPECT_EQ(total, 2);  // the two different ones
 }
 
 TEST_P(LabStoreTest, RunsWithoutALeaseNeverLapse) {
@@ -373,11 +423,11 @@ TEST_P(LabStoreTest, RecoverAfterCrashTouchesOnlyTheRestartedHostsRuns) {
 TEST_P(LabStoreTest, HostsAreListedWithTheirBenchesAndHeartbeats) {
   auto b = Open();
   const double t0 = NowS();
-  ASSERT_TRUE(b->Heartbeat(HostRecord{"host-b", "10.0.0.2:50051", R"([{"name":"emu-1"}])", t0 - 5, 0}, 10).ok());
-  ASSERT_TRUE(store_->Heartbeat(HostRecord{"host-a", "10.0.0.1:50051", R"([{"name":"emu-2"}])", t0 - 9, 0}, 10).ok());
+  ASSERT_TRUE(b->Heartbeat(HostRecord{"host-b", "10.0.0.2:50051", R"([{"name":"emu-1"}])", t0 - 5, 0}, 10, {}).ok());
+  ASSERT_TRUE(store_->Heartbeat(HostRecord{"host-a", "10.0.0.1:50051", R"([{"name":"emu-2"}])", t0 - 9, 0}, 10, {}).ok());
   std::this_thread::sleep_for(20ms);
   ASSERT_TRUE(b->Heartbeat(HostRecord{"host-b", "10.0.0.2:50052", R"([{"name":"emu-1"},{"name":"emu-3"}])", t0 - 5, 0},
-                           10).ok());
+                           10, {}).ok());
   auto hosts = store_->ListHosts();
   ASSERT_TRUE(hosts.ok()) << hosts.status().ToString();
   ASSERT_EQ(hosts->size(), 2u);

@@ -227,4 +227,36 @@ void PgServer::Stop() {
   dir_.clear();
 }
 
+Status PgServer::Restart() {
+  if (dir_.empty() || !running_) return Status::FailedPrecondition("not a server this process started");
+  const std::string cmd = Cat(run_as_, bindir_, "/pg_ctl -D ", dir_, "/data -m fast -w -t 60 -s restart > /dev/null 2>&1");
+  if (std::system(cmd.c_str()) != 0) return Status::Unavailable(Cat("pg_ctl restart failed: ", Tail(ReadAll(dir_ + "/log"), 600)));
+  return Status::Ok();
+}
+
+Status PgServer::StopServer() {
+  if (dir_.empty() || !running_) return Status::FailedPrecondition("not a server this process started");
+  const std::string cmd = Cat(run_as_, bindir_, "/pg_ctl -D ", dir_, "/data -m fast -w -t 60 -s stop > /dev/null 2>&1");
+  if (std::system(cmd.c_str()) != 0) return Status::Unavailable("pg_ctl stop failed");
+  return Status::Ok();
+}
+
+Status PgServer::StartServer() {
+  if (dir_.empty() || !running_) return Status::FailedPrecondition("not a server this process started");
+  std::string why;
+  if (!StartIn(dir_, &why)) return Status::Unavailable(why);
+  return Status::Ok();
+}
+
+StatusOr<int> PgServer::TerminateSessions(const std::string& dbname) {
+  auto c = pg::Connection::Open(admin_);
+  if (!c.ok()) return c.status();
+  auto n = (*c)->QueryInt(
+      "SELECT count(pg_terminate_backend(pid))::int8 FROM pg_stat_activity WHERE datname = $1 AND pid <> "
+      "pg_backend_pid()",
+      pg::Params().Text(dbname));
+  if (!n.ok()) return n.status();
+  return static_cast<int>(*n);
+}
+
 }  // namespace vb::db::testing

@@ -26,6 +26,15 @@ class PgServer {
 
   void Stop();  // idempotent; also at process exit
 
+  // Database faults for the tests of a store that survives them (docs/lab.md, "When the database fails"). Only
+  // on the server this process started (FailedPrecondition with VB_TEST_PG_URL). They affect every database of
+  // the process's server: use them in a test binary of their own.
+  Status Restart();        // pg_ctl restart -m fast: every session is ended, the server is back when it returns
+  Status StopServer();     // pg_ctl stop -m fast: an outage, until StartServer()
+  Status StartServer();
+  // pg_terminate_backend of every session on `dbname` but the caller's own; returns how many.
+  StatusOr<int> TerminateSessions(const std::string& dbname);
+
  private:
   PgServer() = default;
   bool Start(std::string* why);

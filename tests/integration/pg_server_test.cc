@@ -198,5 +198,50 @@ TEST(PgLab, ARunSubmittedOnOneHostAndExecutedOnAnotherIsFollowedFromAThird) {
   std::filesystem::remove_all(root);
 }
 
+// Issue 30: the API's pooled store connections survive the database. The first calls after a PostgreSQL
+// restart answer (they failed, exit 3, even 35 s later); with the database down a call says "store
+// unavailable" (exit 3) without quoting SQL; back up, calls answer and the host's bench runs a run again, all
+// without restarting the host.
+TEST(PgServer, TheApiAnswersTheFirstCallAfterTheDatabaseRestartsAndSaysWhenItIsDown) {
+  db::testing::PgServer* pg = db::testing::PgServer::Get();
+  if (pg == nullptr) GTEST_SKIP() << "PostgreSQL cannot start here: " << db::testing::PgServer::WhyUnavailable();
+  auto created = pg->CreateDatabase();
+  ASSERT_TRUE(created.ok()) << created.status().ToString();
+  const std::string dir = ::testing::TempDir() + "/vb-pg-restart-" + std::to_string(getpid());
+  std::filesystem::remove_all(dir);
+  ServerProcess server(dir);
+  {
+    std::string config = ReadAll(dir + "/server.json");
+    const std::string from = R"("database_path": "runs.db")";
+    const auto at = config.find(from);
+    ASSERT_NE(at, std::string::npos);
+    config.replace(at, from.size(), std::string(R"("database_path": ")") + *created + "\"");
+    std::ofstream(dir + "/server.json") << config;
+  }
+  const std::string addr = server.Start();
+  ASSERT_FALSE(addr.empty()) << ReadAll(dir + "/server-1.log");
+  const std::string auth = " --server " + addr + " --token " + testing::kOperatorToken;
+  ASSERT_EQ(Benchctl("queue" + auth).code, 0);
+  ASSERT_EQ(Benchctl("benches" + auth).code, 0);
+
+  ASSERT_TRUE(pg->Restart().ok());
+  Ran queue = Benchctl("queue" + auth);
+  EXPECT_EQ(queue.code, 0) << queue.out;
+  Ran benches = Benchctl("benches" + auth);
+  EXPECT_EQ(benches.code, 0) << benches.out;
+
+  ASSERT_TRUE(pg->StopServer().ok());
+  Ran down = Benchctl("queue" + auth);
+  ASSERT_TRUE(pg->StartServer().ok());
+  EXPECT_EQ(down.code, 3) << down.out;
+  EXPECT_NE(down.out.find("store unavailable"), std::string::npos) << down.out;
+  EXPECT_EQ(down.out.find("SELECT"), std::string::npos) << down.out;
+
+  Ran back = Benchctl("queue" + auth);
+  EXPECT_EQ(back.code, 0) << back.out;
+  Ran run = Benchctl("run " VB_SOURCE_DIR "/examples/standard/e1.json --wait --json" + auth);
+  EXPECT_EQ(run.code, 0) << run.out << ReadAll(dir + "/server-1.log");
+}
+
 }  // namespace
 }  // namespace vb

@@ -1,12 +1,18 @@
 // runs/: Admit and Execute, the one pipeline behind the server, the nights and benchctl's local mode.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <atomic>
 #include <bit>
 #include <chrono>
 #include <cmath>
+#include <sstream>
 #include <thread>
 
 #include <unistd.h>
+
+#include <spdlog/sinks/ostream_sink.h>
+#include <spdlog/spdlog.h>
 
 #include "common/format.h"
 #include "db/store.h"
@@ -15,6 +21,7 @@
 #include "runs/admit.h"
 #include "runs/monitor.h"
 #include "runs/worker.h"
+#include "tests/runs/flaky_store.h"
 
 namespace vb::runs {
 namespace {
@@ -480,6 +487,209 @@ TEST(Execute, ACancelInsideALongStepStatesTheTimeTheBenchReached) {
       << r->reason;
   EXPECT_NEAR(r->progress, reached / 600.0, 1e-9);
 }
+
+
+// ---- A run that survives its store (issue 30; docs/lab.md, "When the database fails") ----
+
+namespace store_faults {
+
+using runs::testing::FlakyStore;
+
+// One E3 run queued on a SQLite store, claimed as host "h" (a lease of 10 s); the claimed record.
+struct Queued {
+  std::unique_ptr<db::Store> store;
+  db::RunRecord run;
+};
+Queued QueueAndClaim() {
+  Queued q;
+  auto store = db::Store::Open(":memory:");
+  EXPECT_TRUE(store.ok());
+  q.store = std::move(*store);
+  Policy local;
+  local.benches = {LocalEmulatorSetup()};
+  auto a = Admit({"me", "b", {E3()}, {}, ""}, local);
+  EXPECT_TRUE(a.ok());
+  auto e = Enqueue(q.store.get(), std::move(*a), local);
+  EXPECT_TRUE(e.ok());
+  db::ClaimRequest claim = db::BenchClaim(LocalEmulatorSetup().bench_class, LocalEmulatorSetup().name);
+  claim.host = "h";
+  claim.lease_ttl_s = 10;
+  auto c = q.store->ClaimNext(claim);
+  EXPECT_TRUE(c.ok() && c->has_value());
+  q.run = **c;
+  return q;
+}
+
+std::int64_t StoredSamples(db::Store* store, std::int64_t id) {
+  std::int64_t stored = 0;
+  EXPECT_TRUE(store->ForEachTraceChunk(id, [&](const db::TraceChunk&, std::int64_t total) {
+    stored = total;
+    return Status::Ok();
+  }).ok());
+  return stored;
+}
+
+TEST(StoreFaults, ARunWhoseStoreIsDownWhileItRunsIsWrittenWhenTheStoreReturns) {
+  Queued q = QueueAndClaim();
+  FlakyStore flaky(q.store.get());
+  flaky.down = true;  // from before the first chunk to after the end of the run
+  std::atomic<bool> ended{false};
+  ExecuteContext ctx;
+  ctx.retry.give_up_s = 30;
+  ctx.ended = [&] { ended = true; };
+  std::thread back([&] {
+    while (!ended) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));  // the result waits ~0.3 s for the store
+    flaky.down = false;
+  });
+  Outcome o = Execute(&flaky, q.run, LocalEmulatorSetup(), ctx);
+  back.join();
+  EXPECT_GT(flaky.failed_writes.load(), 1);
+  EXPECT_TRUE(o.recorded);
+  EXPECT_FALSE(o.released);
+  EXPECT_FALSE(o.stale);
+  EXPECT_EQ(o.status, db::RunStatus::kDone) << o.reason;
+  auto r = q.store->GetRun(q.run.id);
+  ASSERT_TRUE(r.ok());
+  EXPECT_EQ(r->status, db::RunStatus::kDone) << r->reason;
+  EXPECT_EQ(StoredSamples(q.store.get(), q.run.id), 5001);  // the chunks kept while it was down, in order
+  EXPECT_FALSE(q.store->GetMetrics(q.run.id)->empty());
+}
+
+TEST(StoreFaults, AnswersLostAfterTheirCommitAreNotStaleWritesNorWrittenTwice) {
+  Queued q = QueueAndClaim();
+  FlakyStore flaky(q.store.get());
+  flaky.lose_chunk_answers = 1;
+  flaky.lose_finish_answers = 1;
+  ExecuteContext ctx;
+  Outcome o = Execute(&flaky, q.run, LocalEmulatorSetup(), ctx);
+  EXPECT_EQ(flaky.failed_writes.load(), 2);
+  EXPECT_TRUE(o.recorded);
+  EXPECT_FALSE(o.stale);
+  EXPECT_EQ(o.status, db::RunStatus::kDone) << o.reason;
+  EXPECT_EQ(StoredSamples(q.store.get(), q.run.id), 5001);
+  std::int64_t stale = -1;
+  ASSERT_TRUE(q.store->StaleWrites(10, &stale).ok());
+  EXPECT_EQ(stale, 0);
+  auto hist = q.store->History(q.run.id);
+  ASSERT_TRUE(hist.ok());
+  EXPECT_EQ(std::count_if(hist->begin(), hist->end(),
+                          [](const db::StatusChange& c) { return c.status == db::RunStatus::kDone; }),
+            1);
+}
+
+TEST(StoreFaults, AResultTheStoreNeverTakesIsReleasedNotFailed) {
+  Queued q = QueueAndClaim();
+  FlakyStore flaky(q.store.get());
+  flaky.down = true;
+  ExecuteContext ctx;
+  ctx.retry.give_up_s = 0.3;
+  Outcome o = Execute(&flaky, q.run, LocalEmulatorSetup(), ctx);
+  EXPECT_TRUE(o.released);
+  EXPECT_FALSE(o.recorded);
+  auto r = q.store->GetRun(q.run.id);
+  ASSERT_TRUE(r.ok());
+  // Still running under a lease nobody renews: it lapses and the lab runs it again; never failed.
+  EXPECT_EQ(r->status, db::RunStatus::kRunning);
+}
+
+TEST(StoreFaults, ARunIsNoLongerExecutingWhileItsResultWaitsForTheStore) {
+  Queued q = QueueAndClaim();
+  // Give the run back to the queue so a Worker claims it itself.
+  ASSERT_TRUE(q.store->RecoverAfterCrash("h").ok());
+  FlakyStore flaky(q.store.get());
+  flaky.fail_finishes = 1000000;
+  Worker worker(LocalEmulatorSetup(), nullptr);
+  worker.set_claim_policy({"h", 10.0, 0.0, 1.0});  // the result is held 1 s
+  std::atomic<bool> done{false};
+  StatusOr<std::optional<Outcome>> o = std::optional<Outcome>();
+  std::thread t([&] {
+    o = worker.ClaimAndExecute(&flaky);
+    done = true;
+  });
+  bool seen_waiting = false;
+  int executing_while_waiting = 0;
+  while (!done) {
+    if (flaky.finish_calls.load() > 0) {
+      seen_waiting = true;
+      executing_while_waiting += worker.executing_lease().run_id != 0;
+      // A progress write now would race the result: WithExecutingLease does not call it.
+      bool called = false;
+      EXPECT_TRUE(worker.WithExecutingLease([&](const db::Lease&) {
+        called = true;
+        return Status::Ok();
+      }).ok());
+      EXPECT_FALSE(called);
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  }
+  t.join();
+  EXPECT_TRUE(seen_waiting);
+  EXPECT_EQ(executing_while_waiting, 0);
+  ASSERT_TRUE(o.ok() && o->has_value());
+  EXPECT_TRUE((*o)->released);
+  EXPECT_EQ(worker.executing_lease().run_id, 0);
+}
+
+TEST(StoreFaults, AFaultIsLoggedOnceWhenItBeginsAndOnceWithItsLengthWhenItEnds) {
+  std::ostringstream out;
+  auto sink = std::make_shared<spdlog::sinks::ostream_sink_mt>(out);
+  auto previous = spdlog::default_logger();
+  spdlog::set_default_logger(std::make_shared<spdlog::logger>("test", sink));
+  {
+    FaultLog log("bench emu-1");
+    log.Recovered();  // no fault: nothing
+    for (int k = 0; k < 100; ++k) log.Failed(Status::Unavailable("store unavailable: down"));
+    EXPECT_TRUE(log.in_fault());
+    log.Recovered();
+    log.Recovered();
+    EXPECT_FALSE(log.in_fault());
+  }
+  spdlog::set_default_logger(previous);
+  const std::string text = out.str();
+  EXPECT_EQ(std::count(text.begin(), text.end(), '\n'), 2) << text;
+  EXPECT_NE(text.find("bench emu-1: store unavailable, retrying"), std::string::npos) << text;
+  EXPECT_NE(text.find("bench emu-1: store reachable again after"), std::string::npos) << text;
+  EXPECT_NE(text.find("(100 call(s) failed meanwhile)"), std::string::npos) << text;
+}
+
+TEST(StoreFaults, RetryWriteRetriesOnlyTransientErrorsAndGivesUpWhenTold) {
+  RetryPolicy fast;
+  fast.first_wait_s = 0.001;
+  fast.max_wait_s = 0.002;
+  int calls = 0;
+  // Transient twice, then done.
+  Status st = RetryWrite(
+      [&] { return ++calls < 3 ? Status::Unavailable("store unavailable: x") : Status::Ok(); }, fast, nullptr);
+  EXPECT_TRUE(st.ok());
+  EXPECT_EQ(calls, 3);
+  // Aborted (a deadlock, a lock timeout) is transient too.
+  calls = 0;
+  st = RetryWrite([&] { return ++calls < 2 ? Status::Aborted("deadlock") : Status::Ok(); }, fast, nullptr);
+  EXPECT_TRUE(st.ok());
+  EXPECT_EQ(calls, 2);
+  // Fenced and permanent errors: once, returned as they are.
+  for (const Status& once : {Status::FailedPrecondition("stale write: x"), Status::InvalidArgument("progress: x"),
+                             Status::Internal("bug")}) {
+    calls = 0;
+    st = RetryWrite([&] { ++calls; return once; }, fast, nullptr);
+    EXPECT_EQ(st.code(), once.code());
+    EXPECT_EQ(calls, 1);
+  }
+  // Given up after give_up_s, or at once when stopping: the last transient error.
+  fast.give_up_s = 0.05;
+  st = RetryWrite([] { return Status::Unavailable("store unavailable: down"); }, fast, nullptr);
+  EXPECT_EQ(st.code(), StatusCode::kUnavailable);
+  std::atomic<bool> stop{true};
+  fast.give_up_s = 1e9;
+  fast.stop = &stop;
+  calls = 0;
+  st = RetryWrite([&] { ++calls; return Status::Unavailable("store unavailable: down"); }, fast, nullptr);
+  EXPECT_EQ(st.code(), StatusCode::kUnavailable);
+  EXPECT_EQ(calls, 1);
+}
+
+}  // namespace store_faults
 
 }  // namespace
 }  // namespace vb::runs
