@@ -166,9 +166,10 @@ try:
     driver.get(base + "/")
     driver.find_element(By.ID, "token").send_keys(OPERATOR)
     driver.find_element(By.ID, "login-button").click()
-    rows = wait(lambda: driver.find_elements(By.CSS_SELECTOR, "#benches tr")[1:] or None, what="bench table")
-    check("the lab lists both benches", rows is not None and len(rows) == 2 and "idle" in rows[0].text,
-          rows and [r.text for r in rows])
+    # Texts read inside the wait: the Lab page re-renders its tables as the benches report.
+    rows = wait(lambda: [r.text for r in driver.find_elements(By.CSS_SELECTOR, "#benches tr")[1:]] or None,
+                what="bench table")
+    check("the lab lists both benches", rows is not None and len(rows) == 2 and "idle" in rows[0], rows)
     check("the token stays in sessionStorage",
           driver.execute_script("return sessionStorage.getItem('valvebench.token')") == OPERATOR)
 
@@ -253,8 +254,10 @@ try:
         time.sleep(0.1)
     check("the comparison's runs finish", all(r["status"] == "DONE" for r in runs), [r["status"] for r in runs])
     go("#/compare?batch=%s" % batch)
-    table = wait(lambda: driver.find_elements(By.CSS_SELECTOR, "#comparison tr")[1:] or None, what="comparison table")
-    check("the comparison has one row per law", table is not None and len(table) == 4, table and [r.text for r in table])
+    # The rows' texts are read inside the wait, which looks again when the page re-rendered the table.
+    table = wait(lambda: [r.text for r in driver.find_elements(By.CSS_SELECTOR, "#comparison tr")[1:]] or None,
+                 what="comparison table")
+    check("the comparison has one row per law", table is not None and len(table) == 4, table)
     header = driver.find_element(By.CSS_SELECTOR, "#comparison tr").text
     check("metric columns carry units", "rmse [A]" in header and "effort_l2 [V s^0.5]" in header, header)
     plots = wait(lambda: len(driver.find_elements(By.CSS_SELECTOR, "#pareto canvas, #overlay-current canvas, "
