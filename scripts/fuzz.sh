@@ -10,6 +10,9 @@ seconds="${1:-20}"
 build="$here/build-fuzz"
 jobs="${VB_FUZZ_BUILD_JOBS:-2}"
 
+# ccache keys on the compiler's command line: with the checkout as its base directory, paths are relative to it,
+# so a second clone or worktree (CI's fresh clone on a developer's machine) reuses the objects already built.
+export CCACHE_BASEDIR="${CCACHE_BASEDIR:-$here}"
 launcher=()
 command -v ccache >/dev/null && launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
 cmake -S "$here" -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_COMPILER=clang++ \

@@ -60,6 +60,9 @@ fi
 
 [ "${1:-}" = "--deps" ] && exit 0
 
+# ccache keys on the compiler's command line: with the checkout as its base directory, paths are relative to it,
+# so a second clone or worktree (CI's fresh clone on a developer's machine) reuses the objects already built.
+export CCACHE_BASEDIR="${CCACHE_BASEDIR:-$here}"
 cd "$here"
 cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE=Release
 cmake --build build
