@@ -2,6 +2,7 @@
 
 #include "common/format.h"
 #include "gap/moving_valve.h"
+#include "gap/opening_dip.h"
 #include "gap/predict.h"
 
 #include <fmt/format.h>
@@ -94,26 +95,9 @@ void FindLandmarks(const std::vector<double>& i_A, const std::vector<std::int8_t
   if (on == gate.size()) return;
   std::size_t off = on;
   while (off < gate.size() && gate[off] != 0) ++off;
-  // The opening dip: a peak, then a fall of more than the threshold, then a rise of more than the threshold.
-  double peak = -1.0, low = 0.0;
-  std::size_t low_k = 0;
-  bool falling = false;
-  for (std::size_t k = on; k < off; ++k) {
-    if (!falling) {
-      peak = std::max(peak, s[k]);
-      if (s[k] < peak - threshold_A) {
-        falling = true;
-        low = s[k];
-        low_k = k;
-      }
-    } else if (s[k] < low) {
-      low = s[k];
-      low_k = k;
-    } else if (s[k] > low + threshold_A) {
-      lm->dip_t_s[which] = static_cast<double>(low_k - on) * dt;
-      lm->dip_depth_A[which] = peak - low;
-      break;
-    }
+  if (const OpeningDip dip = FindOpeningDip(s, on, off, threshold_A); dip.found) {
+    lm->dip_t_s[which] = static_cast<double>(dip.low_k - on) * dt;
+    lm->dip_depth_A[which] = dip.peak_A - dip.low_A;
   }
   if (off == gate.size()) return;
   const std::size_t from = off >= 5 ? off - 5 : 0;
@@ -802,6 +786,18 @@ void Decide(Diagnosis* out) {
 
 }  // namespace
 
+namespace {
+// The temperature the runs of a session share (within 1 K), NaN when they do not.
+double SharedTemperatureC(const Dataset& ds) {
+  double tmin = INFINITY, tmax = -INFINITY;
+  for (const auto& r : ds.runs) {
+    tmin = std::min(tmin, r.temperature_C());
+    tmax = std::max(tmax, r.temperature_C());
+  }
+  return std::isfinite(tmin) && tmax - tmin <= 1.0 ? 0.5 * (tmin + tmax) : NAN;
+}
+}  // namespace
+
 StatusOr<FittedDevice> ReferenceDevice(const Dataset& reference, const model::PlantParams& nominal,
                                        const IdentifyOptions& fit, ReferenceFit* out) {
   if (fit.params.empty() && fit.fixed.empty() && IsSwitchOnSession(reference, nominal)) {
@@ -820,12 +816,7 @@ StatusOr<FittedDevice> ReferenceDevice(const Dataset& reference, const model::Pl
       out->from_scratch = true;
       for (const auto& h : id->held) out->notes.push_back(h.name + " held at " + FormatNumber(h.value));
       for (const auto& n : id->notes) out->notes.push_back(n);
-      double tmin = INFINITY, tmax = -INFINITY;
-      for (const auto& r : reference.runs) {
-        tmin = std::min(tmin, r.temperature_C());
-        tmax = std::max(tmax, r.temperature_C());
-      }
-      out->temperature_C = std::isfinite(tmin) && tmax - tmin <= 1.0 ? 0.5 * (tmin + tmax) : NAN;
+      out->temperature_C = SharedTemperatureC(reference);
     }
     return dev;
   }
@@ -842,12 +833,7 @@ StatusOr<FittedDevice> ReferenceDevice(const Dataset& reference, const model::Pl
     out->directory = reference.directory;
     out->fit_rmse_A = id->fit.fit_rmse_A;
     out->params = id->fit.params;
-    double tmin = INFINITY, tmax = -INFINITY;
-    for (const auto& r : reference.runs) {
-      tmin = std::min(tmin, r.temperature_C());
-      tmax = std::max(tmax, r.temperature_C());
-    }
-    out->temperature_C = std::isfinite(tmin) && tmax - tmin <= 1.0 ? 0.5 * (tmin + tmax) : NAN;
+    out->temperature_C = SharedTemperatureC(reference);
   }
   return dev;
 }

@@ -14,6 +14,7 @@
 #include <sstream>
 #include <thread>
 
+#include "gap/opening_dip.h"
 #include "gap/predict.h"
 #include "model/plant.h"
 
@@ -269,27 +270,11 @@ SwitchOnMarks FindSwitchOnMarks(const std::vector<double>& i_A, const std::vecto
   std::size_t off = on;
   while (off < gate.size() && gate[off] != 0) ++off;
   const std::vector<double> s = Smooth3(i_A);
-  double peak = -INFINITY, low = 0.0;
-  std::size_t low_k = 0;
-  bool falling = false;
-  for (std::size_t k = on; k < off; ++k) {
-    if (!falling) {
-      peak = std::max(peak, s[k]);
-      if (s[k] < peak - threshold_A) {
-        falling = true;
-        low = s[k];
-        low_k = k;
-      }
-    } else if (s[k] < low) {
-      low = s[k];
-      low_k = k;
-    } else if (s[k] > low + threshold_A) {
-      m.pulls_in = true;
-      m.pull_in_s = static_cast<double>(low_k - on) * dt_s;
-      m.dip_depth_A = peak - low;
-      m.peak_A = peak;
-      break;
-    }
+  if (const OpeningDip dip = FindOpeningDip(s, on, off, threshold_A); dip.found) {
+    m.pulls_in = true;
+    m.pull_in_s = static_cast<double>(dip.low_k - on) * dt_s;
+    m.dip_depth_A = dip.peak_A - dip.low_A;
+    m.peak_A = dip.peak_A;
   }
   const std::size_t from = off >= on + 5 ? off - 5 : on;
   double sum = 0.0;
