@@ -207,7 +207,7 @@ int DiagnoseAndReport(const gap::Dataset& ds_in, const Nominal& nominal, const s
     suggestion = std::move(*s);
     if (!suggestion->runs.empty()) {
       std::ofstream out(o.suggest_out);
-      out << gap::SuggestionSpecJson(*suggestion, "next-experiment", nominal.spec.preset().empty() ? "taghizadeh2009"
+      out << gap::SuggestionSpecJson(*suggestion, "next-experiment", nominal.spec.preset().empty() ? model::kDefaultPreset
                                                                                                    : nominal.spec.preset());
       out.close();
       if (!out) return Fail(Status::Unavailable(o.suggest_out + ": cannot write"));
@@ -599,7 +599,7 @@ int GapCli::Convert() {
     so.split = scope_split_;
     so.t_start_s = scope_t_start_s_;
     so.device = scope_device_;
-    so.model = convert_->count("--model") > 0 ? convert_model_ : "taghizadeh2009";
+    so.model = convert_->count("--model") > 0 ? convert_model_ : model::kDefaultPreset;
     so.noise_A = scope_noise_A_;
     so.averaged = convert_->count("--averaged") > 0 ? averaged_ : 0;
     so.lsb_A = scope_lsb_A_;

@@ -15,6 +15,7 @@
 #include "control/open_loop_pwm.h"
 #include "experiment/bounds.h"
 #include "experiment/controllers.h"
+#include "model/params.h"
 
 namespace vb::experiment {
 
@@ -388,7 +389,7 @@ StatusOr<std::vector<RunPoint>> ExpandRuns(const ExperimentSpec& spec, size_t ma
 
 StatusOr<model::PlantParams> BuildPlant(const valvebench::v1::ModelSpec& ms,
                                         const valvebench::v1::Perturbation* perturbation) {
-  auto plant = model::Preset(ms.preset().empty() ? "taghizadeh2009" : ms.preset());
+  auto plant = model::Preset(ms.preset().empty() ? model::kDefaultPreset : ms.preset());
   if (!plant.ok()) return plant.status().WithContext("bench.model.preset");
   // Overrides in a fixed (sorted) order so the result never depends on map iteration order.
   std::vector<std::pair<std::string, double>> overrides(ms.params().begin(), ms.params().end());

@@ -1,5 +1,6 @@
 #include "common/format.h"
 #include "gap/dataset.h"
+#include "model/params.h"
 
 #include <algorithm>
 #include <array>
@@ -715,7 +716,7 @@ double StartCurrent(const RunData& run, std::size_t n) {
 
 }  // namespace
 
-std::vector<std::string> DefaultKnownModels() { return {"taghizadeh2009"}; }
+std::vector<std::string> DefaultKnownModels() { return {model::kDefaultPreset}; }
 
 StatusOr<Dataset> LoadDataset(const std::string& directory, const std::vector<std::string>& known_models) {
   const std::string name = DatasetName(directory);

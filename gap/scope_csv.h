@@ -14,6 +14,7 @@
 #include <string>
 
 #include "common/status.h"
+#include "model/params.h"
 
 namespace vb::gap {
 
@@ -31,7 +32,7 @@ struct ScopeCsvOptions {
   double supply_pressure_Pa = 0.0;
   double t_start_s = NAN;         // NaN: after the dataset's last run (+1 s), or 0 for the first
   std::string split;              // "", "fit" or "holdout"
-  std::string model = "taghizadeh2009";
+  std::string model = model::kDefaultPreset;
   std::string device;
   // The scope's chain (declared in the manifest's sensor; NaN / 0: not declared).
   double noise_A = NAN;

@@ -1,4 +1,5 @@
 #include "gap/stored_runs.h"
+#include "model/params.h"
 
 #include <algorithm>
 
@@ -49,7 +50,7 @@ StatusOr<Dataset> DatasetOfStoredRuns(std::vector<StoredRun> runs) {
     // the start from when they ran.
     r.t_start_s = s.t_start_s ? *s.t_start_s : s.started_unix_s - first_start_unix;
     r.split = s.split == "fit" || s.split == "holdout" ? s.split : "";
-    if (k == 0) ds.model = s.preset.empty() ? "taghizadeh2009" : s.preset;
+    if (k == 0) ds.model = s.preset.empty() ? model::kDefaultPreset : s.preset;
     ds.runs.push_back(std::move(r));
   }
   std::stable_sort(ds.runs.begin(), ds.runs.end(),

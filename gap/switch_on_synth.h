@@ -35,7 +35,7 @@ struct ScopeChain {
 // CSV per run (t_s, gate, i_A). Runs start 2 s apart (the model's slow states carry over as on a bench).
 Status WriteSwitchOnSession(const std::string& directory, const model::PlantParams& truth,
                             const std::vector<SwitchOnRunPlan>& runs, const ScopeChain& scope,
-                            const std::string& device, const std::string& model_family = "taghizadeh2009",
+                            const std::string& device, const std::string& model_family = model::kDefaultPreset,
                             double t_start_s = 0.0);
 
 }  // namespace vb::gap

@@ -16,7 +16,7 @@ constexpr double kInf = std::numeric_limits<double>::infinity();
 // Seed 000, Tables 1-2 (identified values) and the nominal contract of issue 2.
 PlantParams Taghizadeh2009() {
   PlantParams p;
-  p.preset = "taghizadeh2009";
+  p.preset = kDefaultPreset;
   p.law = InductanceLaw::kReluctance;
   p.has_moving_part = true;
   p.R_ohm = 13.0;         // Table 2 identified (15 measured cold)
@@ -84,10 +84,10 @@ PlantParams Ts98Coil() {
 double PlantParams::K_reluctance_H_m() const { return N_turns * N_turns * A_e_m2 * mu_r * kMu0; }
 double PlantParams::L_prime_H() const { return M_PI * d_m * kMu0 * a_m * N_turns * N_turns / g_m; }
 
-std::vector<std::string> PresetNames() { return {"taghizadeh2009", "lunge2013", "ts98_coil"}; }
+std::vector<std::string> PresetNames() { return {kDefaultPreset, "lunge2013", "ts98_coil"}; }
 
 StatusOr<PlantParams> Preset(std::string_view name) {
-  if (name == "taghizadeh2009") return Taghizadeh2009();
+  if (name == kDefaultPreset) return Taghizadeh2009();
   if (name == "lunge2013") return Lunge2013();
   if (name == "ts98_coil") return Ts98Coil();
   std::string known;

@@ -78,6 +78,10 @@ struct PlantParams {
   double L_prime_H() const;
 };
 
+// The default model: seed 000's pneumatic valve (Taghizadeh 2009), what a spec, a dataset or an import that
+// names no model means. One constant, so the default is said once.
+inline constexpr char kDefaultPreset[] = "taghizadeh2009";
+
 // The preset names the papers give us.
 std::vector<std::string> PresetNames();
 StatusOr<PlantParams> Preset(std::string_view name);

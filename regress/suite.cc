@@ -11,6 +11,7 @@
 
 #include "experiment/metrics.h"
 #include "experiment/spec.h"
+#include "model/params.h"
 
 namespace vb::regress {
 namespace {
@@ -106,7 +107,7 @@ const char* DirectionName(v1::Direction d) {
 std::string BenchClassOf(const v1::ExperimentSpec& spec) {
   const std::string kind = spec.bench().kind().empty() ? "emulated" : spec.bench().kind();
   if (kind != "emulated") return kind;
-  return kind + ":" + (spec.bench().model().preset().empty() ? "taghizadeh2009" : spec.bench().model().preset());
+  return kind + ":" + (spec.bench().model().preset().empty() ? model::kDefaultPreset : spec.bench().model().preset());
 }
 
 double NoiseSigmas(const Suite& suite) {

@@ -6,13 +6,14 @@
 
 #include "common/format.h"
 #include "experiment/capabilities.h"
+#include "model/params.h"
 
 namespace vb::runs {
 
 std::string SpecBenchClass(const experiment::ExperimentSpec& spec) {
   const std::string kind = spec.bench().kind().empty() ? "emulated" : spec.bench().kind();
   if (kind != "emulated") return kind;
-  const std::string preset = spec.bench().model().preset().empty() ? "taghizadeh2009" : spec.bench().model().preset();
+  const std::string preset = spec.bench().model().preset().empty() ? model::kDefaultPreset : spec.bench().model().preset();
   return kind + ":" + preset;
 }
 

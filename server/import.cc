@@ -162,7 +162,7 @@ StatusOr<std::vector<db::RunRecord>> ImportRecords(const v1::ImportRunsRequest& 
                                                    std::uint32_t max_runs) {
   if (req.dataset().empty()) return Status::InvalidArgument("dataset: must name the dataset");
   if (req.runs_size() == 0) return Status::InvalidArgument("runs: at least one run is needed");
-  const std::string model = req.model().empty() ? "taghizadeh2009" : req.model();
+  const std::string model = req.model().empty() ? model::kDefaultPreset : req.model();
   if (!model::Preset(model).ok()) return Status::InvalidArgument("model: unknown model '" + model + "'");
   if (static_cast<std::uint32_t>(req.runs_size()) > max_runs)
     return Status::ResourceExhausted("runs: " + std::to_string(req.runs_size()) + " runs exceed the server limit of " +
