@@ -13,6 +13,7 @@
 #include <cmath>
 #include <cstdio>
 #include <map>
+#include <set>
 #include <sstream>
 
 namespace vb::gap {
@@ -181,6 +182,13 @@ bool Decisive(double before_A, double after_A, double floor_A) {
   return after_A <= half_way && removed2 >= (kSignificance * kSignificance - 1.0) * floor_A * floor_A;
 }
 
+// A combination's members in a fixed order: "a+b" and "b+a" are one combination.
+std::vector<std::string> SortedMembers(const Candidate& c) {
+  std::vector<std::string> m = Members(c);
+  std::sort(m.begin(), m.end());
+  return m;
+}
+
 // A copy of a candidate that starts from a fitted result's values (clamped into its box).
 Candidate WarmStarted(const Candidate& c, const CandidateResult& r) {
   Candidate w = c;
@@ -284,15 +292,9 @@ Status SelectCombination(const Dataset& ds, const std::vector<bool>& fit_mask, c
     return Status::Ok();
   };
   std::vector<Candidate> pairs;
-  std::vector<std::string> pair_keys;  // sorted member names: each pair once
+  std::set<std::vector<std::string>> pair_keys;  // each combination once, whatever its members' order
   auto add_pair = [&](Candidate c) {
-    std::vector<std::string> key = Members(c);
-    std::sort(key.begin(), key.end());
-    std::string joined;
-    for (const auto& x : key) joined += x + "+";
-    if (std::find(pair_keys.begin(), pair_keys.end(), joined) != pair_keys.end()) return;
-    pair_keys.push_back(joined);
-    pairs.push_back(std::move(c));
+    if (pair_keys.insert(SortedMembers(c)).second) pairs.push_back(std::move(c));
   };
   for (std::size_t a = 0; a < pool.size(); ++a)
     for (std::size_t b = a + 1; b < pool.size(); ++b)
@@ -345,7 +347,7 @@ Status SelectCombination(const Dataset& ds, const std::vector<bool>& fit_mask, c
   if (good.size() > 1 && tried[good[1]].fit_rmse_A > 1.25 * tried[good[0]].fit_rmse_A) good.erase(good.begin() + 1, good.end());
   if (opt.max_effects >= 3) {
     std::vector<Candidate> triples;
-    std::vector<std::string> names;
+    std::set<std::vector<std::string>> names;
     for (std::size_t g = 0; g < std::min<std::size_t>(good.size(), 2); ++g) {
       const Candidate& pc = tried_c[good[g]];
       // The best pair is extended with every structural effect, also those whose single fit found nothing (a
@@ -356,13 +358,7 @@ Status SelectCombination(const Dataset& ds, const std::vector<bool>& fit_mask, c
         if (std::find(pc.effects.begin(), pc.effects.end(), ec->effects.front()) != pc.effects.end()) continue;
         const bool vanished = std::find(structural.begin(), structural.end(), e) == structural.end();
         Candidate t = PairCandidate(WarmStarted(pc, tried[good[g]]), vanished ? *ec : WarmStarted(*ec, *e));
-        std::vector<std::string> key = Members(t);
-        std::sort(key.begin(), key.end());
-        std::string joined;
-        for (const auto& x : key) joined += x + "+";
-        if (std::find(names.begin(), names.end(), joined) != names.end()) continue;
-        names.push_back(joined);
-        triples.push_back(std::move(t));
+        if (names.insert(SortedMembers(t)).second) triples.push_back(std::move(t));
       }
     }
     VB_RETURN_IF_ERROR(fit_all(triples));
