@@ -129,6 +129,13 @@ StatusOr<ScopeRun> ConvertScopeCsv(const std::string& csv_path, const std::strin
         if (!g_idx.ok()) return g_idx.status();
         gi = *g_idx;
       }
+      // One column, one role: the current cannot be the time, nor the gate the current or the time.
+      if (ci == ti)
+        return Status::InvalidArgument("--channel: '" + o.current_channel + "' is the time column; name the current's channel");
+      if (gi >= 0 && (gi == ci || gi == ti))
+        return Status::InvalidArgument("--gate-channel: '" + o.gate_channel + "' is the " +
+                                       (gi == ci ? "current's channel (--channel)" : "time column") +
+                                       "; name the gate drive's channel, or give --trigger-s");
     }
     auto f = Split(line, sep);
     auto column = [&](int k) { return k < static_cast<int>(col_names.size()) ? col_names[k] : std::to_string(k + 1); };

@@ -27,6 +27,7 @@ targets=(
   fuzz_hid_protocol:hid_protocol:128
   fuzz_u3_protocol:u3_protocol:128
   fuzz_gateway:gateway:16384
+  fuzz_scope_csv:scope_csv:8192
 )
 mkdir -p "$build/artifacts"
 failed=0

@@ -415,6 +415,21 @@ TEST(ScopeCsv, ErrorsNameLineAndColumn) {
   run = ConvertScopeCsv(csv.string(), (dir / "ds").string(), o);
   ASSERT_FALSE(run.ok());
   EXPECT_NE(run.status().message().find("exactly one of --shunt-ohm"), std::string::npos);
+  // One column in two roles (found by fuzz_scope_csv: the gate's samples were never read, and an empty channel
+  // was searched for its range).
+  o.probe_A_per_V = 0.0;
+  o.trigger_s = NAN;
+  o.gate_channel = "CH2";
+  run = ConvertScopeCsv(csv.string(), (dir / "ds").string(), o);
+  ASSERT_FALSE(run.ok());
+  EXPECT_NE(run.status().message().find("--gate-channel: 'CH2' is the current's channel"), std::string::npos)
+      << run.status().message();
+  o.gate_channel.clear();
+  o.trigger_s = 0.0;
+  o.current_channel = "1";  // the time column
+  run = ConvertScopeCsv(csv.string(), (dir / "ds").string(), o);
+  ASSERT_FALSE(run.ok());
+  EXPECT_NE(run.status().message().find("--channel: '1' is the time column"), std::string::npos) << run.status().message();
   Cleanup(dir);
 }
 
