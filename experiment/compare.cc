@@ -116,9 +116,10 @@ struct Prefix {
   double scale;  // value in base unit * scale = value in prefixed unit
 };
 
+constexpr Prefix kPrefixes[] = {{"G", 1e-9}, {"M", 1e-6}, {"k", 1e-3}, {"", 1}, {"m", 1e3}, {"µ", 1e6}, {"n", 1e9}};
+
 // The prefix that puts the column's largest magnitude in [1, 1000).
 Prefix ChoosePrefix(double max_abs) {
-  static const Prefix kPrefixes[] = {{"G", 1e-9}, {"M", 1e-6}, {"k", 1e-3}, {"", 1}, {"m", 1e3}, {"µ", 1e6}, {"n", 1e9}};
   if (!(max_abs > 0) || !std::isfinite(max_abs)) return {"", 1};
   for (const auto& p : kPrefixes)
     if (max_abs * p.scale >= 1.0 - 1e-12) return p;
@@ -140,8 +141,9 @@ struct TextColumn {
   bool left = false;
 };
 
-// A numeric column from per-row stats in `unit` (after factor): SI prefix and decimals chosen on the column.
-TextColumn NumericColumn(const std::string& label, const MetricView& v, const std::vector<MetricStat>& stats) {
+// How a numeric column from per-row stats in `unit` (after factor) is shown: the SI prefix and the decimals
+// chosen on the column (the one rule for the CLI's tables, the HTML report and the web page).
+ColumnDisplay ChooseDisplay(const std::string& label, const MetricView& v, const std::vector<MetricStat>& stats) {
   double max_abs = 0;
   bool integer = v.unit.empty();
   for (const auto& s : stats)
@@ -150,16 +152,27 @@ TextColumn NumericColumn(const std::string& label, const MetricView& v, const st
       if (s.mean != std::round(s.mean)) integer = false;
     }
   const Prefix p = v.prefix ? ChoosePrefix(max_abs) : Prefix{"", 1};
-  const int dec = v.decimals >= 0 ? v.decimals : DecimalsFor(max_abs * p.scale, integer);
+  ColumnDisplay d;
+  d.label = label;
+  d.unit = v.unit.empty() ? "" : std::string(p.symbol) + v.unit;
+  d.header = d.unit.empty() ? label : label + " [" + d.unit + "]";
+  d.scale = v.factor * p.scale;
+  d.decimals = v.decimals >= 0 ? v.decimals : DecimalsFor(max_abs * p.scale, integer);
+  d.spread_decimals = std::max(d.decimals, 1);
+  return d;
+}
+
+// A numeric column from per-row stats in `unit` (after factor): SI prefix and decimals chosen on the column.
+TextColumn NumericColumn(const std::string& label, const MetricView& v, const std::vector<MetricStat>& stats) {
+  const ColumnDisplay d = ChooseDisplay(label, v, stats);
   TextColumn col;
-  const std::string unit = v.unit.empty() ? "" : std::string(p.symbol) + v.unit;
-  col.header = unit.empty() ? label : label + " [" + unit + "]";
+  col.header = d.header;
   for (const auto& s : stats) {
     if (s.n == 0) {
       col.cells.push_back("-");
     } else {
-      std::string cell = fmt::format("{:.{}f}", s.mean * v.factor * p.scale, dec);
-      if (s.n > 1) cell += fmt::format("±{:.{}f}", s.spread * v.factor * p.scale, std::max(dec, 1));
+      std::string cell = fmt::format("{:.{}f}", s.mean * d.scale, d.decimals);
+      if (s.n > 1) cell += fmt::format("±{:.{}f}", s.spread * d.scale, d.spread_decimals);
       col.cells.push_back(cell);
     }
   }
@@ -212,13 +225,20 @@ std::string Leaf(const std::string& field) {
 }
 
 // A sweep axis as a column: the leaf of its field path, its unit from the suffix, prefixed per column.
-TextColumn SweepColumn(const std::string& field, const std::vector<double>& values) {
+MetricView SweepView(const std::string& field) {
   MetricView v = ViewOf(Leaf(field), ExperimentKind::kGeneric);
   if (Leaf(field) == "duty") v = {"duty", "%", 100, false};
   if (Leaf(field) == "average_current_A") v.label = "I_avg set";  // seed 003's requested I_avg
+  return v;
+}
+std::vector<MetricStat> SweepStats(const std::vector<double>& values) {
   std::vector<MetricStat> stats;
   for (double x : values) stats.push_back(std::isnan(x) ? MetricStat{} : MetricStat{x, 0, 1});
-  return NumericColumn(v.label, v, stats);
+  return stats;
+}
+TextColumn SweepColumn(const std::string& field, const std::vector<double>& values) {
+  const MetricView v = SweepView(field);
+  return NumericColumn(v.label, v, SweepStats(values));
 }
 
 std::string FormatSweepValue(const std::string& field, double value, double column_max) {
@@ -698,6 +718,31 @@ MetricDisplay DisplayOf(const Comparison& c, const std::string& metric) {
   const std::string unit = v.unit.empty() ? "" : std::string(p.symbol) + v.unit;
   return {unit.empty() ? v.label : v.label + " [" + unit + "]", v.factor * p.scale};
 }
+
+ColumnDisplay MetricColumnDisplay(const Comparison& c, const std::string& metric) {
+  const MetricView v = ViewOf(metric, KindOfRows(c));
+  std::vector<MetricStat> stats;
+  for (const auto& r : c.rows)
+    if (const MetricStat* s = Stat(r, metric); s != nullptr) stats.push_back(*s);
+  return ChooseDisplay(v.label, v, stats);
+}
+
+ColumnDisplay SweepColumnDisplay(const std::string& field, const std::vector<double>& values) {
+  const MetricView v = SweepView(field);
+  return ChooseDisplay(v.label, v, SweepStats(values));
+}
+
+std::vector<std::string> DefaultMetricColumns(const Comparison& c) {
+  return ShownColumns(c, KindOfRows(c), TableOptions{});
+}
+
+std::vector<SiPrefix> SiPrefixes() {
+  std::vector<SiPrefix> out;
+  for (const auto& p : kPrefixes) out.push_back({p.symbol, p.scale});
+  return out;
+}
+
+std::string LawName(const std::string& controller) { return LawLabel(controller); }
 
 std::string ComparisonCsv(const Comparison& c) {
   std::vector<RunKey> keys;

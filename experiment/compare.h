@@ -95,6 +95,31 @@ struct MetricDisplay {
 };
 MetricDisplay DisplayOf(const Comparison& c, const std::string& metric);
 
+// How a column is shown, for renderers that format the cells themselves (the web dashboard): the choice the
+// text table makes (SI prefix on the column's largest value, 4 significant digits), so every view agrees.
+struct ColumnDisplay {
+  std::string label;       // "RMSE"
+  std::string unit;        // with its prefix, "mA"; "" = none
+  std::string header;      // "RMSE [mA]"
+  double scale = 1.0;      // SI value * scale = the shown number
+  int decimals = 2;        // of the mean
+  int spread_decimals = 2; // of the spread
+};
+ColumnDisplay MetricColumnDisplay(const Comparison& c, const std::string& metric);
+// A sweep axis (a spec field path such as "controller.open_loop_pwm.duty") over the rows' values.
+ColumnDisplay SweepColumnDisplay(const std::string& field, const std::vector<double>& values);
+// The metrics the text table shows by default for these rows (the kind's defaults that some row has).
+std::vector<std::string> DefaultMetricColumns(const Comparison& c);
+// The SI prefixes columns choose from, largest first: symbol and SI value * scale = value in the prefixed unit.
+// A column takes the first whose scale puts its largest magnitude at 1 or above.
+struct SiPrefix {
+  std::string symbol;
+  double scale;
+};
+std::vector<SiPrefix> SiPrefixes();
+// A law's short name for people ("PI" for pi_current).
+std::string LawName(const std::string& controller);
+
 // For scripts: one row per case, the sweep coordinates as columns (full field paths), every metric and its
 // spread in SI units with full names.
 std::string ComparisonCsv(const Comparison& c);

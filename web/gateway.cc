@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "common/queue_estimate.h"
+#include "experiment/compare.h"
 #include "experiment/spec.h"
 #include "export/run_file.h"
 #include "valvebench/v1/api.grpc.pb.h"
@@ -553,6 +554,7 @@ class Routes {
     s.Get(R"(/api/runs/(\d{1,15})/events)", [this](const auto& q, auto& r) { Events(q, r); });
     s.Get("/api/compare", [this](const auto& q, auto& r) { Compare(q, r); });
     s.Get("/api/diagnose", [this](const auto& q, auto& r) { Diagnose(q, r); });
+    s.Get("/api/units", [this](const auto& q, auto& r) { Units(q, r); });
     s.Get("/api/nights", [this](const auto& q, auto& r) { Nights(q, r); });
     s.set_pre_routing_handler([this](const httplib::Request& req, httplib::Response& res) {
       return Admit(req, res) ? httplib::Server::HandlerResponse::Unhandled : httplib::Server::HandlerResponse::Handled;
@@ -932,6 +934,11 @@ class Routes {
     const std::int64_t id = PathId(req);
     auto st = FetchRun(req, id, &run);
     if (!st.ok()) return SendError(res, st);
+    // An imported run is a measurement (benchctl import): it has no spec a bench could run again.
+    if (std::find(run.tags().begin(), run.tags().end(), "imported") != run.tags().end())
+      return SendError(res, grpc::Status(grpc::StatusCode::FAILED_PRECONDITION,
+                                         fmt::format("run {} is an imported measurement (benchctl import), not a bench run: "
+                                                     "there is no spec to run again", id)));
     v1::SubmitRunRequest r;
     *r.mutable_spec() = run.spec();
     r.set_batch_name(fmt::format("rerun of run {}", id));
@@ -1163,6 +1170,8 @@ class Routes {
     if (!st.ok()) return SendError(res, st);
     Json j = {{"report", out.report()}};
     j["diagnosis"] = Json::parse(out.report_json(), nullptr, false);
+    // The nominal model with the diagnosed effect(s), as `benchctl diagnose --model-out` writes it ("" = none).
+    j["improved_model_json"] = out.improved_model_json();
     res.set_content(Dump(j), kJson);
   }
 
@@ -1191,7 +1200,79 @@ class Routes {
       for (const auto& s : seen) u += (u.empty() ? "" : " or ") + s;
       units[col] = u;
     }
-    res.set_content(R"({"comparison":)" + ToJson(out) + R"(,"units":)" + Dump(units) + "}", kJson);
+    // Zeros written (a metric at exactly 0 is a value, a missing one is absent from the row's map).
+    res.set_content(R"({"comparison":)" + ToJson(out, /*with_zeros=*/true) + R"(,"units":)" + Dump(units) +
+                        R"(,"display":)" + Dump(CompareDisplay(out)) + "}",
+                    kJson);
+  }
+
+  // How the CLI's table shows each column (experiment::MetricColumnDisplay: one formatter for the CLI, the
+  // report and this page): {columns: {metric: {label, unit, header, scale, decimals, spread_decimals}},
+  // default_columns, sweep_axes: [{field, ...display}], keys: [RunKey per row], laws: {controller: name}}.
+  static Json DisplayJson(const experiment::ColumnDisplay& d) {
+    return Json{{"label", d.label}, {"unit", d.unit}, {"header", d.header}, {"scale", d.scale},
+                {"decimals", d.decimals}, {"spread_decimals", d.spread_decimals}};
+  }
+  static Json CompareDisplay(const v1::CompareRunsResponse& out) {
+    experiment::Comparison c;
+    c.rank_metric = out.rank_metric();
+    c.effort_metric = out.effort_metric();
+    c.columns.assign(out.columns().begin(), out.columns().end());
+    Json keys = Json::array(), laws = Json::object();
+    std::vector<std::string> axes;
+    std::map<std::string, std::vector<double>> axis_values;
+    for (const auto& r : out.rows()) {
+      experiment::CompareRow row;
+      row.name = r.name();
+      row.controller = r.controller();
+      row.runs = r.runs();
+      row.failed = r.failed();
+      row.rank = r.rank();
+      row.pareto = r.pareto();
+      for (const auto& [k, v] : r.metrics()) row.metrics[k] = {v.mean(), v.spread(), v.n()};
+      c.rows.push_back(std::move(row));
+      laws[r.controller()] = experiment::LawName(r.controller());
+      // The row's key as the server sent it; from a server before CompareRow.key, read back from its name.
+      RunKey key;
+      if (!r.key().name().empty()) {
+        key.name = r.key().name();
+        for (const auto& sc : r.key().sweep()) key.sweep.push_back({sc.field(), sc.value()});
+      } else {
+        key = experiment::SplitCaseName(r.name());
+      }
+      Json sweep = Json::array();
+      for (const auto& sc : key.sweep) {
+        sweep.push_back({{"field", sc.field}, {"value", sc.value}});
+        if (std::find(axes.begin(), axes.end(), sc.field) == axes.end()) axes.push_back(sc.field);
+      }
+      keys.push_back({{"name", key.name}, {"sweep", sweep}});
+    }
+    for (size_t i = 0; i < keys.size(); ++i)
+      for (const auto& a : axes) {
+        double v = NAN;
+        for (const auto& sc : keys[i]["sweep"]) if (sc["field"] == a) v = sc["value"].get<double>();
+        axis_values[a].push_back(v);
+      }
+    Json cols = Json::object();
+    std::vector<std::string> all = c.columns;
+    all.push_back(c.rank_metric);
+    all.push_back(c.effort_metric);
+    for (const auto& col : all) cols[col] = DisplayJson(experiment::MetricColumnDisplay(c, col));
+    Json sweep_axes = Json::array();
+    for (const auto& a : axes) {
+      Json d = DisplayJson(experiment::SweepColumnDisplay(a, axis_values[a]));
+      d["field"] = a;
+      sweep_axes.push_back(d);
+    }
+    return Json{{"columns", cols}, {"default_columns", experiment::DefaultMetricColumns(c)},
+                {"sweep_axes", sweep_axes}, {"keys", keys}, {"laws", laws}};
+  }
+
+  // The SI prefixes the CLI's columns choose from (experiment::SiPrefixes), for the page's chart axes.
+  void Units(const httplib::Request&, httplib::Response& res) {
+    Json p = Json::array();
+    for (const auto& x : experiment::SiPrefixes()) p.push_back({{"symbol", x.symbol}, {"scale", x.scale}});
+    res.set_content(Dump(Json{{"prefixes", p}}), kJson);
   }
 
   void Nights(const httplib::Request& req, httplib::Response& res) {

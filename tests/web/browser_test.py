@@ -132,6 +132,186 @@ def shot(name, scroll_to=None):
     driver.save_screenshot(os.path.join(shots, "web-%s.png" % name))
 
 
+# ---- issue 28 (charts, units, compare, sweeps, run charts, diagnosis): helpers and checks of D1's pages.
+def page_shots(name, widths=(1400, 1024)):
+    """web-NAME-WIDTH.png of the whole page (the window made as tall as the page, at most 5000 px)."""
+    for width in widths:
+        driver.set_window_size(width, 900)
+        time.sleep(0.5)  # dygraphs redraws on resize
+        height = driver.execute_script("return document.documentElement.scrollHeight;")
+        driver.set_window_size(width, min(max(height + 140, 900), 5000))
+        time.sleep(0.4)
+        driver.save_screenshot(os.path.join(shots, "web-%s-%d.png" % (name, width)))
+    driver.set_window_size(1400, 900)
+
+
+def chart_info(selector):
+    """For each chart (.vb-chart) under `selector`: its plot area in page pixels, its x range, its axis texts."""
+    return driver.execute_script("""
+      return Array.from(document.querySelectorAll(arguments[0] + ' .vb-plot')).map((d) => {
+        const c = d.vbChart; if (!c || !c.g) return null;
+        const a = c.g.getArea(), b = d.getBoundingClientRect();
+        return {left: b.left + a.x, right: b.left + a.x + a.w, top: b.top + a.y, bottom: b.top + a.y + a.h,
+                x: c.g.xAxisRange(), ylabel: (d.querySelector('.dygraph-ylabel') || {}).textContent || '',
+                xlabel: (d.querySelector('.dygraph-xlabel') || {}).textContent || '',
+                yticks: Array.from(d.querySelectorAll('.dygraph-axis-label-y')).map((e) => e.textContent),
+                title: d.closest('.vb-chart').querySelector('.vb-chart-title').textContent,
+                legend: Array.from(d.closest('.vb-chart').querySelectorAll('.vb-legend-item')).map((e) =>
+                  [e.textContent, e.querySelector('i').style.background, (e.querySelector('a') || {}).href || '']),
+                labels: Array.from(d.querySelectorAll('.vb-point-label')).map((e) => {
+                  const r = e.getBoundingClientRect(); return [e.textContent, r.left, r.right, r.top, r.bottom]; })};
+      });""", selector)
+
+
+def check_downloads(selector, what):
+    """The chart's SVG has its series and texts; its PNG is an image (made in the page, as the buttons do)."""
+    out = driver.execute_async_script("""
+      const done = arguments[arguments.length - 1];
+      const d = document.querySelector(arguments[0] + ' .vb-plot');
+      const box = document.querySelector(arguments[0] + '.vb-chart, ' + arguments[0] + ' .vb-chart');
+      if (!box) { done(['no chart']); return; }
+      const buttons = box.querySelectorAll('.dl-svg, .dl-png').length;
+      let svg;
+      if (d && d.vbChart) svg = VBCharts.toSvg(d.vbChart); else svg = box.querySelector('svg').cloneNode(true);
+      const text = VBCharts.svgText(svg);
+      VBCharts.pngOf(svg).then((b) => done([buttons, text.length, (text.match(/<(polyline|rect|circle)/g) || []).length,
+        (text.match(/<text/g) || []).length, b.type, b.size])).catch((e) => done(['png: ' + e.message]));
+    """, selector)
+    ok = len(out) == 6 and out[0] == 2 and out[2] >= 2 and out[3] >= 4 and out[4] == "image/png" and out[5] > 2000
+    check("%s: PNG and SVG downloads (SVG with series and texts, PNG an image)" % what, ok, out)
+
+
+def check_compare_page(batch, runs):
+    header = [e.text for e in driver.find_elements(By.CSS_SELECTOR, "#comparison th")]
+    metric_heads = [e.text for e in driver.find_elements(By.CSS_SELECTOR, "#comparison th[data-metric]")]
+    check("compare: headers carry the CLI's units and SI prefixes (RMSE [mA], driver loss [mW])",
+          "RMSE [mA]" in header and any(h.startswith("driver loss [") for h in header), header)
+    check("compare: a readable subset by default (at most 9 metrics of more)", 3 <= len(metric_heads) <= 9, metric_heads)
+    chooser = driver.find_elements(By.CSS_SELECTOR, ".columns-chooser input[type=checkbox]")
+    check("compare: a column chooser with every metric", len(chooser) > len(metric_heads), len(chooser))
+    cells = [e.text for e in driver.find_elements(By.CSS_SELECTOR, "#comparison td.num")]
+    check("compare: no raw SI value with 5+ decimals in the table", not any(re.match(r"^-?0\.0000", c) for c in cells), cells[:20])
+    info = chart_info("#pareto")
+    sc = info[0] if info else None
+    check("compare: the scatter's effort axis is the comparison's effort metric, labelled with its unit",
+          sc is not None and sc["xlabel"].startswith("driver loss [") and sc["ylabel"] == "RMSE [mA]", sc and (sc["xlabel"], sc["ylabel"]))
+    inside = sc is not None and len(sc["labels"]) == 4 and all(
+        l[1] >= sc["left"] - 1 and l[2] <= sc["right"] + 1 and l[3] >= sc["top"] - 1 and l[4] <= sc["bottom"] + 1 for l in sc["labels"])
+    check("compare: every scatter point has its label inside the plot area", inside, sc and (sc["labels"], sc["left"], sc["right"]))
+    check("compare: the Pareto front is drawn", sc is not None and any(l[0] == "Pareto front" for l in sc["legend"]), sc and sc["legend"])
+    # One colour per case across the table, the scatter and the overlays.
+    swatches = driver.execute_script("""return Array.from(document.querySelectorAll('#comparison tr')).slice(1).map((r) =>
+        [r.querySelector('td i.swatch').parentNode.textContent.trim(), r.querySelector('td i.swatch').style.background]);""")
+    legend = {l[0]: l[1] for l in sc["legend"]} if sc else {}
+    check("compare: a case has one colour in the table and the scatter",
+          bool(swatches) and all(legend.get(n) == c for n, c in swatches), (swatches, legend))
+    over = chart_info("#overlays")
+    check("compare: the overlays are drawn with their legends below, linking to the runs",
+          len(over) >= 2 and all(any(("#%s" % r["id"]) in l[0] and l[2].endswith("#/run/%s" % r["id"]) for l in over[0]["legend"])
+                                 for r in runs), over and over[0]["legend"])
+    check("compare: the overlays share one time axis", len(over) >= 2 and all(abs(o["left"] - over[0]["left"]) <= 2 and
+                                                                             o["x"] == over[0]["x"] for o in over), over and [(o["left"], o["x"]) for o in over])
+    cmp = api("GET", "/api/compare?batch_id=%s" % batch, VIEWER)
+    if any(r.get("run_ids") for r in cmp["comparison"]["rows"]):
+        links = driver.find_elements(By.CSS_SELECTOR, "#comparison td a[href^='#/run/']")
+        check("compare: rows link to their runs", len(links) >= len(runs), len(links))
+    else:
+        print("note: CompareRow.run_ids not filled by this server yet: rows cannot link to their runs")
+    check_downloads("#pareto", "compare scatter")
+
+
+def check_diagnosis_page():
+    size = driver.find_element(By.CSS_SELECTOR, "#diagnosis-report .verdict-box").text
+    check("diagnosis: the verdict with its size (the gap before and after, with units)",
+          re.search(r"closes \d+ % of the hold-out gap: RMSE [0-9.]+ [mµ]?A → [0-9.]+ [mµ]?A", size), size)
+    check("diagnosis: button enabled again", driver.find_element(By.CSS_SELECTOR, "button.diagnose").is_enabled())
+    over = chart_info("#diagnosis-overlays")
+    check("diagnosis: measured and model overlaid per run, before and after", len(over) >= 2 and all(
+        [l[0] for l in o["legend"]][:2] == ["measured", "nominal model (before)"] and len(o["legend"]) == 3 for o in over),
+        [o["legend"] for o in over][:2])
+    bars = driver.find_elements(By.CSS_SELECTOR, "#diagnosis-phases .vb-bar")
+    check("diagnosis: residual by phase as bars", len(bars) >= 4, len(bars))
+    check("diagnosis: detection limits shown", bool(driver.find_elements(By.CSS_SELECTOR, "#detection-limits")))
+    report_w, main_w = driver.execute_script("return [document.querySelector('#diagnosis-report pre.report').clientWidth, "
+                                             "document.querySelector('#main').clientWidth];")
+    check("diagnosis: the text report is full width", report_w >= 0.9 * (main_w - 40), (report_w, main_w))
+    have = driver.find_elements(By.ID, "improved-model")
+    check("diagnosis: the improved model can be downloaded (or the page says there is none)",
+          bool(have) or bool(driver.find_elements(By.ID, "improved-model-none")))
+    if have:
+        check("diagnosis: the improved model download is a JSON file", have[0].get_attribute("download") == "improved-model.json")
+    else:
+        print("note: DiagnoseRunsResponse.improved_model_json empty on this server: no model to download")
+    check_downloads("#diagnosis-phases", "diagnosis bars")
+
+
+def check_sweep_page(batch, n):
+    go("#/compare?batch=%s" % batch)
+    rows = wait(lambda: (lambda r: r if len(r) == n else None)(driver.find_elements(By.CSS_SELECTOR, "#comparison tr")[1:]),
+                what="the sweep's table")
+    header = [e.text for e in driver.find_elements(By.CSS_SELECTOR, "#comparison th")]
+    sweep_heads = [e.text for e in driver.find_elements(By.CSS_SELECTOR, "#comparison th.sweep")]
+    check("sweep: one column per sweep axis (duty, pressure, frequency)", len(sweep_heads) == 3 and
+          any(h.startswith("duty") for h in sweep_heads), sweep_heads)
+    names = [r.find_elements(By.TAG_NAME, "td")[0].text for r in rows or []] if rows else []
+    check("sweep: case names without the sweep point", bool(names) and not any("sweep:" in x for x in names), names[:3])
+    # Duty 0: the valve stays shut, its mean position is exactly 0 and shows as 0, not as a missing value.
+    col = [k for k, h in enumerate(header) if h.startswith("mean x")]
+    duty = [k for k, h in enumerate(header) if h.startswith("duty")]
+    zero = []
+    for r in rows or []:
+        cells = [c.text for c in r.find_elements(By.TAG_NAME, "td")]
+        if duty and col and cells[duty[0]] == "0":
+            zero.append(cells[col[0]])
+    check("sweep: a metric at exactly 0 shows 0 (duty 0: mean position 0)", bool(zero) and all(z == "0" for z in zero), zero)
+    curves = wait(lambda: (lambda c: c if len(c) >= 2 and all(c) else None)(chart_info("#sweep-section")), what="sweep curves")
+    curves = curves or []
+    check("sweep: position against duty, one curve per pressure (fig8) and per frequency (fig9)",
+          len(curves) == 2 and all(c["xlabel"].startswith("duty") and c["ylabel"].startswith("mean x") for c in curves) and
+          [len(c["legend"]) for c in curves] == [4, 3], [(c["title"], c["xlabel"], c["ylabel"], len(c["legend"])) for c in curves])
+    heat = driver.find_elements(By.CSS_SELECTOR, "#sweep-section svg.vb-heatmap")
+    check("sweep: a heat map per 2-D sweep", len(heat) == 2, len(heat))
+    check_downloads("#sweep-section .sweep-curve", "sweep curve")
+
+
+def check_run_charts():
+    charts = wait(lambda: (lambda c: c if len(c) >= 3 and all(c) else None)(chart_info("#traces")), what="run charts")
+    charts = charts or []
+    titles = [c["title"] for c in charts]
+    check("run: current, position, voltage and gate charts", len(charts) >= 3 and "Gate (logic level)" in titles, titles)
+    lefts = [c["left"] for c in charts]
+    rights = [c["right"] for c in charts]
+    check("run: the time axes line up within 2 px", bool(lefts) and max(lefts) - min(lefts) <= 2 and max(rights) - min(rights) <= 2,
+          (lefts, rights))
+    check("run: the charts show one time range", all(c["x"] == charts[0]["x"] for c in charts), [c["x"] for c in charts])
+    gate = [c for c in charts if c["title"].startswith("Gate")]
+    check("run: the gate chart is a logic level, not volts", bool(gate) and "V" not in gate[0]["ylabel"] and
+          gate[0]["yticks"] == ["0 (off)", "1 (on)"], gate and (gate[0]["ylabel"], gate[0]["yticks"]))
+    pos = [c for c in charts if c["title"] == "Spool position"]
+    check("run: position in a prefixed unit (mm or µm) with distinct ticks", bool(pos) and re.search(r"\[(mm|µm)\]", pos[0]["ylabel"])
+          and len(set(pos[0]["yticks"])) == len(pos[0]["yticks"]) >= 3, pos and (pos[0]["ylabel"], pos[0]["yticks"]))
+    cur = [c for c in charts if c["title"] == "Coil current"]
+    check("run: current in A or mA", bool(cur) and re.search(r"\[m?A\]", cur[0]["ylabel"]), cur and cur[0]["ylabel"])
+    # A drag over the position chart zooms every chart to the same window; the ticks stay distinct.
+    from selenium.webdriver.common.action_chains import ActionChains
+    plot = driver.find_elements(By.CSS_SELECTOR, "#traces .trace-position .vb-plot")
+    if plot:
+        w = plot[0].size["width"]
+        ActionChains(driver).move_to_element_with_offset(plot[0], int(-w * 0.1), 0).click_and_hold() \
+            .move_by_offset(int(w * 0.05), 0).release().perform()
+        zoomed = wait(lambda: (lambda c: c if c and all(x and x["x"][1] - x["x"][0] < 0.5 * (charts[0]["x"][1] - charts[0]["x"][0])
+                                                         for x in c) else None)(chart_info("#traces")), what="zoomed charts")
+        zoomed = zoomed or []
+        check("run: a zoom on one chart zooms all to one window",
+              len(zoomed) == len(charts) and all(abs(z["x"][0] - zoomed[0]["x"][0]) < 1e-9 and abs(z["x"][1] - zoomed[0]["x"][1]) < 1e-9
+                                                 for z in zoomed), [z["x"] for z in zoomed])
+        zp = [c for c in zoomed if c["title"] == "Spool position"]
+        check("run: zoomed position ticks are distinct", bool(zp) and len(set(zp[0]["yticks"])) == len(zp[0]["yticks"]),
+              zp and zp[0]["yticks"])
+        driver.execute_script("document.querySelector('#traces .trace-position .vb-plot').vbChart.g.resetZoom();")
+    check_downloads("#traces .trace-current", "run chart")
+
+
 try:
     base = None
     for _ in range(400):
@@ -213,6 +393,10 @@ try:
     wait(lambda: int(driver.find_element(By.CSS_SELECTOR, "#traces .live-count").get_attribute("data-samples") or 0) > 0,
          what="live samples on the run page")
     shot("run-live")
+    wait(lambda: driver.find_elements(By.CSS_SELECTOR, "#traces .progress") or None, what="the live progress")
+    progress = driver.execute_script("return Array.from(document.querySelectorAll('#main *')).filter((e) => "
+                                     "e.children.length === 0 && /^\\d+ %$/.test(e.textContent.trim())).length;")
+    check("the run page shows one progress figure", progress == 1, progress)
     if btn:
         btn[0].click()
     cancelled = wait(lambda: "CANCELLED" in driver.find_element(By.TAG_NAME, "h1").text, what="cancelled run")
@@ -258,13 +442,13 @@ try:
     table = wait(lambda: [r.text for r in driver.find_elements(By.CSS_SELECTOR, "#comparison tr")[1:]] or None,
                  what="comparison table")
     check("the comparison has one row per law", table is not None and len(table) == 4, table)
-    header = driver.find_element(By.CSS_SELECTOR, "#comparison tr").text
-    check("metric columns carry units", "rmse [A]" in header and "effort_l2 [V s^0.5]" in header, header)
     plots = wait(lambda: len(driver.find_elements(By.CSS_SELECTOR, "#pareto canvas, #overlay-current canvas, "
                                                   "#overlay-error canvas")) >= 3 or None, what="comparison plots")
     legend = driver.find_element(By.ID, "overlay-current").text
-    check("the overlays show every run", all(("#%s" % r["id"]) in legend for r in runs) or plots is not None, legend)
+    check("the overlays show every run", all(("#%s" % r["id"]) in legend for r in runs) and plots is not None, legend)
+    check_compare_page(batch, runs)
     shot("compare")
+    page_shots("compare")
     no_overflow("compare")
 
     # 6. A finished run's page: metrics with units, traces, export links; zoom refetches at full resolution.
@@ -272,11 +456,13 @@ try:
     go("#/run/" + done_id)
     wait(lambda: len(driver.find_elements(By.CSS_SELECTOR, ".trace-chart canvas")) >= 2 or None, what="trace charts")
     metrics = driver.find_element(By.ID, "metrics").text
-    check("the run page shows metrics with units", re.search(r"rmse [-0-9.e]+ A", metrics), metrics[:300])
+    check("the run page shows metrics with units and SI prefixes", re.search(r"rmse -?[0-9.]+ [mµn]?A\b", metrics), metrics[:300])
     check("the run page links the export", driver.find_element(By.ID, "export-csv").get_attribute("href")
           .endswith("/api/runs/%s/trace.csv" % done_id))
+    check_run_charts()
     shot("run")
     shot("run-traces", "#traces")
+    page_shots("run")
     no_overflow("run")
 
     # 7. The nightly history: the regressed night with its verdict and links to its runs and comparison.
@@ -313,14 +499,60 @@ try:
         button = wait(lambda: driver.find_elements(By.CSS_SELECTOR, "button.diagnose") or None, what="diagnose button")
         if button:
             button[0].click()
+            busy = driver.execute_script("return [document.querySelector('button.diagnose').disabled, "
+                                         "!!document.querySelector('#diagnosis-report .progress-bar')];")
+            check("diagnosis: the button is disabled and a progress shows while it runs", busy == [True, True], busy)
         verdict = wait(lambda: driver.find_elements(By.CSS_SELECTOR, "#diagnosis-report .verdict") or None,
                        timeout=120, what="diagnosis verdict")
         text = verdict[0].text if verdict else ""
         check("the page diagnoses the imported runs on the server", text == "supply_resistance", text)
+        check_diagnosis_page()
         shot("diagnosis")
+        page_shots("diagnosis")
         no_overflow("#/diagnosis with its report")
+        # The overlay link opens the imported runs' traces overlaid.
+        driver.find_element(By.CSS_SELECTOR, "a.overlay").click()
+        over = wait(lambda: driver.find_elements(By.CSS_SELECTOR, "#overlay-current canvas") or None, what="diagnosis overlay")
+        check("diagnosis: the overlay link opens a populated overlay", bool(over) and
+              len(driver.find_elements(By.CSS_SELECTOR, "#overlay-current .vb-legend-item")) >= 2,
+              driver.find_element(By.ID, "main").text[:300])
+        # Re-run of an imported run: refused with a clear message by the API, the page's button disabled.
+        imp = api("GET", "/api/runs?tag=imported&page_size=1", VIEWER)["runs"][0]["id"]
+        try:
+            api("POST", "/api/runs/%s/rerun" % imp, OPERATOR, {})
+            refused = None
+        except urllib.error.HTTPError as e:
+            refused = (e.code, json.loads(e.read()))
+        check("an imported run's re-run is refused as a precondition, saying why",
+              refused is not None and refused[0] == 409 and "imported measurement" in refused[1]["message"], refused)
+        go("#/run/%s" % imp)
+        rr = wait(lambda: driver.find_elements(By.ID, "rerun") or None, what="re-run button")
+        check("an imported run's Re-run button is disabled with a tooltip", bool(rr) and not rr[0].is_enabled() and
+              "imported" in (rr[0].get_attribute("title") or ""), rr and rr[0].get_attribute("title"))
     else:
         print("note: no ../shared/gapbench/practice/p07 or benchctl beside the server: the diagnosis step is skipped")
+
+    # 7c. An empty Compare page offers the recent batches.
+    go("#/compare")
+    recent = wait(lambda: driver.find_elements(By.CSS_SELECTOR, "#recent-batches a.compare-batch") or None, what="recent batches")
+    check("an empty Compare page offers the recent batches",
+          bool(recent) and any(a.get_attribute("href").endswith("#/compare?batch=%s" % batch) for a in recent or []))
+
+    # 7d. Seed 000's static map (examples/static-map.json, Figs. 8-9; 147 short emulated runs): one column per
+    # sweep axis, position against duty per pressure (fig8) and per PWM frequency (fig9), a heat map each.
+    with open(os.path.join(examples_dir, "static-map.json")) as f:
+        smap = json.load(f)
+    t_sweep = time.time()
+    sweep_batch = api("POST", "/api/runs", OPERATOR, {"spec": smap})["batch_id"]
+    for _ in range(1200):
+        sruns = api("GET", "/api/runs?page_size=200&batch_id=%s" % sweep_batch, VIEWER).get("runs", [])
+        if sruns and all(r["status"] not in ("QUEUED", "RUNNING") for r in sruns):
+            break
+        time.sleep(0.1)
+    print("note: the static map's %d runs took %.1f s" % (len(sruns), time.time() - t_sweep))
+    check_sweep_page(sweep_batch, len(sruns))
+    page_shots("sweep")
+    no_overflow("compare (sweep)")
 
     for page in ("#/runs", "#/nights", "#/diagnosis", "#/submit"):
         go(page)

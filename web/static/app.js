@@ -187,7 +187,7 @@ function liveView(runId, box, onEnd) {
   const MAX = 20000;
   es.addEventListener('run', (ev) => {
     const e = JSON.parse(ev.data);
-    status.replaceChildren(statusCell(e.status), ' ' + Math.round(100 * (e.progress || 0)) + ' %');
+    status.replaceChildren(statusCell(e.status), ' ', el('span', {class: 'progress', text: Math.round(100 * (e.progress || 0)) + ' %'}));
     for (const s of e.samples || []) {
       // The server writes fields at zero too (proto3 JSON would leave them out: t_s = 0, x_m = 0 at rest); a
       // missing one is still read as 0, and NaN (no reference) arrives as "NaN".
@@ -369,12 +369,17 @@ async function pageRun(main, m) {
   const id = m[1];
   main.replaceChildren(el('h1', {text: 'Run ' + id}), el('p', {class: 'muted', text: 'loading…'}));
   let data;
-  try { data = await api('GET', '/api/runs/' + id); } catch (e) { showError(e, main); return; }
+  try {
+    data = await api('GET', '/api/runs/' + id);
+    await VBFormat.load((p) => api('GET', p));
+  } catch (e) { showError(e, main); return; }
   const r = data.run, units = data.metric_units || {}, cu = data.channel_units || {};
   const ended = !['QUEUED', 'RUNNING'].includes(r.status);
   const actions = el('div', {class: 'actions'},
     ended ? null : el('button', {class: 'danger', id: 'cancel', onclick: () => cancelRun(id).then(() => route()), text: 'Cancel'}),
-    el('button', {id: 'rerun', onclick: () => rerun(id), text: 'Re-run'}),
+    (r.tags || []).includes('imported')
+      ? el('button', {id: 'rerun', disabled: true, title: 'an imported run is a measurement (benchctl import): there is no spec to run again', text: 'Re-run'})
+      : el('button', {id: 'rerun', onclick: () => rerun(id), text: 'Re-run'}),
     ended ? el('a', {href: '/api/runs/' + id + '/trace.csv', id: 'export-csv', text: 'trace CSV'}) : null,
     el('a', {href: '/api/runs/' + id, id: 'export-json', text: 'run JSON'}),
     el('a', {href: '#/compare?runs=' + id, text: 'compare'}),
@@ -386,16 +391,14 @@ async function pageRun(main, m) {
     ['priority', String(r.priority || 0)], ['tags', (r.tags || []).join(', ') || '–'],
     ['conditions.supply_V', fmt(c.supply_V) + ' V'], ['conditions.supply_pressure_Pa', fmt(c.supply_pressure_Pa || 0) + ' Pa'],
     ['duration_s', fmt(r.spec && r.spec.duration_s) + ' s'], ['submitted', when(r.submitted_unix_s)],
-    ['started', when(r.started_unix_s)], ['finished', when(r.finished_unix_s)],
-    ['progress', Math.round(100 * (r.progress || 0)) + ' %']]) kv.append(el('div', {text: k}), el('div', {}, v));
+    ['started', when(r.started_unix_s)], ['finished', when(r.finished_unix_s)]]) kv.append(el('div', {text: k}), el('div', {}, v));
   const history = el('table', {}, el('tr', {}, ['time', 'status', 'reason'].map((h) => el('th', {text: h}))),
     (r.history || []).map((h) => el('tr', {}, el('td', {text: when(h.at_unix_s)}), el('td', {}, statusCell(h.status)),
       el('td', {text: h.reason || ''}))));
   const metricNames = Object.keys(r.metrics || {}).sort();
   const metrics = metricNames.length === 0 ? el('p', {class: 'muted', text: 'No metrics (yet).'}) :
-    el('table', {id: 'metrics'}, el('tr', {}, ['metric', 'value', 'unit'].map((h) => el('th', {text: h}))),
-      metricNames.map((k) => el('tr', {}, el('td', {text: k}), el('td', {class: 'num', text: fmt(r.metrics[k], 6)}),
-        el('td', {text: units[k] || ''}))));
+    el('table', {id: 'metrics'}, el('tr', {}, ['metric', 'value'].map((h) => el('th', {text: h}))),
+      metricNames.map((k) => el('tr', {}, el('td', {text: k}), el('td', {class: 'num', text: VBFormat.value(r.metrics[k], units[k])}))));
   const traces = el('section', {id: 'traces'}, el('h2', {text: 'Traces'}));
   main.replaceChildren(el('h1', {}, 'Run ' + id + ' ', statusCell(r.status)), actions,
     el('div', {class: 'grid2'},
@@ -411,46 +414,54 @@ async function pageRun(main, m) {
   await traceCharts(id, traces, cu);
 }
 
-// The recorded trace, min/max-decimated by the server to ~4000 rows; zooming refetches the visible window at
-// full resolution (double-click: back to the whole run).
+// The recorded trace, min/max-decimated by the server to ~4000 rows, one chart per quantity on one time axis
+// (same range, same left margin; charts.js); zooming refetches the visible window at full resolution
+// (double-click: back to the whole run).
 async function traceCharts(id, box, cu) {
   const note = el('p', {class: 'muted', text: 'loading trace…'});
   box.append(note);
   let t;
-  try { t = await api('GET', '/api/runs/' + id + '/trace?max_points=4000'); } catch (e) { showError(e, note); return; }
+  try {
+    await VBFormat.load((p) => api('GET', p));
+    t = await api('GET', '/api/runs/' + id + '/trace?max_points=4000');
+  } catch (e) { showError(e, note); return; }
   const col = (name) => t.channels.indexOf(name);
+  const C = VBCharts.PALETTE;
+  // [title, class, [channel, legend name, colour, step], y label, unit, logic]
   const groups = [
-    [['i_A', 'ref'], (cu.ref === 'A' || !cu.ref) ? 'A' : 'A (ref: ' + cu.ref + ')'],
-    [['x_m'].concat(cu.ref === 'm' ? ['ref'] : []), 'm'],
-    [['gate', 'v_coil_V'], 'V'],
+    ['Coil current', 'trace-current', [['i_A', 'i (measured)', C[0]]].concat(cu.ref === 'A' ? [['ref', 'reference', C[1]]] : []), 'i', 'A'],
+    ['Spool position', 'trace-position', [['x_m', 'x (measured)', C[2]]].concat(cu.ref === 'm' ? [['ref', 'reference', C[1]]] : []), 'x', 'm'],
+    ['Coil voltage', 'trace-voltage', [['v_coil_V', 'v_coil', C[4]]], 'v', 'V'],
+    ['Gate (logic level)', 'trace-gate', [['gate', 'gate', C[3], true]], 'gate', '', true],
   ];
-  note.textContent = t.total_samples + ' samples at ' + fmt(1 / t.sample_period_s) + ' Hz' +
+  note.textContent = t.total_samples + ' samples at ' + VBFormat.value(1 / t.sample_period_s, 'Hz') +
     (t.decimated ? ' (shown as a min/max envelope; drag to zoom for every sample, double-click to reset)' : '');
-  const graphs = [];
-  let syncing = false;
-  for (const [names, unit] of groups) {
-    const present = names.filter((n) => col(n) >= 0 && !(n === 'ref' && unit === 'A' && cu.ref === 'm'));
+  const range = t.rows.length ? [t.rows[0][0], t.rows[t.rows.length - 1][0]] : null;
+  const charts = [];
+  for (const [title, cls, chans, label, unit, logic] of groups) {
+    const present = chans.filter(([n]) => col(n) >= 0);
     if (present.length === 0) continue;
-    const pick = (rows) => rows.map((row) => [row[0]].concat(present.map((n) => row[col(n) + 1])));
-    const div = el('div', {class: 'chart trace-chart'});
-    box.append(div);
-    const withGate = present.includes('gate') && present.length > 1;
-    const g = chart(div, pick(t.rows), ['t [s]'].concat(present), {ylabel: unit,
-      series: withGate ? {gate: {stepPlot: true, axis: 'y2'}} : {},
-      axes: withGate ? {y2: GATE_AXIS} : {}, y2label: withGate ? 'gate' : undefined,
-      zoomCallback: async (lo, hi) => {
-        if (syncing) return;
-        syncing = true;
-        for (const o of graphs) if (o.g !== g) o.g.updateOptions({dateWindow: [lo, hi]});
-        syncing = false;
-        const full = lo <= t.rows[0][0] && hi >= t.rows[t.rows.length - 1][0];
-        try {
-          const w = full ? t : await api('GET', '/api/runs/' + id + '/trace?max_points=4000&t_from_s=' + lo + '&t_to_s=' + hi);
-          for (const o of graphs) o.g.updateOptions({file: o.pick(w.rows), dateWindow: full ? null : [lo, hi]});
-        } catch (e) { showError(e); }
-      }});
-    graphs.push({g, pick});
+    const pick = (rows) => rows.map((row) => [row[0]].concat(present.map(([n]) => row[col(n) + 1])));
+    const c = VBCharts.plot(box, {title, class: 'trace-chart ' + cls, x: {label: 't', unit: 's', range},
+      y: {label, unit, logic}, series: present.map(([, name, color, step]) => ({name, color, step: !!step})),
+      rows: pick(t.rows), height: logic ? 110 : 220}, cleanups);
+    c.pick = pick;
+    charts.push(c);
   }
+  if (!charts.length) return;
+  // One zoom for all (charts.js linkTime), then the window at full resolution.
+  let latest = 0;  // a window fetched after a newer zoom (or a reset) is dropped
+  charts[0].opts.onZoom = async (lo, hi) => {
+    const full = lo <= t.rows[0][0] && hi >= t.rows[t.rows.length - 1][0];
+    const mine = ++latest;
+    try {
+      const w = full ? t : await api('GET', '/api/runs/' + id + '/trace?max_points=4000&t_from_s=' + lo + '&t_to_s=' + hi);
+      if (mine !== latest) return;
+      for (const o of charts) { o.rows = o.pick(w.rows); o.g.updateOptions({file: o.rows, dateWindow: full ? range : [lo, hi]}); }
+    } catch (e) { showError(e); }
+  };
+  for (const o of charts.slice(1)) o.opts.onZoom = charts[0].opts.onZoom;
+  VBCharts.linkTime(charts);
 }
 
 // ---- Submit: a spec as JSON; the server's validation answers (field-named errors)
@@ -492,79 +503,7 @@ function pageSubmit(main) {
       el('button', {class: 'primary', id: 'submit', type: 'submit', text: 'Submit'}))), out));
 }
 
-// ---- Compare: overlays on shared axes, error traces, RMSE/effort scatter with the Pareto front
-async function pageCompare(main, m, params) {
-  const input = el('input', {id: 'compare-runs', type: 'text', size: 30, placeholder: 'run ids, e.g. 1,2,3',
-    value: params.get('runs') || ''});
-  const form = el('form', {class: 'actions', onsubmit: (ev) => {
-    ev.preventDefault();
-    location.hash = '#/compare?runs=' + input.value.replace(/\s+/g, '');
-  }}, 'runs ', input, el('button', {type: 'submit', text: 'Compare'}), el('span', {class: 'muted', text: 'or pick runs on the Runs page'}));
-  const body = el('div');
-  main.replaceChildren(el('h1', {text: 'Compare'}), el('section', {}, form), body);
-  const q = params.get('batch') ? 'batch_id=' + encodeURIComponent(params.get('batch'))
-    : params.get('runs') ? 'runs=' + encodeURIComponent(params.get('runs')) : null;
-  if (!q) return;
-  let cmp, ids;
-  try {
-    cmp = await api('GET', '/api/compare?' + q);
-    if (params.get('batch')) {
-      const l = await api('GET', '/api/runs?page_size=50&batch_id=' + encodeURIComponent(params.get('batch')));
-      ids = (l.runs || []).map((r) => String(r.id));
-    } else ids = params.get('runs').split(',');
-  } catch (e) { showError(e, body); return; }
-  const c = cmp.comparison, units = cmp.units || {};
-  const cols = c.columns || [];
-  const table = el('table', {id: 'comparison'},
-    el('tr', {}, el('th', {text: 'rank'}), el('th', {text: 'name'}), el('th', {text: 'controller'}), el('th', {text: 'runs'}),
-      el('th', {text: 'Pareto'}), cols.map((k) => el('th', {class: 'num', text: k + (units[k] ? ' [' + units[k] + ']' : '')}))),
-    (c.rows || []).map((r) => el('tr', {}, el('td', {text: r.rank || '–'}), el('td', {text: r.name}),
-      el('td', {text: r.controller}), el('td', {text: (r.runs || 0) + (r.failed ? ' (' + r.failed + ' failed)' : '')}),
-      el('td', {text: r.pareto ? 'yes' : ''}),
-      cols.map((k) => { const s = (r.metrics || {})[k]; return el('td', {class: 'num', text: s ? fmt(s.mean) + (s.n > 1 ? ' ± ' + fmt(s.spread, 2) : '') : '–'}); }))));
-  const scatter = el('div', {class: 'chart', id: 'pareto'});
-  const overI = el('div', {class: 'chart', id: 'overlay-current'});
-  const overX = el('div', {class: 'chart', id: 'overlay-position'});
-  const errs = el('div', {class: 'chart', id: 'overlay-error'});
-  body.append(el('section', {}, el('h2', {text: 'Metrics (rank by ' + (c.rank_metric || 'rmse') + ')'}), el('div', {class: 'scroll'}, table)),
-    el('section', {}, el('h2', {text: c.rank_metric + ' vs ' + c.effort_metric + ' (Pareto front joined)'}), scatter),
-    el('section', {}, el('h2', {text: 'Overlays on shared axes'}), overI, overX),
-    el('section', {}, el('h2', {text: 'Tracking error (controlled variable − reference)'}), errs));
-  // Scatter: one series per row; the front as a line through the Pareto rows.
-  const pts = (c.rows || []).map((r) => ({name: r.name, x: num(((r.metrics || {})[c.effort_metric] || {}).mean),
-    y: num(((r.metrics || {})[c.rank_metric] || {}).mean), pareto: r.pareto})).filter((p) => p.x !== null && p.y !== null);
-  if (pts.length) {
-    const names = pts.map((p) => p.name);
-    const rows = pts.map((p, k) => { const row = [p.x].concat(new Array(pts.length + 1).fill(null)); row[k + 1] = p.y; return row; });
-    const front = pts.filter((p) => p.pareto).sort((a, b) => a.x - b.x);
-    for (const p of front) { const row = [p.x].concat(new Array(pts.length + 1).fill(null)); row[pts.length + 1] = p.y; rows.push(row); }
-    rows.sort((a, b) => a[0] - b[0]);
-    const series = {'Pareto front': {drawPoints: false, strokeWidth: 1.5, connectSeparatedPoints: true}};
-    for (const n of names) series[n] = {strokeWidth: 0, drawPoints: true, pointSize: 5};
-    chart(scatter, rows, [c.effort_metric].concat(names, ['Pareto front']), {xlabel: c.effort_metric + ' [' + (units[c.effort_metric] || '') + ']',
-      ylabel: c.rank_metric + ' [' + (units[c.rank_metric] || '') + ']', series, drawPoints: true, strokeWidth: 0,
-      connectSeparatedPoints: false, legend: 'follow', labelsSeparateLines: true});
-  } else scatter.replaceChildren(el('p', {class: 'muted', text: 'No run has both metrics.'}));
-  // Overlays: each run's trace (decimated), merged on one time axis.
-  const shown = ids.slice(0, 12);
-  try {
-    const traces = await Promise.all(shown.map((id) => Promise.all([api('GET', '/api/runs/' + id),
-      api('GET', '/api/runs/' + id + '/trace?max_points=3000')])));
-    const labels = shown.map((id, k) => '#' + id + ' ' + traces[k][0].run.name);
-    const series = (name) => traces.map(([, t]) => { const j = t.channels.indexOf(name); return j < 0 ? [] : t.rows.map((r) => [r[0], r[j + 1]]); });
-    chart(overI, mergeSeries(series('i_A')), ['t [s]'].concat(labels), {ylabel: 'i_A [A]'});
-    chart(overX, mergeSeries(series('x_m')), ['t [s]'].concat(labels), {ylabel: 'x_m [m]'});
-    const err = traces.map(([run, t]) => {
-      const refUnit = (run.channel_units || {}).ref;
-      const y = t.channels.indexOf(refUnit === 'm' ? 'x_m' : 'i_A'), ref = t.channels.indexOf('ref');
-      if (!refUnit || y < 0 || ref < 0) return [];
-      return t.rows.map((r) => [r[0], (r[y + 1] === null || r[ref + 1] === null) ? null : r[y + 1] - r[ref + 1]]);
-    });
-    if (err.some((e) => e.length)) chart(errs, mergeSeries(err), ['t [s]'].concat(labels), {ylabel: 'error [A or m]'});
-    else errs.replaceChildren(el('p', {class: 'muted', text: 'No run has a reference.'}));
-    if (ids.length > shown.length) overI.before(el('p', {class: 'muted', text: 'first ' + shown.length + ' of ' + ids.length + ' runs shown'}));
-  } catch (e) { showError(e, overI); }
-}
+// ---- Compare: web/static/compare.js
 
 // ---- Nights: regression history, verdicts, links to the night's runs
 async function pageNights(main) {
@@ -589,46 +528,7 @@ async function pageNights(main) {
   } catch (e) { showError(e, box); }
 }
 
-// ---- Diagnosis: the imported measured runs by dataset; "diagnose" runs the sim-to-real gap diagnosis on the
-// server (DiagnoseRuns, the same as benchctl diagnose --runs; docs/web.md "Diagnosis").
-async function runDiagnosis(ids, out) {
-  out.replaceChildren(el('p', {class: 'muted', text: 'Diagnosing ' + ids.length + ' runs on the server (seconds to a minute) …'}));
-  try {
-    const d = await api('GET', '/api/diagnose?runs=' + ids.join(','));
-    const v = d.diagnosis || {};
-    out.replaceChildren(
-      el('p', {}, el('strong', {text: 'Verdict: '}), el('span', {class: 'verdict', text: String(v.verdict || '–')})),
-      el('pre', {class: 'report', text: d.report}));
-  } catch (e) { showError(e, out); }
-}
-
-async function pageDiagnosis(main) {
-  const box = el('div', {class: 'scroll'});
-  const out = el('div', {id: 'diagnosis-report', class: 'scroll'});
-  main.replaceChildren(el('h1', {text: 'Diagnosis'}), el('section', {},
-    el('p', {}, 'The sim-to-real gap diagnosis of stored measured runs: where they depart from the model, which ' +
-      'unmodelled effect explains it and how far it closes the gap on held-out runs (docs/gap.md). It runs on the ' +
-      'server, as ', el('code', {text: 'benchctl diagnose --runs ID,ID,…'}), ' does.'), box, out));
-  try {
-    const l = await api('GET', '/api/runs?tag=imported&page_size=1000');
-    const byBatch = new Map();
-    for (const r of l.runs || []) {
-      if (!byBatch.has(r.batch_id)) byBatch.set(r.batch_id, []);
-      byBatch.get(r.batch_id).push(r);
-    }
-    box.replaceChildren(byBatch.size === 0 ? el('p', {class: 'muted', text: 'No imported runs (benchctl import DIR).'}) :
-      el('table', {}, el('tr', {}, ['batch', 'dataset', 'runs', 'fit / holdout', 'diagnosis', ''].map((h) => el('th', {text: h}))),
-        Array.from(byBatch.entries()).map(([b, runs]) => {
-          const ds = ((runs[0].tags || []).find((t) => t.startsWith('dataset:')) || '').slice(8);
-          const fit = runs.filter((r) => r.split === 'fit').length, hold = runs.filter((r) => r.split === 'holdout').length;
-          return el('tr', {}, el('td', {}, el('a', {href: '#/runs?batch=' + b, text: b})), el('td', {text: ds}),
-            el('td', {class: 'num', text: String(runs.length)}), el('td', {text: fit + ' / ' + hold}),
-            el('td', {}, el('button', {type: 'button', class: 'diagnose', 'data-batch': String(b),
-              onclick: () => runDiagnosis(runs.map((r) => r.id), out), text: 'diagnose'})),
-            el('td', {}, el('a', {href: '#/compare?runs=' + runs.slice(0, 12).map((r) => r.id).join(','), text: 'overlay'})));
-        })));
-  } catch (e) { showError(e, box); }
-}
+// ---- Diagnosis: web/static/diagnosis.js
 
 // ---- start
 document.addEventListener('DOMContentLoaded', async () => {
