@@ -1,3 +1,4 @@
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 
 #include "experiment/compare.h"
@@ -120,6 +121,38 @@ TEST(CompareTable, CurrentLawsFitIn120ColumnsWithUnitsAndWithoutTheSharedPrefix)
   // The 28-character prefix is said once, not on every row.
   EXPECT_EQ(t.find("compare-current-controllers/"), std::string::npos) << t;
   EXPECT_EQ(t.rfind("compare-current-controllers: 4 cases", 0), 0u) << t;
+}
+
+// The web page formats its cells from MetricColumnDisplay: the same header, scale and decimals as the text table.
+TEST(CompareTable, ColumnDisplayIsTheTextTablesChoice) {
+  const Comparison c = Compare(CurrentLaws());
+  const ColumnDisplay rmse = MetricColumnDisplay(c, "rmse");
+  EXPECT_EQ(rmse.header, "RMSE [mA]");
+  EXPECT_EQ(rmse.unit, "mA");
+  EXPECT_DOUBLE_EQ(rmse.scale, 1e3);
+  const ColumnDisplay rate = MetricColumnDisplay(c, "switching_rate_Hz");
+  EXPECT_EQ(rate.header, "sw rate [kHz]");
+  EXPECT_DOUBLE_EQ(rate.scale, 1e-3);
+  EXPECT_EQ(rate.decimals, 2);  // "40.00", as the table prints it
+  const std::string t = ComparisonTable(c);
+  const double fuzzy = Row(c, "compare-current-controllers/fuzzy").metrics.at("rmse").mean;
+  EXPECT_NE(t.find(fmt::format("{:.{}f}", fuzzy * rmse.scale, rmse.decimals)), std::string::npos) << t;
+  const auto defaults = DefaultMetricColumns(c);
+  EXPECT_EQ(defaults.front(), "rmse");
+  EXPECT_NE(std::find(defaults.begin(), defaults.end(), "driver_loss_W"), defaults.end());
+  EXPECT_EQ(std::find(defaults.begin(), defaults.end(), "overshoot"), defaults.end()) << "applies to no row";
+  // A sweep axis: duty in %, a pressure in kPa.
+  EXPECT_EQ(SweepColumnDisplay("controller.open_loop_pwm.segments[0].duty", {0.0, 0.5, 1.0}).header, "duty [%]");
+  const ColumnDisplay p = SweepColumnDisplay("conditions.supply_pressure_Pa", {0.0, 2e5, 6e5});
+  EXPECT_EQ(p.unit, "kPa");
+  EXPECT_DOUBLE_EQ(p.scale, 1e-3);
+  // The prefix table, largest first, with the base unit in it.
+  const auto prefixes = SiPrefixes();
+  ASSERT_GE(prefixes.size(), 5u);
+  EXPECT_EQ(prefixes.front().symbol, "G");
+  for (size_t k = 1; k < prefixes.size(); ++k) EXPECT_GT(prefixes[k].scale, prefixes[k - 1].scale);
+  EXPECT_NE(std::find_if(prefixes.begin(), prefixes.end(), [](const SiPrefix& x) { return x.symbol == "µ"; }),
+            prefixes.end());
 }
 
 TEST(CompareTable, CurrentLawsTradeRmseAgainstTheDriverLoss) {

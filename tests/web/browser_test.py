@@ -211,12 +211,10 @@ def check_compare_page(batch, runs):
                                  for r in runs), over and over[0]["legend"])
     check("compare: the overlays share one time axis", len(over) >= 2 and all(abs(o["left"] - over[0]["left"]) <= 2 and
                                                                              o["x"] == over[0]["x"] for o in over), over and [(o["left"], o["x"]) for o in over])
-    cmp = api("GET", "/api/compare?batch_id=%s" % batch, VIEWER)
-    if any(r.get("run_ids") for r in cmp["comparison"]["rows"]):
-        links = driver.find_elements(By.CSS_SELECTOR, "#comparison td a[href^='#/run/']")
-        check("compare: rows link to their runs", len(links) >= len(runs), len(links))
-    else:
-        print("note: CompareRow.run_ids not filled by this server yet: rows cannot link to their runs")
+    links = [a.get_attribute("href") for a in driver.find_elements(By.CSS_SELECTOR, "#comparison td a[href*='#/run/']")]
+    check("compare: rows link to their runs", all(any(h.endswith("#/run/%s" % r["id"]) for h in links) for r in runs), links)
+    check("compare: the scatter's legend links to the runs",
+          sc is not None and all(any(l[2].endswith("#/run/%s" % r["id"]) for l in sc["legend"]) for r in runs), sc and sc["legend"])
     check_downloads("#pareto", "compare scatter")
 
 

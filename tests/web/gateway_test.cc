@@ -269,6 +269,24 @@ TEST_F(WebGatewayTest, TracesDecimatedWindowedAndExportedWhole) {
   EXPECT_EQ(c["units"]["effort_l2"], "V s^0.5");
   EXPECT_EQ(c["units"]["driver_loss_W"], "W");
   EXPECT_FALSE(c["units"][c["comparison"]["effort_metric"].get<std::string>()].get<std::string>().empty());
+  // How the CLI shows each column, for the page (experiment::MetricColumnDisplay), and every row's key.
+  const Json& d = c["display"];
+  EXPECT_EQ(d["columns"]["effort_l2"]["header"], "||v||2 [V s^0.5]") << d.dump();
+  EXPECT_FALSE(d["columns"]["rmse"]["header"].get<std::string>().empty()) << d.dump();
+  EXPECT_GT(d["columns"]["rmse"]["scale"].get<double>(), 0.0);
+  EXPECT_FALSE(d["default_columns"].empty());
+  ASSERT_EQ(d["keys"].size(), 1u);
+  EXPECT_EQ(d["keys"][0]["name"], c["comparison"]["rows"][0]["name"]);
+  // Zeros are written: e1 is a single run, so every spread is 0 and still there.
+  const Json& stat = c["comparison"]["rows"][0]["metrics"]["effort_l2"];
+  ASSERT_TRUE(stat.contains("spread")) << stat.dump();
+  EXPECT_EQ(stat["spread"], 0.0);
+  auto units = http_->Get("/api/units", Bearer(kViewerToken));
+  ASSERT_TRUE(units);
+  ASSERT_EQ(units->status, 200);
+  const Json u = Json::parse(units->body);
+  ASSERT_GE(u["prefixes"].size(), 5u);
+  EXPECT_EQ(u["prefixes"][0]["symbol"], "G");
   auto bad = http_->Get("/api/compare?runs=1,x", Bearer(kViewerToken));
   ASSERT_TRUE(bad);
   EXPECT_EQ(bad->status, 400);

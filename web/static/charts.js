@@ -166,20 +166,33 @@ const VBCharts = (() => {
     if (!div || !c.opts.labels) return;
     for (const e of div.querySelectorAll('.vb-point-label')) e.remove();
     const a = g.getArea();
-    for (const L of c.opts.labels) {
-      const [x, y] = g.toDomCoords(L.x, L.y);
-      if (!finite(x) || !finite(y) || x < a.x - 1 || x > a.x + a.w + 1 || y < a.y - 1 || y > a.y + a.h + 1) continue;
+    const placed = [];  // boxes taken by labels and points: a label goes where it covers neither
+    const pts = c.opts.labels.map((L) => g.toDomCoords(L.x, L.y));
+    for (const [x, y] of pts) if (finite(x) && finite(y)) placed.push([x - 4, y - 4, x + 4, y + 4]);
+    const hits = (b) => placed.some((p) => b[0] < p[2] && b[2] > p[0] && b[1] < p[3] && b[3] > p[1]);
+    c.opts.labels.forEach((L, k) => {
+      const [x, y] = pts[k];
+      if (!finite(x) || !finite(y) || x < a.x - 1 || x > a.x + a.w + 1 || y < a.y - 1 || y > a.y + a.h + 1) return;
       const e = h('div', {class: 'vb-point-label', text: L.text, style: 'color:' + (L.color || '#333')});
       div.append(e);
       const w = e.offsetWidth, hh = e.offsetHeight;
-      let left = x + 7, top = y - hh - 2;
-      if (left + w > a.x + a.w) left = x - 7 - w;
-      if (left < a.x) left = a.x + 2;
-      if (top < a.y) top = y + 4;
-      if (top + hh > a.y + a.h) top = a.y + a.h - hh;
-      e.style.left = left + 'px';
-      e.style.top = top + 'px';
-    }
+      const clampBox = (left, top) => {
+        left = Math.min(Math.max(left, a.x + 2), a.x + a.w - w - 2);
+        top = Math.min(Math.max(top, a.y + 1), a.y + a.h - hh - 1);
+        return [left, top, left + w, top + hh];
+      };
+      // Right, left, above, below, then further out, each kept inside the plot area.
+      const tries = [];
+      for (const d of [0, 1, 2, 3])
+        tries.push([x + 7, y - hh / 2 - d * hh], [x - 7 - w, y - hh / 2 - d * hh], [x + 7, y - hh / 2 + d * hh],
+          [x - 7 - w, y - hh / 2 + d * hh], [x - w / 2, y - hh - 5 - d * hh], [x - w / 2, y + 5 + d * hh]);
+      let box = null;
+      for (const [l, t] of tries) { const b = clampBox(l, t); if (!hits(b)) { box = b; break; } }
+      if (!box) box = clampBox(x + 7, y - hh / 2);
+      placed.push(box);
+      e.style.left = box[0] + 'px';
+      e.style.top = box[1] + 'px';
+    });
   }
 
   // The chart as a standalone SVG: what the canvas shows (grid, ticks, series in the visible window, point
@@ -271,7 +284,7 @@ const VBCharts = (() => {
   function heatmap(parent, opts) {
     const make = () => {
       const nx = opts.x.values.length, ny = opts.y.values.length;
-      const cw = Math.max(16, Math.min(56, Math.floor(440 / nx))), ch = 26;
+      const cw = Math.max(16, Math.min(56, Math.floor(440 / nx))), ch = Math.max(22, Math.min(48, Math.floor(220 / ny)));
       const L = 90, T = 10, W = L + nx * cw + 150, H = T + ny * ch + 50;
       const svg = s('svg', {xmlns: NS, width: W, height: H, viewBox: '0 0 ' + W + ' ' + H, class: 'vb-heatmap',
         'font-family': 'system-ui, sans-serif', 'font-size': 11});

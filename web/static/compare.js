@@ -36,6 +36,9 @@ async function pageCompare(main, m, params) {
     // The traces can still be overlaid (measured runs without the metrics a comparison ranks).
     body.append(el('section', {}, el('p', {class: 'error', text: errorText(e)})));
   }
+  if (cmp && !(cmp.comparison.rows || []).some((r) => (r.run_ids || []).length)) {
+    try { await fillRunIds(cmp, params); } catch (e) { /* rows then link to nothing; the rest still draws */ }
+  }
   let ids = [];
   if (params.get('runs')) ids = params.get('runs').split(',').filter((x) => /^\d+$/.test(x));
   else if (cmp) ids = (cmp.comparison.rows || []).flatMap((r) => (r.run_ids || []).map(String));
@@ -60,6 +63,35 @@ async function pageCompare(main, m, params) {
       'A sweep of ' + ids.length + ' runs: follow a case\'s link in the table, or pick runs on the ',
       el('a', {href: '#/runs?batch=' + params.get('batch'), text: 'Runs page'}), ', to overlay their traces.')));
   else await compareOverlays(body, ids, cmp, palette);
+}
+
+// A server before CompareRow.run_ids: each row's runs found by their RunKey (name and sweep point), so that rows
+// and legends still link to their runs.
+async function fillRunIds(cmp, params) {
+  let runs = [];
+  if (params.get('batch')) {
+    const q = new URLSearchParams({page_size: '1000', batch_id: params.get('batch')});
+    let data = await api('GET', '/api/runs?' + q.toString());
+    runs = data.runs || [];
+    while (data.next_page_token && runs.length < 5000) {
+      q.set('page_token', data.next_page_token);
+      data = await api('GET', '/api/runs?' + q.toString());
+      runs = runs.concat(data.runs || []);
+    }
+  } else if (params.get('runs')) {
+    const ids = params.get('runs').split(',').filter((x) => /^\d+$/.test(x)).slice(0, 60);
+    runs = (await Promise.all(ids.map((id) => api('GET', '/api/runs/' + id)))).map((x) => x.run);
+  }
+  const keyOf = (k) => (k && k.name ? k.name + '|' + (k.sweep || []).map((p) => p.field + '=' + Number(Number(p.value).toPrecision(10))).join('|') : null);
+  const byKey = new Map();
+  for (const r of runs) {
+    const k = keyOf(r.key);
+    if (!k) continue;
+    if (!byKey.has(k)) byKey.set(k, []);
+    byKey.get(k).push(String(r.id));
+  }
+  const keys = (cmp.display || {}).keys || [];
+  (cmp.comparison.rows || []).forEach((r, i) => { r.run_ids = byKey.get(keyOf(keys[i])) || []; });
 }
 
 // An empty Compare page: the latest batches, each a link to its comparison.
@@ -107,7 +139,8 @@ function compareTables(body, cmp, palette) {
   let shown = null;
   try { shown = JSON.parse(sessionStorage.getItem(storeKey) || 'null'); } catch (e) { shown = null; }
   if (!Array.isArray(shown)) shown = (d.default_columns || allCols).slice();
-  const tableBox = el('div', {class: 'scroll'});
+  // A long table (a sweep) scrolls in its own box, its header kept in view.
+  const tableBox = el('div', {class: 'scroll' + (rows.length > 25 ? ' table-tall' : '')});
   const chooser = el('details', {class: 'columns-chooser'}, el('summary', {text: 'columns (' + allCols.length + ' metrics)'}),
     allCols.map((k) => el('label', {title: k}, el('input', {type: 'checkbox', value: k, checked: shown.includes(k),
       onchange: (ev) => {
@@ -116,10 +149,12 @@ function compareTables(body, cmp, palette) {
         draw();
       }}), ' ' + disp[k].header)));
   const ranked = rows.some((r) => r.rank > 0);
+  // The law, unless every case is named after it (as the CLI's table).
+  const showLaw = !rows.every((r, i) => names[i].toLowerCase().startsWith(String(laws[r.controller] || r.controller).toLowerCase()));
   const draw = () => {
     const cols = allCols.filter((k) => shown.includes(k));
     const head = el('tr', {}, ranked ? el('th', {class: 'num', text: 'rank'}) : null, el('th', {text: 'case'}),
-      el('th', {text: 'law'}), el('th', {class: 'num', text: 'runs'}),
+      showLaw ? el('th', {text: 'law'}) : null, el('th', {class: 'num', text: 'runs'}),
       axes.map((a) => el('th', {class: 'num sweep', title: a.field, text: a.header})),
       cols.map((k) => el('th', {class: 'num', title: k, 'data-metric': k, text: disp[k].header})),
       el('th', {text: 'Pareto'}));
@@ -131,7 +166,7 @@ function compareTables(body, cmp, palette) {
         el('td', {}, el('i', {class: 'swatch', style: 'background:' + palette.colorOf(names[i])}),
           runIds.length ? el('a', {href: runIds.length === 1 ? '#/run/' + runIds[0] : '#/compare?runs=' + runIds.join(','),
             text: names[i]}) : names[i], r.failed ? el('span', {class: 'error', text: ' (' + r.failed + ' failed)'}) : null),
-        el('td', {text: laws[r.controller] || r.controller}),
+        showLaw ? el('td', {text: laws[r.controller] || r.controller}) : null,
         el('td', {class: 'num'}, runIds.length ? runIds.map((id, k) => [k ? ' ' : '', runLink(id)]) : String(r.runs || 0)),
         axes.map((a) => {
           const p = sweep.find((x) => x.field === a.field);
@@ -180,7 +215,7 @@ function scatterChart(body, c, d, names, palette) {
   // x and y in the shown units: the axis is labelled with the column's header.
   const X = (p) => p.x * dx.scale, Y = (p) => p.y * dy.scale;
   const series = pts.map((p) => ({name: p.name, color: palette.colorOf(p.name), points: true, width: 0,
-    href: p.ids.length ? '#/compare?runs=' + p.ids.join(',') : null}));
+    href: p.ids.length === 1 ? '#/run/' + p.ids[0] : p.ids.length ? '#/compare?runs=' + p.ids.join(',') : null}));
   const front = pts.filter((p) => p.pareto).sort((a, b) => a.x - b.x);
   series.push({name: 'Pareto front', color: '#555', width: 1.5, dash: [6, 3], connect: true});
   const rows = pts.map((p, k) => { const r = new Array(pts.length + 2).fill(null); r[0] = X(p); r[k + 1] = Y(p); return r; });
