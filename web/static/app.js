@@ -170,18 +170,29 @@ function every(ms, fn) {
 function liveView(runId, box, onEnd) {
   const counter = el('span', {class: 'muted live-count', text: '0 samples'});
   const status = el('span', {class: 'live-status', text: '…'});
-  const cur = el('div', {class: 'chart-small'}), pos = el('div', {class: 'chart-small'});
-  box.append(el('div', {class: 'actions'}, 'status ', status, ' · ', counter), el('div', {class: 'charts'}, cur, pos));
-  const rowsI = [], rowsX = [];
-  const gI = chart(cur, [], ['t [s]', 'i_A', 'ref', 'gate'], {ylabel: 'A', series: {gate: {axis: 'y2', stepPlot: true}},
-    axes: {y2: GATE_AXIS}, y2label: 'gate'});
-  const gX = chart(pos, [], ['t [s]', 'x_m'], {ylabel: 'm'});
+  const charts = el('div', {class: 'charts'});
+  box.append(el('div', {class: 'actions'}, 'status ', status, ' · ', counter), charts);
+  const rowsI = [], rowsX = [], rowsG = [];
+  // The run page's charts (charts.js): SI-prefixed axes, the gate as a logic level, one time axis.
+  VBFormat.load((p) => api('GET', p)).catch(() => {});
+  const C = VBCharts.PALETTE;
+  const cI = VBCharts.plot(charts, {title: 'Coil current (live)', class: 'live-current', x: {label: 't', unit: 's'},
+    y: {label: 'i', unit: 'A'}, series: [{name: 'i (measured)', color: C[0]}, {name: 'reference', color: C[1]}], rows: [],
+    height: 170}, cleanups);
+  const cX = VBCharts.plot(charts, {title: 'Spool position (live)', class: 'live-position', x: {label: 't', unit: 's'},
+    y: {label: 'x', unit: 'm'}, series: [{name: 'x (measured)', color: C[2]}], rows: [], height: 150}, cleanups);
+  const cG = VBCharts.plot(charts, {title: 'Gate (logic level, live)', class: 'live-gate', x: {label: 't', unit: 's'},
+    y: {label: 'gate', unit: '', logic: true}, series: [{name: 'gate', color: C[3], step: true}], rows: [], height: 90}, cleanups);
   let dirty = false, n = 0, lastT = -Infinity;
   const timer = setInterval(() => {
-    if (!dirty) return;
+    if (!dirty || !cI.g) return;
     dirty = false;
-    gI.updateOptions({file: rowsI});
-    gX.updateOptions({file: rowsX});
+    const span = [rowsI[0][0], rowsI[rowsI.length - 1][0]];
+    const range = span[1] > span[0] ? span : null;  // one time range for the three
+    cI.rows = rowsI; cX.rows = rowsX; cG.rows = rowsG;
+    cI.g.updateOptions({file: rowsI, dateWindow: range});
+    cX.g.updateOptions({file: rowsX, dateWindow: range});
+    cG.g.updateOptions({file: rowsG, dateWindow: range});
   }, 250);
   const es = new EventSource('/api/runs/' + runId + '/events?rate_Hz=200');
   const MAX = 20000;
@@ -194,11 +205,12 @@ function liveView(runId, box, onEnd) {
       const t = typeof s.t_s === 'number' ? s.t_s : 0;
       if (!(t > lastT)) continue;  // a reconnected stream starts over from the run's buffer
       lastT = t;
-      rowsI.push([t, s.i_A === undefined ? 0 : num(s.i_A), s.ref === undefined ? 0 : num(s.ref), num(s.gate || 0)]);
+      rowsI.push([t, s.i_A === undefined ? 0 : num(s.i_A), s.ref === undefined ? 0 : num(s.ref)]);
       rowsX.push([t, s.x_m === undefined ? 0 : num(s.x_m)]);
+      rowsG.push([t, num(s.gate || 0)]);
       n++;
     }
-    if (rowsI.length > MAX) { rowsI.splice(0, rowsI.length - MAX); rowsX.splice(0, rowsX.length - MAX); }
+    if (rowsI.length > MAX) { for (const r of [rowsI, rowsX, rowsG]) r.splice(0, r.length - MAX); }
     counter.textContent = n + ' samples';
     counter.dataset.samples = String(n);
     dirty = rowsI.length > 0;  // a queued run's events carry no samples; dygraphs refuses an empty file
