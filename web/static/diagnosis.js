@@ -68,9 +68,10 @@ function showDiagnosis(d, out, took_s) {
     const shown = ovs.slice(0, 8);
     if (ovs.length > shown.length) sec.insertBefore(el('p', {class: 'muted', text: 'the first ' + shown.length + ' of ' + ovs.length + ' runs'}), grid);
     for (const o of shown) {
-      const series = [{name: 'measured', color: '#222', width: 1.4}, {name: 'nominal model (before)', color: VBCharts.PALETTE[3], dash: [5, 3]}];
+      // The measurement wide and light underneath, the models thin over it: where they leave it shows.
+      const series = [{name: 'measured', color: '#9aa0a6', width: 3.2}, {name: 'nominal model (before)', color: VBCharts.PALETTE[3], dash: [5, 3], width: 1.3}];
       const hasFit = (o.fitted_A || []).some((x) => typeof x === 'number');
-      if (hasFit) series.push({name: 'with ' + (how ? how.candidate : 'the effect') + ' (after)', color: VBCharts.PALETTE[0]});
+      if (hasFit) series.push({name: 'with ' + (how ? how.candidate : 'the effect') + ' (after)', color: VBCharts.PALETTE[0], width: 1.1});
       const rows = (o.t_s || []).map((t, k) => [t, num(o.measured_A[k]), num(o.nominal_A[k])].concat(hasFit ? [num(o.fitted_A[k])] : []));
       VBCharts.plot(grid, {title: 'run ' + o.run + ' (' + (o.split || 'fit') + ')', class: 'diagnosis-overlay',
         x: {label: 't', unit: 's'}, y: {label: 'i', unit: 'A'}, series, rows, height: 200}, cleanups);
