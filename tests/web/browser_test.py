@@ -514,6 +514,7 @@ try:
         check("diagnosis: the overlay link opens a populated overlay", bool(over) and
               len(driver.find_elements(By.CSS_SELECTOR, "#overlay-current .vb-legend-item")) >= 2,
               driver.find_element(By.ID, "main").text[:300])
+        page_shots("diagnosis-overlay", widths=(1400,))
         # Re-run of an imported run: refused with a clear message by the API, the page's button disabled.
         imp = api("GET", "/api/runs?tag=imported&page_size=1", VIEWER)["runs"][0]["id"]
         try:

@@ -149,6 +149,7 @@ function compareTables(body, cmp, palette) {
         draw();
       }}), ' ' + disp[k].header)));
   const ranked = rows.some((r) => r.rank > 0);
+  const front = rows.some((r) => r.pareto);
   // The law, unless every case is named after it (as the CLI's table).
   const showLaw = !rows.every((r, i) => names[i].toLowerCase().startsWith(String(laws[r.controller] || r.controller).toLowerCase()));
   const draw = () => {
@@ -157,7 +158,7 @@ function compareTables(body, cmp, palette) {
       showLaw ? el('th', {text: 'law'}) : null, el('th', {class: 'num', text: 'runs'}),
       axes.map((a) => el('th', {class: 'num sweep', title: a.field, text: a.header})),
       cols.map((k) => el('th', {class: 'num', title: k, 'data-metric': k, text: disp[k].header})),
-      el('th', {text: 'Pareto'}));
+      front ? el('th', {text: 'Pareto'}) : null);
     const body_ = rows.map((r, i) => {
       const runIds = (r.run_ids || []).map(String);
       const sweep = (keys[i] && keys[i].sweep) || [];
@@ -176,7 +177,7 @@ function compareTables(body, cmp, palette) {
           const st = (r.metrics || {})[k];
           return el('td', {class: 'num', text: VBFormat.cell(st, disp[k])});
         }),
-        el('td', {text: r.pareto ? '★' : ''}));
+        front ? el('td', {text: r.pareto ? '★' : ''}) : null);
     });
     tableBox.replaceChildren(el('table', {id: 'comparison'}, head, body_));
   };
@@ -194,12 +195,13 @@ function compareTables(body, cmp, palette) {
   body.append(sweepBox);
   body.append(el('section', {}, el('h2', {text: 'Metrics' + (cmp.common ? ': ' + cmp.common.slice(0, -1) : '')}),
     el('p', {class: 'muted'}, rows.length + ' cases; ' + (ranked ? 'rank by ' + (disp[c.rank_metric] || {}).header +
-      ' (rows within the repeat spread share a rank); ' : '') + '★ = Pareto-optimal in (' +
-      (disp[c.rank_metric] || {}).label + ', ' + (disp[c.effort_metric] || {}).label + '). Values are mean ± spread over repeats; "–" = not measured. ', csv),
-    chooser, tableBox));
+      ' (rows within the repeat spread share a rank); ' : '') + (front ? '★ = Pareto-optimal in (' +
+      (disp[c.rank_metric] || {}).label + ', ' + (disp[c.effort_metric] || {}).label + '). ' : '') +
+      (allCols.length ? 'Values are mean ± spread over repeats; "–" = not measured. ' : 'These runs have no metrics (measured runs are compared by their traces). '), csv),
+    allCols.length ? chooser : null, tableBox));
   // A sweep's curves before its long table; a comparison's scatter after its short one.
   if (axes.length) sweepCharts(sweepBox, c, d, keys, names, palette, shown);
-  else scatterChart(body, c, d, names, palette);
+  else if (allCols.length) scatterChart(body, c, d, names, palette);
 }
 
 // Rank metric against effort: each case a labelled point, the Pareto front joined.
