@@ -18,8 +18,14 @@ const VBCharts = (() => {
   class Palette {
     constructor() { this.map = new Map(); }
     colorOf(name) {
-      if (!this.map.has(name)) this.map.set(name, PALETTE[this.map.size % PALETTE.length]);
-      return this.map.get(name);
+      if (!this.map.has(name)) this.map.set(name, this.map.size);
+      return PALETTE[this.map.get(name) % PALETTE.length];
+    }
+    // Past the palette's ten colours a name is told apart by its dashes as well.
+    dashOf(name) {
+      this.colorOf(name);
+      const round = Math.floor(this.map.get(name) / PALETTE.length);
+      return round === 0 ? null : [[6, 3], [2, 2], [8, 3, 2, 3]][(round - 1) % 3];
     }
   }
 
@@ -94,7 +100,8 @@ const VBCharts = (() => {
   // A legend below a chart: a swatch per series, a link where the series has one (a run, a case's runs).
   function legend(series) {
     return h('div', {class: 'vb-legend'}, series.filter((x) => !x.hideInLegend).map((x) =>
-      h('span', {class: 'vb-legend-item'}, h('i', {style: 'background:' + x.color + (x.dash ? ';height:2px' : '')}),
+      h('span', {class: 'vb-legend-item'}, h('i', {style: x.dash ? 'background:repeating-linear-gradient(90deg,' + x.color + ' 0 ' + x.dash[0] + 'px,transparent ' +
+        x.dash[0] + 'px ' + (x.dash[0] + x.dash[1]) + 'px);height:3px' : 'background:' + x.color}),
         x.href ? h('a', {href: x.href, text: x.name}) : x.name)));
   }
 

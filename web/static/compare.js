@@ -197,7 +197,7 @@ function compareTables(body, cmp, palette) {
     el('p', {class: 'muted'}, rows.length + ' cases; ' + (ranked ? 'rank by ' + (disp[c.rank_metric] || {}).header +
       ' (rows within the repeat spread share a rank); ' : '') + (front ? '★ = Pareto-optimal in (' +
       (disp[c.rank_metric] || {}).label + ', ' + (disp[c.effort_metric] || {}).label + '). ' : '') +
-      (allCols.length ? 'Values are mean ± spread over repeats; "–" = not measured. ' : 'These runs have no metrics (measured runs are compared by their traces). '), csv),
+      (allCols.length ? 'Values are mean ± spread over repeats; "–" = not measured. ' : 'these runs have no metrics (measured runs are compared by their traces). '), csv),
     allCols.length ? chooser : null, tableBox));
   // A sweep's curves before its long table; a comparison's scatter after its short one.
   if (axes.length) sweepCharts(sweepBox, c, d, keys, names, palette, shown);
@@ -319,7 +319,7 @@ async function compareOverlays(body, ids, cmp, palette) {
     const name = '#' + id + ' ' + (cmp && cmp.common && full.startsWith(cmp.common) ? full.slice(cmp.common.length) : full);
     // Repeats of one case share its colour; a sweep's runs (many per case) get one each.
     const color = cs && perCase.get(cs) <= 3 ? palette.colorOf(cs) : palette.colorOf(name);
-    return {name, color, href: '#/run/' + id, width: 1.2};
+    return {name, color, dash: cs && perCase.get(cs) <= 3 ? palette.dashOf(cs) : palette.dashOf(name), href: '#/run/' + id, width: 1.2};
   });
   const pickCol = (name) => traces.map(([, t]) => { const j = t.channels.indexOf(name); return j < 0 ? [] : t.rows.map((r) => [r[0], r[j + 1]]); });
   const span = traces.map(([, t]) => t.rows.length ? [t.rows[0][0], t.rows[t.rows.length - 1][0]] : null).filter(Boolean);
