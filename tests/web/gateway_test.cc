@@ -10,7 +10,10 @@
 #include <sstream>
 #include <thread>
 
+#include <grpcpp/grpcpp.h>
+
 #include "server/config.h"
+#include "valvebench/v1/api.grpc.pb.h"
 #include "tests/integration/server_process.h"
 #include "web/gateway.h"
 
@@ -36,7 +39,8 @@ class WebGatewayTest : public ::testing::Test {
                             ::testing::UnitTest::GetInstance()->current_test_info()->name();
     std::filesystem::remove_all(dir);
     server_ = std::make_unique<vb::testing::ServerProcess>(dir, R"("web": {"listen_address": "127.0.0.1:0"})");
-    ASSERT_FALSE(server_->Start().empty()) << server_->Log();
+    grpc_address_ = server_->Start();
+    ASSERT_FALSE(grpc_address_.empty()) << server_->Log();
     const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(10);
     while (std::chrono::steady_clock::now() < until) {
       const std::string log = server_->Log();
@@ -78,6 +82,7 @@ class WebGatewayTest : public ::testing::Test {
 
   std::unique_ptr<vb::testing::ServerProcess> server_;
   std::unique_ptr<httplib::Client> http_;
+  std::string grpc_address_;
   int port_ = 0;
 };
 
@@ -395,6 +400,34 @@ TEST_F(WebGatewayTest, InteractiveRunsAreNotWatchedFromThePage) {
   EXPECT_NE(res->body.find("event: error"), std::string::npos) << res->body;
   EXPECT_NE(res->body.find("is interactive: follow it with benchctl watch"), std::string::npos) << res->body;
   EXPECT_EQ(WaitEnded(id)["run"]["status"], "DONE");
+}
+
+// An imported run is a measurement: "Re-run" is refused as a precondition, saying so (not an internal error).
+TEST_F(WebGatewayTest, AnImportedRunIsNotReRun) {
+  auto stub = valvebench::v1::BenchService::NewStub(grpc::CreateChannel(grpc_address_, grpc::InsecureChannelCredentials()));
+  valvebench::v1::ImportRunsRequest req;
+  req.set_dataset("web-lab");
+  auto* r = req.add_runs();
+  r->set_id("step");
+  r->set_supply_v(24.0);
+  r->set_sample_period_s(2e-5);
+  for (int k = 0; k < 3; ++k) {
+    r->add_gate(k > 0 ? 1 : 0);
+    r->add_i_a(0.01 * k);
+  }
+  grpc::ClientContext ctx;
+  ctx.AddMetadata("authorization", std::string("Bearer ") + kOperatorToken);
+  valvebench::v1::SubmitRunResponse out;
+  const grpc::Status st = stub->ImportRuns(&ctx, req, &out);
+  ASSERT_TRUE(st.ok()) << st.error_message();
+  ASSERT_EQ(out.run_ids_size(), 1);
+  const std::string id = std::to_string(out.run_ids(0));
+  auto rerun = http_->Post("/api/runs/" + id + "/rerun", Bearer(kOperatorToken), "{}", "application/json");
+  ASSERT_TRUE(rerun);
+  EXPECT_EQ(rerun->status, 409) << rerun->body;
+  const Json e = Json::parse(rerun->body);
+  EXPECT_EQ(e["code"], "FAILED_PRECONDITION");
+  EXPECT_NE(e["message"].get<std::string>().find("imported measurement"), std::string::npos) << rerun->body;
 }
 
 TEST_F(WebGatewayTest, CancelAndRerunGoThroughTheService) {
