@@ -445,6 +445,7 @@ try:
     legend = driver.find_element(By.ID, "overlay-current").text
     check("the overlays show every run", all(("#%s" % r["id"]) in legend for r in runs) and plots is not None, legend)
     check_compare_page(batch, runs)
+    law_colours = {l[0]: l[1] for l in (chart_info("#pareto") or [{"legend": []}])[0]["legend"]}
     shot("compare")
     page_shots("compare")
     no_overflow("compare")
@@ -552,6 +553,28 @@ try:
     check_sweep_page(sweep_batch, len(sruns))
     page_shots("sweep")
     no_overflow("compare (sweep)")
+
+    # 7e. A 1-D sweep of four laws (seed 001's comparison at three supply voltages): one curve per law, each in
+    # its law's colour, the same as in the scatter of the comparison above.
+    with open(os.path.join(examples_dir, "compare-current-controllers.json")) as f:
+        laws = json.load(f)
+    laws["sweep"] = [{"field": "conditions.supply_V", "values": [20, 24, 28]}]
+    law_batch = api("POST", "/api/runs", OPERATOR, {"spec": laws})["batch_id"]
+    for _ in range(600):
+        lruns = api("GET", "/api/runs?page_size=200&batch_id=%s" % law_batch, VIEWER).get("runs", [])
+        if lruns and all(r["status"] not in ("QUEUED", "RUNNING") for r in lruns):
+            break
+        time.sleep(0.1)
+    go("#/compare?batch=%s" % law_batch)
+    curves = wait(lambda: (lambda c: c if len(c) == 1 and all(c) else None)(chart_info("#sweep-section")), what="1-D sweep curve")
+    c1 = curves[0] if curves else None
+    check("1-D sweep: one chart, one curve per law against the swept supply voltage",
+          c1 is not None and sorted(l[0] for l in c1["legend"]) == ["fuzzy", "hysteresis", "pi", "predictive"] and
+          c1["xlabel"] == "supply [V]",
+          c1 and (c1["xlabel"], c1["legend"]))
+    check("1-D sweep: a law keeps its colour from the comparison's scatter",
+          c1 is not None and all(law_colours.get(l[0]) == l[1] for l in c1["legend"]), (c1 and c1["legend"], law_colours))
+    page_shots("sweep-laws", widths=(1400,))
 
     for page in ("#/runs", "#/nights", "#/diagnosis", "#/submit"):
         go(page)

@@ -13,20 +13,31 @@ const VBCharts = (() => {
   const RIGHT_GAP = 16;
   const X_TICK_PX = 100, Y_TICK_PX = 45;  // about one tick per this many pixels
 
-  // One colour per name (a law, a case, a run) for every chart of a page: the first name seen gets the first
-  // colour, and keeps it.
+  // One colour per name (a law, a case, a run) for every chart of a page. A law has its own colour on every
+  // page (LAW_COLORS: PI is green in every comparison); other names take the palette's next free colour in
+  // order of first appearance, and past the palette's ten, dashes as well.
+  const LAW_COLORS = {fuzzy_current: PALETTE[0], predictive_current: PALETTE[1], pi_current: PALETTE[2],
+    hysteresis_current: PALETTE[3], cascade_pi_position: PALETTE[4], sliding_mode_position: PALETTE[5],
+    peak_and_hold: PALETTE[6], dither_pwm: PALETTE[7], open_loop_pwm: PALETTE[8]};
+  const DASHES = [[6, 3], [2, 2], [8, 3, 2, 3]];
   class Palette {
-    constructor() { this.map = new Map(); }
-    colorOf(name) {
-      if (!this.map.has(name)) this.map.set(name, this.map.size);
-      return PALETTE[this.map.get(name) % PALETTE.length];
+    constructor() { this.map = new Map(); this.auto = 0; }
+    // `name` drawn in the colour of the law `controller` (when the page knows that law's colour).
+    fixLaw(name, controller) {
+      if (!this.map.has(name) && LAW_COLORS[controller]) this.map.set(name, {color: LAW_COLORS[controller], dash: null});
     }
-    // Past the palette's ten colours a name is told apart by its dashes as well.
-    dashOf(name) {
-      this.colorOf(name);
-      const round = Math.floor(this.map.get(name) / PALETTE.length);
-      return round === 0 ? null : [[6, 3], [2, 2], [8, 3, 2, 3]][(round - 1) % 3];
+    entry(name) {
+      if (!this.map.has(name)) {
+        const used = new Set(Array.from(this.map.values()).filter((e) => !e.dash).map((e) => e.color));
+        const free = PALETTE.filter((c) => !used.has(c));
+        const k = this.auto++;
+        this.map.set(name, k < free.length ? {color: free[k], dash: null}
+          : {color: PALETTE[(k - free.length) % PALETTE.length], dash: DASHES[Math.floor((k - free.length) / PALETTE.length) % DASHES.length]});
+      }
+      return this.map.get(name);
     }
+    colorOf(name) { return this.entry(name).color; }
+    dashOf(name) { return this.entry(name).dash; }
   }
 
   function h(tag, attrs, ...children) {

@@ -132,7 +132,11 @@ function compareTables(body, cmp, palette) {
   const axes = d.sweep_axes || [];
   const laws = d.laws || {};
   const names = cmp.names;
-  // One colour per case (a swept case keeps one colour for all its points).
+  // One colour per case (a swept case keeps one colour for all its points); a case per law: the law's colour.
+  const lawOf = new Map();
+  rows.forEach((r, i) => { if (!lawOf.has(names[i])) lawOf.set(names[i], new Set()); lawOf.get(names[i]).add(r.controller); });
+  const perLaw = new Set(rows.map((r) => r.controller)).size === lawOf.size && [...lawOf.values()].every((x) => x.size === 1);
+  if (perLaw) for (const [n, ctl] of lawOf) palette.fixLaw(n, [...ctl][0]);
   for (const n of names) palette.colorOf(n);
   const allCols = (c.columns || []).filter((k) => disp[k]);
   const storeKey = 'valvebench.compare.columns.' + (d.default_columns || []).join(',');
@@ -249,10 +253,27 @@ function sweepCharts(body, c, d, keys, names, palette, shown) {
     const groups = [...new Set(names)];
     const grid = el('div', {class: 'chart-grid2'});
     charts.append(grid);
+    const indexOf = (gname) => rows.map((r, i) => i).filter((i) => names[i] === gname);
+    const axesOf = (idx) => axes.filter((a) => idx.some((i) => coord(i, a.field) !== null));
+    // Every case swept along the same one axis (a law per variant): one chart, one curve per case.
+    const one = groups.map((g) => axesOf(indexOf(g)));
+    if (groups.length > 1 && one.every((m) => m.length === 1 && m[0].field === one[0][0].field)) {
+      const ax = one[0][0];
+      const xs = [...new Set(rows.map((r, i) => coord(i, ax.field)).filter((x) => x !== null))].sort((a, b) => a - b);
+      const data = xs.map((x) => [x * ax.scale].concat(groups.map((g) => {
+        const i = indexOf(g).find((j) => coord(j, ax.field) === x);
+        return i === undefined ? null : value(i);
+      })));
+      grid.className = '';
+      VBCharts.plot(grid, {title: dm.label + ' vs ' + ax.label + ', one curve per case', class: 'sweep-curve',
+        x: {label: ax.header, unit: ''}, y: {label: dm.header, unit: ''}, rows: data, pad: 0.04, height: 320,
+        series: groups.map((g) => ({name: g, color: palette.colorOf(g), points: true, width: 1.6}))}, cleanups);
+      return;
+    }
     for (const gname of groups) {
-      const idx = rows.map((r, i) => i).filter((i) => names[i] === gname);
+      const idx = indexOf(gname);
       // This case's axes (variants may sweep different fields): duty on x when it is one of them.
-      const mine = axes.filter((a) => idx.some((i) => coord(i, a.field) !== null));
+      const mine = axesOf(idx);
       if (mine.length === 0 || mine.length > 2) {
         grid.append(el('p', {class: 'muted', text: gname + ': ' + mine.length + ' sweep axes: see the table.'}));
         continue;
