@@ -22,6 +22,8 @@
 #include "common/queue_estimate.h"
 #include "experiment/compare.h"
 #include "experiment/spec.h"
+#include "model/effects.h"
+#include "model/params.h"
 #include "export/run_file.h"
 #include "valvebench/v1/api.grpc.pb.h"
 #include "web/assets.h"
@@ -1172,7 +1174,37 @@ class Routes {
     j["diagnosis"] = Json::parse(out.report_json(), nullptr, false);
     // The nominal model with the diagnosed effect(s), as `benchctl diagnose --model-out` writes it ("" = none).
     j["improved_model_json"] = out.improved_model_json();
+    j["param_units"] = DiagnosisParamUnits(j["diagnosis"]);
     res.set_content(Dump(j), kJson);
+  }
+
+  // The unit of every fitted parameter a diagnosis names, from the model's own tables: a plant parameter ("R":
+  // model::ParamTable) or an effect's ("supply_resistance.R_s": model::EffectCatalog). Unknown ones are left out.
+  static Json DiagnosisParamUnits(const Json& d) {
+    Json units = Json::object();
+    auto add = [&](const Json& params) {
+      if (!params.is_object()) return;
+      for (const auto& [name, value] : params.items()) {
+        (void)value;
+        if (const model::ParamInfo* p = model::FindParam(name)) {
+          units[name] = std::string(p->unit);
+          continue;
+        }
+        const size_t dot = name.find('.');
+        if (dot == std::string::npos) continue;
+        for (const auto& e : model::EffectCatalog())
+          if (e.name == std::string_view(name).substr(0, dot))
+            for (const auto& q : e.params)
+              if (q.name == std::string_view(name).substr(dot + 1)) units[name] = std::string(q.unit);
+      }
+    };
+    if (!d.is_object()) return units;
+    for (const char* list : {"ranking", "detection_limits"})
+      if (d.contains(list) && d[list].is_array())
+        for (const auto& row : d[list])
+          if (row.contains("params")) add(row["params"]);
+    if (d.contains("parametric") && d["parametric"].contains("params")) add(d["parametric"]["params"]);
+    return units;
   }
 
   void Compare(const httplib::Request& req, httplib::Response& res) {

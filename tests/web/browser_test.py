@@ -222,6 +222,8 @@ def check_diagnosis_page():
     size = driver.find_element(By.CSS_SELECTOR, "#diagnosis-report .verdict-box").text
     check("diagnosis: the verdict with its size (the gap before and after, with units)",
           re.search(r"closes \d+ % of the hold-out gap: RMSE [0-9.]+ [mµ]?A → [0-9.]+ [mµ]?A", size), size)
+    check("diagnosis: the effect's fitted parameter with its unit (supply_resistance.R_s in ohm)",
+          re.search(r"supply_resistance\.R_s = [0-9.]+ [mk]?ohm ± [0-9.]+ [mµ]?ohm", size), size)
     check("diagnosis: button enabled again", driver.find_element(By.CSS_SELECTOR, "button.diagnose").is_enabled())
     over = chart_info("#diagnosis-overlays")
     check("diagnosis: measured and model overlaid per run, before and after", len(over) >= 2 and all(

@@ -32,6 +32,7 @@ async function runDiagnosis(ids, out) {
 
 function showDiagnosis(d, out, took_s) {
   const v = d.diagnosis || {};
+  paramUnits = d.param_units || {};
   const A = (x) => VBFormat.value(x, 'A');
   const best = (v.ranking || [])[0] || null;
   const how = v.how_far || null;
@@ -43,7 +44,7 @@ function showDiagnosis(d, out, took_s) {
       A(how.holdout_rmse_before_A) + ' → ' + A(how.holdout_rmse_after_A)) : null,
     best && best.effect === v.verdict && Object.keys(best.params || {}).length ?
       el('div', {class: 'verdict-params'}, Object.entries(best.params).map(([k, x], i) => [i ? '; ' : '', el('code', {text: k}), ' = ' +
-        fmtParam(x) + (best.uncertainty && best.uncertainty[k] ? ' ± ' + fmtParam(best.uncertainty[k]) : '')])) : null,
+        fmtParam(x, k) + (best.uncertainty && best.uncertainty[k] ? ' ± ' + fmtParam(best.uncertainty[k], k) : '')])) : null,
     el('div', {class: 'muted'}, v.verdict_reason || ''),
     el('div', {class: 'muted'}, 'gap: fit RMSE ' + A((v.gap || {}).fit_rmse_A) + ', hold-out RMSE ' + A((v.gap || {}).holdout_rmse_A) +
       ((v.gap || {}).significant ? ' (significant)' : ' (not significant)') + '; noise floor ' + A(v.noise_floor_A) +
@@ -101,18 +102,24 @@ function showDiagnosis(d, out, took_s) {
       ranking.slice(0, 12).map((r) => el('tr', {}, el('td', {text: r.effect}), el('td', {class: 'num', text: A(r.holdout_rmse_before_A)}),
         el('td', {class: 'num', text: A(r.holdout_rmse_after_A)}), el('td', {class: 'num', text: typeof r.closed === 'number' ? Math.round(100 * r.closed) + ' %' : '–'}),
         el('td', {class: 'num', text: typeof r.signature_match === 'number' ? r.signature_match.toFixed(2) : '–'}),
-        el('td', {class: 'wrap', text: Object.entries(r.params || {}).map(([k, x]) => k + ' = ' + fmtParam(x)).join(', ')})))))));
+        el('td', {class: 'wrap', text: Object.entries(r.params || {}).map(([k, x]) => k + ' = ' + fmtParam(x, k)).join(', ')})))))));
   const limits = v.detection_limits || [];
   out.append(el('section', {id: 'detection-limits'}, el('h2', {text: 'Detection limits'}), limits.length === 0 ?
     el('p', {class: 'muted', text: 'No detection limits computed for this diagnosis.'}) :
     el('div', {class: 'scroll'}, el('table', {}, el('tr', {}, ['effect', 'detectable', 'smallest detectable', 'residual at the limit'].map((t) => el('th', {text: t}))),
       limits.map((l) => el('tr', {}, el('td', {text: l.effect}), el('td', {text: l.detectable ? 'yes' : (l.below_range ? 'below range' : 'no')}),
-        el('td', {class: 'wrap', text: Object.entries(l.params || {}).map(([k, x]) => k + ' = ' + fmtParam(x)).join(', ') || '–'}),
+        el('td', {class: 'wrap', text: Object.entries(l.params || {}).map(([k, x]) => k + ' = ' + fmtParam(x, k)).join(', ') || '–'}),
         el('td', {class: 'num', text: A(l.residual_at_limit_A)})))))));
   out.append(el('section', {}, el('h2', {text: 'Report (as benchctl diagnose prints it)'}), el('pre', {class: 'report', text: d.report || ''})));
 }
 
-function fmtParam(x) { return typeof x === 'number' ? String(parseFloat(x.toPrecision(4))) : String(x); }
+// A fitted parameter with its unit from the model's tables (the gateway's param_units), SI-prefixed.
+let paramUnits = {};
+function fmtParam(x, name) {
+  if (typeof x !== 'number') return String(x);
+  const u = paramUnits[name];
+  return u ? VBFormat.value(x, u) : String(parseFloat(x.toPrecision(4)));
+}
 
 async function pageDiagnosis(main) {
   const box = el('div', {class: 'scroll'});
