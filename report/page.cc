@@ -1,10 +1,13 @@
-// The HTML page of a report: CSS, the data as JSON, Debian's dygraphs inlined for the time series, and the
-// renderer (vanilla JS; inline SVG for the scatter, the bars and the --svg/--png files; no network).
+// The HTML page of a report: CSS, the data as JSON, Debian's dygraphs and the web dashboard's chart code
+// (web/static/format.js, charts.js, charts.css) inlined, and the renderer that hands each section to that code
+// (the regression's bars excepted: inline SVG). No network.
 #include <ctime>
 #include <string>
 
 #include "report/dygraphs.h"
 #include "report/report.h"
+
+#include "experiment/compare.h"
 
 namespace vb::report {
 namespace {
@@ -48,7 +51,7 @@ constexpr const char* kJs = R"js(
     status.className = 'bad';
   };
   var NS = 'http://www.w3.org/2000/svg';
-  var COLORS = ['#1f77b4', '#d62728', '#2ca02c', '#ff7f0e', '#9467bd', '#8c564b', '#e377c2', '#17becf', '#7f7f7f'];
+  var COLORS = VBCharts.PALETTE;  // the dashboard's palette
   var VERDICT_COLORS = {regressed: '#d62728', improved: '#2ca02c', unchanged: '#999999', 'new': '#1f77b4'};
   var plots = 0;
 
@@ -103,196 +106,85 @@ constexpr const char* kJs = R"js(
     return [lo, hi];
   }
 
-  // Time series are drawn by Debian's dygraphs, inlined in the page (the library the web dashboard serves,
-  // docs/report.md "Chart library"). The SVG drawing below is for '#svg' pages only: `benchctl report --svg/--png`
-  // loads the page so and writes each plot as a vector file, which a canvas cannot give.
+  // Every chart is drawn by the web dashboard's own code, inlined above (web/static/charts.js over Debian's
+  // dygraphs; format.js for the numbers): the same axes with SI-prefixed units from the CLI's prefix table (carried
+  // in the page's data), legends below the charts, one colour per law on every chart, SVG and PNG per chart. The
+  // regression's bars alone are this page's SVG. With '#svg' in the address (`benchctl report --svg/--png`) each
+  // chart's SVG form (VBCharts.toSvg) is also put in the page as an <svg class="plot"> for report/export.cc.
   var SVG_MODE = /svg/.test(location.hash);
   var ALL_RUNS = /all/.test(location.hash);
+  var data = JSON.parse(document.getElementById('vb-data').textContent);
+  VBFormat.use(data.units);
+  var palette = new VBCharts.Palette();
+  var BASE_UNITS = ['A', 'V', 'W', 's', 'Hz', 'J', 'm', 'Pa', 'N', 'H', 'Ohm'];
 
-  // A dygraphs plot of series that each have their own x: rows merged on one x axis, gaps bridged.
-  function DyPlot(parent, opt) {
-    var self = this;
-    plots++;
-    var div = html('div', null, parent, 'dyplot');
-    div.style.height = (opt.height || 240) + 'px';
-    var n = opt.series.length, rows = new Map(), labels = [opt.xLabel || 't [s]'], series = {}, colors = [];
-    opt.series.forEach(function (s, i) {
-      var name = s.name, k = 2;
-      while (labels.indexOf(name) >= 0) name = s.name + ' (' + (k++) + ')';
-      labels.push(name);
-      colors.push(s.color || COLORS[i % COLORS.length]);
-      series[name] = {stepPlot: !!s.step, strokeWidth: s.width || 1.3, drawPoints: !!opt.markers, pointSize: 2.5,
-                      strokePattern: s.dash ? s.dash.split(',').map(Number) : null};
-      for (var k2 = 0; k2 < s.x.length; k2++) {
-        var x = s.x[k2];
+  // "current [mA]" -> {label: 'current', unit: 'A', factor: 1e-3}: values times factor are SI, and the shared
+  // formatter prefixes the axis for the range shown. A unit that is no SI unit with a prefix ("%", "bar") stays
+  // in the label, unprefixed.
+  function axis(text) {
+    var m = /^(.*?)\s*\[([^\]]+)\]\s*$/.exec(text || '');
+    if (!m) return {label: text || '', unit: '', factor: 1};
+    var u = m[2];
+    if (BASE_UNITS.indexOf(u) >= 0) return {label: m[1], unit: u, factor: 1};
+    var hit = data.units.prefixes.filter(function (p) {
+      return p.symbol && u.indexOf(p.symbol) === 0 && BASE_UNITS.indexOf(u.slice(p.symbol.length)) >= 0;
+    })[0];
+    if (hit) return {label: m[1], unit: u.slice(hit.symbol.length), factor: 1 / hit.scale};
+    return {label: text, unit: '', factor: 1};
+  }
+  // Series with their own x merged into dygraphs rows on one x axis (gaps bridged by the series' `connect`).
+  function mergeRows(list, xf, yf) {
+    var rows = new Map(), n = list.length;
+    list.forEach(function (s, i) {
+      for (var k = 0; k < s.x.length; k++) {
+        var x = s.x[k];
         if (!finite(x)) continue;
+        x *= xf;
         var row = rows.get(x);
         if (!row) { row = [x]; for (var j = 0; j < n; j++) row.push(null); rows.set(x, row); }
-        row[i + 1] = finite(s.y[k2]) ? s.y[k2] : null;
+        row[i + 1] = finite(s.y[k]) ? s.y[k] * yf : null;
       }
     });
-    var data = Array.from(rows.values()).sort(function (a, b) { return a[0] - b[0]; });
-    if (data.length === 0) { var empty = [0]; for (var e = 0; e < n; e++) empty.push(null); data = [empty]; }
-    var link = opt.link || {plots: []};
-    var band = opt.band;
-    self.g = new Dygraph(div, data, {
-      labels: labels, colors: colors, series: series, xlabel: opt.xLabel || 't [s]', ylabel: opt.yLabel || '',
-      valueRange: opt.yRange || null, connectSeparatedPoints: true, legend: 'onmouseover', labelsSeparateLines: false,
-      axisLabelFontSize: 11, xLabelHeight: 14, yLabelWidth: 14, digitsAfterDecimal: 4,
-      underlayCallback: band ? function (ctx, area, g) {
-        var l = g.toDomXCoord(band[0]), r = g.toDomXCoord(band[1]);
-        ctx.fillStyle = 'rgba(255, 200, 0, 0.16)';
-        ctx.fillRect(l, area.y, r - l, area.h);
-      } : null,
-      // Drag across to zoom (every linked panel follows), double-click to reset.
-      zoomCallback: function (lo, hi) {
-        link.plots.forEach(function (p) { if (p !== self && p.g) p.g.updateOptions({dateWindow: [lo, hi]}); });
-      }
-    });
-    link.plots.push(self);
-    if (band) html('p', 'metric window ' + fmt(band[0]) + '-' + fmt(band[1]) + ' s shaded', parent, 'band');
+    return Array.from(rows.values()).sort(function (p, q) { return p[0] - q[0]; });
   }
-
-  // A line plot. opt: {series: [{name, x, y, color, step}], xLabel, yLabel, height, markers, link}
-  // link: a shared {range, full, plots} object so that stacked panels zoom together.
-  function LinePlot(parent, opt) {
-    if (!SVG_MODE) return new DyPlot(parent, opt);
-    var self = this;
-    var W = opt.width || 1200, H = opt.height || 240, M = {l: 78, r: 16, t: 10, b: 38};
-    var svg = svgEl('svg', {viewBox: '0 0 ' + W + ' ' + H, 'class': 'plot', preserveAspectRatio: 'xMinYMin meet'}, parent);
-    var clipId = 'clip' + (++plots);
-    var defs = svgEl('defs', {}, svg);
-    var clip = svgEl('clipPath', {id: clipId}, defs);
-    svgEl('rect', {x: M.l, y: M.t, width: W - M.l - M.r, height: H - M.t - M.b}, clip);
-    var layer = svgEl('g', {}, svg);
-    var link = opt.link || {plots: []};
-    if (!link.full) {
-      link.full = extent(opt.series.map(function (s) { return s.x; }));
-      link.range = opt.xRange ? opt.xRange.slice() : link.full.slice();
-    }
-    link.plots.push(self);
-    function px(x, r) { return M.l + (x - r[0]) / (r[1] - r[0]) * (W - M.l - M.r); }
-    function py(y, r) { return H - M.b - (y - r[0]) / (r[1] - r[0]) * (H - M.t - M.b); }
-    self.draw = function () {
-      while (layer.firstChild) layer.removeChild(layer.firstChild);
-      var xr = link.range;
-      var visible = opt.series.map(function (s) {
-        var ys = [];
-        for (var k = 0; k < s.x.length; k++) if (s.x[k] >= xr[0] && s.x[k] <= xr[1]) ys.push(s.y[k]);
-        return ys;
-      });
-      var yr = opt.yRange || extent(visible);
-      var pad = (yr[1] - yr[0]) * 0.06;
-      yr = [yr[0] - pad, yr[1] + pad];
-      var xt = ticks(xr[0], xr[1], 8), yt = ticks(yr[0], yr[1], 4);
-      xt.forEach(function (t) {
-        var x = px(t, xr);
-        svgEl('line', {x1: x, x2: x, y1: M.t, y2: H - M.b, 'class': 'grid'}, layer);
-        svgEl('text', {x: x, y: H - M.b + 14, 'text-anchor': 'middle'}, layer).textContent = tickLabel(t, xt);
-      });
-      yt.forEach(function (t) {
-        var y = py(t, yr);
-        svgEl('line', {x1: M.l, x2: W - M.r, y1: y, y2: y, 'class': 'grid'}, layer);
-        svgEl('text', {x: M.l - 6, y: y + 4, 'text-anchor': 'end'}, layer).textContent = tickLabel(t, yt);
-      });
-      if (opt.band) {
-        var b0 = Math.max(opt.band[0], xr[0]), b1 = Math.min(opt.band[1], xr[1]);
-        if (b1 > b0) {
-          var band = svgEl('rect', {x: px(b0, xr), y: M.t, width: px(b1, xr) - px(b0, xr), height: H - M.t - M.b,
-                                    'class': 'band'}, layer);
-          svgEl('title', {}, band).textContent = 'metric window ' + fmt(opt.band[0]) + '-' + fmt(opt.band[1]) + ' s';
-        }
-      }
-      svgEl('rect', {x: M.l, y: M.t, width: W - M.l - M.r, height: H - M.t - M.b, 'class': 'axis'}, layer);
-      svgEl('text', {x: (W + M.l) / 2, y: H - 4, 'text-anchor': 'middle'}, layer).textContent = opt.xLabel || 't [s]';
-      svgEl('text', {x: 12, y: (H - M.b + M.t) / 2, 'text-anchor': 'middle',
-                     transform: 'rotate(-90 12 ' + ((H - M.b + M.t) / 2) + ')'}, layer).textContent = opt.yLabel || '';
-      opt.series.forEach(function (s, i) {
-        var color = s.color || COLORS[i % COLORS.length];
-        var pts = [];
-        var first = 0, last = s.x.length - 1;
-        while (first < last && s.x[first + 1] < xr[0]) first++;
-        while (last > first && s.x[last - 1] > xr[1]) last--;
-        var prevY = null;
-        for (var k = first; k <= last; k++) {
-          if (!finite(s.y[k])) { prevY = null; continue; }
-          var X = px(s.x[k], xr).toFixed(1), Y = py(s.y[k], yr).toFixed(1);
-          if (s.step && prevY !== null) pts.push(X + ',' + prevY);
-          pts.push(X + ',' + Y);
-          prevY = Y;
-        }
-        if (pts.length > 0)
-          svgEl('polyline', {points: pts.join(' '), fill: 'none', stroke: color, 'stroke-width': s.width || 1.3,
-                             'stroke-dasharray': s.dash || '', 'clip-path': 'url(#' + clipId + ')'}, layer);
-        if (opt.markers)
-          for (var m = first; m <= last; m++)
-            if (finite(s.y[m]))
-              svgEl('circle', {cx: px(s.x[m], xr), cy: py(s.y[m], yr), r: 2.5, fill: color,
-                               'clip-path': 'url(#' + clipId + ')'}, layer);
-      });
-    };
-    // Drag across to zoom (all linked panels), double-click to reset.
-    var sel = null, x0 = 0;
-    function mouseX(ev) { var b = svg.getBoundingClientRect(); return (ev.clientX - b.left) * W / b.width; }
-    svg.addEventListener('mousedown', function (ev) {
-      x0 = mouseX(ev);
-      sel = svgEl('rect', {x: x0, y: M.t, width: 0, height: H - M.t - M.b, 'class': 'sel'}, svg);
-      ev.preventDefault();
-    });
-    svg.addEventListener('mousemove', function (ev) {
-      if (!sel) return;
-      var x1 = mouseX(ev);
-      sel.setAttribute('x', Math.min(x0, x1));
-      sel.setAttribute('width', Math.abs(x1 - x0));
-    });
-    window.addEventListener('mouseup', function (ev) {
-      if (!sel) return;
-      var x1 = mouseX(ev);
-      svg.removeChild(sel);
-      sel = null;
-      if (Math.abs(x1 - x0) < 5) return;
-      var r = link.range;
-      var a = r[0] + (Math.min(x0, x1) - M.l) / (W - M.l - M.r) * (r[1] - r[0]);
-      var b = r[0] + (Math.max(x0, x1) - M.l) / (W - M.l - M.r) * (r[1] - r[0]);
-      link.range = [Math.max(a, link.full[0]), Math.min(b, link.full[1])];
-      link.plots.forEach(function (p) { p.draw(); });
-    });
-    svg.addEventListener('dblclick', function () {
-      link.range = link.full.slice();
-      link.plots.forEach(function (p) { p.draw(); });
-    });
-    self.draw();
+  var made = [];  // every drawn chart: {c} (dygraphs) or {box} (SVG), for the '#svg' export
+  function chart(parent, opts) {
+    plots++;
+    var c = VBCharts.plot(parent, opts);
+    made.push({c: c});
+    return c;
   }
-
-  function legend(parent, series) {
-    var d = html('div', null, parent, 'legend');
-    series.forEach(function (s, i) {
-      var span = html('span', null, d);
-      var sw = html('i', null, span);
-      sw.style.background = s.color || COLORS[i % COLORS.length];
-      span.appendChild(document.createTextNode(s.name));
-    });
+  // A line chart of series {name, x, y, color, dash, width, step, points} with x/y labels "name [unit]".
+  function lineChart(parent, title, xText, yText, list, more) {
+    var xa = axis(xText), ya = axis(yText);
+    var opts = {title: title, x: {label: xa.label, unit: xa.unit}, y: {label: ya.label, unit: ya.unit},
+                rows: mergeRows(list, xa.factor, ya.factor), height: 260,
+                series: list.map(function (s) {
+                  return {name: s.name, color: s.color, dash: dashOf(s.dash), width: s.width, step: !!s.step,
+                          points: !!s.points, connect: true};
+                })};
+    for (var k in more || {}) opts[k] = more[k];
+    if (opts.band) opts.band = [opts.band[0] * xa.factor, opts.band[1] * xa.factor];
+    return chart(parent, opts);
   }
+  function dashOf(text) { return text ? String(text).split(',').map(Number) : null; }
 
   function drawRun(run, box) {
-    var link = {plots: []};
-    if (run.gate) new LinePlot(box, {series: [{name: 'gate', x: run.t, y: run.gate, step: true, color: '#555'}],
-                                     yLabel: 'gate', height: 110, link: link, yRange: [0, 1]});
+    var charts = [];
+    if (run.gate)
+      charts.push(lineChart(box, 'gate', 't [s]', 'gate', [{name: 'gate', x: run.t, y: run.gate, step: true, color: '#555'}],
+                            {height: 110, y: {label: 'gate', logic: true}}));
     if (run.i_A) {
-      var s = [{name: 'i [A]', x: run.t, y: run.i_A, color: '#1f77b4'}];
-      if (run.ref && run.controlled === 'current') s.push({name: 'reference [A]', x: run.t, y: run.ref, color: '#d62728', dash: '5,3'});
-      legend(box, s);
-      new LinePlot(box, {series: s, yLabel: 'current [A]', link: link});
+      var s = [{name: 'i', x: run.t, y: run.i_A, color: VBCharts.PALETTE[0]}];
+      if (run.ref && run.controlled === 'current') s.push({name: 'reference', x: run.t, y: run.ref, color: '#000', dash: '5,3', width: 1});
+      charts.push(lineChart(box, 'current', 't [s]', 'current [A]', s));
     }
     if (run.x_m) {
-      var mm = run.x_m.map(function (v) { return finite(v) ? v * 1e3 : v; });
-      var p = [{name: 'x [mm]', x: run.t, y: mm, color: '#2ca02c'}];
-      if (run.ref && run.controlled === 'position')
-        p.push({name: 'reference [mm]', x: run.t, y: run.ref.map(function (v) { return finite(v) ? v * 1e3 : v; }),
-                color: '#d62728', dash: '5,3'});
-      legend(box, p);
-      new LinePlot(box, {series: p, yLabel: 'position [mm]', xLabel: 't [s]', link: link});
+      var p = [{name: 'x', x: run.t, y: run.x_m, color: VBCharts.PALETTE[2]}];
+      if (run.ref && run.controlled === 'position') p.push({name: 'reference', x: run.t, y: run.ref, color: '#000', dash: '5,3', width: 1});
+      charts.push(lineChart(box, 'position', 't [s]', 'position [m]', p));
     }
+    VBCharts.linkTime(charts);
   }
 
   // Every run is reachable: one collapsible block per run, the first `open` drawn at once, the rest when opened.
@@ -328,22 +220,25 @@ constexpr const char* kJs = R"js(
   }
 
   // The compared runs on shared axes: controlled variable and reference over the run (metric window shaded),
-  // tracking error over the metric window.
+  // tracking error over the metric window; each law in its colour of every page.
   function renderOverlay(sec, box) {
     var ys = [], es = [];
-    sec.series.forEach(function (s, i) {
-      var color = COLORS[i % COLORS.length];
-      ys.push({name: s.name, x: s.t, y: s.y, color: color});
-      es.push({name: s.name, x: s.et, y: s.e, color: color});
+    sec.series.forEach(function (s) {
+      palette.fixLaw(s.name, s.controller);
+      var e = palette.entry(s.name);
+      ys.push({name: s.name, x: s.t, y: s.y, color: e.color, dash: e.dash ? e.dash.join(',') : null});
+      es.push({name: s.name, x: s.et, y: s.e, color: e.color, dash: e.dash ? e.dash.join(',') : null});
     });
     if (sec.series.length > 0) {
       var r = sec.series[0];
       ys.push({name: 'reference', x: r.t, y: r.ref, color: '#000', dash: '5,3', width: 1});
     }
-    legend(box, ys);
-    new LinePlot(box, {series: ys, yLabel: sec.y_label, height: 300, band: sec.window});
-    html('h3', 'Tracking error over the metric window ' + fmt(sec.window[0]) + '-' + fmt(sec.window[1]) + ' s', box);
-    new LinePlot(box, {series: es, yLabel: sec.e_label, height: 260, band: sec.window});
+    var w = sec.window;
+    var a = lineChart(box, sec.y_label.replace(/ \[.*$/, '') + ' and reference', 't [s]', sec.y_label, ys, {height: 300, band: w});
+    html('p', 'metric window ' + VBFormat.value(w[0], 's') + ' to ' + VBFormat.value(w[1], 's') + ' shaded', box, 'band');
+    html('h3', 'Tracking error over the metric window ' + VBFormat.value(w[0], 's') + ' to ' + VBFormat.value(w[1], 's'), box);
+    var b = lineChart(box, 'tracking error', 't [s]', sec.e_label, es, {height: 260, band: w});
+    VBCharts.linkTime([a, b]);
   }
 
   function renderTable(sec, box) {
@@ -363,60 +258,20 @@ constexpr const char* kJs = R"js(
     });
   }
 
+  // The Pareto scatter as the Compare page draws it (web/static/compare.js scatterChart): a point per case in its
+  // law's colour, labelled beside it, the front joined by a dashed line, axes in the table's columns' units.
   function renderScatter(sec, box) {
-    var W = 1200, H = 440, M = {l: 84, r: 20, t: 14, b: 42};
-    var svg = svgEl('svg', {viewBox: '0 0 ' + W + ' ' + H, 'class': 'plot'}, box);
-    var clipId = 'clip' + (++plots);
-    var clip = svgEl('clipPath', {id: clipId}, svgEl('defs', {}, svg));
-    svgEl('rect', {x: M.l, y: M.t, width: W - M.l - M.r, height: H - M.t - M.b}, clip);
-    var xs = sec.points.map(function (p) { return p.x; }), ys = sec.points.map(function (p) { return p.y; });
-    var xr = extent([xs]), yr = extent([ys]);
-    // A spread of a few per cent is not stretched across the plot: the axis then starts at 0.
-    if (xr[0] > 0 && (xr[1] - xr[0]) < 0.05 * xr[1]) xr[0] = 0;
-    var dx = (xr[1] - xr[0]) * 0.08, dy = (yr[1] - yr[0]) * 0.1;
-    xr = [xr[0] - dx, xr[1] + dx]; yr = [Math.max(0, yr[0] - dy), yr[1] + dy];
-    if (yr[0] >= yr[1]) yr = [yr[0] - dy, yr[1] + dy];
-    function px(x) { return M.l + (x - xr[0]) / (xr[1] - xr[0]) * (W - M.l - M.r); }
-    function py(y) { return H - M.b - (y - yr[0]) / (yr[1] - yr[0]) * (H - M.t - M.b); }
-    var xt = ticks(xr[0], xr[1], 8), yt = ticks(yr[0], yr[1], 6);
-    xt.forEach(function (t) {
-      svgEl('line', {x1: px(t), x2: px(t), y1: M.t, y2: H - M.b, 'class': 'grid'}, svg);
-      svgEl('text', {x: px(t), y: H - M.b + 14, 'text-anchor': 'middle'}, svg).textContent = tickLabel(t, xt);
-    });
-    yt.forEach(function (t) {
-      svgEl('line', {x1: M.l, x2: W - M.r, y1: py(t), y2: py(t), 'class': 'grid'}, svg);
-      svgEl('text', {x: M.l - 6, y: py(t) + 4, 'text-anchor': 'end'}, svg).textContent = tickLabel(t, yt);
-    });
-    svgEl('rect', {x: M.l, y: M.t, width: W - M.l - M.r, height: H - M.t - M.b, 'class': 'axis'}, svg);
-    svgEl('text', {x: (W + M.l) / 2, y: H - 6, 'text-anchor': 'middle'}, svg).textContent = sec.x_label;
-    svgEl('text', {x: 14, y: H / 2, 'text-anchor': 'middle', transform: 'rotate(-90 14 ' + H / 2 + ')'}, svg).textContent = sec.y_label;
-    var front = sec.points.filter(function (p) { return p.front; }).sort(function (a, b) { return a.x - b.x; });
-    if (front.length > 1)
-      svgEl('polyline', {points: front.map(function (p) { return px(p.x) + ',' + py(p.y); }).join(' '),
-                         fill: 'none', stroke: '#d62728', 'stroke-width': 1.5, 'stroke-dasharray': '6,3'}, svg);
-    var placed = [];  // label boxes already drawn: a new label moves down until it overlaps none
-    function place(x, y, w, right) {
-      var x0 = right ? x - w : x, h = 13;
-      for (var tries = 0; tries < 30; tries++) {
-        var hit = placed.some(function (b) { return x0 < b.x + b.w && b.x < x0 + w && y - h < b.y && b.y - h < y; });
-        if (!hit) break;
-        y += h;
-      }
-      placed.push({x: x0, y: y, w: w});
-      return y;
-    }
-    sec.points.slice().sort(function (a, b) { return a.y - b.y; }).reverse().forEach(function (p) {
-      var color = p.front ? '#d62728' : '#1f77b4';
-      var clipped = {stroke: color, 'clip-path': 'url(#' + clipId + ')'};
-      if (p.y_err > 0) svgEl('line', Object.assign({x1: px(p.x), x2: px(p.x), y1: py(p.y - p.y_err), y2: py(p.y + p.y_err)}, clipped), svg);
-      if (p.x_err > 0) svgEl('line', Object.assign({x1: px(p.x - p.x_err), x2: px(p.x + p.x_err), y1: py(p.y), y2: py(p.y)}, clipped), svg);
-      var c = svgEl('circle', {cx: px(p.x), cy: py(p.y), r: p.front ? 6 : 4.5, fill: color}, svg);
-      svgEl('title', {}, c).textContent = p.label + ': ' + sec.x_label + ' ' + fmt(p.x) + ', ' + sec.y_label + ' ' + fmt(p.y);
-      var right = px(p.x) > W * 0.7;
-      var ly = place(px(p.x) + (right ? -8 : 8), py(p.y) - 6, 7 * p.label.length, right);
-      svgEl('text', {x: px(p.x) + (right ? -8 : 8), y: ly, 'text-anchor': right ? 'end' : 'start'}, svg).textContent = p.label;
-    });
-    legend(box, [{name: 'Pareto front (not dominated in both)', color: '#d62728'}, {name: 'dominated', color: '#1f77b4'}]);
+    var pts = sec.points;
+    pts.forEach(function (p) { palette.fixLaw(p.label, p.controller); });
+    var series = pts.map(function (p) { return {name: p.label, color: palette.colorOf(p.label), points: true, width: 0}; });
+    var front = pts.filter(function (p) { return p.front; }).sort(function (p, q) { return p.x - q.x; });
+    series.push({name: 'Pareto front', color: '#555', width: 1.5, dash: [6, 3], connect: true});
+    var rows = pts.map(function (p, k) { var r = new Array(pts.length + 2).fill(null); r[0] = p.x; r[k + 1] = p.y; return r; });
+    front.forEach(function (p) { var r = new Array(pts.length + 2).fill(null); r[0] = p.x; r[pts.length + 1] = p.y; rows.push(r); });
+    rows.sort(function (p, q) { return p[0] - q[0]; });
+    chart(box, {title: sec.y_label + ' vs ' + sec.x_label, class: 'pareto', x: {label: sec.x_label, unit: ''},
+                y: {label: sec.y_label, unit: ''}, series: series, rows: rows, pad: 0.12, height: 360,
+                labels: pts.map(function (p) { return {x: p.x, y: p.y, text: p.label, color: palette.colorOf(p.label)}; })});
   }
 
   function renderBars(sec, box) {
@@ -449,13 +304,43 @@ constexpr const char* kJs = R"js(
     });
   }
 
+  // Curves (a static map's sweep, a diagnosis's measured and model currents). A sweep's curves (markers: one
+  // per value of the other axis) are also shown as a heat map over both axes, as the Compare page shows a sweep.
   function renderLines(sec, box) {
-    var series = (sec.series || []).map(function (s) { return {name: s.name, x: s.x, y: s.y, dash: s.dash, width: s.width}; });
-    legend(box, series);
-    new LinePlot(box, {series: series, xLabel: sec.x_label, yLabel: sec.y_label, height: 340, markers: !!sec.markers});
+    var list = (sec.series || []).map(function (s) {
+      var e = palette.entry(s.name);
+      return {name: s.name, x: s.x, y: s.y, color: e.color, dash: dashOf(s.dash) ? s.dash : (e.dash ? e.dash.join(',') : null),
+              width: s.width, points: !!sec.markers};
+    });
+    list.forEach(function (s) { s.dash = dashOf(s.dash); });
+    var xa = axis(sec.x_label), ya = axis(sec.y_label);
+    var opts = {title: sec.title, x: {label: xa.label, unit: xa.unit}, y: {label: ya.label, unit: ya.unit},
+                rows: mergeRows(list, xa.factor, ya.factor), height: 340,
+                series: list.map(function (s) {
+                  return {name: s.name, color: s.color, dash: s.dash, width: s.width, points: s.points, connect: true};
+                })};
+    chart(box, opts);
+    if (sec.markers && list.length > 1) {
+      var xs = [];
+      list.forEach(function (s) { s.x.forEach(function (x) { if (xs.indexOf(x) < 0) xs.push(x); }); });
+      xs.sort(function (p, q) { return p - q; });
+      if (xs.length > 1) {
+        plots++;
+        var hm = VBCharts.heatmap(box, {
+          title: sec.y_label + ' over ' + sec.x_label + ' and curve',
+          x: {label: sec.x_label, values: xs, fmt: function (v) { return String(+v.toPrecision(4)); }},
+          y: {label: 'curve', values: list.map(function (s) { return s.name; }), fmt: String},
+          z: {label: sec.y_label, fmt: function (v) { return String(+v.toPrecision(3)); },
+              get: function (x, name) {
+                var s = list.filter(function (q) { return q.name === name; })[0];
+                var k = s ? s.x.indexOf(x) : -1;
+                return k >= 0 && finite(s.y[k]) ? s.y[k] : null;
+              }}});
+        made.push({box: hm});
+      }
+    }
   }
 
-  var data = JSON.parse(document.getElementById('vb-data').textContent);
   var root = document.getElementById('vb-report');
   var renderers = {traces: renderTraces, table: renderTable, scatter: renderScatter, bars: renderBars, lines: renderLines,
                    meta: renderMeta, overlay: renderOverlay,
@@ -470,6 +355,15 @@ constexpr const char* kJs = R"js(
     r(sec, box);
     count++;
   });
+  // '#svg': each chart's vector form after it, for report/export.cc (namespace and size are added there).
+  if (SVG_MODE)
+    made.forEach(function (m) {
+      var svg = m.c ? (m.c.g ? VBCharts.toSvg(m.c) : null) : m.box.querySelector('svg').cloneNode(true);
+      if (!svg) return;
+      ['xmlns', 'width', 'height'].forEach(function (k) { svg.removeAttribute(k); });
+      svg.setAttribute('class', 'plot');
+      (m.c ? m.c.box : m.box).after(svg);
+    });
   if (!failed) {
     status.textContent = 'rendered-ok: ' + count + ' sections, ' + plots + ' plots';
     document.body.setAttribute('data-vb-status', 'ok');
@@ -521,14 +415,20 @@ std::string ScriptSafe(const std::string& json) {
 }  // namespace
 
 std::string RenderHtml(const std::string& title, const Json& sections) {
-  Json data = {{"title", title}, {"sections", sections.is_array() ? sections : Json::array()}};
+  // The SI prefix table the CLI chooses from (format.js's /api/units on the dashboard): the charts' axes use it.
+  Json prefixes = Json::array();
+  for (const auto& p : experiment::SiPrefixes()) prefixes.push_back({{"symbol", p.symbol}, {"scale", p.scale}});
+  Json data = {{"title", title},
+               {"units", {{"prefixes", prefixes}}},
+               {"sections", sections.is_array() ? sections : Json::array()}};
   std::string out;
   out += "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>";
   out += EscapeHtml(title);
   out += "</title>\n<link rel=\"icon\" href=\"data:,\">\n<style>";
   out += kCss;
   out += "</style>\n";
-  // dygraphs as Debian ships it (MIT licence comment kept), without its source-map line: nothing to fetch.
+  // dygraphs as Debian ships it (MIT licence comment kept), without its source-map line: nothing to fetch; then
+  // the dashboard's format.js, charts.js and charts.css (report/CMakeLists.txt embeds them in that order).
   for (const Asset& a : Assets()) {
     std::string_view body = a.body();
     if (const size_t map = body.rfind("//# sourceMappingURL="); map != std::string_view::npos) body = body.substr(0, map);

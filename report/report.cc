@@ -100,6 +100,7 @@ Json ComparisonSections(const experiment::Comparison& c, const std::string& titl
                       {"x", f->second.mean * fx.scale},
                       {"y", e->second.mean * ex.scale},
                       {"front", r.pareto},
+                      {"controller", r.controller},  // the law's colour on the page
                       {"x_err", f->second.spread * fx.scale},
                       {"y_err", e->second.spread * ex.scale}});
   }
@@ -336,7 +337,7 @@ Json OverlaySection(const std::vector<RunInfo>& runs, std::size_t max_points) {
       }
     const std::string label = r.key.DisplayName();
     series.push_back({{"name", label.substr(label.rfind('/') == std::string::npos ? 0 : label.rfind('/') + 1)},
-                      {"t", t}, {"y", y}, {"ref", ref}, {"et", et}, {"e", ev}});
+                      {"controller", r.controller}, {"t", t}, {"y", y}, {"ref", ref}, {"et", et}, {"e", ev}});
     w0_all = std::min(w0_all, p.w0);
     w1_all = std::max(w1_all, p.w1);
   }

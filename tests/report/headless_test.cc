@@ -88,11 +88,20 @@ TEST_F(HeadlessReport, BatchRunRegressionAndDiagnosisPagesRenderWithoutErrors) {
       << batch.substr(0, 2000);
   EXPECT_NE(batch.find("Runs, conditions and specs"), std::string::npos);
   EXPECT_NE(batch.find("Static map"), std::string::npos);
-  EXPECT_NE(batch.find("<polyline"), std::string::npos);  // the Pareto front on the (SVG) scatter
-  // The 7 time-series panels (static map, 2 runs x 3 traces) are dygraphs plots: each draws on canvases.
-  EXPECT_EQ(Count(batch, "class=\"dyplot\""), 7u);
-  EXPECT_GE(Count(batch, "<canvas"), 14u);
+  // Every chart is the dashboard's (web/static/charts.js over dygraphs): 8 of them (static map, Pareto scatter,
+  // 2 runs x 3 traces), each with its SVG and PNG buttons and its legend below; canvases drawn; axes in SI-prefixed
+  // units from the shared formatter (the traces' time in ms, their position in µm).
+  EXPECT_EQ(Count(batch, "class=\"vb-plot\""), 8u);
+  EXPECT_EQ(Count(batch, "class=\"link dl-svg\""), 8u);
+  EXPECT_EQ(Count(batch, "class=\"link dl-png\""), 8u);
+  EXPECT_EQ(Count(batch, "class=\"vb-legend\""), 8u);
+  EXPECT_GE(Count(batch, "<canvas"), 16u);
   EXPECT_NE(batch.find("dygraph-axis-label"), std::string::npos) << "dygraphs drew the axes";
+  EXPECT_NE(batch.find(">t [ms]<"), std::string::npos) << "time axis prefixed by the shared formatter";
+  EXPECT_NE(batch.find(">position [µm]<"), std::string::npos) << "position axis prefixed by the shared formatter";
+  // The Pareto scatter as the Compare page draws it: each case labelled beside its point.
+  EXPECT_NE(batch.find("vb-chart pareto"), std::string::npos);
+  EXPECT_GE(Count(batch, "class=\"vb-point-label\""), 2u);
   EXPECT_EQ(Count(batch, "<details"), 10u) << "9 runs, every one reachable, and the specs";
   // The diagnosis page: summary, shares, per-phase table, ranking, one overlay of three curves.
   const std::string diag = ExpectRenders(dir_ + "/diag.html", "diag");

@@ -190,6 +190,30 @@ TEST(ReportPage, InlinesDebiansDygraphs) {
   EXPECT_NE(html.find(".dygraph-legend"), std::string::npos);          // and its stylesheet
 }
 
+// Issue 28: one chart library for the page and the reports. The report inlines the dashboard's own files
+// (web/static/format.js, charts.js, charts.css) byte for byte, before its renderer, and the renderer hands its
+// charts to them; the SI prefix table it gives them is the CLI's.
+TEST(ReportPage, InlinesTheDashboardsChartAndFormatCode) {
+  const std::string html = RenderHtml("t", Json::array());
+  for (const char* f : {"format.js", "charts.js", "charts.css"}) {
+    std::ifstream in(std::string(VB_SOURCE_DIR) + "/web/static/" + f, std::ios::binary);
+    std::stringstream ss;
+    ss << in.rdbuf();
+    ASSERT_GT(ss.str().size(), 1000u) << f;
+    const bool css = std::string(f).ends_with(".css");
+    const size_t at = html.find((css ? "<style>" : "<script>") + ss.str() + (css ? "</style>" : "</script>"));
+    EXPECT_NE(at, std::string::npos) << f << " is not inlined whole";
+    EXPECT_LT(at, html.find("id=\"vb-data\"")) << f << " must load before the renderer";
+  }
+  // The renderer uses them: the shared palette and plot, the formatter given the CLI's prefixes.
+  const size_t renderer = html.find("id=\"vb-data\"");
+  for (const char* use : {"VBCharts.plot(", "VBCharts.heatmap(", "new VBCharts.Palette()", "VBCharts.PALETTE",
+                          "VBFormat.use(data.units)", "palette.fixLaw("})
+    EXPECT_NE(html.find(use, renderer), std::string::npos) << use;
+  EXPECT_NE(html.find("\"prefixes\":[{\"symbol\":"), std::string::npos) << "the SI prefix table in the data";
+  EXPECT_NE(html.find("\"symbol\":\"m\",\"scale\":1000.0"), std::string::npos);
+}
+
 TEST(ReportRegression, TablesAndBarsFromAResult) {
   Json r = {{"suite", "ci"}, {"baseline", {{"name", "main"}, {"version", 2}}}, {"verdict", "regressed"},
             {"counts", {{"regressed", 1}, {"improved", 0}, {"unchanged", 1}, {"new", 0}}},

@@ -12,6 +12,7 @@ const VBCharts = (() => {
   const Y_AXIS_WIDTH = 64;  // every chart's left margin: stacked time axes line up
   const RIGHT_GAP = 16;
   const X_TICK_PX = 100, Y_TICK_PX = 45;  // about one tick per this many pixels
+  const BAND_FILL = 'rgba(255, 200, 0, 0.16)';
 
   // One colour per name (a law, a case, a run) for every chart of a page. A law has its own colour on every
   // page (LAW_COLORS: PI is green in every comparison); other names take the palette's next free colour in
@@ -119,7 +120,7 @@ const VBCharts = (() => {
   // ---- dygraphs charts: time series (lines, steps) and scatters (points with labels, a front)
   // opts: {title, x: {label, unit, range}, y: {label, unit, range, logic}, series: [{name, color, step, points,
   //   width, dash, href, hideInLegend}], rows: [[x, y1, y2, ...]], height, labels: [{x, y, text, color}] (point
-  //   labels), pad (fraction of the data range added around a scatter), onZoom(lo, hi)}
+  //   labels), pad (fraction of the data range added around a scatter), band ([x0, x1] shaded), onZoom(lo, hi)}
   // Returns {g, box, opts, setRows(rows)} (g null when the page went away).
   function plot(parent, opts, cleanups) {
     const plotDiv = h('div', {class: 'vb-plot', style: 'height:' + (opts.height || 240) + 'px'});
@@ -153,6 +154,12 @@ const VBCharts = (() => {
         y: {ticker: tickerFor(opts.y.unit, opts.y.logic, Y_TICK_PX), axisLabelWidth: Y_AXIS_WIDTH}},
       valueFormatter: (v, o, name) => (name === opts.x.label ? VBFormat.value(v, opts.x.unit) : VBFormat.value(v, opts.y.unit)),
       zoomCallback: opts.onZoom ? (lo, hi) => opts.onZoom(lo, hi) : null,
+      // opts.band [x0, x1]: an x interval shaded (a metric window).
+      underlayCallback: opts.band ? (ctx, area, g) => {
+        const l = g.toDomXCoord(opts.band[0]), r = g.toDomXCoord(opts.band[1]);
+        ctx.fillStyle = BAND_FILL;
+        ctx.fillRect(l, area.y, r - l, area.h);
+      } : null,
       drawCallback: (g) => {
         // The axis titles carry the prefix the ticks are in.
         const xr = g.xAxisRange(), yr = g.yAxisRange();
@@ -239,6 +246,10 @@ const VBCharts = (() => {
     for (const t of yt.ticks) {
       s('line', {x1: a.x, x2: a.x + a.w, y1: Y(t.v), y2: Y(t.v), stroke: '#e6e6e6'}, root);
       s('text', {x: a.x - 5, y: Y(t.v) + 4, 'text-anchor': 'end', fill: '#333'}, root).textContent = t.label;
+    }
+    if (o.band) {
+      const l = Math.max(a.x, X(o.band[0])), r = Math.min(a.x + a.w, X(o.band[1]));
+      if (r > l) s('rect', {x: l, y: a.y, width: r - l, height: a.h, fill: BAND_FILL, class: 'band'}, root);
     }
     s('rect', {x: a.x, y: a.y, width: a.w, height: a.h, fill: 'none', stroke: '#999'}, root);
     const layer = s('g', {'clip-path': 'url(#' + clip + ')'}, root);

@@ -15,6 +15,12 @@ const VBFormat = (() => {
     prefixes = u.prefixes;
   }
 
+  // The same table handed over directly (the HTML report carries it in its data: no server to ask).
+  function use(units) {
+    if (!units || !Array.isArray(units.prefixes) || !units.prefixes.length) throw new Error('units: no SI prefix table');
+    prefixes = units.prefixes;
+  }
+
   // {symbol, scale} for a value range of the largest magnitude `maxAbs` (unit "" or "1": no prefix).
   function prefixFor(maxAbs, unit) {
     if (!prefixes || !unit || unit === '1' || unit === '%' || !(maxAbs > 0) || !isFinite(maxAbs)) return {symbol: '', scale: 1};
@@ -59,5 +65,5 @@ const VBFormat = (() => {
     return {ticks: out, symbol: p.symbol, scale: p.scale};
   }
 
-  return {load, prefixFor, cell, value, ticks};
+  return {load, use, prefixFor, cell, value, ticks};
 })();
