@@ -167,6 +167,13 @@ constexpr const char* kJs = R"js(
     if (opts.band) opts.band = [opts.band[0] * xa.factor, opts.band[1] * xa.factor];
     return chart(parent, opts);
   }
+  // Law colours when each law is one case (as the Compare page: PI green everywhere); when a law has several
+  // cases (variants of a plant), each case its own colour, or they could not be told apart.
+  function fixLaws(items, nameOf) {
+    var seen = {}, once = true;
+    items.forEach(function (it) { if (it.controller) { once = once && !seen[it.controller]; seen[it.controller] = true; } });
+    if (once) items.forEach(function (it) { palette.fixLaw(nameOf(it), it.controller); });
+  }
   function dashOf(text) { return text ? String(text).split(',').map(Number) : null; }
 
   function drawRun(run, box) {
@@ -223,8 +230,8 @@ constexpr const char* kJs = R"js(
   // tracking error over the metric window; each law in its colour of every page.
   function renderOverlay(sec, box) {
     var ys = [], es = [];
+    fixLaws(sec.series, function (s) { return s.name; });
     sec.series.forEach(function (s) {
-      palette.fixLaw(s.name, s.controller);
       var e = palette.entry(s.name);
       ys.push({name: s.name, x: s.t, y: s.y, color: e.color, dash: e.dash ? e.dash.join(',') : null});
       es.push({name: s.name, x: s.et, y: s.e, color: e.color, dash: e.dash ? e.dash.join(',') : null});
@@ -262,7 +269,7 @@ constexpr const char* kJs = R"js(
   // law's colour, labelled beside it, the front joined by a dashed line, axes in the table's columns' units.
   function renderScatter(sec, box) {
     var pts = sec.points;
-    pts.forEach(function (p) { palette.fixLaw(p.label, p.controller); });
+    fixLaws(pts, function (p) { return p.label; });
     var series = pts.map(function (p) { return {name: p.label, color: palette.colorOf(p.label), points: true, width: 0}; });
     var front = pts.filter(function (p) { return p.front; }).sort(function (p, q) { return p.x - q.x; });
     series.push({name: 'Pareto front', color: '#555', width: 1.5, dash: [6, 3], connect: true});
@@ -314,7 +321,7 @@ constexpr const char* kJs = R"js(
     });
     list.forEach(function (s) { s.dash = dashOf(s.dash); });
     var xa = axis(sec.x_label), ya = axis(sec.y_label);
-    var opts = {title: sec.title, x: {label: xa.label, unit: xa.unit}, y: {label: ya.label, unit: ya.unit},
+    var opts = {title: sec.y_label + ' against ' + sec.x_label, x: {label: xa.label, unit: xa.unit}, y: {label: ya.label, unit: ya.unit},
                 rows: mergeRows(list, xa.factor, ya.factor), height: 340,
                 series: list.map(function (s) {
                   return {name: s.name, color: s.color, dash: s.dash, width: s.width, points: s.points, connect: true};
@@ -330,7 +337,7 @@ constexpr const char* kJs = R"js(
           title: sec.y_label + ' over ' + sec.x_label + ' and curve',
           x: {label: sec.x_label, values: xs, fmt: function (v) { return String(+v.toPrecision(4)); }},
           y: {label: 'curve', values: list.map(function (s) { return s.name; }), fmt: String},
-          z: {label: sec.y_label, fmt: function (v) { return String(+v.toPrecision(3)); },
+          z: {label: sec.y_label.replace(/ \[.*$/, ''), fmt: function (v) { return String(+v.toPrecision(3)); },
               get: function (x, name) {
                 var s = list.filter(function (q) { return q.name === name; })[0];
                 var k = s ? s.x.indexOf(x) : -1;

@@ -208,7 +208,7 @@ TEST(ReportPage, InlinesTheDashboardsChartAndFormatCode) {
   // The renderer uses them: the shared palette and plot, the formatter given the CLI's prefixes.
   const size_t renderer = html.find("id=\"vb-data\"");
   for (const char* use : {"VBCharts.plot(", "VBCharts.heatmap(", "new VBCharts.Palette()", "VBCharts.PALETTE",
-                          "VBFormat.use(data.units)", "palette.fixLaw("})
+                          "VBFormat.use(data.units)", "palette.fixLaw(", "VBCharts.linkTime("})
     EXPECT_NE(html.find(use, renderer), std::string::npos) << use;
   EXPECT_NE(html.find("\"prefixes\":[{\"symbol\":"), std::string::npos) << "the SI prefix table in the data";
   EXPECT_NE(html.find("\"symbol\":\"m\",\"scale\":1000.0"), std::string::npos);

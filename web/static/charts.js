@@ -22,7 +22,7 @@ const VBCharts = (() => {
     peak_and_hold: PALETTE[6], dither_pwm: PALETTE[7], open_loop_pwm: PALETTE[8]};
   const DASHES = [[6, 3], [2, 2], [8, 3, 2, 3]];
   class Palette {
-    constructor() { this.map = new Map(); this.auto = 0; }
+    constructor() { this.map = new Map(); this.over = 0; }
     // `name` drawn in the colour of the law `controller` (when the page knows that law's colour).
     fixLaw(name, controller) {
       if (!this.map.has(name) && LAW_COLORS[controller]) this.map.set(name, {color: LAW_COLORS[controller], dash: null});
@@ -30,10 +30,13 @@ const VBCharts = (() => {
     entry(name) {
       if (!this.map.has(name)) {
         const used = new Set(Array.from(this.map.values()).filter((e) => !e.dash).map((e) => e.color));
+        // The first colour no name has yet (before: the k-th free one of a shrinking list, which skipped colours).
         const free = PALETTE.filter((c) => !used.has(c));
-        const k = this.auto++;
-        this.map.set(name, k < free.length ? {color: free[k], dash: null}
-          : {color: PALETTE[(k - free.length) % PALETTE.length], dash: DASHES[Math.floor((k - free.length) / PALETTE.length) % DASHES.length]});
+        if (free.length) this.map.set(name, {color: free[0], dash: null});
+        else {
+          const k = this.over++;
+          this.map.set(name, {color: PALETTE[k % PALETTE.length], dash: DASHES[Math.floor(k / PALETTE.length) % DASHES.length]});
+        }
       }
       return this.map.get(name);
     }
