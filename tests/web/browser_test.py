@@ -225,10 +225,22 @@ def check_diagnosis_page():
     check("diagnosis: the effect's fitted parameter with its unit (supply_resistance.R_s in ohm)",
           re.search(r"supply_resistance\.R_s = [0-9.]+ [mk]?ohm ± [0-9.]+ [mµ]?ohm", size), size)
     check("diagnosis: button enabled again", driver.find_element(By.CSS_SELECTOR, "button.diagnose").is_enabled())
-    over = chart_info("#diagnosis-overlays")
+    over = chart_info("#diagnosis-overlays .diagnosis-overlay")
     check("diagnosis: measured and model overlaid per run, before and after", len(over) >= 2 and all(
         [l[0] for l in o["legend"]][:2] == ["measured", "nominal model (before)"] and len(o["legend"]) == 3 for o in over),
         [o["legend"] for o in over][:2])
+    # Under each overlay its residual, measured - model before and after, computed from the overlay's own rows.
+    res = driver.execute_script("""
+      const ov = Array.from(document.querySelectorAll('#diagnosis-overlays .diagnosis-overlay .vb-plot')).map((d) => d.vbChart);
+      const rs = Array.from(document.querySelectorAll('#diagnosis-overlays .diagnosis-residual .vb-plot')).map((d) => d.vbChart);
+      let bad = 0, n = 0;
+      ov.forEach((c, i) => { const r = rs[i]; if (!r) { bad++; return; }
+        c.rows.forEach((row, k) => { for (const j of [1, 2]) { const want = row[j + 1] === null || row[1] === null ? null : row[1] - row[j + 1];
+          const got = r.rows[k][j]; n++; if (want === null ? got !== null : Math.abs(got - want) > 1e-12) bad++; } }); });
+      return [ov.length, rs.length, n, bad, rs.length ? rs[0].opts.series.map((s) => s.name) : []];""")
+    check("diagnosis: a residual chart (measured - model, before and after) under each overlay",
+          res[0] >= 2 and res[0] == res[1] and res[2] > 0 and res[3] == 0 and len(res[4]) == 2 and
+          res[4][0].startswith("measured − nominal") and res[4][1].endswith("(after)"), res)
     bars = driver.find_elements(By.CSS_SELECTOR, "#diagnosis-phases .vb-bar")
     check("diagnosis: residual by phase as bars", len(bars) >= 4, len(bars))
     check("diagnosis: detection limits shown", bool(driver.find_elements(By.CSS_SELECTOR, "#detection-limits")))

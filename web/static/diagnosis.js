@@ -74,8 +74,19 @@ function showDiagnosis(d, out, took_s) {
       const hasFit = (o.fitted_A || []).some((x) => typeof x === 'number');
       if (hasFit) series.push({name: 'with ' + (how ? how.candidate : 'the effect') + ' (after)', color: VBCharts.PALETTE[0], width: 1.1});
       const rows = (o.t_s || []).map((t, k) => [t, num(o.measured_A[k]), num(o.nominal_A[k])].concat(hasFit ? [num(o.fitted_A[k])] : []));
-      VBCharts.plot(grid, {title: 'run ' + o.run + ' (' + (o.split || 'fit') + ')', class: 'diagnosis-overlay',
+      const cell = el('div');
+      grid.append(cell);
+      const overlay = VBCharts.plot(cell, {title: 'run ' + o.run + ' (' + (o.split || 'fit') + ')', class: 'diagnosis-overlay',
         x: {label: 't', unit: 's'}, y: {label: 'i', unit: 'A'}, series, rows, height: 200}, cleanups);
+      // Under it, the residual (measured - model) before and after the effect, on the same time axis (zoomed
+      // together): what the effect removes, and what is left.
+      const diff = (a, b) => (a === null || b === null ? null : a - b);
+      const rseries = [{name: 'measured − nominal (before)', color: VBCharts.PALETTE[3], width: 1.3}];
+      if (hasFit) rseries.push({name: 'measured − with ' + (how ? how.candidate : 'the effect') + ' (after)', color: VBCharts.PALETTE[0], width: 1.3});
+      const rrows = rows.map((r) => [r[0], diff(r[1], r[2])].concat(hasFit ? [diff(r[1], r[3])] : []));
+      const residual = VBCharts.plot(cell, {title: 'run ' + o.run + ': residual', class: 'diagnosis-residual',
+        x: {label: 't', unit: 's'}, y: {label: 'measured − model', unit: 'A'}, series: rseries, rows: rrows, height: 140}, cleanups);
+      VBCharts.linkTime([overlay, residual]);
     }
   }
   // The residual by phase: where the gap is, and how much of it the effect removes.
