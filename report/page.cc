@@ -256,11 +256,19 @@ constexpr const char* kJs = R"js(
     var t = html('table', null, html('div', null, box, 'scroll'));
     var tr = html('tr', null, t);
     (sec.columns || []).forEach(function (c) { html('th', c, tr); });
+    var caseCol = (sec.columns || []).indexOf('case');
     (sec.rows || []).forEach(function (row, i) {
       var r = html('tr', null, t, sec.row_classes ? sec.row_classes[i] : '');
       row.forEach(function (c, j) {
         var right = sec.left ? !sec.left[j] : typeof c === 'number';
-        html('td', c === null ? '' : (typeof c === 'number' ? fmt(c) : String(c)), r, right ? 'num' : '');
+        var td = html('td', c === null ? '' : (typeof c === 'number' ? fmt(c) : String(c)), r, right ? 'num' : '');
+        // A case's swatch: its colour in the charts below (as the Compare page's table).
+        if (j === caseCol && palette.map.has(String(c))) {
+          var sw = document.createElement('i');
+          sw.className = 'swatch';
+          sw.style.background = palette.colorOf(String(c));
+          td.insertBefore(sw, td.firstChild);
+        }
       });
     });
   }
@@ -353,6 +361,11 @@ constexpr const char* kJs = R"js(
                    meta: renderMeta, overlay: renderOverlay,
                    note: function (sec, box) { html('p', sec.text, box, 'note ' + (sec['class'] || '')); }};
   var count = 0;
+  // The cases' colours first (scatter, then overlays), so that the comparison table above them shows them too.
+  data.sections.forEach(function (sec) {
+    if (sec.kind === 'scatter') { fixLaws(sec.points, function (p) { return p.label; }); sec.points.forEach(function (p) { palette.entry(p.label); }); }
+    if (sec.kind === 'overlay') { fixLaws(sec.series, function (x) { return x.name; }); sec.series.forEach(function (x) { palette.entry(x.name); }); }
+  });
   data.sections.forEach(function (sec) {
     var box = html('section', null, root);
     if (sec.title && sec.kind !== 'table') html('h2', sec.title, box);

@@ -122,6 +122,10 @@ TEST_F(HeadlessReport, ComparedLawsAreOverlaidAndPagesFitALaptopScreen) {
   EXPECT_NE(page.find("UTC"), std::string::npos) << "timestamps on the page";
   EXPECT_NE(page.find("supply_V = 24"), std::string::npos) << "conditions on the page";
   EXPECT_EQ(page.find("rendered-ok: 1"), std::string::npos);
+  // Each law in its colour of every page (charts.js LAW_COLORS: PI green, #2ca02c), the table's swatch included.
+  EXPECT_EQ(Count(page, "<i class=\"swatch\""), 4u);
+  EXPECT_NE(page.find("<i class=\"swatch\" style=\"background: rgb(44, 160, 44);\"></i>pi</td>"), std::string::npos);
+  EXPECT_NE(page.find("<i class=\"swatch\" style=\"background: rgb(255, 127, 14);\"></i>hysteresis</td>"), std::string::npos);
   for (const char* size : {"1400,900", "1024,768"}) {
     auto r = RunCommand(Browser(std::string("--window-size=") + size + " --dump-dom file://" + dir_ + "/current.html"));
     EXPECT_NE(r.out.find("data-vb-overflow-px=\"0\""), std::string::npos) << "sideways overflow at " << size;
