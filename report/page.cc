@@ -334,7 +334,21 @@ constexpr const char* kJs = R"js(
                 series: list.map(function (s) {
                   return {name: s.name, color: s.color, dash: s.dash, width: s.width, points: s.points, connect: true};
                 })};
-    chart(box, opts);
+    var main = chart(box, opts);
+    // A diagnosis overlay: under it the residual, measured - model before (nominal) and after (fitted), on the
+    // same time axis, as the dashboard's Diagnosis page shows it.
+    var measured = list.filter(function (q) { return q.name === 'measured'; })[0];
+    var models = list.filter(function (q) { return q.name === 'nominal' || q.name === 'fitted'; });
+    if (measured && models.length) {
+      var res = models.map(function (q) {
+        return {name: 'measured − ' + q.name + (q.name === 'nominal' ? ' (before)' : ' (after)'), x: q.x,
+                color: q.color, width: 1.3,
+                y: q.y.map(function (v, k) { return finite(v) && finite(measured.y[k]) ? measured.y[k] - v : null; })};
+      });
+      var r = lineChart(box, 'residual: measured − model', sec.x_label, sec.y_label.replace(/^.*\[/, 'measured − model ['),
+                        res, {height: 160});
+      VBCharts.linkTime([main, r]);
+    }
     if (sec.markers && list.length > 1) {
       var xs = [];
       list.forEach(function (s) { s.x.forEach(function (x) { if (xs.indexOf(x) < 0) xs.push(x); }); });

@@ -105,7 +105,11 @@ TEST_F(HeadlessReport, BatchRunRegressionAndDiagnosisPagesRenderWithoutErrors) {
   EXPECT_EQ(Count(batch, "<details"), 10u) << "9 runs, every one reachable, and the specs";
   // The diagnosis page: summary, shares, per-phase table, ranking, one overlay of three curves.
   const std::string diag = ExpectRenders(dir_ + "/diag.html", "diag");
-  EXPECT_NE(diag.find("id=\"vb-status\">rendered-ok: 5 sections, 2 plots"), std::string::npos) << diag.substr(0, 2000);
+  // ... and under it the residual, measured - nominal (before) and measured - fitted (after), as the dashboard shows it.
+  EXPECT_NE(diag.find("id=\"vb-status\">rendered-ok: 5 sections, 3 plots"), std::string::npos) << diag.substr(0, 2000);
+  EXPECT_NE(diag.find("residual: measured − model"), std::string::npos);
+  EXPECT_NE(diag.find(">measured − nominal (before)<"), std::string::npos);
+  EXPECT_NE(diag.find(">measured − fitted (after)<"), std::string::npos);
   ExpectScreenshot(dir_ + "/batch.html", dir_ + "/batch.png", 40000);
 }
 
