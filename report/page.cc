@@ -33,11 +33,7 @@ svg.plot { display: block; background: #fff; user-select: none; width: 100%; max
 svg.plot .band { fill: rgba(255, 200, 0, 0.16); }
 svg.plot text { font: 11px system-ui, sans-serif; fill: #333; }
 svg.plot .grid { stroke: #eee; } svg.plot .axis { stroke: #999; fill: none; }
-svg.plot .sel { fill: rgba(80, 120, 220, 0.15); stroke: #57c; }
-.legend span { display: inline-block; margin-right: 14px; font-size: 12px; }
-.dyplot { width: 100%; max-width: 1200px; padding: 0; margin: 0 0 4px; }
 p.band { font-size: 11px; color: #666; margin: 0 0 8px; }
-.legend i { display: inline-block; width: 14px; height: 3px; margin-right: 4px; vertical-align: middle; }
 )css";
 
 constexpr const char* kJs = R"js(
@@ -74,14 +70,6 @@ constexpr const char* kJs = R"js(
     var a = Math.abs(v);
     if (a !== 0 && (a < 1e-3 || a >= 1e5)) return v.toExponential(2);
     return String(+v.toPrecision(4));
-  }
-  function tickLabel(v, ticksArr) {
-    var step = ticksArr.length > 1 ? Math.abs(ticksArr[1] - ticksArr[0]) : Math.abs(v);
-    if (!finite(v)) return 'n/a';
-    if (v === 0) return '0';
-    var decimals = Math.max(0, -Math.floor(Math.log10(step) + 1e-9));
-    if (decimals <= 6 && Math.abs(v) < 1e6) return v.toFixed(decimals);
-    return v.toExponential(Math.max(0, Math.floor(Math.log10(Math.abs(v))) - Math.floor(Math.log10(step))));
   }
   function ticks(lo, hi, n) {
     var span = hi - lo;
