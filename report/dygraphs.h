@@ -1,5 +1,6 @@
-// Debian's dygraphs (libjs-dygraphs), embedded at build time (cmake/embed.cmake) so that every report page
-// inlines the same chart library the web dashboard serves and stays one self-contained file (docs/report.md).
+// The files every report page inlines, embedded at build time (cmake/embed.cmake, report/CMakeLists.txt): Debian's
+// dygraphs (libjs-dygraphs) and the web dashboard's format.js, charts.js and charts.css, so that a report draws
+// with the dashboard's chart code and stays one self-contained file (docs/report.md "Chart library").
 #pragma once
 
 #include <cstddef>
@@ -9,7 +10,7 @@
 namespace vb::report {
 
 struct Asset {
-  const char* url_path;      // "/dygraph.min.js", "/dygraph.min.css"
+  const char* url_path;      // "/dygraph.min.js", "/dygraph.min.css", "/format.js", "/charts.js", "/charts.css"
   const char* content_type;
   const char* data;
   std::size_t size;

@@ -1,7 +1,7 @@
 // Self-contained HTML reports (docs/report.md): one file, no network access, the data as JSON inside it, Debian's
-// dygraphs inlined for the time series (zoomable traces, overlays, static maps, gap-diagnosis overlays) and a
-// small vanilla-JS renderer (report/page.cc) for the RMSE-vs-effort scatter with the Pareto front, the bars and
-// the SVG files of --svg/--png.
+// dygraphs and the web dashboard's chart code (web/static/format.js, charts.js) inlined: traces, overlays, the
+// RMSE-vs-effort scatter, static maps and gap-diagnosis overlays are drawn as on the dashboard; report/page.cc
+// hands each section to that code (and draws the regression's bars itself).
 //
 // A report is a list of sections (JSON objects with a "kind"); the builders below make them from our types.
 // The page writes "rendered-ok" into #vb-status once every section drew without an exception, and
