@@ -10,6 +10,8 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <deque>
 #include <map>
@@ -19,7 +21,11 @@
 #include <set>
 #include <vector>
 
+#include <unistd.h>
+
+#include "common/csv.h"
 #include "common/queue_estimate.h"
+#include "experiment/compare.h"
 #include "experiment/spec.h"
 #include "export/run_file.h"
 #include "valvebench/v1/api.grpc.pb.h"
@@ -541,6 +547,7 @@ class Routes {
       } catch (...) {
       }
     });
+    s.Get("/api/session", [this](const auto& q, auto& r) { Session(q, r); });
     s.Get("/api/benches", [this](const auto& q, auto& r) { Benches(q, r); });
     s.Get("/api/queue", [this](const auto& q, auto& r) { Queue(q, r); });
     s.Get("/api/runs", [this](const auto& q, auto& r) { ListRuns(q, r); });
@@ -552,6 +559,8 @@ class Routes {
     s.Get(R"(/api/runs/(\d{1,15})/trace\.csv)", [this](const auto& q, auto& r) { TraceCsv(q, r); });
     s.Get(R"(/api/runs/(\d{1,15})/events)", [this](const auto& q, auto& r) { Events(q, r); });
     s.Get("/api/compare", [this](const auto& q, auto& r) { Compare(q, r); });
+    s.Get(R"(/api/runs/(\d{1,15})/trace\.(h5|mat))", [this](const auto& q, auto& r) { TraceFile(q, r); });
+    s.Get(R"(/api/compare\.(csv|json))", [this](const auto& q, auto& r) { CompareFile(q, r); });
     s.Get("/api/diagnose", [this](const auto& q, auto& r) { Diagnose(q, r); });
     s.Get("/api/nights", [this](const auto& q, auto& r) { Nights(q, r); });
     s.set_pre_routing_handler([this](const httplib::Request& req, httplib::Response& res) {
@@ -671,7 +680,7 @@ class Routes {
   }
 
   static bool CookieRoute(const std::string& path) {
-    static const std::regex re(R"(/api/runs/\d{1,15}/(events|trace\.csv))");
+    static const std::regex re(R"(/api/runs/\d{1,15}/(events|trace\.(csv|h5|mat))|/api/compare\.(csv|json))");
     return std::regex_match(path, re);
   }
 
@@ -842,6 +851,17 @@ class Routes {
     r.set_bench(req.get_param_value("bench"));
     r.set_controller(req.get_param_value("controller"));
     r.set_page_token(req.get_param_value("page_token"));
+    // The contract of api.proto's ListRunsRequest (AIP-132 order_by, a name filter): the service validates them
+    // and names the field it refuses; the gateway only carries them.
+    r.set_submitter(req.get_param_value("submitter"));
+    r.set_name(req.get_param_value("name"));
+    r.set_order_by(req.get_param_value("order_by"));
+    double after_s = 0, before_s = 0;
+    if (!NumberParam(req, res, "submitted_after_unix_s", &after_s) ||
+        !NumberParam(req, res, "submitted_before_unix_s", &before_s))
+      return;
+    r.set_submitted_after_unix_s(after_s);
+    r.set_submitted_before_unix_s(before_s);
     grpc::ClientContext ctx;
     Authorize(req, &ctx);
     Deadline(&ctx, 20.0);
@@ -1028,12 +1048,12 @@ class Routes {
             out.reserve(out.size() + n * (d->value_channels.size() + 1) * 14);
             const char* data = c.data().data();
             for (size_t i = 0; i < n; ++i) {
-              AppendNumber(&out, d->t0_s + static_cast<double>(d->k + static_cast<std::int64_t>(i)) * d->period_s);
+              AppendCsvNumber(&out, d->t0_s + static_cast<double>(d->k + static_cast<std::int64_t>(i)) * d->period_s);
               for (size_t ch : d->value_channels) {
                 double v;
                 std::memcpy(&v, data + (ch * n + i) * 8, 8);  // little-endian float64, channel-major (api.proto)
                 out += ',';
-                AppendNumber(&out, v);
+                AppendCsvNumber(&out, v);  // NaN: an empty field, as benchctl writes it (common/csv.h)
               }
               out += '\n';
             }
@@ -1194,6 +1214,132 @@ class Routes {
     res.set_content(R"({"comparison":)" + ToJson(out) + R"(,"units":)" + Dump(units) + "}", kJson);
   }
 
+  // The trace as HDF5 or MATLAB .mat, the files `benchctl export --hdf5/--mat` writes (export/run_file.h, the
+  // same writers). Both formats are written whole by their libraries, so the run's samples are held in memory
+  // while the file is written (to a temporary file, unlinked at once) and the file is then streamed from disk
+  // in 64 KiB pieces; a trace above kMaxFileTraceBytes is refused (413) with the CLI to use instead.
+  static constexpr std::size_t kMaxFileTraceBytes = std::size_t{256} << 20;
+  void TraceFile(const httplib::Request& req, httplib::Response& res) {
+    const std::int64_t id = PathId(req);
+    const std::string format = req.matches[2].str();
+    v1::Run run;
+    if (auto st = FetchRun(req, id, &run); !st.ok()) return SendError(res, st);
+    exportfile::RunFile f;
+    f.run_id = run.id();
+    f.name = run.name();
+    f.controller = run.controller();
+    f.bench = run.bench();
+    f.status = RunStatusText(run.status());
+    f.reason = run.reason();
+    google::protobuf::util::JsonPrintOptions opts;
+    opts.preserve_proto_field_names = true;
+    (void)google::protobuf::util::MessageToJsonString(run.spec(), &f.spec_json, opts);
+    f.conditions = {{"supply_V", run.spec().conditions().supply_v(), "V"},
+                    {"supply_pressure_Pa", run.spec().conditions().supply_pressure_pa(), "Pa"}};
+    std::map<std::string, double> metrics(run.metrics().begin(), run.metrics().end());  // sorted: a stable file
+    for (const auto& [name, value] : metrics)
+      if (std::isfinite(value)) f.metrics.push_back({name, value, exportfile::MetricUnit(name, f.controller)});
+    grpc::ClientContext ctx;
+    Authorize(req, &ctx);
+    Deadline(&ctx, 600.0);
+    v1::GetTraceRequest r;
+    r.set_run_id(id);
+    auto reader = stub_->GetTrace(&ctx, r);
+    v1::TraceChunk chunk;
+    std::size_t bytes = 0;
+    std::int64_t k = 0;
+    while (reader->Read(&chunk)) {
+      const std::size_t n = static_cast<std::size_t>(std::max(0, chunk.samples()));
+      const std::size_t nch = static_cast<std::size_t>(chunk.channels_size());
+      if (f.channels.empty()) {
+        f.t0_s = chunk.t0_s();
+        f.sample_period_s = chunk.sample_period_s();
+        f.channels.push_back({"t_s", exportfile::ChannelUnit("t_s", f.controller), {}});
+        for (const auto& name : chunk.channels())
+          if (name != "t_s") f.channels.push_back({name, exportfile::ChannelUnit(name, f.controller), {}});
+      }
+      if (chunk.data().size() != n * nch * 8 || nch + (f.channels.size() > nch ? 1 : 0) != f.channels.size()) {
+        ctx.TryCancel();
+        while (reader->Read(&chunk)) {
+        }
+        (void)reader->Finish();
+        return SendError(res, grpc::StatusCode::DATA_LOSS, fmt::format("run {}: a trace chunk of the wrong size", id));
+      }
+      bytes += chunk.data().size() + n * 8;
+      if (bytes > kMaxFileTraceBytes) {
+        ctx.TryCancel();
+        while (reader->Read(&chunk)) {
+        }
+        (void)reader->Finish();
+        return SendErrorStatus(res, 413, "RESOURCE_EXHAUSTED",
+                               fmt::format("run {}: the trace is larger than {} MiB, too large for a {} file from the "
+                                           "page; use benchctl export {} --{} FILE",
+                                           id, kMaxFileTraceBytes >> 20, format, id, format == "h5" ? "hdf5" : "mat"));
+      }
+      for (std::size_t i = 0; i < n; ++i)
+        f.channels[0].values.push_back(f.t0_s + static_cast<double>(k + static_cast<std::int64_t>(i)) * f.sample_period_s);
+      std::size_t out_ch = 1;
+      for (std::size_t ch = 0; ch < nch; ++ch) {
+        if (chunk.channels(static_cast<int>(ch)) == "t_s") continue;
+        auto& v = f.channels[out_ch++].values;
+        const std::size_t at = v.size();
+        v.resize(at + n);
+        std::memcpy(v.data() + at, chunk.data().data() + ch * n * 8, n * 8);  // little-endian float64, channel-major
+      }
+      k += static_cast<std::int64_t>(n);
+    }
+    if (auto st = reader->Finish(); !st.ok()) return SendError(res, st);
+    char path[] = "/tmp/valvebench-web-XXXXXX";
+    const int fd = mkstemp(path);
+    if (fd < 0) return SendError(res, grpc::StatusCode::UNAVAILABLE, "export: cannot create a temporary file");
+    ::close(fd);
+    const Status written = format == "h5" ? exportfile::WriteHdf5(f, path) : exportfile::WriteMat(f, path);
+    std::FILE* file = written.ok() ? std::fopen(path, "rb") : nullptr;
+    std::remove(path);  // the open file stays readable; nothing is left behind
+    if (!written.ok()) return SendError(res, grpc::StatusCode::INTERNAL, written.message());
+    if (file == nullptr) return SendError(res, grpc::StatusCode::UNAVAILABLE, "export: cannot read the written file");
+    auto handle = std::shared_ptr<std::FILE>(file, &std::fclose);
+    f = {};  // the samples are in the file now
+    res.set_header("Content-Disposition", fmt::format("attachment; filename=\"run{}.{}\"", id, format));
+    res.set_chunked_content_provider(
+        format == "h5" ? "application/x-hdf5" : "application/x-matlab-data",
+        [handle](size_t, httplib::DataSink& sink) {
+          char buf[64 * 1024];
+          const size_t got = std::fread(buf, 1, sizeof buf, handle.get());
+          if (got > 0 && !sink.write(buf, got)) return false;
+          if (got < sizeof buf) {
+            if (std::ferror(handle.get())) return false;
+            sink.done();
+          }
+          return true;
+        },
+        [](bool) {});
+  }
+
+  // The comparison as the files `benchctl compare --csv/--json` prints (experiment::ComparisonCsv/Json): a
+  // missing metric is an empty CSV field and a JSON null (docs/cli.md "Missing values").
+  void CompareFile(const httplib::Request& req, httplib::Response& res) {
+    const std::string format = req.matches[1].str();
+    v1::CompareRunsRequest r;
+    long long batch = 0;
+    if (!IntParam(req, res, "batch_id", &batch)) return;
+    r.set_batch_id(batch);
+    if (!RunIdsParam(req, res, r.mutable_run_ids())) return;
+    grpc::ClientContext ctx;
+    Authorize(req, &ctx);
+    Deadline(&ctx, 30.0);
+    v1::CompareRunsResponse out;
+    auto st = stub_->CompareRuns(&ctx, r, &out);
+    if (!st.ok()) return SendError(res, st);
+    const experiment::Comparison c = experiment::ComparisonFromProto(out);
+    const std::string name = batch != 0 ? fmt::format("batch{}-comparison", batch) : "comparison";
+    res.set_header("Content-Disposition", fmt::format("attachment; filename=\"{}.{}\"", name, format));
+    if (format == "csv")
+      res.set_content(experiment::ComparisonCsv(c), "text/csv; charset=utf-8");
+    else
+      res.set_content(experiment::ComparisonJson(c), kJson);
+  }
+
   void Nights(const httplib::Request& req, httplib::Response& res) {
     long long limit = 0;
     if (!IntParam(req, res, "limit", &limit)) return;
@@ -1206,7 +1352,22 @@ class Routes {
     v1::ListNightsResponse out;
     auto st = stub_->ListNights(&ctx, r, &out);
     if (!st.ok()) return SendError(res, st);
-    res.set_content(ToJson(out), kJson);
+    Json j = Json::parse(ToJson(out));
+    if (options_.next_night_unix_s) {
+      if (auto next = options_.next_night_unix_s(); next.ok()) j["next_night_unix_s"] = *next;
+    }
+    res.set_content(Dump(j), kJson);
+  }
+
+  // Who the bearer token is (user, role), from the server's own Authenticator: the page shows it in its header
+  // and hides what the role may not do (the service still refuses it: this is for the eye, not a rule).
+  void Session(const httplib::Request& req, httplib::Response& res) {
+    if (!options_.identify) return SendError(res, grpc::StatusCode::NOT_FOUND, "session: not available on this server");
+    if (!req.has_header("Authorization"))
+      return SendError(res, grpc::StatusCode::UNAUTHENTICATED, "authorization: missing bearer token");
+    auto who = options_.identify(req.get_header_value("Authorization"));
+    if (!who.ok()) return SendError(res, grpc::StatusCode::UNAUTHENTICATED, who.status().message());
+    res.set_content(Dump(Json{{"user", who->user}, {"role", who->role}}), kJson);
   }
 
   // Who a live view belongs to, for the per-session cap: the token (from the header or the cookie), hashed.
