@@ -201,7 +201,8 @@ try:
               "--user-data-dir=" + os.path.join(work, "chromium-profile")):
         opts.add_argument(a)
     opts.set_capability("goog:loggingPrefs", {"browser": "ALL"})
-    driver = webdriver.Chrome(service=Service(DRIVER), options=opts)
+    # A time zone other than the server's UTC, so that local times are seen to be local.
+    driver = webdriver.Chrome(service=Service(DRIVER, env=dict(os.environ, TZ="Europe/Berlin")), options=opts)
     driver.set_page_load_timeout(20)
 
     # 1. Log in with the operator's token.
@@ -257,9 +258,18 @@ try:
     shot("run-live")
     if btn:
         btn[0].click()
+        # Cancel asks for confirmation and a reason (a prompt); the reason is recorded with the user's name.
+        alert = wait(lambda: driver.switch_to.alert, what="the cancel confirmation")
+        if alert:
+            alert.send_keys("valve chatter seen")
+            alert.accept()
     cancelled = wait(lambda: "CANCELLED" in driver.find_element(By.TAG_NAME, "h1").text, what="cancelled run")
     check("the run is cancelled from the page", bool(cancelled), driver.find_element(By.TAG_NAME, "h1").text)
-    check("the store says cancelled", api("GET", "/api/runs/" + live_id, VIEWER)["run"]["status"] == "CANCELLED")
+    stored = api("GET", "/api/runs/" + live_id, VIEWER)["run"]
+    check("the store says cancelled, by whom and why", stored["status"] == "CANCELLED" and
+          stored.get("reason", "").startswith("cancelled by olga: valve chatter seen"), stored.get("reason"))
+    flash_text = driver.find_element(By.ID, "flash").text
+    check("the page says the result of the cancel", "cancelled" in flash_text.lower(), flash_text)
 
     # 4b. A run watched from its start (issue 24, M3): its first sample is at t_s = 0, which proto3 JSON would
     # leave out; the charts must draw it and every later one, without a console error.
@@ -407,8 +417,11 @@ try:
     subs = driver.execute_script("return Array.from(document.querySelectorAll('#runs tr[data-run] td:nth-child(8)')).map(t => t.textContent);")
     check("the submitter filter keeps olga's runs", subs and all(x == "olga" for x in subs), subs[:5])
     times = driver.find_elements(By.CSS_SELECTOR, "#runs time")
-    check("times are local with the zone, UTC on hover", times and times[0].get_attribute("title").endswith(" UTC")
-          and re.match(r"\d{4}-\d\d-\d\d \d\d:\d\d:\d\d \S+", times[0].text), times[0].text if times else None)
+    check("times are local (Europe/Berlin here) with the zone, UTC on hover", times and
+          times[0].get_attribute("title").endswith(" UTC") and
+          re.match(r"\d{4}-\d\d-\d\d \d\d:\d\d:\d\d (CET|CEST|GMT\+[12])$", times[0].text) and
+          times[0].text[:19] != times[0].get_attribute("title")[:19],
+          (times[0].text, times[0].get_attribute("title")) if times else None)
     durations = driver.execute_script("return Array.from(document.querySelectorAll('#runs tr[data-run] td:nth-child(10)')).map(t => t.textContent);")
     check("the runs show their duration", any(re.search(r"\d s$|min", d) for d in durations), durations[:5])
     go("#/runs")
@@ -476,7 +489,11 @@ try:
     bg, fg = driver.execute_script("const s = getComputedStyle(document.body); return [s.backgroundColor, s.color];")
     lum = lambda c: sum(int(x) for x in re.findall(r"\d+", c)[:3])
     check("the dark theme is dark with light text", lum(bg) < 150 and lum(fg) > 500, (bg, fg))
-    shot_at("dark", 1400)
+    driver.set_window_size(1400, 900)
+    driver.execute_script("document.querySelector('#traces').scrollIntoView();")
+    time.sleep(0.5)
+    driver.save_screenshot(os.path.join(shots, "web-dark-1400.png"))
+    driver.execute_script("window.scrollTo(0, 0);")
     go("#/runs")
     wait(lambda: page_rows() or None, what="dark runs")
     shot_at("dark-runs", 1400)

@@ -113,7 +113,7 @@ function chart(div, rows, labels, opts) {
   const g = new Dygraph(div, rows.length ? rows : [[0].concat(labels.slice(1).map(() => null))], Object.assign({
     labels, legend: 'always', labelsSeparateLines: false, connectSeparatedPoints: false,
     xlabel: 't [s]', animatedZooms: false, labelsKMB: false, digitsAfterDecimal: 4,
-  }, opts || {}));
+  }, chartTheme(), opts || {}));
   cleanups.push(() => g.destroy());
   return g;
 }
@@ -145,7 +145,8 @@ const routes = [
 function route() {
   for (const c of cleanups) { try { c(); } catch (e) { /* already gone */ } }
   cleanups = [];
-  flash('');
+  if (!keepFlash) flash('');  // a result to show across the re-render (cancel) stays once
+  keepFlash = false;
   const hash = location.hash.replace(/^#/, '') || '/';
   const [path, query] = hash.split('?');
   const params = new URLSearchParams(query || '');

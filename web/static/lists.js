@@ -30,6 +30,16 @@ const ZONE = (() => {
     return (p.find((x) => x.type === 'timeZoneName') || {}).value || '';
   } catch (e) { return ''; }
 })();
+// Text that may break after _ / . : = (identifiers like hysteresis_current, static-map/fig8 sweep:a.b=0.3):
+// narrow tables wrap there instead of mid-word or not at all.
+function breakable(text) {
+  const out = [];
+  for (const part of String(text === undefined || text === null ? '' : text).split(/(?<=[_/.:=,])/)) {
+    if (out.length) out.push(el('wbr'));
+    out.push(part);
+  }
+  return el('span', {class: 'breakable'}, out);
+}
 function pad2(n) { return String(n).padStart(2, '0'); }
 function localText(unix_s) {
   const d = new Date(unix_s * 1000);
@@ -50,6 +60,7 @@ function runDuration_s(r) {
 
 // ---- connection state: a banner while the server does not answer; it clears when it answers again.
 let connectionLost = false;
+let keepFlash = false;  // the next route() keeps the flash (a cancel's result over the re-rendered page)
 function setConnected(ok, why) {
   const b = $('#disconnected');
   if (!b) return;
@@ -82,6 +93,7 @@ async function cancelRun(id, submitter) {
     const body = reason.trim() ? {reason: reason.trim()} : {};
     const r = await api('POST', '/api/runs/' + id + '/cancel', body);
     flash('Run ' + id + ' ' + String(r.status).toLowerCase() + (r.reason ? ': ' + r.reason : ''), true);
+    keepFlash = true;
     return true;
   } catch (e) { showError(e); return false; }
 }
@@ -119,8 +131,8 @@ function pageLab(main) {
       el('tr', {}, ['bench', 'kind', 'model', 'driver', 'state', 'max supply', 'trips at', 'interlocks',
         'rates: carrier / sample / control', 'position'].map((h) => el('th', {text: h}))),
       (b.benches || []).map((x) => el('tr', {},
-        el('td', {text: x.name}), el('td', {text: x.kind}), el('td', {text: x.model || '–'}), el('td', {text: x.driver}),
-        el('td', {}, x.busy ? ['running ', runLink(x.current_run_id), ' ', runName.get(String(x.current_run_id)) || '']
+        el('td', {text: x.name}), el('td', {text: x.kind}), el('td', {}, breakable(x.model || '–')), el('td', {}, breakable(x.driver)),
+        el('td', {class: 'long'}, x.busy ? ['running ', runLink(x.current_run_id), ' ', runName.get(String(x.current_run_id)) || '']
           : x.fault ? el('span', {class: 'status-FAILED', title: x.fault, text: 'faulted: ' + x.fault.slice(0, 80)})
             : 'idle'),
         el('td', {class: 'num', text: fmt(x.max_supply_V) + ' V'}), el('td', {class: 'num', text: fmt(x.max_current_A) + ' A'}),
@@ -138,7 +150,7 @@ function pageLab(main) {
         el('tr', {}, ['position', 'run', 'name', 'status', 'progress', 'ETA', 'bench', 'priority', 'submitter', 'submitted', '']
           .map((h) => el('th', {text: h}))),
         rows.map(([p, r, eta]) => el('tr', {'data-run': r.id},
-          el('td', {text: p}), el('td', {}, runLink(r.id)), el('td', {text: r.name}), el('td', {}, statusCell(r.status)),
+          el('td', {text: p}), el('td', {}, runLink(r.id)), el('td', {}, breakable(r.name)), el('td', {}, statusCell(r.status)),
           el('td', {class: 'num', text: Math.round(100 * (r.progress || 0)) + ' %'}), el('td', {text: eta}),
           el('td', {text: r.bench || 'any'}), el('td', {class: 'num', text: String(r.priority || 0)}),
           el('td', {text: r.submitter}), el('td', {}, timeCell(r.submitted_unix_s)),
@@ -179,13 +191,13 @@ const PAGE_SIZES = [25, 50, 100, 200, 500];
 const RUN_COLUMNS = [
   ['run', 'id', (r) => runLink(r.id)],
   ['batch', null, (r) => el('a', {href: '#/runs?batch=' + r.batch_id, text: r.batch_id})],
-  ['name', 'name', (r) => r.name],
-  ['controller', 'controller', (r) => r.controller],
+  ['name', 'name', (r) => breakable(r.name)],
+  ['controller', 'controller', (r) => breakable(r.controller)],
   ['status', 'status', (r) => statusCell(r.status)],
   ['bench', 'bench', (r) => r.bench || '–'],
   ['submitter', 'submitter', (r) => r.submitter],
   ['submitted', 'submitted', (r) => timeCell(r.submitted_unix_s)],
-  ['duration', 'duration', (r) => duration(runDuration_s(r))],
+  ['duration', 'duration', (r) => { const d = runDuration_s(r); return d !== null && d < 1 ? fmt(d, 2) + ' s' : duration(d); }],
   ['rmse', null, (r) => fmt((r.metrics || {}).rmse)],
   ['effort_l2', null, (r) => fmt((r.metrics || {}).effort_l2)],
 ];
@@ -339,13 +351,21 @@ async function pageNights(main) {
       nights.map((x) => el('tr', {}, el('td', {class: 'nowrap', text: x.date}),
         el('td', {}, el('span', {class: 'verdict-' + x.verdict, text: x.verdict})),
         el('td', {class: 'num', text: (x.regressed_count || 0) + ' / ' + (x.unchanged || 0) + ' / ' + (x.improved || 0)}),
-        el('td', {text: x.suite || ''}), el('td', {text: x.baseline || ''}),
+        el('td', {}, breakable(x.suite || '')), el('td', {}, breakable(x.baseline || '')),
         el('td', {}, timeCell(x.started_unix_s)), el('td', {}, timeCell(x.finished_unix_s)),
         el('td', {}, x.batch_id && x.batch_id !== '0' ? [el('a', {href: '#/runs?batch=' + x.batch_id, text: 'batch ' + x.batch_id}),
           ' ', el('a', {href: '#/runs?batch=' + x.batch_id + '&status=FAILED', text: 'failed'}),
           ' ', el('a', {href: '#/compare?batch=' + x.batch_id, text: 'compare'})] : '–'),
         el('td', {class: 'regressed-cases'}, (x.regressed_cases || []).map((c, k) => [k ? ', ' : '',
-          el('a', {href: '#/runs?batch=' + x.batch_id + '&name=' + encodeURIComponent(c), text: c})])),
-        el('td', {class: 'summary', text: x.summary || ''})))));
+          el('a', {href: '#/runs?batch=' + x.batch_id + '&name=' + encodeURIComponent(c)}, breakable(c))])),
+        el('td', {class: 'summary long', text: x.summary || ''})))));
   } catch (e) { showError(e, box); }
+}
+
+// ---- charts in the page's theme: dygraphs draws axes and grid on a canvas, which CSS cannot reach; their
+// colours come from the theme's variables (theme.css), read when a chart is made.
+function chartTheme() {
+  const css = getComputedStyle(document.documentElement);
+  const v = (name, fallback) => (css.getPropertyValue(name) || '').trim() || fallback;
+  return {axisLineColor: v('--chart-axis', '#555'), gridLineColor: v('--chart-grid', '#ddd')};
 }
