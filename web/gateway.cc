@@ -8,6 +8,7 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -26,6 +27,8 @@
 #include "common/csv.h"
 #include "common/queue_estimate.h"
 #include "experiment/compare.h"
+#include "proto/api_convert.h"
+#include "report/report.h"
 #include "experiment/spec.h"
 #include "export/run_file.h"
 #include "valvebench/v1/api.grpc.pb.h"
@@ -561,6 +564,7 @@ class Routes {
     s.Get("/api/compare", [this](const auto& q, auto& r) { Compare(q, r); });
     s.Get(R"(/api/runs/(\d{1,15})/trace\.(h5|mat))", [this](const auto& q, auto& r) { TraceFile(q, r); });
     s.Get(R"(/api/compare\.(csv|json))", [this](const auto& q, auto& r) { CompareFile(q, r); });
+    s.Get(R"(/api/batches/(\d{1,15})/report\.html)", [this](const auto& q, auto& r) { BatchReport(q, r); });
     s.Get("/api/diagnose", [this](const auto& q, auto& r) { Diagnose(q, r); });
     s.Get("/api/nights", [this](const auto& q, auto& r) { Nights(q, r); });
     s.set_pre_routing_handler([this](const httplib::Request& req, httplib::Response& res) {
@@ -680,7 +684,8 @@ class Routes {
   }
 
   static bool CookieRoute(const std::string& path) {
-    static const std::regex re(R"(/api/runs/\d{1,15}/(events|trace\.(csv|h5|mat))|/api/compare\.(csv|json))");
+    static const std::regex re(
+        R"(/api/runs/\d{1,15}/(events|trace\.(csv|h5|mat))|/api/compare\.(csv|json)|/api/batches/\d{1,15}/report\.html)");
     return std::regex_match(path, re);
   }
 
@@ -1338,6 +1343,98 @@ class Routes {
       res.set_content(experiment::ComparisonCsv(c), "text/csv; charset=utf-8");
     else
       res.set_content(experiment::ComparisonJson(c), kJson);
+  }
+
+  // A batch's HTML report, the page `benchctl report --batch N --html FILE` writes (report::BatchSections and
+  // RenderHtml, the same code): comparison, Pareto scatter, static map, overlays and the runs' traces. The traces
+  // are read whole (the report decimates them itself) up to kMaxReportTraceBytes in all; the runs beyond that
+  // are in the tables without their trace, and the page says how many.
+  static constexpr std::size_t kMaxReportTraceBytes = std::size_t{256} << 20;
+  static constexpr int kMaxReportTraces = 100;  // benchctl report's --max-traces default
+  void BatchReport(const httplib::Request& req, httplib::Response& res) {
+    const std::int64_t batch = PathId(req);
+    std::vector<v1::Run> listed;
+    v1::ListRunsRequest lr;
+    lr.set_batch_id(batch);
+    lr.set_page_size(1000);
+    lr.set_order_by("id");
+    do {
+      grpc::ClientContext ctx;
+      Authorize(req, &ctx);
+      Deadline(&ctx, 20.0);
+      v1::ListRunsResponse out;
+      if (auto st = stub_->ListRuns(&ctx, lr, &out); !st.ok()) return SendError(res, st);
+      for (auto& r : *out.mutable_runs()) listed.push_back(std::move(r));
+      lr.set_page_token(out.next_page_token());
+    } while (!lr.page_token().empty() && listed.size() < 20000);
+    if (listed.empty()) return SendError(res, grpc::StatusCode::NOT_FOUND, fmt::format("batch {}: no runs", batch));
+    std::sort(listed.begin(), listed.end(), [](const v1::Run& a, const v1::Run& b) { return a.id() < b.id(); });
+    std::vector<report::RunInfo> runs;
+    std::size_t bytes = 0;
+    int traced = 0, left_out = 0;
+    for (const v1::Run& listed_run : listed) {
+      v1::Run run;
+      if (auto st = FetchRun(req, listed_run.id(), &run); !st.ok()) return SendError(res, st);
+      std::string status = RunStatusText(run.status());
+      std::transform(status.begin(), status.end(), status.begin(), [](unsigned char c) { return std::tolower(c); });
+      report::RunInfo info{run.id(), api::FromProto(run.key()), run.controller(), status,
+                           std::map<std::string, double>(run.metrics().begin(), run.metrics().end()),
+                           run.has_spec() ? ToJson(run.spec()) : std::string(), run.submitted_unix_s(),
+                           run.started_unix_s(), run.finished_unix_s(), {}};
+      const bool ended = run.status() != v1::QUEUED && run.status() != v1::RUNNING;
+      if (ended && traced < kMaxReportTraces && bytes < kMaxReportTraceBytes) {
+        report::TraceData t;
+        t.label = fmt::format("run {}: {}", run.id(), run.name());
+        grpc::ClientContext ctx;
+        Authorize(req, &ctx);
+        Deadline(&ctx, 120.0);
+        v1::GetTraceRequest tr;
+        tr.set_run_id(run.id());
+        auto reader = stub_->GetTrace(&ctx, tr);
+        v1::TraceChunk chunk;
+        bool too_big = false;
+        while (reader->Read(&chunk)) {
+          const std::size_t n = static_cast<std::size_t>(std::max(0, chunk.samples()));
+          const std::size_t nch = static_cast<std::size_t>(chunk.channels_size());
+          if (chunk.data().size() != n * nch * 8) continue;
+          if (t.channels.empty()) {
+            t.t0_s = chunk.t0_s();
+            t.sample_period_s = chunk.sample_period_s();
+          }
+          bytes += chunk.data().size();
+          if (bytes > kMaxReportTraceBytes) {
+            too_big = true;
+            ctx.TryCancel();
+            continue;
+          }
+          for (std::size_t ch = 0; ch < nch; ++ch) {
+            auto& v = t.channels[chunk.channels(static_cast<int>(ch))];
+            const std::size_t at = v.size();
+            v.resize(at + n);
+            std::memcpy(v.data() + at, chunk.data().data() + ch * n * 8, n * 8);
+          }
+        }
+        const grpc::Status st = reader->Finish();
+        if (!too_big && st.ok() && !t.channels.empty()) {
+          info.trace = std::move(t);
+          ++traced;
+        } else if (too_big) {
+          ++left_out;
+        } else if (!st.ok() && st.error_code() != grpc::StatusCode::NOT_FOUND) {
+          return SendError(res, st);
+        }
+      } else if (ended) {
+        ++left_out;
+      }
+      runs.push_back(std::move(info));
+    }
+    std::string where = "web dashboard (" + req.get_header_value("Host") + ")";
+    if (left_out > 0) where += fmt::format("; traces of {} runs left out (size): benchctl report --batch {}", left_out, batch);
+    const std::string title =
+        fmt::format("Batch {}: {}", batch, runs.front().key.name.substr(0, runs.front().key.name.find('/')));
+    const std::string html = report::RenderHtml(title, report::BatchSections(where, batch, runs));
+    res.set_header("Content-Disposition", fmt::format("inline; filename=\"batch{}-report.html\"", batch));
+    res.set_content(html, "text/html; charset=utf-8");
   }
 
   void Nights(const httplib::Request& req, httplib::Response& res) {

@@ -461,6 +461,10 @@ try:
         check("compare.csv parses with pandas: one row per law", len(cmp_csv) == 4 and "rmse" in cmp_csv.columns,
               cmp_csv.columns.tolist())
         check("compare.json parses: one row per law", len(json.loads(body_cj)["rows"]) == 4, body_cj[:200])
+        ctype_r, body_r = download("/api/batches/%s/report.html" % batch, OPERATOR)
+        check("the batch's HTML report is the CLI's page", ctype_r.startswith("text/html") and
+              b"<!doctype html>" in body_r[:200].lower() and b"compare-current-controllers" in body_r and
+              all(("run %s:" % r["id"]).encode() in body_r for r in runs), (ctype_r, body_r[:200]))
     except ImportError as e:
         check("python3-h5py, python3-scipy and python3-pandas (scripts/setup.sh) are installed", False, e)
     links = [a.get_attribute("href") or "" for a in driver.find_elements(By.CSS_SELECTOR, "a")]

@@ -50,7 +50,10 @@ function utcText(unix_s) { return new Date(unix_s * 1000).toISOString().replace(
 // A <time> element: local time and zone, UTC in its tooltip.
 function timeCell(unix_s) {
   if (!unix_s) return '–';
-  return el('time', {datetime: new Date(unix_s * 1000).toISOString(), title: utcText(unix_s), text: localText(unix_s) + ' ' + ZONE});
+  const [day, clock] = localText(unix_s).split(' ');
+  // Two unbreakable halves: a narrow table puts the date over the time, never the zone alone.
+  return el('time', {datetime: new Date(unix_s * 1000).toISOString(), title: utcText(unix_s)},
+    el('span', {class: 'nowrap', text: day}), ' ', el('span', {class: 'nowrap', text: clock + (ZONE ? ' ' + ZONE : '')}));
 }
 function runDuration_s(r) {
   if (!r.started_unix_s) return null;
@@ -247,7 +250,9 @@ async function pageRuns(main, m, params) {
     if (ids.length) location.hash = '#/compare?runs=' + ids.join(',');
   }});
   main.replaceChildren(el('h1', {text: 'Runs'}), el('section', {}, form, el('div', {class: 'actions'}, compare,
-    f.batch ? el('a', {href: '#/compare?batch=' + f.batch, text: 'compare batch ' + f.batch}) : null), pager, table));
+    f.batch ? el('a', {href: '#/compare?batch=' + f.batch, text: 'compare batch ' + f.batch}) : null,
+    f.batch ? el('a', {href: '/api/batches/' + encodeURIComponent(f.batch) + '/report.html', id: 'batch-report', target: '_blank',
+      text: 'HTML report of batch ' + f.batch}) : null), pager, table));
 
   const q = new URLSearchParams({page_size: String(size), order_by: order});
   if (f.batch) q.set('batch_id', f.batch);
@@ -355,7 +360,8 @@ async function pageNights(main) {
         el('td', {}, timeCell(x.started_unix_s)), el('td', {}, timeCell(x.finished_unix_s)),
         el('td', {}, x.batch_id && x.batch_id !== '0' ? [el('a', {href: '#/runs?batch=' + x.batch_id, text: 'batch ' + x.batch_id}),
           ' ', el('a', {href: '#/runs?batch=' + x.batch_id + '&status=FAILED', text: 'failed'}),
-          ' ', el('a', {href: '#/compare?batch=' + x.batch_id, text: 'compare'})] : '–'),
+          ' ', el('a', {href: '#/compare?batch=' + x.batch_id, text: 'compare'}),
+          ' ', el('a', {href: '/api/batches/' + x.batch_id + '/report.html', target: '_blank', text: 'report'})] : '–'),
         el('td', {class: 'regressed-cases'}, (x.regressed_cases || []).map((c, k) => [k ? ', ' : '',
           el('a', {href: '#/runs?batch=' + x.batch_id + '&name=' + encodeURIComponent(c)}, breakable(c))])),
         el('td', {class: 'summary long', text: x.summary || ''})))));
@@ -367,5 +373,7 @@ async function pageNights(main) {
 function chartTheme() {
   const css = getComputedStyle(document.documentElement);
   const v = (name, fallback) => (css.getPropertyValue(name) || '').trim() || fallback;
-  return {axisLineColor: v('--chart-axis', '#555'), gridLineColor: v('--chart-grid', '#ddd')};
+  // dygraphs' own series colours (HSV around the wheel) at the theme's value: brighter on a dark page.
+  return {axisLineColor: v('--chart-axis', '#555'), gridLineColor: v('--chart-grid', '#ddd'),
+    colorValue: Number(v('--chart-color-value', '0.5')), colorSaturation: Number(v('--chart-color-saturation', '1'))};
 }
