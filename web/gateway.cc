@@ -15,6 +15,8 @@
 #include <cstdlib>
 #include <cstring>
 #include <deque>
+#include <filesystem>
+#include <fstream>
 #include <map>
 #include <regex>
 #include <mutex>
@@ -27,6 +29,9 @@
 #include "common/csv.h"
 #include "common/queue_estimate.h"
 #include "experiment/compare.h"
+#include "gap/dataset.h"
+#include "gap/import_request.h"
+#include "model/params.h"
 #include "proto/api_convert.h"
 #include "report/report.h"
 #include "experiment/spec.h"
@@ -565,6 +570,7 @@ class Routes {
     s.Get(R"(/api/runs/(\d{1,15})/trace\.(h5|mat))", [this](const auto& q, auto& r) { TraceFile(q, r); });
     s.Get(R"(/api/compare\.(csv|json))", [this](const auto& q, auto& r) { CompareFile(q, r); });
     s.Get(R"(/api/batches/(\d{1,15})/report\.html)", [this](const auto& q, auto& r) { BatchReport(q, r); });
+    s.Post("/api/import", [this](const auto& q, auto& r) { Import(q, r); });
     s.Get("/api/diagnose", [this](const auto& q, auto& r) { Diagnose(q, r); });
     s.Get("/api/nights", [this](const auto& q, auto& r) { Nights(q, r); });
     s.set_pre_routing_handler([this](const httplib::Request& req, httplib::Response& res) {
@@ -1435,6 +1441,68 @@ class Routes {
     const std::string html = report::RenderHtml(title, report::BatchSections(where, batch, runs));
     res.set_header("Content-Disposition", fmt::format("inline; filename=\"batch{}-report.html\"", batch));
     res.set_content(html, "text/html; charset=utf-8");
+  }
+
+  // A measured dataset uploaded from the page: {"dataset": NAME, "files": {"manifest.json": TEXT, "a.csv": TEXT,
+  // ...}} (within the 8 MiB body limit). The files are written to a temporary directory named after the dataset
+  // and read by gap::LoadDataset, the reader of `benchctl import DIR`, so a bad file gets the same error naming
+  // the file, the line and the field; the runs then go to the service's ImportRuns (operator role) as
+  // benchctl sends them (gap::FillImportRequest). The directory is removed before the answer.
+  void Import(const httplib::Request& req, httplib::Response& res) {
+    Json body;
+    if (!BodyJson(req, res, &body)) return;
+    if (!body.is_object()) return BadRequest(res, "body: must be a JSON object {\"dataset\", \"files\"}");
+    for (const auto& [key, value] : body.items())
+      if (key != "dataset" && key != "files")
+        return BadRequest(res, key + ": unknown field (the body is {\"dataset\": \"...\", \"files\": {...}})");
+    static const std::regex name_re(R"([A-Za-z0-9][A-Za-z0-9._-]{0,99})");
+    if (!body.contains("dataset") || !body["dataset"].is_string())
+      return BadRequest(res, "dataset: must be a string (the dataset's name)");
+    const std::string dataset = body["dataset"].get<std::string>();
+    if (!std::regex_match(dataset, name_re))
+      return BadRequest(res, "dataset: '" + dataset + "' must be 1-100 characters of A-Z a-z 0-9 . _ - (not starting with . _ -)");
+    if (!body.contains("files") || !body["files"].is_object() || body["files"].empty())
+      return BadRequest(res, "files: must be an object of file name -> text (manifest.json and its CSV files)");
+    if (body["files"].size() > 2000) return BadRequest(res, "files: more than 2000 files");
+    for (const auto& [fname, text] : body["files"].items()) {
+      if (!std::regex_match(fname, name_re))
+        return BadRequest(res, "files['" + fname + "']: a file name of A-Z a-z 0-9 . _ - (no directories)");
+      if (!text.is_string()) return BadRequest(res, "files['" + fname + "']: must be the file's text");
+    }
+    if (!body["files"].contains("manifest.json"))
+      return BadRequest(res, "files: no manifest.json (pick the dataset's manifest.json and its files)");
+    char tmpl[] = "/tmp/valvebench-import-XXXXXX";
+    if (mkdtemp(tmpl) == nullptr) return SendError(res, grpc::StatusCode::UNAVAILABLE, "import: cannot create a temporary directory");
+    struct Cleanup {
+      std::string dir;
+      ~Cleanup() {
+        std::error_code ec;
+        std::filesystem::remove_all(dir, ec);
+      }
+    } cleanup{tmpl};
+    const std::string dir = std::string(tmpl) + "/" + dataset;
+    std::error_code ec;
+    std::filesystem::create_directory(dir, ec);
+    for (const auto& [fname, text] : body["files"].items()) {
+      std::ofstream out(dir + "/" + fname, std::ios::binary);
+      const std::string& t = text.get_ref<const std::string&>();
+      out.write(t.data(), static_cast<std::streamsize>(t.size()));
+      if (!out) return SendError(res, grpc::StatusCode::UNAVAILABLE, "import: cannot write " + fname);
+    }
+    auto ds = gap::LoadDataset(dir, model::PresetNames());
+    if (!ds.ok()) return BadRequest(res, ds.status().message());
+    v1::ImportRunsRequest r;
+    if (auto st = gap::FillImportRequest(*ds, dataset, &r); !st.ok()) return BadRequest(res, st.message());
+    grpc::ClientContext ctx;
+    Authorize(req, &ctx);
+    Deadline(&ctx, 120.0);
+    v1::SubmitRunResponse out;
+    auto st = stub_->ImportRuns(&ctx, r, &out);
+    if (!st.ok()) return SendError(res, st);
+    Json j = Json::parse(ToJson(out));
+    j["warnings"] = ds->warnings;
+    res.status = 201;
+    res.set_content(Dump(j), kJson);
   }
 
   void Nights(const httplib::Request& req, httplib::Response& res) {

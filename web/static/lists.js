@@ -336,7 +336,37 @@ function pageSubmit(main) {
       'axes and repeats expand into a batch. The server validates it and names the field it refuses.'),
     el('form', {onsubmit: submit}, text, el('div', {class: 'actions'}, batch,
       allowed ? el('button', {class: 'primary', id: 'submit', type: 'submit', text: 'Submit'})
-        : el('button', {class: 'primary', id: 'submit', type: 'submit', disabled: true, title: 'Submit ' + VIEWER_REASON, text: 'Submit'}))), out));
+        : el('button', {class: 'primary', id: 'submit', type: 'submit', disabled: true, title: 'Submit ' + VIEWER_REASON, text: 'Submit'}))), out),
+    importSection(allowed));
+}
+
+// Import: a measured dataset's manifest.json and files (docs/dataset-format.md), read in the browser and sent
+// as JSON to /api/import, which reads them as `benchctl import DIR` does and stores them with ImportRuns.
+function importSection(allowed) {
+  const files = el('input', {id: 'import-files', type: 'file', multiple: true, accept: '.json,.csv,application/json,text/csv'});
+  const name = el('input', {id: 'import-name', type: 'text', size: 20, placeholder: 'dataset name', pattern: '[A-Za-z0-9][A-Za-z0-9._-]*'});
+  const out = el('div', {id: 'import-result'});
+  const submit = async (ev) => {
+    ev.preventDefault();
+    if (!allowed) return;
+    const picked = Array.from(files.files || []);
+    if (picked.length === 0) { out.replaceChildren(el('p', {class: 'error', text: 'files: pick manifest.json and its CSV files'})); return; }
+    const body = {dataset: name.value.trim(), files: {}};
+    for (const f of picked) body.files[f.name] = await f.text();
+    out.replaceChildren(el('p', {class: 'muted', text: 'importing ' + picked.length + ' files…'}));
+    try {
+      const r = await api('POST', '/api/import', body);
+      out.replaceChildren(el('p', {class: 'ok'}, 'Imported ', String((r.run_ids || []).length), ' runs as batch ',
+        el('a', {href: '#/runs?batch=' + r.batch_id, text: r.batch_id}), ' · ', el('a', {href: '#/diagnosis', text: 'diagnose them'})),
+      (r.warnings || []).length ? el('ul', {class: 'muted'}, r.warnings.map((w) => el('li', {text: w}))) : null);
+    } catch (e) { out.replaceChildren(el('p', {class: 'error', text: errorText(e)})); }
+  };
+  return el('section', {id: 'import'}, el('h2', {text: 'Import a measured dataset'}),
+    el('p', {class: 'muted', text: 'A dataset of measured runs (valve-runs/1 or /2, docs/dataset-format.md): pick its manifest.json and ' +
+      'every file it names (up to 8 MiB in all; larger: benchctl import DIR). The runs are stored for the diagnosis.'}),
+    el('form', {class: 'actions', onsubmit: submit}, files, name,
+      el('button', {type: 'submit', id: 'import-button', disabled: !allowed, title: allowed ? undefined : 'Import ' + VIEWER_REASON, text: 'Import'})),
+    out);
 }
 
 // ---- Nights: the next night, regression history, verdicts, links to the night's runs
