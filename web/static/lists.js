@@ -63,17 +63,22 @@ function runDuration_s(r) {
 
 // ---- connection state: a banner while the server does not answer; it clears when it answers again.
 let connectionLost = false;
-let keepFlash = false;  // the next route() keeps the flash (a cancel's result over the re-rendered page)
+let keepFlash = false;
+let lastAnswer = 0;  // when the server last answered (ms)  // the next route() keeps the flash (a cancel's result over the re-rendered page)
 function setConnected(ok, why) {
   const b = $('#disconnected');
   if (!b) return;
   if (!ok) {
     connectionLost = true;
     b.replaceChildren(el('strong', {text: 'Disconnected from the server — retrying.'}), ' ',
-      el('span', {class: 'muted', text: 'What the page shows may be stale (' + why + ').'}));
+      el('span', {class: 'muted', text: 'What the page shows is from ' + (lastAnswer ? localText(lastAnswer / 1000).slice(11) : 'before') +
+        ' and may be stale.'}));
+    b.title = why || '';
     b.hidden = false;
     document.body.classList.add('stale');
-  } else if (connectionLost) {
+  } else {
+    lastAnswer = Date.now();
+    if (!connectionLost) return;
     connectionLost = false;
     b.hidden = true;
     document.body.classList.remove('stale');
