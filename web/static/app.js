@@ -145,8 +145,7 @@ const routes = [
 function route() {
   for (const c of cleanups) { try { c(); } catch (e) { /* already gone */ } }
   cleanups = [];
-  if (!keepFlash) flash('');  // a result to show across the re-render (cancel) stays once
-  keepFlash = false;
+  if (Date.now() > keepFlashUntil) flash('');  // a result to show across re-renders (cancel) stays a while
   const hash = location.hash.replace(/^#/, '') || '/';
   const [path, query] = hash.split('?');
   const params = new URLSearchParams(query || '');

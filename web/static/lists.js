@@ -63,8 +63,8 @@ function runDuration_s(r) {
 
 // ---- connection state: a banner while the server does not answer; it clears when it answers again.
 let connectionLost = false;
-let keepFlash = false;
-let lastAnswer = 0;  // when the server last answered (ms)  // the next route() keeps the flash (a cancel's result over the re-rendered page)
+let keepFlashUntil = 0;  // route() keeps the flash until then (ms): a cancel's result over the re-rendered page
+let lastAnswer = 0;  // when the server last answered (ms)
 function setConnected(ok, why) {
   const b = $('#disconnected');
   if (!b) return;
@@ -101,7 +101,7 @@ async function cancelRun(id, submitter) {
     const body = reason.trim() ? {reason: reason.trim()} : {};
     const r = await api('POST', '/api/runs/' + id + '/cancel', body);
     flash('Run ' + id + ' ' + String(r.status).toLowerCase() + (r.reason ? ': ' + r.reason : ''), true);
-    keepFlash = true;
+    keepFlashUntil = Date.now() + 8000;
     return true;
   } catch (e) { showError(e); return false; }
 }
