@@ -22,10 +22,14 @@
 //   GET  /api/runs/ID/trace.csv      GetTrace, every sample (export)
 //   GET  /api/runs/ID/events?rate_Hz=                                     WatchRun as Server-Sent Events
 //   GET  /api/compare?runs=1,2,3 | ?batch_id=N                            CompareRuns, with units
+//   GET  /api/runs/ID/trace.h5|.mat  GetRun + GetTrace as HDF5 / MATLAB (export/'s writers, benchctl export's)
+//   GET  /api/compare.csv|.json?runs=|?batch_id=                        CompareRuns as benchctl compare --csv/--json
+//   GET  /api/batches/N/report.html  the batch's HTML report (report/, benchctl report --batch N)
+//   POST /api/import {"dataset", "files": {name: text}}                  gap::LoadDataset + ImportRuns
 //   GET  /api/nights?limit=          ListNights, and next_night_unix_s (GatewayOptions::next_night_unix_s)
 // Tokens: "Authorization: Bearer <token>" on any request; the vb_session cookie (HttpOnly, SameSite=Strict) only
-// on GET .../events and .../trace.csv, from this origin (EventSource and a link cannot send headers; docs/web.md
-// "Sessions"). Every request passes the door's checks first (docs/web.md "Door", "Limits").
+// on GET .../events and the download links (trace.csv/.h5/.mat, compare.csv/.json, report.html), from this
+// origin (EventSource and a link cannot send headers; docs/web.md "Sessions"). Every request passes the door's checks first (docs/web.md "Door", "Limits").
 // Errors: {"code": "INVALID_ARGUMENT", "message": "..."} with the HTTP status of HttpStatusFor(code).
 #pragma once
 

@@ -36,7 +36,7 @@ if missing:
           % ", ".join(missing))
     sys.exit(77)
 
-OPERATOR, VIEWER = "web-operator-token", "web-viewer-token"
+OPERATOR, VIEWER, OPERATOR2 = "web-operator-token", "web-viewer-token", "web-operator2-token"
 shutil.rmtree(work, ignore_errors=True)
 os.makedirs(work)
 os.makedirs(shots, exist_ok=True)
@@ -62,7 +62,8 @@ config = {"listen_address": "127.0.0.1:0", "database_path": "runs.db",
           "benches": [{"name": "emu-1", "kind": "emulated", "model": {"preset": "taghizadeh2009"}},
                       {"name": "emu-2", "kind": "emulated", "model": {"preset": "taghizadeh2009"}}],
           "tokens": [{"user": "olga", "role": "operator", "token_sha256": sha(OPERATOR)},
-                     {"user": "vic", "role": "viewer", "token_sha256": sha(VIEWER)}],
+                     {"user": "vic", "role": "viewer", "token_sha256": sha(VIEWER)},
+                     {"user": "oscar", "role": "operator", "token_sha256": sha(OPERATOR2)}],
           "web": {"listen_address": "127.0.0.1:0"}}
 with open(os.path.join(work, "server.json"), "w") as f:
     json.dump(config, f)
@@ -526,6 +527,18 @@ try:
     shot_at("dark-runs", 1400)
     driver.execute_cdp_cmd("Emulation.setEmulatedMedia", {"features": [{"name": "prefers-color-scheme", "value": "light"}]})
     driver.set_window_size(1400, 900)
+    # An operator cancels its own runs only: oscar's running run shows no Cancel to olga; olga's own does.
+    theirs = api("POST", "/api/runs", OPERATOR2, {"spec": dict(spec, name="web-oscars", duration_s=30.0)})["run_ids"][0]
+    mine = api("POST", "/api/runs", OPERATOR, {"spec": dict(spec, name="web-olgas", duration_s=30.0)})["run_ids"][0]
+    go("#/")
+    wait(lambda: len(driver.find_elements(By.CSS_SELECTOR, "#queue tr[data-run='%s'], #queue tr[data-run='%s']"
+                                          % (theirs, mine))) == 2 or None, what="both runs in the queue")
+    check("an operator sees Cancel on its own run only",
+          not driver.find_elements(By.CSS_SELECTOR, "#queue tr[data-run='%s'] button.cancel" % theirs) and
+          driver.find_elements(By.CSS_SELECTOR, "#queue tr[data-run='%s'] button.cancel" % mine),
+          driver.find_element(By.ID, "queue").text[:400])
+    api("POST", "/api/runs/%s/cancel" % theirs, OPERATOR2, {})
+    api("POST", "/api/runs/%s/cancel" % mine, OPERATOR, {})
     errors = console_errors()
     check("no console error on the lists, downloads and themes", not errors, errors)
 
