@@ -29,7 +29,8 @@
 //   GET  /api/nights?limit=          ListNights, and next_night_unix_s (GatewayOptions::next_night_unix_s)
 // Tokens: "Authorization: Bearer <token>" on any request; the vb_session cookie (HttpOnly, SameSite=Strict) only
 // on GET .../events and the download links (trace.csv/.h5/.mat, compare.csv/.json, report.html), from this
-// origin (EventSource and a link cannot send headers; docs/web.md "Sessions"). Every request passes the door's checks first (docs/web.md "Door", "Limits").
+// origin (EventSource and a link cannot send headers; docs/web.md "Sessions"). Every request passes the door's
+// checks first (docs/web.md "Door", "Limits").
 // Errors: {"code": "INVALID_ARGUMENT", "message": "..."} with the HTTP status of HttpStatusFor(code).
 #pragma once
 
