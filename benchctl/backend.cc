@@ -377,27 +377,7 @@ StatusOr<experiment::Comparison> RemoteComparison(client::Client& client, std::i
                                                   const std::vector<std::int64_t>& run_ids) {
   auto cmp = client.Compare(batch, run_ids);
   if (!cmp.ok()) return cmp.status();
-  experiment::Comparison c;
-  c.rank_metric = cmp->rank_metric();
-  c.effort_metric = cmp->effort_metric();
-  c.columns.assign(cmp->columns().begin(), cmp->columns().end());
-  for (const auto& r : cmp->rows()) {
-    experiment::CompareRow row;
-    row.name = r.name();
-    row.controller = r.controller();
-    row.runs = r.runs();
-    row.failed = r.failed();
-    row.rank = r.rank();
-    row.pareto = r.pareto();
-    for (const auto& col : c.columns) {
-      experiment::MetricStat st;
-      auto it = r.metrics().find(col);
-      if (it != r.metrics().end()) st = {it->second.mean(), it->second.spread(), it->second.n()};
-      row.metrics[col] = st;
-    }
-    c.rows.push_back(std::move(row));
-  }
-  return c;
+  return experiment::ComparisonFromProto(*cmp);
 }
 
 std::unique_ptr<Backend> LocalBackend(std::string store_path) { return std::make_unique<Local>(std::move(store_path)); }

@@ -21,6 +21,7 @@
 #include "client/client.h"
 #include "experiment/spec.h"
 #include "gap/diagnose.h"
+#include "gap/import_request.h"
 #include "gap/stored_runs.h"
 #include "gap/suggest.h"
 #include "gap/identify.h"
@@ -309,33 +310,11 @@ int StoredDiagnose(Backend& backend, const std::vector<std::int64_t>& run_ids, c
 int ImportDataset(Backend& backend, const std::string& dataset_dir, bool json) {
   auto ds = Load(dataset_dir);
   if (!ds.ok()) return Fail(ds.status());
-  for (std::size_t k = 0; k < ds->runs.size(); ++k)
-    if (ds->runs[k].kind != gap::RunKind::kWaveform || std::isfinite(ds->runs[k].stroke_m))
-      return Fail(Status::InvalidArgument(
-          "import: runs[" + std::to_string(k) + "] '" + ds->runs[k].id + "' is a " +
-          std::string(gap::RunKindName(ds->runs[k].kind)) +
-          (std::isfinite(ds->runs[k].stroke_m) ? " run with a held stroke" : " run") +
-          "; the server stores waveform runs only: diagnose this dataset locally (benchctl diagnose DIR)"));
   valvebench::v1::ImportRunsRequest req;
   std::string name = dataset_dir;
   while (!name.empty() && name.back() == '/') name.pop_back();
   name = name.substr(name.find_last_of('/') == std::string::npos ? 0 : name.find_last_of('/') + 1);
-  req.set_dataset(name);
-  req.set_model(ds->model);
-  req.set_description(ds->description);
-  for (const auto& r : ds->runs) {
-    auto* out = req.add_runs();
-    out->set_id(r.id);
-    out->set_supply_v(r.supply_V);
-    out->set_supply_pressure_pa(r.supply_pressure_Pa);
-    out->set_t_start_s(r.t_start_s);
-    out->set_split(r.split);
-    out->set_sample_period_s(r.sample_period_s);
-    for (auto g : r.gate) out->add_gate(g);
-    for (double i : r.i_A) out->add_i_a(i);
-    for (double x : r.x_m) out->add_x_m(x);
-    for (double v : r.v_coil_V) out->add_v_coil_v(v);
-  }
+  if (auto st = gap::FillImportRequest(*ds, name, &req); !st.ok()) return Fail(st);
   auto resp = backend.Import(req);
   if (!resp.ok()) return Fail(resp.status().WithContext("import " + name));
   std::string ids;

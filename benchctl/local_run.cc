@@ -12,6 +12,7 @@
 #include <filesystem>
 #include <map>
 
+#include "common/csv.h"
 #include "db/open_store.h"
 #include "db/store.h"
 #include "runs/admit.h"
@@ -179,8 +180,9 @@ Status WriteTraceCsv(const experiment::Trace& trace, const std::string& path) {
   for (size_t c = 0; c < names.size(); ++c) std::fprintf(f.get(), "%s%s", c ? "," : "", names[c].c_str());
   std::fputc('\n', f.get());
   for (size_t k = 0; k < trace.size(); ++k) {
-    std::fprintf(f.get(), "%.8f,%d,%.6g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.12g,%.12g,%.0f\n", trace.t_s[k],
-                 trace.gate[k], trace.v_coil_V[k], trace.i_A[k], trace.x_m[k], trace.v_mps[k], trace.ref[k],
+    // ref is NaN for a law without a reference: an empty field (common/csv.h AppendCsvNumber).
+    std::fprintf(f.get(), "%.8f,%d,%.6g,%.9g,%.9g,%.9g,%s,%.9g,%.9g,%.12g,%.12g,%.0f\n", trace.t_s[k],
+                 trace.gate[k], trace.v_coil_V[k], trace.i_A[k], trace.x_m[k], trace.v_mps[k], CsvNumber(trace.ref[k], 9).c_str(),
                  trace.x_avg_m[k], trace.flow_kg_per_s[k], trace.v2_int_V2s[k], trace.energy_int_J[k],
                  trace.switch_count[k]);
   }

@@ -1,5 +1,6 @@
 #include "benchctl/run_commands.h"
 
+#include "common/csv.h"
 #include "common/queue_estimate.h"
 
 #include <google/protobuf/util/json_util.h>
@@ -71,9 +72,15 @@ Status WriteTraceCsv(const Trace& t, std::FILE* f, const std::string& what) {
   std::fputc('\n', f);
   std::vector<const std::vector<double>*> cols;
   for (const auto& name : t.channels) cols.push_back(&t.columns.at(name));
+  std::string line;
   for (size_t k = 0; k < t.samples(); ++k) {
-    for (size_t ch = 0; ch < cols.size(); ++ch) std::fprintf(f, "%s%.10g", ch ? "," : "", (*cols[ch])[k]);
-    std::fputc('\n', f);
+    line.clear();
+    for (size_t ch = 0; ch < cols.size(); ++ch) {
+      if (ch) line += ',';
+      AppendCsvNumber(&line, (*cols[ch])[k]);  // NaN: an empty field, as the web's CSV (common/csv.h)
+    }
+    line += '\n';
+    std::fputs(line.c_str(), f);
   }
   if (std::ferror(f)) return Status::DataLoss(what + ": write failed");
   return Status::Ok();

@@ -126,5 +126,33 @@ std::string ComparisonCsv(const Comparison& c);
 // {kind, rank_metric, effort_metric, columns, rows: [{rank, name, controller, runs, failed, pareto,
 // sweep: {field: value}, metrics: {column: {mean, spread, n} or null}}]}.
 std::string ComparisonJson(const Comparison& c);
+// The service's comparison (a valvebench::v1::CompareRunsResponse; a template, so that this library needs no
+// gRPC code) as the Comparison every renderer above takes: benchctl's remote commands and the web's comparison
+// downloads write the same files.
+template <class CompareRunsResponse>
+Comparison ComparisonFromProto(const CompareRunsResponse& cmp) {
+  Comparison c;
+  c.rank_metric = cmp.rank_metric();
+  c.effort_metric = cmp.effort_metric();
+  c.columns.assign(cmp.columns().begin(), cmp.columns().end());
+  for (const auto& r : cmp.rows()) {
+    CompareRow row;
+    row.name = r.name();
+    row.controller = r.controller();
+    row.runs = r.runs();
+    row.failed = r.failed();
+    row.rank = r.rank();
+    row.pareto = r.pareto();
+    for (const auto& col : c.columns) {
+      MetricStat st;
+      auto it = r.metrics().find(col);
+      if (it != r.metrics().end()) st = {it->second.mean(), it->second.spread(), it->second.n()};
+      row.metrics[col] = st;
+    }
+    c.rows.push_back(std::move(row));
+  }
+  return c;
+}
+
 
 }  // namespace vb::experiment

@@ -15,6 +15,7 @@
 
 #include <csignal>
 #include <cstdio>
+#include <ctime>
 
 #include <spdlog/sinks/stdout_sinks.h>
 #include <spdlog/spdlog.h>
@@ -29,6 +30,7 @@
 #include "server/retention.h"
 #include "server/service.h"
 #include "server/status_interceptor.h"
+#include "regress/cron.h"
 #include "db/open_store.h"
 #include "web/gateway.h"
 
@@ -188,6 +190,17 @@ int main(int argc, char** argv) {
     if (w.max_streams() > 0) wo.max_streams = w.max_streams();
     if (w.max_streams_per_session() > 0) wo.max_streams_per_session = w.max_streams_per_session();
     wo.allowed_origins.assign(w.allowed_origins().begin(), w.allowed_origins().end());
+    wo.identify = [&settings](std::string_view authorization) -> vb::StatusOr<vb::web::GatewayOptions::Identity> {
+      auto p = settings->auth.Authenticate(authorization);
+      if (!p.ok()) return p.status();
+      return vb::web::GatewayOptions::Identity{p->user, vb::server::RoleName(p->role)};
+    };
+    if (settings->nights.enabled)
+      wo.next_night_unix_s = [cron = settings->nights.cron, utc = settings->nights.utc]() -> vb::StatusOr<double> {
+        auto c = vb::regress::Cron::Parse(cron);
+        if (!c.ok()) return c.status();
+        return c->NextUnix(static_cast<double>(std::time(nullptr)), utc);
+      };
     auto started = vb::web::Gateway::Start(wo, server->InProcessChannel(args));
     if (!started.ok()) {
       spdlog::error("{}", started.status().message().c_str());

@@ -8,10 +8,15 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <deque>
+#include <filesystem>
+#include <fstream>
 #include <map>
 #include <regex>
 #include <mutex>
@@ -19,11 +24,18 @@
 #include <set>
 #include <vector>
 
+#include <unistd.h>
+
+#include "common/csv.h"
 #include "common/queue_estimate.h"
 #include "experiment/compare.h"
+#include "gap/dataset.h"
+#include "gap/import_request.h"
+#include "model/params.h"
+#include "proto/api_convert.h"
+#include "report/report.h"
 #include "experiment/spec.h"
 #include "model/effects.h"
-#include "model/params.h"
 #include "export/run_file.h"
 #include "valvebench/v1/api.grpc.pb.h"
 #include "web/assets.h"
@@ -544,6 +556,7 @@ class Routes {
       } catch (...) {
       }
     });
+    s.Get("/api/session", [this](const auto& q, auto& r) { Session(q, r); });
     s.Get("/api/benches", [this](const auto& q, auto& r) { Benches(q, r); });
     s.Get("/api/queue", [this](const auto& q, auto& r) { Queue(q, r); });
     s.Get("/api/runs", [this](const auto& q, auto& r) { ListRuns(q, r); });
@@ -555,6 +568,10 @@ class Routes {
     s.Get(R"(/api/runs/(\d{1,15})/trace\.csv)", [this](const auto& q, auto& r) { TraceCsv(q, r); });
     s.Get(R"(/api/runs/(\d{1,15})/events)", [this](const auto& q, auto& r) { Events(q, r); });
     s.Get("/api/compare", [this](const auto& q, auto& r) { Compare(q, r); });
+    s.Get(R"(/api/runs/(\d{1,15})/trace\.(h5|mat))", [this](const auto& q, auto& r) { TraceFile(q, r); });
+    s.Get(R"(/api/compare\.(csv|json))", [this](const auto& q, auto& r) { CompareFile(q, r); });
+    s.Get(R"(/api/batches/(\d{1,15})/report\.html)", [this](const auto& q, auto& r) { BatchReport(q, r); });
+    s.Post("/api/import", [this](const auto& q, auto& r) { Import(q, r); });
     s.Get("/api/diagnose", [this](const auto& q, auto& r) { Diagnose(q, r); });
     s.Get("/api/units", [this](const auto& q, auto& r) { Units(q, r); });
     s.Get("/api/nights", [this](const auto& q, auto& r) { Nights(q, r); });
@@ -675,7 +692,8 @@ class Routes {
   }
 
   static bool CookieRoute(const std::string& path) {
-    static const std::regex re(R"(/api/runs/\d{1,15}/(events|trace\.csv))");
+    static const std::regex re(
+        R"(/api/runs/\d{1,15}/(events|trace\.(csv|h5|mat))|/api/compare\.(csv|json)|/api/batches/\d{1,15}/report\.html)");
     return std::regex_match(path, re);
   }
 
@@ -846,6 +864,17 @@ class Routes {
     r.set_bench(req.get_param_value("bench"));
     r.set_controller(req.get_param_value("controller"));
     r.set_page_token(req.get_param_value("page_token"));
+    // The contract of api.proto's ListRunsRequest (AIP-132 order_by, a name filter): the service validates them
+    // and names the field it refuses; the gateway only carries them.
+    r.set_submitter(req.get_param_value("submitter"));
+    r.set_name(req.get_param_value("name"));
+    r.set_order_by(req.get_param_value("order_by"));
+    double after_s = 0, before_s = 0;
+    if (!NumberParam(req, res, "submitted_after_unix_s", &after_s) ||
+        !NumberParam(req, res, "submitted_before_unix_s", &before_s))
+      return;
+    r.set_submitted_after_unix_s(after_s);
+    r.set_submitted_before_unix_s(before_s);
     grpc::ClientContext ctx;
     Authorize(req, &ctx);
     Deadline(&ctx, 20.0);
@@ -1037,12 +1066,12 @@ class Routes {
             out.reserve(out.size() + n * (d->value_channels.size() + 1) * 14);
             const char* data = c.data().data();
             for (size_t i = 0; i < n; ++i) {
-              AppendNumber(&out, d->t0_s + static_cast<double>(d->k + static_cast<std::int64_t>(i)) * d->period_s);
+              AppendCsvNumber(&out, d->t0_s + static_cast<double>(d->k + static_cast<std::int64_t>(i)) * d->period_s);
               for (size_t ch : d->value_channels) {
                 double v;
                 std::memcpy(&v, data + (ch * n + i) * 8, 8);  // little-endian float64, channel-major (api.proto)
                 out += ',';
-                AppendNumber(&out, v);
+                AppendCsvNumber(&out, v);  // NaN: an empty field, as benchctl writes it (common/csv.h)
               }
               out += '\n';
             }
@@ -1307,6 +1336,286 @@ class Routes {
     res.set_content(Dump(Json{{"prefixes", p}}), kJson);
   }
 
+  // The trace as HDF5 or MATLAB .mat, the files `benchctl export --hdf5/--mat` writes (export/run_file.h, the
+  // same writers). Both formats are written whole by their libraries, so the run's samples are held in memory
+  // while the file is written (to a temporary file, unlinked at once) and the file is then streamed from disk
+  // in 64 KiB pieces; a trace above kMaxFileTraceBytes is refused (413) with the CLI to use instead.
+  static constexpr std::size_t kMaxFileTraceBytes = std::size_t{256} << 20;
+  void TraceFile(const httplib::Request& req, httplib::Response& res) {
+    const std::int64_t id = PathId(req);
+    const std::string format = req.matches[2].str();
+    v1::Run run;
+    if (auto st = FetchRun(req, id, &run); !st.ok()) return SendError(res, st);
+    exportfile::RunFile f;
+    f.run_id = run.id();
+    f.name = run.name();
+    f.controller = run.controller();
+    f.bench = run.bench();
+    f.status = RunStatusText(run.status());
+    f.reason = run.reason();
+    google::protobuf::util::JsonPrintOptions opts;
+    opts.preserve_proto_field_names = true;
+    (void)google::protobuf::util::MessageToJsonString(run.spec(), &f.spec_json, opts);
+    f.conditions = {{"supply_V", run.spec().conditions().supply_v(), "V"},
+                    {"supply_pressure_Pa", run.spec().conditions().supply_pressure_pa(), "Pa"}};
+    std::map<std::string, double> metrics(run.metrics().begin(), run.metrics().end());  // sorted: a stable file
+    for (const auto& [name, value] : metrics)
+      if (std::isfinite(value)) f.metrics.push_back({name, value, exportfile::MetricUnit(name, f.controller)});
+    grpc::ClientContext ctx;
+    Authorize(req, &ctx);
+    Deadline(&ctx, 600.0);
+    v1::GetTraceRequest r;
+    r.set_run_id(id);
+    auto reader = stub_->GetTrace(&ctx, r);
+    v1::TraceChunk chunk;
+    std::size_t bytes = 0;
+    std::int64_t k = 0;
+    while (reader->Read(&chunk)) {
+      const std::size_t n = static_cast<std::size_t>(std::max(0, chunk.samples()));
+      const std::size_t nch = static_cast<std::size_t>(chunk.channels_size());
+      if (f.channels.empty()) {
+        f.t0_s = chunk.t0_s();
+        f.sample_period_s = chunk.sample_period_s();
+        f.channels.push_back({"t_s", exportfile::ChannelUnit("t_s", f.controller), {}});
+        for (const auto& name : chunk.channels())
+          if (name != "t_s") f.channels.push_back({name, exportfile::ChannelUnit(name, f.controller), {}});
+      }
+      if (chunk.data().size() != n * nch * 8 || nch + (f.channels.size() > nch ? 1 : 0) != f.channels.size()) {
+        ctx.TryCancel();
+        while (reader->Read(&chunk)) {
+        }
+        (void)reader->Finish();
+        return SendError(res, grpc::StatusCode::DATA_LOSS, fmt::format("run {}: a trace chunk of the wrong size", id));
+      }
+      bytes += chunk.data().size() + n * 8;
+      if (bytes > kMaxFileTraceBytes) {
+        ctx.TryCancel();
+        while (reader->Read(&chunk)) {
+        }
+        (void)reader->Finish();
+        return SendErrorStatus(res, 413, "RESOURCE_EXHAUSTED",
+                               fmt::format("run {}: the trace is larger than {} MiB, too large for a {} file from the "
+                                           "page; use benchctl export {} --{} FILE",
+                                           id, kMaxFileTraceBytes >> 20, format, id, format == "h5" ? "hdf5" : "mat"));
+      }
+      for (std::size_t i = 0; i < n; ++i)
+        f.channels[0].values.push_back(f.t0_s + static_cast<double>(k + static_cast<std::int64_t>(i)) * f.sample_period_s);
+      std::size_t out_ch = 1;
+      for (std::size_t ch = 0; ch < nch; ++ch) {
+        if (chunk.channels(static_cast<int>(ch)) == "t_s") continue;
+        auto& v = f.channels[out_ch++].values;
+        const std::size_t at = v.size();
+        v.resize(at + n);
+        std::memcpy(v.data() + at, chunk.data().data() + ch * n * 8, n * 8);  // little-endian float64, channel-major
+      }
+      k += static_cast<std::int64_t>(n);
+    }
+    if (auto st = reader->Finish(); !st.ok()) return SendError(res, st);
+    char path[] = "/tmp/valvebench-web-XXXXXX";
+    const int fd = mkstemp(path);
+    if (fd < 0) return SendError(res, grpc::StatusCode::UNAVAILABLE, "export: cannot create a temporary file");
+    ::close(fd);
+    const Status written = format == "h5" ? exportfile::WriteHdf5(f, path) : exportfile::WriteMat(f, path);
+    std::FILE* file = written.ok() ? std::fopen(path, "rb") : nullptr;
+    std::remove(path);  // the open file stays readable; nothing is left behind
+    if (!written.ok()) return SendError(res, grpc::StatusCode::INTERNAL, written.message());
+    if (file == nullptr) return SendError(res, grpc::StatusCode::UNAVAILABLE, "export: cannot read the written file");
+    auto handle = std::shared_ptr<std::FILE>(file, &std::fclose);
+    f = {};  // the samples are in the file now
+    res.set_header("Content-Disposition", fmt::format("attachment; filename=\"run{}.{}\"", id, format));
+    res.set_chunked_content_provider(
+        format == "h5" ? "application/x-hdf5" : "application/x-matlab-data",
+        [handle](size_t, httplib::DataSink& sink) {
+          char buf[64 * 1024];
+          const size_t got = std::fread(buf, 1, sizeof buf, handle.get());
+          if (got > 0 && !sink.write(buf, got)) return false;
+          if (got < sizeof buf) {
+            if (std::ferror(handle.get())) return false;
+            sink.done();
+          }
+          return true;
+        },
+        [](bool) {});
+  }
+
+  // The comparison as the files `benchctl compare --csv/--json` prints (experiment::ComparisonCsv/Json): a
+  // missing metric is an empty CSV field and a JSON null (docs/cli.md "Missing values").
+  void CompareFile(const httplib::Request& req, httplib::Response& res) {
+    const std::string format = req.matches[1].str();
+    v1::CompareRunsRequest r;
+    long long batch = 0;
+    if (!IntParam(req, res, "batch_id", &batch)) return;
+    r.set_batch_id(batch);
+    if (!RunIdsParam(req, res, r.mutable_run_ids())) return;
+    grpc::ClientContext ctx;
+    Authorize(req, &ctx);
+    Deadline(&ctx, 30.0);
+    v1::CompareRunsResponse out;
+    auto st = stub_->CompareRuns(&ctx, r, &out);
+    if (!st.ok()) return SendError(res, st);
+    const experiment::Comparison c = experiment::ComparisonFromProto(out);
+    const std::string name = batch != 0 ? fmt::format("batch{}-comparison", batch) : "comparison";
+    res.set_header("Content-Disposition", fmt::format("attachment; filename=\"{}.{}\"", name, format));
+    if (format == "csv")
+      res.set_content(experiment::ComparisonCsv(c), "text/csv; charset=utf-8");
+    else
+      res.set_content(experiment::ComparisonJson(c), kJson);
+  }
+
+  // A batch's HTML report, the page `benchctl report --batch N --html FILE` writes (report::BatchSections and
+  // RenderHtml, the same code): comparison, Pareto scatter, static map, overlays and the runs' traces. The traces
+  // are read whole (the report decimates them itself) up to kMaxReportTraceBytes in all; the runs beyond that
+  // are in the tables without their trace, and the page says how many.
+  static constexpr std::size_t kMaxReportTraceBytes = std::size_t{256} << 20;
+  static constexpr int kMaxReportTraces = 100;  // benchctl report's --max-traces default
+  void BatchReport(const httplib::Request& req, httplib::Response& res) {
+    const std::int64_t batch = PathId(req);
+    std::vector<v1::Run> listed;
+    v1::ListRunsRequest lr;
+    lr.set_batch_id(batch);
+    lr.set_page_size(1000);
+    lr.set_order_by("id");
+    do {
+      grpc::ClientContext ctx;
+      Authorize(req, &ctx);
+      Deadline(&ctx, 20.0);
+      v1::ListRunsResponse out;
+      if (auto st = stub_->ListRuns(&ctx, lr, &out); !st.ok()) return SendError(res, st);
+      for (auto& r : *out.mutable_runs()) listed.push_back(std::move(r));
+      lr.set_page_token(out.next_page_token());
+    } while (!lr.page_token().empty() && listed.size() < 20000);
+    if (listed.empty()) return SendError(res, grpc::StatusCode::NOT_FOUND, fmt::format("batch {}: no runs", batch));
+    std::sort(listed.begin(), listed.end(), [](const v1::Run& a, const v1::Run& b) { return a.id() < b.id(); });
+    std::vector<report::RunInfo> runs;
+    std::size_t bytes = 0;
+    int traced = 0, left_out = 0;
+    for (const v1::Run& listed_run : listed) {
+      v1::Run run;
+      if (auto st = FetchRun(req, listed_run.id(), &run); !st.ok()) return SendError(res, st);
+      std::string status = RunStatusText(run.status());
+      std::transform(status.begin(), status.end(), status.begin(), [](unsigned char c) { return std::tolower(c); });
+      report::RunInfo info{run.id(), api::FromProto(run.key()), run.controller(), status,
+                           std::map<std::string, double>(run.metrics().begin(), run.metrics().end()),
+                           run.has_spec() ? ToJson(run.spec()) : std::string(), run.submitted_unix_s(),
+                           run.started_unix_s(), run.finished_unix_s(), {}};
+      const bool ended = run.status() != v1::QUEUED && run.status() != v1::RUNNING;
+      if (ended && traced < kMaxReportTraces && bytes < kMaxReportTraceBytes) {
+        report::TraceData t;
+        t.label = fmt::format("run {}: {}", run.id(), run.name());
+        grpc::ClientContext ctx;
+        Authorize(req, &ctx);
+        Deadline(&ctx, 120.0);
+        v1::GetTraceRequest tr;
+        tr.set_run_id(run.id());
+        auto reader = stub_->GetTrace(&ctx, tr);
+        v1::TraceChunk chunk;
+        bool too_big = false;
+        while (reader->Read(&chunk)) {
+          const std::size_t n = static_cast<std::size_t>(std::max(0, chunk.samples()));
+          const std::size_t nch = static_cast<std::size_t>(chunk.channels_size());
+          if (chunk.data().size() != n * nch * 8) continue;
+          if (t.channels.empty()) {
+            t.t0_s = chunk.t0_s();
+            t.sample_period_s = chunk.sample_period_s();
+          }
+          bytes += chunk.data().size();
+          if (bytes > kMaxReportTraceBytes) {
+            too_big = true;
+            ctx.TryCancel();
+            continue;
+          }
+          for (std::size_t ch = 0; ch < nch; ++ch) {
+            auto& v = t.channels[chunk.channels(static_cast<int>(ch))];
+            const std::size_t at = v.size();
+            v.resize(at + n);
+            std::memcpy(v.data() + at, chunk.data().data() + ch * n * 8, n * 8);
+          }
+        }
+        const grpc::Status st = reader->Finish();
+        if (!too_big && st.ok() && !t.channels.empty()) {
+          info.trace = std::move(t);
+          ++traced;
+        } else if (too_big) {
+          ++left_out;
+        } else if (!st.ok() && st.error_code() != grpc::StatusCode::NOT_FOUND) {
+          return SendError(res, st);
+        }
+      } else if (ended) {
+        ++left_out;
+      }
+      runs.push_back(std::move(info));
+    }
+    std::string where = "web dashboard (" + req.get_header_value("Host") + ")";
+    if (left_out > 0) where += fmt::format("; traces of {} runs left out (size): benchctl report --batch {}", left_out, batch);
+    const std::string title =
+        fmt::format("Batch {}: {}", batch, runs.front().key.name.substr(0, runs.front().key.name.find('/')));
+    const std::string html = report::RenderHtml(title, report::BatchSections(where, batch, runs));
+    res.set_header("Content-Disposition", fmt::format("inline; filename=\"batch{}-report.html\"", batch));
+    res.set_content(html, "text/html; charset=utf-8");
+  }
+
+  // A measured dataset uploaded from the page: {"dataset": NAME, "files": {"manifest.json": TEXT, "a.csv": TEXT,
+  // ...}} (within the 8 MiB body limit). The files are written to a temporary directory named after the dataset
+  // and read by gap::LoadDataset, the reader of `benchctl import DIR`, so a bad file gets the same error naming
+  // the file, the line and the field; the runs then go to the service's ImportRuns (operator role) as
+  // benchctl sends them (gap::FillImportRequest). The directory is removed before the answer.
+  void Import(const httplib::Request& req, httplib::Response& res) {
+    Json body;
+    if (!BodyJson(req, res, &body)) return;
+    if (!body.is_object()) return BadRequest(res, "body: must be a JSON object {\"dataset\", \"files\"}");
+    for (const auto& [key, value] : body.items())
+      if (key != "dataset" && key != "files")
+        return BadRequest(res, key + ": unknown field (the body is {\"dataset\": \"...\", \"files\": {...}})");
+    static const std::regex name_re(R"([A-Za-z0-9][A-Za-z0-9._-]{0,99})");
+    if (!body.contains("dataset") || !body["dataset"].is_string())
+      return BadRequest(res, "dataset: must be a string (the dataset's name)");
+    const std::string dataset = body["dataset"].get<std::string>();
+    if (!std::regex_match(dataset, name_re))
+      return BadRequest(res, "dataset: '" + dataset + "' must be 1-100 characters of A-Z a-z 0-9 . _ - (not starting with . _ -)");
+    if (!body.contains("files") || !body["files"].is_object() || body["files"].empty())
+      return BadRequest(res, "files: must be an object of file name -> text (manifest.json and its CSV files)");
+    if (body["files"].size() > 2000) return BadRequest(res, "files: more than 2000 files");
+    for (const auto& [fname, text] : body["files"].items()) {
+      if (!std::regex_match(fname, name_re))
+        return BadRequest(res, "files['" + fname + "']: a file name of A-Z a-z 0-9 . _ - (no directories)");
+      if (!text.is_string()) return BadRequest(res, "files['" + fname + "']: must be the file's text");
+    }
+    if (!body["files"].contains("manifest.json"))
+      return BadRequest(res, "files: no manifest.json (pick the dataset's manifest.json and its files)");
+    char tmpl[] = "/tmp/valvebench-import-XXXXXX";
+    if (mkdtemp(tmpl) == nullptr) return SendError(res, grpc::StatusCode::UNAVAILABLE, "import: cannot create a temporary directory");
+    struct Cleanup {
+      std::string dir;
+      ~Cleanup() {
+        std::error_code ec;
+        std::filesystem::remove_all(dir, ec);
+      }
+    } cleanup{tmpl};
+    const std::string dir = std::string(tmpl) + "/" + dataset;
+    std::error_code ec;
+    std::filesystem::create_directory(dir, ec);
+    for (const auto& [fname, text] : body["files"].items()) {
+      std::ofstream out(dir + "/" + fname, std::ios::binary);
+      const std::string& t = text.get_ref<const std::string&>();
+      out.write(t.data(), static_cast<std::streamsize>(t.size()));
+      if (!out) return SendError(res, grpc::StatusCode::UNAVAILABLE, "import: cannot write " + fname);
+    }
+    auto ds = gap::LoadDataset(dir, model::PresetNames());
+    if (!ds.ok()) return BadRequest(res, ds.status().message());
+    v1::ImportRunsRequest r;
+    if (auto st = gap::FillImportRequest(*ds, dataset, &r); !st.ok()) return BadRequest(res, st.message());
+    grpc::ClientContext ctx;
+    Authorize(req, &ctx);
+    Deadline(&ctx, 120.0);
+    v1::SubmitRunResponse out;
+    auto st = stub_->ImportRuns(&ctx, r, &out);
+    if (!st.ok()) return SendError(res, st);
+    Json j = Json::parse(ToJson(out));
+    j["warnings"] = ds->warnings;
+    res.status = 201;
+    res.set_content(Dump(j), kJson);
+  }
+
   void Nights(const httplib::Request& req, httplib::Response& res) {
     long long limit = 0;
     if (!IntParam(req, res, "limit", &limit)) return;
@@ -1319,7 +1628,22 @@ class Routes {
     v1::ListNightsResponse out;
     auto st = stub_->ListNights(&ctx, r, &out);
     if (!st.ok()) return SendError(res, st);
-    res.set_content(ToJson(out), kJson);
+    Json j = Json::parse(ToJson(out));
+    if (options_.next_night_unix_s) {
+      if (auto next = options_.next_night_unix_s(); next.ok()) j["next_night_unix_s"] = *next;
+    }
+    res.set_content(Dump(j), kJson);
+  }
+
+  // Who the bearer token is (user, role), from the server's own Authenticator: the page shows it in its header
+  // and hides what the role may not do (the service still refuses it: this is for the eye, not a rule).
+  void Session(const httplib::Request& req, httplib::Response& res) {
+    if (!options_.identify) return SendError(res, grpc::StatusCode::NOT_FOUND, "session: not available on this server");
+    if (!req.has_header("Authorization"))
+      return SendError(res, grpc::StatusCode::UNAUTHENTICATED, "authorization: missing bearer token");
+    auto who = options_.identify(req.get_header_value("Authorization"));
+    if (!who.ok()) return SendError(res, grpc::StatusCode::UNAUTHENTICATED, who.status().message());
+    res.set_content(Dump(Json{{"user", who->user}, {"role", who->role}}), kJson);
   }
 
   // Who a live view belongs to, for the per-session cap: the token (from the header or the cookie), hashed.

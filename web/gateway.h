@@ -11,7 +11,9 @@
 //   POST /api/logout                 revokes the session
 //   GET  /api/benches                ListBenches
 //   GET  /api/queue                  running and queued runs, queue positions, ETA of running runs
-//   GET  /api/runs?status=&batch_id=&tag=&bench=&page_size=&page_token=   ListRuns
+//   GET  /api/session                who the token is: {user, role} (GatewayOptions::identify)
+//   GET  /api/runs?status=&batch_id=&tag=&bench=&controller=&submitter=&name=&submitted_after_unix_s=
+//                  &submitted_before_unix_s=&order_by=&page_size=&page_token=   ListRuns (total_size too)
 //   POST /api/runs {"spec", "batch_name"}                                 SubmitRun
 //   GET  /api/runs/ID                GetRun, with the unit of each metric
 //   POST /api/runs/ID/cancel {"reason"}                                   CancelRun
@@ -20,15 +22,21 @@
 //   GET  /api/runs/ID/trace.csv      GetTrace, every sample (export)
 //   GET  /api/runs/ID/events?rate_Hz=                                     WatchRun as Server-Sent Events
 //   GET  /api/compare?runs=1,2,3 | ?batch_id=N                            CompareRuns, with units
-//   GET  /api/nights?limit=          ListNights
+//   GET  /api/runs/ID/trace.h5|.mat  GetRun + GetTrace as HDF5 / MATLAB (export/'s writers, benchctl export's)
+//   GET  /api/compare.csv|.json?runs=|?batch_id=                        CompareRuns as benchctl compare --csv/--json
+//   GET  /api/batches/N/report.html  the batch's HTML report (report/, benchctl report --batch N)
+//   POST /api/import {"dataset", "files": {name: text}}                  gap::LoadDataset + ImportRuns
+//   GET  /api/nights?limit=          ListNights, and next_night_unix_s (GatewayOptions::next_night_unix_s)
 // Tokens: "Authorization: Bearer <token>" on any request; the vb_session cookie (HttpOnly, SameSite=Strict) only
-// on GET .../events and .../trace.csv, from this origin (EventSource and a link cannot send headers; docs/web.md
-// "Sessions"). Every request passes the door's checks first (docs/web.md "Door", "Limits").
+// on GET .../events and the download links (trace.csv/.h5/.mat, compare.csv/.json, report.html), from this
+// origin (EventSource and a link cannot send headers; docs/web.md "Sessions"). Every request passes the door's
+// checks first (docs/web.md "Door", "Limits").
 // Errors: {"code": "INVALID_ARGUMENT", "message": "..."} with the HTTP status of HttpStatusFor(code).
 #pragma once
 
 #include <grpcpp/grpcpp.h>
 
+#include <functional>
 #include <memory>
 #include <string>
 #include <string_view>
@@ -56,6 +64,16 @@ struct GatewayOptions {
   int max_streams_per_session = 8;
   // Origins besides the dashboard's own accepted on login and on cookie-authorised costly calls.
   std::vector<std::string> allowed_origins;
+  // Who a bearer token is, for the page's header and its role-aware controls (GET /api/session): the server's
+  // own Authenticator (server/auth.h), so the page shows what the service will enforce. Unset: 404.
+  struct Identity {
+    std::string user;
+    std::string role;  // "viewer", "operator", "admin"
+  };
+  std::function<StatusOr<Identity>(std::string_view authorization)> identify;
+  // The next nightly regression's start (unix seconds), from the server's cron (config "nights"); unset or an
+  // error = no night scheduled. GET /api/nights says it as next_night_unix_s.
+  std::function<StatusOr<double>()> next_night_unix_s;
 };
 
 // The door's checks, public for the tests and the fuzz target.

@@ -8,6 +8,7 @@
 #include <sstream>
 
 #include "common/run_key.h"
+#include "valvebench/v1/api.pb.h"
 
 namespace vb::experiment {
 namespace {
@@ -279,6 +280,38 @@ TEST(CompareTable, CaseNamesSplitBackIntoTheirKey) {
   const RunKey key{"static-map/fig8", {{"controller.open_loop_pwm.segments[0].duty", 0.35}, {"conditions.supply_V", 24}}, -1};
   EXPECT_EQ(SplitCaseName(key.CaseName()), key);
   EXPECT_EQ(SplitCaseName("say hi, then go").name, "say hi, then go");
+}
+
+// The service's comparison becomes the Comparison the CLI's and the web's files are written from; a metric a
+// row lacks is an empty CSV field and a JSON null there (docs/cli.md "Missing values").
+TEST(CompareFiles, FromTheServiceAMissingMetricIsAnEmptyFieldAndANull) {
+  valvebench::v1::CompareRunsResponse p;
+  p.set_rank_metric("rmse");
+  p.set_effort_metric("effort_l2");
+  p.add_columns("rmse");
+  p.add_columns("effort_l2");
+  auto* a = p.add_rows();
+  a->set_name("c/pi");
+  a->set_controller("pi_current");
+  a->set_runs(1);
+  a->set_rank(1);
+  (*a->mutable_metrics())["rmse"].set_mean(0.001);
+  (*a->mutable_metrics())["rmse"].set_n(1);
+  auto* b = p.add_rows();
+  b->set_name("c/smc");
+  b->set_controller("sliding_mode_current");
+  b->set_runs(1);
+  b->set_failed(1);
+  const Comparison c = ComparisonFromProto(p);
+  ASSERT_EQ(c.rows.size(), 2u);
+  EXPECT_EQ(c.rows[0].metrics.at("rmse").n, 1);
+  const std::string csv = ComparisonCsv(c);
+  EXPECT_NE(csv.find("\"c/pi\",pi_current,1,0,0,0.001,0,,"), std::string::npos) << csv;
+  EXPECT_NE(csv.find("\"c/smc\",sliding_mode_current,1,1,0,,,,"), std::string::npos) << csv;
+  EXPECT_EQ(csv.find("nan"), std::string::npos) << csv;
+  const std::string json = ComparisonJson(c);
+  EXPECT_NE(json.find("\"effort_l2\": null"), std::string::npos) << json;
+  EXPECT_EQ(json.find("NaN"), std::string::npos) << json;
 }
 
 }  // namespace

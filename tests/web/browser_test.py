@@ -15,6 +15,7 @@ import shutil
 import subprocess
 import sys
 import time
+import urllib.error
 import urllib.request
 
 server_bin, examples_dir, work = sys.argv[1:4]
@@ -35,7 +36,7 @@ if missing:
           % ", ".join(missing))
     sys.exit(77)
 
-OPERATOR, VIEWER = "web-operator-token", "web-viewer-token"
+OPERATOR, VIEWER, OPERATOR2 = "web-operator-token", "web-viewer-token", "web-operator2-token"
 shutil.rmtree(work, ignore_errors=True)
 os.makedirs(work)
 os.makedirs(shots, exist_ok=True)
@@ -61,7 +62,8 @@ config = {"listen_address": "127.0.0.1:0", "database_path": "runs.db",
           "benches": [{"name": "emu-1", "kind": "emulated", "model": {"preset": "taghizadeh2009"}},
                       {"name": "emu-2", "kind": "emulated", "model": {"preset": "taghizadeh2009"}}],
           "tokens": [{"user": "olga", "role": "operator", "token_sha256": sha(OPERATOR)},
-                     {"user": "vic", "role": "viewer", "token_sha256": sha(VIEWER)}],
+                     {"user": "vic", "role": "viewer", "token_sha256": sha(VIEWER)},
+                     {"user": "oscar", "role": "operator", "token_sha256": sha(OPERATOR2)}],
           "web": {"listen_address": "127.0.0.1:0"}}
 with open(os.path.join(work, "server.json"), "w") as f:
     json.dump(config, f)
@@ -117,6 +119,47 @@ def no_overflow(page):
             "return [window.innerWidth, document.documentElement.scrollWidth];")
         check("%s: no horizontal overflow at %d px" % (page, width), scroll <= inner, "scrollWidth %d > %d" % (scroll, inner))
     driver.set_window_size(1400, 900)
+
+
+def overflowing(width):
+    """Elements of the page wider than the viewport at `width` px (a table that overflows its section)."""
+    driver.set_window_size(width, 900)
+    time.sleep(0.3)
+    return driver.execute_script("""
+        // What scrolls inside a container of its own (overflow-x auto) is allowed; the container must fit.
+        const w = document.documentElement.clientWidth, out = [];
+        const inScroller = (e) => { for (let a = e.parentElement; a && a !== document.body; a = a.parentElement)
+          if (getComputedStyle(a).overflowX !== 'visible') return true; return false; };
+        for (const e of document.querySelectorAll('body *')) {
+          if (e.closest('[hidden]') || e.offsetParent === null || inScroller(e)) continue;
+          const r = e.getBoundingClientRect();
+          const own = getComputedStyle(e).overflowX === 'visible' ? e.scrollWidth : 0;
+          if (r.right > w + 1 || own > w + 1)
+            out.push(e.tagName.toLowerCase() + (e.id ? '#' + e.id : '') + (e.className && e.className.baseVal === undefined ? '.' + e.className : '') + ' ' + Math.round(r.right) + '/' + e.scrollWidth);
+        }
+        return out.slice(0, 8);""")
+
+
+def shot_at(name, width):
+    driver.set_window_size(width, 900)
+    time.sleep(0.5)
+    driver.save_screenshot(os.path.join(shots, "web-%s-%d.png" % (name, width)))
+
+
+def download(path, token):
+    req = urllib.request.Request(base + path, headers={"Authorization": "Bearer " + token})
+    with urllib.request.urlopen(req, timeout=60) as r:
+        return r.headers.get("Content-Type", ""), r.read()
+
+
+def page_rows():
+    return driver.execute_script(
+        "return Array.from(document.querySelectorAll('#runs tr[data-run]')).map(r => r.dataset.run);")
+
+
+def page_info():
+    e = driver.find_elements(By.ID, "page-info")
+    return e[0].text if e else ""
 
 
 def go(hash_):
@@ -350,7 +393,8 @@ try:
               "--user-data-dir=" + os.path.join(work, "chromium-profile")):
         opts.add_argument(a)
     opts.set_capability("goog:loggingPrefs", {"browser": "ALL"})
-    driver = webdriver.Chrome(service=Service(DRIVER), options=opts)
+    # A time zone other than the server's UTC, so that local times are seen to be local.
+    driver = webdriver.Chrome(service=Service(DRIVER, env=dict(os.environ, TZ="Europe/Berlin")), options=opts)
     driver.set_page_load_timeout(20)
 
     # 1. Log in with the operator's token.
@@ -410,9 +454,18 @@ try:
     check("the run page shows one progress figure", progress == 1, progress)
     if btn:
         btn[0].click()
+        # Cancel asks for confirmation and a reason (a prompt); the reason is recorded with the user's name.
+        alert = wait(lambda: driver.switch_to.alert, what="the cancel confirmation")
+        if alert:
+            alert.send_keys("valve chatter seen")
+            alert.accept()
     cancelled = wait(lambda: "CANCELLED" in driver.find_element(By.TAG_NAME, "h1").text, what="cancelled run")
     check("the run is cancelled from the page", bool(cancelled), driver.find_element(By.TAG_NAME, "h1").text)
-    check("the store says cancelled", api("GET", "/api/runs/" + live_id, VIEWER)["run"]["status"] == "CANCELLED")
+    stored = api("GET", "/api/runs/" + live_id, VIEWER)["run"]
+    check("the store says cancelled, by whom and why", stored["status"] == "CANCELLED" and
+          stored.get("reason", "").startswith("cancelled by olga: valve chatter seen"), stored.get("reason"))
+    flash_text = driver.find_element(By.ID, "flash").text
+    check("the page says the result of the cancel", "cancelled" in flash_text.lower(), flash_text)
 
     # 4b. A run watched from its start (issue 24, M3): its first sample is at t_s = 0, which proto3 JSON would
     # leave out; the charts must draw it and every later one, without a console error.
@@ -601,21 +654,221 @@ try:
     errors = console_errors()
     check("no console error while operating", not errors, errors)
 
+    # 7b'. Import from the page: a file missing from the dataset is refused naming the file; then p07 whole.
+    if os.path.isdir(p07):
+        go("#/submit")
+        wait(lambda: driver.find_elements(By.ID, "import-files") or None, what="import form")
+        driver.find_element(By.ID, "import-name").send_keys("p07-web")
+        csvs = sorted(f for f in os.listdir(p07) if f.endswith(".csv"))
+        driver.find_element(By.ID, "import-files").send_keys("\n".join(
+            [os.path.join(p07, "manifest.json")] + [os.path.join(p07, f) for f in csvs[1:]]))
+        driver.find_element(By.ID, "import-button").click()
+        err = wait(lambda: driver.find_elements(By.CSS_SELECTOR, "#import-result .error") or None, what="import error")
+        text = err[0].text if err else ""
+        check("an incomplete dataset is refused naming the missing file", "INVALID_ARGUMENT" in text and csvs[0] in text, text)
+        driver.find_element(By.ID, "import-files").clear()
+        driver.find_element(By.ID, "import-files").send_keys("\n".join(
+            [os.path.join(p07, "manifest.json")] + [os.path.join(p07, f) for f in csvs]))
+        driver.find_element(By.ID, "import-button").click()
+        ok = wait(lambda: driver.find_elements(By.CSS_SELECTOR, "#import-result .ok a") or None, timeout=60, what="import result")
+        imported_batch = ok[0].text if ok else ""
+        got = api("GET", "/api/runs?page_size=1000&batch_id=%s" % imported_batch, VIEWER).get("runs", []) if ok else []
+        check("the page imports a dataset (its runs stored, tagged imported)", len(got) == len(csvs) and
+              all("imported" in r.get("tags", []) for r in got), (imported_batch, len(got), len(csvs)))
+        console_errors(allowed=(r"/api/import - Failed to load resource: the server responded with a status of 400",))
+
+    # 7c. The Runs page (issue 28): newest first, paged by the service with its total, sorted by a click on a
+    # column header, filtered by submitter; local times with UTC on hover; a duration column.
+    listing = api("GET", "/api/runs?page_size=1000", VIEWER)
+    all_ids = sorted(int(r["id"]) for r in listing.get("runs", []))
+    check("the API says how many runs match (total_size)", int(listing.get("total_size", -1)) == len(all_ids),
+          (listing.get("total_size"), len(all_ids)))
+    go("#/runs?size=25")
+    wait(lambda: page_rows() or None, what="runs table")
+    first_page = page_rows()
+    check("runs are listed newest first", first_page[:25] == [str(i) for i in sorted(all_ids, reverse=True)[:25]],
+          first_page[:5])
+    check("the page says which runs it shows of how many",
+          page_info() == "showing 1–25 of %d" % len(all_ids), page_info())
+    driver.find_element(By.ID, "page-next").click()
+    wait(lambda: page_rows() and page_rows() != first_page or None, what="the next page")
+    check("Next shows the following runs", page_rows()[:1] == [str(sorted(all_ids, reverse=True)[25])] and
+          page_info().startswith("showing 26–"), (page_rows()[:2], page_info()))
+    driver.find_element(By.ID, "page-prev").click()
+    wait(lambda: page_rows() == first_page or None, what="the previous page")
+    driver.find_element(By.CSS_SELECTOR, "th[data-order='id'] a").click()  # newest first -> by id, descending
+    time.sleep(0.5)
+    driver.find_element(By.CSS_SELECTOR, "th[data-order='id'] a").click()  # again: ascending
+    asc = wait(lambda: page_rows() and page_rows()[0] == str(all_ids[0]) and page_rows(), what="sorted by id")
+    check("a click on a header sorts by it", bool(asc) and [int(i) for i in asc] == all_ids[:len(asc)],
+          (asc or [])[:5])
+    go("#/runs?submitter=olga&size=25")
+    wait(lambda: page_rows() is not None and "submitter=olga" in driver.current_url or None, what="filtered runs")
+    time.sleep(0.5)
+    subs = driver.execute_script("return Array.from(document.querySelectorAll('#runs tr[data-run] td:nth-child(8)')).map(t => t.textContent);")
+    check("the submitter filter keeps olga's runs", subs and all(x == "olga" for x in subs), subs[:5])
+    times = driver.find_elements(By.CSS_SELECTOR, "#runs time")
+    check("times are local (Europe/Berlin here) with the zone, UTC on hover", times and
+          times[0].get_attribute("title").endswith(" UTC") and
+          re.match(r"\d{4}-\d\d-\d\d \d\d:\d\d:\d\d (CET|CEST|GMT\+[12])$", times[0].text) and
+          times[0].text[:19] != times[0].get_attribute("title")[:19],
+          (times[0].text, times[0].get_attribute("title")) if times else None)
+    durations = driver.execute_script("return Array.from(document.querySelectorAll('#runs tr[data-run] td:nth-child(10)')).map(t => t.textContent);")
+    check("the runs show their duration", any(re.search(r"\d s$|min", d) for d in durations), durations[:5])
+    go("#/runs")
+    wait(lambda: page_rows() or None, what="runs table")
+    for w in (1400, 1024):
+        shot_at("runs", w)
+    header_text = driver.find_element(By.ID, "session-text").text
+    check("the header shows the user and the role", "olga" in header_text and "operator" in header_text, header_text)
+
+    # 7d. Downloads of every format the CLI writes, with their content types, parsed as a user would.
+    ctype, body = download("/api/runs/%s/trace.h5" % done_id, OPERATOR)
+    check("trace.h5 is HDF5", ctype == "application/x-hdf5" and body[:8] == b"\x89HDF\r\n\x1a\n", (ctype, body[:8]))
+    ctype_m, body_m = download("/api/runs/%s/trace.mat" % done_id, OPERATOR)
+    check("trace.mat is a MAT-file", ctype_m == "application/x-matlab-data" and body_m[:19] == b"MATLAB 5.0 MAT-file",
+          (ctype_m, body_m[:20]))
+    ctype_c, body_c = download("/api/runs/%s/trace.csv" % done_id, OPERATOR)
+    ctype_cc, body_cc = download("/api/compare.csv?batch_id=%s" % batch, OPERATOR)
+    ctype_cj, body_cj = download("/api/compare.json?batch_id=%s" % batch, OPERATOR)
+    check("comparison downloads have their types", ctype_cc.startswith("text/csv") and
+          ctype_cj.startswith("application/json"), (ctype_cc, ctype_cj))
+    try:
+        import io
+        import h5py
+        import pandas
+        import scipy.io
+        with h5py.File(io.BytesIO(body), "r") as h:
+            n = h["channels/i_A"].shape[0]
+            check("the HDF5 file holds the trace with units", n > 100 and h["channels/i_A"].attrs["units"] in
+                  (b"A", "A") and int(h.attrs["run_id"]) == int(done_id), (n, dict(h.attrs)))
+        mat = scipy.io.loadmat(io.BytesIO(body_m), squeeze_me=True, struct_as_record=False)["vbrun"]
+        check("the MAT file loads with scipy (same samples as the HDF5)", len(mat.channels.i_A) == n,
+              len(mat.channels.i_A))
+        csv_trace = pandas.read_csv(io.BytesIO(body_c))
+        check("trace.csv parses with pandas (same samples)", len(csv_trace) == n and "i_A" in csv_trace.columns,
+              (len(csv_trace), list(csv_trace.columns)))
+        cmp_csv = pandas.read_csv(io.BytesIO(body_cc))
+        check("compare.csv parses with pandas: one row per law", len(cmp_csv) == 4 and "rmse" in cmp_csv.columns,
+              cmp_csv.columns.tolist())
+        check("compare.json parses: one row per law", len(json.loads(body_cj)["rows"]) == 4, body_cj[:200])
+        ctype_r, body_r = download("/api/batches/%s/report.html" % batch, OPERATOR)
+        check("the batch's HTML report is the CLI's page", ctype_r.startswith("text/html") and
+              b"<!doctype html>" in body_r[:200].lower() and b"compare-current-controllers" in body_r and
+              all(("run %s:" % r["id"]).encode() in body_r for r in runs), (ctype_r, body_r[:200]))
+    except ImportError as e:
+        check("python3-h5py, python3-scipy and python3-pandas (scripts/setup.sh) are installed", False, e)
+    links = [a.get_attribute("href") or "" for a in driver.find_elements(By.CSS_SELECTOR, "a")]
+
+    # 7e. Every page fits 1024 px: no element wider than the viewport (tables wrap); screenshots at both widths.
+    for page, name in (("#/", "lab"), ("#/runs", None), ("#/nights", "nights"), ("#/submit", None),
+                       ("#/run/" + done_id, None), ("#/compare?batch=%s" % batch, None), ("#/diagnosis", None)):
+        go(page)
+        time.sleep(1.2)
+        for w in (1400, 1024):
+            wide = overflowing(w)
+            check("%s: no element wider than the viewport at %d px" % (page, w), not wide, wide)
+        if name:
+            shot_at(name, 1400)
+            shot_at(name, 1024)
+    go("#/nights")
+    nxt = wait(lambda: driver.find_element(By.ID, "next-night").text or None, what="next night")
+    check("the Nights page shows the next night's time", nxt and nxt.startswith("Next night: ") and
+          re.search(r"\d\d:\d\d:\d\d", nxt), nxt)
+    driver.set_window_size(1400, 900)
+
+    # 7f. Dark theme (prefers-color-scheme: dark emulated through CDP): dark background, light text, charts drawn.
+    driver.execute_cdp_cmd("Emulation.setEmulatedMedia", {"features": [{"name": "prefers-color-scheme", "value": "dark"}]})
+    go("#/run/" + done_id)
+    wait(lambda: len(driver.find_elements(By.CSS_SELECTOR, ".trace-chart canvas")) >= 2 or None, what="dark charts")
+    bg, fg = driver.execute_script("const s = getComputedStyle(document.body); return [s.backgroundColor, s.color];")
+    lum = lambda c: sum(int(x) for x in re.findall(r"\d+", c)[:3])
+    check("the dark theme is dark with light text", lum(bg) < 150 and lum(fg) > 500, (bg, fg))
+    driver.set_window_size(1400, 900)
+    driver.execute_script("document.querySelector('#traces').scrollIntoView();")
+    time.sleep(0.5)
+    driver.save_screenshot(os.path.join(shots, "web-dark-1400.png"))
+    driver.execute_script("window.scrollTo(0, 0);")
+    go("#/runs")
+    wait(lambda: page_rows() or None, what="dark runs")
+    shot_at("dark-runs", 1400)
+    driver.execute_cdp_cmd("Emulation.setEmulatedMedia", {"features": [{"name": "prefers-color-scheme", "value": "light"}]})
+    driver.set_window_size(1400, 900)
+    # An operator cancels its own runs only: oscar's running run shows no Cancel to olga; olga's own does.
+    theirs = api("POST", "/api/runs", OPERATOR2, {"spec": dict(spec, name="web-oscars", duration_s=30.0)})["run_ids"][0]
+    mine = api("POST", "/api/runs", OPERATOR, {"spec": dict(spec, name="web-olgas", duration_s=30.0)})["run_ids"][0]
+    go("#/")
+    wait(lambda: len(driver.find_elements(By.CSS_SELECTOR, "#queue tr[data-run='%s'], #queue tr[data-run='%s']"
+                                          % (theirs, mine))) == 2 or None, what="both runs in the queue")
+    check("an operator sees Cancel on its own run only",
+          not driver.find_elements(By.CSS_SELECTOR, "#queue tr[data-run='%s'] button.cancel" % theirs) and
+          driver.find_elements(By.CSS_SELECTOR, "#queue tr[data-run='%s'] button.cancel" % mine),
+          driver.find_element(By.ID, "queue").text[:400])
+    api("POST", "/api/runs/%s/cancel" % theirs, OPERATOR2, {})
+    api("POST", "/api/runs/%s/cancel" % mine, OPERATOR, {})
+    errors = console_errors()
+    check("no console error on the lists, downloads and themes", not errors, errors)
+
     # 8. A viewer follows the lab but cannot submit: the server's PERMISSION_DENIED shows on the page.
     driver.find_element(By.ID, "logout").click()
     driver.find_element(By.ID, "token").send_keys(VIEWER)
     driver.find_element(By.ID, "login-button").click()
     wait(lambda: driver.find_elements(By.CSS_SELECTOR, "#session:not([hidden])") or None, what="viewer session")
-    before = len(api("GET", "/api/runs", VIEWER).get("runs", []))
+    who = wait(lambda: "vic" in driver.find_element(By.ID, "session-text").text and
+               driver.find_element(By.ID, "session-text").text, what="viewer in the header")
+    check("the header shows the viewer and the role", bool(who) and "viewer" in who, who)
+    # An operator's run running: the viewer sees it in the queue and on its page, without Cancel or Re-run.
+    running = api("POST", "/api/runs", OPERATOR, {"spec": dict(spec, name="web-viewer-sees", duration_s=30.0)})["run_ids"][0]
+    go("#/")
+    wait(lambda: driver.find_elements(By.CSS_SELECTOR, "#queue tr[data-run='%s']" % running) or None, what="queue (viewer)")
+    check("a viewer sees no Cancel in the queue", not driver.find_elements(By.CSS_SELECTOR, "#queue button.cancel"),
+          driver.find_element(By.ID, "queue").text[:300])
+    nav = [a.text for a in driver.find_elements(By.CSS_SELECTOR, "#nav a") if a.is_displayed()]
+    check("a viewer's navigation has no Submit", "Submit" not in nav, nav)
+    go("#/run/%s" % running)
+    wait(lambda: driver.find_elements(By.CSS_SELECTOR, "#traces .live-count") or None, what="run page (viewer)")
+    check("a viewer sees no Cancel or Re-run on a run", not driver.find_elements(By.CSS_SELECTOR, "#cancel, #rerun"),
+          driver.find_element(By.CSS_SELECTOR, "#main .actions").text)
     go("#/submit")
     wait(lambda: driver.find_elements(By.ID, "spec") or None, what="spec editor (viewer)")
-    driver.find_element(By.ID, "submit").click()
-    refused = wait(lambda: "PERMISSION_DENIED" in driver.find_element(By.ID, "submit-result").text, what="refusal")
-    check("a viewer cannot submit", bool(refused), driver.find_element(By.ID, "submit-result").text)
-    check("nothing was queued for the viewer", len(api("GET", "/api/runs", VIEWER).get("runs", [])) == before)
-    # The refused request is logged by chromium as a failed resource (403); nothing else may be.
-    errors = console_errors(allowed=(r"/api/runs - Failed to load resource: the server responded with a status of 403",))
-    check("no other console error as a viewer", not errors, errors)
+    button = driver.find_element(By.ID, "submit")
+    check("a viewer's Submit is disabled with the reason", not button.is_enabled() and "operator role" in
+          (button.get_attribute("title") or "") and driver.find_elements(By.ID, "role-notice"), button.get_attribute("title"))
+    imp = driver.find_elements(By.ID, "import-button")
+    check("a viewer's Import is disabled with the reason", imp and not imp[0].is_enabled() and
+          "operator role" in (imp[0].get_attribute("title") or ""), imp[0].get_attribute("title") if imp else None)
+    before = len(api("GET", "/api/runs?page_size=1000", VIEWER).get("runs", []))
+    try:  # the service refuses the viewer whatever the page shows
+        api("POST", "/api/runs", VIEWER, {"spec": spec})
+        check("the service refuses a viewer's submission", False, "accepted")
+    except urllib.error.HTTPError as e:
+        check("the service refuses a viewer's submission", e.code == 403, e.code)
+    check("nothing was queued for the viewer", len(api("GET", "/api/runs?page_size=1000", VIEWER).get("runs", [])) == before)
+    errors = console_errors()
+    check("no console error as a viewer", not errors, errors)
+
+    # 9. The server goes away: a "disconnected — retrying" banner over the stale page, gone when it is back.
+    go("#/")
+    wait(lambda: driver.find_elements(By.CSS_SELECTOR, "#benches tr") or None, what="lab before the outage")
+    api("POST", "/api/runs/%s/cancel" % running, OPERATOR, {})
+    web_port = int(base.rsplit(":", 1)[1])
+    proc.terminate()
+    proc.wait(timeout=20)
+    banner = wait(lambda: driver.find_element(By.ID, "disconnected").is_displayed() and
+                  driver.find_element(By.ID, "disconnected").text, what="disconnected banner")
+    check("a banner says the server is gone", bool(banner) and "Disconnected" in banner and "retrying" in banner, banner)
+    check("no 'Failed to fetch' over the page", "Failed to fetch" not in driver.find_element(By.ID, "flash").text)
+    shot_at("disconnected", 1024)
+    config["web"]["listen_address"] = "127.0.0.1:%d" % web_port
+    config["nights"]["cron"] = "0 2 * * *"
+    with open(os.path.join(work, "server.json"), "w") as f:
+        json.dump(config, f)
+    proc = subprocess.Popen([server_bin, "--config", os.path.join(work, "server.json")], stderr=log,
+                            stdout=subprocess.DEVNULL)
+    gone = wait(lambda: not driver.find_element(By.ID, "disconnected").is_displayed() or None, timeout=30,
+                what="banner cleared")
+    check("the banner clears when the server is back", bool(gone))
+    console_errors()  # the outage's failed requests are expected
 except SystemExit:
     raise
 except Exception as e:  # noqa: BLE001

@@ -4,7 +4,9 @@
 #include <gtest/gtest.h>
 #include <httplib.h>
 
+#include <algorithm>
 #include <chrono>
+#include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <sstream>
@@ -572,6 +574,98 @@ TEST_F(WebGatewayTest, ListsCheckTheirParametersAndPassTheRestToTheService) {
   auto other_batch = http_->Get("/api/runs?batch_id=2", Bearer(kViewerToken));
   ASSERT_TRUE(other_batch);
   EXPECT_EQ(other_batch->body, "{}");
+}
+
+// Issue 28: who is signed in, the downloads of every format the CLI writes (a missing value an empty CSV field,
+// never "nan" or "null"), the import from the page with the dataset reader's field-named errors.
+TEST_F(WebGatewayTest, SessionDownloadsAndImport) {
+  auto who = http_->Get("/api/session", Bearer(kViewerToken));
+  ASSERT_TRUE(who);
+  ASSERT_EQ(who->status, 200) << who->body;
+  EXPECT_EQ(Json::parse(who->body), (Json{{"user", "viewer"}, {"role", "viewer"}}));
+  who = http_->Get("/api/session", Bearer(kOperatorToken));
+  ASSERT_TRUE(who);
+  EXPECT_EQ(Json::parse(who->body)["role"], "operator");
+  auto stranger = http_->Get("/api/session", Bearer("not-a-token"));
+  ASSERT_TRUE(stranger);
+  EXPECT_EQ(stranger->status, 401) << stranger->body;
+
+  // An open-loop run has no reference: its ref column is NaN in the store.
+  Json spec = Json::parse(SpecFile("static-map.json"));
+  spec.erase("sweep");
+  spec.erase("variants");
+  spec["duration_s"] = 0.05;
+  spec["metric_window"] = {{"start_s", 0.0}, {"end_s", 0.05}};
+  const Json sub = Submit(spec.dump());
+  const std::string id = sub["run_ids"][0];
+  ASSERT_EQ(WaitEnded(id)["run"]["status"], "DONE");
+  auto csv = http_->Get("/api/runs/" + id + "/trace.csv", Bearer(kViewerToken));
+  ASSERT_TRUE(csv);
+  ASSERT_EQ(csv->status, 200);
+  EXPECT_EQ(csv->body.find("nan"), std::string::npos);
+  EXPECT_EQ(csv->body.find("null"), std::string::npos);
+  std::istringstream lines(csv->body);
+  std::string header, row;
+  std::getline(lines, header);
+  std::getline(lines, row);
+  std::vector<std::string> names, cells;
+  for (std::istringstream h(header); std::getline(h, names.emplace_back(), ',');) {
+  }
+  for (std::istringstream r(row); std::getline(r, cells.emplace_back(), ',');) {
+  }
+  const size_t ref = std::find(names.begin(), names.end(), "ref") - names.begin();
+  ASSERT_LT(ref, names.size()) << header;
+  EXPECT_EQ(cells.at(ref), "") << "no reference: an empty field\n" << header << "\n" << row;
+
+  auto h5 = http_->Get("/api/runs/" + id + "/trace.h5", Bearer(kViewerToken));
+  ASSERT_TRUE(h5);
+  ASSERT_EQ(h5->status, 200) << h5->body;
+  EXPECT_EQ(h5->get_header_value("Content-Type"), "application/x-hdf5");
+  EXPECT_EQ(h5->body.substr(0, 8), std::string("\x89HDF\r\n\x1a\n", 8));
+  auto mat = http_->Get("/api/runs/" + id + "/trace.mat", Bearer(kViewerToken));
+  ASSERT_TRUE(mat);
+  ASSERT_EQ(mat->status, 200) << mat->body;
+  EXPECT_EQ(mat->body.rfind("MATLAB 5.0 MAT-file", 0), 0u);
+  auto missing = http_->Get("/api/runs/999999/trace.h5", Bearer(kViewerToken));
+  ASSERT_TRUE(missing);
+  EXPECT_EQ(missing->status, 404) << missing->body;
+  auto cmp = http_->Get("/api/compare.csv?runs=" + id, Bearer(kViewerToken));
+  ASSERT_TRUE(cmp);
+  ASSERT_EQ(cmp->status, 200) << cmp->body;
+  EXPECT_EQ(cmp->body.rfind("rank,name,controller,runs,failed,pareto", 0), 0u) << cmp->body;
+  EXPECT_EQ(cmp->body.find("nan"), std::string::npos) << cmp->body;
+  auto report = http_->Get("/api/batches/" + std::string(sub["batch_id"]) + "/report.html", Bearer(kViewerToken));
+  ASSERT_TRUE(report);
+  ASSERT_EQ(report->status, 200) << report->body;
+  EXPECT_NE(report->body.find("run " + id + ":"), std::string::npos);
+
+  // Import: field-named errors of the gateway and of the dataset reader, then the service's role check.
+  auto post = [&](const Json& body, const char* token) {
+    return http_->Post("/api/import", Bearer(token), body.dump(), "application/json");
+  };
+  auto no_manifest = post({{"dataset", "d1"}, {"files", {{"a.csv", "t_s,gate,i_A\n"}}}}, kOperatorToken);
+  ASSERT_TRUE(no_manifest);
+  EXPECT_EQ(no_manifest->status, 400);
+  EXPECT_NE(no_manifest->body.find("files: no manifest.json"), std::string::npos) << no_manifest->body;
+  auto escape = post({{"dataset", "d1"}, {"files", {{"../x.csv", ""}}}}, kOperatorToken);
+  ASSERT_TRUE(escape);
+  EXPECT_EQ(escape->status, 400);
+  EXPECT_NE(escape->body.find("files['../x.csv']"), std::string::npos) << escape->body;
+  auto bad_manifest = post({{"dataset", "d1"}, {"files", {{"manifest.json", R"({"format": "valve-runs/1"})"}}}}, kOperatorToken);
+  ASSERT_TRUE(bad_manifest);
+  EXPECT_EQ(bad_manifest->status, 400);
+  EXPECT_NE(bad_manifest->body.find("d1/manifest.json"), std::string::npos) << bad_manifest->body;
+  const std::string p07 = std::string(VB_SHARED_DIR) + "/gapbench/practice/p07";
+  if (!std::filesystem::exists(p07 + "/manifest.json")) GTEST_SKIP() << "no " << p07;
+  Json files = Json::object();
+  for (const auto& e : std::filesystem::directory_iterator(p07)) files[e.path().filename().string()] = ReadFile(e.path());
+  auto viewer = post({{"dataset", "p07"}, {"files", files}}, kViewerToken);
+  ASSERT_TRUE(viewer);
+  EXPECT_EQ(viewer->status, 403) << viewer->body;
+  auto imported = post({{"dataset", "p07"}, {"files", files}}, kOperatorToken);
+  ASSERT_TRUE(imported);
+  ASSERT_EQ(imported->status, 201) << imported->body;
+  EXPECT_EQ(Json::parse(imported->body)["run_ids"].size(), 12u);
 }
 
 TEST_F(WebGatewayTest, QueueListsRunningAndQueuedRunsInClaimOrder) {

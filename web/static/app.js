@@ -27,10 +27,8 @@ function fmt(v, digits) {
   if (Number.isInteger(x) && Math.abs(x) < 1e9) return String(x);
   return String(parseFloat(x.toPrecision(digits || 4)));
 }
-function when(unix_s) {
-  if (!unix_s) return '–';
-  return new Date(unix_s * 1000).toISOString().replace('T', ' ').replace(/\.\d+Z$/, ' UTC');
-}
+// Local time with the zone, UTC on hover (lists.js timeCell).
+function when(unix_s) { return timeCell(unix_s); }
 function duration(s) {
   if (s === null || s === undefined || !isFinite(s)) return '–';
   if (s < 60) return s.toFixed(1) + ' s';
@@ -54,7 +52,12 @@ async function api(method, path, body) {
     opts.headers['Content-Type'] = 'application/json';
     opts.body = JSON.stringify(body);
   }
-  const res = await fetch(path, opts);
+  let res;
+  try { res = await fetch(path, opts); } catch (e) {
+    setConnected(false, e.message);  // the server went away: a banner, not "TypeError: Failed to fetch"
+    throw new ApiError(0, 'UNAVAILABLE', 'the server does not answer (' + e.message + ')');
+  }
+  setConnected(true);
   const text = await res.text();
   let data = null;
   try { data = text ? JSON.parse(text) : null; } catch (e) { data = null; }
@@ -74,6 +77,7 @@ function flash(message, ok) {
 }
 function errorText(e) { return e instanceof ApiError ? e.code + ': ' + e.message : String(e); }
 function showError(e, where) {
+  if (e instanceof ApiError && e.status === 0 && !where) return;  // the disconnected banner says it
   const text = errorText(e);
   if (where) where.replaceChildren(el('p', {class: 'error', text}));
   else flash(text);
@@ -90,12 +94,13 @@ async function login(t) {
     flash(errorText(e));
     return false;
   }
+  await loadSession();
   showLoggedIn();
   flash('');
   return true;
 }
 function showLoggedIn() { $('#login').hidden = true; $('#session').hidden = false; }
-function showLoggedOut() { $('#login').hidden = false; $('#session').hidden = true; }
+function showLoggedOut() { $('#login').hidden = false; $('#session').hidden = true; me = null; document.body.dataset.role = ''; }
 
 // ---- charts (dygraphs, Debian's libjs-dygraphs, embedded in the server)
 // The gate's axis: 0 and 1, nothing between.
@@ -108,7 +113,7 @@ function chart(div, rows, labels, opts) {
   const g = new Dygraph(div, rows.length ? rows : [[0].concat(labels.slice(1).map(() => null))], Object.assign({
     labels, legend: 'always', labelsSeparateLines: false, connectSeparatedPoints: false,
     xlabel: 't [s]', animatedZooms: false, labelsKMB: false, digitsAfterDecimal: 4,
-  }, opts || {}));
+  }, chartTheme(), opts || {}));
   cleanups.push(() => g.destroy());
   return g;
 }
@@ -140,7 +145,7 @@ const routes = [
 function route() {
   for (const c of cleanups) { try { c(); } catch (e) { /* already gone */ } }
   cleanups = [];
-  flash('');
+  if (Date.now() > keepFlashUntil) flash('');  // a result to show across re-renders (cancel) stays a while
   const hash = location.hash.replace(/^#/, '') || '/';
   const [path, query] = hash.split('?');
   const params = new URLSearchParams(query || '');
@@ -231,149 +236,12 @@ function liveView(runId, box, onEnd) {
   cleanups.push(() => { es.close(); clearInterval(timer); });
 }
 
-async function cancelRun(id) {
-  try {
-    const r = await api('POST', '/api/runs/' + id + '/cancel', {reason: 'cancelled from the web dashboard'});
-    flash('run ' + id + ': ' + r.status, true);
-  } catch (e) { showError(e); }
-}
 async function rerun(id) {
   try {
     const r = await api('POST', '/api/runs/' + id + '/rerun');
     flash('re-run of run ' + id + ' queued as run ' + r.run_ids.join(', ') + ' (batch ' + r.batch_id + ')', true);
     location.hash = '#/run/' + r.run_ids[0];
   } catch (e) { showError(e); }
-}
-
-// ---- Lab: benches, queue, live runs
-// The interlocks beyond the current limit (0 or absent = off; docs/server.md "safety").
-function hz(v) {
-  if (!v) return '–';
-  return v >= 1e6 ? fmt(v / 1e6) + ' MHz' : v >= 1e3 ? fmt(v / 1e3) + ' kHz' : fmt(v) + ' Hz';
-}
-function interlocks(b) {
-  const out = [];
-  if (b.max_duty !== undefined && b.max_duty < 1) out.push('duty ≤ ' + fmt(b.max_duty));
-  if (b.max_on_time_s) out.push('on ≤ ' + fmt(b.max_on_time_s) + ' s');
-  if (b.max_coil_temp_C) out.push('coil ≤ ' + fmt(b.max_coil_temp_C) + ' °C');
-  return out.join(', ') || '–';
-}
-const MAX_LIVE = 4;
-function pageLab(main) {
-  const benches = el('div', {class: 'scroll'}), queue = el('div', {class: 'scroll'}), live = el('div');
-  main.replaceChildren(el('h1', {text: 'Lab'}),
-    el('section', {id: 'benches'}, el('h2', {text: 'Benches'}), benches),
-    el('section', {id: 'queue'}, el('h2', {text: 'Queue'}), queue),
-    el('section', {id: 'live'}, el('h2', {text: 'Running now'}), live));
-  const watching = new Map();
-  every(1500, async () => {
-    const [b, q] = await Promise.all([api('GET', '/api/benches'), api('GET', '/api/queue')]);
-    const runName = new Map(q.running.map((r) => [String(r.run.id), r.run.name]));
-    benches.replaceChildren(el('table', {},
-      el('tr', {}, ['bench', 'kind', 'model', 'driver', 'state', 'max supply [V]', 'trips at [A]', 'interlocks',
-        'max carrier / sample / control rate', 'position'].map((h) => el('th', {text: h}))),
-      (b.benches || []).map((x) => el('tr', {},
-        el('td', {text: x.name}), el('td', {text: x.kind}), el('td', {text: x.model || '–'}), el('td', {text: x.driver}),
-        el('td', {}, x.busy ? ['running ', runLink(x.current_run_id), ' ', runName.get(String(x.current_run_id)) || '']
-          : x.fault ? el('span', {class: 'status-FAILED', title: x.fault, text: 'faulted: ' + x.fault.slice(0, 80)})
-            : 'idle'),
-        el('td', {class: 'num', text: fmt(x.max_supply_V)}), el('td', {class: 'num', text: fmt(x.max_current_A)}),
-        el('td', {text: interlocks(x)}),
-        el('td', {text: [x.max_carrier_Hz, x.max_sample_rate_Hz, x.max_control_rate_Hz].map(hz).join(' / ')}),
-        el('td', {text: x.measures_position ? 'measured' : 'none'})))));
-    const rows = [];
-    for (const r of q.running) rows.push(['running', r.run, duration(r.eta_s)]);
-    for (const r of q.queued) {
-      rows.push([String(r.position), r.run, r.eta_s == null ? 'after ' + (r.position - 1 + q.running.length) + ' run(s)'
-                                                            : duration(r.eta_s)]);
-    }
-    queue.replaceChildren(rows.length === 0 ? el('p', {class: 'muted', text: 'Nothing queued or running.'}) :
-      el('table', {},
-        el('tr', {}, ['position', 'run', 'name', 'status', 'progress', 'ETA', 'bench', 'priority', 'submitter', 'submitted', '']
-          .map((h) => el('th', {text: h}))),
-        rows.map(([p, r, eta]) => el('tr', {'data-run': r.id},
-          el('td', {text: p}), el('td', {}, runLink(r.id)), el('td', {text: r.name}), el('td', {}, statusCell(r.status)),
-          el('td', {class: 'num', text: Math.round(100 * (r.progress || 0)) + ' %'}), el('td', {text: eta}),
-          el('td', {text: r.bench || 'any'}), el('td', {class: 'num', text: String(r.priority || 0)}),
-          el('td', {text: r.submitter}), el('td', {text: when(r.submitted_unix_s)}),
-          el('td', {}, el('button', {class: 'danger cancel', onclick: () => cancelRun(r.id), text: 'Cancel'}))))));
-    const ids = new Set(q.running.map((r) => String(r.run.id)));
-    for (const r of q.running) {
-      const id = String(r.run.id);
-      if (watching.has(id)) continue;
-      // A browser keeps about 6 connections per server over HTTP/1.1, and each live view holds one: at most
-      // MAX_LIVE here, the rest are a click away (their run page streams them).
-      const open = Array.from(watching.values()).filter((b) => !b.dataset.ended).length;
-      if (open >= MAX_LIVE) {
-        if (!live.querySelector('p.more')) live.append(el('p', {class: 'muted more', text: 'More runs are running: open them from the queue to watch them live.'}));
-        continue;
-      }
-      const box = el('div', {class: 'live-run', 'data-run': id},
-        el('h2', {}, runLink(id, 'Run ' + id), ' ', r.run.name, ' on ', r.run.bench || '?'));
-      live.append(box);
-      watching.set(id, box);
-      liveView(id, box);
-    }
-    for (const [id, box] of watching) {
-      if (ids.has(id) || box.dataset.ended) continue;
-      box.dataset.ended = '1';
-      box.append(el('p', {class: 'muted', text: 'finished: see the run page'}));
-      setTimeout(() => { box.remove(); watching.delete(id); }, 15000);
-    }
-    if (watching.size === 0 && !live.querySelector('p.muted.none'))
-      live.replaceChildren(el('p', {class: 'muted none', text: 'No run is running.'}));
-    else if (watching.size > 0) { const p = live.querySelector('p.none'); if (p) p.remove(); }
-  });
-}
-
-// ---- Runs: a filtered list, selection for comparison
-async function pageRuns(main, m, params) {
-  const batch = params.get('batch') || '', status = params.get('status') || '', tag = params.get('tag') || '';
-  const name = params.get('name') || '';  // a suite case (RunKey.name), e.g. from the Nights page
-  const form = el('form', {class: 'actions', onsubmit: (ev) => {
-    ev.preventDefault();
-    const q = new URLSearchParams();
-    for (const k of ['batch', 'status', 'tag', 'name']) { const v = $('#f-' + k).value.trim(); if (v) q.set(k, v); }
-    location.hash = '#/runs?' + q.toString();
-  }},
-  'batch ', el('input', {id: 'f-batch', type: 'text', size: 6, value: batch}),
-  ' status ', el('select', {id: 'f-status'}, ['', 'QUEUED', 'RUNNING', 'DONE', 'FAILED', 'CANCELLED', 'INTERRUPTED']
-    .map((s) => el('option', {value: s, selected: s === status, text: s || 'any'}))),
-  ' tag ', el('input', {id: 'f-tag', type: 'text', size: 12, value: tag}),
-  ' case ', el('input', {id: 'f-name', type: 'text', size: 16, value: name}),
-  el('button', {type: 'submit', text: 'Filter'}));
-  const table = el('div', {class: 'scroll'});
-  const compare = el('button', {class: 'primary', id: 'compare-selected', text: 'Compare selected', onclick: () => {
-    const ids = Array.from(main.querySelectorAll('input.pick:checked')).map((c) => c.value);
-    if (ids.length) location.hash = '#/compare?runs=' + ids.join(',');
-  }});
-  main.replaceChildren(el('h1', {text: 'Runs'}), el('section', {}, form, el('div', {class: 'actions'}, compare,
-    batch ? el('a', {href: '#/compare?batch=' + batch, text: 'compare batch ' + batch}) : null), table));
-  const q = new URLSearchParams({page_size: '200'});
-  if (batch) q.set('batch_id', batch);
-  if (status) q.set('status', status);
-  if (tag) q.set('tag', tag);
-  try {
-    let data = await api('GET', '/api/runs?' + q.toString());
-    let runs = data.runs || [];
-    while (data.next_page_token && runs.length < 2000) {
-      q.set('page_token', data.next_page_token);
-      data = await api('GET', '/api/runs?' + q.toString());
-      runs = runs.concat(data.runs || []);
-    }
-    runs.reverse();  // newest first
-    if (name) runs = runs.filter((r) => (r.key || {}).name === name);
-    table.replaceChildren(runs.length === 0 ? el('p', {class: 'muted', text: 'No runs match.'}) : el('table', {id: 'runs'},
-      el('tr', {}, ['', 'run', 'batch', 'name', 'controller', 'status', 'bench', 'submitter', 'submitted', 'rmse', 'effort_l2']
-        .map((h) => el('th', {text: h}))),
-      runs.map((r) => el('tr', {},
-        el('td', {}, el('input', {type: 'checkbox', class: 'pick', value: r.id})),
-        el('td', {}, runLink(r.id)), el('td', {}, el('a', {href: '#/runs?batch=' + r.batch_id, text: r.batch_id})),
-        el('td', {text: r.name}), el('td', {text: r.controller}), el('td', {}, statusCell(r.status)),
-        el('td', {text: r.bench}), el('td', {text: r.submitter}), el('td', {text: when(r.submitted_unix_s)}),
-        el('td', {class: 'num', text: fmt((r.metrics || {}).rmse)}),
-        el('td', {class: 'num', text: fmt((r.metrics || {}).effort_l2)})))));
-  } catch (e) { showError(e, table); }
 }
 
 // ---- Run page: spec, conditions, history, metrics with units, traces with zoom, export links, live view
@@ -388,11 +256,13 @@ async function pageRun(main, m) {
   const r = data.run, units = data.metric_units || {}, cu = data.channel_units || {};
   const ended = !['QUEUED', 'RUNNING'].includes(r.status);
   const actions = el('div', {class: 'actions'},
-    ended ? null : el('button', {class: 'danger', id: 'cancel', onclick: () => cancelRun(id).then(() => route()), text: 'Cancel'}),
-    (r.tags || []).includes('imported')
+    ended || !canCancel(r) ? null : el('button', {class: 'danger', id: 'cancel', onclick: () => cancelRun(id, r.submitter).then((ok) => ok && route()), text: 'Cancel'}),
+    !canOperate() ? null : (r.tags || []).includes('imported')
       ? el('button', {id: 'rerun', disabled: true, title: 'an imported run is a measurement (benchctl import): there is no spec to run again', text: 'Re-run'})
       : el('button', {id: 'rerun', onclick: () => rerun(id), text: 'Re-run'}),
     ended ? el('a', {href: '/api/runs/' + id + '/trace.csv', id: 'export-csv', text: 'trace CSV'}) : null,
+    ended ? el('a', {href: '/api/runs/' + id + '/trace.h5', id: 'export-h5', text: 'HDF5'}) : null,
+    ended ? el('a', {href: '/api/runs/' + id + '/trace.mat', id: 'export-mat', text: 'MAT'}) : null,
     el('a', {href: '/api/runs/' + id, id: 'export-json', text: 'run JSON'}),
     el('a', {href: '#/compare?runs=' + id, text: 'compare'}),
     el('a', {href: '#/runs?batch=' + r.batch_id, text: 'batch ' + r.batch_id}));
@@ -404,8 +274,8 @@ async function pageRun(main, m) {
     ['conditions.supply_V', fmt(c.supply_V) + ' V'], ['conditions.supply_pressure_Pa', fmt(c.supply_pressure_Pa || 0) + ' Pa'],
     ['duration_s', fmt(r.spec && r.spec.duration_s) + ' s'], ['submitted', when(r.submitted_unix_s)],
     ['started', when(r.started_unix_s)], ['finished', when(r.finished_unix_s)]]) kv.append(el('div', {text: k}), el('div', {}, v));
-  const history = el('table', {}, el('tr', {}, ['time', 'status', 'reason'].map((h) => el('th', {text: h}))),
-    (r.history || []).map((h) => el('tr', {}, el('td', {text: when(h.at_unix_s)}), el('td', {}, statusCell(h.status)),
+  const history = el('table', {class: 'wide'}, el('tr', {}, ['time', 'status', 'reason'].map((h) => el('th', {text: h}))),
+    (r.history || []).map((h) => el('tr', {}, el('td', {}, when(h.at_unix_s)), el('td', {}, statusCell(h.status)),
       el('td', {text: h.reason || ''}))));
   const metricNames = Object.keys(r.metrics || {}).sort();
   const metrics = metricNames.length === 0 ? el('p', {class: 'muted', text: 'No metrics (yet).'}) :
@@ -415,7 +285,7 @@ async function pageRun(main, m) {
   main.replaceChildren(el('h1', {}, 'Run ' + id + ' ', statusCell(r.status)), actions,
     el('div', {class: 'grid2'},
       el('section', {}, el('h2', {text: 'Run'}), kv),
-      el('section', {}, el('h2', {text: 'History'}), el('div', {class: 'scroll'}, history),
+      el('section', {}, el('h2', {text: 'History'}), el('div', {class: 'fit'}, history),
         el('h2', {text: 'Metrics'}), el('div', {class: 'scroll'}, metrics))),
     traces,
     el('section', {}, el('h2', {text: 'Spec (exact, single run)'}), el('pre', {text: JSON.stringify(r.spec, null, 2)})));
@@ -476,70 +346,8 @@ async function traceCharts(id, box, cu) {
   VBCharts.linkTime(charts);
 }
 
-// ---- Submit: a spec as JSON; the server's validation answers (field-named errors)
-const EXAMPLE_SPEC = {
-  name: 'web-pi-current',
-  description: 'PI current control at 0.5 A on seed 000\'s valve, submitted from the web dashboard',
-  bench: {model: {preset: 'taghizadeh2009'}, driver: {kind: 'low_side_flyback'}},
-  conditions: {supply_V: 24.0, supply_pressure_Pa: 400000.0},
-  reference: {on_off_profile: {switching_value: 0.9, switching_time_s: 0.006, holding_value: 0.5}},
-  controller: {pi_current: {}},
-  duration_s: 0.1,
-  metric_window: {start_s: 0.02, end_s: 0.1},
-  recording: {rate_Hz: 50000.0},
-};
-function pageSubmit(main) {
-  const text = el('textarea', {id: 'spec', spellcheck: 'false'});
-  text.value = sessionStorage.getItem('valvebench.draft') || JSON.stringify(EXAMPLE_SPEC, null, 2);
-  const batch = el('input', {id: 'batch-name', type: 'text', size: 30, placeholder: 'batch name (default: the spec name)'});
-  const out = el('div', {id: 'submit-result'});
-  const submit = async (ev) => {
-    ev.preventDefault();
-    sessionStorage.setItem('valvebench.draft', text.value);
-    let spec;
-    try { spec = JSON.parse(text.value); } catch (e) {
-      out.replaceChildren(el('p', {class: 'error', text: 'spec: not JSON: ' + e.message})); return;
-    }
-    const body = {spec};
-    if (batch.value.trim()) body.batch_name = batch.value.trim();
-    try {
-      const r = await api('POST', '/api/runs', body);
-      out.replaceChildren(el('p', {class: 'ok'}, 'Queued batch ', el('a', {href: '#/runs?batch=' + r.batch_id, text: r.batch_id}),
-        ': runs ', r.run_ids.map((id, k) => [k ? ', ' : '', runLink(id)])));
-    } catch (e) { out.replaceChildren(el('p', {class: 'error', text: errorText(e)})); }
-  };
-  main.replaceChildren(el('h1', {text: 'Submit a spec'}),
-    el('section', {}, el('p', {class: 'muted'}, 'An experiment spec as protobuf JSON (docs/spec.md); variants, sweep ' +
-      'axes and repeats expand into a batch. The server validates it and names the field it refuses.'),
-    el('form', {onsubmit: submit}, text, el('div', {class: 'actions'}, batch,
-      el('button', {class: 'primary', id: 'submit', type: 'submit', text: 'Submit'}))), out));
-}
-
+// ---- Lab, Runs, Submit, Nights: web/static/lists.js
 // ---- Compare: web/static/compare.js
-
-// ---- Nights: regression history, verdicts, links to the night's runs
-async function pageNights(main) {
-  const box = el('div', {class: 'scroll'});
-  main.replaceChildren(el('h1', {text: 'Nightly regressions'}), el('section', {}, box));
-  try {
-    const n = await api('GET', '/api/nights?limit=60');
-    const nights = n.nights || [];
-    box.replaceChildren(nights.length === 0 ? el('p', {class: 'muted', text: 'No night has run yet (config "nights").'}) :
-      el('table', {id: 'nights'}, el('tr', {}, ['date', 'verdict', 'regressed', 'unchanged', 'improved', 'suite', 'baseline',
-        'started', 'finished', 'runs', 'regressed runs', 'summary'].map((h) => el('th', {text: h}))),
-      nights.map((x) => el('tr', {}, el('td', {text: x.date}), el('td', {}, el('span', {class: 'verdict-' + x.verdict, text: x.verdict})),
-        el('td', {class: 'num', text: String(x.regressed_count || 0)}), el('td', {class: 'num', text: String(x.unchanged || 0)}),
-        el('td', {class: 'num', text: String(x.improved || 0)}), el('td', {text: x.suite || ''}), el('td', {text: x.baseline || ''}),
-        el('td', {text: when(x.started_unix_s)}), el('td', {text: when(x.finished_unix_s)}),
-        el('td', {}, x.batch_id && x.batch_id !== '0' ? [el('a', {href: '#/runs?batch=' + x.batch_id, text: 'batch ' + x.batch_id}),
-          ' ', el('a', {href: '#/runs?batch=' + x.batch_id + '&status=FAILED', text: 'failed'}),
-          ' ', el('a', {href: '#/compare?batch=' + x.batch_id, text: 'compare'})] : '–'),
-        el('td', {class: 'regressed-cases'}, (x.regressed_cases || []).map((c, k) => [k ? ', ' : '',
-          el('a', {href: '#/runs?batch=' + x.batch_id + '&name=' + encodeURIComponent(c), text: c})])),
-        el('td', {class: 'wrap', text: x.summary || ''})))));
-  } catch (e) { showError(e, box); }
-}
-
 // ---- Diagnosis: web/static/diagnosis.js
 
 // ---- start
@@ -558,6 +366,7 @@ document.addEventListener('DOMContentLoaded', async () => {
     route();
   });
   window.addEventListener('hashchange', route);
+  startConnectionProbe();
   if (token() && !(await login(token()))) return;
   route();
 });

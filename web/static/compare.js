@@ -55,6 +55,7 @@ async function pageCompare(main, m, params) {
     cmp.common = commonCasePrefix(rows.map((r, k) => (keys[k] && keys[k].name) || r.name));
     cmp.names = rows.map((r, k) => compareCaseLabel(keys[k], r, cmp.common));
     cmp.keys = keys;
+    cmp.query = q;
     compareTables(body, cmp, palette);
   }
   const swept = cmp && ((cmp.display || {}).sweep_axes || []).length > 0;
@@ -119,7 +120,7 @@ async function recentBatches(body) {
           return el('tr', {}, el('td', {}, el('a', {href: '#/runs?batch=' + b.id, text: b.id})),
             el('td', {text: names.slice(0, 3).join(', ') + (names.length > 3 ? ' … (' + names.length + ')' : '')}),
             el('td', {class: 'num', text: String(b.runs)}), el('td', {class: 'num', text: String(b.done)}),
-            el('td', {text: when(b.last)}),
+            el('td', {}, when(b.last)),
             el('td', {}, el('a', {href: '#/compare?batch=' + b.id, class: 'compare-batch', text: 'compare'})));
         })));
   } catch (e) { showError(e, box); }
@@ -186,15 +187,11 @@ function compareTables(body, cmp, palette) {
     tableBox.replaceChildren(el('table', {id: 'comparison'}, head, body_));
   };
   draw();
-  const csv = el('button', {type: 'button', class: 'link', id: 'comparison-csv', text: 'CSV (SI units, every metric)', onclick: () => {
-    const head = ['rank', 'case', 'controller', 'runs', 'run_ids'].concat(axes.map((a) => a.field),
-      allCols.flatMap((k) => [k, k + '_spread']));
-    const lines = [head.join(',')].concat(rows.map((r, i) => [r.rank || '', JSON.stringify(names[i]), r.controller, r.runs || 0,
-      JSON.stringify((r.run_ids || []).join(' '))].concat(axes.map((a) => { const p = ((keys[i] || {}).sweep || []).find((x) => x.field === a.field); return p ? p.value : ''; }),
-      allCols.flatMap((k) => { const st = (r.metrics || {})[k]; return st && st.n > 0 ? [st.mean, st.spread || 0] : ['', '']; })).join(',')));
-    const a = el('a', {href: URL.createObjectURL(new Blob([lines.join('\n') + '\n'], {type: 'text/csv'})), download: 'comparison.csv'});
-    document.body.append(a); a.click(); a.remove();
-  }});
+  // Downloads by the CLI's own writers (experiment::ComparisonCsv/Json, SI units, every metric; a missing value
+  // is an empty CSV field / JSON null): what `benchctl compare --csv/--json` writes.
+  const csv = el('span', {class: 'downloads'}, 'download ',
+    el('a', {href: '/api/compare.csv?' + cmp.query, id: 'export-compare-csv', text: 'CSV'}), ' ',
+    el('a', {href: '/api/compare.json?' + cmp.query, id: 'export-compare-json', text: 'JSON'}));
   const sweepBox = el('div');
   body.append(sweepBox);
   body.append(el('section', {}, el('h2', {text: 'Metrics' + (cmp.common ? ': ' + cmp.common.slice(0, -1) : '')}),
