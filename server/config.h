@@ -9,7 +9,7 @@
 #include "runs/admit.h"
 #include "runs/bench_setup.h"
 #include "regress/compare.h"
-#include "server/auth.h"
+#include "service/auth.h"
 #include "valvebench/v1/config.pb.h"
 
 namespace vb::server {

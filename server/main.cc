@@ -27,8 +27,8 @@
 #include "server/lab.h"
 #include "server/nights.h"
 #include "server/retention.h"
-#include "server/service.h"
-#include "server/status_interceptor.h"
+#include "service/service.h"
+#include "service/status_interceptor.h"
 #include "db/open_store.h"
 #include "web/gateway.h"
 

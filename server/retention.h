@@ -11,7 +11,7 @@
 #include "db/store.h"
 #include "server/config.h"
 #include "server/stop_signal.h"
-#include "server/service.h"
+#include "service/service.h"
 
 namespace vb::server {
 

@@ -8,9 +8,9 @@
 #include "common/format.h"
 #include "proto/api_convert.h"
 #include "server/config.h"
-#include "server/grpc_status.h"
+#include "service/grpc_status.h"
 #include "server/retention.h"
-#include "server/service.h"
+#include "service/service.h"
 
 namespace vb::server {
 
