@@ -19,7 +19,7 @@
 #include "proto/api_convert.h"
 #include "runs/query.h"
 #include "service/grpc_status.h"
-#include "server/lab.h"
+#include "service/lab_benches.h"
 
 namespace vb::server {
 
