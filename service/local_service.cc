@@ -8,6 +8,7 @@
 #include <random>
 
 #include "db/open_store.h"
+#include "hw/emulated_bench.h"
 #include "runs/admit.h"
 #include "service/status_interceptor.h"
 
@@ -63,12 +64,19 @@ StatusOr<std::unique_ptr<LocalService>> LocalService::Start(LocalServiceOptions 
   return s;
 }
 
-std::string LocalService::Where() const {
-  return options_.store.empty() ? "in-memory store (--no-store)" : "local store " + db::DisplayLocation(options_.store);
+std::string LocalService::Describe(const std::string& store) {
+  return store.empty() ? "in-memory store (--no-store)" : "local store " + db::DisplayLocation(store);
 }
 
 Status LocalService::Init() {
-  if (options_.benches.empty()) options_.benches.push_back(runs::LocalEmulatorSetup());
+  if (options_.benches.empty()) {
+    runs::BenchSetup b = runs::LocalEmulatorSetup();
+    hw::EmulatedBenchOptions opts;  // what ListBenches shows of it: the default emulator's capabilities
+    opts.name = b.name;
+    b.caps = hw::EmulatedBench(opts).capabilities();
+    b.preset = "the spec's";
+    options_.benches.push_back(std::move(b));
+  }
   if (options_.realtime)
     for (auto& b : options_.benches) b.paced = true;
   if (options_.user.empty()) options_.user = DefaultUser();

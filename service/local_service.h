@@ -71,8 +71,9 @@ class LocalService {
   // A channel to this service (no network). Calls must carry `authorization: Bearer token()`.
   std::shared_ptr<grpc::Channel> InProcessChannel();
   const std::string& token() const { return token_; }
-  // For messages: "local store PATH" or "in-memory store (--no-store)".
-  std::string Where() const;
+  // For messages: "local store PATH" or "in-memory store (--no-store)" (a PostgreSQL URL without its password).
+  std::string Where() const { return Describe(options_.store); }
+  static std::string Describe(const std::string& store);
   // Whether runs outlive the service (false: the private temporary store).
   bool keeps_runs() const { return !options_.store.empty(); }
   // The summary (and trace, with keep_traces) of a run this service executed; nullopt otherwise.

@@ -78,6 +78,9 @@ class BenchServiceImpl final : public valvebench::v1::BenchService::Service {
   // service/prune_service.cc
   grpc::Status PruneRuns(grpc::ServerContext* ctx, const valvebench::v1::PruneRunsRequest* req,
                          valvebench::v1::PruneRunsResponse* resp) override;
+  // service/queue_service.cc
+  grpc::Status GetQueue(grpc::ServerContext* ctx, const valvebench::v1::GetQueueRequest* req,
+                        valvebench::v1::GetQueueResponse* resp) override;
 
   // Admits and queues a submission (runs::Admit, runs::Enqueue) and wakes the workers: what SubmitRun and
   // SubmitBatch do after authorising, and what the nights scheduler calls directly.
