@@ -15,6 +15,8 @@
 #include <memory>
 #include <thread>
 
+#include <unistd.h>
+
 #include "benchctl/cli_common.h"
 #include "export/run_file.h"
 
@@ -120,7 +122,10 @@ int CmdRun(Backend& backend, const RunOptions& o, const Output& out) {
   std::vector<std::optional<server::ExecutedRun>> executed;
   for (size_t k = 0; k < sub->run_ids.size(); ++k) {
     const std::int64_t id = sub->run_ids[k];
-    if (auto st = WaitFor(backend, id, !out.json && !out.csv); !st.ok())
+    // The bar: for people; a local run that ran in this process before draws it only on a terminal, so its
+    // output (stdout and stderr together, as scripts capture it) stays what it was.
+    const bool bar = !out.json && !out.csv && (!backend.executes_here() || ::isatty(2) != 0);
+    if (auto st = WaitFor(backend, id, bar); !st.ok())
       return Fail(st.WithContext("waiting for run " + std::to_string(id)));
     auto r = backend.GetRun(id);
     if (!r.ok()) return Fail(r.status());

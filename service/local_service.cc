@@ -93,6 +93,8 @@ Status LocalService::Init() {
     store_path_ = (dir / "runs.db").string();
   } else {
     store_path_ = options_.store;
+    if (options_.must_exist && !db::IsPostgresLocation(store_path_) && !std::filesystem::exists(store_path_))
+      return Status::FailedPrecondition("no local store at " + store_path_ + " (--db FILE or VALVEBENCH_DB)");
     if (!db::IsPostgresLocation(store_path_))
       if (const auto parent = std::filesystem::path(store_path_).parent_path(); !parent.empty()) {
         std::error_code ec;  // a first run on a fresh machine: ~/.local/share/valvebench/ may not exist yet

@@ -51,6 +51,9 @@ struct LocalServiceOptions {
   bool execute = true;
   // Keep every executed run's whole trace in memory (Executed()::trace), for --trace-csv/--plot.
   bool keep_traces = false;
+  // A SQLite store must exist already (an administrative command, e.g. prune, would otherwise create an empty
+  // one): FailedPrecondition "no local store at PATH" if it does not.
+  bool must_exist = false;
   // The user runs are submitted as (default $USER, else "local").
   std::string user;
 };
@@ -74,6 +77,8 @@ class LocalService {
   // For messages: "local store PATH" or "in-memory store (--no-store)" (a PostgreSQL URL without its password).
   std::string Where() const { return Describe(options_.store); }
   static std::string Describe(const std::string& store);
+  // What the service's connections open: the store given, or the private store's file.
+  const std::string& store_path() const { return store_path_; }
   // Whether runs outlive the service (false: the private temporary store).
   bool keeps_runs() const { return !options_.store.empty(); }
   // The summary (and trace, with keep_traces) of a run this service executed; nullopt otherwise.
