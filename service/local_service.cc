@@ -10,7 +10,7 @@
 #include "db/open_store.h"
 #include "hw/emulated_bench.h"
 #include "runs/admit.h"
-#include "service/status_interceptor.h"
+#include "service/hosting.h"
 
 namespace vb::server {
 
@@ -130,12 +130,7 @@ Status LocalService::Init() {
   }
   service_ = std::make_unique<BenchServiceImpl>(&settings_, pool_.get(), &registry_, &workers_);
   grpc::ServerBuilder builder;  // no listening port: InProcessChannel() only
-  builder.RegisterService(service_.get());
-  builder.SetMaxReceiveMessageSize(64 << 20);
-  builder.SetMaxSendMessageSize(64 << 20);
-  std::vector<std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface>> interceptors;
-  interceptors.push_back(std::make_unique<BadRequestInterceptorFactory>());
-  builder.experimental().SetInterceptorCreators(std::move(interceptors));
+  HostService(&builder, service_.get());
   server_ = builder.BuildAndStart();
   if (server_ == nullptr) return Status::Internal("the local service did not start");
 
@@ -164,9 +159,7 @@ LocalService::~LocalService() {
 }
 
 std::shared_ptr<grpc::Channel> LocalService::InProcessChannel() {
-  grpc::ChannelArguments args;
-  args.SetMaxReceiveMessageSize(64 << 20);
-  args.SetMaxSendMessageSize(64 << 20);
+  grpc::ChannelArguments args = InProcessChannelArguments();
   return server_->InProcessChannel(args);
 }
 
