@@ -112,6 +112,12 @@ StatusOr<std::vector<RunView>> Backend::Runs(std::int64_t batch, const std::vect
   }
   if (out.empty())
     return Status::NotFound(where_ + ": batch " + std::to_string(batch) + " not found");
+  // ListRuns leaves the spec out; reports show it (GetRun has it).
+  for (auto& v : out) {
+    auto r = c_->GetRun(v.id);
+    if (!r.ok()) return Named(r.status());
+    if (r->has_spec()) v.spec = r->spec();
+  }
   return out;
 }
 
