@@ -171,6 +171,7 @@ StatusOr<std::vector<RunView>> Backend::ListRuns(const RunFilter& filter, bool* 
   req.set_batch_id(filter.batch_id);
   req.set_tag(filter.tag);
   req.set_page_size(filter.limit);
+  req.set_order_by("submitted desc");  // newest first (ListRuns' default, said here)
   auto resp = c_->ListRuns(req);
   if (!resp.ok()) return Named(resp.status());
   *more = !resp->next_page_token().empty();

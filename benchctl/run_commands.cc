@@ -258,7 +258,6 @@ int CmdQueue(Backend& backend, const QueueOptions& o, const Output& out) {
   if (default_view && any_queued)
     std::printf("queued: position in claim order, ETA from the runs' durations over %d live bench%s\n", live,
                 live == 1 ? "" : "es");
-  if (!default_view) std::printf("newest first\n");
   const bool lab = std::any_of(rows.begin(), rows.end(), [](const QueueRow& q) { return !q.run.host.empty(); });
   std::printf("%6s %6s  %-11s %8s %5s %8s  %-16s %s%-20s %-10s %s\n", "id", "batch", "status", "progress", "pos", "ETA",
               "bench", lab ? "host         " : "", "controller", "submitter", "name");
