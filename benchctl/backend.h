@@ -1,8 +1,9 @@
-// Where benchctl's runs live, behind one interface: the local store with the run pipeline in process
-// (LocalBackend: runs/ Admit, Enqueue and a Worker on this thread), or a valvebench-server (RemoteBackend:
-// client/). Commands are written once against it and render its result types with their one renderer
-// (experiment::ComparisonTable/Csv/Json, RunView below); which backend a command gets is decided once, from
-// the options (--local, --server), never inside the command.
+// Where benchctl's runs live: a BenchService, reached with client::Client over a channel (issue 27). Remote: a
+// valvebench-server's network channel. Local (--local): a local service (service/local_service.h) that this
+// process starts over the local store and the embedded emulator, reached through its in-process channel. Both
+// are the same code from here on: commands are written once against Backend and render its result types with
+// their one renderer (experiment::ComparisonTable/Csv/Json, RunView below); which service a command talks to
+// is decided once, from the options (--local, --server), never inside the command.
 #pragma once
 
 #include <cstdint>
@@ -20,7 +21,7 @@
 #include "common/status.h"
 #include "experiment/compare.h"
 #include "experiment/spec.h"
-#include "benchctl/local_run.h"
+#include "service/local_service.h"
 #include "benchctl/run_view.h"
 
 namespace vb::benchctl {
@@ -35,61 +36,91 @@ struct RunFilter {
   int limit = 100;                  // 1..1000
 };
 
-// What `run` queued: the batch and its runs; a backend that executes in process (the local one) has run them
-// already and gives their summaries (and traces if asked), in run order.
+// What `run` queued: the batch and its runs.
 struct Submitted {
   std::int64_t batch_id = 0;
   std::vector<std::int64_t> run_ids;
-  std::vector<LocalRunResult> executed;
 };
 
-class Backend {
+// How a local service is started (ChooseBackend): whether it executes runs (run, compare SPEC, regress) or only
+// reads, cancels and imports (show, queue, watch, cancel, export, diagnose --runs, import: another benchctl
+// may be executing on the same store), and whether it keeps executed runs' whole traces (run --trace-csv).
+struct LocalUse {
+  bool execute = false;
+  bool keep_traces = false;
+};
+
+class Backend final {
  public:
-  virtual ~Backend() = default;
+  // A service reached through `client`; `local`: the local service it talks to (nullptr: a server at
+  // `where`, "server ADDR").
+  Backend(std::unique_ptr<client::Client> client, std::string where,
+          std::unique_ptr<server::LocalService> local = nullptr);
+  // A local service that could not start: every call returns `why`.
+  Backend(Status why, std::string where);
+  ~Backend();
+
   // For messages: "local store PATH" (or "in-memory store (--no-store)") or "server ADDR".
-  virtual std::string Where() const = 0;
+  std::string Where() const { return where_; }
   // Whether hardware bench classes ("hid", "u3") can be run here (the local emulator plays only emulated ones).
-  virtual bool serves_hardware() const = 0;
+  bool serves_hardware() const { return local_ == nullptr; }
+  // Whether runs are executed by this process (a local service): `run` waits for them, whatever --wait says.
+  bool executes_here() const { return local_ != nullptr; }
+  // Whether runs are kept after this process ends (false: a local service with --no-store).
+  bool keeps_runs() const { return local_ == nullptr || local_->keeps_runs(); }
+
   // Queues already expanded specs with their keys as one batch and waits until every run has ended;
   // progress on stderr. Returns the batch id.
-  virtual StatusOr<std::int64_t> RunBatch(const std::vector<experiment::ExperimentSpec>& specs,
-                                          const std::vector<RunKey>& keys, const std::string& batch_name,
-                                          const std::string& batch_json) = 0;
+  StatusOr<std::int64_t> RunBatch(const std::vector<experiment::ExperimentSpec>& specs, const std::vector<RunKey>& keys,
+                                  const std::string& batch_name, const std::string& batch_json);
   // The runs of a batch (batch != 0) or the listed runs, with their metrics, spec and times (no history).
-  virtual StatusOr<std::vector<RunView>> Runs(std::int64_t batch, const std::vector<std::int64_t>& run_ids) = 0;
+  StatusOr<std::vector<RunView>> Runs(std::int64_t batch, const std::vector<std::int64_t>& run_ids);
   // The comparison of those runs (repeats grouped by case).
-  virtual StatusOr<experiment::Comparison> Compare(std::int64_t batch, const std::vector<std::int64_t>& run_ids) = 0;
-  virtual StatusOr<Trace> GetTrace(std::int64_t run_id) = 0;
-  // The benches runs go to here, and the USB devices this backend's machine sees.
-  virtual StatusOr<valvebench::v1::ListBenchesResponse> Benches() = 0;
-
-  // Whether runs are kept after this process ends (false: the local backend with --no-store).
-  virtual bool keeps_runs() const = 0;
-  // Queues a spec's runs as one batch. The local backend executes them before it returns (realtime: paced
-  // to the wall clock; keep_traces: the traces in Submitted::executed); the server queues them.
-  virtual StatusOr<Submitted> Submit(const experiment::ExperimentSpec& spec, bool realtime, bool keep_traces) = 0;
+  StatusOr<experiment::Comparison> Compare(std::int64_t batch, const std::vector<std::int64_t>& run_ids);
+  StatusOr<Trace> GetTrace(std::int64_t run_id);
+  // The benches runs go to here, and the USB devices the service's machine sees.
+  StatusOr<valvebench::v1::ListBenchesResponse> Benches();
+  // Queues a spec's runs as one batch (realtime: paced to the wall clock).
+  StatusOr<Submitted> Submit(const experiment::ExperimentSpec& spec, bool realtime);
+  // What a local service executed of a run (summary with loop jitter, and the trace if kept); nullopt remotely.
+  std::optional<server::ExecutedRun> Executed(std::int64_t run_id) const;
   // One run with its spec and status history.
-  virtual StatusOr<RunView> GetRun(std::int64_t run_id) = 0;
-  // Runs matching the filter in id order, at most filter.limit; *more: more matched.
-  virtual StatusOr<std::vector<RunView>> ListRuns(const RunFilter& filter, bool* more) = 0;
+  StatusOr<RunView> GetRun(std::int64_t run_id);
+  // Runs matching the filter, at most filter.limit, in the service's order (newest first); *more: more matched.
+  // *total (optional): how many runs match (all pages; 0 when the service does not say).
+  StatusOr<std::vector<RunView>> ListRuns(const RunFilter& filter, bool* more, std::int64_t* total = nullptr);
+  // The running runs and the queue with positions and ETAs (GetQueue).
+  StatusOr<valvebench::v1::GetQueueResponse> Queue();
   // Asks the run to stop and returns it as it is then: a queued run is cancelled at once, a running one
-  // stops within a control period of whoever executes it (the server, or the benchctl running it locally).
-  virtual StatusOr<RunView> Cancel(std::int64_t run_id, const std::string& reason) = 0;
+  // stops within a control period of whoever executes it.
+  StatusOr<RunView> Cancel(std::int64_t run_id, const std::string& reason);
   // Calls on_event (id, status, progress, reason) on every change until the run has ended or on_event
   // returns false.
-  virtual Status Watch(std::int64_t run_id, const std::function<bool(const RunView&)>& on_event) = 0;
+  Status Watch(std::int64_t run_id, const std::function<bool(const RunView&)>& on_event);
   // Stores a measured dataset's runs (benchctl import).
-  virtual StatusOr<valvebench::v1::SubmitRunResponse> Import(const valvebench::v1::ImportRunsRequest& request) = 0;
+  StatusOr<valvebench::v1::SubmitRunResponse> Import(const valvebench::v1::ImportRunsRequest& request);
+
+ private:
+  // A local service's errors that name nothing of where (a run not found) name its store.
+  Status Named(Status st) const;
+
+  Status broken_;
+  std::string where_;
+  std::unique_ptr<server::LocalService> local_;  // declared before c_: destroyed after the client
+  std::unique_ptr<client::Client> c_;
 };
 
-// store_path "" (--no-store): an in-memory store that lives as long as the backend.
-std::unique_ptr<Backend> LocalBackend(std::string store_path);
-std::unique_ptr<Backend> RemoteBackend(std::unique_ptr<client::Client> client, std::string address);
+// A run as the API gives it, as commands see it.
+RunView FromProto(const valvebench::v1::Run& r);
 // The server's comparison (CompareRuns) as the experiment::Comparison every renderer takes.
 StatusOr<experiment::Comparison> RemoteComparison(client::Client& client, std::int64_t batch,
                                                   const std::vector<std::int64_t>& run_ids);
-// The one decision: a server address given (and not overridden by --local) means the remote backend.
+// The one decision: a server address given (and not overridden by --local) means that server; else a local
+// service over store_path ("" = --no-store: a private store that lives as long as the backend).
 std::unique_ptr<Backend> ChooseBackend(const std::string& server, const std::string& store_path,
-                                       const std::function<std::unique_ptr<client::Client>()>& make_client);
+                                       const std::function<std::unique_ptr<client::Client>()>& make_client,
+                                       LocalUse use = {});
+// Where local runs are recorded: $VALVEBENCH_DB, else ~/.local/share/valvebench/local.db, else ./valvebench-local.db.
+std::string DefaultLocalStorePath();
 
 }  // namespace vb::benchctl

@@ -5,7 +5,7 @@
 #include <nlohmann/json.hpp>
 
 #include "benchctl/cli_common.h"
-#include "db/pg_copy.h"
+#include "service/store_admin.h"
 
 namespace vb::benchctl {
 namespace {
@@ -45,7 +45,7 @@ DbCli::DbCli(CLI::App* app, bool* json, std::string* store_path) : json_(json), 
 int DbCli::Run() {
   if (info_->parsed()) {
     if (store_path_->empty()) return Fail(Status::InvalidArgument("--db: give the store (a file or postgresql://...)"));
-    auto info = db::ReadStoreInfo(*store_path_);
+    auto info = server::DescribeStore(*store_path_);
     if (!info.ok()) return Fail(info.status());
     if (*json_) {
       Json j;
@@ -73,7 +73,7 @@ int DbCli::Run() {
   }
   if (copy_->parsed()) {
     const auto t0 = std::chrono::steady_clock::now();
-    auto summary = db::CopySqliteToPostgres(from_, to_, {into_non_empty_});
+    auto summary = server::CopyStoreToPostgres(from_, to_, into_non_empty_);
     if (!summary.ok()) return Fail(summary.status());
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     if (*json_) {

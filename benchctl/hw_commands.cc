@@ -9,8 +9,6 @@
 #include <iostream>
 
 #include "benchctl/cli_common.h"
-#include "hw/emulated_bench.h"
-#include "hw/usb/list_attached.h"
 
 namespace vb::benchctl {
 
@@ -24,44 +22,10 @@ void PrintAttached(const valvebench::v1::ListBenchesResponse& r) {
   if (!r.attached_note().empty()) std::printf("  (%s)\n", r.attached_note().c_str());
 }
 
-}  // namespace
-
-valvebench::v1::ListBenchesResponse LocalBenches() {
-  valvebench::v1::ListBenchesResponse r;
-  {
-    hw::EmulatedBenchOptions opts;  // what `run --local` drives
-    opts.name = "local-emulator";
-    hw::EmulatedBench emu(opts);
-    const hw::Capabilities& c = emu.capabilities();
-    auto* b = r.add_benches();
-    b->set_name(opts.name);
-    b->set_kind(c.kind);
-    b->set_driver(c.driver);
-    b->set_model("the spec's");
-    b->set_max_supply_v(c.max_supply_V);
-    b->set_max_carrier_hz(c.max_carrier_Hz);
-    b->set_max_sample_rate_hz(c.max_sample_rate_Hz);
-    b->set_max_control_rate_hz(c.max_control_rate_Hz);
-    b->set_measures_position(c.measures_position);
-  }
-  const hw::AttachedDevices attached = hw::ListAttachedDevices();
-  for (const auto& d : attached.devices) {
-    auto* a = r.add_attached();
-    a->set_kind(d.kind);
-    a->set_vendor_id(d.vendor_id);
-    a->set_product_id(d.product_id);
-    a->set_serial(d.serial);
-    a->set_product(d.product);
-    a->set_path(d.path);
-  }
-  std::string note = attached.note;
-  for (const auto& err : attached.errors) note += (note.empty() ? "" : "; ") + err;
-  r.set_attached_note(note);
-  return r;
-}
-
 // A fault reason in the table: the table stays within 120 columns; --json has it whole.
 std::string Clip(const std::string& s, std::size_t n) { return s.size() <= n ? s : s.substr(0, n - 3) + "..."; }
+
+}  // namespace
 
 int CmdBenches(Backend& backend, bool json) {
   auto r = backend.Benches();

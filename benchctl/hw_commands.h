@@ -1,5 +1,5 @@
-// benchctl benches: the benches a backend offers and the USB devices its machine sees, one renderer for both
-// backends (the local one: the embedded emulator and this machine's devices; the remote one: the server's).
+// benchctl benches: the benches a service offers and the USB devices its machine sees (ListBenches), one renderer
+// whichever service answers (--local: the local service's emulator and this machine's devices).
 #pragma once
 
 #include "benchctl/backend.h"
@@ -7,9 +7,6 @@
 
 namespace vb::benchctl {
 
-// The local backend's answer: the embedded emulator `run --local` drives and the devices this machine sees.
-// No USB bus is a clean answer ("no USB bus on this machine"), not an error.
-valvebench::v1::ListBenchesResponse LocalBenches();
 // benches [--local]: the one rendering (a table, or protobuf JSON with every field written).
 int CmdBenches(Backend& backend, bool json);
 

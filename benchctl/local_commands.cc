@@ -1,4 +1,4 @@
-// benchctl's local commands: run specs on the embedded emulator, compare runs, with the local store.
+// benchctl compare: results files, a spec run on a service (--local: the local service), or stored runs.
 #include "benchctl/local_commands.h"
 
 #include <nlohmann/json.hpp>
@@ -12,8 +12,6 @@
 
 #include "benchctl/cli_common.h"
 #include "common/csv.h"
-#include "benchctl/local_run.h"
-#include "db/store.h"
 #include "experiment/compare.h"
 #include "experiment/spec.h"
 #include "model/params.h"
@@ -26,19 +24,6 @@ using vb::Status;
 using vb::StatusCode;
 using Json = nlohmann::ordered_json;
 
-
-std::vector<vb::experiment::RunRecord> Records(const std::vector<vb::benchctl::LocalRunResult>& results) {
-  std::vector<vb::experiment::RunRecord> out;
-  for (const auto& r : results) {
-    vb::experiment::RunRecord rec;
-    rec.name = r.key.CaseName();
-    rec.controller = r.controller;
-    rec.ok = r.summary.ok();
-    for (const auto& [name, value] : vb::experiment::MetricList(r.summary.metrics)) rec.metrics[name] = value;
-    out.push_back(std::move(rec));
-  }
-  return out;
-}
 
 }  // namespace
 
@@ -62,18 +47,28 @@ int CmdCompareStored(Backend& backend, std::int64_t batch, const std::vector<std
   return PrintComparison(*c, json, csv, table);
 }
 
-// compare RESULTS.json (the output of `run --json`) or compare --local SPEC (runs it first).
-int CmdCompare(const std::string& input, bool local, const std::string& store_path, bool json, bool csv,
-               const vb::experiment::TableOptions& table) {
-  if (local) {
-    auto spec = vb::experiment::LoadSpecFile(input);
-    if (!spec.ok()) return Fail(spec.status());
-    auto results = vb::benchctl::RunLocal({{*spec}, {}, spec->name(), "", false, false, store_path});
-    if (!results.ok()) return Fail(results.status().WithContext(input));
-    for (const auto& r : *results)
-      std::fprintf(stderr, "%s [%s]: %s\n", r.key.DisplayName().c_str(), r.controller.c_str(), r.summary.BriefReport().c_str());
-    return PrintComparison(vb::experiment::Compare(Records(*results)), json, csv, table);
+int CmdCompareSpec(Backend& backend, const std::string& spec_path, bool json, bool csv,
+                   const vb::experiment::TableOptions& table) {
+  auto spec = vb::experiment::LoadSpecFile(spec_path);
+  if (!spec.ok()) return Fail(spec.status());
+  auto sub = backend.Submit(*spec, false);
+  if (!sub.ok()) return Fail(sub.status().WithContext(spec_path));
+  for (std::int64_t id : sub->run_ids) {
+    auto st = backend.Watch(id, [](const RunView&) { return true; });
+    if (!st.ok()) return Fail(st.WithContext("waiting for run " + std::to_string(id)));
+    auto r = backend.GetRun(id);
+    if (!r.ok()) return Fail(r.status());
+    const auto e = backend.Executed(id);
+    std::fprintf(stderr, "%s [%s]: %s\n", r->key.DisplayName().c_str(), r->controller.c_str(),
+                 e ? e->summary.BriefReport().c_str() : RunStatusName(r->status));
   }
+  auto c = backend.Compare(sub->batch_id, {});
+  if (!c.ok()) return Fail(c.status());
+  return PrintComparison(*c, json, csv, table);
+}
+
+// compare RESULTS.json (the output of `run --json`).
+int CmdCompare(const std::string& input, bool json, bool csv, const vb::experiment::TableOptions& table) {
   std::ifstream in(input);
   if (!in) return Fail(Status::NotFound(input + ": cannot open the results file"));
   Json doc;

@@ -10,9 +10,11 @@
 
 namespace vb::benchctl {
 
-// compare RESULTS.json (from run --json), or compare --local SPEC (runs it first).
-int CmdCompare(const std::string& input, bool local, const std::string& store_path, bool json, bool csv,
-               const experiment::TableOptions& table = {});
+// compare RESULTS.json (from run --json).
+int CmdCompare(const std::string& input, bool json, bool csv, const experiment::TableOptions& table = {});
+// compare --local SPEC: runs the spec's batch on the backend (a local service), waits, compares the batch.
+int CmdCompareSpec(Backend& backend, const std::string& spec_path, bool json, bool csv,
+                   const experiment::TableOptions& table = {});
 
 // compare --batch B / --runs A,B,...: stored runs on either backend (--local: the local store), rendered by
 // the comparison's one renderer.

@@ -1,6 +1,7 @@
 // benchctl: the valvebench command line.
 //
-// Local mode (--local): the embedded emulator and no server. Remote mode (--server ADDR or VALVEBENCH_SERVER,
+// Local mode (--local): a local service (the embedded emulator, the local store) in this process, reached
+// through its in-process channel exactly as a server is (benchctl/backend.h); no server. Remote mode (--server ADDR or VALVEBENCH_SERVER,
 // --token TOKEN or VALVEBENCH_TOKEN): a valvebench-server. Data on stdout, progress on stderr; --json everywhere.
 // Exit codes (benchctl/cli_common.h): 0 success; 1 a run failed or was cancelled; 2 the request was refused
 // (bad input naming the field, not found, no capable bench, limits, permissions); 3 environment.
@@ -16,7 +17,7 @@
 #include "benchctl/gap_commands.h"
 #include "benchctl/hw_commands.h"
 #include "benchctl/local_commands.h"
-#include "benchctl/local_run.h"
+#include "benchctl/backend.h"
 #include "benchctl/db_commands.h"
 #include "benchctl/prune_command.h"
 #include "benchctl/regress_commands.h"
@@ -174,7 +175,9 @@ int main(int argc, char** argv) {
   if (report_cli.parsed()) return report_cli.Run(make_client);
   if (gap_cli.parsed()) return gap_cli.Run(make_client);
   // One decision per invocation: the server if one is given and --local is not, else the local store.
-  auto backend = [&]() { return vb::benchctl::ChooseBackend(local ? "" : server, store_path, make_client); };
+  auto backend = [&](vb::benchctl::LocalUse use = {}) {
+    return vb::benchctl::ChooseBackend(local ? "" : server, store_path, make_client, use);
+  };
   if (prune_cli.parsed()) return prune_cli.Run();
   if (db_cli.parsed()) return db_cli.Run();
   if (run->parsed()) {
@@ -183,7 +186,7 @@ int main(int argc, char** argv) {
           "no server given: use --local for the embedded emulator, or --server ADDR (or VALVEBENCH_SERVER)"));
     if (!local && (!trace_csv.empty() || realtime))
       return Fail(Status::InvalidArgument("--trace-csv and --realtime are local options; use `export` remotely"));
-    return vb::benchctl::CmdRun(*backend(), {spec_path, wait, trace_csv, realtime, table}, out);
+    return vb::benchctl::CmdRun(*backend({true, !trace_csv.empty()}), {spec_path, wait, trace_csv, realtime, table}, out);
   }
   if (compare->parsed()) {
     if (batch != 0 || !run_ids.empty()) {
@@ -193,7 +196,8 @@ int main(int argc, char** argv) {
     }
     if (compare_input.empty())
       return Fail(Status::InvalidArgument("compare: give --batch B or --runs A,B,..., a results file, or --local SPEC"));
-    return vb::benchctl::CmdCompare(compare_input, local, store_path, json, csv, table);
+    if (local) return vb::benchctl::CmdCompareSpec(*backend({true, false}), compare_input, json, csv, table);
+    return vb::benchctl::CmdCompare(compare_input, json, csv, table);
   }
   if (benches->parsed()) {
     if (!local && server.empty()) return need_server();

@@ -15,8 +15,7 @@
 
 #include "benchctl/cli_common.h"
 #include "client/client.h"
-#include "db/open_store.h"
-#include "db/store.h"
+#include "service/local_service.h"
 #include "proto/api_convert.h"
 #include "valvebench/v1/api.grpc.pb.h"
 #include "common/format.h"
@@ -26,10 +25,6 @@ namespace {
 
 namespace v1 = valvebench::v1;
 using Json = nlohmann::ordered_json;
-
-double NowUnixS() {
-  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
-}
 
 std::string UtcTime(double unix_s) { return unix_s <= 0 ? "-" : FormatUtc(unix_s); }
 
@@ -42,41 +37,36 @@ std::string Bytes(std::int64_t b) {
   return buf;
 }
 
-// What both backends return, in the store's terms.
-struct Outcome {
-  db::PruneResult result;
-  double cutoff_unix_s = 0;
-  bool dry_run = false;
-};
+// PruneRuns (admin) on a service: a server's, or the local service's over the local store (its own admin token):
+// one path, the service's prune rules either way.
+StatusOr<v1::PruneRunsResponse> Prune(const std::shared_ptr<grpc::Channel>& channel, const std::string& token,
+                                      const std::string& where, double age_s, std::int32_t keep_last, bool dry_run) {
+  auto stub = v1::BenchService::NewStub(channel);
+  grpc::ClientContext ctx;
+  ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::minutes(10));  // a large delete takes a while
+  if (!token.empty()) ctx.AddMetadata("authorization", "Bearer " + token);
+  v1::PruneRunsRequest req;
+  req.set_older_than_s(age_s);
+  req.set_keep_last(keep_last);
+  req.set_dry_run(dry_run);
+  v1::PruneRunsResponse resp;
+  const grpc::Status st = stub->PruneRuns(&ctx, req, &resp);
+  if (!st.ok()) return client::FromGrpc(st).WithContext(where);
+  return resp;
+}
 
-StatusOr<Outcome> PruneLocal(const std::string& path, double age_s, std::int32_t keep_last, bool dry_run) {
+StatusOr<v1::PruneRunsResponse> PruneLocal(const std::string& path, double age_s, std::int32_t keep_last, bool dry_run) {
   if (path.empty()) return Status::InvalidArgument("--no-store: prune needs the local store (--db FILE)");
-  // Pruning a store that is not there would create an empty one: say so instead.
-  if (!db::IsPostgresLocation(path) && access(path.c_str(), F_OK) != 0)
-    return Status::FailedPrecondition("no local store at " + path + " (--db FILE or VALVEBENCH_DB)");
-  auto store = db::OpenStore(path);
-  if (!store.ok()) return store.status().WithContext("local store " + db::DisplayLocation(path));
-  db::PruneRequest req;
-  req.finished_before_unix_s = NowUnixS() - age_s;
-  req.keep_last = keep_last;
-  req.dry_run = dry_run;
-  auto r = (*store)->Prune(req);
-  if (!r.ok()) return r.status();
-  return Outcome{std::move(*r), req.finished_before_unix_s, dry_run};
+  server::LocalServiceOptions o;
+  o.store = path;
+  o.execute = false;
+  o.must_exist = true;  // pruning a store that is not there would create an empty one: say so instead
+  auto local = server::LocalService::Start(o);
+  if (!local.ok()) return local.status();
+  return Prune((*local)->InProcessChannel(), (*local)->token(), (*local)->Where(), age_s, keep_last, dry_run);
 }
 
-db::PruneDecision FromProto(const v1::PruneDecision& d) {
-  db::PruneDecision out;
-  out.run_id = d.run_id();
-  out.batch_id = d.batch_id();
-  out.name = d.name();
-  out.status = api::FromProto(d.status()).value_or(RunStatus::kFailed);
-  out.finished_unix_s = d.finished_unix_s();
-  out.why = d.why();
-  return out;
-}
-
-StatusOr<Outcome> PruneRemote(const SharedOptions& o, double age_s, std::int32_t keep_last, bool dry_run) {
+StatusOr<v1::PruneRunsResponse> PruneRemote(const SharedOptions& o, double age_s, std::int32_t keep_last, bool dry_run) {
   std::shared_ptr<grpc::ChannelCredentials> creds = grpc::InsecureChannelCredentials();
   if (!o.tls_ca_file->empty()) {
     std::ifstream in(*o.tls_ca_file);
@@ -87,62 +77,43 @@ StatusOr<Outcome> PruneRemote(const SharedOptions& o, double age_s, std::int32_t
     ssl.pem_root_certs = ss.str();
     creds = grpc::SslCredentials(ssl);
   }
-  auto stub = v1::BenchService::NewStub(grpc::CreateChannel(*o.server, creds));
-  grpc::ClientContext ctx;
-  ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::minutes(10));  // a large delete takes a while
-  if (!o.token->empty()) ctx.AddMetadata("authorization", "Bearer " + *o.token);
-  v1::PruneRunsRequest req;
-  req.set_older_than_s(age_s);
-  req.set_keep_last(keep_last);
-  req.set_dry_run(dry_run);
-  v1::PruneRunsResponse resp;
-  const grpc::Status st = stub->PruneRuns(&ctx, req, &resp);
-  if (!st.ok()) return client::FromGrpc(st).WithContext("server " + *o.server);
-  Outcome out;
-  for (const auto& d : resp.deleted()) out.result.deleted.push_back(FromProto(d));
-  for (const auto& d : resp.kept()) out.result.kept.push_back(FromProto(d));
-  out.result.newer_kept = resp.newer_kept();
-  out.result.trace_bytes = resp.trace_bytes();
-  out.result.batches_deleted = resp.batches_deleted();
-  out.cutoff_unix_s = resp.cutoff_unix_s();
-  out.dry_run = resp.dry_run();
-  return out;
+  return Prune(grpc::CreateChannel(*o.server, creds), *o.token, "server " + *o.server, age_s, keep_last, dry_run);
 }
 
-Json ToJson(const db::PruneDecision& d) {
-  return Json{{"run_id", d.run_id},   {"batch_id", d.batch_id},
-              {"name", d.name},       {"status", RunStatusName(d.status)},
-              {"finished_unix_s", d.finished_unix_s}, {"why", d.why}};
+Json ToJson(const v1::PruneDecision& d) {
+  return Json{{"run_id", d.run_id()},   {"batch_id", d.batch_id()},
+              {"name", d.name()},       {"status", RunStatusName(api::FromProto(d.status()).value_or(RunStatus::kFailed))},
+              {"finished_unix_s", d.finished_unix_s()}, {"why", d.why()}};
 }
 
-void Print(const Outcome& o, const std::string& where, bool json) {
-  const db::PruneResult& r = o.result;
+void Print(const v1::PruneRunsResponse& r, const std::string& where, bool json) {
   if (json) {
-    Json j{{"where", where}, {"dry_run", o.dry_run}, {"cutoff_unix_s", o.cutoff_unix_s}};
+    Json j{{"where", where}, {"dry_run", r.dry_run()}, {"cutoff_unix_s", r.cutoff_unix_s()}};
     Json del = Json::array(), kept = Json::array();
-    for (const auto& d : r.deleted) del.push_back(ToJson(d));
-    for (const auto& d : r.kept) kept.push_back(ToJson(d));
+    for (const auto& d : r.deleted()) del.push_back(ToJson(d));
+    for (const auto& d : r.kept()) kept.push_back(ToJson(d));
     j["deleted"] = del;
     j["kept"] = kept;
-    j["newer_kept"] = r.newer_kept;
-    j["trace_bytes"] = r.trace_bytes;
-    j["batches_deleted"] = r.batches_deleted;
+    j["newer_kept"] = r.newer_kept();
+    j["trace_bytes"] = r.trace_bytes();
+    j["batches_deleted"] = r.batches_deleted();
     std::cout << j.dump(2) << "\n";
     return;
   }
-  std::printf("prune %s%s: finished runs that ended before %s\n", where.c_str(), o.dry_run ? " (dry run)" : "",
-              UtcTime(o.cutoff_unix_s).c_str());
-  std::printf("%s %zu run(s), %s of traces, %lld batch(es) left empty\n", o.dry_run ? "would delete" : "deleted",
-              r.deleted.size(), Bytes(r.trace_bytes).c_str(), static_cast<long long>(r.batches_deleted));
-  auto line = [](const db::PruneDecision& d) {
-    std::printf("  run %-6lld batch %-5lld %-9s %-20s %s\n      %s\n", static_cast<long long>(d.run_id),
-                static_cast<long long>(d.batch_id), RunStatusName(d.status), UtcTime(d.finished_unix_s).c_str(),
-                d.name.c_str(), d.why.c_str());
+  std::printf("prune %s%s: finished runs that ended before %s\n", where.c_str(), r.dry_run() ? " (dry run)" : "",
+              UtcTime(r.cutoff_unix_s()).c_str());
+  std::printf("%s %d run(s), %s of traces, %lld batch(es) left empty\n", r.dry_run() ? "would delete" : "deleted",
+              r.deleted_size(), Bytes(r.trace_bytes()).c_str(), static_cast<long long>(r.batches_deleted()));
+  auto line = [](const v1::PruneDecision& d) {
+    std::printf("  run %-6lld batch %-5lld %-9s %-20s %s\n      %s\n", static_cast<long long>(d.run_id()),
+                static_cast<long long>(d.batch_id()),
+                RunStatusName(api::FromProto(d.status()).value_or(RunStatus::kFailed)),
+                UtcTime(d.finished_unix_s()).c_str(), d.name().c_str(), d.why().c_str());
   };
-  for (const auto& d : r.deleted) line(d);
-  std::printf("kept %zu run(s) that are old or unfinished:\n", r.kept.size());
-  for (const auto& d : r.kept) line(d);
-  std::printf("kept %lld newer finished run(s)\n", static_cast<long long>(r.newer_kept));
+  for (const auto& d : r.deleted()) line(d);
+  std::printf("kept %d run(s) that are old or unfinished:\n", r.kept_size());
+  for (const auto& d : r.kept()) line(d);
+  std::printf("kept %lld newer finished run(s)\n", static_cast<long long>(r.newer_kept()));
 }
 
 }  // namespace
@@ -198,7 +169,7 @@ int PruneCli::Run() {
   auto out = local ? PruneLocal(*shared_.store_path, *age, keep_last_, dry_run_)
                    : PruneRemote(shared_, *age, keep_last_, dry_run_);
   if (!out.ok()) return Fail(out.status());
-  Print(*out, local ? "local store " + db::DisplayLocation(*shared_.store_path) : "server " + *shared_.server, *shared_.json);
+  Print(*out, local ? server::LocalService::Describe(*shared_.store_path) : "server " + *shared_.server, *shared_.json);
   return kExitOk;
 }
 

@@ -1,7 +1,7 @@
 // benchctl prune: retention (docs/store.md, "Retention").
 //   prune --older-than 30d [--keep-last N] [--dry-run] [--json] [--local [--db FILE] | --server ADDR]
-// Deletes finished runs that ended longer ago than the age, with their traces, from the local store or (with
-// a server) through the admin-only PruneRuns RPC. Never queued, running or interrupted runs, never runs of a
+// Deletes finished runs that ended longer ago than the age, with their traces, through the admin-only PruneRuns
+// RPC of a server or of the local service over the local store (one set of prune rules, the service's). Never queued, running or interrupted runs, never runs of a
 // batch that a baseline or a regression night or result references, never the newest N. Prints what it
 // deleted (or would delete) and what it kept, and why. Exit 0 done, 2 bad input or refused, 3 environment.
 #pragma once

@@ -12,8 +12,7 @@
 #include "benchctl/backend.h"
 #include "benchctl/cli_common.h"
 #include "proto/api_convert.h"
-#include "db/open_store.h"
-#include "db/store.h"
+#include "service/local_records.h"
 #include "experiment/spec.h"
 #include "regress/compare.h"
 #include "regress/suite.h"
@@ -26,18 +25,6 @@ using regress::Json;
 
 
 std::string Where(const std::string& server) { return server.empty() ? "local" : "server " + server; }
-
-StatusOr<std::unique_ptr<db::Store>> OpenStore(const std::string& path) {
-  if (path.empty())
-    return Status::InvalidArgument("--no-store: baselines and regression results need the local store (--db FILE)");
-  if (const auto parent = std::filesystem::path(path).parent_path(); !parent.empty() && !db::IsPostgresLocation(path)) {
-    std::error_code ec;
-    std::filesystem::create_directories(parent, ec);
-  }
-  auto s = db::OpenStore(path);
-  if (!s.ok()) return s.status().WithContext("local store " + db::DisplayLocation(path));
-  return s;
-}
 
 // What regress compares, from the runs of a batch wherever they are stored.
 std::vector<regress::RunMetrics> ToRunMetrics(const std::vector<RunView>& runs) {
@@ -87,25 +74,6 @@ StatusOr<SuiteOutcome> RunSuite(const regress::LoadedSuite& suite, std::uint64_t
   return out;
 }
 
-regress::Baseline FromRecord(const db::BaselineRecord& r) {
-  regress::Baseline b;
-  b.name = r.name;
-  b.version = r.version;
-  b.created_unix_s = r.created_unix_s;
-  b.source = r.source;
-  b.note = r.note;
-  for (const auto& e : r.entries) b.cases[e.case_name][e.metric] = {e.mean, e.spread, e.n};
-  return b;
-}
-
-std::vector<db::BaselineEntry> ToEntries(const regress::CaseStats& stats) {
-  std::vector<db::BaselineEntry> out;
-  for (const auto& [c, metrics] : stats)
-    for (const auto& [name, s] : metrics)
-      if (s.n > 0) out.push_back({c, name, s.mean, s.spread, s.n});
-  return out;
-}
-
 bool LooksLikeFile(const std::string& arg) {
   return arg.find('/') != std::string::npos || (arg.size() > 5 && arg.compare(arg.size() - 5, 5, ".json") == 0);
 }
@@ -124,16 +92,16 @@ StatusOr<regress::Baseline> LoadBaselineArg(const std::string& arg, int version,
     if (!b.ok()) return b.status().WithContext("--baseline " + arg);
     return b;
   }
-  auto store = OpenStore(store_path);
-  if (!store.ok()) return store.status();
-  auto rec = (*store)->GetBaseline(arg, version);
+  auto records = server::LocalRecords::Open(store_path);
+  if (!records.ok()) return records.status();
+  auto rec = (*records)->GetBaseline(arg, version);
   if (!rec.ok()) {
     if (rec.status().code() == StatusCode::kNotFound)
       return Status::NotFound("--baseline: " + rec.status().message() + " in " + store_path +
                               " (create it: benchctl baseline set " + arg + " --suite SUITE, or --batch B)");
     return rec.status();
   }
-  return FromRecord(*rec);
+  return rec;
 }
 
 std::string Time(double unix_s) {
@@ -211,14 +179,14 @@ int RegressCli::Run(const ClientFactory& make_client) {
       auto suite = regress::LoadSuite(suite_path_);
       if (!suite.ok()) return Fail(suite.status());
       const std::uint64_t seed = seed_ != 0 ? seed_ : (suite->suite.seed() != 0 ? suite->suite.seed() : 1);
-      auto backend = ChooseBackend(server, store_path, make_client);
+      auto backend = ChooseBackend(server, store_path, make_client, {/*execute=*/true, /*keep_traces=*/false});
       auto out = RunSuite(*suite, seed, *backend);
       if (!out.ok()) return Fail(out.status());
       runs = std::move(out->runs);
       source = "suite " + suite->suite.name() + " (" + Where(server) + " batch " + std::to_string(out->batch_id) +
                ", seed " + std::to_string(seed) + ")";
     } else {
-      if (server.empty() && store_path.empty()) return Fail(OpenStore(store_path).status());
+      if (server.empty() && store_path.empty()) return Fail(server::LocalRecords::Open(store_path).status());
       auto backend = ChooseBackend(server, store_path, make_client);
       auto r = backend->Runs(batch_, {});
       if (!r.ok()) return Fail(r.status().WithContext("--batch"));
@@ -232,28 +200,29 @@ int RegressCli::Run(const ClientFactory& make_client) {
       return Fail(Status::FailedPrecondition("baseline set: runs did not succeed; a baseline must come from good "
                                              "runs:" + list));
     }
-    auto store = OpenStore(store_path);
-    if (!store.ok()) return Fail(store.status());
-    auto v = (*store)->SaveBaseline(name_, source, note_, ToEntries(m.stats));
-    if (!v.ok()) return Fail(v.status());
-    auto rec = (*store)->GetBaseline(name_, *v);
+    auto records = server::LocalRecords::Open(store_path);
+    if (!records.ok()) return Fail(records.status());
+    auto rec = (*records)->SaveBaseline(name_, source, note_, m.stats);
     if (!rec.ok()) return Fail(rec.status());
+    const int v = rec->version;
+    std::size_t values = 0;
+    for (const auto& [c, metrics] : rec->cases) values += metrics.size();
     if (json) {
-      std::cout << regress::BaselineToJson(FromRecord(*rec)).dump(2) << "\n";
+      std::cout << regress::BaselineToJson(*rec).dump(2) << "\n";
     } else {
-      std::printf("baseline %s version %d stored (%zu values from %s)%s\n", name_.c_str(), *v, rec->entries.size(),
+      std::printf("baseline %s version %d stored (%zu values from %s)%s\n", name_.c_str(), v, values,
                   source.c_str(),
-                  *v > 1 ? ("; versions 1-" + std::to_string(*v - 1) + " are kept (baseline show " + name_ +
-                            " --version N)").c_str()
-                         : "");
+                  v > 1 ? ("; versions 1-" + std::to_string(v - 1) + " are kept (baseline show " + name_ +
+                           " --version N)").c_str()
+                        : "");
     }
     return kExitOk;
   }
 
   if (baseline_list_->parsed()) {
-    auto store = OpenStore(store_path);
-    if (!store.ok()) return Fail(store.status());
-    auto list = (*store)->ListBaselines();
+    auto records = server::LocalRecords::Open(store_path);
+    if (!records.ok()) return Fail(records.status());
+    auto list = (*records)->ListBaselines();
     if (!list.ok()) return Fail(list.status());
     if (json) {
       Json a = Json::array();
@@ -271,11 +240,11 @@ int RegressCli::Run(const ClientFactory& make_client) {
   }
 
   if (baseline_show_->parsed()) {
-    auto store = OpenStore(store_path);
-    if (!store.ok()) return Fail(store.status());
-    auto rec = (*store)->GetBaseline(name_, version_);
+    auto records = server::LocalRecords::Open(store_path);
+    if (!records.ok()) return Fail(records.status());
+    auto rec = (*records)->GetBaseline(name_, version_);
     if (!rec.ok()) return Fail(rec.status());
-    const regress::Baseline b = FromRecord(*rec);
+    const regress::Baseline& b = *rec;
     if (json) {
       std::cout << regress::BaselineToJson(b).dump(2) << "\n";
       return kExitOk;
@@ -299,7 +268,7 @@ int RegressCli::Run(const ClientFactory& make_client) {
       std::fprintf(stderr, "regress: suite %s (%d entries) on %s vs baseline %s v%d, seed %llu\n",
                    suite->suite.name().c_str(), suite->suite.experiments_size(), Where(server).c_str(),
                    baseline->name.c_str(), baseline->version, static_cast<unsigned long long>(seed));
-    auto backend = ChooseBackend(server, store_path, make_client);
+    auto backend = ChooseBackend(server, store_path, make_client, {/*execute=*/true, /*keep_traces=*/false});
     auto out = RunSuite(*suite, seed, *backend);
     if (!out.ok()) return Fail(out.status());
     regress::RegressResult r = regress::Compare(suite->suite, *baseline, regress::Summarise(out->runs));
@@ -307,17 +276,10 @@ int RegressCli::Run(const ClientFactory& make_client) {
     r.where = server.empty() ? "local" : server;
     r.seed = seed;
     if (!store_path.empty()) {
-      auto store = OpenStore(store_path);
-      if (store.ok()) {
-        db::RegressionRecord rec;
-        rec.suite = r.suite;
-        rec.baseline_name = r.baseline_name;
-        rec.baseline_version = r.baseline_version;
-        rec.batch_id = server.empty() ? r.batch_id : 0;  // a server batch is not in this store
-        rec.created_unix_s = r.created_unix_s;
-        rec.verdict = r.verdict();
-        rec.result_json = regress::ResultToJson(r).dump();
-        auto id = (*store)->SaveRegression(rec);
+      auto records = server::LocalRecords::Open(store_path);
+      if (records.ok()) {
+        // A server batch is not in this store.
+        auto id = (*records)->SaveRegression(r, server.empty() ? r.batch_id : 0);
         if (id.ok()) r.id = *id;
         else std::fprintf(stderr, "benchctl: warning: the result was not stored: %s\n", id.status().message().c_str());
       }

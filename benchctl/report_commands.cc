@@ -9,8 +9,7 @@
 
 #include "benchctl/backend.h"
 #include "benchctl/cli_common.h"
-#include "db/open_store.h"
-#include "db/store.h"
+#include "service/local_records.h"
 #include "experiment/compare.h"
 #include "experiment/metrics.h"
 #include "experiment/spec.h"
@@ -77,9 +76,9 @@ int ReportCli::Run(const ClientFactory& make_client) {
     sections = report::DiagnosisSections(*j);
   } else if (regress_ != 0) {
     if (store_path.empty()) return Fail(Status::InvalidArgument("--regress needs the local store (--db)"));
-    auto store = db::OpenStore(store_path);
-    if (!store.ok()) return Fail(store.status().WithContext("local store " + store_path));
-    auto rec = (*store)->GetRegression(regress_);
+    auto records = server::LocalRecords::Open(store_path);
+    if (!records.ok()) return Fail(records.status());
+    auto rec = (*records)->GetRegression(regress_);
     if (!rec.ok()) return Fail(rec.status());
     Json r;
     try {
@@ -109,7 +108,7 @@ int ReportCli::Run(const ClientFactory& make_client) {
       }
       runs.push_back(std::move(r));
     }
-    const std::string where = server.empty() ? "local store " + store_path : "server " + server;
+    const std::string where = backend->Where();
     if (run_ != 0) {
       title = "Run " + std::to_string(run_) + ": " + runs.front().key.DisplayName();
       sections = report::RunSections(where, runs.front());

@@ -16,6 +16,8 @@
 #include <memory>
 #include <thread>
 
+#include <unistd.h>
+
 #include "benchctl/cli_common.h"
 #include "export/run_file.h"
 
@@ -86,15 +88,33 @@ Status WriteTraceCsv(const Trace& t, std::FILE* f, const std::string& what) {
   return Status::Ok();
 }
 
+// The loop's own trace, every channel (run --trace-csv on a run executed here).
+Status WriteTraceCsv(const experiment::Trace& trace, const std::string& path) {
+  std::unique_ptr<FILE, int (*)(FILE*)> f(std::fopen(path.c_str(), "w"), &std::fclose);
+  if (!f) return Status::Unavailable(path + ": cannot open for writing");
+  const auto& names = experiment::Trace::ChannelNames();
+  for (size_t c = 0; c < names.size(); ++c) std::fprintf(f.get(), "%s%s", c ? "," : "", names[c].c_str());
+  std::fputc('\n', f.get());
+  for (size_t k = 0; k < trace.size(); ++k) {
+    // ref is NaN for a law without a reference: an empty field (common/csv.h AppendCsvNumber).
+    std::fprintf(f.get(), "%.8f,%d,%.6g,%.9g,%.9g,%.9g,%s,%.9g,%.9g,%.12g,%.12g,%.0f\n", trace.t_s[k],
+                 trace.gate[k], trace.v_coil_V[k], trace.i_A[k], trace.x_m[k], trace.v_mps[k], CsvNumber(trace.ref[k], 9).c_str(),
+                 trace.x_avg_m[k], trace.flow_kg_per_s[k], trace.v2_int_V2s[k], trace.energy_int_J[k],
+                 trace.switch_count[k]);
+  }
+  if (std::ferror(f.get())) return Status::DataLoss(path + ": write failed");
+  return Status::Ok();
+}
+
 }  // namespace
 
 int CmdRun(Backend& backend, const RunOptions& o, const Output& out) {
   auto spec = experiment::LoadSpecFile(o.spec_path);
   if (!spec.ok()) return Fail(spec.status());
-  auto sub = backend.Submit(*spec, o.realtime, !o.trace_csv.empty());
+  auto sub = backend.Submit(*spec, o.realtime);
   if (!sub.ok()) return Fail(sub.status().WithContext(o.spec_path));
-  const bool executed = !sub->executed.empty();
-  if (!executed && !o.wait) {  // queued on the server; watch, show or compare them later
+  // A local service lives as long as this process: its runs are waited for, whatever --wait says.
+  if (!backend.executes_here() && !o.wait) {  // queued on the server; watch, show or compare them later
     if (out.json) {
       std::cout << Json{{"batch_id", sub->batch_id}, {"run_ids", sub->run_ids}}.dump(2) << "\n";
     } else {
@@ -104,29 +124,45 @@ int CmdRun(Backend& backend, const RunOptions& o, const Output& out) {
     }
     return kExitOk;
   }
-  if (executed && !o.trace_csv.empty())
-    for (size_t k = 0; k < sub->executed.size(); ++k) {
-      auto st = WriteTraceCsv(sub->executed[k].trace, IndexedPath(o.trace_csv, k, sub->executed.size()));
-      if (!st.ok()) return Fail(st);
-    }
 
   int code = kExitOk;
   std::vector<RunView> runs;
-  std::vector<const experiment::RunSummary*> summaries;
+  std::vector<std::optional<server::ExecutedRun>> executed;
   for (size_t k = 0; k < sub->run_ids.size(); ++k) {
     const std::int64_t id = sub->run_ids[k];
-    if (!executed)
-      if (auto st = WaitFor(backend, id, !out.json && !out.csv); !st.ok())
-        return Fail(st.WithContext("waiting for run " + std::to_string(id)));
+    // The bar: for people; a local run that ran in this process before draws it only on a terminal, so its
+    // output (stdout and stderr together, as scripts capture it) stays what it was.
+    const bool bar = !out.json && !out.csv && (!backend.executes_here() || ::isatty(2) != 0);
+    if (auto st = WaitFor(backend, id, bar); !st.ok())
+      return Fail(st.WithContext("waiting for run " + std::to_string(id)));
     auto r = backend.GetRun(id);
     if (!r.ok()) return Fail(r.status());
     r->spec.reset();  // `show` has the spec and history; `run` lists what ran
     r->history.clear();
-    if (!backend.keeps_runs()) r->id = r->batch_id = 0;
     if (!r->ok()) code = kExitRunFailed;
     runs.push_back(std::move(*r));
-    summaries.push_back(executed ? &sub->executed[k].summary : nullptr);
+    executed.push_back(backend.Executed(id));
   }
+  if (!o.trace_csv.empty())
+    for (size_t k = 0; k < runs.size(); ++k) {
+      const std::string path = IndexedPath(o.trace_csv, k, runs.size());
+      Status st;
+      if (executed[k]) {  // the whole trace as the loop recorded it, every channel
+        st = WriteTraceCsv(executed[k]->trace, path);
+      } else {  // what the service stored
+        auto trace = backend.GetTrace(sub->run_ids[k]);
+        if (!trace.ok()) return Fail(trace.status());
+        std::unique_ptr<std::FILE, int (*)(std::FILE*)> f(std::fopen(path.c_str(), "w"), &std::fclose);
+        if (!f) return Fail(Status::Unavailable(path + ": cannot open for writing"));
+        st = WriteTraceCsv(*trace, f.get(), path);
+      }
+      if (!st.ok()) return Fail(st);
+    }
+  const std::int64_t batch_id = sub->batch_id;
+  if (!backend.keeps_runs())
+    for (auto& r : runs) r.id = r.batch_id = 0;
+  std::vector<const experiment::RunSummary*> summaries;
+  for (const auto& e : executed) summaries.push_back(e ? &e->summary : nullptr);
   if (out.json) {
     Json all = Json::array();
     for (size_t k = 0; k < runs.size(); ++k) all.push_back(RunJson(runs[k], summaries[k]));
@@ -138,7 +174,7 @@ int CmdRun(Backend& backend, const RunOptions& o, const Output& out) {
       std::cout << RunText(runs[0], summaries[0], false);
     } else {  // a batch: one line per run, the metrics are in the comparison below (docs/comparison.md)
       for (const auto& r : runs) std::cout << RunLine(r);
-      auto cmp = backend.Compare(sub->batch_id, {});
+      auto cmp = backend.Compare(batch_id, {});
       if (!cmp.ok()) return Fail(cmp.status());
       if (const std::string bad = experiment::CheckTableOptions(*cmp, o.table); !bad.empty())
         return Fail(Status::InvalidArgument(bad));
@@ -148,33 +184,42 @@ int CmdRun(Backend& backend, const RunOptions& o, const Output& out) {
   return code;
 }
 
-// The queue estimate both `queue` and the web dashboard show (common/queue_estimate.h).
-static std::map<std::int64_t, QueueEstimate> EstimateQueue(const std::vector<RunView>& runs, int live_benches) {
-  std::vector<QueueRunInfo> info;
-  for (const auto& r : runs) info.push_back({r.id, r.status, r.priority, r.duration_s, r.progress, r.started_unix_s});
-  return vb::EstimateQueue(info, live_benches);
+namespace {
+
+// A queued or running run as `queue` lists it, with its place and ETA.
+struct QueueRow {
+  RunView run;
+  int position = -1;   // -1: not in the queue view (a filtered list)
+  double eta_s = -1.0;
+};
+
+void AddEstimate(Json* j, const QueueRow& q) {
+  if (q.position < 0) return;
+  (*j)["position"] = q.position;
+  (*j)["eta_s"] = q.eta_s >= 0 ? Json(q.eta_s) : Json(nullptr);
 }
 
-static int LiveBenches(Backend& backend) {
-  auto b = backend.Benches();
-  if (!b.ok()) return 0;
-  int n = 0;
-  for (const auto& x : b->benches()) n += x.host().empty() || x.alive();
-  return n;
-}
+}  // namespace
 
 int CmdQueue(Backend& backend, const QueueOptions& o, const Output& out) {
-  std::vector<RunView> runs;
+  std::vector<QueueRow> rows;
   bool more = false;
+  std::int64_t more_count = 0;  // how many more matched than are listed (0: unknown or none)
+  int live = 0;
   const bool default_view = o.status.empty() && o.batch == 0 && o.tag.empty();
-  if (default_view) {  // what is happening now: running runs first, then the queue in claim order
-    for (RunStatus s : {RunStatus::kRunning, RunStatus::kQueued}) {
-      bool m = false;
-      auto page = backend.ListRuns({s, 0, "", o.limit}, &m);
-      if (!page.ok()) return Fail(page.status());
-      more = more || m;
-      runs.insert(runs.end(), page->begin(), page->end());
-    }
+  if (default_view) {  // what is happening now (GetQueue): running runs first, then the queue in claim order
+    auto q = backend.Queue();
+    if (!q.ok()) return Fail(q.status());
+    live = q->live_benches();
+    for (const auto* list : {&q->running(), &q->queued()})
+      for (const auto& x : *list) {
+        if (static_cast<int>(rows.size()) >= o.limit) {
+          more = true;
+          ++more_count;
+          continue;
+        }
+        rows.push_back({FromProto(x.run()), x.position(), x.eta_s()});
+      }
   } else {
     RunFilter f{std::nullopt, o.batch, o.tag, o.limit};
     if (!o.status.empty()) {
@@ -182,62 +227,66 @@ int CmdQueue(Backend& backend, const QueueOptions& o, const Output& out) {
       if (!s.ok()) return Fail(s.status().WithContext("--status"));
       f.status = *s;
     }
-    auto page = backend.ListRuns(f, &more);
+    std::int64_t total = 0;
+    auto page = backend.ListRuns(f, &more, &total);
     if (!page.ok()) return Fail(page.status());
-    runs = std::move(*page);
+    if (more && total > static_cast<std::int64_t>(page->size())) more_count = total - static_cast<std::int64_t>(page->size());
+    for (auto& r : *page) rows.push_back({std::move(r), -1, -1.0});
   }
-  const bool any_queued = std::any_of(runs.begin(), runs.end(), [](const RunView& r) { return r.status == RunStatus::kQueued; });
-  const int live = any_queued ? LiveBenches(backend) : 0;
-  const auto estimates = EstimateQueue(runs, live);
+  const bool any_queued =
+      std::any_of(rows.begin(), rows.end(), [](const QueueRow& r) { return r.run.status == RunStatus::kQueued; });
   if (out.json) {
     Json a = Json::array();
-    for (const auto& r : runs) {
-      Json j = RunJson(r, nullptr);
-      if (auto e = estimates.find(r.id); e != estimates.end()) {
-        j["position"] = e->second.position;
-        j["eta_s"] = e->second.eta_s >= 0 ? Json(e->second.eta_s) : Json(nullptr);
-      }
+    for (const auto& q : rows) {
+      Json j = RunJson(q.run, nullptr);
+      AddEstimate(&j, q);
       a.push_back(std::move(j));
     }
     Json all{{"where", backend.Where()}, {"runs", a}, {"more", more}};
-    if (any_queued) all["live_benches"] = live;
+    if (default_view && any_queued) all["live_benches"] = live;
     std::cout << all.dump(2) << "\n";
     return kExitOk;
   }
   if (out.csv) {
+    std::vector<RunView> runs;
+    for (const auto& q : rows) runs.push_back(q.run);
     std::cout << RunsCsv(runs, {});
     return kExitOk;
   }
-  if (runs.empty()) {
+  if (rows.empty()) {
     std::printf("%s on %s\n", default_view ? "no runs queued or running" : "no runs match", backend.Where().c_str());
     return kExitOk;
   }
   std::map<RunStatus, int> count;
-  for (const auto& r : runs) ++count[r.status];
+  for (const auto& q : rows) ++count[q.run.status];
   std::string counts;
   for (const auto& [status, n] : count) counts += fmt::format("{}{} {}", counts.empty() ? "" : ", ", n, RunStatusName(status));
-  std::printf("%zu runs on %s: %s%s\n", runs.size(), backend.Where().c_str(), counts.c_str(),
+  std::printf("%zu runs on %s: %s%s\n", rows.size(), backend.Where().c_str(), counts.c_str(),
               count.count(RunStatus::kRunning) ? " (ETA: wall time left, from progress so far)" : "");
-  if (any_queued)
+  if (default_view && any_queued)
     std::printf("queued: position in claim order, ETA from the runs' durations over %d live bench%s\n", live,
                 live == 1 ? "" : "es");
-  const bool lab = std::any_of(runs.begin(), runs.end(), [](const RunView& r) { return !r.host.empty(); });
+  const bool lab = std::any_of(rows.begin(), rows.end(), [](const QueueRow& q) { return !q.run.host.empty(); });
   std::printf("%6s %6s  %-11s %8s %5s %8s  %-16s %s%-20s %-10s %s\n", "id", "batch", "status", "progress", "pos", "ETA",
               "bench", lab ? "host         " : "", "controller", "submitter", "name");
   const double now = NowUnix();
-  for (const auto& r : runs) {
+  for (const auto& q : rows) {
+    const RunView& r = q.run;
     std::string pos = "-", eta = Eta(r, now);
-    if (auto e = estimates.find(r.id); e != estimates.end()) {
-      pos = std::to_string(e->second.position);
-      eta = e->second.eta_s >= 0 ? Duration(e->second.eta_s) : "?";
-    }
+    if (q.position > 0) pos = std::to_string(q.position);
+    if (q.position >= 0) eta = q.eta_s >= 0 ? Duration(q.eta_s) : "?";
     std::printf("%6lld %6lld  %-11s %6.0f %% %5s %8s  %-16s %s%-20s %-10s %s\n", static_cast<long long>(r.id),
                 static_cast<long long>(r.batch_id), RunStatusName(r.status), 100.0 * r.progress, pos.c_str(),
                 eta.c_str(), r.bench.empty() ? "any" : r.bench.c_str(),
                 lab ? fmt::format("{:<12.12} ", r.host).c_str() : "", r.controller.c_str(), r.submitter.c_str(),
                 r.key.DisplayName().c_str());
   }
-  if (more) std::fprintf(stderr, "(more runs: raise --limit)\n");
+  if (more) {
+    if (more_count > 0)
+      std::fprintf(stderr, "(%lld more; --limit)\n", static_cast<long long>(more_count));
+    else
+      std::fprintf(stderr, "(cut at %d; --limit for more)\n", o.limit);
+  }
   return kExitOk;
 }
 

@@ -68,6 +68,9 @@ Client::Client(const ClientOptions& options) : opt_(options) {
   stub_ = v1::BenchService::NewStub(channel_);
 }
 
+Client::Client(std::shared_ptr<grpc::Channel> channel, const ClientOptions& options)
+    : opt_(options), channel_(std::move(channel)), stub_(v1::BenchService::NewStub(channel_)) {}
+
 void Client::Prepare(grpc::ClientContext* ctx, double deadline_s) const {
   ctx->set_deadline(std::chrono::system_clock::now() +
                     std::chrono::microseconds(static_cast<std::int64_t>(deadline_s * 1e6)));
@@ -216,6 +219,15 @@ StatusOr<v1::ListBenchesResponse> Client::Benches() {
   Prepare(&ctx, opt_.deadline_s);
   v1::ListBenchesResponse resp;
   auto st = stub_->ListBenches(&ctx, v1::ListBenchesRequest{}, &resp);
+  if (!st.ok()) return Error(st);
+  return resp;
+}
+
+StatusOr<v1::GetQueueResponse> Client::GetQueue() {
+  grpc::ClientContext ctx;
+  Prepare(&ctx, opt_.deadline_s);
+  v1::GetQueueResponse resp;
+  auto st = stub_->GetQueue(&ctx, v1::GetQueueRequest{}, &resp);
   if (!st.ok()) return Error(st);
   return resp;
 }

@@ -34,6 +34,9 @@ struct FetchedTrace {
 class Client {
  public:
   explicit Client(const ClientOptions& options);
+  // Over a channel made elsewhere: a local service's in-process channel (service/local_service.h). The options'
+  // address only names it in messages; tls_ca_pem is not used.
+  Client(std::shared_ptr<grpc::Channel> channel, const ClientOptions& options);
 
   StatusOr<valvebench::v1::SubmitRunResponse> Submit(const valvebench::v1::ExperimentSpec& spec,
                                                      const std::string& batch_name = "");
@@ -50,6 +53,8 @@ class Client {
   StatusOr<FetchedTrace> GetTrace(std::int64_t run_id, double deadline_s = 60.0);
   StatusOr<valvebench::v1::CompareRunsResponse> Compare(std::int64_t batch_id, const std::vector<std::int64_t>& run_ids);
   StatusOr<valvebench::v1::ListBenchesResponse> Benches();
+  // The running runs and the queue with positions and ETAs, and the benches the estimate is over.
+  StatusOr<valvebench::v1::GetQueueResponse> GetQueue();
   StatusOr<valvebench::v1::ListNightsResponse> ListNights(int limit);
   // The gap diagnosis of stored runs, computed by the server (seconds to a minute).
   StatusOr<valvebench::v1::DiagnoseRunsResponse> DiagnoseRuns(const std::vector<std::int64_t>& run_ids,

@@ -1,4 +1,5 @@
 #include "server/config.h"
+#include "service/prune_rules.h"
 
 #include <fmt/format.h>
 #include <google/protobuf/util/json_util.h>
@@ -194,32 +195,7 @@ StatusOr<LabSetup> LabFromConfig(const valvebench::v1::ServerConfig& c) {
 
 }  // namespace
 
-StatusOr<regress::Baseline> LoadBaselineFile(const std::string& path) {
-  auto text = ReadFile(path, path);
-  if (!text.ok()) return text.status();
-  regress::Json j;
-  try {
-    j = regress::Json::parse(*text);
-  } catch (const regress::Json::exception& e) {
-    return Status::InvalidArgument(path + ": not JSON: " + e.what());
-  }
-  auto b = regress::BaselineFromJson(j);
-  if (!b.ok()) return b.status().WithContext(path);
-  return b;
-}
 
-runs::Policy Settings::AdmitPolicy() const {
-  runs::Policy p;
-  p.limits.max_spec_bytes = limits.max_spec_bytes();
-  p.limits.max_duration_s = limits.max_duration_s();
-  p.limits.max_record_rate_Hz = limits.max_record_rate_hz();
-  p.limits.max_queued_runs_per_user = limits.max_queued_runs_per_user();
-  p.limits.max_runs_per_submission = limits.max_runs_per_submission();
-  p.limits.max_trace_bytes_per_run = limits.max_trace_mb_per_run() * 1e6;
-  if (limits.max_disk_mb_per_user() > 0.0) p.limits.max_disk_bytes_per_user = limits.max_disk_mb_per_user() * 1e6;
-  p.benches = benches;
-  return p;
-}
 
 StatusOr<Settings> SettingsFromConfig(const valvebench::v1::ServerConfig& c, const std::string& base_dir) {
   Settings s;

@@ -21,6 +21,7 @@
 #include "runs/store_faults.h"
 #include "runs/worker.h"
 #include "server/config.h"
+#include "service/lab_benches.h"
 #include "server/stop_signal.h"
 
 namespace vb::server {
@@ -28,9 +29,6 @@ namespace vb::server {
 // The host's benches as HostRecord::benches_json: [{"name", "kind", "model", "driver", "paced", "device",
 // "max_supply_V", "max_carrier_Hz", "max_sample_rate_Hz", "max_control_rate_Hz", "measures_position"}, ...].
 std::string BenchesJson(const std::vector<BenchSetup>& benches);
-// The benches the other hosts registered (their heartbeats' benches_json, with capabilities), as BenchSetups that
-// admission matches runs against: a run any host of the lab can take is accepted by every host.
-std::vector<BenchSetup> OtherHostsBenches(const std::vector<db::HostRecord>& hosts, const std::string& own_host);
 
 class LabHost {
  public:

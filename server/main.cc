@@ -28,8 +28,8 @@
 #include "server/lab.h"
 #include "server/nights.h"
 #include "server/retention.h"
-#include "server/service.h"
-#include "server/status_interceptor.h"
+#include "service/service.h"
+#include "service/hosting.h"
 #include "regress/cron.h"
 #include "db/open_store.h"
 #include "web/gateway.h"
@@ -119,12 +119,7 @@ int main(int argc, char** argv) {
   // No SO_REUSEPORT (gRPC's default on Linux): a second server on a held port must fail to bind, not share it.
   builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
   builder.AddListeningPort(settings->listen_address, creds, &port);
-  builder.RegisterService(&service);
-  builder.SetMaxReceiveMessageSize(64 << 20);
-  builder.SetMaxSendMessageSize(64 << 20);
-  std::vector<std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface>> interceptors;
-  interceptors.push_back(std::make_unique<vb::server::BadRequestInterceptorFactory>());
-  builder.experimental().SetInterceptorCreators(std::move(interceptors));
+  vb::server::HostService(&builder, &service);  // as a local service hosts it (service/hosting.h), plus the port
   std::unique_ptr<grpc::Server> server = builder.BuildAndStart();
   if (server == nullptr || port == 0) {
     spdlog::error("cannot listen on {} (is the port in use by another server?)", settings->listen_address.c_str());
@@ -177,8 +172,7 @@ int main(int argc, char** argv) {
 
   std::unique_ptr<vb::web::Gateway> web;
   if (!settings->web_listen_address.empty()) {
-    grpc::ChannelArguments args;
-    args.SetMaxReceiveMessageSize(64 << 20);
+    grpc::ChannelArguments args = vb::server::InProcessChannelArguments();
     vb::web::GatewayOptions wo;
     wo.listen_address = settings->web_listen_address;
     wo.tls_cert_pem = settings->tls_cert_pem;

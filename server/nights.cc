@@ -1,4 +1,5 @@
 #include "server/nights.h"
+#include "service/prune_rules.h"
 
 #include <algorithm>
 #include <chrono>

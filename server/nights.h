@@ -16,7 +16,7 @@
 #include "runs/admit.h"
 #include "server/config.h"
 #include "server/stop_signal.h"
-#include "server/service.h"
+#include "service/service.h"
 
 namespace vb::server {
 

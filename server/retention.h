@@ -11,13 +11,11 @@
 #include "db/store.h"
 #include "server/config.h"
 #include "server/stop_signal.h"
-#include "server/service.h"
+#include "service/prune_rules.h"
+#include "service/service.h"
 
 namespace vb::server {
 
-// Store::Prune on the server's store with the server's own protection added: the batch the nights' baseline
-// file was taken from stays. Refuses (deleting nothing) when that file is configured but cannot be read.
-StatusOr<db::PruneResult> PruneWithServerRules(StorePool* pool, const NightsSetup& nights, db::PruneRequest req);
 
 class RetentionScheduler {
  public:

@@ -434,3 +434,53 @@ TEST(BenchctlCli, DiagnoseOneRunSaysNothingCanBeHeldOut) {
 }
 
 }  // namespace
+
+namespace {
+
+// benchctl --local is a client of a local service (service/local_service.h): import goes through the
+// service's ImportRuns into the local store (it was refused before), and the imported runs are then what show,
+// queue --status and diagnose --runs of later invocations read from that store.
+TEST(BenchctlCli, ImportWorksLocallyThroughTheService) {
+  const std::string p07 = std::string(VB_SHARED_DIR) + "/gapbench/practice/p07";
+  if (!std::filesystem::exists(p07)) GTEST_SKIP() << "no practice data";
+  const std::string dir = ::testing::TempDir() + "/benchctl-import-" + std::to_string(::getpid());
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  const std::string env = "VALVEBENCH_DB=" + dir + "/local.db ";
+  auto cli = [&](const std::string& args) { return vb::testing::RunCommand(env + VB_BENCHCTL + " " + args); };
+  Result imported = cli("import " + p07 + " --local --json");
+  ASSERT_EQ(imported.exit_code, 0) << imported.out;
+  const auto j = nlohmann::json::parse(imported.out);
+  ASSERT_EQ(j["run_ids"].size(), 12u) << imported.out;  // p07 has 12 runs
+  const std::string first = std::to_string(j["run_ids"][0].get<std::int64_t>());
+  Result shown = cli("show " + first + " --local --json");
+  ASSERT_EQ(shown.exit_code, 0) << shown.out;
+  EXPECT_EQ(nlohmann::json::parse(shown.out)["status"], "done") << shown.out;
+  // Listed newest first, cut by --limit, saying so.
+  Result listed = cli("queue --local --status done --limit 5");
+  ASSERT_EQ(listed.exit_code, 0) << listed.out;
+  EXPECT_NE(listed.out.find("5 runs on local store " + dir + "/local.db"), std::string::npos) << listed.out;
+  EXPECT_NE(listed.out.find("--limit"), std::string::npos) << listed.out;
+}
+
+// queue and benches --local ask the local service (GetQueue, ListBenches) as they ask a server: the queue
+// says which store it looked at, and the bench is the service's local emulator (positions and ETAs of queued
+// runs: tests/service/local_service_test.cc).
+TEST(BenchctlCli, LocalQueueIsTheServicesGetQueue) {
+  const std::string dir = ::testing::TempDir() + "/benchctl-queue-" + std::to_string(::getpid());
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  const std::string env = "VALVEBENCH_DB=" + dir + "/local.db ";
+  auto cli = [&](const std::string& args) { return vb::testing::RunCommand(env + VB_BENCHCTL + " " + args); };
+  Result empty = cli("queue --local --json");
+  ASSERT_EQ(empty.exit_code, 0) << empty.out;
+  const auto e = nlohmann::json::parse(empty.out);
+  EXPECT_EQ(e["runs"].size(), 0u) << empty.out;
+  EXPECT_NE(e["where"].get<std::string>().find("local store " + dir + "/local.db"), std::string::npos) << empty.out;
+  Result benches = cli("benches --local");
+  ASSERT_EQ(benches.exit_code, 0) << benches.out;
+  EXPECT_NE(benches.out.find("local-emulator"), std::string::npos) << benches.out;
+  EXPECT_NE(benches.out.find("idle"), std::string::npos) << benches.out;
+}
+
+}  // namespace

@@ -17,7 +17,7 @@
 #include <thread>
 #include <vector>
 
-#include "server/auth.h"
+#include "service/auth.h"
 #include "valvebench/v1/config.pb.h"
 
 extern char** environ;

@@ -14,7 +14,7 @@
 #include <grpcpp/grpcpp.h>
 
 #include "client/client.h"
-#include "server/auth.h"
+#include "service/auth.h"
 #include "server/config.h"
 #include "experiment/spec.h"
 #include "server_process.h"

@@ -19,8 +19,8 @@
 #include "common/format.h"
 #include "experiment/bounds.h"
 #include "model/params.h"
-#include "server/grpc_status.h"
-#include "server/service.h"
+#include "service/grpc_status.h"
+#include "service/service.h"
 
 namespace vb::server {
 

@@ -1,5 +1,5 @@
 #include "common/format.h"
-#include "server/service.h"
+#include "service/service.h"
 
 #include <google/protobuf/util/json_util.h>
 
@@ -18,8 +18,8 @@
 #include "hw/usb/list_attached.h"
 #include "proto/api_convert.h"
 #include "runs/query.h"
-#include "server/grpc_status.h"
-#include "server/lab.h"
+#include "service/grpc_status.h"
+#include "service/lab_benches.h"
 
 namespace vb::server {
 

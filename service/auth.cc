@@ -1,4 +1,4 @@
-#include "server/auth.h"
+#include "service/auth.h"
 
 #include <openssl/evp.h>
 

@@ -3,8 +3,8 @@
 #include <string>
 
 #include "regress/compare.h"
-#include "server/grpc_status.h"
-#include "server/service.h"
+#include "service/grpc_status.h"
+#include "service/service.h"
 
 namespace vb::server {
 

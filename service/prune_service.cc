@@ -1,5 +1,5 @@
 // BenchServiceImpl::PruneRuns: retention through the API (admin role), Store::Prune on the server's store
-// (docs/store.md, "Retention") through PruneWithServerRules (server/retention.h), which the retention scheduler
+// (docs/store.md, "Retention") through PruneWithServerRules (service/prune_rules.h), which the retention scheduler
 // uses too: besides what the store protects by itself, the batch the nights' baseline file was taken from stays.
 #include <chrono>
 #include <cmath>
@@ -7,10 +7,9 @@
 
 #include "common/format.h"
 #include "proto/api_convert.h"
-#include "server/config.h"
-#include "server/grpc_status.h"
-#include "server/retention.h"
-#include "server/service.h"
+#include "service/grpc_status.h"
+#include "service/prune_rules.h"
+#include "service/service.h"
 
 namespace vb::server {
 
@@ -46,7 +45,7 @@ grpc::Status BenchServiceImpl::PruneRuns(grpc::ServerContext* ctx, const v1::Pru
   p.dry_run = req->dry_run();
   if (!std::isfinite(p.finished_before_unix_s) || p.finished_before_unix_s <= 0)
     return ToGrpcStatus(Status::InvalidArgument("older_than_s: reaches before 1970"));
-  // The same path the retention scheduler takes (server/retention.h): one set of rules.
+  // The same path the retention scheduler takes (service/prune_rules.h): one set of rules.
   auto result = PruneWithServerRules(pool_, settings_->nights, p);
   if (!result.ok()) return ToGrpcStatus(result.status());
   for (const auto& d : result->deleted) ToProto(d, resp->add_deleted());

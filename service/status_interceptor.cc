@@ -1,4 +1,4 @@
-#include "server/status_interceptor.h"
+#include "service/status_interceptor.h"
 
 #include <string>
 

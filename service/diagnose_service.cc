@@ -7,8 +7,8 @@
 #include "gap/diagnose.h"
 #include "gap/stored_runs.h"
 #include "model/params.h"
-#include "server/grpc_status.h"
-#include "server/service.h"
+#include "service/grpc_status.h"
+#include "service/service.h"
 
 namespace vb::server {
 

@@ -7,7 +7,7 @@
 #include <vector>
 
 #include "db/store.h"
-#include "server/config.h"
+#include "service/settings.h"
 #include "runs/admit.h"
 #include "runs/monitor.h"
 #include "runs/worker.h"
@@ -42,7 +42,7 @@ class StorePool {
 
 class BenchServiceImpl final : public valvebench::v1::BenchService::Service {
  public:
-  BenchServiceImpl(const Settings* settings, StorePool* pool, runs::Registry* registry,
+  BenchServiceImpl(const ServiceSettings* settings, StorePool* pool, runs::Registry* registry,
                    const std::vector<std::unique_ptr<runs::Worker>>* workers)
       : settings_(settings), policy_(settings->AdmitPolicy()), pool_(pool), registry_(registry), workers_(workers) {}
 
@@ -64,20 +64,23 @@ class BenchServiceImpl final : public valvebench::v1::BenchService::Service {
                            valvebench::v1::CompareRunsResponse* resp) override;
   grpc::Status ListBenches(grpc::ServerContext* ctx, const valvebench::v1::ListBenchesRequest* req,
                            valvebench::v1::ListBenchesResponse* resp) override;
-  // server/import.cc
+  // service/import.cc
   grpc::Status ImportRuns(grpc::ServerContext* ctx, const valvebench::v1::ImportRunsRequest* req,
                           valvebench::v1::SubmitRunResponse* resp) override;
   grpc::Status ImportRunsStream(grpc::ServerContext* ctx, grpc::ServerReader<valvebench::v1::ImportRunsPart>* reader,
                                 valvebench::v1::SubmitRunResponse* resp) override;
-  // server/diagnose_service.cc
+  // service/diagnose_service.cc
   grpc::Status DiagnoseRuns(grpc::ServerContext* ctx, const valvebench::v1::DiagnoseRunsRequest* req,
                             valvebench::v1::DiagnoseRunsResponse* resp) override;
-  // server/nights_service.cc
+  // service/nights_service.cc
   grpc::Status ListNights(grpc::ServerContext* ctx, const valvebench::v1::ListNightsRequest* req,
                           valvebench::v1::ListNightsResponse* resp) override;
-  // server/prune_service.cc
+  // service/prune_service.cc
   grpc::Status PruneRuns(grpc::ServerContext* ctx, const valvebench::v1::PruneRunsRequest* req,
                          valvebench::v1::PruneRunsResponse* resp) override;
+  // service/queue_service.cc
+  grpc::Status GetQueue(grpc::ServerContext* ctx, const valvebench::v1::GetQueueRequest* req,
+                        valvebench::v1::GetQueueResponse* resp) override;
 
   // Admits and queues a submission (runs::Admit, runs::Enqueue) and wakes the workers: what SubmitRun and
   // SubmitBatch do after authorising, and what the nights scheduler calls directly.
@@ -89,7 +92,7 @@ class BenchServiceImpl final : public valvebench::v1::BenchService::Service {
   grpc::Status FillRun(db::Store* store, const db::RunRecord& r, bool full, valvebench::v1::Run* out);
   grpc::Status LabBenches(valvebench::v1::ListBenchesResponse* resp);
 
-  const Settings* settings_;
+  const ServiceSettings* settings_;
   const runs::Policy policy_;
   StorePool* pool_;
   runs::Registry* registry_;
