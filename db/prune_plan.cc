@@ -1,12 +1,46 @@
 #include "db/prune_plan.h"
 
 #include <algorithm>
+#include <limits>
 #include <set>
+#include <string_view>
 
 #include "common/format.h"
 #include "db/text.h"
 
 namespace vb::db {
+namespace {
+
+// The batch number at source[k...] (digits up to a non-digit), else 0.
+std::int64_t BatchNumberAt(const std::string& source, std::size_t k) {
+  if (k >= source.size() || source[k] < '0' || source[k] > '9') return 0;
+  std::int64_t batch = 0;
+  for (; k < source.size() && source[k] >= '0' && source[k] <= '9'; ++k) {
+    if (batch > (std::numeric_limits<std::int64_t>::max() - 9) / 10) return 0;
+    batch = batch * 10 + (source[k] - '0');
+  }
+  return batch;
+}
+
+}  // namespace
+
+std::int64_t LocalBatchOfBaselineSource(const std::string& source) {
+  // "local batch 12" (baseline set --batch 12 --local) or "suite ci (local batch 12, seed 1)" (--suite).
+  constexpr std::string_view kMarker = "local batch ";
+  const std::size_t at = source.find(kMarker);
+  if (at == std::string::npos || (at > 0 && source[at - 1] != ' ' && source[at - 1] != '(')) return 0;
+  return BatchNumberAt(source, at + kMarker.size());
+}
+
+std::int64_t ServerBatchOfBaselineSource(const std::string& source) {
+  // "server lab:50051 batch 12" or "suite ci (server lab:50051 batch 12, seed 1)".
+  const std::size_t server = source.find("server ");
+  if (server == std::string::npos) return 0;
+  constexpr std::string_view kMarker = " batch ";
+  const std::size_t at = source.find(kMarker, server);
+  if (at == std::string::npos) return 0;
+  return BatchNumberAt(source, at + kMarker.size());
+}
 
 PrunePlan PlanPrune(const PruneFacts& facts, const PruneRequest& request) {
   // What references batches: the caller's (first: its reason wins), regression results and nights, baselines

@@ -933,21 +933,6 @@ WriteFault ClassifyWrite(const Status& st) {
   }
 }
 
-std::int64_t LocalBatchOfBaselineSource(const std::string& source) {
-  // "local batch 12" (baseline set --batch 12 --local) or "suite ci (local batch 12, seed 1)" (--suite).
-  constexpr std::string_view kMarker = "local batch ";
-  const std::size_t at = source.find(kMarker);
-  if (at == std::string::npos || (at > 0 && source[at - 1] != ' ' && source[at - 1] != '(')) return 0;
-  std::int64_t batch = 0;
-  std::size_t k = at + kMarker.size();
-  if (k >= source.size() || source[k] < '0' || source[k] > '9') return 0;
-  for (; k < source.size() && source[k] >= '0' && source[k] <= '9'; ++k) {
-    if (batch > (std::numeric_limits<std::int64_t>::max() - 9) / 10) return 0;
-    batch = batch * 10 + (source[k] - '0');
-  }
-  return batch;
-}
-
 StatusOr<std::unique_ptr<Store>> Store::Open(const std::string& path) {
   if (path.empty()) {
     return Status::InvalidArgument("path: must not be empty (\":memory:\" opens a private in-memory database)");

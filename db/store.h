@@ -325,5 +325,9 @@ WriteFault ClassifyWrite(const Status& st);
 // The batch a baseline's source names when its runs are in the local store ("local batch 12", "suite ci (local
 // batch 12, seed 1)"), else 0. benchctl writes these sources (benchctl/regress_commands.cc).
 std::int64_t LocalBatchOfBaselineSource(const std::string& source);
+// The batch a baseline taken on a server names ("server lab:50051 batch 12", "suite ci (server lab:50051 batch
+// 12, seed 1)"), else 0: what the server's retention protects for its nights' baseline file (server/retention.cc).
+// Both parsers are in db/prune_plan.cc, beside the rules that use them.
+std::int64_t ServerBatchOfBaselineSource(const std::string& source);
 
 }  // namespace vb::db
