@@ -52,6 +52,8 @@ Status ValidateFilter(const RunFilter& f) {
   }
   if (f.after_id < 0) return Status::InvalidArgument(Cat("filter.after_id: must be >= 0, got ", f.after_id));
   if (f.batch_id < 0) return Status::InvalidArgument(Cat("filter.batch_id: must be >= 0, got ", f.batch_id));
+  if (f.after && (!std::isfinite(f.after->number) || f.after->id < 0))
+    return Status::InvalidArgument("filter.after: the cursor's key must be finite and its id >= 0");
   if (!std::isfinite(f.submitted_after_unix_s) || f.submitted_after_unix_s < 0) {
     return Status::InvalidArgument(
         Cat("filter.submitted_after_unix_s: must be finite and >= 0, got ", FormatExact(f.submitted_after_unix_s)));
@@ -146,6 +148,17 @@ Status CheckPrune(const PruneRequest& request) {
 Status CheckRegression(const RegressionRecord& record) {
   if (record.suite.empty()) return Status::InvalidArgument("regression.suite: must not be empty");
   if (record.verdict.empty()) return Status::InvalidArgument("regression.verdict: must not be empty");
+  return Status::Ok();
+}
+
+Status CheckHeartbeat(const HostRecord& host, double lease_ttl_s) {
+  if (host.name.empty()) return Status::InvalidArgument("host.name: must not be empty");
+  if (!std::isfinite(lease_ttl_s) || lease_ttl_s < 0)
+    return Status::InvalidArgument(Cat("lease_ttl_s: must be finite and >= 0, got ", FormatExact(lease_ttl_s)));
+  if (!std::isfinite(host.started_unix_s) || host.started_unix_s < 0) {
+    return Status::InvalidArgument(
+        Cat("host.started_unix_s: must be finite and >= 0, got ", FormatExact(host.started_unix_s)));
+  }
   return Status::Ok();
 }
 

@@ -26,5 +26,7 @@ Status CheckPrune(const PruneRequest& request);
 Status CheckRegression(const RegressionRecord& record);
 // ClaimNight's arguments: a YYYY-MM-DD night and a host name.
 Status CheckNightClaim(const std::string& night, const std::string& host);
+// Heartbeat's arguments: a named host, a finite lease TTL and start time >= 0.
+Status CheckHeartbeat(const HostRecord& host, double lease_ttl_s);
 
 }  // namespace vb::db::checks

@@ -14,10 +14,14 @@
 #include <string_view>
 #include <unordered_set>
 #include <utility>
+#include <variant>
 
 #include "common/format.h"
 #include "db/pg_conn.h"
 #include "db/pg_schema.h"
+#include "db/prune_plan.h"
+#include "db/run_query.h"
+#include "db/run_rules.h"
 #include "db/text.h"
 #include "db/trace_codec.h"
 
@@ -32,23 +36,19 @@ using TxnKind = pg::Transaction::Kind;
 // same time, whichever host's clock is off (docs/store.md, "PostgreSQL", "The clock").
 #define VB_PG_NOW "extract(epoch FROM now())::float8"
 
-constexpr const char* kRecoverReason = "server restarted while running";
-constexpr int kMaxInterruptions = 3;  // as SQLite (db/store.cc): a run interrupted this often is failed
 // bytea values are limited to 1 GiB by PostgreSQL.
 constexpr std::uint64_t kMaxBlobBytes = (std::uint64_t{1} << 30) - 1;
 
 // The columns every RunRecord query reads (ReadRun() reads them in this order), tags and sweep point included as
 // length-prefixed text so a listing is one query: tags as "<bytes>:<tag>", the sweep as "<bytes>:<field><value>;".
 constexpr const char* kRunColumns =
-    "id, batch_id, name, controller, bench_kind, bench_name, spec_json, submitter, priority, status, reason, "
-    "requeue_on_interrupt, submitted, started, finished, progress, key_name, repeat_index, split, t_start_s, "
-    "fence, host, lease_expires, "
+    VB_DB_RUN_COLUMNS ", "
     "(SELECT string_agg(octet_length(t.tag) || ':' || t.tag, '' ORDER BY t.id) FROM run_tags t "
     "WHERE t.run_id = runs.id), "
     "(SELECT string_agg(octet_length(s.field) || ':' || s.field || s.value::text || ';', '' ORDER BY s.axis) "
     "FROM run_sweep s WHERE s.run_id = runs.id)";
 
-Status RunNotFound(std::int64_t id) { return Status::NotFound(Cat("run ", id, " not found")); }
+using rules::RunNotFound;
 
 // Parses "<n>:<n bytes>" items; `tail` (';' or 0) ends each item's remainder (the sweep value).
 bool SplitPrefixed(std::string_view s, char tail, std::vector<std::pair<std::string, std::string>>* out) {
@@ -71,11 +71,6 @@ bool SplitPrefixed(std::string_view s, char tail, std::vector<std::pair<std::str
   return true;
 }
 
-Status ValidateSeconds(const char* field, double v) {
-  if (!std::isfinite(v) || v < 0)
-    return Status::InvalidArgument(Cat(field, ": must be finite and >= 0, got ", FormatExact(v)));
-  return Status::Ok();
-}
 
 
 class PgStore final : public Store {
@@ -100,6 +95,7 @@ class PgStore final : public Store {
   StatusOr<bool> ClaimNight(const std::string& night, const std::string& host) override;
   StatusOr<RunRecord> GetRun(std::int64_t run_id) override;
   StatusOr<std::vector<RunRecord>> ListRuns(const RunFilter& filter) override;
+  StatusOr<std::int64_t> CountRuns(const RunFilter& filter) override;
   StatusOr<std::vector<StatusChange>> History(std::int64_t run_id) override;
   StatusOr<std::vector<Metric>> GetMetrics(std::int64_t run_id) override;
   StatusOr<std::int64_t> CountQueued(const std::string& submitter) override;
@@ -122,10 +118,10 @@ class PgStore final : public Store {
   Status AddHistory(std::int64_t run_id, RunStatus status, const std::string& reason);
   StatusOr<RunRecord> ReadRun(const Result& r, int row);
   StatusOr<RunRecord> LoadRun(std::int64_t run_id);
-  // Locks the run's row and checks that `lease` holds it (its fence is the run's, and, when `running_action` is
-  // given, the run is running). A stale lease: the write is recorded in stale_writes, that is committed (ending
-  // `txn`) and FailedPrecondition "stale write: ..." returned. NotFound for an unknown run.
-  Status CheckLease(pg::Transaction* txn, const Lease& lease, const char* running_action, const std::string& what);
+  // Locks the run's row and checks that `lease` holds it (rules::StaleWriteWhy: it is running and its fence is the
+  // run's). A stale lease: the write is recorded in stale_writes, that is committed (ending `txn`) and
+  // FailedPrecondition "stale write: ..." returned. NotFound for an unknown run.
+  Status CheckLease(pg::Transaction* txn, const Lease& lease, const std::string& what);
   // Interrupts the selected running runs (RecoverAfterCrash, RequeueLapsed); returns their ids.
   StatusOr<std::vector<std::int64_t>> Interrupt(const std::string& select_sql, const Params& params, bool lapsed);
   Status ReadChunks(std::int64_t run_id, const std::function<Status(TraceChunk&, std::int64_t)>& fn);
@@ -139,9 +135,7 @@ class PgStore final : public Store {
 StatusOr<RunStatus> PgStore::StatusOf(std::int64_t run_id) {
   VB_PG_ASSIGN_OR_RETURN(Result r, conn_->Exec("SELECT status FROM runs WHERE id = $1", Params().Int(run_id)));
   if (r.rows() == 0) return RunNotFound(run_id);
-  StatusOr<RunStatus> s = ParseRunStatus(r.Text(0, 0));
-  if (!s.ok()) return Status::DataLoss(Cat("run ", run_id, ": ", s.status().message()));
-  return s;
+  return rules::StoredStatus(r.Text(0, 0), Cat("run ", run_id));
 }
 
 Status PgStore::AddHistory(std::int64_t run_id, RunStatus status, const std::string& reason) {
@@ -151,32 +145,18 @@ Status PgStore::AddHistory(std::int64_t run_id, RunStatus status, const std::str
       .status();
 }
 
+// One row of a Result as rules::RunFromRow reads it.
+struct PgRow {
+  const Result& r;
+  int k;
+  std::int64_t Int(int col) const { return r.Int(k, col); }
+  std::string Text(int col) const { return r.Text(k, col); }
+  double Double(int col) const { return r.Double(k, col); }
+  bool IsNull(int col) const { return r.IsNull(k, col); }
+};
+
 StatusOr<RunRecord> PgStore::ReadRun(const Result& row, int k) {
-  RunRecord r;
-  r.id = row.Int(k, 0);
-  r.batch_id = row.Int(k, 1);
-  r.controller = row.Text(k, 3);
-  r.bench_kind = row.Text(k, 4);
-  r.bench_name = row.Text(k, 5);
-  r.spec_json = row.Text(k, 6);
-  r.submitter = row.Text(k, 7);
-  r.priority = static_cast<std::int32_t>(row.Int(k, 8));
-  StatusOr<RunStatus> status = ParseRunStatus(row.Text(k, 9));
-  if (!status.ok()) return Status::DataLoss(Cat("run ", r.id, ": ", status.status().message()));
-  r.status = *status;
-  r.reason = row.Text(k, 10);
-  r.requeue_on_interrupt = row.Int(k, 11) != 0;
-  r.submitted_unix_s = row.Double(k, 12);
-  r.started_unix_s = row.Double(k, 13);
-  r.finished_unix_s = row.Double(k, 14);
-  r.progress = row.Double(k, 15);
-  r.key.name = row.Text(k, 16);
-  r.key.repeat = static_cast<int>(row.Int(k, 17));
-  r.split = row.Text(k, 18);
-  if (!row.IsNull(k, 19)) r.t_start_s = row.Double(k, 19);
-  r.fence = row.Int(k, 20);
-  r.host = row.Text(k, 21);
-  r.lease_expires_unix_s = row.Double(k, 22);
+  VB_PG_ASSIGN_OR_RETURN(RunRecord r, rules::RunFromRow(PgRow{row, k}));
   std::vector<std::pair<std::string, std::string>> items;
   if (!SplitPrefixed(row.Text(k, 23), 0, &items)) return Status::DataLoss(Cat("run ", r.id, ": unreadable tags"));
   for (auto& [tag, _] : items) r.tags.push_back(std::move(tag));
@@ -285,40 +265,34 @@ StatusOr<std::optional<RunRecord>> PgStore::ClaimNext(const ClaimRequest& reques
   return std::optional<RunRecord>(std::move(run));
 }
 
-Status PgStore::CheckLease(pg::Transaction* txn, const Lease& lease, const char* running_action,
-                           const std::string& what) {
+Status PgStore::CheckLease(pg::Transaction* txn, const Lease& lease, const std::string& what) {
   VB_PG_ASSIGN_OR_RETURN(Result r, conn_->Exec("SELECT status, fence, host FROM runs WHERE id = $1 FOR UPDATE",
                                                Params().Int(lease.run_id)));
   if (r.rows() == 0) return RunNotFound(lease.run_id);
-  StatusOr<RunStatus> status = ParseRunStatus(r.Text(0, 0));
-  if (!status.ok()) return Status::DataLoss(Cat("run ", lease.run_id, ": ", status.status().message()));
+  VB_PG_ASSIGN_OR_RETURN(const RunStatus status, rules::StoredStatus(r.Text(0, 0), Cat("run ", lease.run_id)));
   const std::int64_t fence = r.Int(0, 1);
   const std::string host = r.Text(0, 2);
-  std::string why;
-  if (lease.fence != fence) {
-    why = Cat("stale write: run ", lease.run_id, " is held by attempt ", fence,
-              host.empty() ? std::string() : Cat(" on host ", host), ", not by this lease's attempt ", lease.fence,
-              " (its lease lapsed and the run was re-queued or claimed again)");
-  } else if (running_action != nullptr && *status != RunStatus::kRunning) {
-    why = Cat("stale write: run ", lease.run_id, " is ", RunStatusName(*status), ", not running: only a running run ",
-              running_action);
-  } else {
-    return Status::Ok();
-  }
+  std::optional<std::string> stale = rules::StaleWriteWhy(lease, what, status, fence, host);
+  if (!stale) return Status::Ok();
   VB_RETURN_IF_ERROR(conn_
                          ->Exec("INSERT INTO stale_writes (run_id, fence, current_fence, host, what, at) "
                                 "VALUES ($1, $2, $3, $4, $5, " VB_PG_NOW ")",
-                                Params().Int(lease.run_id).Int(lease.fence).Int(fence).Text(host).Text(what))
+                                Params()
+                                    .Int(lease.run_id)
+                                    .Int(lease.fence)
+                                    .Int(fence)
+                                    .Text(status == RunStatus::kRunning ? host : std::string())
+                                    .Text(what))
                          .status());
   VB_RETURN_IF_ERROR(txn->Commit());
-  return Status::FailedPrecondition(std::move(why));
+  return Status::FailedPrecondition(std::move(*stale));
 }
 
 Status PgStore::SetProgress(const Lease& lease, double progress) {
   VB_RETURN_IF_ERROR(checks::CheckProgress(progress));
   pg::Transaction txn(conn_.get());
   VB_RETURN_IF_ERROR(txn.Begin());
-  VB_RETURN_IF_ERROR(CheckLease(&txn, lease, "reports progress", "progress"));
+  VB_RETURN_IF_ERROR(CheckLease(&txn, lease, "progress"));
   VB_RETURN_IF_ERROR(
       conn_->Exec("UPDATE runs SET progress = $2 WHERE id = $1", Params().Int(lease.run_id).Double(progress)).status());
   return txn.Commit();
@@ -341,7 +315,7 @@ Status PgStore::Finish(const Lease& lease, RunStatus final_status, const std::st
       return Status::Ok();
     }
   }
-  VB_RETURN_IF_ERROR(CheckLease(&txn, lease, "can finish", Cat("finish ", RunStatusName(final_status))));
+  VB_RETURN_IF_ERROR(CheckLease(&txn, lease, Cat("finish ", RunStatusName(final_status))));
   VB_RETURN_IF_ERROR(conn_
                          ->Exec("UPDATE runs SET status = $2, reason = $3, finished = " VB_PG_NOW ", "
                                 "progress = CASE WHEN $2 = 'done' THEN 1.0 ELSE progress END, lease_expires = 0 "
@@ -365,9 +339,7 @@ StatusOr<RunStatus> PgStore::RequestCancel(std::int64_t run_id, const std::strin
   VB_PG_ASSIGN_OR_RETURN(Result r,
                          conn_->Exec("SELECT status FROM runs WHERE id = $1 FOR UPDATE", Params().Int(run_id)));
   if (r.rows() == 0) return RunNotFound(run_id);
-  StatusOr<RunStatus> parsed = ParseRunStatus(r.Text(0, 0));
-  if (!parsed.ok()) return Status::DataLoss(Cat("run ", run_id, ": ", parsed.status().message()));
-  const RunStatus status = *parsed;
+  VB_PG_ASSIGN_OR_RETURN(const RunStatus status, rules::StoredStatus(r.Text(0, 0), Cat("run ", run_id)));
   if (status == RunStatus::kQueued) {
     VB_RETURN_IF_ERROR(conn_
                            ->Exec("UPDATE runs SET status = 'cancelled', reason = $2, finished = " VB_PG_NOW
@@ -413,37 +385,28 @@ StatusOr<std::vector<std::int64_t>> PgStore::Interrupt(const std::string& select
   }
   std::vector<std::int64_t> ids;
   for (const Running& r : running) {
-    const std::string why =
-        lapsed ? Cat("lease lapsed: host ", r.host.empty() ? std::string("(none)") : r.host, " stopped heartbeating")
-               : std::string(kRecoverReason);
+    const std::string why = lapsed ? rules::LapsedReason(r.host) : std::string(rules::kRecoverReason);
     VB_RETURN_IF_ERROR(conn_
                            ->Exec("UPDATE runs SET status = 'interrupted', reason = $2, finished = " VB_PG_NOW
                                   ", lease_expires = 0 WHERE id = $1",
                                   Params().Int(r.id).Text(why))
                            .status());
     VB_RETURN_IF_ERROR(AddHistory(r.id, RunStatus::kInterrupted, why));
-    VB_PG_ASSIGN_OR_RETURN(const std::int64_t times,
-                           conn_->QueryInt("SELECT count(*) FROM status_history WHERE run_id = $1 AND "
-                                           "status = 'interrupted'",
-                                           Params().Int(r.id)));
-    if (r.cancel_requested) {
-      const std::string reason =
-          r.cancel_reason.empty() ? "cancel requested before the server restarted" : r.cancel_reason;
+    std::int64_t times = 0;
+    if (!r.cancel_requested && r.requeue) {
+      VB_PG_ASSIGN_OR_RETURN(times, conn_->QueryInt("SELECT count(*) FROM status_history WHERE run_id = $1 AND "
+                                                    "status = 'interrupted'",
+                                                    Params().Int(r.id)));
+    }
+    const rules::AfterInterrupt next = rules::AfterInterruption(r.cancel_requested, r.cancel_reason, r.requeue,
+                                                                times, why);
+    if (next.status == RunStatus::kCancelled || next.status == RunStatus::kFailed) {
       VB_RETURN_IF_ERROR(conn_
-                             ->Exec("UPDATE runs SET status = 'cancelled', reason = $2, host = '' WHERE id = $1",
-                                    Params().Int(r.id).Text(reason))
+                             ->Exec("UPDATE runs SET status = $2, reason = $3 WHERE id = $1",
+                                    Params().Int(r.id).Text(RunStatusName(next.status)).Text(next.reason))
                              .status());
-      VB_RETURN_IF_ERROR(AddHistory(r.id, RunStatus::kCancelled, reason));
-    } else if (r.requeue && times >= kMaxInterruptions) {
-      const std::string reason = Cat("the server stopped ", times,
-                                     " times while this run ran: not re-queued again "
-                                     "(a run that takes the server down; see the server's log)");
-      VB_RETURN_IF_ERROR(conn_
-                             ->Exec("UPDATE runs SET status = 'failed', reason = $2, host = '' WHERE id = $1",
-                                    Params().Int(r.id).Text(reason))
-                             .status());
-      VB_RETURN_IF_ERROR(AddHistory(r.id, RunStatus::kFailed, reason));
-    } else if (r.requeue) {
+      VB_RETURN_IF_ERROR(AddHistory(r.id, next.status, next.reason));
+    } else if (next.status == RunStatus::kQueued) {
       // As on SQLite: back in the queue with its id, priority and age, asking for the bench it asked for; the
       // partial trace is dropped. The fence stays: the next claim moves it on, so the old attempt stays stale.
       VB_RETURN_IF_ERROR(conn_
@@ -453,7 +416,7 @@ StatusOr<std::vector<std::int64_t>> PgStore::Interrupt(const std::string& select
                                     Params().Int(r.id))
                              .status());
       VB_RETURN_IF_ERROR(conn_->Exec("DELETE FROM trace_chunks WHERE run_id = $1", Params().Int(r.id)).status());
-      VB_RETURN_IF_ERROR(AddHistory(r.id, RunStatus::kQueued, why));
+      VB_RETURN_IF_ERROR(AddHistory(r.id, RunStatus::kQueued, next.reason));
     }
     ids.push_back(r.id);
   }
@@ -480,12 +443,7 @@ StatusOr<int> PgStore::RecoverAfterCrash(const std::string& host) {
 // ---- The lab ----
 
 Status PgStore::Heartbeat(const HostRecord& host, double lease_ttl_s, const std::vector<Lease>& executing) {
-  if (host.name.empty()) return Status::InvalidArgument("host.name: must not be empty");
-  VB_RETURN_IF_ERROR(ValidateSeconds("lease_ttl_s", lease_ttl_s));
-  if (!std::isfinite(host.started_unix_s) || host.started_unix_s < 0) {
-    return Status::InvalidArgument(
-        Cat("host.started_unix_s: must be finite and >= 0, got ", FormatExact(host.started_unix_s)));
-  }
+  VB_RETURN_IF_ERROR(checks::CheckHeartbeat(host, lease_ttl_s));
   pg::Transaction txn(conn_.get());
   VB_RETURN_IF_ERROR(txn.Begin());
   VB_RETURN_IF_ERROR(conn_
@@ -566,54 +524,34 @@ StatusOr<bool> PgStore::ClaimNight(const std::string& night, const std::string& 
 
 StatusOr<RunRecord> PgStore::GetRun(std::int64_t run_id) { return LoadRun(run_id); }
 
+// The SQL is run_query's (db/run_query.cc), shared with SQLite.
+Params ParamsOf(const run_query::Query& q) {
+  Params p;
+  for (const run_query::Param& v : q.params) {
+    if (const auto* i = std::get_if<std::int64_t>(&v)) p.Int(*i);
+    else if (const auto* d = std::get_if<double>(&v)) p.Double(*d);
+    else p.Text(std::get<std::string>(v));
+  }
+  return p;
+}
+
 StatusOr<std::vector<RunRecord>> PgStore::ListRuns(const RunFilter& f) {
   VB_RETURN_IF_ERROR(checks::ValidateFilter(f));
-  Params p;
-  int n = 0;
-  auto next = [&n] { return Cat("$", ++n); };
-  std::string q = Cat("SELECT ", kRunColumns, " FROM runs WHERE id > ", next());
-  p.Int(f.after_id);
-  if (f.status) {
-    q += " AND status = " + next();
-    p.Text(RunStatusName(*f.status));
-  }
-  if (!f.tag.empty()) {
-    q += Cat(" AND id IN (SELECT run_id FROM run_tags WHERE tag = ", next(), ")");
-    p.Text(f.tag);
-  }
-  if (f.batch_id != 0) {
-    q += " AND batch_id = " + next();
-    p.Int(f.batch_id);
-  }
-  if (!f.controller.empty()) {
-    q += " AND controller = " + next();
-    p.Text(f.controller);
-  }
-  if (!f.bench_name.empty()) {
-    q += " AND bench_name = " + next();
-    p.Text(f.bench_name);
-  }
-  if (!f.submitter.empty()) {
-    q += " AND submitter = " + next();
-    p.Text(f.submitter);
-  }
-  if (f.submitted_after_unix_s > 0) {
-    q += " AND submitted >= " + next();
-    p.Double(f.submitted_after_unix_s);
-  }
-  if (f.submitted_before_unix_s > 0) {
-    q += " AND submitted < " + next();
-    p.Double(f.submitted_before_unix_s);
-  }
-  q += " ORDER BY id LIMIT " + next();
-  p.Int(f.limit);
-  VB_PG_ASSIGN_OR_RETURN(Result r, conn_->Exec(q, p));
+  const run_query::Query q = run_query::Page(f, run_query::Dialect::kPostgres);
+  VB_PG_ASSIGN_OR_RETURN(Result r, conn_->Exec(Cat("SELECT ", kRunColumns, q.sql), ParamsOf(q)));
   std::vector<RunRecord> out;
+  out.reserve(static_cast<std::size_t>(r.rows()));
   for (int k = 0; k < r.rows(); ++k) {
     VB_PG_ASSIGN_OR_RETURN(RunRecord run, ReadRun(r, k));
     out.push_back(std::move(run));
   }
   return out;
+}
+
+StatusOr<std::int64_t> PgStore::CountRuns(const RunFilter& f) {
+  VB_RETURN_IF_ERROR(checks::ValidateFilter(f));
+  const run_query::Query q = run_query::Count(f, run_query::Dialect::kPostgres);
+  return conn_->QueryInt(Cat("SELECT count(*)", q.sql), ParamsOf(q));
 }
 
 StatusOr<std::vector<StatusChange>> PgStore::History(std::int64_t run_id) {
@@ -625,9 +563,8 @@ StatusOr<std::vector<StatusChange>> PgStore::History(std::int64_t run_id) {
                                                Params().Int(run_id)));
   std::vector<StatusChange> out;
   for (int k = 0; k < r.rows(); ++k) {
-    StatusOr<RunStatus> s = ParseRunStatus(r.Text(k, 0));
-    if (!s.ok()) return Status::DataLoss(Cat("history of run ", run_id, ": ", s.status().message()));
-    out.push_back({*s, r.Double(k, 1), r.Text(k, 2)});
+    VB_PG_ASSIGN_OR_RETURN(const RunStatus s, rules::StoredStatus(r.Text(k, 0), Cat("history of run ", run_id)));
+    out.push_back({s, r.Double(k, 1), r.Text(k, 2)});
   }
   VB_RETURN_IF_ERROR(txn.Commit());
   return out;
@@ -680,7 +617,7 @@ Status PgStore::AppendTraceChunk(const Lease& lease, const TraceChunk& chunk) {
   pg::Transaction txn(conn_.get());
   VB_RETURN_IF_ERROR(txn.Begin());
   // Trace chunks keep SQLite's rule (any status), but only the lease's attempt may write them.
-  VB_RETURN_IF_ERROR(CheckLease(&txn, lease, nullptr, Cat("trace chunk ", chunk.index)));
+  VB_RETURN_IF_ERROR(CheckLease(&txn, lease, Cat("trace chunk ", chunk.index)));
   VB_PG_ASSIGN_OR_RETURN(Result last, conn_->Exec("SELECT idx, channels FROM trace_chunks WHERE run_id = $1 "
                                                   "ORDER BY idx DESC LIMIT 1",
                                                   Params().Int(run_id)));
@@ -904,79 +841,38 @@ StatusOr<std::vector<RegressionRecord>> PgStore::ListRegressions(bool nights_onl
   return out;
 }
 
-// ---- Retention (the rules of SqliteStore::Prune, db/store.cc) ----
+// ---- Retention ----
+// The rules are PlanPrune's (db/prune_plan.h), shared with SQLite: this reads the facts and executes the plan.
 
 StatusOr<PruneResult> PgStore::Prune(const PruneRequest& request) {
   VB_RETURN_IF_ERROR(checks::CheckPrune(request));
   pg::Transaction txn(conn_.get());
   VB_RETURN_IF_ERROR(txn.Begin(request.dry_run ? TxnKind::kRead : TxnKind::kWrite));
-  std::map<std::int64_t, std::string> protected_batches;
-  for (std::int64_t b : request.protected_batches)
-    protected_batches.emplace(b, request.protected_why.empty() ? "protected by the caller" : request.protected_why);
+  PruneFacts facts;
   {
     VB_PG_ASSIGN_OR_RETURN(Result r, conn_->Exec("SELECT id, batch_id, night, suite FROM regressions "
-                                                 "WHERE batch_id != 0 ORDER BY id"));
-    for (int k = 0; k < r.rows(); ++k) {
-      const std::string night = r.Text(k, 2);
-      protected_batches.emplace(r.Int(k, 1), night.empty()
-                                                 ? Cat("regression result ", r.Int(k, 0), " (suite ", r.Text(k, 3), ")")
-                                                 : Cat("regression night ", night, " (result ", r.Int(k, 0), ")"));
-    }
+                                                 "WHERE batch_id != 0"));
+    for (int k = 0; k < r.rows(); ++k)
+      facts.regressions.push_back({r.Int(k, 0), r.Int(k, 1), r.Text(k, 2), r.Text(k, 3)});
   }
   {
     VB_PG_ASSIGN_OR_RETURN(Result r, conn_->Exec("SELECT name, version, source FROM baselines ORDER BY id"));
-    for (int k = 0; k < r.rows(); ++k) {
-      const std::int64_t batch = LocalBatchOfBaselineSource(r.Text(k, 2));
-      if (batch != 0) protected_batches.emplace(batch, Cat("baseline '", r.Text(k, 0), "' v", r.Int(k, 1)));
-    }
+    for (int k = 0; k < r.rows(); ++k)
+      facts.baselines.push_back({r.Text(k, 0), static_cast<std::int32_t>(r.Int(k, 1)), r.Text(k, 2)});
   }
-  PruneResult out;
-  std::vector<std::int64_t> doomed;
-  std::set<std::int64_t> touched_batches;
   {
     // No row locks: only finished runs are deleted, and nothing writes to a finished run any more.
-    VB_PG_ASSIGN_OR_RETURN(Result r, conn_->Exec("SELECT id, batch_id, name, status, finished FROM runs "
-                                                 "ORDER BY id DESC"));
-    std::int32_t finished_seen = 0;
+    VB_PG_ASSIGN_OR_RETURN(Result r, conn_->Exec("SELECT id, batch_id, name, status, finished FROM runs"));
+    facts.runs.reserve(static_cast<std::size_t>(r.rows()));
     for (int k = 0; k < r.rows(); ++k) {
-      PruneDecision d;
-      d.run_id = r.Int(k, 0);
-      d.batch_id = r.Int(k, 1);
-      d.name = r.Text(k, 2);
-      StatusOr<RunStatus> status = ParseRunStatus(r.Text(k, 3));
-      if (!status.ok()) return Status::DataLoss(Cat("run ", d.run_id, ": ", status.status().message()));
-      d.status = *status;
-      d.finished_unix_s = r.Double(k, 4);
-      const bool final_status =
-          d.status == RunStatus::kDone || d.status == RunStatus::kFailed || d.status == RunStatus::kCancelled;
-      if (!final_status) {
-        d.why = Cat(RunStatusName(d.status), ": only finished runs are pruned");
-        out.kept.push_back(std::move(d));
-        continue;
-      }
-      ++finished_seen;
-      if (d.finished_unix_s >= request.finished_before_unix_s) {
-        ++out.newer_kept;
-        continue;
-      }
-      if (auto p = protected_batches.find(d.batch_id); p != protected_batches.end()) {
-        d.why = Cat(p->second, " references batch ", d.batch_id);
-        out.kept.push_back(std::move(d));
-        continue;
-      }
-      if (finished_seen <= request.keep_last) {
-        d.why = Cat("one of the newest ", request.keep_last, " finished runs (--keep-last)");
-        out.kept.push_back(std::move(d));
-        continue;
-      }
-      d.why = Cat(RunStatusName(d.status), ", finished ", FormatUtc(d.finished_unix_s), ", before the cutoff ",
-                  FormatUtc(request.finished_before_unix_s));
-      doomed.push_back(d.run_id);
-      touched_batches.insert(d.batch_id);
-      out.deleted.push_back(std::move(d));
+      PruneFacts::Run run{r.Int(k, 0), r.Int(k, 1), r.Text(k, 2), RunStatus::kDone, r.Double(k, 4)};
+      VB_PG_ASSIGN_OR_RETURN(run.status, rules::StoredStatus(r.Text(k, 3), Cat("run ", run.id)));
+      facts.runs.push_back(std::move(run));
     }
   }
-  for (std::int64_t id : doomed) {
+  PrunePlan plan = PlanPrune(facts, request);
+  PruneResult& out = plan.result;
+  for (std::int64_t id : plan.doomed) {
     VB_PG_ASSIGN_OR_RETURN(const std::int64_t bytes,
                            conn_->QueryInt("SELECT COALESCE(SUM(octet_length(data)), 0)::int8 FROM trace_chunks "
                                            "WHERE run_id = $1",
@@ -984,25 +880,19 @@ StatusOr<PruneResult> PgStore::Prune(const PruneRequest& request) {
     out.trace_bytes += bytes;
   }
   if (!request.dry_run) {
-    for (std::int64_t id : doomed) {
+    for (std::int64_t id : plan.doomed) {
       VB_RETURN_IF_ERROR(conn_->Exec("DELETE FROM runs WHERE id = $1", Params().Int(id)).status());
     }
-    for (std::int64_t b : touched_batches) {
+    out.batches_deleted = 0;
+    for (std::int64_t b : plan.empty_batches) {
       VB_PG_ASSIGN_OR_RETURN(Result del, conn_->Exec("DELETE FROM batches WHERE id = $1 AND NOT EXISTS "
                                                      "(SELECT 1 FROM runs WHERE batch_id = $1)",
                                                      Params().Int(b)));
       out.batches_deleted += del.affected();
     }
-  } else {
-    for (std::int64_t b : touched_batches) {
-      VB_PG_ASSIGN_OR_RETURN(std::int64_t remaining,
-                             conn_->QueryInt("SELECT count(*) FROM runs WHERE batch_id = $1", Params().Int(b)));
-      for (const PruneDecision& d : out.deleted) remaining -= d.batch_id == b;
-      out.batches_deleted += remaining == 0;
-    }
   }
   VB_RETURN_IF_ERROR(txn.Commit());
-  return out;
+  return std::move(out);
 }
 
 }  // namespace

@@ -14,10 +14,14 @@
 #include <string_view>
 #include <unordered_set>
 #include <utility>
+#include <variant>
 
 #include "db/checks.h"
 #include "db/checkpointer.h"
+#include "db/prune_plan.h"
 #include "db/regress_tables.h"
+#include "db/run_query.h"
+#include "db/run_rules.h"
 #include "db/schema.h"
 #include "db/sqlite_conn.h"
 #include "db/text.h"
@@ -40,22 +44,12 @@ constexpr int kCheckpointEveryPages = 1000;
 constexpr int kWalWaitAbovePages = 8000;
 constexpr std::int64_t kWalLimitBytes =
     static_cast<std::int64_t>(kWalWaitAbovePages + kCheckpointEveryPages) * kPageSizeBytes;
-constexpr const char* kRecoverReason = "server restarted while running";
-// A run interrupted by a server stop this many times is failed, not re-queued again: whatever it does (a spec
-// that exhausts memory, a bench that crashes the process) would take the server down at every start.
-constexpr int kMaxInterruptions = 3;
-
-// Column list shared by every query that builds a RunRecord (ReadRun() reads them in this order).
-constexpr const char* kRunColumns =
-    "id, batch_id, name, controller, bench_kind, bench_name, spec_json, submitter, priority, status, reason, "
-    "requeue_on_interrupt, submitted, started, finished, progress, key_name, repeat_index, split, t_start_s, "
-    "fence, host, lease_expires";
+using rules::kRunColumns;
+using rules::RunNotFound;
 
 double NowUnixS() {
   return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
 }
-
-Status RunNotFound(std::int64_t id) { return Status::NotFound(Cat("run ", id, " not found")); }
 
 class SqliteStore final : public Store {
  public:
@@ -93,6 +87,7 @@ class SqliteStore final : public Store {
   StatusOr<bool> ClaimNight(const std::string& night, const std::string& host) override;
   StatusOr<RunRecord> GetRun(std::int64_t run_id) override;
   StatusOr<std::vector<RunRecord>> ListRuns(const RunFilter& filter) override;
+  StatusOr<std::int64_t> CountRuns(const RunFilter& filter) override;
   StatusOr<std::vector<StatusChange>> History(std::int64_t run_id) override;
   StatusOr<std::vector<Metric>> GetMetrics(std::int64_t run_id) override;
   StatusOr<std::int64_t> CountQueued(const std::string& submitter) override;
@@ -142,9 +137,7 @@ StatusOr<RunStatus> SqliteStore::StatusOf(std::int64_t run_id) {
   st.Bind(1, run_id);
   VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
   if (!row) return RunNotFound(run_id);
-  StatusOr<RunStatus> s = ParseRunStatus(st.Text(0));
-  if (!s.ok()) return Status::DataLoss(Cat("run ", run_id, ": ", s.status().message()));
-  return s;
+  return rules::StoredStatus(st.Text(0), Cat("run ", run_id));
 }
 
 Status SqliteStore::AddHistory(std::int64_t run_id, RunStatus status, double at, const std::string& reason) {
@@ -158,32 +151,7 @@ Status SqliteStore::AddHistory(std::int64_t run_id, RunStatus status, double at,
 }
 
 StatusOr<RunRecord> SqliteStore::ReadRun(const Stmt& row) {
-  RunRecord r;
-  r.id = row.Int(0);
-  r.batch_id = row.Int(1);
-  r.controller = row.Text(3);
-  r.bench_kind = row.Text(4);
-  r.bench_name = row.Text(5);
-  r.spec_json = row.Text(6);
-  r.submitter = row.Text(7);
-  r.priority = static_cast<std::int32_t>(row.Int(8));
-  StatusOr<RunStatus> status = ParseRunStatus(row.Text(9));
-  if (!status.ok()) return Status::DataLoss(Cat("run ", r.id, ": ", status.status().message()));
-  r.status = *status;
-  r.reason = row.Text(10);
-  r.requeue_on_interrupt = row.Int(11) != 0;
-  r.submitted_unix_s = row.Double(12);
-  r.started_unix_s = row.Double(13);
-  r.finished_unix_s = row.Double(14);
-  r.progress = row.Double(15);
-  r.key.name = row.Text(16);
-  r.key.repeat = static_cast<int>(row.Int(17));
-  r.split = row.Text(18);
-  if (!row.IsNull(19)) r.t_start_s = row.Double(19);
-  r.fence = row.Int(20);
-  r.host = row.Text(21);
-  r.lease_expires_unix_s = row.Double(22);
-
+  VB_DB_ASSIGN_OR_RETURN(RunRecord r, rules::RunFromRow(row));
   VB_DB_ASSIGN_OR_RETURN(Stmt sweep,
                          conn_.Prepare("SELECT field, value FROM run_sweep WHERE run_id = ?1 ORDER BY axis"));
   sweep.Bind(1, r.id);
@@ -438,28 +406,22 @@ Status SqliteStore::CheckLease(const Lease& lease, const std::string& what, Tran
   st.Bind(1, lease.run_id);
   VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
   if (!row) return RunNotFound(lease.run_id);
-  StatusOr<RunStatus> status = ParseRunStatus(st.Text(0));
-  if (!status.ok()) return Status::DataLoss(Cat("run ", lease.run_id, ": ", status.status().message()));
+  VB_DB_ASSIGN_OR_RETURN(const RunStatus status, rules::StoredStatus(st.Text(0), Cat("run ", lease.run_id)));
   const std::int64_t fence = st.Int(1);
   const std::string host = st.Text(2);
-  if (*status == RunStatus::kRunning && fence == lease.fence) return Status::Ok();
-  const std::string holder = *status != RunStatus::kRunning ? std::string("nobody")
-                                                            : host.empty() ? "another attempt" : "host " + host;
-  const std::string message =
-      Cat("stale write: ", what, " for run ", lease.run_id, " with fence ", lease.fence, " refused: the run is ",
-          RunStatusName(*status), (*status == RunStatus::kRunning ? "" : ", not running"), ", its fence is ", fence,
-          " (held by ", holder, "); the run is no longer this attempt's");
+  std::optional<std::string> stale = rules::StaleWriteWhy(lease, what, status, fence, host);
+  if (!stale) return Status::Ok();
   VB_DB_ASSIGN_OR_RETURN(Stmt log, conn_.Prepare("INSERT INTO stale_writes (run_id, fence, current_fence, host, "
                                                  "what, at) VALUES (?1, ?2, ?3, ?4, ?5, ?6)"));
   log.Bind(1, lease.run_id);
   log.Bind(2, lease.fence);
   log.Bind(3, fence);
-  log.Bind(4, *status == RunStatus::kRunning ? host : std::string());
+  log.Bind(4, status == RunStatus::kRunning ? host : std::string());
   log.Bind(5, what);
   log.Bind(6, NowUnixS());
   VB_RETURN_IF_ERROR(log.Run());
   VB_RETURN_IF_ERROR(txn->Commit());
-  return Status::FailedPrecondition(message);
+  return Status::FailedPrecondition(std::move(*stale));
 }
 
 Status SqliteStore::InterruptRunning(const std::vector<std::int64_t>& ids, const std::string& reason, double now) {
@@ -485,28 +447,18 @@ Status SqliteStore::InterruptRunning(const std::vector<std::int64_t>& ids, const
     VB_RETURN_IF_ERROR(AddHistory(id, RunStatus::kInterrupted, now, reason));
 
     std::int64_t times = 0;
-    if (cancel_requested) {
-      // Somebody asked to cancel it while it ran: it has stopped now, so the request is fulfilled.
-      const std::string why = cancel_reason.empty() ? "cancel requested before the server restarted" : cancel_reason;
-      VB_DB_ASSIGN_OR_RETURN(Stmt cancel,
-                             conn_.Prepare("UPDATE runs SET status = 'cancelled', reason = ?2 WHERE id = ?1"));
-      cancel.Bind(1, id);
-      cancel.Bind(2, why);
-      VB_RETURN_IF_ERROR(cancel.Run());
-      VB_RETURN_IF_ERROR(AddHistory(id, RunStatus::kCancelled, now, why));
-    } else if (requeue && [&] {
-                 auto n = InterruptionsOfRun(id);
-                 times = n.ok() ? *n : 0;
-                 return times >= kMaxInterruptions;
-               }()) {
-      const std::string why = Cat("the server stopped ", times, " times while this run ran: not re-queued again "
-                                  "(a run that takes the server down; see the server's log)");
-      VB_DB_ASSIGN_OR_RETURN(Stmt fail, conn_.Prepare("UPDATE runs SET status = 'failed', reason = ?2 WHERE id = ?1"));
-      fail.Bind(1, id);
-      fail.Bind(2, why);
-      VB_RETURN_IF_ERROR(fail.Run());
-      VB_RETURN_IF_ERROR(AddHistory(id, RunStatus::kFailed, now, why));
-    } else if (requeue) {
+    if (!cancel_requested && requeue) {
+      VB_DB_ASSIGN_OR_RETURN(times, InterruptionsOfRun(id));
+    }
+    const rules::AfterInterrupt next = rules::AfterInterruption(cancel_requested, cancel_reason, requeue, times, reason);
+    if (next.status == RunStatus::kCancelled || next.status == RunStatus::kFailed) {
+      VB_DB_ASSIGN_OR_RETURN(Stmt end, conn_.Prepare("UPDATE runs SET status = ?2, reason = ?3 WHERE id = ?1"));
+      end.Bind(1, id);
+      end.Bind(2, RunStatusName(next.status));
+      end.Bind(3, next.reason);
+      VB_RETURN_IF_ERROR(end.Run());
+      VB_RETURN_IF_ERROR(AddHistory(id, next.status, now, next.reason));
+    } else if (next.status == RunStatus::kQueued) {
       // Back in the queue with its id, priority and age; the bench it asked for (not the one that was running
       // it), no host and no lease; its fence stays, so the interrupted attempt's late writes are refused, and the
       // next claim takes fence + 1. The partial trace of the interrupted attempt is dropped: the rerun writes its
@@ -520,7 +472,7 @@ Status SqliteStore::InterruptRunning(const std::vector<std::int64_t>& ids, const
       VB_DB_ASSIGN_OR_RETURN(Stmt drop, conn_.Prepare("DELETE FROM trace_chunks WHERE run_id = ?1"));
       drop.Bind(1, id);
       VB_RETURN_IF_ERROR(drop.Run());
-      VB_RETURN_IF_ERROR(AddHistory(id, RunStatus::kQueued, now, reason));
+      VB_RETURN_IF_ERROR(AddHistory(id, RunStatus::kQueued, now, next.reason));
     }
   }
   return Status::Ok();
@@ -543,7 +495,7 @@ StatusOr<int> SqliteStore::RecoverAfterCrash(const std::string& host) {
       running.push_back(st.Int(0));
     }
   }
-  VB_RETURN_IF_ERROR(InterruptRunning(running, kRecoverReason, NowUnixS()));
+  VB_RETURN_IF_ERROR(InterruptRunning(running, rules::kRecoverReason, NowUnixS()));
   VB_RETURN_IF_ERROR(txn.Commit());
   return static_cast<int>(running.size());
 }
@@ -551,9 +503,7 @@ StatusOr<int> SqliteStore::RecoverAfterCrash(const std::string& host) {
 // ---- The lab ----
 
 Status SqliteStore::Heartbeat(const HostRecord& host, double lease_ttl_s, const std::vector<Lease>& executing) {
-  if (host.name.empty()) return Status::InvalidArgument("host.name: must not be empty");
-  if (!std::isfinite(lease_ttl_s) || lease_ttl_s < 0)
-    return Status::InvalidArgument(Cat("lease_ttl_s: must be finite and >= 0, got ", FormatExact(lease_ttl_s)));
+  VB_RETURN_IF_ERROR(checks::CheckHeartbeat(host, lease_ttl_s));
   const double now = NowUnixS();
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kWrite));
@@ -615,8 +565,7 @@ StatusOr<std::vector<std::int64_t>> SqliteStore::RequeueLapsed() {
   }
   for (const std::int64_t id : lapsed) {
     const std::string& h = host_of[id];
-    VB_RETURN_IF_ERROR(InterruptRunning(
-        {id}, Cat("lease lapsed: host ", h.empty() ? std::string("(none)") : h, " stopped renewing it"), now));
+    VB_RETURN_IF_ERROR(InterruptRunning({id}, rules::LapsedReason(h), now));
   }
   VB_RETURN_IF_ERROR(txn.Commit());
   return lapsed;
@@ -669,33 +618,22 @@ StatusOr<RunRecord> SqliteStore::GetRun(std::int64_t run_id) {
   return run;
 }
 
+// The SQL is run_query's (db/run_query.cc), shared with PostgreSQL; one text per combination of filters and
+// order in use, each prepared once and cached like the others.
+void BindQuery(Stmt* st, const run_query::Query& q) {
+  for (std::size_t k = 0; k < q.params.size(); ++k) {
+    const int i = static_cast<int>(k) + 1;
+    std::visit([&](const auto& v) { st->Bind(i, v); }, q.params[k]);
+  }
+}
+
 StatusOr<std::vector<RunRecord>> SqliteStore::ListRuns(const RunFilter& f) {
   VB_RETURN_IF_ERROR(checks::ValidateFilter(f));
-  // One SQL text per combination of filters in use, each prepared once and cached like the others.
-  std::string q = Cat("SELECT ", kRunColumns, " FROM runs WHERE id > :after_id");
-  if (f.status) q += " AND status = :status";
-  if (!f.tag.empty()) q += " AND id IN (SELECT run_id FROM run_tags WHERE tag = :tag)";
-  if (f.batch_id != 0) q += " AND batch_id = :batch_id";
-  if (!f.controller.empty()) q += " AND controller = :controller";
-  if (!f.bench_name.empty()) q += " AND bench_name = :bench_name";
-  if (!f.submitter.empty()) q += " AND submitter = :submitter";
-  if (f.submitted_after_unix_s > 0) q += " AND submitted >= :after_s";
-  if (f.submitted_before_unix_s > 0) q += " AND submitted < :before_s";
-  q += " ORDER BY id LIMIT :limit";
-
+  const run_query::Query q = run_query::Page(f, run_query::Dialect::kSqlite);
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
-  VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare(q));
-  st.BindNamed(":after_id", f.after_id);
-  if (f.status) st.BindNamed(":status", RunStatusName(*f.status));
-  st.BindNamed(":tag", f.tag);
-  st.BindNamed(":batch_id", f.batch_id);
-  st.BindNamed(":controller", f.controller);
-  st.BindNamed(":bench_name", f.bench_name);
-  st.BindNamed(":submitter", f.submitter);
-  st.BindNamed(":after_s", f.submitted_after_unix_s);
-  st.BindNamed(":before_s", f.submitted_before_unix_s);
-  st.BindNamed(":limit", static_cast<std::int64_t>(f.limit));
+  VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare(Cat("SELECT ", kRunColumns, q.sql)));
+  BindQuery(&st, q);
   std::vector<RunRecord> out;
   while (true) {
     VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
@@ -705,6 +643,20 @@ StatusOr<std::vector<RunRecord>> SqliteStore::ListRuns(const RunFilter& f) {
   }
   VB_RETURN_IF_ERROR(txn.Commit());
   return out;
+}
+
+StatusOr<std::int64_t> SqliteStore::CountRuns(const RunFilter& f) {
+  VB_RETURN_IF_ERROR(checks::ValidateFilter(f));
+  const run_query::Query q = run_query::Count(f, run_query::Dialect::kSqlite);
+  Transaction txn(&conn_);
+  VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
+  VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare(Cat("SELECT count(*)", q.sql)));
+  BindQuery(&st, q);
+  VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+  if (!row) return Status::Internal("count(*) returned no row");
+  const std::int64_t n = st.Int(0);
+  VB_RETURN_IF_ERROR(txn.Commit());
+  return n;
 }
 
 StatusOr<std::vector<StatusChange>> SqliteStore::History(std::int64_t run_id) {
@@ -718,9 +670,8 @@ StatusOr<std::vector<StatusChange>> SqliteStore::History(std::int64_t run_id) {
   while (true) {
     VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
     if (!row) break;
-    StatusOr<RunStatus> s = ParseRunStatus(st.Text(0));
-    if (!s.ok()) return Status::DataLoss(Cat("history of run ", run_id, ": ", s.status().message()));
-    out.push_back({*s, st.Double(1), st.Text(2)});
+    VB_DB_ASSIGN_OR_RETURN(const RunStatus s, rules::StoredStatus(st.Text(0), Cat("history of run ", run_id)));
+    out.push_back({s, st.Double(1), st.Text(2)});
   }
   VB_RETURN_IF_ERROR(txn.Commit());
   return out;
@@ -900,29 +851,21 @@ Status SqliteStore::ReadChunks(std::int64_t run_id, const std::function<Status(T
 }
 
 // ---- Retention ----
-
-std::string UtcDate(double unix_s) { return FormatUtc(unix_s); }
+// The rules are PlanPrune's (db/prune_plan.h), shared with PostgreSQL: this reads the facts and executes the plan.
 
 StatusOr<PruneResult> SqliteStore::Prune(const PruneRequest& request) {
   VB_RETURN_IF_ERROR(checks::CheckPrune(request));
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(request.dry_run ? TxnKind::kRead : TxnKind::kWrite));
 
-  // What references batches: results of regression runs and nights, baselines taken from local batches, and
-  // whatever the caller names.
-  std::map<std::int64_t, std::string> protected_batches;
-  for (std::int64_t b : request.protected_batches)
-    protected_batches.emplace(b, request.protected_why.empty() ? "protected by the caller" : request.protected_why);
+  PruneFacts facts;
   {
     VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT id, batch_id, night, suite FROM regressions "
-                                                  "WHERE batch_id != 0 ORDER BY id"));
+                                                  "WHERE batch_id != 0"));
     while (true) {
       VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
       if (!row) break;
-      const std::string night = st.Text(2);
-      protected_batches.emplace(st.Int(1), night.empty()
-                                               ? Cat("regression result ", st.Int(0), " (suite ", st.Text(3), ")")
-                                               : Cat("regression night ", night, " (result ", st.Int(0), ")"));
+      facts.regressions.push_back({st.Int(0), st.Int(1), st.Text(2), st.Text(3)});
     }
   }
   {
@@ -930,63 +873,25 @@ StatusOr<PruneResult> SqliteStore::Prune(const PruneRequest& request) {
     while (true) {
       VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
       if (!row) break;
-      const std::int64_t batch = LocalBatchOfBaselineSource(st.Text(2));
-      if (batch != 0) protected_batches.emplace(batch, Cat("baseline '", st.Text(0), "' v", st.Int(1)));
+      facts.baselines.push_back({st.Text(0), static_cast<std::int32_t>(st.Int(1)), st.Text(2)});
     }
   }
-
-  PruneResult out;
-  std::vector<std::int64_t> doomed;
-  std::set<std::int64_t> touched_batches;
   {
-    // Newest first, so that the first keep_last finished runs are the newest.
-    VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT id, batch_id, name, status, finished FROM runs "
-                                                  "ORDER BY id DESC"));
-    std::int32_t finished_seen = 0;
+    VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT id, batch_id, name, status, finished FROM runs"));
     while (true) {
       VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
       if (!row) break;
-      PruneDecision d;
-      d.run_id = st.Int(0);
-      d.batch_id = st.Int(1);
-      d.name = st.Text(2);
-      StatusOr<RunStatus> status = ParseRunStatus(st.Text(3));
-      if (!status.ok()) return Status::DataLoss(Cat("run ", d.run_id, ": ", status.status().message()));
-      d.status = *status;
-      d.finished_unix_s = st.Double(4);
-      const bool final_status = d.status == RunStatus::kDone || d.status == RunStatus::kFailed ||
-                                d.status == RunStatus::kCancelled;
-      if (!final_status) {
-        d.why = Cat(RunStatusName(d.status), ": only finished runs are pruned");
-        out.kept.push_back(std::move(d));
-        continue;
-      }
-      ++finished_seen;
-      if (d.finished_unix_s >= request.finished_before_unix_s) {
-        ++out.newer_kept;
-        continue;
-      }
-      if (auto p = protected_batches.find(d.batch_id); p != protected_batches.end()) {
-        d.why = Cat(p->second, " references batch ", d.batch_id);
-        out.kept.push_back(std::move(d));
-        continue;
-      }
-      if (finished_seen <= request.keep_last) {
-        d.why = Cat("one of the newest ", request.keep_last, " finished runs (--keep-last)");
-        out.kept.push_back(std::move(d));
-        continue;
-      }
-      d.why = Cat(RunStatusName(d.status), ", finished ", UtcDate(d.finished_unix_s), ", before the cutoff ",
-                  UtcDate(request.finished_before_unix_s));
-      doomed.push_back(d.run_id);
-      touched_batches.insert(d.batch_id);
-      out.deleted.push_back(std::move(d));
+      PruneFacts::Run r{st.Int(0), st.Int(1), st.Text(2), RunStatus::kDone, st.Double(4)};
+      VB_DB_ASSIGN_OR_RETURN(r.status, rules::StoredStatus(st.Text(3), Cat("run ", r.id)));
+      facts.runs.push_back(std::move(r));
     }
   }
+  PrunePlan plan = PlanPrune(facts, request);
+  PruneResult& out = plan.result;
   {
     VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT COALESCE(SUM(length(data)), 0) FROM trace_chunks "
                                                   "WHERE run_id = ?1"));
-    for (std::int64_t id : doomed) {
+    for (std::int64_t id : plan.doomed) {
       st.Reset();
       st.Bind(1, id);
       VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
@@ -996,32 +901,23 @@ StatusOr<PruneResult> SqliteStore::Prune(const PruneRequest& request) {
   if (!request.dry_run) {
     // Children go with their run (ON DELETE CASCADE): tags, history, metrics, sweep point, trace chunks.
     VB_DB_ASSIGN_OR_RETURN(Stmt del, conn_.Prepare("DELETE FROM runs WHERE id = ?1"));
-    for (std::int64_t id : doomed) {
+    for (std::int64_t id : plan.doomed) {
       del.Reset();
       del.Bind(1, id);
       VB_RETURN_IF_ERROR(del.Run());
     }
     VB_DB_ASSIGN_OR_RETURN(Stmt empty, conn_.Prepare("DELETE FROM batches WHERE id = ?1 AND NOT EXISTS "
                                                      "(SELECT 1 FROM runs WHERE batch_id = ?1)"));
-    for (std::int64_t b : touched_batches) {
+    out.batches_deleted = 0;
+    for (std::int64_t b : plan.empty_batches) {
       empty.Reset();
       empty.Bind(1, b);
       VB_RETURN_IF_ERROR(empty.Run());
       out.batches_deleted += sqlite3_changes(conn_.raw());
     }
-  } else {
-    VB_DB_ASSIGN_OR_RETURN(Stmt left, conn_.Prepare("SELECT count(*) FROM runs WHERE batch_id = ?1"));
-    for (std::int64_t b : touched_batches) {
-      left.Reset();
-      left.Bind(1, b);
-      VB_DB_ASSIGN_OR_RETURN(const bool row, left.Step());
-      std::int64_t remaining = row ? left.Int(0) : 0;
-      for (const PruneDecision& d : out.deleted) remaining -= d.batch_id == b;
-      out.batches_deleted += remaining == 0;
-    }
   }
   VB_RETURN_IF_ERROR(txn.Commit());
-  return out;
+  return std::move(out);
 }
 
 }  // namespace
@@ -1035,21 +931,6 @@ WriteFault ClassifyWrite(const Status& st) {
     case StatusCode::kNotFound: return WriteFault::kFenced;
     default: return WriteFault::kPermanent;
   }
-}
-
-std::int64_t LocalBatchOfBaselineSource(const std::string& source) {
-  // "local batch 12" (baseline set --batch 12 --local) or "suite ci (local batch 12, seed 1)" (--suite).
-  constexpr std::string_view kMarker = "local batch ";
-  const std::size_t at = source.find(kMarker);
-  if (at == std::string::npos || (at > 0 && source[at - 1] != ' ' && source[at - 1] != '(')) return 0;
-  std::int64_t batch = 0;
-  std::size_t k = at + kMarker.size();
-  if (k >= source.size() || source[k] < '0' || source[k] > '9') return 0;
-  for (; k < source.size() && source[k] >= '0' && source[k] <= '9'; ++k) {
-    if (batch > (std::numeric_limits<std::int64_t>::max() - 9) / 10) return 0;
-    batch = batch * 10 + (source[k] - '0');
-  }
-  return batch;
 }
 
 StatusOr<std::unique_ptr<Store>> Store::Open(const std::string& path) {

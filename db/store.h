@@ -119,6 +119,33 @@ struct TraceChunk {
   std::vector<double> data;         // channels.size() * samples values, channel-major
 };
 
+// The order of a run listing (db/run_query.h parses the API's order_by). Ties are broken by id in the same
+// direction, so every order is total and a keyset cursor pages through it.
+enum class RunSortKey {
+  kId,
+  kSubmitted,
+  kStarted,
+  kFinished,
+  kDuration,    // finished - started for a run that started and finished, else 0
+  kName,        // RunKey::DisplayName(), byte order (both engines)
+  kStatus,      // lifecycle order: queued, running, interrupted, done, failed, cancelled
+  kBench,       // bench_name
+  kController,
+  kSubmitter,
+};
+struct RunOrder {
+  RunSortKey key = RunSortKey::kId;
+  bool desc = false;
+  bool operator==(const RunOrder&) const = default;
+};
+// Keyset paging: the listing continues after the run whose sort key had this value (number for the numeric keys
+// and kStatus's rank, text for the text keys) and this id.
+struct RunCursor {
+  double number = 0.0;
+  std::string text;
+  std::int64_t id = 0;
+};
+
 struct RunFilter {
   std::optional<RunStatus> status;
   std::string tag;                  // runs carrying this tag
@@ -126,9 +153,12 @@ struct RunFilter {
   std::string controller;
   std::string bench_name;
   std::string submitter;
+  std::string name;                 // runs whose name contains this text (ASCII case-insensitive)
   double submitted_after_unix_s = 0.0;
   double submitted_before_unix_s = 0.0;  // 0 = no bound
-  std::int64_t after_id = 0;        // paging: runs with id > after_id
+  std::int64_t after_id = 0;        // runs with id > after_id (a filter: whatever the order)
+  RunOrder order;                   // default: by id, oldest first (the API's default is "submitted desc")
+  std::optional<RunCursor> after;   // paging in `order`: the runs after this one (CursorAfter, page tokens)
   std::int32_t limit = 100;         // page size (1..1000)
 };
 
@@ -242,7 +272,10 @@ class Store {
   virtual StatusOr<bool> ClaimNight(const std::string& night, const std::string& host) = 0;
 
   virtual StatusOr<RunRecord> GetRun(std::int64_t run_id) = 0;
+  // At most filter.limit runs matching the filter, in filter.order, after filter.after.
   virtual StatusOr<std::vector<RunRecord>> ListRuns(const RunFilter& filter) = 0;
+  // How many runs match the filter on every page (filter.after and filter.limit ignored).
+  virtual StatusOr<std::int64_t> CountRuns(const RunFilter& filter) = 0;
   virtual StatusOr<std::vector<StatusChange>> History(std::int64_t run_id) = 0;
   virtual StatusOr<std::vector<Metric>> GetMetrics(std::int64_t run_id) = 0;
   virtual StatusOr<std::int64_t> CountQueued(const std::string& submitter) = 0;
@@ -292,5 +325,9 @@ WriteFault ClassifyWrite(const Status& st);
 // The batch a baseline's source names when its runs are in the local store ("local batch 12", "suite ci (local
 // batch 12, seed 1)"), else 0. benchctl writes these sources (benchctl/regress_commands.cc).
 std::int64_t LocalBatchOfBaselineSource(const std::string& source);
+// The batch a baseline taken on a server names ("server lab:50051 batch 12", "suite ci (server lab:50051 batch
+// 12, seed 1)"), else 0: what the server's retention protects for its nights' baseline file (server/retention.cc).
+// Both parsers are in db/prune_plan.cc, beside the rules that use them.
+std::int64_t ServerBatchOfBaselineSource(const std::string& source);
 
 }  // namespace vb::db

@@ -27,6 +27,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "db/run_query.h"
 #include "db/store.h"
 #include "db/text.h"
 #include "experiment/runner.h"
@@ -275,6 +276,76 @@ void MeasureQueue(const std::string& path) {
               kQueueRuns / Seconds(q1 - q0), kQueueRuns / Seconds(q2 - q1));
 }
 
+// Listing (ListRuns/CountRuns, docs/store.md "Listing runs"): 20 000 runs with 1 KB specs, statuses and times
+// spread out; the median of 20 calls each: the API's default first page (submitted desc), a page 100 pages deep
+// by its keyset cursor, a full-sort order (duration desc), a name filter, and the counts.
+void MeasureListing(const std::string& path) {
+  constexpr int kBatches = 20, kPerBatch = 1000, kCalls = 20;
+  auto store = OpenFresh(path);
+  const std::string spec = "{\"name\": \"list\", \"pad\": \"" + std::string(1000, 'x') + "\"}";
+  for (int b = 0; b < kBatches; ++b) {
+    std::vector<vb::db::RunRecord> runs;
+    for (int k = 0; k < kPerBatch; ++k) {
+      vb::db::RunRecord r;
+      r.key = vb::NamedRun(vb::db::Cat(k % 3 == 0 ? "hold-" : "map-", k % 97));
+      r.controller = k % 2 == 0 ? "pi_current" : "bang_bang";
+      r.bench_kind = "emulated";
+      r.spec_json = spec;
+      runs.push_back(std::move(r));
+    }
+    auto id = store->SubmitBatch("perf", "list", "{}", runs, nullptr);
+    if (!id.ok()) Die(id.status(), "submit");
+  }
+  sqlite3* raw = nullptr;
+  if (sqlite3_open(path.c_str(), &raw) != SQLITE_OK ||
+      sqlite3_exec(raw,
+                   "UPDATE runs SET submitted = submitted + id, started = 1e9 + id * 2.0, "
+                   "finished = 1e9 + id * 2.0 + (id % 613) * 0.1, "
+                   "status = CASE id % 4 WHEN 0 THEN 'failed' ELSE 'done' END",
+                   nullptr, nullptr, nullptr) != SQLITE_OK) {
+    Die(vb::Status::Internal(sqlite3_errmsg(raw)), "update");
+  }
+  sqlite3_close(raw);
+  auto median_ms = [&](const auto& call) {
+    std::vector<double> ms;
+    for (int k = 0; k < kCalls; ++k) {
+      const auto t0 = Clock::now();
+      call();
+      ms.push_back(1e3 * Seconds(Clock::now() - t0));
+    }
+    std::nth_element(ms.begin(), ms.begin() + kCalls / 2, ms.end());
+    return ms[kCalls / 2];
+  };
+  vb::db::RunFilter newest;
+  newest.order = {vb::db::RunSortKey::kSubmitted, true};
+  auto page = [&](const vb::db::RunFilter& f) {
+    auto r = store->ListRuns(f);
+    if (!r.ok() || r->empty()) Die(r.ok() ? vb::Status::Internal("empty page") : r.status(), "list");
+    return std::move(r).value();
+  };
+  auto count = [&](const vb::db::RunFilter& f) {
+    auto n = store->CountRuns(f);
+    if (!n.ok()) Die(n.status(), "count");
+  };
+  const double first = median_ms([&] { page(newest); });
+  vb::db::RunFilter deep = newest;
+  deep.limit = 1000;
+  for (int k = 0; k < 10; ++k) deep.after = vb::db::CursorAfter(page(deep).back(), deep.order);  // 10 000 runs in
+  deep.limit = 100;
+  const double deep_ms = median_ms([&] { page(deep); });
+  vb::db::RunFilter longest;
+  longest.order = {vb::db::RunSortKey::kDuration, true};
+  const double sorted_ms = median_ms([&] { page(longest); });
+  vb::db::RunFilter named = newest;
+  named.name = "map-7";
+  const double named_ms = median_ms([&] { page(named); });
+  const double count_ms = median_ms([&] { count(vb::db::RunFilter{}); });
+  const double count_named_ms = median_ms([&] { count(named); });
+  std::printf("\nlisting %d runs (100 per page, medians of %d): newest first %.2f ms, 100 pages deep %.2f ms, "
+              "duration desc %.2f ms, name contains %.2f ms; count all %.2f ms, count by name %.2f ms\n",
+              kBatches * kPerBatch, kCalls, first, deep_ms, sorted_ms, named_ms, count_ms, count_named_ms);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -323,6 +394,7 @@ int main(int argc, char** argv) {
   }
   MeasureSustained(path, emulator, 16'384);
   MeasureQueue(path);
+  MeasureListing(path);
   for (const char* suffix : {"", "-wal", "-shm"}) std::remove((path + suffix).c_str());
   std::printf("\ntargets met for %d of %d configurations\n", met, measured);
   return 0;

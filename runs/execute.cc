@@ -208,8 +208,10 @@ Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& se
   auto e = experiment::BuildExperiment(*spec);
   if (!e.ok()) return finish(db::RunStatus::kFailed, e.status().message(), {});
   auto opened = OpenBench(setup, *e);
-  if (!opened.ok())
+  if (!opened.ok()) {
+    out.bench_fault = true;
     return finish(db::RunStatus::kFailed, "bench " + setup.name + ": " + opened.status().message(), {});
+  }
   // A trip puts the bench in its safe state and fails the run with the reason, keeping the samples up to it.
   std::unique_ptr<hw::SafetyBench> safety;
   hw::Bench* bench = opened->get();
@@ -241,6 +243,7 @@ Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& se
   options.keep_whole_trace = ctx.keep_trace;
   out.summary = experiment::Runner::Run(*e, *bench, &out.trace, options);
   bench->SafeState();
+  if (safety != nullptr && safety->tripped()) out.bench_fault = true;
   if (ctx.current_monitor != nullptr) {
     std::unique_lock<std::mutex> lock;
     if (ctx.current_monitor_mu != nullptr) lock = std::unique_lock<std::mutex>(*ctx.current_monitor_mu);

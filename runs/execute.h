@@ -38,6 +38,8 @@ struct Outcome {
   bool stale = false;                // the store refused a write as stale: the run is another attempt's now
   bool released = false;             // the store stayed unavailable: the result was dropped, the run is left to
                                      // lapse and be re-run (never failed for a transport error)
+  bool bench_fault = false;          // it failed at the bench: the bench could not be opened or an interlock
+                                     // tripped (the Worker marks the bench faulted; decided here, not from text)
   experiment::RunSummary summary;    // empty when the run never started (bad spec, bench not there)
   experiment::Trace trace;           // what was recorded, when ExecuteContext::keep_trace (it is in the store)
 };

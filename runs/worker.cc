@@ -51,8 +51,7 @@ StatusOr<std::optional<Outcome>> Worker::ClaimAndExecute(db::Store* store) {
     std::lock_guard<std::mutex> lock(fault_mu_);
     if (out.status == db::RunStatus::kDone) {
       fault_.clear();
-    } else if (out.status == db::RunStatus::kFailed &&
-               (out.reason.rfind("bench " + setup_.name + ":", 0) == 0 || out.reason.find("safety: ") != std::string::npos)) {
+    } else if (out.status == db::RunStatus::kFailed && out.bench_fault) {
       fault_ = out.reason;
     }
   }

@@ -13,6 +13,7 @@
 #include <thread>
 
 #include "db/open_store.h"
+#include "db/run_query.h"
 #include "experiment/compare.h"
 #include "experiment/spec.h"
 #include "hw/usb/list_attached.h"
@@ -170,23 +171,26 @@ grpc::Status BenchServiceImpl::ListRuns(grpc::ServerContext* ctx, const v1::List
   f.submitter = req->submitter();
   f.submitted_after_unix_s = req->submitted_after_unix_s();
   f.submitted_before_unix_s = req->submitted_before_unix_s();
+  f.name = req->name();
   if (req->page_size() < 0 || req->page_size() > 1000)
     return ToGrpcStatus(Status::InvalidArgument("page_size: must be in [0, 1000] (0 = 100)"));
   f.limit = req->page_size() == 0 ? 100 : req->page_size();
-  if (!req->page_token().empty()) {
-    try {
-      f.after_id = std::stoll(req->page_token());
-    } catch (...) {
-      return ToGrpcStatus(Status::InvalidArgument("page_token: not a token from a previous ListRuns"));
-    }
-  }
+  // Newest first unless asked otherwise; the page token carries a keyset cursor valid for this order and these
+  // filters only (db/run_query.h).
+  auto order = db::ParseRunOrder(req->order_by());
+  if (!order.ok()) return ToGrpcStatus(order.status());
+  f.order = *order;
+  if (auto st = db::ApplyPageToken(req->page_token(), &f); !st.ok()) return ToGrpcStatus(st);
   auto store = pool_->Acquire();
   if (!store.ok()) return ToGrpcStatus(store.status());
   auto runs = (*store)->ListRuns(f);
   if (!runs.ok()) return ToGrpcStatus(runs.status());
+  auto total = (*store)->CountRuns(f);
+  if (!total.ok()) return ToGrpcStatus(total.status());
+  resp->set_total_size(*total);
   for (const auto& r : *runs)
     if (auto st = FillRun(store->get(), r, false, resp->add_runs()); !st.ok()) return st;
-  if (static_cast<std::int32_t>(runs->size()) == f.limit) resp->set_next_page_token(std::to_string(runs->back().id));
+  if (static_cast<std::int32_t>(runs->size()) == f.limit) resp->set_next_page_token(db::EncodePageToken(f, runs->back()));
   return grpc::Status::OK;
 }
 

@@ -336,6 +336,34 @@ class Batch:
         return "Batch(%d: runs %s)" % (self.batch_id, ", ".join(map(str, self.run_ids)))
 
 
+class RunList(list):
+    """What list_runs returns: the runs (a list), plus how many matched the filters in all (`total`), how many
+    of those are not in the list (`more`), the token that continues the listing (`next_page_token`, "" on the
+    last page) and its order (`order_by`). Its repr ends with how many were left out, so a cut list says so."""
+
+    def __init__(self, runs, total=0, next_page_token="", order_by="submitted desc"):
+        super().__init__(runs)
+        self.total = max(int(total), len(self))
+        self.next_page_token = next_page_token
+        self.order_by = order_by
+
+    @property
+    def more(self):
+        """How many matching runs are not in this list (0 when it holds them all)."""
+        return self.total - len(self)
+
+    @property
+    def truncated(self):
+        return self.more > 0
+
+    def __repr__(self):
+        base = list.__repr__(self)
+        if self.more > 0:
+            return "%s  # %d of %d runs (%s); %d more: list_runs(limit=None) or page_token=" % (
+                base, len(self), self.total, self.order_by, self.more)
+        return base
+
+
 class Client:
     """A valvebench server, remote or private.
 
@@ -490,25 +518,36 @@ class Client:
         full = [self.get_run(r.id) for r in runs]
         return Batch(self, batch_id, [r.id for r in full], full)
 
-    def list_runs(self, status=None, tag="", batch_id=0, controller="", bench="", submitter="", limit=100):
-        """Runs matching every filter given, newest first as the server lists them (without spec and history:
-        get_run has them). limit=None reads every page."""
+    def list_runs(self, status=None, tag="", batch_id=0, controller="", bench="", submitter="", name="",
+                  submitted_after=0.0, submitted_before=0.0, order_by="", limit=100, page_token=""):
+        """Runs matching every filter given (without spec and history: get_run has them), newest first unless
+        order_by says otherwise ("FIELD" or "FIELD desc", FIELD one of id, submitted, started, finished, duration,
+        name, status, bench, controller, submitter). name matches runs whose name contains it; submitted_after and
+        submitted_before are unix seconds. At most `limit` runs (None = every page).
+
+        Returns a RunList: a list that also says how many runs matched (`total`), how many were left out
+        (`more`) and where to continue (`next_page_token`, for page_token=); its repr says when it was cut."""
         code = 0
         if status:
             code = api_pb2.RunStatus.Value(status.upper()) if status.upper() in api_pb2.RunStatus.keys() else None
             if code is None:
                 raise InvalidArgument("status: '%s' is not one of queued, running, done, failed, cancelled, "
                                       "interrupted" % status)
-        out, token = [], ""
+        if limit is not None and (isinstance(limit, bool) or not isinstance(limit, int) or limit < 1):
+            raise InvalidArgument("limit: must be a positive integer or None (every run), got %r" % (limit,))
+        out, token, total = [], page_token, 0
         while True:
             page = 1000 if limit is None else min(1000, max(1, limit - len(out)))
             req = api_pb2.ListRunsRequest(status=code, tag=tag, batch_id=batch_id, controller=controller,
-                                          bench=bench, submitter=submitter, page_size=page, page_token=token)
+                                          bench=bench, submitter=submitter, name=name,
+                                          submitted_after_unix_s=submitted_after,
+                                          submitted_before_unix_s=submitted_before, order_by=order_by,
+                                          page_size=page, page_token=token)
             resp = self._call(self._api.ListRuns, req)
             out.extend(Run(self, r) for r in resp.runs)
-            token = resp.next_page_token
+            token, total = resp.next_page_token, resp.total_size
             if not token or (limit is not None and len(out) >= limit):
-                return out
+                return RunList(out, total=total, next_page_token=token, order_by=order_by or "submitted desc")
 
     def cancel(self, run_id, reason=""):
         return Run(self, self._call(self._api.CancelRun, api_pb2.CancelRunRequest(run_id=run_id, reason=reason),

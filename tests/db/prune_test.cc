@@ -251,6 +251,11 @@ TEST(PruneSourceTest, LocalBatchOfBaselineSource) {
   EXPECT_EQ(LocalBatchOfBaselineSource("local batch "), 0);
   EXPECT_EQ(LocalBatchOfBaselineSource("nonlocal batch 3"), 0);
   EXPECT_EQ(LocalBatchOfBaselineSource(""), 0);
+  EXPECT_EQ(ServerBatchOfBaselineSource("server lab:50051 batch 12"), 12);
+  EXPECT_EQ(ServerBatchOfBaselineSource("suite ci (server lab:50051 batch 7, seed 1)"), 7);
+  EXPECT_EQ(ServerBatchOfBaselineSource("local batch 12"), 0);
+  EXPECT_EQ(ServerBatchOfBaselineSource("server lab:50051 batch x"), 0);
+  EXPECT_EQ(ServerBatchOfBaselineSource("server lab batch 99999999999999999999999"), 0) << "overflow is no batch";
 }
 
 }  // namespace

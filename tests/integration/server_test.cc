@@ -461,9 +461,11 @@ TEST(Server, ImportRunsStreamsRunsOfAnyLength) {
             std::string::npos)
       << bad.status().message();
   v1::ListRunsRequest all;
+  all.set_order_by("id");  // in import order (the default is newest first)
   auto listed = olga.ListRuns(all);
   ASSERT_TRUE(listed.ok());
   ASSERT_EQ(listed->runs_size(), 3);
+  EXPECT_EQ(listed->total_size(), 3);
   EXPECT_EQ(listed->runs(1).status(), v1::DONE) << "the run imported before the bad one stays";
   EXPECT_EQ(listed->runs(2).status(), v1::FAILED);
   EXPECT_NE(listed->runs(2).reason().find("import failed: runs[1].i_A[1234567]"), std::string::npos)

@@ -80,6 +80,7 @@ class FlakyStore final : public db::Store {
     return inner_->GetRun(run_id);
   }
   StatusOr<std::vector<db::RunRecord>> ListRuns(const db::RunFilter& filter) override { return inner_->ListRuns(filter); }
+  StatusOr<std::int64_t> CountRuns(const db::RunFilter& filter) override { return inner_->CountRuns(filter); }
   StatusOr<std::vector<db::StatusChange>> History(std::int64_t run_id) override { return inner_->History(run_id); }
   StatusOr<std::vector<db::Metric>> GetMetrics(std::int64_t run_id) override { return inner_->GetMetrics(run_id); }
   StatusOr<std::int64_t> CountQueued(const std::string& submitter) override { return inner_->CountQueued(submitter); }

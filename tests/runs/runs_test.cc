@@ -199,6 +199,39 @@ TEST(Execute, AStoredSpecThatNoLongerParsesFailsTheRunWithTheReason) {
   EXPECT_NE(got->reason.find("stored spec does not parse"), std::string::npos) << got->reason;
 }
 
+// A run that fails at the bench marks the bench faulted (Outcome::bench_fault, set where the bench failed, not
+// read back from the reason's text); a run that fails for any other reason does not.
+TEST(Execute, ABenchThatCannotBeOpenedIsAFaultABadSpecIsNot) {
+  auto store = db::Store::Open(":memory:");
+  ASSERT_TRUE(store.ok());
+  db::RunRecord r;
+  r.key = NamedRun("on-hid");
+  r.spec_json = R"({"name": "on-hid", "controller": {"open_loop_pwm": {"segments": [{"frequency_Hz": 0, "duty": 1}]}},
+                    "conditions": {"supply_V": 24}, "duration_s": 0.01, "recording": {"rate_Hz": 10000}})";
+  ASSERT_TRUE((*store)->SubmitBatch("me", "b", "{}", {r}, nullptr).ok());
+  BenchSetup hid = LocalEmulatorSetup();
+  hid.name = "hid-h3";
+  hid.kind = "hid";
+  hid.config.set_serial("no-such-device-serial");
+  Worker faulty(hid, nullptr);
+  auto o = faulty.ClaimAndExecute(store->get());
+  ASSERT_TRUE(o.ok() && o->has_value());
+  EXPECT_EQ((*o)->status, db::RunStatus::kFailed);
+  EXPECT_TRUE((*o)->bench_fault) << (*o)->reason;
+  EXPECT_EQ(faulty.fault(), (*o)->reason);
+
+  db::RunRecord broken;
+  broken.key = NamedRun("broken");
+  broken.spec_json = R"({"no_such_field": 1, "note": "bench hid-h3: safety: looks like a fault"})";
+  ASSERT_TRUE((*store)->SubmitBatch("me", "b", "{}", {broken}, nullptr).ok());
+  Worker fine(LocalEmulatorSetup(), nullptr);
+  o = fine.ClaimAndExecute(store->get());
+  ASSERT_TRUE(o.ok() && o->has_value());
+  EXPECT_EQ((*o)->status, db::RunStatus::kFailed);
+  EXPECT_FALSE((*o)->bench_fault) << (*o)->reason;
+  EXPECT_EQ(fine.fault(), "");
+}
+
 // Progress is by simulated time even between the loop's ticks: an open-loop run (one tick per segment) moves
 // with its samples instead of sitting at 0 % until it ends.
 TEST(Registry, ProgressFollowsTheSamplesBetweenTicks) {
