@@ -383,6 +383,9 @@ StatusOr<experiment::Comparison> RemoteComparison(client::Client& client, std::i
   c.columns.assign(cmp->columns().begin(), cmp->columns().end());
   for (const auto& r : cmp->rows()) {
     experiment::CompareRow row;
+    // The case's identity as fields; a row from a server older than CompareRow.key is only its name.
+    row.key = r.has_key() ? api::FromProto(r.key()) : NamedRun(r.name());
+    row.run_ids.assign(r.run_ids().begin(), r.run_ids().end());
     row.name = r.name();
     row.controller = r.controller();
     row.runs = r.runs();
