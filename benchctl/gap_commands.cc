@@ -25,6 +25,7 @@
 #include "gap/stored_runs.h"
 #include "gap/suggest.h"
 #include "gap/identify.h"
+#include "gap/improved_model.h"
 #include "gap/moving_valve.h"
 #include "gap/scope_csv.h"
 #include "gap/readings_csv.h"
@@ -72,62 +73,13 @@ StatusOr<Nominal> NominalFor(const gap::Dataset& ds, const std::string& model) {
   return LoadNominal(ds.model_file.empty() ? ds.model : ds.model_file);
 }
 
-// Writes the identified values into a model spec: nominal ones as params, effect ones into their effect,
-// driver ones into identified_driver.
-valvebench::v1::ModelSpec WithValues(valvebench::v1::ModelSpec spec, const std::vector<std::string>& effects,
-                                     const std::map<std::string, double>& values,
-                                     const model::DriverParams& driver_base, const std::string& description);
-
-// The base spec plus fitted values: "R" -> params["R"], "eddy_currents.R_p" -> that effect's params.
-valvebench::v1::ModelSpec Improved(valvebench::v1::ModelSpec spec, const std::vector<std::string>& effects,
-                                   const std::map<std::string, double>& fitted, const std::string& description) {
-  auto effect_entry = [&](const std::string& name) {
-    for (auto& e : *spec.mutable_effects())
-      if (e.name() == name) return &e;
-    auto* e = spec.add_effects();
-    e->set_name(name);
-    return e;
-  };
-  for (const auto& e : effects) effect_entry(e);
-  for (const auto& [name, v] : fitted) {
-    if (name.rfind("driver.", 0) == 0) continue;  // WithValues writes the driver
-    const auto dot = name.find('.');
-    if (dot == std::string::npos)
-      (*spec.mutable_params())[name] = v;
-    else
-      (*effect_entry(name.substr(0, dot))->mutable_params())[name.substr(dot + 1)] = v;
-  }
-  spec.set_description(description);
-  return spec;
-}
+using gap::WithValues;  // the one model builder (gap/improved_model.h), shared with the server's DiagnoseRuns
 
 Status WriteSpec(const valvebench::v1::ModelSpec& spec, const std::string& path) {
-  std::string text;
-  google::protobuf::util::JsonPrintOptions o;
-  o.add_whitespace = true;
-  o.preserve_proto_field_names = true;
-  auto st = google::protobuf::util::MessageToJsonString(spec, &text, o);
-  if (!st.ok()) return Status::Internal(std::string(st.message()));
   std::ofstream out(path);
-  out << text;
+  out << gap::ModelSpecJson(spec);
   if (!out) return Status::Unavailable(path + ": cannot write");
   return Status::Ok();
-}
-
-valvebench::v1::ModelSpec WithValues(valvebench::v1::ModelSpec spec, const std::vector<std::string>& effects,
-                                     const std::map<std::string, double>& values,
-                                     const model::DriverParams& driver_base, const std::string& description) {
-  spec = Improved(std::move(spec), effects, values, description);
-  bool driver_fitted = false;
-  for (const auto& [name, v] : values) driver_fitted = driver_fitted || name.rfind("driver.", 0) == 0;
-  if (driver_fitted || spec.has_identified_driver()) {
-    auto* d = spec.mutable_identified_driver();
-    d->set_kind(std::string(model::DriverKindName(driver_base.kind)));
-    (*d->mutable_params())["diode_drop_V"] = driver_base.diode_drop_V;
-    for (const auto& [name, v] : values)
-      if (name.rfind("driver.", 0) == 0) (*d->mutable_params())[name.substr(7)] = v;
-  }
-  return spec;
 }
 
 StatusOr<gap::Dataset> Load(const std::string& dir) {
@@ -237,32 +189,10 @@ int DiagnoseAndReport(const gap::Dataset& ds_in, const Nominal& nominal, const s
     }
   }
   if (o.model_out.empty()) return kExitOk;
-  if (d->verdict == "unknown")
-    return Fail(Status::FailedPrecondition("--model-out: no candidate in the catalog explains the gap (verdict "
-                                           "unknown); the diagnosis is above, no model written"));
-  // The model the diagnosis started from (with a reference: as identified there), plus the verdict.
-  valvebench::v1::ModelSpec base = nominal.spec;
-  model::DriverParams driver = ds->driver;
-  if (d->has_reference) {
-    std::vector<std::string> ref_effects;
-    for (const auto& [name, v] : d->reference.params) {
-      const auto dot = name.find('.');
-      if (dot != std::string::npos && name.rfind("driver.", 0) != 0) ref_effects.push_back(name.substr(0, dot));
-      if (name == "driver.diode_drop_V") driver.diode_drop_V = v;
-    }
-    base = WithValues(base, ref_effects, d->reference.params, ds->driver, "");
-  }
-  std::vector<std::string> effects;
-  std::map<std::string, double> fitted;
-  std::string desc = "the nominal model: no significant gap in " + source;
-  if (d->chosen >= 0) {
-    const auto& row = d->ranking[static_cast<std::size_t>(d->chosen)];
-    effects = d->candidates[static_cast<std::size_t>(d->chosen)].effects;
-    fitted = row.params;
-    for (const auto& [name, v] : d->candidates[static_cast<std::size_t>(d->chosen)].fixed) fitted[name] = v;
-    desc = "nominal + " + d->verdict + ", fitted by benchctl diagnose on " + source;
-  }
-  if (auto st = WriteSpec(WithValues(base, effects, fitted, driver, desc), o.model_out); !st.ok()) return Fail(st);
+  auto improved = gap::ImprovedModel(*d, nominal.spec, ds->driver, "benchctl diagnose on " + source);
+  if (!improved.ok())
+    return Fail(improved.status().WithContext("--model-out"));
+  if (auto st = WriteSpec(*improved, o.model_out); !st.ok()) return Fail(st);
   if (!o.json_stdout) std::cout << "improved model written to " << o.model_out << "\n";
   return kExitOk;
 }
@@ -470,7 +400,7 @@ int GapCli::Diagnose(const ClientFactory& make_client) {
       auto one = gap::DatasetOfStoredRuns({std::move(*fetched)});
       if (!one.ok()) return Fail(one.status().WithContext("--add-runs"));
       gap::RunData r = std::move(one->runs.front());
-      r.split = "holdout";
+      r.split = Split::kHoldout;
       r.t_start_s = t + 1.0;
       t = r.t_start_s + (r.t_s.empty() ? 0.0 : r.t_s.back());
       ds->runs.push_back(std::move(r));

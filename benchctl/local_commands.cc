@@ -87,17 +87,19 @@ int CmdCompare(const std::string& input, bool json, bool csv, const vb::experime
       return Fail(Status::InvalidArgument(where + ": expected a run summary with 'name' and 'metrics'"));
     vb::experiment::RunRecord rec;
     // Repeats group on the run's key (written by `run --json`); a summary without one is its own case.
-    rec.name = r["name"].get<std::string>();
+    rec.key = vb::NamedRun(r["name"].get<std::string>());
     if (r.contains("key") && r["key"].is_object()) {
       const Json& k = r["key"];
-      RunKey key{k.value("name", rec.name), {}, k.value("repeat", -1)};
+      RunKey key{k.value("name", rec.key.name), {}, k.value("repeat", -1)};
       if (k.contains("sweep") && k["sweep"].is_array())
         for (const auto& c : k["sweep"])
           if (c.is_object()) key.sweep.push_back({c.value("field", ""), c.value("value", 0.0)});
-      rec.name = key.CaseName();
+      rec.key = std::move(key);
     }
     rec.controller = r.value("controller", "");
-    rec.ok = r.value("status", "done") == "done";
+    auto status = vb::ParseRunStatus(r.value("status", std::string(vb::RunStatusName(vb::RunStatus::kDone))));
+    if (!status.ok()) return Fail(status.status().WithContext(where + ".status"));
+    rec.ok = *status == vb::RunStatus::kDone;
     for (const auto& [key, value] : r["metrics"].items()) {
       if (value.is_number()) {
         rec.metrics[key] = value.get<double>();

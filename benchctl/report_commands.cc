@@ -97,7 +97,7 @@ int ReportCli::Run(const ClientFactory& make_client) {
     if (!fetched.ok()) return Fail(fetched.status());
     std::vector<report::RunInfo> runs;
     for (const RunView& v : *fetched) {
-      report::RunInfo r{v.id, v.key, v.controller, RunStatusName(v.status), v.metrics,
+      report::RunInfo r{v.id, v.key, v.controller, v.status, v.metrics,
                         v.spec ? experiment::SpecToJson(*v.spec, false) : std::string(),
                         v.submitted_unix_s, v.started_unix_s, v.finished_unix_s, {}};
       // No trace is stored before a run ends.

@@ -6,6 +6,8 @@
 
 #include <cstring>
 
+#include "proto/trace_chunk.h"
+
 namespace vb::client {
 
 namespace v1 = valvebench::v1;
@@ -157,38 +159,30 @@ Status Client::Watch(std::int64_t run_id, double deadline_s, double sample_rate_
 }
 
 StatusOr<FetchedTrace> Client::GetTrace(std::int64_t run_id, double deadline_s) {
-  grpc::ClientContext ctx;
-  Prepare(&ctx, deadline_s);
   v1::GetTraceRequest req;
   req.set_run_id(run_id);
-  auto reader = stub_->GetTrace(&ctx, req);
-  FetchedTrace out;
+  return GetTrace(req, deadline_s);
+}
+
+StatusOr<FetchedTrace> Client::GetTrace(const v1::GetTraceRequest& request, double deadline_s) {
+  grpc::ClientContext ctx;
+  Prepare(&ctx, deadline_s);
+  auto reader = stub_->GetTrace(&ctx, request);
+  TraceDecoder decoder;
   v1::TraceChunk chunk;
-  int expected = 0;
+  Status bad;
   while (reader->Read(&chunk)) {
-    if (chunk.index() != expected)
-      return Status::DataLoss("trace chunk " + std::to_string(chunk.index()) + " arrived, expected " +
-                              std::to_string(expected));
-    const size_t n = static_cast<size_t>(chunk.samples());
-    if (chunk.data().size() != n * static_cast<size_t>(chunk.channels_size()) * sizeof(double))
-      return Status::DataLoss("trace chunk " + std::to_string(chunk.index()) + ": data size does not match");
-    if (expected == 0) {
-      out.t0_s = chunk.t0_s();
-      out.sample_period_s = chunk.sample_period_s();
-      out.channels.assign(chunk.channels().begin(), chunk.channels().end());
-      for (const auto& name : out.channels) out.columns[name].reserve(static_cast<size_t>(chunk.total_samples()));
+    if (bad = api::DecodeChunk(chunk, &decoder); !bad.ok()) {
+      ctx.TryCancel();
+      while (reader->Read(&chunk)) {
+      }
+      break;
     }
-    for (int c = 0; c < chunk.channels_size(); ++c) {
-      auto& col = out.columns[chunk.channels(c)];
-      const size_t at = col.size();
-      col.resize(at + n);
-      std::memcpy(col.data() + at, chunk.data().data() + c * n * sizeof(double), n * sizeof(double));
-    }
-    ++expected;
   }
   auto st = reader->Finish();
+  if (!bad.ok()) return bad;
   if (!st.ok()) return Error(st);
-  return out;
+  return decoder.Take();
 }
 
 StatusOr<v1::CompareRunsResponse> Client::Compare(std::int64_t batch_id, const std::vector<std::int64_t>& run_ids) {

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "common/status.h"
+#include "common/trace_columns.h"
 #include "valvebench/v1/api.grpc.pb.h"
 
 namespace vb::client {
@@ -22,14 +23,8 @@ struct ClientOptions {
   double deadline_s = 30.0;             // unary calls
 };
 
-// A trace fetched back: uniformly sampled columns by channel name.
-struct FetchedTrace {
-  double t0_s = 0.0;
-  double sample_period_s = 0.0;
-  std::vector<std::string> channels;
-  std::map<std::string, std::vector<double>> columns;
-  size_t samples() const { return columns.empty() ? 0 : columns.begin()->second.size(); }
-};
+// A trace fetched back: columns by channel name, decoded by the one decoder (common/trace_columns.h).
+using FetchedTrace = vb::TraceColumns;
 
 class Client {
  public:
@@ -51,6 +46,8 @@ class Client {
   Status Watch(std::int64_t run_id, double deadline_s, double sample_rate_Hz,
                const std::function<bool(const valvebench::v1::RunEvent&)>& on_event);
   StatusOr<FetchedTrace> GetTrace(std::int64_t run_id, double deadline_s = 60.0);
+  // A window and/or a min/max decimation done by the server (request.max_points, from_s, to_s: api.proto).
+  StatusOr<FetchedTrace> GetTrace(const valvebench::v1::GetTraceRequest& request, double deadline_s = 60.0);
   StatusOr<valvebench::v1::CompareRunsResponse> Compare(std::int64_t batch_id, const std::vector<std::int64_t>& run_ids);
   StatusOr<valvebench::v1::ListBenchesResponse> Benches();
   // The running runs and the queue with positions and ETAs, and the benches the estimate is over.

@@ -312,7 +312,7 @@ std::string StaticMapText(const Comparison& c, const std::string& prefix) {
   std::map<std::string, std::vector<Point>> by_group;
   for (const auto& r : c.rows) {
     const MetricStat* s = Stat(r, "mean_position_pct");
-    RunKey key = SplitCaseName(r.name);
+    const RunKey& key = r.key;
     if (key.sweep.empty()) return "";
     if (!by_group.count(key.name)) groups.push_back(key.name);
     by_group[key.name].push_back({key, s != nullptr && s->n > 0 ? s->mean : kNaN});
@@ -415,28 +415,6 @@ std::string SiUnit(const std::string& metric, const std::string& controller) {
   return v.unit;
 }
 
-RunKey SplitCaseName(const std::string& case_name) {
-  RunKey key;
-  const std::string tag = " sweep:";
-  size_t at = case_name.find(tag);
-  key.name = case_name.substr(0, at);
-  while (at != std::string::npos) {
-    const size_t start = at + tag.size();
-    const size_t next = case_name.find(tag, start);
-    const std::string part = case_name.substr(start, next == std::string::npos ? std::string::npos : next - start);
-    const size_t eq = part.rfind('=');
-    if (eq != std::string::npos) {
-      try {
-        key.sweep.push_back({part.substr(0, eq), std::stod(part.substr(eq + 1))});
-      } catch (const std::exception&) {
-        key.sweep.push_back({part.substr(0, eq), kNaN});
-      }
-    }
-    at = next;
-  }
-  return key;
-}
-
 Comparison Compare(const std::vector<RunRecord>& runs) {
   Comparison c;
   std::vector<std::string> controllers;
@@ -451,21 +429,27 @@ Comparison Compare(const std::vector<RunRecord>& runs) {
   for (const auto& [name, value] : MetricList(Metrics{}))
     if (present.erase(name)) c.columns.push_back(name);
   c.columns.insert(c.columns.end(), present.begin(), present.end());
-  // Group by name (repeats of one configuration share it), in first-seen order.
+  // Group by the case (the key without its repeat: repeats of one configuration share it), in first-seen order.
   std::vector<CompareRow> rows;
   std::map<std::string, std::vector<const RunRecord*>> groups;
   for (const auto& r : runs) {
-    if (groups.find(r.name) == groups.end()) {
+    RunKey case_key = r.key;
+    case_key.repeat = -1;
+    const std::string name = case_key.CaseName();
+    if (groups.find(name) == groups.end()) {
       CompareRow row;
-      row.name = r.name;
+      row.key = std::move(case_key);
+      row.name = name;
       row.controller = r.controller;
       rows.push_back(row);
     }
-    groups[r.name].push_back(&r);
+    groups[name].push_back(&r);
   }
   for (auto& row : rows) {
     const auto& members = groups[row.name];
     row.runs = static_cast<int>(members.size());
+    for (const auto* r : members)
+      if (r->run_id != 0) row.run_ids.push_back(r->run_id);
     for (const auto* r : members) row.failed += r->ok ? 0 : 1;
     for (const auto& col : c.columns) {
       MetricStat st;
@@ -550,7 +534,7 @@ namespace {
 std::vector<TextColumn> LongColumns(const Comparison& c, const TableOptions& options, ExperimentKind kind,
                                     const std::string& prefix, std::vector<std::string>* notes) {
   std::vector<RunKey> keys;
-  for (const auto& r : c.rows) keys.push_back(SplitCaseName(r.name));
+  for (const auto& r : c.rows) keys.push_back(r.key);
   const bool ranked = std::any_of(c.rows.begin(), c.rows.end(), [](const CompareRow& r) { return r.rank > 0; });
   const bool repeats = std::any_of(c.rows.begin(), c.rows.end(), [](const CompareRow& r) { return r.runs > 1; });
   std::vector<TextColumn> cols;
@@ -655,7 +639,7 @@ ExperimentKind KindOfRows(const Comparison& c) {
 
 std::string PrefixOfRows(const Comparison& c) {
   std::vector<std::string> names;
-  for (const auto& r : c.rows) names.push_back(SplitCaseName(r.name).name);
+  for (const auto& r : c.rows) names.push_back(r.key.name);
   return CommonPrefix(names);
 }
 
@@ -667,9 +651,9 @@ std::string ComparisonTable(const Comparison& c, const TableOptions& options) {
   std::ostringstream os;
   std::string title = prefix.empty() ? "" : prefix.substr(0, prefix.size() - 1);
   if (title.empty() && !c.rows.empty()) {
-    title = SplitCaseName(c.rows[0].name).name;  // one spec's sweep: its name, said once
+    title = c.rows[0].key.name;  // one spec's sweep: its name, said once
     for (const auto& r : c.rows)
-      if (SplitCaseName(r.name).name != title) title.clear();
+      if (r.key.name != title) title.clear();
   }
   if (!title.empty()) os << title << ": ";
   os << c.rows.size() << (c.rows.size() == 1 ? " case" : " cases") << " ("
@@ -748,7 +732,7 @@ std::string ComparisonCsv(const Comparison& c) {
   std::vector<RunKey> keys;
   std::vector<std::string> axes;
   for (const auto& r : c.rows) {
-    keys.push_back(SplitCaseName(r.name));
+    keys.push_back(r.key);
     for (const auto& sc : keys.back().sweep)
       if (std::find(axes.begin(), axes.end(), sc.field) == axes.end()) axes.push_back(sc.field);
   }
@@ -792,9 +776,15 @@ std::string ComparisonJson(const Comparison& c) {
       m[col] = s == nullptr || s->n == 0 ? Json(nullptr) : Json{{"mean", s->mean}, {"spread", s->spread}, {"n", s->n}};
     }
     Json sweep = Json::object();
-    for (const auto& sc : SplitCaseName(r.name).sweep) sweep[sc.field] = sc.value;
+    Json key_sweep = Json::array();
+    for (const auto& sc : r.key.sweep) {
+      sweep[sc.field] = sc.value;
+      key_sweep.push_back({{"field", sc.field}, {"value", sc.value}});
+    }
     rows.push_back({{"rank", r.rank},
                     {"name", r.name},
+                    {"key", {{"name", r.key.name}, {"sweep", key_sweep}}},
+                    {"run_ids", r.run_ids},
                     {"controller", r.controller},
                     {"runs", r.runs},
                     {"failed", r.failed},

@@ -7,6 +7,7 @@
 // metric names in SI units).
 #pragma once
 
+#include <cstdint>
 #include <map>
 #include <string>
 #include <vector>
@@ -16,7 +17,8 @@
 namespace vb::experiment {
 
 struct RunRecord {
-  std::string name;                      // the case (RunKey::CaseName): repeats share it
+  RunKey key;                            // the run's identity; repeats (same key but for `repeat`) share a row
+  std::int64_t run_id = 0;               // the stored run (0: not stored, e.g. `compare RESULTS.json`)
   std::string controller;
   bool ok = true;
   std::map<std::string, double> metrics;
@@ -29,7 +31,9 @@ struct MetricStat {
 };
 
 struct CompareRow {
-  std::string name;
+  RunKey key;                            // the case: name and sweep point as fields (repeat -1)
+  std::vector<std::int64_t> run_ids;     // the stored runs the row aggregates (those with an id), in input order
+  std::string name;                      // key.CaseName(), for people and scripts; nothing parses it back
   std::string controller;
   int runs = 0;
   int failed = 0;
@@ -61,10 +65,6 @@ Comparison Compare(const std::vector<RunRecord>& runs);
 // A metric's SI unit as its JSON value carries it ("A" or "m" for rmse by the law, "V s^0.5", "1" for ratios
 // and counts, "" when unknown): for listings that print SI values.
 std::string SiUnit(const std::string& metric, const std::string& controller);
-
-// A case name split into its spec name and sweep point ("m/fig8 sweep:a=1 sweep:b=2" -> "m/fig8", {a=1, b=2}).
-// RunKey::CaseName() is the only form a row carries through the server's comparison, so this reads it back.
-RunKey SplitCaseName(const std::string& case_name);
 
 // Which columns a table shows.
 struct TableOptions {
@@ -124,7 +124,7 @@ std::string LawName(const std::string& controller);
 // spread in SI units with full names.
 std::string ComparisonCsv(const Comparison& c);
 // {kind, rank_metric, effort_metric, columns, rows: [{rank, name, controller, runs, failed, pareto,
-// sweep: {field: value}, metrics: {column: {mean, spread, n} or null}}]}.
+// key: {name, sweep: [{field, value}]}, run_ids: [...], sweep: {field: value}, metrics: {column: {mean, spread, n} or null}}]}.
 std::string ComparisonJson(const Comparison& c);
 // The service's comparison (a valvebench::v1::CompareRunsResponse; a template, so that this library needs no
 // gRPC code) as the Comparison every renderer above takes: benchctl's remote commands and the web's comparison
@@ -137,6 +137,14 @@ Comparison ComparisonFromProto(const CompareRunsResponse& cmp) {
   c.columns.assign(cmp.columns().begin(), cmp.columns().end());
   for (const auto& r : cmp.rows()) {
     CompareRow row;
+    // The case's identity as fields; a row from a server older than CompareRow.key is only its name.
+    if (r.has_key()) {
+      row.key = RunKey{r.key().name(), {}, r.key().repeat()};
+      for (const auto& p : r.key().sweep()) row.key.sweep.push_back({p.field(), p.value()});
+    } else {
+      row.key = NamedRun(r.name());
+    }
+    row.run_ids.assign(r.run_ids().begin(), r.run_ids().end());
     row.name = r.name();
     row.controller = r.controller();
     row.runs = r.runs();

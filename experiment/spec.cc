@@ -15,9 +15,19 @@
 #include "control/open_loop_pwm.h"
 #include "experiment/bounds.h"
 #include "experiment/controllers.h"
+#include "common/bench_kind.h"
 #include "model/params.h"
 
 namespace vb::experiment {
+
+std::string BenchClassOf(const ExperimentSpec& spec) {
+  const std::string& kind = spec.bench().kind();
+  // An unknown kind is refused where the spec is built (BuildExperiment); here it is its own class.
+  auto parsed = ParseBenchKind(kind);
+  if (!parsed.ok()) return kind;
+  const std::string& preset = spec.bench().model().preset();
+  return BenchClass(*parsed, preset.empty() ? std::string_view(model::kDefaultPreset) : std::string_view(preset));
+}
 
 namespace pb = google::protobuf;
 using valvebench::v1::ControllerSpec;
@@ -465,9 +475,8 @@ StatusOr<Experiment> BuildExperiment(const ExperimentSpec& spec) {
   if (!(spec.duration_s() > 0.0) || !std::isfinite(spec.duration_s()))
     return Status::InvalidArgument("duration_s: must be > 0, got " + FormatNumber(spec.duration_s()));
   e.duration_s = spec.duration_s();
-  const std::string& kind = spec.bench().kind();
-  if (!kind.empty() && kind != "emulated" && kind != "hid" && kind != "u3")
-    return Status::InvalidArgument("bench.kind: unknown bench kind '" + kind + "' (known: emulated, hid, u3)");
+  auto bench_kind = ParseBenchKind(spec.bench().kind(), "bench.kind");
+  if (!bench_kind.ok()) return bench_kind.status();
 
   auto plant = BuildPlant(spec.bench().model(), spec.has_perturbation() ? &spec.perturbation() : nullptr);
   if (!plant.ok()) return plant.status();
@@ -483,7 +492,7 @@ StatusOr<Experiment> BuildExperiment(const ExperimentSpec& spec) {
     if (!std::isfinite(value)) return Status::InvalidArgument(std::string("perturbation.") + field + ": not finite");
   if (pert.disturbance_hz() < 0.0) return Status::InvalidArgument("perturbation.disturbance_Hz: must be >= 0");
   e.disturbance = model::Disturbance{pert.disturbance_v(), pert.disturbance_force_n(), pert.disturbance_hz()};
-  if (e.disturbance.active() && !kind.empty() && kind != "emulated")
+  if (e.disturbance.active() && *bench_kind != BenchKind::kEmulated)
     return Status::InvalidArgument("perturbation: disturbances can only be injected on an emulated bench");
   const auto& c = spec.conditions();
   e.run.supply_V = c.has_supply_v() ? c.supply_v() : kDefaultSupply_V;

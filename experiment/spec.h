@@ -27,6 +27,10 @@ StatusOr<ExperimentSpec> ParseSpecJson(std::string_view json);
 StatusOr<ExperimentSpec> LoadSpecFile(const std::string& path);
 std::string SpecToJson(const ExperimentSpec& spec, bool pretty = true);
 
+// The bench class a spec asks for: "emulated:<preset>" (the default preset when none is named), or the
+// hardware kind ("hid", "u3"). Admission matches runs to benches on it (runs/admit.h); suites check it.
+std::string BenchClassOf(const ExperimentSpec& spec);
+
 // Defaults a spec gets when a field is left out (documented in docs/spec.md).
 inline constexpr double kDefaultRecordRate_Hz = 50'000.0;
 inline constexpr double kDefaultSupply_V = 24.0;

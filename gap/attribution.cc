@@ -19,6 +19,52 @@
 
 namespace vb::gap {
 
+const char* CauseKindName(CauseKind kind) {
+  switch (kind) {
+    case CauseKind::kEffect: return "effect";
+    case CauseKind::kParameter: return "parameter";
+    case CauseKind::kCombination: return "combination";
+  }
+  return "effect";
+}
+
+StatusOr<CauseKind> ParseCauseKind(std::string_view name) {
+  for (CauseKind k : {CauseKind::kEffect, CauseKind::kParameter, CauseKind::kCombination})
+    if (name == CauseKindName(k)) return k;
+  return Status::InvalidArgument("cause kind: '" + std::string(name) + "' is not effect, parameter or combination");
+}
+
+const char* DisqualificationName(Disqualification why) {
+  switch (why) {
+    case Disqualification::kNone: return "";
+    case Disqualification::kEffectVanished: return "effect_vanished";
+    case Disqualification::kSaturatedFit: return "saturated_fit";
+    case Disqualification::kRAloneDoesAsWell: return "r_alone_does_as_well";
+    case Disqualification::kMemberVanished: return "member_vanished";
+    case Disqualification::kNotDecisive: return "not_decisive";
+  }
+  return "";
+}
+
+StatusOr<Disqualification> ParseDisqualification(std::string_view name) {
+  for (Disqualification d : {Disqualification::kNone, Disqualification::kEffectVanished, Disqualification::kSaturatedFit,
+                             Disqualification::kRAloneDoesAsWell, Disqualification::kMemberVanished,
+                             Disqualification::kNotDecisive})
+    if (name == DisqualificationName(d)) return d;
+  return Status::InvalidArgument("disqualification: '" + std::string(name) + "' is not a known reason");
+}
+
+void Disqualify(CandidateResult* row, Disqualification why, std::string words) {
+  row->disqualification = why;
+  row->disqualified = std::move(words);
+}
+
+Candidate ParamCandidate(const std::string& param, FreeParam free) {
+  Candidate c{"param:" + param, {}, {std::move(free)}, {}};
+  c.kind = CauseKind::kParameter;
+  return c;
+}
+
 namespace {
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
@@ -142,6 +188,7 @@ CandidateResult Fit(const Dataset& ds, const std::vector<bool>& fit_mask, const 
                     const AttributionOptions& options) {
   CandidateResult res;
   res.name = c.name;
+  res.kind = c.kind;
   // The fit's own wall-time budget, within the caller's deadline: every simulation it runs stops there.
   using Clock = std::chrono::steady_clock;
   const auto fit_start = Clock::now();
@@ -312,9 +359,11 @@ CandidateResult Fit(const Dataset& ds, const std::vector<bool>& fit_mask, const 
     if (std::abs(Normalised(f, best[j]) - Normalised(f, f.absent)) > 0.02) all_absent = false;
   }
   if (has_effect_param && all_absent)
-    res.disqualified = "fitted at the value where the effect vanishes: no such effect in the data";
+    Disqualify(&res, Disqualification::kEffectVanished,
+               "fitted at the value where the effect vanishes: no such effect in the data");
   if (k > 0 && s.fit_n <= k)
-    res.disqualified = "as many free parameters (" + std::to_string(k) + ") as fit values (" + std::to_string(s.fit_n) + ")";
+    Disqualify(&res, Disqualification::kSaturatedFit,
+               "as many free parameters (" + std::to_string(k) + ") as fit values (" + std::to_string(s.fit_n) + ")");
 
   // 1-sigma from the Gauss-Newton approximation: cov = s^2 (J^T J)^-1, J by forward differences.
   if (k > 0 && !residuals.empty()) {
@@ -448,7 +497,7 @@ std::vector<Candidate> DefaultCandidates(const model::PlantParams& nominal) {
   for (const char* name : {"R", "k", "delta", "b", "mu_r", "x_t", "m", "l_c", "A_e"}) {
     const double v = *model::GetParam(nominal, name);
     auto [lo, hi] = around(v, 0.6, 1.4);
-    out.push_back({std::string("param:") + name, {}, {{name, lo, hi, v, false}}, {}});
+    out.push_back(ParamCandidate(name, {name, lo, hi, v, false}));
   }
   // Structural effects, each with R free too; `absent` marks where each effect vanishes.
   const auto [rlo, rhi] = around(nominal.R_ohm, 0.8, 1.2);
@@ -491,8 +540,8 @@ std::vector<Candidate> DefaultCandidates(const model::PlantParams& nominal, cons
   };
   std::vector<Candidate> out;
   for (auto& c : DefaultCandidates(nominal)) {
-    if (c.name.rfind("param:", 0) == 0) {
-      if (law_param(c.name.substr(6))) out.push_back(std::move(c));
+    if (c.kind == CauseKind::kParameter) {
+      if (law_param(c.params.front().name)) out.push_back(std::move(c));
       continue;
     }
     const std::string& e = c.effects.front();
@@ -510,7 +559,7 @@ std::vector<Candidate> DefaultCandidates(const model::PlantParams& nominal, cons
       auto held = model::AtState(nominal, model::HeldState{ds.runs.front().stroke_m, NAN});
       if (held.ok()) L = held->L_H;
     }
-    out.insert(out.begin() + 1, Candidate{"param:L", {}, {{"L", L * 0.6, L * 1.4, L, false}}, {}});
+    out.insert(out.begin() + 1, ParamCandidate("L", {"L", L * 0.6, L * 1.4, L, false}));
   }
   // The sense chain: an offset (bounded by the currents seen) and a gain, each with R free.
   double peak = 0.0;
@@ -592,7 +641,7 @@ StatusOr<std::vector<CandidateResult>> Attribute(const Dataset& ds, const std::v
 
 namespace {
 bool IsParametricSingle(const Candidate& c) {
-  return c.effects.empty() && c.param_members.empty() && c.params.size() == 1 && c.name.rfind("param:", 0) == 0;
+  return c.kind == CauseKind::kParameter && c.params.size() == 1;
 }
 }  // namespace
 
@@ -605,6 +654,7 @@ std::vector<std::string> Members(const Candidate& c) {
 
 Candidate PairCandidate(const Candidate& a, const Candidate& b) {
   Candidate c{a.name + "+" + b.name, a.effects, a.params};
+  c.kind = CauseKind::kCombination;
   c.effects.insert(c.effects.end(), b.effects.begin(), b.effects.end());
   for (const Candidate* side : {&a, &b}) {
     if (IsParametricSingle(*side)) c.param_members.push_back(side->params.front().name);

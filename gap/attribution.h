@@ -15,6 +15,7 @@
 #include <functional>
 #include <map>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "common/status.h"
@@ -39,15 +40,39 @@ struct FreeParam {
 double ValueAt(const FreeParam& f, double u);
 double Normalised(const FreeParam& f, double v);
 
+// What a candidate (and so a verdict) names: one catalogued effect ("eddy_currents"; the moving valve's
+// "supply_pressure" and "stuck" too), one nominal parameter re-fitted alone ("param:R"), or several causes
+// together ("a+b"). Declared by whoever builds the candidate: the code reads the kind, never the name's text.
+enum class CauseKind { kEffect, kParameter, kCombination };
+const char* CauseKindName(CauseKind kind);  // "effect", "parameter", "combination"
+StatusOr<CauseKind> ParseCauseKind(std::string_view name);
+
+// Why a candidate may not be the verdict (CandidateResult::disqualified says it in words for people).
+enum class Disqualification {
+  kNone,
+  kEffectVanished,    // its effect's parameters ended where the effect vanishes
+  kSaturatedFit,      // as many free parameters as fit values: it can match anything
+  kRAloneDoesAsWell,  // R alone (param:R) does as well on the holdout runs
+  kMemberVanished,    // a combination with a member fitted where it vanishes
+  kNotDecisive,       // a combination that does not remove enough of what a smaller model leaves
+};
+// "", "effect_vanished", "saturated_fit", "r_alone_does_as_well", "member_vanished", "not_decisive".
+const char* DisqualificationName(Disqualification why);
+StatusOr<Disqualification> ParseDisqualification(std::string_view name);
+
 struct Candidate {
-  std::string name;                  // the output name: "eddy_currents", "param:R", "a+b"
+  std::string name;                  // the output name: "eddy_currents", "param:R", "a+b" (for people)
   std::vector<std::string> effects;  // effects switched on
   std::vector<FreeParam> params;
   std::vector<std::pair<std::string, double>> fixed = {};  // set before the free ones (e.g. a reference temperature)
   // Nominal parameters that are causes in their own right in a combination ("eddy_currents+param:k" has {"k"});
   // a single param:NAME candidate needs none (its name says it). R freed beside an effect is not one.
   std::vector<std::string> param_members = {};
+  CauseKind kind = CauseKind::kEffect;
 };
+
+// The candidate that re-fits one nominal parameter alone: "param:NAME", kind kParameter.
+Candidate ParamCandidate(const std::string& param, FreeParam free);
 
 // The causes a candidate names, in order: its effects, then "param:NAME" for each parametric member (a single
 // param:NAME candidate is its own member).
@@ -55,6 +80,7 @@ std::vector<std::string> Members(const Candidate& c);
 
 struct CandidateResult {
   std::string name;
+  CauseKind kind = CauseKind::kEffect;  // the candidate's
   std::map<std::string, double> params;       // fitted values
   std::map<std::string, double> uncertainty;  // 1-sigma (Gauss-Newton at the optimum; optimistic with
                                               // correlated residuals)
@@ -77,7 +103,11 @@ struct CandidateResult {
   // Why the candidate may not be the verdict, "" if it may: its effect ended at its absent value, it has as
   // many free parameters as the fit has values, or (gap/diagnose.h) R alone does as well.
   std::string disqualified;
+  Disqualification disqualification = Disqualification::kNone;  // the same, as a value to test
 };
+
+// Sets both the reason and its words.
+void Disqualify(CandidateResult* row, Disqualification why, std::string words);
 
 struct AttributionOptions {
   int max_evaluations = 150;          // per candidate

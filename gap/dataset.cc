@@ -453,8 +453,11 @@ Status ParseRun(const ManifestContext& m, const fs::path& dir, const json& j, co
     return m.Error(path + ".t_start_s", FormatNumber(run->t_start_s) + " s is outside [0, 1e+09] s");
 
   VB_RETURN_IF_ERROR(GetString(m, j, "split", path + ".split", false, &s));
-  run->split = s.value_or("");
-  if (s && *s != "fit" && *s != "holdout") return m.Error(path + ".split", Quote(*s) + " is not fit or holdout");
+  if (s) {
+    auto split = ParseSplit(*s);
+    if (!split.ok() || *split == Split::kNone) return m.Error(path + ".split", Quote(*s) + " is not fit or holdout");
+    run->split = *split;
+  }
   return Status::Ok();
 }
 
@@ -503,8 +506,11 @@ Status ParseRunV2(const ManifestContext& m, const fs::path& dir, const json& j, 
   run->t_start_s = kNaN;
   VB_RETURN_IF_ERROR(GetBounded(m, j, "t_start_s", path + ".t_start_s", 0.0, 1e9, "s", &run->t_start_s));
   VB_RETURN_IF_ERROR(GetString(m, j, "split", path + ".split", false, &s));
-  run->split = s.value_or("");
-  if (s && *s != "fit" && *s != "holdout") return m.Error(path + ".split", Quote(*s) + " is not fit or holdout");
+  if (s) {
+    auto split = ParseSplit(*s);
+    if (!split.ok() || *split == Split::kNone) return m.Error(path + ".split", Quote(*s) + " is not fit or holdout");
+    run->split = *split;
+  }
   VB_RETURN_IF_ERROR(GetBounded(m, j, "ambient_C", path + ".ambient_C", -100.0, 400.0, "C", &run->ambient_C));
   VB_RETURN_IF_ERROR(GetBounded(m, j, "coil_C", path + ".coil_C", -100.0, 400.0, "C", &run->coil_C));
   VB_RETURN_IF_ERROR(GetBounded(m, j, "stroke_m", path + ".stroke_m", 0.0, 1.0, "m", &run->stroke_m));

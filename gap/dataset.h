@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "common/status.h"
+#include "common/split.h"
 #include "model/driver.h"
 
 namespace vb::gap {
@@ -42,7 +43,7 @@ struct RunData {
   double supply_V = 0.0;                // > 0: the supply as measured
   double supply_pressure_Pa = 0.0;      // >= 0
   double t_start_s = 0.0;               // >= 0, seconds since the bench was powered; NaN: not recorded
-  std::string split;                    // "fit", "holdout", or "" if absent
+  Split split = Split::kNone;           // the manifest's (common/split.h); kNone if absent
   // Covariates (NaN: not recorded).
   double ambient_C = kNaN;              // the air (chamber) temperature
   double coil_C = kNaN;                 // the winding temperature

@@ -18,15 +18,45 @@
 
 namespace vb::gap {
 
+const char* VerdictKindName(VerdictKind kind) {
+  switch (kind) {
+    case VerdictKind::kNone: return "none";
+    case VerdictKind::kEffect: return "effect";
+    case VerdictKind::kParameter: return "parameter";
+    case VerdictKind::kCombination: return "combination";
+    case VerdictKind::kEitherOf: return "either_of";
+    case VerdictKind::kUnknown: return "unknown";
+  }
+  return "unknown";
+}
+
+StatusOr<VerdictKind> ParseVerdictKind(std::string_view name) {
+  for (VerdictKind k : {VerdictKind::kNone, VerdictKind::kEffect, VerdictKind::kParameter, VerdictKind::kCombination,
+                        VerdictKind::kEitherOf, VerdictKind::kUnknown})
+    if (name == VerdictKindName(k)) return k;
+  return Status::InvalidArgument("verdict kind: '" + std::string(name) +
+                                 "' is not none, effect, parameter, combination, either_of or unknown");
+}
+
+VerdictKind VerdictKindOf(CauseKind cause) {
+  switch (cause) {
+    case CauseKind::kEffect: return VerdictKind::kEffect;
+    case CauseKind::kParameter: return VerdictKind::kParameter;
+    case CauseKind::kCombination: return VerdictKind::kCombination;
+  }
+  return VerdictKind::kEffect;
+}
+
 namespace {
 
 // Without a split in the manifest: hold out the runs at the supply voltage seen least often (ties: the
 // highest), so that holdout conditions differ from fit conditions, and say so.
-std::vector<std::string> MakeSplit(const Dataset& ds, std::string* note) {
-  std::vector<std::string> split;
+std::vector<Split> MakeSplit(const Dataset& ds, std::string* note) {
+  std::vector<Split> split;
   bool given = true;
-  for (const auto& r : ds.runs) given = given && !r.split.empty();
-  const bool any_holdout = std::any_of(ds.runs.begin(), ds.runs.end(), [](const RunData& r) { return r.split == "holdout"; });
+  for (const auto& r : ds.runs) given = given && r.split != Split::kNone;
+  const bool any_holdout =
+      std::any_of(ds.runs.begin(), ds.runs.end(), [](const RunData& r) { return r.split == Split::kHoldout; });
   if (given && any_holdout) {
     for (const auto& r : ds.runs) split.push_back(r.split);
     return split;
@@ -35,7 +65,8 @@ std::vector<std::string> MakeSplit(const Dataset& ds, std::string* note) {
     // Every run may be fitted: still hold some out, or nothing would be measured on unseen runs (with two or
     // three runs, the last one; one run cannot be split).
     const std::size_t n = ds.runs.size();
-    for (std::size_t k = 0; k < n; ++k) split.push_back(k % 4 == 3 || (n > 1 && n < 4 && k == n - 1) ? "holdout" : "fit");
+    for (std::size_t k = 0; k < n; ++k)
+      split.push_back(k % 4 == 3 || (n > 1 && n < 4 && k == n - 1) ? Split::kHoldout : Split::kFit);
     *note = n == 1  ? "one run: nothing can be held out"
             : n < 4 ? "the manifest holds no run out: the last run is held out"
                     : "the manifest holds no run out: every fourth run is held out";
@@ -54,15 +85,16 @@ std::vector<std::string> MakeSplit(const Dataset& ds, std::string* note) {
     // One supply voltage: hold out every fourth run; with two or three runs, the last one.
     const std::size_t n = ds.runs.size();
     for (std::size_t k = 0; k < n; ++k)
-      split.push_back(!ds.runs[k].split.empty() ? ds.runs[k].split
-                      : (k % 4 == 3 || (n > 1 && n < 4 && k == n - 1)) ? "holdout"
-                                                                       : "fit");
+      split.push_back(ds.runs[k].split != Split::kNone                    ? ds.runs[k].split
+                      : (k % 4 == 3 || (n > 1 && n < 4 && k == n - 1)) ? Split::kHoldout
+                                                                       : Split::kFit);
     *note = n == 1   ? "one run: nothing can be held out"
             : n < 4  ? "no split in the manifest: the last run is held out"
                      : "no split in the manifest: every fourth run is held out";
     return split;
   }
-  for (const auto& r : ds.runs) split.push_back(!r.split.empty() ? r.split : (r.supply_V == held ? "holdout" : "fit"));
+  for (const auto& r : ds.runs)
+    split.push_back(r.split != Split::kNone ? r.split : (r.supply_V == held ? Split::kHoldout : Split::kFit));
   std::ostringstream os;
   os << "no split in the manifest: runs at " << held << " V are held out";
   *note = os.str();
@@ -129,7 +161,8 @@ double Pearson(const std::vector<double>& a, const std::vector<double>& b) {
   return saa > 0.0 && sbb > 0.0 ? sab / std::sqrt(saa * sbb) : NAN;
 }
 
-bool IsParametric(const std::string& name) { return name.rfind("param:", 0) == 0; }
+bool IsParametric(const CandidateResult& row) { return row.kind == CauseKind::kParameter; }
+bool IsCombination(const CandidateResult& row) { return row.kind == CauseKind::kCombination; }
 
 // A structural candidate fits the coil resistance as well as its effect. When it does no better on the
 // holdout runs than R alone (by a twentieth of the gap), its effect added nothing the data can see: it may
@@ -144,13 +177,14 @@ void DisqualifyWhatRAloneExplains(Diagnosis* d, CandidateOf candidate_of) {
   if (!(gap > 0.0)) return;
   bool changed = false;
   for (auto& row : d->ranking) {
-    if (IsParametric(row.name) || !row.status.ok() || !row.disqualified.empty()) continue;
+    if (IsParametric(row) || !row.status.ok() || !row.disqualified.empty()) continue;
     const Candidate* c = candidate_of(row.name);
     if (c == nullptr) continue;
     const bool r_free = std::any_of(c->params.begin(), c->params.end(), [](const FreeParam& f) { return f.name == "R"; });
     if (!r_free) continue;
     if (row.holdout_rmse_after_A > r_alone->holdout_rmse_after_A - 0.05 * gap) {
-      row.disqualified = "R alone (param:R) does as well on the holdout runs: the effect adds nothing the data shows";
+      Disqualify(&row, Disqualification::kRAloneDoesAsWell,
+                 "R alone (param:R) does as well on the holdout runs: the effect adds nothing the data shows");
       changed = true;
     }
   }
@@ -248,8 +282,8 @@ Status SelectCombination(const Dataset& ds, const std::vector<bool>& fit_mask, c
   // 1. The pool.
   std::vector<const CandidateResult*> structural, all_structural;
   for (const auto& row : d->ranking) {
-    if (IsParametric(row.name) || !row.status.ok() || row.name.find('+') != std::string::npos) continue;
-    if (row.disqualified.rfind("as many free parameters", 0) == 0) continue;
+    if (IsParametric(row) || !row.status.ok() || IsCombination(row)) continue;
+    if (row.disqualification == Disqualification::kSaturatedFit) continue;
     const Candidate* c = candidate_of(row.name);
     if (c == nullptr || c->effects.size() != 1) continue;
     all_structural.push_back(&row);
@@ -284,7 +318,8 @@ Status SelectCombination(const Dataset& ds, const std::vector<bool>& fit_mask, c
       for (const auto& c : cs)
         if (c.name == row.name) {
           if (row.status.ok() && row.disqualified.empty() && AnyEffectVanished(c, row))
-            row.disqualified = "one of its effects was fitted where it vanishes: a smaller combination";
+            Disqualify(&row, Disqualification::kMemberVanished,
+                       "one of its effects was fitted where it vanishes: a smaller combination");
           tried.push_back(std::move(row));
           tried_c.push_back(c);
           break;
@@ -319,7 +354,7 @@ Status SelectCombination(const Dataset& ds, const std::vector<bool>& fit_mask, c
   // (k and delta; mu_r, l_c and x_t), and its single fit already says which the data ask for.
   const CandidateResult* best_param = nullptr;
   for (const auto& row : d->ranking)
-    if (IsParametric(row.name) && row.status.ok() && row.disqualified.empty() && row.name != "param:R" &&
+    if (IsParametric(row) && row.status.ok() && row.disqualified.empty() && row.name != "param:R" &&
         (best_param == nullptr || row.score < best_param->score))
       best_param = &row;
   if (best_param != nullptr && best_param->name != base_row.name) {
@@ -431,8 +466,9 @@ Status SelectCombination(const Dataset& ds, const std::vector<bool>& fit_mask, c
     auto& row = tried[k];
     const bool was_accepted = std::find(accepted.begin(), accepted.end(), row.name) != accepted.end();
     if (!was_accepted && row.disqualified.empty() && row.status.ok())
-      row.disqualified = "not decisive: on the holdout runs it does not remove enough of what a smaller model "
-                         "leaves above the floor";
+      Disqualify(&row, Disqualification::kNotDecisive,
+                 "not decisive: on the holdout runs it does not remove enough of what a smaller model leaves above "
+                 "the floor");
     if (row.name == chosen) row.score = lowest * (1.0 - 1e-9);
     d->ranking.push_back(row);
     d->candidates.push_back(tried_c[k]);
@@ -513,7 +549,7 @@ Status FitNuisance(const Dataset& ds, const std::vector<bool>& fit_mask, const m
     return Status::Ok();
   std::vector<Candidate> trials;
   for (const auto& c : d->candidates) {
-    if (!IsParametric(c.name) || c.params.size() != 1 || c.name.find('+') != std::string::npos) continue;
+    if (c.kind != CauseKind::kParameter || c.params.size() != 1) continue;
     const FreeParam& f = c.params.front();
     const bool free_already = std::any_of(verdict_c.params.begin(), verdict_c.params.end(),
                                           [&](const FreeParam& q) { return q.name == f.name; });
@@ -549,7 +585,9 @@ Status FitNuisance(const Dataset& ds, const std::vector<bool>& fit_mask, const m
   refined.score = verdict.score;
   if (drift_gap >= std::sqrt(kSignificance * kSignificance - 1.0) * d->noise_floor_A) {
     refined_c.name = verdict_c.name + "+param:" + param;
+    refined_c.kind = CauseKind::kCombination;
     refined.name = refined_c.name;
+    refined.kind = CauseKind::kCombination;
   } else {
     Diagnosis::Drift drift;
     drift.param = param;
@@ -605,7 +643,7 @@ void MemberShares(const Dataset& ds, const std::vector<bool>& fit_mask, const mo
 
 // Steps 1-3 (gap/diagnose.h): the nominal model's replay of every run, the noise floor, the gap's significance,
 // and where it lies by phase. Returns the nominal prediction.
-StatusOr<Predicted> MeasureGap(const Dataset& ds, const model::PlantParams& nominal, const std::vector<std::string>& split,
+StatusOr<Predicted> MeasureGap(const Dataset& ds, const model::PlantParams& nominal, const std::vector<Split>& split,
                                const model::SolverOptions& solver, Diagnosis* out) {
   Diagnosis& d = *out;
   std::array<double, kPhaseCount> energy{}, hold_energy{};
@@ -619,7 +657,7 @@ StatusOr<Predicted> MeasureGap(const Dataset& ds, const model::PlantParams& nomi
   const std::vector<std::vector<double>>& nominal_i = nominal_pred->i_A;
   for (std::size_t r = 0; r < ds.runs.size(); ++r) {
     const RunData& run = ds.runs[r];
-    const bool holdout = split[r] == "holdout";
+    const bool holdout = split[r] == Split::kHoldout;
     double e2 = 0.0;
     for (std::size_t k = 0; k < run.i_A.size(); ++k) {
       const double e = run.i_A[k] - nominal_i[r][k];
@@ -739,11 +777,13 @@ void Decide(Diagnosis* out) {
     // and the holdout runs are no worse: nothing changed but the model's own form error. (Without a
     // reference the same picture is also what an effect outside the catalog looks like: that stays unknown.)
     d.verdict = "none";
+    d.verdict_kind = VerdictKind::kNone;
     d.verdict_reason = "what is left is the model's own form error: no candidate fits better, and the holdout "
                        "runs are within " + FormatNumber(kSignificance) + "x of it";
   } else if (best.status.ok() && best.disqualified.empty() && best.closed >= kExplained) {
     d.chosen = 0;
     d.verdict = best.name;
+    d.verdict_kind = VerdictKindOf(best.kind);
     char buf[160];
     std::snprintf(buf, sizeof buf, "closes %.0f %% of the holdout gap above the %s", 100.0 * best.closed,
                   d.form_floor_A > d.noise_floor_A ? "model's form floor (its own error on the fit runs)"
@@ -752,6 +792,7 @@ void Decide(Diagnosis* out) {
     d.verdict_reason = buf;
   } else {
     d.verdict = "unknown";
+    d.verdict_kind = VerdictKind::kUnknown;
     char buf[300];
     std::snprintf(buf, sizeof buf, "no candidate in the catalog closes %.0f %% of the holdout gap (best: %s, %.0f %%%s%s)",
                   100.0 * kExplained, best.name.c_str(), 100.0 * best.closed, best.disqualified.empty() ? "" : "; ",
@@ -769,10 +810,12 @@ void Decide(Diagnosis* out) {
   if (d.chosen >= 0) {
     for (std::size_t k = 1; k < d.ranking.size(); ++k) {
       const auto& row = d.ranking[k];
-      if (!row.status.ok() || !row.disqualified.empty() || row.name.find('+') != std::string::npos) continue;
+      if (!row.status.ok() || !row.disqualified.empty() || IsCombination(row)) continue;
       // A structural candidate with the winning parameter free contains the parametric winner: it ties by
       // construction and is not an alternative explanation.
-      if (IsParametric(best.name) && row.params.count(best.name.substr(6)) > 0) continue;
+      if (IsParametric(best) && !d.candidates.empty() && d.candidates.front().params.size() == 1 &&
+          row.params.count(d.candidates.front().params.front().name) > 0)
+        continue;
       if (row.holdout_rmse_after_A - best.holdout_rmse_after_A < 0.1 * gap) d.confusable.push_back(row.name);
     }
     if (best.name == d.chosen_combination)
@@ -854,7 +897,7 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds_in, const model::PlantParams& nom
     dsp = &with_driver;
   }
   const Dataset& ds = *dsp;
-  const std::vector<std::string> split = MakeSplit(ds, &d.split_note);
+  const std::vector<Split> split = MakeSplit(ds, &d.split_note);
   auto nominal_pred = MeasureGap(ds, nominal, split, opt.attribution.solver, &d);
   if (!nominal_pred.ok()) return nominal_pred.status();
   const std::vector<std::vector<double>>& nominal_i = nominal_pred->i_A;
@@ -864,7 +907,7 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds_in, const model::PlantParams& nom
   LandmarksAndTrends(ds, nominal_i, &d);
 
   std::vector<bool> fit_mask;
-  for (const auto& sp : split) fit_mask.push_back(sp != "holdout");
+  for (const auto& sp : split) fit_mask.push_back(sp != Split::kHoldout);
   const std::vector<Candidate> catalog =
       !opt.candidates.empty() ? opt.candidates
       : d.reference.from_scratch ? MovingValveCandidates(nominal, ds, fit_mask, d.reference.temperature_C)
@@ -882,12 +925,14 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds_in, const model::PlantParams& nom
 
   if (!d.significant) {
     d.verdict = "none";
+    d.verdict_kind = VerdictKind::kNone;
     d.verdict_reason = d.has_reference ? "the change from the reference is within its own fit error"
                                        : "the residual is within the noise floor";
     return d;
   }
   if (!opt.attribute) {
     d.verdict = "unknown";
+    d.verdict_kind = VerdictKind::kUnknown;
     d.verdict_reason = "attribution not run";
     return d;
   }
@@ -895,6 +940,7 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds_in, const model::PlantParams& nom
     // Every run is fitted: a candidate's worth is its error on runs it was not fitted to, and there are none.
     // No ranking (it would read "holdout 0.00 -> 0.00" for every candidate).
     d.verdict = "unknown";
+    d.verdict_kind = VerdictKind::kUnknown;
     d.verdict_reason = std::string(ds.runs.size() == 1 ? "one run" : "no holdout run") +
                        ": nothing can be held out, so no candidate can be judged on data it was not fitted to; "
                        "record another run (another pressure or supply, or the same conditions again) and diagnose "
@@ -948,7 +994,7 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds_in, const model::PlantParams& nom
     d.candidates = std::move(ordered);
   }
   for (std::size_t k = 0; k < d.ranking.size(); ++k)
-    if (IsParametric(d.ranking[k].name)) {
+    if (IsParametric(d.ranking[k])) {
       d.parametric = static_cast<int>(k);
       break;
     }
@@ -969,6 +1015,7 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds_in, const model::PlantParams& nom
     }
     if (row.name != before_drift) {  // the drift is a cause in its own right
       d.verdict = row.name;
+      d.verdict_kind = VerdictKindOf(row.kind);
       d.verdict_reason = fmt::format("closes {:.0f} % of the holdout gap above the floor; the drifted parameter is a "
                                      "cause beside the effect (its own gap on the holdout runs is significant)",
                                      100.0 * row.closed);

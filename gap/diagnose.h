@@ -19,6 +19,7 @@
 #include <cmath>
 #include <map>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "common/status.h"
@@ -43,14 +44,14 @@ struct PhaseStat {
 
 struct RunGap {
   std::string id;
-  std::string split;    // "fit" or "holdout" (made up when the manifest has none)
+  Split split = Split::kFit;  // made up when the manifest has none
   double rmse_A = 0.0;
 };
 
 // Measured, nominal and fitted current of one run, decimated for plots (the reports draw these).
 struct Overlay {
   std::string run;
-  std::string split;
+  Split split = Split::kFit;
   std::vector<double> t_s, measured_A, nominal_A, fitted_A;
 };
 
@@ -98,6 +99,14 @@ struct ReferenceFit {
   std::vector<std::string> notes;        // what the from-scratch identification held and could not determine
 };
 
+// What a verdict is: nothing to explain, a cause (of CauseKind's kinds), either of two causes the data cannot
+// tell apart (a moving valve's "supply_pressure or param:delta"), or no candidate explains it. One formatter
+// each way; code tests the kind, never the verdict's text.
+enum class VerdictKind { kNone, kEffect, kParameter, kCombination, kEitherOf, kUnknown };
+const char* VerdictKindName(VerdictKind kind);  // "none", "effect", "parameter", "combination", "either_of", "unknown"
+StatusOr<VerdictKind> ParseVerdictKind(std::string_view name);
+VerdictKind VerdictKindOf(CauseKind cause);
+
 struct Diagnosis {
   std::string model;
   std::string device;
@@ -131,7 +140,8 @@ struct Diagnosis {
   // The smallest magnitude of each catalogued effect this dataset would have shown (gap/detection.h): "none"
   // means nothing above these.
   std::vector<DetectionLimit> detection_limits;
-  std::string verdict;             // "none", an effect name, "a+b", or "unknown"
+  std::string verdict;             // "none", an effect name, "a+b", or "unknown" (for people)
+  VerdictKind verdict_kind = VerdictKind::kUnknown;
   std::string verdict_reason;
   std::vector<std::string> warnings;
   // Nuisance drift (docs/gap.md, "Nuisance drift"): nominal parameters re-fitted beside the verdict's effect

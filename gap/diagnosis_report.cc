@@ -89,7 +89,7 @@ std::string DiagnosisJson(const Diagnosis& d) {
                      {"samples", w.samples}});
   j["where"] = where;
   nlohmann::ordered_json runs = nlohmann::ordered_json::array();
-  for (const auto& r : d.runs) runs.push_back({{"id", r.id}, {"split", r.split}, {"rmse_A", r.rmse_A}});
+  for (const auto& r : d.runs) runs.push_back({{"id", r.id}, {"split", SplitName(r.split)}, {"rmse_A", r.rmse_A}});
   j["runs"] = runs;
   nlohmann::ordered_json lms = nlohmann::ordered_json::array();
   for (const auto& l : d.landmarks) {
@@ -108,6 +108,7 @@ std::string DiagnosisJson(const Diagnosis& d) {
   j["ranking"] = ranking;
   if (d.parametric >= 0) j["parametric"] = RowJson(d.ranking[static_cast<std::size_t>(d.parametric)]);
   j["verdict"] = d.verdict;
+  j["verdict_kind"] = VerdictKindName(d.verdict_kind);
   j["verdict_reason"] = d.verdict_reason;
   if (!d.nuisance.empty()) {
     nlohmann::ordered_json drift = nlohmann::ordered_json::array();
@@ -151,7 +152,7 @@ std::string DiagnosisJson(const Diagnosis& d) {
   if (!d.warnings.empty()) j["warnings"] = d.warnings;
   nlohmann::ordered_json ovs = nlohmann::ordered_json::array();
   for (const auto& o : d.overlays)
-    ovs.push_back({{"run", o.run}, {"split", o.split}, {"t_s", o.t_s}, {"measured_A", o.measured_A},
+    ovs.push_back({{"run", o.run}, {"split", SplitName(o.split)}, {"t_s", o.t_s}, {"measured_A", o.measured_A},
                    {"nominal_A", o.nominal_A}, {"fitted_A", o.fitted_A}});
   j["overlays"] = ovs;
   return j.dump(2);
@@ -180,7 +181,7 @@ std::string DiagnosisReport(const Diagnosis& d) {
     os << buf;
   }
   const bool any_holdout =
-      std::any_of(d.runs.begin(), d.runs.end(), [](const RunGap& r) { return r.split == "holdout"; });
+      std::any_of(d.runs.begin(), d.runs.end(), [](const RunGap& r) { return r.split == Split::kHoldout; });
   char holdout[48] = "no holdout run";
   if (any_holdout) std::snprintf(holdout, sizeof holdout, "holdout %.2f mA RMS", d.holdout_rmse_A * 1e3);
   std::snprintf(buf, sizeof buf, "gap: fit runs %.2f mA RMS, %s: %s (threshold %.1fx the floor)\n",

@@ -40,8 +40,10 @@ const model::EffectParamInfo* EffectParam(const std::string& name) {
 }
 
 // The start value and default bounds of a parameter.
+// *no_default (when given) says the parameter has no default box because it is 0 in the model: then bounds the
+// user gives make the parameter fine (the caller tests this flag, not the message).
 Status Defaults(const Dataset& ds, const model::PlantParams& nominal, const std::string& name, double* start,
-                double* lo, double* hi) {
+                double* lo, double* hi, bool* no_default = nullptr) {
   if (name.rfind("driver.", 0) == 0) {
     model::DriverParams d = ds.driver;
     const std::string field = name.substr(7);
@@ -59,7 +61,10 @@ Status Defaults(const Dataset& ds, const model::PlantParams& nominal, const std:
     *start = *v;
     *lo = std::min(0.5 * *v, 1.5 * *v);
     *hi = std::max(0.5 * *v, 1.5 * *v);
-    if (!(*hi > *lo)) return Status::InvalidArgument("'" + name + "' is 0 in the model; give its bounds (NAME=LO:HI)");
+    if (!(*hi > *lo)) {
+      if (no_default != nullptr) *no_default = true;
+      return Status::InvalidArgument("'" + name + "' is 0 in the model; give its bounds (NAME=LO:HI)");
+    }
     return Status::Ok();
   }
   const model::EffectParamInfo* info = EffectParam(name);
@@ -144,8 +149,9 @@ StatusOr<Identification> Identify(const Dataset& ds, const model::PlantParams& n
       return Status::InvalidArgument("--params: '" + spec.name + "' is given twice (or also fixed)");
     double start = 0, lo = 0, hi = 0;
     const bool user_bounds = std::isfinite(spec.lower);
-    auto st = Defaults(ds, nominal, spec.name, &start, &lo, &hi);
-    if (!st.ok() && !(user_bounds && st.message().find("give its bounds") != std::string::npos))
+    bool no_default = false;
+    auto st = Defaults(ds, nominal, spec.name, &start, &lo, &hi, &no_default);
+    if (!st.ok() && !(user_bounds && no_default))
       return st.WithContext("--params");
     if (user_bounds) {
       lo = spec.lower;
@@ -172,7 +178,7 @@ StatusOr<Identification> Identify(const Dataset& ds, const model::PlantParams& n
   id.noise_floor_A = d->noise_floor_A;
   id.split_note = d->split_note;
   std::vector<bool> mask;
-  for (const auto& r : d->runs) mask.push_back(r.split != "holdout");
+  for (const auto& r : d->runs) mask.push_back(r.split != Split::kHoldout);
   AttributionOptions opt = options.attribution;
   const int k = static_cast<int>(c.params.size());
   // Identification wants the optimum itself, not a ranking: a tight local fit (each evaluation of a coil

@@ -30,7 +30,7 @@ Status FillImportRequest(const Dataset& ds, const std::string& name, ImportRunsR
     out->set_supply_v(r.supply_V);
     out->set_supply_pressure_pa(r.supply_pressure_Pa);
     out->set_t_start_s(r.t_start_s);
-    out->set_split(r.split);
+    out->set_split(SplitName(r.split));
     out->set_sample_period_s(r.sample_period_s);
     for (auto g : r.gate) out->add_gate(g);
     for (double i : r.i_A) out->add_i_a(i);

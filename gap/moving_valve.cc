@@ -312,7 +312,7 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds, const mode
   // The split: the manifest's; every run is fitted when it holds none out (then nothing is predicted unseen).
   std::vector<bool> fit(ds.runs.size(), true), hold(ds.runs.size(), false);
   for (std::size_t r = 0; r < ds.runs.size(); ++r) {
-    hold[r] = ds.runs[r].split == "holdout";
+    hold[r] = ds.runs[r].split == Split::kHoldout;
     fit[r] = !hold[r];
   }
   id.fit_runs = static_cast<int>(std::count(fit.begin(), fit.end(), true));
@@ -808,7 +808,7 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds, const mode
     const RunData& run = ds.runs[r];
     RunMarks rm;
     rm.run = run.id;
-    rm.split = hold[r] ? "holdout" : "fit";
+    rm.split = hold[r] ? Split::kHoldout : Split::kFit;
     rm.supply_V = run.supply_V;
     rm.pressure_Pa = run.supply_pressure_Pa;
     rm.measured = marks[r];
@@ -868,7 +868,7 @@ std::string MovingIdentificationJson(const MovingIdentification& id) {
                                   {"dip_depth_A", num(m.dip_depth_A)}, {"final_A", num(m.final_A)}};
   };
   for (const auto& r : id.landmarks)
-    lm.push_back({{"run", r.run}, {"split", r.split}, {"supply_V", r.supply_V}, {"supply_pressure_Pa", r.pressure_Pa},
+    lm.push_back({{"run", r.run}, {"split", SplitName(r.split)}, {"supply_V", r.supply_V}, {"supply_pressure_Pa", r.pressure_Pa},
                   {"rmse_A", r.rmse_A}, {"measured", marks(r.measured)}, {"predicted", marks(r.predicted)}});
   j["landmarks"] = lm;
   j["evaluations"] = id.evaluations;
@@ -932,7 +932,7 @@ std::string MovingIdentificationReport(const MovingIdentification& id) {
   };
   for (const auto& r : id.landmarks) {
     std::snprintf(buf, sizeof buf, "  %-16s %-8s %5.2f V %5.2f bar  %7s / %-10s %6s / %-6s %6.1f / %-6.1f %7.3f\n",
-                  r.run.c_str(), r.split.c_str(), r.supply_V, r.pressure_Pa / 1e5, pin(r.measured).c_str(),
+                  r.run.c_str(), SplitName(r.split), r.supply_V, r.pressure_Pa / 1e5, pin(r.measured).c_str(),
                   pin(r.predicted).c_str(), dip(r.measured).c_str(), dip(r.predicted).c_str(), r.measured.final_A * 1e3,
                   r.predicted.final_A * 1e3, r.rmse_A * 1e3);
     os << buf;
@@ -944,7 +944,7 @@ std::vector<Candidate> MovingValveCandidates(const model::PlantParams& ref, cons
                                              const std::vector<bool>& fit_mask, double reference_C) {
   std::vector<Candidate> out;
   const FreeParam R{"R", ref.R_ohm * 0.8, ref.R_ohm * 1.2, ref.R_ohm, false};
-  out.push_back({"param:R", {}, {R}, {}});
+  out.push_back(ParamCandidate("R", R));
   // A supply pressure other than declared: the pressure force (A1 - A2) P scaled by a factor f in [0, 10] is
   // A2 moved to A1 + f (A2 - A1) (seed 000 eq. 10); one factor for every run.
   const double a = ref.A2_m2 - ref.A1_m2;
@@ -959,11 +959,11 @@ std::vector<Candidate> MovingValveCandidates(const model::PlantParams& ref, cons
   const double F0 = ref.k_N_per_m * (ref.x_min_m + ref.delta_m);
   // delta from no preload (-x_min) to twice the identified preload force.
   const double d0 = ref.delta_m, dlo = std::min(-ref.x_min_m, d0), dhi = std::max(2.0 * d0 + ref.x_min_m, d0);
-  if (dhi > dlo) out.push_back({"param:delta", {}, {{"delta", dlo, dhi, d0, false}}, {}});
-  out.push_back({"param:k", {}, {{"k", ref.k_N_per_m * 0.3, ref.k_N_per_m * 3.0, ref.k_N_per_m, true}}, {}});
-  out.push_back({"param:m", {}, {{"m", ref.m_kg * 0.3, ref.m_kg * 3.0, ref.m_kg, true}}, {}});
-  out.push_back({"param:b", {}, {{"b", std::max(ref.b_N_s_per_m * 0.1, 1e-6), std::max(ref.b_N_s_per_m * 10.0, 1e-4),
-                                   std::max(ref.b_N_s_per_m, 1e-6), true}}, {}});
+  if (dhi > dlo) out.push_back(ParamCandidate("delta", {"delta", dlo, dhi, d0, false}));
+  out.push_back(ParamCandidate("k", {"k", ref.k_N_per_m * 0.3, ref.k_N_per_m * 3.0, ref.k_N_per_m, true}));
+  out.push_back(ParamCandidate("m", {"m", ref.m_kg * 0.3, ref.m_kg * 3.0, ref.m_kg, true}));
+  out.push_back(ParamCandidate("b", {"b", std::max(ref.b_N_s_per_m * 0.1, 1e-6), std::max(ref.b_N_s_per_m * 10.0, 1e-4),
+                                     std::max(ref.b_N_s_per_m, 1e-6), true}));
   // A plunger that no longer moves: static and kinetic friction above the largest magnetic force this coil can
   // make (1/2 (V/R)^2 dL/dx at the open gap, where dL/dx is largest, plus the preload); R free.
   double vmax = 0.0;
@@ -1019,6 +1019,7 @@ void MakeVerdict(Diagnosis* d, const std::string& name, const std::string& why) 
   if (d->parametric >= 0 && d->parametric < row) ++d->parametric;
   else if (d->parametric == row) d->parametric = 0;
   d->verdict = name;
+  d->verdict_kind = VerdictKindOf(d->ranking.front().kind);
   d->verdict_reason += "; " + why;
 }
 
@@ -1089,6 +1090,7 @@ void PreferDeterminedChange(Diagnosis* d, const Dataset& target) {
   }
   if (pmax > pmin) return;  // several declared pressures: a pressure error scales with them, a preload does not
   d->verdict = "supply_pressure or param:delta";
+  d->verdict_kind = VerdictKind::kEitherOf;
   d->verdict_reason += "; every run declares one pressure, so a supply pressure other than declared and a changed "
                        "spring preload are the same constant force on the plunger (seed 000 eq. 9-10): runs at "
                        "another declared pressure would tell them apart" + implied;

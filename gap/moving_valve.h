@@ -40,7 +40,8 @@ SwitchOnMarks FindSwitchOnMarks(const std::vector<double>& i_A, const std::vecto
                                 double threshold_A);
 
 struct RunMarks {
-  std::string run, split;
+  std::string run;
+  Split split = Split::kFit;
   double supply_V = 0.0, pressure_Pa = 0.0;
   SwitchOnMarks measured, predicted;
   double rmse_A = 0.0;

@@ -1,5 +1,7 @@
 #include "gap/scope_csv.h"
 
+#include "common/split.h"
+
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
@@ -62,8 +64,7 @@ StatusOr<ScopeRun> ConvertScopeCsv(const std::string& csv_path, const std::strin
   if (!(o.supply_V > 0.0) || !std::isfinite(o.supply_V)) return Status::InvalidArgument("--supply-V: the supply, > 0, is required");
   if (!(o.supply_pressure_Pa >= 0.0) || !std::isfinite(o.supply_pressure_Pa))
     return Status::InvalidArgument("--pressure-Pa: must be a finite number >= 0");
-  if (!o.split.empty() && o.split != "fit" && o.split != "holdout")
-    return Status::InvalidArgument("--split: " + Quote(o.split) + " is not fit or holdout");
+  if (!ParseSplit(o.split).ok()) return Status::InvalidArgument("--split: " + Quote(o.split) + " is not fit or holdout");
   std::ifstream in(csv_path);
   if (!in) return Status::InvalidArgument(csv_path + ": cannot open");
   // Header lines until the first line whose time and current columns are numbers; the last header line with as

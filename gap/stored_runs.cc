@@ -49,16 +49,17 @@ StatusOr<Dataset> DatasetOfStoredRuns(std::vector<StoredRun> runs) {
     // Imported runs carry their session's start time and split as fields (docs/server.md); other runs take
     // the start from when they ran.
     r.t_start_s = s.t_start_s ? *s.t_start_s : s.started_unix_s - first_start_unix;
-    r.split = s.split == "fit" || s.split == "holdout" ? s.split : "";
+    auto split = ParseSplit(s.split);
+    r.split = split.ok() ? *split : Split::kNone;  // the store checked it when the run was imported
     if (k == 0) ds.model = s.preset.empty() ? model::kDefaultPreset : s.preset;
     ds.runs.push_back(std::move(r));
   }
   std::stable_sort(ds.runs.begin(), ds.runs.end(),
                    [](const RunData& a, const RunData& b) { return a.t_start_s < b.t_start_s; });
   // A split only if every run has one (as for a manifest); otherwise the diagnosis makes its own.
-  const bool all_split = std::all_of(ds.runs.begin(), ds.runs.end(), [](const RunData& r) { return !r.split.empty(); });
+  const bool all_split = std::all_of(ds.runs.begin(), ds.runs.end(), [](const RunData& r) { return r.split != Split::kNone; });
   if (!all_split)
-    for (auto& r : ds.runs) r.split.clear();
+    for (auto& r : ds.runs) r.split = Split::kNone;
   return ds;
 }
 

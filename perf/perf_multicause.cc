@@ -140,7 +140,7 @@ Dataset Session(const vb::model::PlantParams& truth, std::mt19937& rng) {
     r.supply_V = p.supply_V;
     r.supply_pressure_Pa = p.pressure_Pa;
     r.t_start_s = t0;
-    r.split = p.split;
+    r.split = *vb::ParseSplit(p.split);
     r.sample_period_s = dt;
     r.gate = Gate(p, dt);
     for (std::size_t k = 0; k < r.gate.size(); ++k) r.t_s.push_back(static_cast<double>(k) * dt);

@@ -104,12 +104,6 @@ const char* DirectionName(v1::Direction d) {
   }
 }
 
-std::string BenchClassOf(const v1::ExperimentSpec& spec) {
-  const std::string kind = spec.bench().kind().empty() ? "emulated" : spec.bench().kind();
-  if (kind != "emulated") return kind;
-  return kind + ":" + (spec.bench().model().preset().empty() ? model::kDefaultPreset : spec.bench().model().preset());
-}
-
 double NoiseSigmas(const Suite& suite) {
   return suite.has_noise_sigmas() ? suite.noise_sigmas() : kDefaultNoiseSigmas;
 }

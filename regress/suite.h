@@ -8,6 +8,7 @@
 
 #include "common/run_key.h"
 #include "common/status.h"
+#include "experiment/spec.h"
 #include "valvebench/v1/spec.pb.h"
 #include "valvebench/v1/suite.pb.h"
 
@@ -27,8 +28,9 @@ struct LoadedSuite {
 StatusOr<LoadedSuite> ParseSuite(const std::string& json, const std::string& base_dir);
 StatusOr<LoadedSuite> LoadSuite(const std::string& path);
 
-// "emulated:<preset>" (the server's bench classes; docs/server.md), or the kind for non-emulated benches.
-std::string BenchClassOf(const valvebench::v1::ExperimentSpec& spec);
+// "emulated:<preset>" (the server's bench classes; docs/server.md), or the kind for non-emulated benches: the
+// one definition, experiment::BenchClassOf.
+using experiment::BenchClassOf;
 
 // One run to execute: the single-run spec, its identity (RunKey as ExpandRuns gives it) and the case it
 // belongs to (key.CaseName(): entry name + sweep point; repeats of one configuration share a case).

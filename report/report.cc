@@ -1,4 +1,5 @@
 #include "report/report.h"
+#include "common/decimate.h"
 #include "common/format.h"
 
 #include <fmt/format.h>
@@ -21,36 +22,6 @@ std::string Fmt(double v, const char* f = "%.6g") {
   return fmt::sprintf(f, v);
 }
 
-// Indices kept by min/max decimation: per bucket the first sample and the min and max of every channel.
-std::vector<std::size_t> DecimationIndices(const std::map<std::string, std::vector<double>>& ch, std::size_t n,
-                                           std::size_t max_points) {
-  std::vector<std::size_t> keep;
-  if (n <= max_points) {
-    keep.resize(n);
-    for (std::size_t k = 0; k < n; ++k) keep[k] = k;
-    return keep;
-  }
-  const std::size_t per_bucket = std::max<std::size_t>(1, ch.size() * 2 + 1);
-  const std::size_t buckets = std::max<std::size_t>(1, max_points / per_bucket);
-  const double width = static_cast<double>(n) / buckets;
-  for (std::size_t b = 0; b < buckets; ++b) {
-    const std::size_t lo = static_cast<std::size_t>(b * width), hi = std::min(n, static_cast<std::size_t>((b + 1) * width));
-    if (lo >= hi) continue;
-    std::vector<std::size_t> in = {lo};
-    for (const auto& [name, v] : ch) {
-      if (v.size() < hi) continue;
-      auto [mn, mx] = std::minmax_element(v.begin() + lo, v.begin() + hi);
-      in.push_back(static_cast<std::size_t>(mn - v.begin()));
-      in.push_back(static_cast<std::size_t>(mx - v.begin()));
-    }
-    std::sort(in.begin(), in.end());
-    in.erase(std::unique(in.begin(), in.end()), in.end());
-    keep.insert(keep.end(), in.begin(), in.end());
-  }
-  if (keep.back() != n - 1) keep.push_back(n - 1);
-  return keep;
-}
-
 }  // namespace
 
 Json TraceSection(const std::vector<TraceData>& traces, std::size_t max_points, std::size_t open) {
@@ -65,15 +36,21 @@ Json TraceSection(const std::vector<TraceData>& traces, std::size_t max_points, 
       n = n == 0 ? it->second.size() : std::min(n, it->second.size());
     }
     if (n == 0) continue;
-    const auto keep = DecimationIndices(used, n, max_points);
+    // The server's GetTrace decimator (common/decimate.h): every channel's peaks survive.
+    std::vector<const std::vector<double>*> cols;
+    for (auto& [name, v] : used) {
+      v.resize(n);
+      cols.push_back(&v);
+    }
+    const MinMaxDecimator::Rows rows = DecimateColumns(cols, t.t0_s, t.sample_period_s, static_cast<std::int64_t>(max_points));
     Json r = {{"label", t.label}, {"controlled", t.controlled}, {"samples", n}};
-    Json ts = Json::array();
-    for (auto k : keep) ts.push_back(t.t0_s + static_cast<double>(k) * t.sample_period_s);
-    r["t"] = ts;
+    r["t"] = rows.t_s;
+    std::size_t j = 0;
     for (const auto& [name, v] : used) {
       Json a = Json::array();
-      for (auto k : keep) a.push_back(Num(v[k]));
+      for (double x : rows.values[j]) a.push_back(Num(x));
       r[name] = a;
+      ++j;
     }
     runs.push_back(r);
   }
@@ -95,7 +72,7 @@ Json ComparisonSections(const experiment::Comparison& c, const std::string& titl
   for (const auto& r : c.rows) {
     auto e = r.metrics.find(c.rank_metric), f = r.metrics.find(c.effort_metric);
     if (e == r.metrics.end() || f == r.metrics.end() || e->second.n == 0 || f->second.n == 0) continue;
-    const std::string label = experiment::SplitCaseName(r.name).name;
+    const std::string& label = r.key.name;
     points.push_back({{"label", label.substr(label.rfind('/') == std::string::npos ? 0 : label.rfind('/') + 1)},
                       {"x", f->second.mean * fx.scale},
                       {"y", e->second.mean * ex.scale},
@@ -236,7 +213,7 @@ Json MetaSection(const std::string& where, const std::vector<RunInfo>& runs) {
   for (const auto& r : runs) {
     if (r.started_unix_s > 0 && (first == 0 || r.started_unix_s < first)) first = r.started_unix_s;
     last = std::max(last, r.finished_unix_s);
-    done += r.status == "done";
+    done += r.status == RunStatus::kDone;
   }
   add("runs", std::to_string(runs.size()) + " (" + std::to_string(done) + " done)");
   if (first > 0) add("ran", Utc(first) + " to " + Utc(last));
@@ -312,29 +289,25 @@ Json OverlaySection(const std::vector<RunInfo>& runs, std::size_t max_points) {
     const RunInfo& r = *p.run;
     const double dt = r.trace.sample_period_s;
     const std::size_t n = std::min(p.y->size(), p.ref->size());
-    std::map<std::string, std::vector<double>> full = {{"y", *p.y}, {"ref", *p.ref}};
-    for (auto& [k, v] : full) v.resize(n);
-    const auto keep = DecimationIndices(full, n, max_points);
-    Json t = Json::array(), y = Json::array(), ref = Json::array();
-    for (auto k : keep) {
-      t.push_back(r.trace.t0_s + dt * static_cast<double>(k));
-      y.push_back(Num((*p.y)[k] * ys));
-      ref.push_back(Num((*p.ref)[k] * ys));
+    std::vector<double> y_n(p.y->begin(), p.y->begin() + static_cast<std::ptrdiff_t>(n));
+    std::vector<double> ref_n(p.ref->begin(), p.ref->begin() + static_cast<std::ptrdiff_t>(n));
+    const MinMaxDecimator::Rows yr = DecimateColumns({&y_n, &ref_n}, r.trace.t0_s, dt, static_cast<std::int64_t>(max_points));
+    Json t = yr.t_s, y = Json::array(), ref = Json::array();
+    for (std::size_t k = 0; k < yr.t_s.size(); ++k) {
+      y.push_back(Num(yr.values[0][k] * ys));
+      ref.push_back(Num(yr.values[1][k] * ys));
     }
     // The error over the metric window only: where the metrics are computed.
     std::size_t k0 = 0, k1 = 0;
     while (k0 < n && r.trace.t0_s + dt * k0 < p.w0 - 1e-12) ++k0;
     k1 = k0;
     while (k1 < n && r.trace.t0_s + dt * k1 <= p.w1 + 1e-12) ++k1;
-    std::map<std::string, std::vector<double>> err = {{"e", {}}};
-    for (std::size_t k = k0; k < k1; ++k) err["e"].push_back((*p.y)[k] - (*p.ref)[k]);
-    const auto ekeep = DecimationIndices(err, err["e"].size(), max_points);
-    Json et = Json::array(), ev = Json::array();
-    if (!err["e"].empty())
-      for (auto k : ekeep) {
-        et.push_back(r.trace.t0_s + dt * static_cast<double>(k0 + k));
-        ev.push_back(Num(err["e"][k] * es));
-      }
+    std::vector<double> err;
+    for (std::size_t k = k0; k < k1; ++k) err.push_back((*p.y)[k] - (*p.ref)[k]);
+    const MinMaxDecimator::Rows er =
+        DecimateColumns({&err}, r.trace.t0_s + dt * static_cast<double>(k0), dt, static_cast<std::int64_t>(max_points));
+    Json et = er.t_s, ev = Json::array();
+    for (double e : er.values[0]) ev.push_back(Num(e * es));
     const std::string label = r.key.DisplayName();
     series.push_back({{"name", label.substr(label.rfind('/') == std::string::npos ? 0 : label.rfind('/') + 1)},
                       {"controller", r.controller}, {"t", t}, {"y", y}, {"ref", ref}, {"et", et}, {"e", ev}});
@@ -356,9 +329,9 @@ Json BatchSections(const std::string& where, std::int64_t batch, const std::vect
   std::vector<experiment::RunRecord> recs;
   std::vector<MapPoint> map;
   for (const auto& r : runs) {
-    recs.push_back({r.key.CaseName(), r.controller, r.status == "done", r.metrics});
+    recs.push_back({r.key, r.id, r.controller, r.status == RunStatus::kDone, r.metrics});
     auto it = r.metrics.find("mean_position_pct");
-    if (r.status == "done" && r.controller == "open_loop_pwm" && it != r.metrics.end()) map.push_back({r.key, it->second});
+    if (r.status == RunStatus::kDone && r.controller == "open_loop_pwm" && it != r.metrics.end()) map.push_back({r.key, it->second});
   }
   sections.push_back({{"kind", "note"},
                       {"text", "Batch " + std::to_string(batch) + ": " + std::to_string(runs.size()) +

@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "common/run_key.h"
+#include "common/run_status.h"
 #include "common/status.h"
 
 #include "experiment/compare.h"
@@ -60,7 +61,7 @@ struct RunInfo {
   std::int64_t id = 0;
   RunKey key;
   std::string controller;
-  std::string status;                    // "done", "failed", ...
+  RunStatus status = RunStatus::kDone;    // the run's outcome (common/run_status.h)
   std::map<std::string, double> metrics;
   std::string spec_json;                 // the single-run spec ("" = not known)
   double submitted_unix_s = 0.0, started_unix_s = 0.0, finished_unix_s = 0.0;

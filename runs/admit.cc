@@ -10,13 +10,6 @@
 
 namespace vb::runs {
 
-std::string SpecBenchClass(const experiment::ExperimentSpec& spec) {
-  const std::string kind = spec.bench().kind().empty() ? "emulated" : spec.bench().kind();
-  if (kind != "emulated") return kind;
-  const std::string preset = spec.bench().model().preset().empty() ? model::kDefaultPreset : spec.bench().model().preset();
-  return kind + ":" + preset;
-}
-
 namespace {
 
 std::string LawName(const experiment::ExperimentSpec& spec) {
@@ -27,7 +20,7 @@ std::string LawName(const experiment::ExperimentSpec& spec) {
 // Step 4: the bench a run goes to (its class and requested name), or why none can take it.
 StatusOr<const BenchSetup*> Match(const experiment::RunPoint& p, const experiment::Experiment& e,
                                   const std::vector<BenchSetup>& benches) {
-  const std::string cls = SpecBenchClass(p.spec);
+  const std::string cls = experiment::BenchClassOf(p.spec);
   const std::string& wanted = p.spec.bench().name();
   const BenchSetup* match = nullptr;
   std::string available, refusals;

@@ -73,7 +73,4 @@ struct Queued {
 StatusOr<Admitted> Admit(const Submission& submission, const Policy& policy);
 StatusOr<Queued> Enqueue(db::Store* store, Admitted admitted, const Policy& policy);
 
-// The bench class a spec asks for: "emulated:<preset>", or the hardware kind ("hid", "u3").
-std::string SpecBenchClass(const experiment::ExperimentSpec& spec);
-
 }  // namespace vb::runs

@@ -11,7 +11,7 @@ namespace vb::runs {
 BenchSetup LocalEmulatorSetup() {
   BenchSetup b;
   b.name = "local-emulator";
-  b.kind = "emulated";
+  b.kind = BenchKind::kEmulated;
   b.bench_class = "local";
   b.interlocks = false;
   b.plant_from_spec = true;
@@ -21,7 +21,7 @@ BenchSetup LocalEmulatorSetup() {
 
 StatusOr<std::unique_ptr<hw::Bench>> OpenBench(const BenchSetup& setup, const experiment::Experiment& e) {
   const auto& c = setup.config;
-  if (setup.kind == "hid") {
+  if (setup.kind == BenchKind::kHid) {
     hw::HidDeviceId id;
     if (c.vendor_id() != 0) id.vendor_id = static_cast<std::uint16_t>(c.vendor_id());
     if (c.product_id() != 0) id.product_id = static_cast<std::uint16_t>(c.product_id());
@@ -36,7 +36,7 @@ StatusOr<std::unique_ptr<hw::Bench>> OpenBench(const BenchSetup& setup, const ex
     if (!b.ok()) return b.status();
     return std::unique_ptr<hw::Bench>(std::move(b.value()));
   }
-  if (setup.kind == "u3") {
+  if (setup.kind == BenchKind::kU3) {
     auto t = hw::OpenLibusbU3Transport(0);
     if (!t.ok()) return t.status();
     hw::U3BenchOptions opt;

@@ -7,6 +7,7 @@
 #include <memory>
 #include <string>
 
+#include "common/bench_kind.h"
 #include "experiment/spec.h"
 #include "hw/bench.h"
 #include "hw/emulated_bench.h"
@@ -17,7 +18,7 @@ namespace vb::runs {
 
 struct BenchSetup {
   std::string name;
-  std::string kind;             // "emulated", "hid", "u3"
+  BenchKind kind = BenchKind::kEmulated;
   std::string bench_class;      // what runs are matched on: "emulated:<preset>", "hid", "u3"
   std::string preset;
   valvebench::v1::ModelSpec model;

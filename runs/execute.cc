@@ -201,7 +201,7 @@ Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& se
   // 1. The stored spec, with the bench's configured model as the plant.
   auto spec = experiment::ParseSpecJson(run.spec_json);
   if (!spec.ok()) return finish(db::RunStatus::kFailed, "stored spec does not parse: " + spec.status().message(), {});
-  if (setup.kind == "emulated" && !setup.plant_from_spec) *spec->mutable_bench()->mutable_model() = setup.model;
+  if (setup.kind == BenchKind::kEmulated && !setup.plant_from_spec) *spec->mutable_bench()->mutable_model() = setup.model;
   if (setup.paced) spec->set_realtime(true);
 
   // 2. The experiment and the bench.

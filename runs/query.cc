@@ -32,7 +32,8 @@ StatusOr<experiment::Comparison> CompareStored(db::Store* store, const std::vect
   std::vector<experiment::RunRecord> records;
   for (const auto& r : runs) {
     experiment::RunRecord rec;
-    rec.name = r.key.CaseName();
+    rec.key = r.key;
+    rec.run_id = r.id;
     rec.controller = r.controller;
     rec.ok = r.status == db::RunStatus::kDone;
     auto metrics = store->GetMetrics(r.id);

@@ -86,7 +86,7 @@ Status HardwareSetup(const valvebench::v1::BenchConfig& b, const std::string& fi
   VB_RETURN_IF_ERROR(positive(b.max_control_rate_hz(), "max_control_rate_Hz"));
   VB_RETURN_IF_ERROR(positive(b.amps_per_volt(), "amps_per_volt"));
   if (b.has_model()) return Status::InvalidArgument(field + ".model: only emulated benches have a model");
-  const bool hid = setup->kind == "hid";
+  const bool hid = setup->kind == BenchKind::kHid;
   if (b.vendor_id() > 0xFFFF || b.product_id() > 0xFFFF)
     return Status::InvalidArgument(field + ".vendor_id/product_id: must fit 16 bits");
   if (!hid && (b.vendor_id() != 0 || b.product_id() != 0))
@@ -94,7 +94,7 @@ Status HardwareSetup(const valvebench::v1::BenchConfig& b, const std::string& fi
   if (!hid && !b.serial().empty() && b.serial().find_first_not_of("0123456789") != std::string::npos)
     return Status::InvalidArgument(field + ".serial: a U3 serial number is decimal, got '" + b.serial() + "'");
   hw::Capabilities& c = setup->caps;
-  c.kind = setup->kind;
+  c.kind = BenchKindName(setup->kind);
   c.driver = "low_side_flyback";
   c.max_supply_V = b.max_supply_v() > 0.0 ? b.max_supply_v() : 24.0;
   c.max_current_A = b.max_current_a() > 0.0 ? b.max_current_a() : 2.0;
@@ -103,7 +103,7 @@ Status HardwareSetup(const valvebench::v1::BenchConfig& b, const std::string& fi
   c.min_carrier_Hz = hid ? 10.0 : 1e6 / 256.0 / 65536.0;
   c.max_carrier_Hz = hid ? 100e3 : 48e6 / 256.0;
   c.serial = b.serial();
-  setup->bench_class = setup->kind;
+  setup->bench_class = BenchClass(setup->kind, "");
   setup->device = hid ? "hid " + Hex4(b.vendor_id() ? b.vendor_id() : 0x2E8A) + ":" +
                             Hex4(b.product_id() ? b.product_id() : 0x10C0) +
                             (b.serial().empty() ? "" : " serial " + b.serial())
@@ -212,16 +212,15 @@ StatusOr<Settings> SettingsFromConfig(const valvebench::v1::ServerConfig& c, con
     if (b.name().empty()) return Status::InvalidArgument(field + ".name: must not be empty");
     if (!names.insert(b.name()).second)
       return Status::InvalidArgument(field + ".name: '" + b.name() + "' appears twice");
-    const std::string kind = b.kind().empty() ? "emulated" : b.kind();
-    if (kind != "emulated" && kind != "hid" && kind != "u3")
-      return Status::InvalidArgument(field + ".kind: unknown bench kind '" + kind + "' (known: emulated, hid, u3)");
+    auto kind = ParseBenchKind(b.kind(), field + ".kind");
+    if (!kind.ok()) return kind.status();
     BenchSetup setup;
     setup.name = b.name();
-    setup.kind = kind;
+    setup.kind = *kind;
     setup.config = b;
-    if (kind != "emulated" && !b.pace().empty())
+    if (*kind != BenchKind::kEmulated && !b.pace().empty())
       return Status::InvalidArgument(field + ".pace: only emulated benches are paced (hardware runs in real time)");
-    if (kind != "emulated") {
+    if (*kind != BenchKind::kEmulated) {
       auto hw = HardwareSetup(b, field, &setup);
       if (!hw.ok()) return hw;
       s.benches.push_back(std::move(setup));
@@ -239,7 +238,7 @@ StatusOr<Settings> SettingsFromConfig(const valvebench::v1::ServerConfig& c, con
     auto driver = experiment::BuildDriver(b.driver());
     if (!driver.ok()) return driver.status().WithContext(field);
     setup.preset = plant->preset;
-    setup.bench_class = kind + ":" + setup.preset;
+    setup.bench_class = BenchClass(*kind, setup.preset);
     setup.emulated.name = b.name();
     setup.emulated.plant = *plant;
     setup.emulated.driver = *driver;

@@ -1,5 +1,6 @@
 #include "server/lab.h"
 
+#include <google/protobuf/util/json_util.h>
 #include <nlohmann/json.hpp>
 #include <spdlog/spdlog.h>
 
@@ -20,41 +21,6 @@ constexpr double kWatchPeriod_s = 0.1;     // cancel requests through the store 
 constexpr int kProgressEveryWatches = 5;   // progress to the store every 0.5 s
 
 }  // namespace
-
-std::string BenchesJson(const std::vector<BenchSetup>& benches) {
-  nlohmann::json a = nlohmann::json::array();
-  for (const BenchSetup& b : benches) {
-    a.push_back({{"name", b.name},
-                 {"kind", b.kind},
-                 {"bench_class", b.bench_class},
-                 {"model", b.preset},
-                 {"driver", b.kind == "emulated" ? std::string(model::DriverKindName(b.emulated.driver.kind))
-                                                 : b.caps.driver},
-                 {"paced", b.paced},
-                 {"device", b.device},
-                 {"max_supply_V", b.caps.max_supply_V},
-                 {"max_carrier_Hz", b.caps.max_carrier_Hz},
-                 {"max_sample_rate_Hz", b.caps.max_sample_rate_Hz},
-                 {"max_control_rate_Hz", b.caps.max_control_rate_Hz},
-                 {"measures_position",
-                  b.kind == "emulated" ? b.emulated.plant.has_moving_part : b.caps.measures_position},
-                 // What admission on another host checks a run against (experiment::CheckCapabilities).
-                 {"caps", {{"kind", b.caps.kind},
-                           {"driver", b.caps.driver},
-                           {"max_supply_V", b.caps.max_supply_V},
-                           {"min_carrier_Hz", b.caps.min_carrier_Hz},
-                           {"max_carrier_Hz", b.caps.max_carrier_Hz},
-                           {"max_sample_rate_Hz", b.caps.max_sample_rate_Hz},
-                           {"max_control_rate_Hz", b.caps.max_control_rate_Hz},
-                           {"measures_position", b.caps.measures_position},
-                           {"measures_velocity", b.caps.measures_velocity},
-                           {"max_current_A", b.caps.max_current_A},
-                           {"device_loops", b.caps.device_loops},
-                           {"max_device_loop_Hz", b.caps.max_device_loop_Hz}}}});
-  }
-  return a.dump();
-}
-
 
 LabHost::LabHost(LabSetup setup, std::string db_path, std::string benches_json, runs::Registry* registry,
                  const std::vector<std::unique_ptr<runs::Worker>>* workers)

@@ -23,12 +23,10 @@
 #include "server/config.h"
 #include "service/lab_benches.h"
 #include "server/stop_signal.h"
+#include "valvebench/v1/api.pb.h"
 
 namespace vb::server {
 
-// The host's benches as HostRecord::benches_json: [{"name", "kind", "model", "driver", "paced", "device",
-// "max_supply_V", "max_carrier_Hz", "max_sample_rate_Hz", "max_control_rate_Hz", "measures_position"}, ...].
-std::string BenchesJson(const std::vector<BenchSetup>& benches);
 
 class LabHost {
  public:

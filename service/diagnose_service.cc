@@ -4,7 +4,9 @@
 
 #include <map>
 
+#include "common/trace_columns.h"
 #include "gap/diagnose.h"
+#include "gap/improved_model.h"
 #include "gap/stored_runs.h"
 #include "model/params.h"
 #include "service/grpc_status.h"
@@ -31,20 +33,26 @@ StatusOr<gap::StoredRun> LoadStoredRun(db::Store* store, std::int64_t id) {
                                       std::isfinite(run->t_start_s) ? std::optional<double>(run->t_start_s)
                                                                     : std::nullopt,
                                       run->split);
-  bool has_gate = false, has_current = false;
-  VB_RETURN_IF_ERROR(store->ForEachTraceChunk(id, [&](const db::TraceChunk& c, std::int64_t /*total*/) {
-    s.sample_period_s = c.sample_period_s;
-    const auto n = static_cast<std::size_t>(c.samples);
-    for (std::size_t ch = 0; ch < c.channels.size(); ++ch) {
-      std::vector<double>* column = c.channels[ch] == "gate" ? &s.gate : c.channels[ch] == "i_A" ? &s.i_A : nullptr;
-      if (column == nullptr) continue;
-      (c.channels[ch] == "gate" ? has_gate : has_current) = true;
-      column->insert(column->end(), c.data.begin() + static_cast<std::ptrdiff_t>(ch * n),
-                     c.data.begin() + static_cast<std::ptrdiff_t>((ch + 1) * n));
-    }
-    return Status::Ok();
+  TraceDecoder decoder({"gate", "i_A"});  // the one decoder (common/trace_columns.h), the two channels kept
+  VB_RETURN_IF_ERROR(store->ForEachTraceChunk(id, [&](const db::TraceChunk& c, std::int64_t total) {
+    ChunkView view;
+    view.index = c.index;
+    view.t0_s = c.t0_s;
+    view.sample_period_s = c.sample_period_s;
+    view.samples = c.samples;
+    view.total_samples = total;
+    view.channels = &c.channels;
+    view.data = c.data.data();
+    return decoder.Add(view).WithContext(where);
   }));
-  if (!has_gate || !has_current) return Status::InvalidArgument(where + ": the trace has no gate and i_A channels");
+  TraceColumns trace = decoder.Take();
+  auto* gate = trace.Find("gate");
+  auto* current = trace.Find("i_A");
+  if (gate == nullptr || current == nullptr)
+    return Status::InvalidArgument(where + ": the trace has no gate and i_A channels");
+  s.sample_period_s = trace.sample_period_s;
+  s.gate = std::move(trace.columns["gate"]);
+  s.i_A = std::move(trace.columns["i_A"]);
   return s;
 }
 
@@ -85,6 +93,17 @@ grpc::Status BenchServiceImpl::DiagnoseRuns(grpc::ServerContext* ctx, const v1::
   if (!d.ok()) return ToGrpcStatus(d.status().WithContext("stored runs"));
   resp->set_report(gap::DiagnosisReport(*d));
   resp->set_report_json(gap::DiagnosisJson(*d));
+  // The improved model, built as `benchctl diagnose --model-out` builds it (gap/improved_model.h); "" when no
+  // effect was attributed (verdict none or unknown: api.proto).
+  std::string runs;
+  for (int k = 0; k < req->run_ids_size(); ++k) {
+    if (k > 0) runs += ',';
+    runs += std::to_string(req->run_ids(k));
+  }
+  valvebench::v1::ModelSpec nominal_spec;
+  nominal_spec.set_preset(model_name);
+  auto improved = gap::ImprovedModel(*d, nominal_spec, ds->driver, "the server's DiagnoseRuns on runs " + runs);
+  if (d->chosen >= 0 && improved.ok()) resp->set_improved_model_json(gap::ModelSpecJson(*improved));
   return grpc::Status::OK;
 }
 

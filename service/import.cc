@@ -17,6 +17,7 @@
 #include <mutex>
 
 #include "common/format.h"
+#include "common/split.h"
 #include "experiment/bounds.h"
 #include "model/params.h"
 #include "service/grpc_status.h"
@@ -64,7 +65,7 @@ Status ValidateMetadata(const v1::ImportedRun& r, std::int64_t samples, const st
   VB_RETURN_IF_ERROR(SpecBound(where + ".supply_pressure_Pa", "conditions.supply_pressure_Pa", r.supply_pressure_pa()));
   VB_RETURN_IF_ERROR(InRange(where + ".t_start_s", r.t_start_s(), 0.0, kMaxStart_s, "s"));
   VB_RETURN_IF_ERROR(InRange(where + ".sample_period_s", r.sample_period_s(), kMinSamplePeriod_s, kMaxSamplePeriod_s, "s"));
-  if (!r.split().empty() && r.split() != "fit" && r.split() != "holdout")
+  if (!ParseSplit(r.split()).ok())
     return Status::InvalidArgument(where + ".split: must be \"fit\", \"holdout\" or empty, got \"" + r.split() + "\"");
   if (samples < 2)
     return Status::InvalidArgument(where + ".gate: at least 2 samples are needed, got " + std::to_string(samples));

@@ -1,10 +1,71 @@
 #include "service/lab_benches.h"
 
+#include <google/protobuf/util/json_util.h>
 #include <nlohmann/json.hpp>
+
+#include "common/bench_kind.h"
+#include "model/driver.h"
 
 namespace vb::server {
 
 using runs::BenchSetup;
+
+valvebench::v1::BenchInfo DescribeBench(const BenchSetup& b) {
+  valvebench::v1::BenchInfo out;
+  const bool emulated = b.kind == BenchKind::kEmulated;
+  out.set_name(b.name);
+  out.set_kind(BenchKindName(b.kind));
+  out.set_driver(emulated ? std::string(model::DriverKindName(b.emulated.driver.kind)) : b.caps.driver);
+  out.set_model(b.preset);
+  out.set_max_supply_v(b.caps.max_supply_V);
+  out.set_max_carrier_hz(b.caps.max_carrier_Hz);
+  out.set_max_sample_rate_hz(b.caps.max_sample_rate_Hz);
+  out.set_max_control_rate_hz(b.caps.max_control_rate_Hz);
+  out.set_measures_position(emulated ? b.emulated.plant.has_moving_part : b.caps.measures_position);
+  out.set_device(b.device);
+  out.set_paced(b.paced);
+  out.set_max_current_a(b.safety.max_current_A > 0.0 ? b.safety.max_current_A : b.caps.max_current_A);
+  out.set_max_duty(b.safety.max_duty);
+  out.set_max_on_time_s(b.safety.max_on_time_s);
+  out.set_max_coil_temp_c(b.safety.max_coil_temp_C);
+  return out;
+}
+
+std::string BenchesJson(const std::vector<BenchSetup>& benches) {
+  nlohmann::json a = nlohmann::json::array();
+  google::protobuf::util::JsonPrintOptions opt;
+  opt.preserve_proto_field_names = true;  // "max_supply_V", as the heartbeats of older builds wrote them
+  for (const BenchSetup& b : benches) {
+    std::string info;
+    (void)google::protobuf::util::MessageToJsonString(DescribeBench(b), &info, opt);
+    nlohmann::json entry = nlohmann::json::parse(info);
+    entry["bench_class"] = b.bench_class;
+    // What admission on another host checks a run against (experiment::CheckCapabilities).
+    entry["caps"] = {{"kind", b.caps.kind},
+                     {"driver", b.caps.driver},
+                     {"max_supply_V", b.caps.max_supply_V},
+                     {"min_carrier_Hz", b.caps.min_carrier_Hz},
+                     {"max_carrier_Hz", b.caps.max_carrier_Hz},
+                     {"max_sample_rate_Hz", b.caps.max_sample_rate_Hz},
+                     {"max_control_rate_Hz", b.caps.max_control_rate_Hz},
+                     {"measures_position", b.caps.measures_position},
+                     {"measures_velocity", b.caps.measures_velocity},
+                     {"max_current_A", b.caps.max_current_A},
+                     {"device_loops", b.caps.device_loops},
+                     {"max_device_loop_Hz", b.caps.max_device_loop_Hz}};
+    a.push_back(std::move(entry));
+  }
+  return a.dump();
+}
+
+StatusOr<valvebench::v1::BenchInfo> RegisteredBench(const std::string& bench_json) {
+  valvebench::v1::BenchInfo out;
+  google::protobuf::util::JsonParseOptions opt;
+  opt.ignore_unknown_fields = true;  // bench_class, caps: admission's, not the description's
+  if (!google::protobuf::util::JsonStringToMessage(bench_json, &out, opt).ok())
+    return Status::InvalidArgument("benches_json: an entry is not a bench description: " + bench_json.substr(0, 200));
+  return out;
+}
 
 std::vector<BenchSetup> OtherHostsBenches(const std::vector<db::HostRecord>& hosts, const std::string& own_host) {
   std::vector<BenchSetup> out;
@@ -17,7 +78,9 @@ std::vector<BenchSetup> OtherHostsBenches(const std::vector<db::HostRecord>& hos
       const auto& c = b["caps"];
       BenchSetup s;
       s.name = b.value("name", "");
-      s.kind = b.value("kind", "");
+      auto kind = ParseBenchKind(b.value("kind", ""));
+      if (!kind.ok()) continue;  // a kind this build does not know: no run can be admitted for it here
+      s.kind = *kind;
       s.bench_class = b.value("bench_class", "");
       s.preset = b.value("model", "");
       s.paced = b.value("paced", false);

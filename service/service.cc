@@ -10,8 +10,11 @@
 #include <chrono>
 #include <map>
 #include <cmath>
+#include <cstring>
+#include <optional>
 #include <thread>
 
+#include "common/decimate.h"
 #include "db/open_store.h"
 #include "db/run_query.h"
 #include "experiment/compare.h"
@@ -348,6 +351,7 @@ grpc::Status BenchServiceImpl::GetTrace(grpc::ServerContext* ctx, const v1::GetT
                                         grpc::ServerWriter<v1::TraceChunk>* writer) {
   Principal who;
   if (auto st = Authorize(ctx, Role::kViewer, &who); !st.ok()) return st;
+  if (auto st = CheckDecimation(req->max_points(), req->from_s(), req->to_s()); !st.ok()) return ToGrpcStatus(st);
   auto store = pool_->Acquire();
   if (!store.ok()) return ToGrpcStatus(store.status());
   auto r = (*store)->GetRun(req->run_id());
@@ -356,27 +360,130 @@ grpc::Status BenchServiceImpl::GetTrace(grpc::ServerContext* ctx, const v1::GetT
     return ToGrpcStatus(Status::FailedPrecondition("run " + std::to_string(r->id) + " is " +
                                                    db::RunStatusName(r->status) +
                                                    "; its trace is stored when it ends"));
-  // Stream while reading: chunk k goes out while chunk k+1 is read; only one chunk is ever in memory.
+  // Stream while reading: chunk k goes out while chunk k+1 is read; only one stored chunk (and, decimating,
+  // the rows not yet sent) is ever in memory.
   v1::TraceChunk out;
   bool client_gone = false;
+  auto send = [&]() {
+    if (writer->Write(out)) return Status::Ok();
+    client_gone = true;
+    return Status::Aborted("client went away");
+  };
+  const bool windowed = req->from_s() != 0.0 || req->to_s() != 0.0;
+  if (req->max_points() == 0 && !windowed) {
+    auto st = (*store)->ForEachTraceChunk(r->id, [&](const db::TraceChunk& c, std::int64_t total) {
+      if (ctx->IsCancelled()) return Status::Aborted("cancelled by the client");
+      out.Clear();
+      out.set_index(c.index);
+      out.set_t0_s(c.t0_s);
+      out.set_sample_period_s(c.sample_period_s);
+      out.set_samples(c.samples);
+      out.set_total_samples(total);
+      for (const auto& ch : c.channels) out.add_channels(ch);
+      out.set_data(reinterpret_cast<const char*>(c.data.data()), c.data.size() * sizeof(double));
+      return send();
+    });
+    if (client_gone) return grpc::Status::OK;
+    if (!st.ok()) return ToGrpcStatus(st);
+    return grpc::Status::OK;
+  }
+  // A window and/or decimation (common/decimate.h): the samples of [from_s, to_s], min/max-decimated to
+  // max_points rows when max_points > 0 and the window holds more.
+  std::optional<MinMaxDecimator> decimator;
+  std::vector<std::size_t> kept;  // the stored channels sent (decimating: all but t_s, whose times are in t_s)
+  std::vector<std::string> names;
+  SampleWindow window;
+  double t0_s = 0.0, period_s = 0.0;
+  std::int64_t total_samples = 0, k = 0;
+  std::int32_t index = 0;
+  std::size_t rows_per_chunk = 1;
+  bool window_read = false, first = true;
+  auto header = [&](std::int32_t samples) {
+    out.Clear();
+    out.set_index(index++);
+    out.set_sample_period_s(period_s);
+    out.set_samples(samples);
+    out.set_total_samples(total_samples);
+    for (const auto& n : names) out.add_channels(n);
+  };
+  auto send_rows = [&](bool all) {
+    while (decimator->pending_rows() >= rows_per_chunk || (all && decimator->pending_rows() > 0)) {
+      MinMaxDecimator::Rows rows = decimator->TakeRows();
+      // Chunks of at most rows_per_chunk rows (a gRPC message stays far below its 4 MB limit).
+      for (std::size_t at = 0; at < rows.t_s.size(); at += rows_per_chunk) {
+        const std::size_t m = std::min(rows_per_chunk, rows.t_s.size() - at);
+        header(static_cast<std::int32_t>(m));
+        out.set_t0_s(t0_s);
+        out.set_decimated(decimator->decimating());
+        out.mutable_t_s()->Add(rows.t_s.begin() + static_cast<std::ptrdiff_t>(at),
+                               rows.t_s.begin() + static_cast<std::ptrdiff_t>(at + m));
+        std::string* data = out.mutable_data();
+        data->resize(m * kept.size() * sizeof(double));
+        for (std::size_t j = 0; j < kept.size(); ++j)
+          std::memcpy(data->data() + j * m * sizeof(double), rows.values[j].data() + at, m * sizeof(double));
+        VB_RETURN_IF_ERROR(send());
+      }
+    }
+    return Status::Ok();
+  };
   auto st = (*store)->ForEachTraceChunk(r->id, [&](const db::TraceChunk& c, std::int64_t total) {
     if (ctx->IsCancelled()) return Status::Aborted("cancelled by the client");
-    out.Clear();
-    out.set_index(c.index);
-    out.set_t0_s(c.t0_s);
-    out.set_sample_period_s(c.sample_period_s);
-    out.set_samples(c.samples);
-    out.set_total_samples(total);
-    for (const auto& ch : c.channels) out.add_channels(ch);
-    out.set_data(reinterpret_cast<const char*>(c.data.data()), c.data.size() * sizeof(double));
-    if (!writer->Write(out)) {
-      client_gone = true;
-      return Status::Aborted("client went away");
+    const auto n = static_cast<std::int64_t>(c.samples);
+    if (first) {
+      first = false;
+      t0_s = c.t0_s;
+      period_s = c.sample_period_s;
+      total_samples = total;
+      window = WindowOf(t0_s, period_s, total, req->from_s(), req->to_s());
+      for (std::size_t ch = 0; ch < c.channels.size(); ++ch)
+        if (req->max_points() == 0 || c.channels[ch] != "t_s") {
+          kept.push_back(ch);
+          names.push_back(c.channels[ch]);
+        }
+      if (req->max_points() > 0) {
+        decimator.emplace(kept.size(), window, req->max_points(), t0_s, period_s);
+        rows_per_chunk = std::max<std::size_t>(1, (1u << 20) / ((kept.size() + 1) * sizeof(double)));
+      }
+    }
+    if (c.channels.size() * static_cast<std::size_t>(n) != c.data.size())
+      return Status::DataLoss("trace chunk " + std::to_string(c.index) + ": data size does not match");
+    if (decimator) {
+      for (std::int64_t i = std::max<std::int64_t>(0, window.k0 - k); i < n && k + i < window.k1; ++i)
+        decimator->Add(k + i, [&](std::size_t j) { return c.data[kept[j] * static_cast<std::size_t>(n) + i]; });
+      VB_RETURN_IF_ERROR(send_rows(false));
+    } else {
+      const std::int64_t lo = std::max(k, window.k0), hi = std::min(k + n, window.k1);
+      if (hi > lo) {
+        const auto m = static_cast<std::size_t>(hi - lo);
+        header(static_cast<std::int32_t>(m));
+        out.set_t0_s(t0_s + static_cast<double>(lo) * period_s);
+        std::string* data = out.mutable_data();
+        data->resize(m * kept.size() * sizeof(double));
+        for (std::size_t j = 0; j < kept.size(); ++j)
+          std::memcpy(data->data() + j * m * sizeof(double),
+                      c.data.data() + kept[j] * static_cast<std::size_t>(n) + static_cast<std::size_t>(lo - k),
+                      m * sizeof(double));
+        VB_RETURN_IF_ERROR(send());
+      }
+    }
+    k += n;
+    if (k >= window.k1) {
+      window_read = true;  // the rest of the trace is after the window: stop reading
+      return Status::Aborted("window read");
     }
     return Status::Ok();
   });
   if (client_gone) return grpc::Status::OK;
-  if (!st.ok()) return ToGrpcStatus(st);
+  if (!st.ok() && !window_read) return ToGrpcStatus(st);
+  if (decimator) {
+    decimator->Finish();
+    if (auto sent = send_rows(true); !sent.ok()) return grpc::Status::OK;  // the client went away
+  }
+  if (index == 0) {  // nothing in the window (or no trace): one empty chunk still names the channels
+    header(0);
+    out.set_t0_s(t0_s);
+    if (!writer->Write(out)) return grpc::Status::OK;
+  }
   return grpc::Status::OK;
 }
 
@@ -408,6 +515,8 @@ grpc::Status BenchServiceImpl::CompareRuns(grpc::ServerContext* ctx, const v1::C
     auto* out = resp->add_rows();
     out->set_rank(row.rank);
     out->set_name(row.name);
+    *out->mutable_key() = api::ToProto(row.key);
+    for (auto id : row.run_ids) out->add_run_ids(id);
     out->set_controller(row.controller);
     out->set_runs(row.runs);
     out->set_failed(row.failed);
@@ -450,20 +559,10 @@ grpc::Status BenchServiceImpl::LabBenches(v1::ListBenchesResponse* resp) {
     if (!benches.is_array()) continue;
     const double age = std::max(0.0, now - h.heartbeat_unix_s);
     for (const auto& b : benches) {
-      if (!b.is_object()) continue;
+      auto info = RegisteredBench(b.dump());
+      if (!info.ok()) continue;  // not a bench description: nothing to list
       auto* out = resp->add_benches();
-      out->set_name(b.value("name", ""));
-      out->set_kind(b.value("kind", ""));
-      out->set_driver(b.value("driver", ""));
-      out->set_model(b.value("model", ""));
-      out->set_max_supply_v(b.value("max_supply_V", 0.0));
-      out->set_max_carrier_hz(b.value("max_carrier_Hz", 0.0));
-      out->set_max_sample_rate_hz(b.value("max_sample_rate_Hz", 0.0));
-      out->set_max_control_rate_hz(b.value("max_control_rate_Hz", 0.0));
-      out->set_measures_position(b.value("measures_position", false));
-      out->set_device(b.value("device", ""));
-      out->set_paced(b.value("paced", false));
-      out->set_fault(b.value("fault", ""));
+      *out = std::move(*info);
       out->set_host(h.name);
       out->set_host_address(h.address);
       out->set_heartbeat_age_s(age);
@@ -486,22 +585,8 @@ grpc::Status BenchServiceImpl::ListBenches(grpc::ServerContext* ctx, const v1::L
   }
   static const std::vector<std::unique_ptr<runs::Worker>> kNone;
   for (const auto& w : settings_->lab.enabled ? kNone : *workers_) {
-    const BenchSetup& b = w->setup();
     auto* out = resp->add_benches();
-    out->set_name(b.name);
-    out->set_kind(b.kind);
-    out->set_driver(b.kind == "emulated" ? std::string(model::DriverKindName(b.emulated.driver.kind)) : b.caps.driver);
-    out->set_model(b.preset);
-    out->set_max_supply_v(b.caps.max_supply_V);
-    out->set_max_carrier_hz(b.caps.max_carrier_Hz);
-    out->set_max_sample_rate_hz(b.caps.max_sample_rate_Hz);
-    out->set_max_control_rate_hz(b.caps.max_control_rate_Hz);
-    out->set_measures_position(b.kind == "emulated" ? b.emulated.plant.has_moving_part : b.caps.measures_position);
-    out->set_device(b.device);
-    out->set_max_current_a(b.safety.max_current_A > 0.0 ? b.safety.max_current_A : b.caps.max_current_A);
-    out->set_max_duty(b.safety.max_duty);
-    out->set_max_on_time_s(b.safety.max_on_time_s);
-    out->set_max_coil_temp_c(b.safety.max_coil_temp_C);
+    *out = DescribeBench(w->setup());
     out->set_fault(w->fault());
     const auto current = w->current_run();
     out->set_busy(current != 0);

@@ -34,9 +34,11 @@
 #include "model/params.h"
 #include "proto/api_convert.h"
 #include "report/report.h"
+#include "common/trace_columns.h"
 #include "experiment/spec.h"
 #include "model/effects.h"
 #include "export/run_file.h"
+#include "proto/trace_chunk.h"
 #include "valvebench/v1/api.grpc.pb.h"
 #include "web/assets.h"
 #include "web/door.h"
@@ -315,10 +317,9 @@ void AppendNumber(std::string* out, double v) {
   }
 }
 
-// The rows [t_s, ch0, ch1, ...] of a stored trace's samples with t in [t_from, t_to], read from GetTrace chunk by
-// chunk (memory: one chunk and the rows, whatever the trace's length). At most max_points rows: beyond that each
-// bucket of samples gives two rows, every channel's minimum at the bucket's start and its maximum at its middle
-// (the envelope of a PWM current survives; a bucket is narrower than a pixel at the default 4000 points).
+// The rows [t_s, ch0, ch1, ...] of a stored trace's samples with t in [t_from, t_to], at most max_points of
+// them: GetTrace windows and min/max-decimates on the server (common/decimate.h: every channel's extremes of a
+// bucket survive), and the one decoder (proto/trace_chunk.h) reads the chunks.
 struct TraceRowsOut {
   std::vector<std::string> channels;  // the rows' columns after t_s
   double t0_s = 0.0, period_s = 0.0;
@@ -334,110 +335,48 @@ grpc::Status ReadTraceRows(v1::BenchService::Stub* stub, const httplib::Request&
   Deadline(&ctx, 120.0);
   v1::GetTraceRequest r;
   r.set_run_id(run_id);
+  r.set_max_points(static_cast<std::int32_t>(max_points));
+  // An open start: before any trace; an open end: to_s <= from_s (api.proto).
+  r.set_from_s(std::isfinite(t_from) ? t_from : -1e300);
+  r.set_to_s(std::isfinite(t_to) ? t_to : r.from_s());
   auto reader = stub->GetTrace(&ctx, r);
+  vb::TraceDecoder decoder;
   v1::TraceChunk c;
-  std::vector<std::string> all;       // every channel, t_s included
-  std::vector<size_t> value_channels; // their indexes but t_s
-  size_t k0 = 0, k1 = 0, count = 0, buckets = 1;
-  std::int64_t k = 0;                 // the next sample's index
-  // The decimation bucket being filled: [a, e), its channels' extremes.
-  size_t bucket = 0, a = 0, e = 0;
-  std::vector<double> lo, hi;
-  bool bucket_open = false;
-  auto row = [&](double time, auto&& value) {
-    if (out->rows.size() > 1) out->rows += ',';
-    out->rows += '[';
-    AppendNumber(&out->rows, time);
-    for (size_t j = 0; j < value_channels.size(); ++j) {
-      out->rows += ',';
-      AppendNumber(&out->rows, value(j));
-    }
-    out->rows += ']';
-  };
-  auto bounds = [&](size_t b) {
-    a = k0 + count * b / buckets;
-    e = k0 + count * (b + 1) / buckets;
-  };
-  auto flush = [&] {
-    if (!bucket_open) return;
-    row(out->t0_s + a * out->period_s, [&](size_t j) { return lo[j]; });
-    row(out->t0_s + (a + (e - a) / 2) * out->period_s, [&](size_t j) { return hi[j]; });
-    bucket_open = false;
-  };
-  bool first = true;
-  grpc::Status bad;
+  vb::Status bad;
   while (reader->Read(&c)) {
-    if (first) {
-      first = false;
-      all.assign(c.channels().begin(), c.channels().end());
-      for (size_t ch = 0; ch < all.size(); ++ch)
-        if (all[ch] != "t_s") {
-          value_channels.push_back(ch);
-          out->channels.push_back(all[ch]);
-        }
-      out->t0_s = c.t0_s();
-      out->period_s = c.sample_period_s();
-      const size_t n = static_cast<size_t>(std::max<std::int64_t>(0, c.total_samples()));
-      k0 = 0;
-      k1 = n;
-      if (out->period_s > 0.0 && n > 0) {
-        if (std::isfinite(t_from))
-          k0 = static_cast<size_t>(std::clamp(std::floor((t_from - out->t0_s) / out->period_s), 0.0, double(n)));
-        if (std::isfinite(t_to))
-          k1 = static_cast<size_t>(std::clamp(std::ceil((t_to - out->t0_s) / out->period_s) + 1, 0.0, double(n)));
-      }
-      if (k1 < k0) k1 = k0;
-      count = k1 - k0;
-      out->decimated = count > max_points;
-      buckets = std::max<size_t>(1, max_points / 2);
-      bucket = 0;
-      bounds(0);
-      lo.assign(value_channels.size(), 0.0);
-      hi.assign(value_channels.size(), 0.0);
-    }
-    const size_t ns = static_cast<size_t>(std::max(0, c.samples()));
-    if (static_cast<size_t>(c.channels_size()) != all.size() || c.data().size() != ns * all.size() * 8) {
-      bad = grpc::Status(grpc::StatusCode::DATA_LOSS, fmt::format("trace chunk {}: inconsistent size", c.index()));
+    if (bad = vb::api::DecodeChunk(c, &decoder); !bad.ok()) {
       ctx.TryCancel();
       while (reader->Read(&c)) {
       }
       break;
     }
-    const char* data = c.data().data();
-    auto value = [&](size_t j, size_t i) {
-      double v;
-      std::memcpy(&v, data + (value_channels[j] * ns + i) * 8, 8);  // little-endian float64 (api.proto)
-      return v;
-    };
-    for (size_t i = 0; i < ns; ++i, ++k) {
-      const size_t kk = static_cast<size_t>(k);
-      if (kk < k0 || kk >= k1) continue;
-      if (!out->decimated) {
-        row(out->t0_s + kk * out->period_s, [&](size_t j) { return value(j, i); });
-        continue;
-      }
-      while (kk >= e && bucket < buckets) {  // past this bucket: the next non-empty one
-        flush();
-        bounds(++bucket);
-      }
-      for (size_t j = 0; j < value_channels.size(); ++j) {
-        const double v = value(j, i);
-        if (!bucket_open) {
-          lo[j] = hi[j] = v;
-        } else {
-          if (std::isnan(lo[j]) || v < lo[j]) lo[j] = v;
-          if (std::isnan(hi[j]) || v > hi[j]) hi[j] = v;
-        }
-      }
-      bucket_open = true;
-    }
   }
   const grpc::Status st = reader->Finish();
-  if (!bad.ok()) return bad;
+  if (!bad.ok()) return grpc::Status(grpc::StatusCode::DATA_LOSS, bad.message());
   if (!st.ok()) return st;
-  flush();
+  const vb::TraceColumns& t = decoder.trace();
+  out->t0_s = t.t0_s;
+  out->period_s = t.sample_period_s;
+  out->total_samples = t.total_samples;
+  out->decimated = t.decimated;
+  std::vector<const std::vector<double>*> cols;
+  for (const auto& name : t.channels)
+    if (name != "t_s") {  // t_s is the rows' first column, not a channel
+      out->channels.push_back(name);
+      cols.push_back(t.Find(name));
+    }
+  const std::size_t n = t.samples();
+  out->rows.reserve(n * (cols.size() + 1) * 12);
+  for (std::size_t k = 0; k < n; ++k) {
+    out->rows += k == 0 ? "[" : ",[";
+    AppendNumber(&out->rows, t.TimeAt(k));
+    for (const auto* col : cols) {
+      out->rows += ',';
+      AppendNumber(&out->rows, (*col)[k]);
+    }
+    out->rows += ']';
+  }
   out->rows += ']';
-  out->total_samples = k;
   return grpc::Status::OK;
 }
 
@@ -951,6 +890,8 @@ class Routes {
         !NumberParam(req, res, "max_points", &max_points))
       return;
     if (max_points < 10 || max_points > 200000) return BadRequest(res, "max_points: must be 10..200000");
+    if (std::isfinite(t_from) && std::isfinite(t_to) && t_to < t_from)
+      return BadRequest(res, "t_to_s: must not be before t_from_s");
     TraceRowsOut t;
     auto st = ReadTraceRows(stub_.get(), req, PathId(req), t_from, t_to, static_cast<size_t>(max_points), &t);
     if (!st.ok()) return SendError(res, st);
@@ -974,6 +915,7 @@ class Routes {
       v1::TraceChunk chunk;
       std::vector<std::string> channels;
       std::vector<size_t> value_channels;
+      vb::TraceDecoder decoder;
       double t0_s = 0, period_s = 0;
       std::int64_t k = 0;  // the next sample's index
       bool header_sent = false, have_chunk = false, finished = false;
@@ -1025,25 +967,24 @@ class Routes {
               }
             }
             d->have_chunk = false;
-            const v1::TraceChunk& c = d->chunk;
-            const size_t n = static_cast<size_t>(std::max(0, c.samples()));
-            if (static_cast<size_t>(c.channels_size()) != d->channels.size() ||
-                c.data().size() != n * d->channels.size() * 8) {
+            if (!vb::api::DecodeChunk(d->chunk, &d->decoder).ok()) {
               d->ctx.TryCancel();
               return false;
             }
-            out.reserve(out.size() + n * (d->value_channels.size() + 1) * 14);
-            const char* data = c.data().data();
+            const vb::TraceColumns& t = d->decoder.trace();
+            const size_t n = t.samples();
+            std::vector<const std::vector<double>*> cols;
+            for (size_t ch : d->value_channels) cols.push_back(t.Find(d->channels[ch]));
+            out.reserve(out.size() + n * (cols.size() + 1) * 14);
             for (size_t i = 0; i < n; ++i) {
               AppendCsvNumber(&out, d->t0_s + static_cast<double>(d->k + static_cast<std::int64_t>(i)) * d->period_s);
-              for (size_t ch : d->value_channels) {
-                double v;
-                std::memcpy(&v, data + (ch * n + i) * 8, 8);  // little-endian float64, channel-major (api.proto)
+              for (const auto* col : cols) {
                 out += ',';
-                AppendCsvNumber(&out, v);  // NaN: an empty field, as benchctl writes it (common/csv.h)
+                AppendCsvNumber(&out, (*col)[i]);  // NaN: an empty field, as benchctl writes it (common/csv.h)
               }
               out += '\n';
             }
+            d->decoder.DropRows();  // memory: one chunk, whatever the trace's length
             d->k += static_cast<std::int64_t>(n);
             if (!sink.write(out.data(), out.size())) {
               d->ctx.TryCancel();
@@ -1244,38 +1185,19 @@ class Routes {
                 {"decimals", d.decimals}, {"spread_decimals", d.spread_decimals}};
   }
   static Json CompareDisplay(const v1::CompareRunsResponse& out) {
-    experiment::Comparison c;
-    c.rank_metric = out.rank_metric();
-    c.effort_metric = out.effort_metric();
-    c.columns.assign(out.columns().begin(), out.columns().end());
+    // The rows' identity is the server's RunKey (CompareRow.key), never read back from the name.
+    const experiment::Comparison c = experiment::ComparisonFromProto(out);
     Json keys = Json::array(), laws = Json::object();
     std::vector<std::string> axes;
     std::map<std::string, std::vector<double>> axis_values;
-    for (const auto& r : out.rows()) {
-      experiment::CompareRow row;
-      row.name = r.name();
-      row.controller = r.controller();
-      row.runs = r.runs();
-      row.failed = r.failed();
-      row.rank = r.rank();
-      row.pareto = r.pareto();
-      for (const auto& [k, v] : r.metrics()) row.metrics[k] = {v.mean(), v.spread(), v.n()};
-      c.rows.push_back(std::move(row));
-      laws[r.controller()] = experiment::LawName(r.controller());
-      // The row's key as the server sent it; from a server before CompareRow.key, read back from its name.
-      RunKey key;
-      if (!r.key().name().empty()) {
-        key.name = r.key().name();
-        for (const auto& sc : r.key().sweep()) key.sweep.push_back({sc.field(), sc.value()});
-      } else {
-        key = experiment::SplitCaseName(r.name());
-      }
+    for (const auto& row : c.rows) {
+      laws[row.controller] = experiment::LawName(row.controller);
       Json sweep = Json::array();
-      for (const auto& sc : key.sweep) {
+      for (const auto& sc : row.key.sweep) {
         sweep.push_back({{"field", sc.field}, {"value", sc.value}});
         if (std::find(axes.begin(), axes.end(), sc.field) == axes.end()) axes.push_back(sc.field);
       }
-      keys.push_back({{"name", key.name}, {"sweep", sweep}});
+      keys.push_back({{"name", row.key.name}, {"sweep", sweep}});
     }
     for (size_t i = 0; i < keys.size(); ++i)
       for (const auto& a : axes) {

@@ -15,7 +15,7 @@ namespace {
 
 RunRecord R(const std::string& name, double rmse, double effort, bool ok = true) {
   RunRecord r;
-  r.name = name;
+  r.key = NamedRun(name);
   r.controller = name;
   r.ok = ok;
   r.metrics["rmse"] = rmse;
@@ -92,7 +92,7 @@ std::vector<RunRecord> CurrentLaws() {
   for (const L& l : {L{"hysteresis_current", 0.006018, 3437, 0.0021, 0.2561}, L{"pi_current", 0.000953, 40000, 0.0247, 0.2553},
                      L{"predictive_current", 0.000694, 40000, 0.0247, 0.2550}, L{"fuzzy_current", 0.000538, 40000, 0.0247, 0.2551}}) {
     RunRecord r;
-    r.name = "compare-current-controllers/" + std::string(l.law).substr(0, std::string(l.law).find('_'));
+    r.key = NamedRun("compare-current-controllers/" + std::string(l.law).substr(0, std::string(l.law).find('_')));
     r.controller = l.law;
     r.metrics = {{"rmse", l.rmse}, {"iae", l.rmse * 0.08}, {"max_abs_error", l.rmse * 3}, {"overshoot", NAN},
                  {"settling_time_s", NAN}, {"effort_l2", 3.67}, {"effort_rms", 12.97}, {"energy_J", 0.26},
@@ -190,7 +190,7 @@ TEST(CompareTable, PositionLawsUseTheirForceNormAsEffort) {
   std::vector<RunRecord> runs;
   for (auto [law, rmse, u] : {std::tuple{"cascade_pi_position", 6.46e-5, 0.21}, std::tuple{"sliding_mode_position", 6.40e-5, 0.12}}) {
     RunRecord r;
-    r.name = std::string("position/") + law;
+    r.key = NamedRun(std::string("position/") + law);
     r.controller = law;
     r.metrics = {{"rmse", rmse}, {"overshoot", 0.2}, {"max_abs_error", NAN}, {"effort_u_l2", u}, {"effort_l2", 152.5}};
     runs.push_back(r);
@@ -216,7 +216,7 @@ TEST(CompareTable, StaticMapIsPositionAgainstDutyOneColumnPerPressure) {
                      f8 ? other : other / 4000}},
                    -1};
         RunRecord r;
-        r.name = key.CaseName();
+        r.key = key;
         r.controller = "open_loop_pwm";
         r.metrics = {{"mean_position_pct", 100 * duty * (f8 ? other / 400000 : 1)}, {"mean_current_A", duty}};
         runs.push_back(r);
@@ -244,7 +244,7 @@ TEST(CompareTable, DitherShowsSeed003TableIBesidePlannedAndAchieved) {
   for (auto [avg, f, d] : {std::tuple{0.1, 149.3594, 0.116566}, std::tuple{0.3, 332.997, 0.355880}}) {
     RunKey key{"dither", {{"controller.dither_pwm.average_current_A", avg}}, -1};
     RunRecord r;
-    r.name = key.CaseName();
+    r.key = key;
     r.controller = "dither_pwm";
     r.metrics = {{"pwm_frequency_Hz", f}, {"pwm_duty", d}, {"ripple_pp_A", 0.0500}, {"ripple_mid_A", avg}};
     runs.push_back(r);
@@ -276,10 +276,44 @@ TEST(CompareTable, SiUnitsFollowTheLaw) {
   EXPECT_EQ(SiUnit("switches", "pi_current"), "1");
 }
 
-TEST(CompareTable, CaseNamesSplitBackIntoTheirKey) {
-  const RunKey key{"static-map/fig8", {{"controller.open_loop_pwm.segments[0].duty", 0.35}, {"conditions.supply_V", 24}}, -1};
-  EXPECT_EQ(SplitCaseName(key.CaseName()), key);
-  EXPECT_EQ(SplitCaseName("say hi, then go").name, "say hi, then go");
+TEST(Compare, RowsCarryTheirKeyAndRunIdsNotTextToParseBack) {
+  // Two repeats of one sweep point, one other point, and a plain run whose name merely looks like a sweep.
+  const RunKey a0{"m/fig8", {{"controller.open_loop_pwm.segments[0].duty", 0.35}, {"conditions.supply_V", 24}}, 0};
+  RunKey a1 = a0;
+  a1.repeat = 1;
+  RunKey b = a0;
+  b.sweep[0].value = 0.5;
+  b.repeat = -1;
+  std::vector<RunRecord> runs;
+  std::int64_t id = 10;
+  for (const RunKey& k : {a0, b, a1, NamedRun("odd sweep:x=1")}) {
+    RunRecord r;
+    r.key = k;
+    r.run_id = id++;
+    r.controller = "open_loop_pwm";
+    r.metrics = {{"mean_position_pct", 50}};
+    runs.push_back(r);
+  }
+  const Comparison c = Compare(runs);
+  ASSERT_EQ(c.rows.size(), 3u);
+  RunKey case_a = a0;
+  case_a.repeat = -1;
+  EXPECT_EQ(c.rows[0].key, case_a) << "repeats share the case's key, repeat -1";
+  EXPECT_EQ(c.rows[0].run_ids, (std::vector<std::int64_t>{10, 12}));
+  EXPECT_EQ(c.rows[0].runs, 2);
+  EXPECT_EQ(c.rows[1].key, b);
+  EXPECT_EQ(c.rows[1].run_ids, (std::vector<std::int64_t>{11}));
+  EXPECT_EQ(c.rows[2].key, NamedRun("odd sweep:x=1")) << "a name is never parsed for sweep coordinates";
+  EXPECT_EQ(c.rows[2].run_ids, (std::vector<std::int64_t>{13}));
+  // The renderers read the coordinates from the key: CSV columns, JSON's sweep and key.
+  const std::string csv = ComparisonCsv(c);
+  EXPECT_NE(csv.find("\"conditions.supply_V\""), std::string::npos) << csv;
+  EXPECT_EQ(csv.find(",x,"), std::string::npos) << "no axis made up from a name: " << csv;
+  const std::string json = ComparisonJson(c);
+  EXPECT_NE(json.find("\"run_ids\": [\n        10,\n        12\n      ]"), std::string::npos) << json;
+  EXPECT_NE(json.find("\"field\": \"controller.open_loop_pwm.segments[0].duty\""), std::string::npos) << json;
+  const std::string wide = ComparisonTable(c, {{}, true});
+  EXPECT_NE(wide.find("supply [V]"), std::string::npos) << "a sweep column from the key: " << wide;
 }
 
 // The service's comparison becomes the Comparison the CLI's and the web's files are written from; a metric a

@@ -59,10 +59,10 @@ TEST(Attribution, HoldoutRunsNeverReachTheFit) {
   const auto clean = Session(With("supply_resistance", {{"R_s", 0.8}}));
   Dataset wrecked = clean;
   for (auto& r : wrecked.runs)
-    if (r.split == "holdout")
+    if (r.split == Split::kHoldout)
       for (double& i : r.i_A) i += 0.3;
   std::vector<bool> mask;
-  for (const auto& r : clean.runs) mask.push_back(r.split == "fit");
+  for (const auto& r : clean.runs) mask.push_back(r.split == Split::kFit);
   const auto cands = Pick({"supply_resistance"});
   auto a = Attribute(clean, mask, *model::Preset("taghizadeh2009"), cands, 2e-3);
   auto b = Attribute(wrecked, mask, *model::Preset("taghizadeh2009"), cands, 2e-3);
@@ -127,7 +127,7 @@ TEST(Attribution, ACandidateOutOfTimeFailsWithItsReasonAndTheOthersGoOn) {
   AttributionOptions opt;
   opt.candidate_budget_s = 1e-6;  // nothing can be fitted in a microsecond
   std::vector<bool> mask;
-  for (const auto& r : ds.runs) mask.push_back(r.split != "holdout");
+  for (const auto& r : ds.runs) mask.push_back(r.split != Split::kHoldout);
   auto rows = Attribute(ds, mask, nominal, cands, 0.002, opt);
   ASSERT_TRUE(rows.ok()) << rows.status().message();
   ASSERT_EQ(rows->size(), cands.size());

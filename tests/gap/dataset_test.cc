@@ -128,7 +128,7 @@ TEST_F(DatasetTest, LoadsEveryField) {
   EXPECT_EQ(a.supply_V, 24.0);
   EXPECT_EQ(a.supply_pressure_Pa, 300000.0);
   EXPECT_EQ(a.t_start_s, 1.0);
-  EXPECT_EQ(a.split, "fit");
+  EXPECT_EQ(a.split, Split::kFit);
   EXPECT_NEAR(a.sample_period_s, 2e-5, 1e-15);
   EXPECT_EQ(a.t_s, (std::vector<double>{0, 2e-5, 4e-5}));
   EXPECT_EQ(a.gate, (std::vector<int8_t>{0, 1, 1}));
@@ -140,7 +140,7 @@ TEST_F(DatasetTest, LoadsEveryField) {
   EXPECT_EQ(b.id, "b");
   EXPECT_EQ(b.supply_V, 15.0);  // JSON integers are numbers too
   EXPECT_EQ(b.supply_pressure_Pa, 0.0);
-  EXPECT_EQ(b.split, "holdout");
+  EXPECT_EQ(b.split, Split::kHoldout);
   EXPECT_EQ(b.sample_period_s, 0.25);
   EXPECT_EQ(b.gate, (std::vector<int8_t>{1, 0, 0}));
 }
@@ -174,8 +174,8 @@ TEST_F(DatasetTest, OptionalFieldsAndEqualStartTimes) {
   auto ds = Load();
   ASSERT_TRUE(ds.ok()) << ds.status().ToString();
   EXPECT_EQ(ds->description, "");
-  EXPECT_EQ(ds->runs[0].split, "");
-  EXPECT_EQ(ds->runs[1].split, "holdout");
+  EXPECT_EQ(ds->runs[0].split, Split::kNone);
+  EXPECT_EQ(ds->runs[1].split, Split::kHoldout);
 }
 
 TEST_F(DatasetTest, CrlfLineEndings) {
@@ -548,7 +548,7 @@ TEST(PracticeDatasets, AllLoad) {
       const RunData& run = ds->runs[k];
       SCOPED_TRACE(run.id);
       EXPECT_EQ(run.id, manifest["runs"][k]["id"].get<std::string>());
-      EXPECT_TRUE(run.split == "fit" || run.split == "holdout") << run.split;
+      EXPECT_TRUE(run.split == Split::kFit || run.split == Split::kHoldout) << SplitName(run.split);
       EXPECT_GT(run.supply_V, 0.0);
       if (k > 0) {
         EXPECT_GE(run.t_start_s, ds->runs[k - 1].t_start_s);

@@ -68,7 +68,7 @@ TEST(MovingValvePractice3, M01IdentifiedFromScratchPredictsSixBarAndLowSupply) {
   // The issue's target: each holdout run within 5 mA RMS.
   int holdouts = 0;
   for (const auto& r : id->landmarks) {
-    if (r.split != "holdout") continue;
+    if (r.split != Split::kHoldout) continue;
     ++holdouts;
     EXPECT_LT(r.rmse_A, 5e-3) << r.run;
     EXPECT_EQ(r.measured.pulls_in, r.predicted.pulls_in) << r.run;
@@ -177,7 +177,7 @@ TEST(MovingValveSynthetic, OtherValveIdentifiedAndPredictedAtAnotherPressureAndS
   EXPECT_NEAR(id->values.at("R"), 62.0, 62.0 * 0.02);
   for (const auto& r : id->landmarks) {
     EXPECT_EQ(r.measured.pulls_in, r.predicted.pulls_in) << r.run;
-    if (r.split == "holdout") {
+    if (r.split == Split::kHoldout) {
       EXPECT_LT(r.rmse_A, 5e-3) << r.run;
     }
   }
@@ -213,7 +213,7 @@ TEST(MovingValveSynthetic, SaturatingCoreJoinsTheModelWhenDecisive) {
       << MovingIdentificationReport(*id);
   for (const auto& r : id->landmarks) {
     EXPECT_EQ(r.measured.pulls_in, r.predicted.pulls_in) << r.run;
-    if (r.split == "holdout") {
+    if (r.split == Split::kHoldout) {
       EXPECT_LT(r.rmse_A, 5e-3) << r.run << "\n" << MovingIdentificationReport(*id);
     }
   }

@@ -277,10 +277,10 @@ TEST(DiagnoseOneDataset, FitColdHoldOutHotCarriesRWithCoppersCoefficient) {
   cold.alpha_per_K = hot.alpha_per_K = 3.93e-3;
   hot.temp_C = 45.0;
   Dataset ds = Session(cold, 41), hot_runs = Session(hot, 42);
-  for (auto& r : ds.runs) r.split = "fit";
+  for (auto& r : ds.runs) r.split = Split::kFit;
   for (auto r : hot_runs.runs) {
     r.id = "hot_" + r.id;
-    r.split = "holdout";
+    r.split = Split::kHoldout;
     ds.runs.push_back(r);
   }
   auto plant = *model::Preset("ts98_coil");

@@ -64,7 +64,7 @@ void RunSuggestion(const std::string& spec_json, const std::vector<std::pair<std
     r.supply_V = p.spec.conditions().supply_v();
     r.supply_pressure_Pa = p.spec.conditions().supply_pressure_pa();
     r.t_start_s = t0;
-    r.split = "holdout";
+    r.split = Split::kHoldout;
     r.sample_period_s = trace.sample_period_s;
     r.t_s = trace.t_s;
     r.gate = trace.gate;

@@ -237,7 +237,7 @@ TEST(BenchctlRemote, ImportThenDiagnoseStoredRuns) {
   Result show = Benchctl("show " + first + " --json " + op);
   EXPECT_NE(show.out.find("split:" + manifest["runs"][0]["split"].get<std::string>()), std::string::npos) << show.out;
 
-  Result d = Benchctl("diagnose --runs " + ids + " --json " + op);
+  Result d = Benchctl("diagnose --runs " + ids + " --json --model-out " + dir + "/improved.json " + op);
   ASSERT_EQ(d.exit_code, 0) << d.out;
   const auto diag = nlohmann::json::parse(d.out);
   EXPECT_EQ(diag["verdict"], "supply_resistance");
@@ -258,6 +258,17 @@ TEST(BenchctlRemote, ImportThenDiagnoseStoredRuns) {
   ASSERT_TRUE(sj.contains("gap") && sj.contains("how_far")) << on_server->report_json().substr(0, 400);
   for (const char* key : {"gap", "how_far", "verdict_reason"}) EXPECT_EQ(sj[key].dump(), diag[key].dump()) << key;
   EXPECT_NE(on_server->report().find("supply_resistance"), std::string::npos) << on_server->report();
+  // The improved model: the server's is the one `diagnose --model-out` wrote (one builder,
+  // gap/improved_model.h); only the description says who fitted it.
+  ASSERT_FALSE(on_server->improved_model_json().empty());
+  auto from_server = nlohmann::json::parse(on_server->improved_model_json());
+  std::ifstream improved_in(dir + "/improved.json");
+  auto from_cli = nlohmann::json::parse(improved_in);
+  EXPECT_NE(from_server.dump().find("supply_resistance"), std::string::npos) << from_server.dump();
+  EXPECT_NE(from_server["description"].get<std::string>().find("DiagnoseRuns"), std::string::npos);
+  from_server.erase("description");
+  from_cli.erase("description");
+  EXPECT_EQ(from_server, from_cli);
   auto twice = c.DiagnoseRuns({id_list[0], id_list[0]});
   ASSERT_FALSE(twice.ok());
   EXPECT_NE(twice.status().message().find("run_ids[1]"), std::string::npos) << twice.status().message();

@@ -1,6 +1,7 @@
 // The real valvebench-server on a loopback port with a temporary database, driven through the C++ client.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <map>
@@ -249,6 +250,107 @@ TEST(Server, WatchTraceAndCompareMatchTheLocalRun) {
   EXPECT_EQ(cmp->rows(0).controller(), "fuzzy_current");
   EXPECT_EQ(cmp->rows(0).rank(), 1);
   EXPECT_GT(cmp->rows(0).metrics().at("effort_l2").mean(), 0.0);
+  // Each row carries its case as fields and the runs it aggregates: together, the batch's runs.
+  std::set<std::int64_t> compared;
+  for (const auto& row : cmp->rows()) {
+    EXPECT_EQ(row.key().name(), row.name()) << "no sweep: the case name is the spec name";
+    EXPECT_EQ(row.key().repeat(), -1);
+    ASSERT_EQ(row.run_ids_size(), 1) << row.name();
+    compared.insert(row.run_ids(0));
+  }
+  EXPECT_EQ(compared, std::set<std::int64_t>(sub->run_ids().begin(), sub->run_ids().end()));
+}
+
+// GetTrace's max_points, from_s and to_s (api.proto): decimated and windowed on the server, peaks kept, bad
+// requests refused naming the field.
+TEST(Server, GetTraceDecimatesAndWindowsOnTheServer) {
+  ServerProcess server(TempDir("trace"));
+  const std::string addr = server.Start();
+  ASSERT_FALSE(addr.empty()) << server.Log();
+  auto olga = MakeClient(addr, testing::kOperatorToken);
+  auto sub = olga.Submit(ShortRun("trace", 0.5, false));  // 0.5 s at 10 kHz: 5001 samples
+  ASSERT_TRUE(sub.ok()) << sub.status().message();
+  const std::int64_t id = sub->run_ids(0);
+  ASSERT_EQ(WaitAll(olga, {id}, 60.0).at(0).status(), v1::DONE);
+  auto full = olga.GetTrace(id);
+  ASSERT_TRUE(full.ok()) << full.status().message();
+  const std::size_t n = full->samples();
+  ASSERT_GT(n, 4000u);
+  const auto& i_full = full->columns.at("i_A");
+  const double period = full->sample_period_s;
+  auto request = [&](std::int32_t max_points, double from_s, double to_s) {
+    v1::GetTraceRequest r;
+    r.set_run_id(id);
+    r.set_max_points(max_points);
+    r.set_from_s(from_s);
+    r.set_to_s(to_s);
+    return olga.GetTrace(r);
+  };
+
+  // Decimated: at most max_points rows, times in t_s, every channel's extremes kept.
+  auto dec = request(200, 0, 0);
+  ASSERT_TRUE(dec.ok()) << dec.status().message();
+  EXPECT_TRUE(dec->decimated);
+  EXPECT_EQ(dec->samples(), 200u);
+  EXPECT_EQ(dec->total_samples, static_cast<std::int64_t>(n));
+  EXPECT_EQ(std::count(dec->channels.begin(), dec->channels.end(), "t_s"), 0) << "times travel in t_s";
+  ASSERT_EQ(dec->t_s.size(), dec->samples());
+  EXPECT_TRUE(std::is_sorted(dec->t_s.begin(), dec->t_s.end()));
+  for (const char* ch : {"i_A", "gate", "v_coil_V"}) {
+    const auto& a = full->columns.at(ch);
+    const auto& b = dec->columns.at(ch);
+    EXPECT_EQ(*std::max_element(b.begin(), b.end()), *std::max_element(a.begin(), a.end())) << ch;
+    EXPECT_EQ(*std::min_element(b.begin(), b.end()), *std::min_element(a.begin(), a.end())) << ch;
+  }
+
+  // A window, every sample: exactly the stored samples of [0.1, 0.12].
+  auto win = request(0, 0.1, 0.12);
+  ASSERT_TRUE(win.ok()) << win.status().message();
+  EXPECT_FALSE(win->decimated);
+  ASSERT_GE(win->samples(), 201u);
+  ASSERT_LE(win->samples(), 203u);
+  EXPECT_LE(win->TimeAt(0), 0.1 + 1e-12);
+  EXPECT_GE(win->TimeAt(win->samples() - 1), 0.12 - 1e-12);
+  for (std::size_t k = 0; k < win->samples(); ++k) {
+    const auto at = static_cast<std::size_t>(std::lround((win->TimeAt(k) - full->t0_s) / period));
+    ASSERT_EQ(win->columns.at("i_A")[k], i_full[at]) << k;
+  }
+
+  // A window decimated: rows inside it only, its peak kept.
+  auto both = request(50, 0.1, 0.3);
+  ASSERT_TRUE(both.ok()) << both.status().message();
+  EXPECT_TRUE(both->decimated);
+  EXPECT_LE(both->samples(), 50u);
+  for (double t : both->t_s) {
+    EXPECT_GE(t, 0.1 - period - 1e-12);
+    EXPECT_LE(t, 0.3 + period + 1e-12);
+  }
+  const auto k0 = static_cast<std::ptrdiff_t>(std::floor(0.1 / period + 1e-9));
+  const auto k1 = static_cast<std::ptrdiff_t>(std::ceil(0.3 / period - 1e-9)) + 1;
+  const double window_max = *std::max_element(i_full.begin() + k0, i_full.begin() + k1);
+  const auto& i_both = both->columns.at("i_A");
+  EXPECT_EQ(*std::max_element(i_both.begin(), i_both.end()), window_max);
+
+  // A window after the end: no rows, the channels still named.
+  auto after = request(100, 10.0, 11.0);
+  ASSERT_TRUE(after.ok()) << after.status().message();
+  EXPECT_EQ(after->samples(), 0u);
+  EXPECT_FALSE(after->channels.empty());
+
+  // Bad requests: INVALID_ARGUMENT naming the field.
+  for (std::int32_t bad : {-1, 1, 2000000}) {
+    auto r = request(bad, 0, 0);
+    ASSERT_FALSE(r.ok()) << bad;
+    EXPECT_EQ(r.status().code(), StatusCode::kInvalidArgument) << bad;
+    EXPECT_EQ(r.status().message().rfind("max_points:", 0), 0u) << r.status().message();
+  }
+  auto nan_from = request(100, std::nan(""), 0);
+  ASSERT_FALSE(nan_from.ok());
+  EXPECT_EQ(nan_from.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(nan_from.status().message().rfind("from_s:", 0), 0u) << nan_from.status().message();
+  auto inf_to = request(0, 0, INFINITY);
+  ASSERT_FALSE(inf_to.ok());
+  EXPECT_EQ(inf_to.status().message().rfind("to_s:", 0), 0u) << inf_to.status().message();
 }
 
 TEST(Server, SigtermStopsCleanlyAndTheRunResumesAfterRestart) {

@@ -83,7 +83,16 @@ TEST(ReportTraces, DecimationBoundsPointsAndKeepsPeaks) {
       t_peak = run["t"][k].get<double>();
     }
   EXPECT_EQ(peak, 5.0);
-  EXPECT_NEAR(t_peak, 54321 * 1e-5, 1e-12);
+  // At its bucket's first or last sample (1000 buckets of 100 samples): a bucket is narrower than a pixel.
+  EXPECT_NEAR(t_peak, 54321 * 1e-5, 100 * 1e-5);
+  // The gate's edges: both levels in every bucket that holds an edge, so the band is drawn full.
+  double gate_lo = 1, gate_hi = 0;
+  for (const auto& g : run["gate"]) {
+    gate_lo = std::min(gate_lo, g.get<double>());
+    gate_hi = std::max(gate_hi, g.get<double>());
+  }
+  EXPECT_EQ(gate_lo, 0.0);
+  EXPECT_EQ(gate_hi, 1.0);
   EXPECT_EQ(run["samples"], n);
   // Short traces are kept whole.
   t.channels = {{"i_A", {1, 2, 3}}};
@@ -121,7 +130,7 @@ TEST(ReportBatch, OverlaysTheComparedLawsWithTheErrorOverTheMetricWindow) {
     r.id = static_cast<std::int64_t>(runs.size()) + 1;
     r.key = NamedRun(std::string("cmp/") + law);
     r.controller = law;
-    r.status = "done";
+    r.status = RunStatus::kDone;
     r.metrics = {{"rmse", 1e-3 * r.id}, {"driver_loss_W", 0.25}};
     r.spec_json = R"({"duration_s": 0.1, "metric_window": {"start_s": 0.02, "end_s": 0.1}, "conditions": {"supply_V": 24}})";
     r.started_unix_s = 1.7e9;

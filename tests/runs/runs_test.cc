@@ -39,7 +39,7 @@ Policy ServerPolicy() {
   Policy p;
   BenchSetup b;
   b.name = "emu-1";
-  b.kind = "emulated";
+  b.kind = BenchKind::kEmulated;
   b.bench_class = "emulated:taghizadeh2009";
   b.caps.max_supply_V = 48;
   b.caps.max_carrier_Hz = 1e6;
