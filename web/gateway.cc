@@ -1383,9 +1383,8 @@ class Routes {
     for (const v1::Run& listed_run : listed) {
       v1::Run run;
       if (auto st = FetchRun(req, listed_run.id(), &run); !st.ok()) return SendError(res, st);
-      std::string status = RunStatusText(run.status());
-      std::transform(status.begin(), status.end(), status.begin(), [](unsigned char c) { return std::tolower(c); });
-      report::RunInfo info{run.id(), api::FromProto(run.key()), run.controller(), status,
+      report::RunInfo info{run.id(), api::FromProto(run.key()), run.controller(),
+                           api::FromProto(run.status()).value_or(RunStatus::kQueued),
                            std::map<std::string, double>(run.metrics().begin(), run.metrics().end()),
                            run.has_spec() ? ToJson(run.spec()) : std::string(), run.submitted_unix_s(),
                            run.started_unix_s(), run.finished_unix_s(), {}};
@@ -1400,29 +1399,28 @@ class Routes {
         tr.set_run_id(run.id());
         auto reader = stub_->GetTrace(&ctx, tr);
         v1::TraceChunk chunk;
-        bool too_big = false;
+        vb::TraceDecoder decoder;  // the one decoder (proto/trace_chunk.h)
+        bool too_big = false, bad = false;
         while (reader->Read(&chunk)) {
-          const std::size_t n = static_cast<std::size_t>(std::max(0, chunk.samples()));
-          const std::size_t nch = static_cast<std::size_t>(chunk.channels_size());
-          if (chunk.data().size() != n * nch * 8) continue;
-          if (t.channels.empty()) {
-            t.t0_s = chunk.t0_s();
-            t.sample_period_s = chunk.sample_period_s();
-          }
           bytes += chunk.data().size();
           if (bytes > kMaxReportTraceBytes) {
             too_big = true;
             ctx.TryCancel();
             continue;
           }
-          for (std::size_t ch = 0; ch < nch; ++ch) {
-            auto& v = t.channels[chunk.channels(static_cast<int>(ch))];
-            const std::size_t at = v.size();
-            v.resize(at + n);
-            std::memcpy(v.data() + at, chunk.data().data() + ch * n * 8, n * 8);
+          if (!vb::api::DecodeChunk(chunk, &decoder).ok()) {
+            bad = true;
+            ctx.TryCancel();
           }
         }
+        if (!too_big && !bad) {
+          vb::TraceColumns cols = decoder.Take();
+          t.t0_s = cols.t0_s;
+          t.sample_period_s = cols.sample_period_s;
+          t.channels = std::move(cols.columns);
+        }
         const grpc::Status st = reader->Finish();
+        if (bad) return SendError(res, grpc::StatusCode::DATA_LOSS, fmt::format("run {}: its trace's chunks do not decode", run.id()));
         if (!too_big && st.ok() && !t.channels.empty()) {
           info.trace = std::move(t);
           ++traced;

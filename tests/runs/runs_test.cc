@@ -211,7 +211,7 @@ TEST(Execute, ABenchThatCannotBeOpenedIsAFaultABadSpecIsNot) {
   ASSERT_TRUE((*store)->SubmitBatch("me", "b", "{}", {r}, nullptr).ok());
   BenchSetup hid = LocalEmulatorSetup();
   hid.name = "hid-h3";
-  hid.kind = "hid";
+  hid.kind = BenchKind::kHid;
   hid.config.set_serial("no-such-device-serial");
   Worker faulty(hid, nullptr);
   auto o = faulty.ClaimAndExecute(store->get());
