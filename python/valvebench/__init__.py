@@ -7,13 +7,13 @@ embedded emulator when no server is given, and a pytest plugin (valvebench.pytes
 
 docs/python.md has the whole API.
 """
-from .client import Batch, Client, Comparison, Diagnosis, Progress, Run, RunList, Trace, load_spec
+from .client import Batch, Client, Comparison, Diagnosis, Progress, Queue, Run, RunList, Trace, load_spec
 from .errors import (Error, FailedPrecondition, InvalidArgument, NotFound, PermissionDenied, ResourceExhausted,
                      RunFailed, Unauthenticated, Unavailable)
 from .local import LocalServer, default_store_path, find_tool
 from .units import channel_unit, metric_unit
 
-__all__ = ["Batch", "Client", "RunList", "Comparison", "Diagnosis", "Progress", "Run", "Trace", "load_spec", "Error",
+__all__ = ["Batch", "Client", "Queue", "RunList", "Comparison", "Diagnosis", "Progress", "Run", "Trace", "load_spec", "Error",
            "FailedPrecondition", "InvalidArgument", "NotFound", "PermissionDenied", "ResourceExhausted",
            "RunFailed", "Unauthenticated", "Unavailable", "LocalServer", "default_store_path", "find_tool",
            "channel_unit", "metric_unit"]

@@ -364,6 +364,40 @@ class RunList(list):
         return base
 
 
+class Queue:
+    """What queue() returns: the server's queue view (GetQueue), the one `benchctl queue` prints and the web
+    dashboard's Lab page shows. `running` and `queued` are lists of (Run, position, eta_s): position 0 for a
+    running run, 1 for the run claimed next, ...; eta_s the seconds until it should end (None when unknown).
+    `benches` are the bench dicts the estimate spreads work over, `live_benches` their count, `at_unix_s` when
+    the estimate was made."""
+
+    def __init__(self, client, proto):
+        def entries(items):
+            return [(Run(client, q.run), q.position, q.eta_s if q.eta_s >= 0 else None) for q in items]
+        self.running = entries(proto.running)
+        self.queued = entries(proto.queued)
+        self.benches = [json_format.MessageToDict(b, preserving_proto_field_name=True) for b in proto.benches]
+        self.live_benches = proto.live_benches
+        self.at_unix_s = proto.at_unix_s
+
+    def __len__(self):
+        return len(self.running) + len(self.queued)
+
+    def to_dataframe(self):
+        """One row per run (running first, then by position): id, name, status, position, eta_s, bench,
+        submitter, priority."""
+        pd = _pandas()
+        rows = [{"id": r.id, "name": r.name, "status": r.status, "position": pos, "eta_s": eta,
+                 "bench": r.bench, "submitter": r.submitter, "priority": r.proto.priority}
+                for r, pos, eta in self.running + self.queued]
+        return pd.DataFrame(rows, columns=["id", "name", "status", "position", "eta_s", "bench", "submitter",
+                                           "priority"]).set_index("id")
+
+    def __repr__(self):
+        return "<valvebench.Queue %d running, %d queued on %d live bench(es)>" % (
+            len(self.running), len(self.queued), self.live_benches)
+
+
 class Client:
     """A valvebench server, remote or private.
 
@@ -548,6 +582,11 @@ class Client:
             token, total = resp.next_page_token, resp.total_size
             if not token or (limit is not None and len(out) >= limit):
                 return RunList(out, total=total, next_page_token=token, order_by=order_by or "submitted desc")
+
+    def queue(self):
+        """The queue as the server sees it (GetQueue): running runs and queued ones in claim order, with
+        positions and ETAs (valvebench.Queue; to_dataframe())."""
+        return Queue(self, self._call(self._api.GetQueue, api_pb2.GetQueueRequest()))
 
     def cancel(self, run_id, reason=""):
         return Run(self, self._call(self._api.CancelRun, api_pb2.CancelRunRequest(run_id=run_id, reason=reason),

@@ -811,6 +811,8 @@ try:
 
     # 8. A viewer follows the lab but cannot submit: the server's PERMISSION_DENIED shows on the page.
     driver.find_element(By.ID, "logout").click()
+    # The login form shows once the logout's request has answered: wait for it rather than type into a hidden box.
+    wait(lambda: driver.find_element(By.ID, "token").is_displayed() or None, what="the login form after logout")
     driver.find_element(By.ID, "token").send_keys(VIEWER)
     driver.find_element(By.ID, "login-button").click()
     wait(lambda: driver.find_elements(By.CSS_SELECTOR, "#session:not([hidden])") or None, what="viewer session")
