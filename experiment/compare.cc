@@ -375,6 +375,18 @@ std::string Ordered(const std::string& kind_metric) {
 
 }  // namespace
 
+HeadlineMetric RankMetricOf(const std::string& controller) {
+  const MetricView v = ViewOf("rmse", KindOf({controller}));
+  return {"rmse", v.label, v.unit};
+}
+
+HeadlineMetric EffortMetricOf(const std::string& controller) {
+  const ExperimentKind kind = KindOf({controller});
+  const std::string metric = EffortOf(kind);
+  const MetricView v = ViewOf(metric, kind);
+  return {metric, v.label, v.unit};
+}
+
 ExperimentKind KindOf(const std::vector<std::string>& controllers) {
   static const std::set<std::string> current = {"hysteresis_current", "pi_current", "predictive_current",
                                                 "fuzzy_current", "peak_and_hold"};

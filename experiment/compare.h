@@ -51,6 +51,16 @@ enum class ExperimentKind {
   kOpenLoop,      // open-loop PWM: seed 000's static map
 };
 ExperimentKind KindOf(const std::vector<std::string>& controllers);
+// A single run's two headline metrics as a comparison of its law shows them (rank metric "rmse" and the
+// comparison's effort metric: driver loss for current laws, ||u||2 for position laws, ||v||2 otherwise), with
+// the CLI's label and SI unit: what a list of runs shows so that its columns are the Compare page's.
+struct HeadlineMetric {
+  std::string metric;  // e.g. "driver_loss_W"
+  std::string label;   // e.g. "driver loss"
+  std::string unit;    // e.g. "W" (SI, before any prefix)
+};
+HeadlineMetric RankMetricOf(const std::string& controller);
+HeadlineMetric EffortMetricOf(const std::string& controller);
 const char* KindName(ExperimentKind kind);
 
 struct Comparison {

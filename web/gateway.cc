@@ -789,7 +789,21 @@ class Routes {
     v1::ListRunsResponse out;
     auto st = stub_->ListRuns(&ctx, r, &out);
     if (!st.ok()) return SendError(res, st);
-    res.set_content(ToJson(out), kJson);
+    // Each law's headline metrics as its comparison shows them (experiment::RankMetricOf/EffortMetricOf: the
+    // Compare page's effort axis, not a second choice made here): {controller: {rank, effort}}.
+    Json headline = Json::object();
+    for (const auto& run : out.runs()) {
+      if (headline.contains(run.controller())) continue;
+      auto view = [](const experiment::HeadlineMetric& m) {
+        return Json{{"metric", m.metric}, {"label", m.label}, {"unit", m.unit}};
+      };
+      headline[run.controller()] = {{"rank", view(experiment::RankMetricOf(run.controller()))},
+                                    {"effort", view(experiment::EffortMetricOf(run.controller()))}};
+    }
+    std::string body = ToJson(out);
+    body.pop_back();  // the object's closing brace: the headline map goes beside the runs
+    body += std::string(body.size() > 1 ? "," : "") + R"("headline":)" + Dump(headline) + "}";
+    res.set_content(body, kJson);
   }
 
   // The body's spec goes through experiment::ParseSpecJson, the parser `benchctl run` uses, so a misspelt field

@@ -350,3 +350,17 @@ TEST(CompareFiles, FromTheServiceAMissingMetricIsAnEmptyFieldAndANull) {
 
 }  // namespace
 }  // namespace vb::experiment
+
+// Issue 28: a list of runs shows each run's headline metrics as its law's comparison does: the effort axis of
+// the Compare page (driver loss for current laws, ||u||2 for position laws), never one effort for all.
+TEST(CompareTable, HeadlineMetricsAreTheComparisonsOwn) {
+  const auto current = vb::experiment::EffortMetricOf("pi_current");
+  EXPECT_EQ(current.metric, "driver_loss_W");
+  EXPECT_EQ(current.label, "driver loss");
+  EXPECT_EQ(current.unit, "W");
+  EXPECT_EQ(vb::experiment::EffortMetricOf("sliding_mode_position").metric, "effort_u_l2");
+  EXPECT_EQ(vb::experiment::EffortMetricOf("open_loop_pwm").metric, "effort_l2");
+  EXPECT_EQ(vb::experiment::RankMetricOf("pi_current").unit, "A");
+  EXPECT_EQ(vb::experiment::RankMetricOf("cascade_pi_position").unit, "m");
+  EXPECT_EQ(vb::experiment::RankMetricOf("cascade_pi_position").label, "RMSE");
+}

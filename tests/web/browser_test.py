@@ -715,6 +715,13 @@ try:
           (times[0].text, times[0].get_attribute("title")) if times else None)
     durations = driver.execute_script("return Array.from(document.querySelectorAll('#runs tr[data-run] td:nth-child(10)')).map(t => t.textContent);")
     check("the runs show their duration", any(re.search(r"\d s$|min", d) for d in durations), durations[:5])
+    go("#/runs?controller=pi_current&size=25")
+    wait(lambda: page_rows() and "controller=pi_current" in driver.current_url or None, what="PI runs")
+    time.sleep(0.5)
+    efforts = driver.execute_script("return Array.from(document.querySelectorAll('#runs tr[data-run] td:nth-child(12) span')).map(t => [t.title, t.textContent]);")
+    check("the effort column is the law's comparison effort with its unit (driver loss for a current law)",
+          efforts and all(t.startswith("driver_loss_W") and re.search(r"\d [mµk]?W \(driver loss\)$", x)
+                          for t, x in efforts), efforts[:5])
     go("#/runs")
     wait(lambda: page_rows() or None, what="runs table")
     for w in (1400, 1024):

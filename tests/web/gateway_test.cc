@@ -2,6 +2,8 @@
 // cpp-httplib's client: the embedded page and dygraphs, the service's own auth, roles and field-named errors,
 // traces (decimated, windowed, CSV), comparison units, SSE live samples, cancel and re-run, the cookie rule.
 #include <gtest/gtest.h>
+
+#include "experiment/compare.h"
 #include <httplib.h>
 
 #include <algorithm>
@@ -571,9 +573,17 @@ TEST_F(WebGatewayTest, ListsCheckTheirParametersAndPassTheRestToTheService) {
   const Json runs = Json::parse(done->body)["runs"];
   ASSERT_EQ(runs.size(), 1u);
   EXPECT_EQ(runs[0]["id"], id);
+  // Issue 28: the list's headline metrics are the ones the law's comparison ranks by, with the CLI's units.
+  const Json headline = Json::parse(done->body)["headline"][runs[0]["controller"].get<std::string>()];
+  EXPECT_EQ(headline["rank"]["metric"], "rmse");
+  EXPECT_EQ(headline["effort"]["metric"],
+            vb::experiment::EffortMetricOf(runs[0]["controller"].get<std::string>()).metric);
+  EXPECT_FALSE(headline["effort"]["unit"].get<std::string>().empty());
   auto other_batch = http_->Get("/api/runs?batch_id=2", Bearer(kViewerToken));
   ASSERT_TRUE(other_batch);
-  EXPECT_EQ(other_batch->body, "{}");
+  const Json none = Json::parse(other_batch->body);
+  EXPECT_FALSE(none.contains("runs"));
+  EXPECT_TRUE(none["headline"].empty());
 }
 
 // Issue 28: who is signed in, the downloads of every format the CLI writes (a missing value an empty CSV field,

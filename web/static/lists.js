@@ -206,9 +206,19 @@ const RUN_COLUMNS = [
   ['submitter', 'submitter', (r) => r.submitter],
   ['submitted', 'submitted', (r) => timeCell(r.submitted_unix_s)],
   ['duration', 'duration', (r) => { const d = runDuration_s(r); return d !== null && d < 1 ? fmt(d, 2) + ' s' : duration(d); }],
-  ['rmse', null, (r) => fmt((r.metrics || {}).rmse)],
-  ['effort_l2', null, (r) => fmt((r.metrics || {}).effort_l2)],
+  ['RMSE', null, (r) => headlineCell(r, 'rank')],
+  ['effort', null, (r) => headlineCell(r, 'effort')],
 ];
+// Each law's headline metrics as its comparison shows them (the gateway's `headline`, from the CLI's own
+// choice: driver loss for current laws, ||u||2 for position laws), in SI-prefixed units.
+let runHeadline = {};
+function headlineCell(r, which) {
+  const h = (runHeadline[r.controller] || {})[which];
+  const v = h ? (r.metrics || {})[h.metric] : undefined;
+  if (!h || v === undefined) return '–';
+  return el('span', {title: h.metric + (which === 'effort' ? ': the effort metric its comparison ranks against' : ''),
+    text: VBFormat.value(v, h.unit) + (which === 'effort' ? ' (' + h.label + ')' : '')});
+}
 // Page tokens are opaque and forward-only: the tokens of the pages seen so far, per filter and order.
 const pageTokens = {key: '', tokens: ['']};
 function dayStart_s(date, endOfDay) {  // a <input type=date> value, in local time
@@ -269,7 +279,11 @@ async function pageRuns(main, m, params) {
   if (page >= pageTokens.tokens.length) page = 0;  // a reloaded page N: its token is gone, start over
   if (pageTokens.tokens[page]) q.set('page_token', pageTokens.tokens[page]);
   let data;
-  try { data = await api('GET', '/api/runs?' + q.toString()); } catch (e) { showError(e, table); return; }
+  try {
+    await VBFormat.load((p) => api('GET', p));
+    data = await api('GET', '/api/runs?' + q.toString());
+  } catch (e) { showError(e, table); return; }
+  runHeadline = data.headline || {};
   let runs = data.runs || [];
   // A server before ListRuns' name filter (api.proto field 11) answers every run: keep the matching ones.
   if (f.name) runs = runs.filter((r) => (r.name || '').includes(f.name) || (r.key || {}).name === f.name);
@@ -286,7 +300,7 @@ async function pageRuns(main, m, params) {
     PAGE_SIZES.map((n) => el('option', {value: n, selected: n === size, text: String(n)})))));
   const [orderField, orderDir] = order.split(/\s+/);
   const header = el('tr', {}, el('th', {text: ''}), RUN_COLUMNS.map(([h, field]) => {
-    if (!field) return el('th', {text: h});
+    if (!field) return el('th', h === 'effort' ? {text: h, title: 'each law\'s effort metric, as its comparison ranks it (hover a value for its name)'} : {text: h});
     const active = field === orderField, desc = active && orderDir === 'desc';
     // A click sorts by the column; a second click reverses it. Times and ids start newest first.
     const next = active ? (desc ? field : field + ' desc') : (['id', 'submitted', 'duration'].includes(field) ? field + ' desc' : field);
@@ -297,7 +311,7 @@ async function pageRuns(main, m, params) {
   table.replaceChildren(runs.length === 0 ? el('p', {class: 'muted', text: 'No runs match.'}) : el('table', {id: 'runs', class: 'wide'},
     header, runs.map((r) => el('tr', {'data-run': r.id},
       el('td', {}, el('input', {type: 'checkbox', class: 'pick', value: r.id, 'aria-label': 'pick run ' + r.id})),
-      RUN_COLUMNS.map(([h, , cell]) => el('td', {class: ['rmse', 'effort_l2', 'duration'].includes(h) ? 'num' : undefined}, cell(r)))))));
+      RUN_COLUMNS.map(([h, , cell]) => el('td', {class: ['RMSE', 'effort', 'duration'].includes(h) ? 'num' : undefined}, cell(r)))))));
 }
 
 // ---- Submit (operator): a spec as JSON; the server's validation answers (field-named errors). Import: a
