@@ -1160,18 +1160,27 @@ class Routes {
     return units;
   }
 
-  void Compare(const httplib::Request& req, httplib::Response& res) {
+  // CompareRuns on the query's batch (?batch_id=) or runs (?runs=): false when an error was answered.
+  bool FetchComparison(const httplib::Request& req, httplib::Response& res, v1::CompareRunsResponse* out,
+                       long long* batch) {
     v1::CompareRunsRequest r;
-    long long batch = 0;
-    if (!IntParam(req, res, "batch_id", &batch)) return;
-    r.set_batch_id(batch);
-    if (!RunIdsParam(req, res, r.mutable_run_ids())) return;
+    if (!IntParam(req, res, "batch_id", batch)) return false;
+    r.set_batch_id(*batch);
+    if (!RunIdsParam(req, res, r.mutable_run_ids())) return false;
     grpc::ClientContext ctx;
     Authorize(req, &ctx);
     Deadline(&ctx, 30.0);
+    if (auto st = stub_->CompareRuns(&ctx, r, out); !st.ok()) {
+      SendError(res, st);
+      return false;
+    }
+    return true;
+  }
+
+  void Compare(const httplib::Request& req, httplib::Response& res) {
+    long long batch = 0;
     v1::CompareRunsResponse out;
-    auto st = stub_->CompareRuns(&ctx, r, &out);
-    if (!st.ok()) return SendError(res, st);
+    if (!FetchComparison(req, res, &out, &batch)) return;
     // The unit of each column; rows of different laws may disagree (rmse is A for a current law, m for a
     // position law): then every unit seen, joined with " or ".
     Json units = Json::object();
@@ -1347,17 +1356,9 @@ class Routes {
   // missing metric is an empty CSV field and a JSON null (docs/cli.md "Missing values").
   void CompareFile(const httplib::Request& req, httplib::Response& res) {
     const std::string format = req.matches[1].str();
-    v1::CompareRunsRequest r;
     long long batch = 0;
-    if (!IntParam(req, res, "batch_id", &batch)) return;
-    r.set_batch_id(batch);
-    if (!RunIdsParam(req, res, r.mutable_run_ids())) return;
-    grpc::ClientContext ctx;
-    Authorize(req, &ctx);
-    Deadline(&ctx, 30.0);
     v1::CompareRunsResponse out;
-    auto st = stub_->CompareRuns(&ctx, r, &out);
-    if (!st.ok()) return SendError(res, st);
+    if (!FetchComparison(req, res, &out, &batch)) return;
     const experiment::Comparison c = experiment::ComparisonFromProto(out);
     const std::string name = batch != 0 ? fmt::format("batch{}-comparison", batch) : "comparison";
     res.set_header("Content-Disposition", fmt::format("attachment; filename=\"{}.{}\"", name, format));

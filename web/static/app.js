@@ -6,17 +6,9 @@ const TOKEN_KEY = 'valvebench.token';
 const $ = (sel, root) => (root || document).querySelector(sel);
 let cleanups = [];  // run when the route changes: timers, EventSources, charts
 
-function el(tag, attrs, ...children) {
-  const e = document.createElement(tag);
-  for (const [k, v] of Object.entries(attrs || {})) {
-    if (v === undefined || v === null || v === false) continue;
-    if (k.startsWith('on')) e.addEventListener(k.slice(2), v);
-    else if (k === 'text') e.textContent = v;
-    else e.setAttribute(k, v === true ? '' : v);
-  }
-  for (const c of children.flat(Infinity)) if (c !== null && c !== undefined) e.append(c instanceof Node ? c : String(c));
-  return e;
-}
+// An element with attributes (on* = listeners, text = its text) and children: charts.js's, one copy for the
+// page and the report.
+const el = VBCharts.el;
 
 // A number from protobuf JSON, which writes NaN and infinities as strings ("NaN"): null (a gap) for those.
 function num(v) { return typeof v === 'number' && isFinite(v) ? v : null; }

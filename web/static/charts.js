@@ -413,5 +413,5 @@ const VBCharts = (() => {
     return box;
   }
 
-  return {Palette, PALETTE, plot, linkTime, heatmap, bars, legend, toSvg, pngOf, svgText, esc};
+  return {Palette, PALETTE, plot, linkTime, heatmap, bars, legend, toSvg, pngOf, svgText, esc, el: h};
 })();
