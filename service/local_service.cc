@@ -1,7 +1,10 @@
 #include "service/local_service.h"
 
+#include <pwd.h>
 #include <spdlog/spdlog.h>
+#include <unistd.h>
 
+#include <array>
 #include <chrono>
 #include <cstdlib>
 #include <filesystem>
@@ -32,9 +35,18 @@ std::string RandomHex(int bytes) {
   return out;
 }
 
+// $USER, else the account's name from the password database (a cron job or `env -i` has no $USER), else "local".
 std::string DefaultUser() {
   const char* user = std::getenv("USER");
-  return user != nullptr && *user != '\0' ? user : "local";
+  if (user != nullptr && *user != '\0') return user;
+  struct passwd pw {};
+  struct passwd* found = nullptr;
+  std::array<char, 4096> buf{};
+  if (getpwuid_r(getuid(), &pw, buf.data(), buf.size(), &found) == 0 && found != nullptr &&
+      found->pw_name != nullptr && *found->pw_name != '\0') {
+    return found->pw_name;
+  }
+  return "local";
 }
 
 // Runs of these benches still queued from an invocation that was interrupted before it ran them.

@@ -54,7 +54,7 @@ struct LocalServiceOptions {
   // A SQLite store must exist already (an administrative command, e.g. prune, would otherwise create an empty
   // one): FailedPrecondition "no local store at PATH" if it does not.
   bool must_exist = false;
-  // The user runs are submitted as (default $USER, else "local").
+  // The user runs are submitted as (default $USER, else the account name, else "local").
   std::string user;
 };
 

@@ -21,6 +21,7 @@ import fcntl
 import hashlib
 import json
 import os
+import pwd
 import re
 import secrets
 import shutil
@@ -151,7 +152,11 @@ class LocalServer:
         atexit.register(self.stop)
 
     def _config(self):
-        user = os.environ.get("USER") or "local"
+        # $USER, else the account's name (a cron job or `env -i` has no $USER), as the C++ local service does.
+        try:
+            user = os.environ.get("USER") or pwd.getpwuid(os.getuid()).pw_name or "local"
+        except KeyError:
+            user = "local"
         return {
             "listen_address": "127.0.0.1:0",
             "database_path": self.db,
