@@ -427,11 +427,12 @@ Status Journal::AppendResult(const SpooledResult& result) {
     if (st.ok()) size_ += buf_.size();
     else broken_ = st;
   }
+  // Marked before the uploader can see the result, so its landing always clears the mark.
+  if (spool_->registry_ != nullptr) spool_->registry_->SetResultWaiting(lease_.run_id, NowUnixS());
   {
     std::lock_guard<std::mutex> lock(mu_);
     result_ = result;
   }
-  if (spool_->registry_ != nullptr) spool_->registry_->SetResultWaiting(lease_.run_id, NowUnixS());
   spool_->Notify();
   return st;
 }

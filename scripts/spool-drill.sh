@@ -14,13 +14,16 @@
 # the p99 by less than --max-p99-change (0.2); 1 otherwise; 2 bad usage; 3 environment.
 #
 # Usage: scripts/spool-drill.sh [--benches B] [--run-s S] [--rate-hz HZ] [--db-stop-s S] [--stop-after-s S]
-#                               [--no-spool] [--max-p99-change F] [--behaviour-only] [--build DIR] [--keep]
-# (--no-spool: the host writes traces to the database directly (spool_dir "none"), the behaviour before the
+#                               [--controller pi|pwm] [--no-spool] [--max-p99-change F] [--behaviour-only]
+#                               [--build DIR] [--keep]
+# (--controller pwm: open-loop PWM (200 Hz, duty 0.4) instead of the PI current law: the loop ticks at 1 kHz and
+#  the carrier's edges, for a machine that cannot emulate the PI law at 20 kHz in real time.
+#  --no-spool: the host writes traces to the database directly (spool_dir "none"), the behaviour before the
 #  spool, to see what the spool changes. --behaviour-only: the exit status ignores the timing figures (overruns,
 #  p99) and asks instead that the loop never waited for its recording; the CTest variant, on a shared machine.)
 set -euo pipefail
 
-BENCHES=2 RUN_S=20 RATE_HZ=20000 DB_STOP_S=30 STOP_AFTER_S=3 SPOOL=1 MAX_CHANGE=0.2 BUILD="" KEEP=0 BEHAVIOUR=0
+CONTROLLER=pi BENCHES=2 RUN_S=20 RATE_HZ=20000 DB_STOP_S=30 STOP_AFTER_S=3 SPOOL=1 MAX_CHANGE=0.2 BUILD="" KEEP=0 BEHAVIOUR=0
 while [[ $# -gt 0 ]]; do
   case "$1" in
     --benches) BENCHES=$2; shift 2 ;;
@@ -29,15 +32,17 @@ while [[ $# -gt 0 ]]; do
     --db-stop-s) DB_STOP_S=$2; shift 2 ;;
     --stop-after-s) STOP_AFTER_S=$2; shift 2 ;;
     --no-spool) SPOOL=0; shift ;;
+    --controller) CONTROLLER=$2; shift 2 ;;
     --behaviour-only) BEHAVIOUR=1; shift ;;
     --max-p99-change) MAX_CHANGE=$2; shift 2 ;;
     --build) BUILD=$2; shift 2 ;;
     --keep) KEEP=1; shift ;;
-    -h|--help) sed -n 2,24p "$0"; exit 0 ;;
+    -h|--help) sed -n 2,27p "$0"; exit 0 ;;
     *) echo "spool-drill: unknown option '$1' (see --help)" >&2; exit 2 ;;
   esac
 done
 [[ $BENCHES =~ ^[0-9]+$ && $BENCHES -gt 0 ]] || { echo "spool-drill: --benches: must be a whole number > 0, got '$BENCHES'" >&2; exit 2; }
+[[ $CONTROLLER =~ ^(pi|pwm)$ ]] || { echo "spool-drill: --controller: pi or pwm, got '$CONTROLLER'" >&2; exit 2; }
 for v in RUN_S RATE_HZ DB_STOP_S STOP_AFTER_S MAX_CHANGE; do
   opt=${v,,}; opt=--${opt//_/-}
   [[ ${!v} =~ ^[0-9]*\.?[0-9]+$ ]] || { echo "spool-drill: $opt: must be a number > 0, got '${!v}'" >&2; exit 2; }
@@ -105,12 +110,16 @@ for ((k = 0; k < 200; k++)); do
   sleep 0.05
 done
 
-# Seed 001's PI current law holding 0.5 A after a 0.9 A pull-in, at 24 V and 4 bar, recorded at RATE_HZ.
+# Seed 001's PI current law holding 0.5 A after a 0.9 A pull-in, at 24 V and 4 bar, recorded at RATE_HZ (or
+# open-loop PWM).
+law='"reference": {"on_off_profile": {"switching_value": 0.9, "switching_time_s": 0.006, "holding_value": 0.5}},
+ "controller": {"pi_current": {}},'
+[[ $CONTROLLER == pwm ]] &&
+  law='"controller": {"open_loop_pwm": {"segments": [{"start_s": 0.0, "frequency_Hz": 200.0, "duty": 0.4}]}},'
 cat > "$WORK/run.json" <<EOF
 {"name": "spool-drill", "bench": {"kind": "emulated", "model": {"preset": "taghizadeh2009"}, "driver": {"kind": "low_side_flyback"}},
  "conditions": {"supply_V": 24.0, "supply_pressure_Pa": 400000.0},
- "reference": {"on_off_profile": {"switching_value": 0.9, "switching_time_s": 0.006, "holding_value": 0.5}},
- "controller": {"pi_current": {}},
+ $law
  "duration_s": $RUN_S, "recording": {"rate_Hz": $RATE_HZ}, "repeats": $BENCHES, "tags": ["spool-drill"]}
 EOF
 
