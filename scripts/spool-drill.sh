@@ -15,15 +15,17 @@
 #
 # Usage: scripts/spool-drill.sh [--benches B] [--run-s S] [--rate-hz HZ] [--db-stop-s S] [--stop-after-s S]
 #                               [--controller pi|pwm] [--no-spool] [--max-p99-change F] [--behaviour-only]
-#                               [--build DIR] [--keep]
+#                               [--server-nice N] [--build DIR] [--keep]
 # (--controller pwm: open-loop PWM (200 Hz, duty 0.4) instead of the PI current law: the loop ticks at 1 kHz and
 #  the carrier's edges, for a machine that cannot emulate the PI law at 20 kHz in real time.
+#  --server-nice N: run the host under `nice -n N` (e.g. -10, as root), as a bench host's loop would run at a
+#  raised priority, when other work shares the machine.
 #  --no-spool: the host writes traces to the database directly (spool_dir "none"), the behaviour before the
 #  spool, to see what the spool changes. --behaviour-only: the exit status ignores the timing figures (overruns,
 #  p99) and asks instead that the loop never waited for its recording; the CTest variant, on a shared machine.)
 set -euo pipefail
 
-CONTROLLER=pi BENCHES=2 RUN_S=20 RATE_HZ=20000 DB_STOP_S=30 STOP_AFTER_S=3 SPOOL=1 MAX_CHANGE=0.2 BUILD="" KEEP=0 BEHAVIOUR=0
+NICE="" CONTROLLER=pi BENCHES=2 RUN_S=20 RATE_HZ=20000 DB_STOP_S=30 STOP_AFTER_S=3 SPOOL=1 MAX_CHANGE=0.2 BUILD="" KEEP=0 BEHAVIOUR=0
 while [[ $# -gt 0 ]]; do
   case "$1" in
     --benches) BENCHES=$2; shift 2 ;;
@@ -33,11 +35,12 @@ while [[ $# -gt 0 ]]; do
     --stop-after-s) STOP_AFTER_S=$2; shift 2 ;;
     --no-spool) SPOOL=0; shift ;;
     --controller) CONTROLLER=$2; shift 2 ;;
+    --server-nice) NICE=$2; shift 2 ;;
     --behaviour-only) BEHAVIOUR=1; shift ;;
     --max-p99-change) MAX_CHANGE=$2; shift 2 ;;
     --build) BUILD=$2; shift 2 ;;
     --keep) KEEP=1; shift ;;
-    -h|--help) sed -n 2,27p "$0"; exit 0 ;;
+    -h|--help) sed -n 2,29p "$0"; exit 0 ;;
     *) echo "spool-drill: unknown option '$1' (see --help)" >&2; exit 2 ;;
   esac
 done
@@ -102,7 +105,9 @@ cat > "$WORK/host.json" <<EOF
  "limits": {"max_duration_s": 3600, "max_trace_MB_per_run": 4000, "max_disk_MB_per_user": 0},
  "lab": {"host": "drill-host", "lease_ttl_s": 10}}
 EOF
-"$SERVER" --config "$WORK/host.json" >"$WORK/host.log" 2>&1 &
+wrap=()
+[[ -z $NICE ]] || wrap=(nice -n "$NICE")
+"${wrap[@]}" "$SERVER" --config "$WORK/host.json" >"$WORK/host.log" 2>&1 &
 PID=$!
 for ((k = 0; k < 200; k++)); do
   grep -q "listening on" "$WORK/host.log" 2>/dev/null && break
