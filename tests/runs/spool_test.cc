@@ -220,11 +220,16 @@ TEST(Spool, AResultWaitingForTheStoreLandsWhenItIsBack) {
   SpoolRig rig("waiting", E3(), false);
   rig.initial_down = true;
   auto spool = rig.MakeSpool();
+  Registry registry;  // what the API reads "result waiting for the store since ..." from
+  spool->set_registry(&registry);
   spool->Start();
   ExecuteContext ctx;
   ctx.spool = spool.get();
   ctx.retry.give_up_s = 0.3;
+  const double before = NowUnixS();
   Outcome o = Execute(rig.store.get(), rig.run, rig.bench, ctx);
+  EXPECT_GE(registry.ResultWaitingSince(rig.run.id), before);
+  EXPECT_LE(registry.ResultWaitingSince(rig.run.id), NowUnixS());
   EXPECT_TRUE(o.spooled);
   EXPECT_FALSE(o.recorded);
   EXPECT_FALSE(o.released);
@@ -240,6 +245,8 @@ TEST(Spool, AResultWaitingForTheStoreLandsWhenItIsBack) {
   EXPECT_EQ(r->status, db::RunStatus::kDone) << r->reason;
   EXPECT_EQ(rig.StoredSamples(rig.run.id), 5001);
   EXPECT_EQ(rig.HistoryCount(rig.run.id, db::RunStatus::kDone), 1);
+  EXPECT_EQ(registry.ResultWaitingSince(rig.run.id), 0.0);
+  spool->Stop();  // before the registry it marks goes
 }
 
 // A disk that fills up mid-run stops the run: the loop ends at once (the bench to its safe state), the run fails
