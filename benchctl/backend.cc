@@ -36,6 +36,7 @@ RunView FromProto(const v1::Run& r) {
   v.submitter = r.submitter();
   v.priority = r.priority();
   v.progress = r.progress();
+  v.result_waiting_since_unix_s = r.result_waiting_since_unix_s();
   v.submitted_unix_s = r.submitted_unix_s();
   v.started_unix_s = r.started_unix_s();
   v.finished_unix_s = r.finished_unix_s();

@@ -83,7 +83,10 @@ std::string RunText(const RunView& r, const experiment::RunSummary* summary, boo
   } else {
     out += fmt::format("run {} [{}]: {}", r.key.DisplayName(), r.controller, RunStatusName(r.status));
   }
-  if (r.status == RunStatus::kRunning) out.append(" ").append(Percent(r.progress));
+  if (r.status == RunStatus::kRunning && r.result_waiting_since_unix_s > 0.0)
+    out += ", result waiting for the store since " + IsoLocalTime(r.result_waiting_since_unix_s);
+  else if (r.status == RunStatus::kRunning)
+    out.append(" ").append(Percent(r.progress));
   out += "\n";
   if (!r.reason.empty()) out += "  reason: " + r.reason + "\n";
   if (r.id != 0) {
@@ -134,6 +137,7 @@ Json RunJson(const RunView& r, const experiment::RunSummary* summary) {
     j["submitter"] = r.submitter;
     j["priority"] = r.priority;
     j["progress"] = r.progress;
+    if (r.result_waiting_since_unix_s > 0.0) j["result_waiting_since_unix_s"] = r.result_waiting_since_unix_s;
     j["submitted"] = Time(r.submitted_unix_s);
     j["started"] = Time(r.started_unix_s);
     j["finished"] = Time(r.finished_unix_s);

@@ -35,6 +35,7 @@ struct RunView {
   std::string reason;
   std::map<std::string, double> metrics;  // finite metrics only
   std::string bench;                   // the bench that ran it (or was requested; "" = any)
+  double result_waiting_since_unix_s = 0.0;  // running: its result waits in its host's spool since then
   std::string host;                    // a lab: the host executing it, or that last did ("" = one machine)
   double duration_s = 0.0;             // the spec's duration (0 = unknown)
   std::string submitter;

@@ -87,7 +87,8 @@ class PgStore final : public Store {
                 const std::vector<Metric>& metrics) override;
   StatusOr<RunStatus> RequestCancel(std::int64_t run_id, const std::string& reason) override;
   StatusOr<bool> CancelRequested(std::int64_t run_id) override;
-  StatusOr<int> RecoverAfterCrash(const std::string& host) override;
+  StatusOr<int> RecoverAfterCrash(const std::string& host) override { return RecoverAfterCrashAt(host, 0.0); }
+  StatusOr<int> RecoverAfterCrashAt(const std::string& host, double stopped_unix_s) override;
   Status Heartbeat(const HostRecord& host, double lease_ttl_s, const std::vector<Lease>& executing) override;
   StatusOr<std::vector<HostRecord>> ListHosts() override;
   StatusOr<std::vector<std::int64_t>> RequeueLapsed() override;
@@ -123,7 +124,9 @@ class PgStore final : public Store {
   // FailedPrecondition "stale write: ..." returned. NotFound for an unknown run.
   Status CheckLease(pg::Transaction* txn, const Lease& lease, const std::string& what);
   // Interrupts the selected running runs (RecoverAfterCrash, RequeueLapsed); returns their ids.
-  StatusOr<std::vector<std::int64_t>> Interrupt(const std::string& select_sql, const Params& params, bool lapsed);
+  // stopped_unix_s > 0: the interrupted entries carry it (when it is before the database's now) instead of now.
+  StatusOr<std::vector<std::int64_t>> Interrupt(const std::string& select_sql, const Params& params, bool lapsed,
+                                                double stopped_unix_s = 0.0);
   Status ReadChunks(std::int64_t run_id, const std::function<Status(TraceChunk&, std::int64_t)>& fn);
 
   std::unique_ptr<pg::Connection> conn_;
@@ -370,7 +373,9 @@ StatusOr<bool> PgStore::CancelRequested(std::int64_t run_id) {
 }
 
 StatusOr<std::vector<std::int64_t>> PgStore::Interrupt(const std::string& select_sql, const Params& params,
-                                                       bool lapsed) {
+                                                       bool lapsed, double stopped_unix_s) {
+  // The stop's time, if known and not in the database's future (clocks differ): else now.
+  const char* kStopped = "CASE WHEN $3::float8 > 0 AND $3::float8 < " VB_PG_NOW " THEN $3::float8 ELSE " VB_PG_NOW " END";
   struct Running {
     std::int64_t id;
     bool requeue;
@@ -387,11 +392,15 @@ StatusOr<std::vector<std::int64_t>> PgStore::Interrupt(const std::string& select
   for (const Running& r : running) {
     const std::string why = lapsed ? rules::LapsedReason(r.host) : std::string(rules::kRecoverReason);
     VB_RETURN_IF_ERROR(conn_
-                           ->Exec("UPDATE runs SET status = 'interrupted', reason = $2, finished = " VB_PG_NOW
-                                  ", lease_expires = 0 WHERE id = $1",
-                                  Params().Int(r.id).Text(why))
+                           ->Exec(std::string("UPDATE runs SET status = 'interrupted', reason = $2, finished = ") +
+                                      kStopped + ", lease_expires = 0 WHERE id = $1",
+                                  Params().Int(r.id).Text(why).Double(stopped_unix_s))
                            .status());
-    VB_RETURN_IF_ERROR(AddHistory(r.id, RunStatus::kInterrupted, why));
+    VB_RETURN_IF_ERROR(conn_
+                           ->Exec(std::string("INSERT INTO status_history (run_id, status, at, reason) VALUES ($1, "
+                                              "'interrupted', ") + kStopped + ", $2)",
+                                  Params().Int(r.id).Text(why).Double(stopped_unix_s))
+                           .status());
     std::int64_t times = 0;
     if (!r.cancel_requested && r.requeue) {
       VB_PG_ASSIGN_OR_RETURN(times, conn_->QueryInt("SELECT count(*) FROM status_history WHERE run_id = $1 AND "
@@ -423,18 +432,18 @@ StatusOr<std::vector<std::int64_t>> PgStore::Interrupt(const std::string& select
   return ids;
 }
 
-StatusOr<int> PgStore::RecoverAfterCrash(const std::string& host) {
+StatusOr<int> PgStore::RecoverAfterCrashAt(const std::string& host, double stopped_unix_s) {
   pg::Transaction txn(conn_.get());
   VB_RETURN_IF_ERROR(txn.Begin());
   StatusOr<std::vector<std::int64_t>> ids =
       host.empty() ? Interrupt(
                          "SELECT id, requeue_on_interrupt, cancel_requested, reason, host FROM runs "
                          "WHERE status = 'running' ORDER BY id FOR UPDATE",
-                         Params(), false)
+                         Params(), false, stopped_unix_s)
                    : Interrupt(
                          "SELECT id, requeue_on_interrupt, cancel_requested, reason, host FROM runs "
                          "WHERE status = 'running' AND host = $1 ORDER BY id FOR UPDATE",
-                         Params().Text(host), false);
+                         Params().Text(host), false, stopped_unix_s);
   if (!ids.ok()) return ids.status();
   VB_RETURN_IF_ERROR(txn.Commit());
   return static_cast<int>(ids->size());

@@ -79,7 +79,8 @@ class SqliteStore final : public Store {
                 const std::vector<Metric>& metrics) override;
   StatusOr<RunStatus> RequestCancel(std::int64_t run_id, const std::string& reason) override;
   StatusOr<bool> CancelRequested(std::int64_t run_id) override;
-  StatusOr<int> RecoverAfterCrash(const std::string& host) override;
+  StatusOr<int> RecoverAfterCrash(const std::string& host) override { return RecoverAfterCrashAt(host, 0.0); }
+  StatusOr<int> RecoverAfterCrashAt(const std::string& host, double stopped_unix_s) override;
   Status Heartbeat(const HostRecord& host, double lease_ttl_s, const std::vector<Lease>& executing) override;
   StatusOr<std::vector<HostRecord>> ListHosts() override;
   StatusOr<std::vector<std::int64_t>> RequeueLapsed() override;
@@ -120,7 +121,9 @@ class SqliteStore final : public Store {
   // The runs in `ids` (running ones) stop being executed: interrupted, then cancelled (a cancel was asked),
   // failed (their kMaxInterruptions-th interruption: a poison run) or re-queued. RecoverAfterCrash and
   // RequeueLapsed; inside the caller's write transaction.
-  Status InterruptRunning(const std::vector<std::int64_t>& ids, const std::string& reason, double now);
+  // interrupted_at: the time the interrupted entries carry (0 = now).
+  Status InterruptRunning(const std::vector<std::int64_t>& ids, const std::string& reason, double now,
+                          double interrupted_at = 0.0);
   // The chunks of a run in order, in one read transaction; fn may take the chunk's contents (move from it).
   Status ReadChunks(std::int64_t run_id, const std::function<Status(TraceChunk&, std::int64_t)>& fn);
 
@@ -424,7 +427,9 @@ Status SqliteStore::CheckLease(const Lease& lease, const std::string& what, Tran
   return Status::FailedPrecondition(std::move(*stale));
 }
 
-Status SqliteStore::InterruptRunning(const std::vector<std::int64_t>& ids, const std::string& reason, double now) {
+Status SqliteStore::InterruptRunning(const std::vector<std::int64_t>& ids, const std::string& reason, double now,
+                                     double interrupted_at) {
+  const double stopped = interrupted_at > 0.0 && interrupted_at < now ? interrupted_at : now;
   for (const std::int64_t id : ids) {
     bool requeue = false, cancel_requested = false;
     std::string cancel_reason;
@@ -442,9 +447,9 @@ Status SqliteStore::InterruptRunning(const std::vector<std::int64_t>& ids, const
                                                     "finished = ?3, lease_expires = 0 WHERE id = ?1"));
     stop.Bind(1, id);
     stop.Bind(2, reason);
-    stop.Bind(3, now);
+    stop.Bind(3, stopped);
     VB_RETURN_IF_ERROR(stop.Run());
-    VB_RETURN_IF_ERROR(AddHistory(id, RunStatus::kInterrupted, now, reason));
+    VB_RETURN_IF_ERROR(AddHistory(id, RunStatus::kInterrupted, stopped, reason));
 
     std::int64_t times = 0;
     if (!cancel_requested && requeue) {
@@ -478,7 +483,7 @@ Status SqliteStore::InterruptRunning(const std::vector<std::int64_t>& ids, const
   return Status::Ok();
 }
 
-StatusOr<int> SqliteStore::RecoverAfterCrash(const std::string& host) {
+StatusOr<int> SqliteStore::RecoverAfterCrashAt(const std::string& host, double stopped_unix_s) {
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kWrite));
   std::vector<std::int64_t> running;
@@ -495,7 +500,7 @@ StatusOr<int> SqliteStore::RecoverAfterCrash(const std::string& host) {
       running.push_back(st.Int(0));
     }
   }
-  VB_RETURN_IF_ERROR(InterruptRunning(running, rules::kRecoverReason, NowUnixS()));
+  VB_RETURN_IF_ERROR(InterruptRunning(running, rules::kRecoverReason, NowUnixS(), stopped_unix_s));
   VB_RETURN_IF_ERROR(txn.Commit());
   return static_cast<int>(running.size());
 }

@@ -253,6 +253,13 @@ class Store {
   // this was their third interruption: a run that keeps taking the server down is failed with the reason (a
   // poison run). Returns how many were interrupted.
   virtual StatusOr<int> RecoverAfterCrash(const std::string& host) = 0;
+  // The same, for a process whose stop time is known (its spool's last sign of life, runs/spool.h): the runs'
+  // `interrupted` entries (and their finish time) carry stopped_unix_s, not the restart's time (issue 39); a
+  // time of 0, or one later than the store's clock, is taken as now. The re-queue itself is dated now.
+  virtual StatusOr<int> RecoverAfterCrashAt(const std::string& host, double stopped_unix_s) {
+    (void)stopped_unix_s;
+    return RecoverAfterCrash(host);
+  }
 
   // ---- The lab (docs/lab.md) ----
   // Registers or refreshes `host` (its heartbeat is the store's clock now) and renews to now + lease_ttl_s the

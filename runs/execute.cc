@@ -35,6 +35,38 @@ db::RunStatus StatusOf(experiment::RunSummary::Termination t) {
   }
 }
 
+// A block of the trace as a store chunk (all channels, channel-major).
+void FillChunk(const experiment::Trace& block, std::int32_t index, db::TraceChunk* chunk) {
+  const std::size_t n = block.size();
+  chunk->index = index;
+  chunk->t0_s = block.t_s[0];
+  chunk->sample_period_s = block.sample_period_s;
+  chunk->samples = static_cast<std::int32_t>(n);
+  chunk->data.resize(chunk->channels.size() * n);
+  for (std::size_t c = 0; c < chunk->channels.size(); ++c)
+    for (std::size_t k = 0; k < n; ++k) chunk->data[c * n + k] = block.Value(c, k);
+}
+
+// The trace's blocks into the host's spool (runs/spool.h), on the trace stream's thread: the stream waits on
+// the local disk only. A journal that cannot be written stops the stream (the run fails with the reason).
+class SpoolChunks final : public experiment::BlockSink {
+ public:
+  explicit SpoolChunks(Journal* journal) : journal_(journal) { chunk_.channels = experiment::Trace::ChannelNames(); }
+  Status OnBlock(const experiment::Trace& block, std::uint64_t /*first_sample*/) override {
+    if (block.size() == 0) return Status::Ok();
+    FillChunk(block, index_++, &chunk_);
+    error_ = journal_->AppendChunk(chunk_);
+    return error_;
+  }
+  const Status& error() const { return error_; }
+
+ private:
+  Journal* journal_;
+  db::TraceChunk chunk_;
+  std::int32_t index_ = 0;
+  Status error_;
+};
+
 // The trace's blocks as store chunks, appended with the run's lease while the run executes (on the trace
 // stream's thread; the worker's thread does not touch the store until the Runner returns). A chunk the store
 // cannot take now (unavailable) is kept, in order, and written before the next one; the loop is not held up
@@ -48,15 +80,8 @@ class StoreChunks final : public experiment::BlockSink {
     chunk_.channels = experiment::Trace::ChannelNames();
   }
   Status OnBlock(const experiment::Trace& block, std::uint64_t /*first_sample*/) override {
-    const std::size_t n = block.size();
-    if (n == 0) return Status::Ok();
-    chunk_.index = index_++;
-    chunk_.t0_s = block.t_s[0];
-    chunk_.sample_period_s = block.sample_period_s;
-    chunk_.samples = static_cast<std::int32_t>(n);
-    chunk_.data.resize(chunk_.channels.size() * n);
-    for (std::size_t c = 0; c < chunk_.channels.size(); ++c)
-      for (std::size_t k = 0; k < n; ++k) chunk_.data[c * n + k] = block.Value(c, k);
+    if (block.size() == 0) return Status::Ok();
+    FillChunk(block, index_++, &chunk_);
     if (backlog_.empty()) {
       const auto call_began = FaultLog::Clock::now();
       const Status st = store_->AppendTraceChunk(lease_, chunk_);
@@ -144,6 +169,52 @@ Outcome Released(Outcome out, const db::RunRecord& run, const Status& st, const 
   return out;
 }
 
+// The end of a spooled run: its progress and result go to the journal, and the spool's uploader writes them
+// after its chunks. Waits up to the policy's give_up_s for them to land; past that (or at a shutdown) the result
+// stays in the spool, uploaded when the store takes it or by the next start (DrainLeftovers): never dropped.
+Outcome SpoolResult(Outcome out, const db::RunRecord& run, const experiment::Experiment& e, Journal* journal,
+                    db::Store* store, const RetryPolicy& policy) {
+  if (out.summary.termination != experiment::RunSummary::Termination::kDone && out.summary.samples > 0 &&
+      out.summary.last_sample_t_s < out.summary.duration_s) {
+    out.summary.duration_s = out.summary.last_sample_t_s;
+    if (out.summary.termination == experiment::RunSummary::Termination::kCancelled)
+      out.summary.message = "cancelled at t = " + FormatNumber(out.summary.duration_s) + " s of " +
+                            FormatNumber(e.duration_s) + " s";
+  }
+  SpooledResult res;
+  if (out.summary.termination != experiment::RunSummary::Termination::kDone && e.duration_s > 0)
+    res.progress = std::clamp(out.summary.duration_s / e.duration_s, 0.0, 1.0);
+  res.status = StatusOf(out.summary.termination);
+  res.reason = out.summary.message;
+  if (res.status == db::RunStatus::kCancelled) {
+    if (auto row = store->GetRun(run.id); row.ok() && !row->reason.empty()) res.reason = row->reason + "; " + res.reason;
+  }
+  res.metrics = RecordedMetrics(out.summary.metrics);
+  out.status = res.status;
+  out.reason = res.reason;
+  if (Status st = journal->AppendResult(res); !st.ok())
+    spdlog::warn("run {}: its result is not in the spool's file ({}); it is uploaded from memory", static_cast<long long>(run.id),
+                 st.message());
+  switch (journal->WaitForResult(policy.give_up_s, policy.stop)) {
+    case Journal::State::kLanded: {
+      const SpooledResult landed = journal->landed();
+      out.status = landed.status;
+      out.reason = landed.reason;
+      out.recorded = true;
+      return out;
+    }
+    case Journal::State::kFenced:
+      return Stale(std::move(out), run, journal->fenced_status());
+    default:
+      spdlog::warn("run {} (fence {}): its result waits in the spool for the store; the spool uploads it when the "
+                   "store takes it", static_cast<long long>(run.id), static_cast<long long>(run.fence));
+      out.spooled = true;
+      out.recorded = false;
+      out.status = db::RunStatus::kRunning;
+      return out;
+  }
+}
+
 }  // namespace
 
 Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& setup, const ExecuteContext& ctx) {
@@ -220,6 +291,20 @@ Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& se
     bench = safety.get();
   }
 
+  // The run's journal in the host's spool, before the bench is driven: a spool that cannot be written is the
+  // host's fault, said as such (the run fails with the reason and the bench is marked faulted).
+  std::shared_ptr<Journal> journal;
+  if (ctx.spool != nullptr) {
+    auto begun = ctx.spool->Begin(db::LeaseOf(run));
+    if (!begun.ok()) {
+      bench->SafeState();
+      out.bench_fault = true;
+      spdlog::error("run {}: {}", static_cast<long long>(run.id), begun.status().message());
+      return finish(db::RunStatus::kFailed, "bench " + setup.name + ": " + begun.status().message(), {});
+    }
+    journal = std::move(*begun);
+  }
+
   // 3. Run it, visible to watchers.
   experiment::RunMonitor monitor;
   const int decimation = std::max(1, static_cast<int>(std::lround(e->run.sample_rate_Hz / 1000.0)));
@@ -235,15 +320,29 @@ Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& se
   if (stopping || (cancel_requested.ok() && *cancel_requested)) monitor.cancel.store(true);
   bench->set_cancel_flag(&monitor.cancel);  // cancel and shutdown stop a long bench step (hw::Bench)
   StoreChunks chunks(store, db::LeaseOf(run), ctx.faults);
+  std::unique_ptr<SpoolChunks> spooled;
+  if (journal != nullptr) spooled = std::make_unique<SpoolChunks>(journal.get());
   experiment::RunOptions options;
   options.monitor = &monitor;
   options.extra_sink = ctx.registry != nullptr ? &tap : nullptr;
-  options.block_sink = &chunks;
+  options.block_sink = spooled != nullptr ? static_cast<experiment::BlockSink*>(spooled.get()) : &chunks;
   options.block_samples = db::kDefaultChunkSamples;
   options.keep_whole_trace = ctx.keep_trace;
   out.summary = experiment::Runner::Run(*e, *bench, &out.trace, options);
   bench->SafeState();
   if (safety != nullptr && safety->tripped()) out.bench_fault = true;
+  if (spooled != nullptr && !spooled->error().ok()) {
+    // The run stopped because the host's disk would not take its trace: the host's fault, with the reason.
+    out.bench_fault = true;
+    spdlog::error("run {}: stopped, its trace cannot be spooled: {}", static_cast<long long>(run.id),
+                  spooled->error().message());
+  }
+  if (out.summary.loop.ticks > 0)
+    spdlog::info("run {}: loop: {} paced ticks, {} overruns, jitter p50 {:.1f} us, p99 {:.1f} us, max {:.1f} us; "
+                 "{} wait(s) for the recording",
+                 static_cast<long long>(run.id), out.summary.loop.ticks, out.summary.loop.overruns,
+                 out.summary.loop.jitter_p50_s * 1e6, out.summary.loop.jitter_p99_s * 1e6,
+                 out.summary.loop.jitter_max_s * 1e6, out.summary.record_waits);
   if (ctx.current_monitor != nullptr) {
     std::unique_lock<std::mutex> lock;
     if (ctx.current_monitor_mu != nullptr) lock = std::unique_lock<std::mutex>(*ctx.current_monitor_mu);
@@ -256,8 +355,10 @@ Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& se
   if (ctx.stop != nullptr && ctx.stop->load() &&
       out.summary.termination == experiment::RunSummary::Termination::kCancelled) {
     out.status = db::RunStatus::kRunning;  // left for RecoverAfterCrash on the next start
+    if (journal != nullptr) journal->Abandon();
     return out;
   }
+  if (journal != nullptr) return SpoolResult(std::move(out), run, *e, journal.get(), store, policy);
 
   // 4. Record. A run that stopped early says where it stopped and keeps how far it got (issue 14: cancelled
   // runs read 0 %, and a cancel that cut a long bench step short stated the step's end as the time). Where the

@@ -26,6 +26,7 @@
 #include "experiment/runner.h"
 #include "runs/bench_setup.h"
 #include "runs/monitor.h"
+#include "runs/spool.h"
 #include "runs/store_faults.h"
 
 namespace vb::runs {
@@ -38,6 +39,9 @@ struct Outcome {
   bool stale = false;                // the store refused a write as stale: the run is another attempt's now
   bool released = false;             // the store stayed unavailable: the result was dropped, the run is left to
                                      // lapse and be re-run (never failed for a transport error)
+  // The result is written to the host's spool and waits there for the store (ExecuteContext::spool): the
+  // uploader writes it when the store takes it (or the next start does); the run is neither released nor failed.
+  bool spooled = false;
   bool bench_fault = false;          // it failed at the bench: the bench could not be opened or an interlock
                                      // tripped (the Worker marks the bench faulted; decided here, not from text)
   experiment::RunSummary summary;    // empty when the run never started (bad spec, bench not there)
@@ -61,6 +65,11 @@ struct ExecuteContext {
   // fails".
   RetryPolicy retry;
   FaultLog* faults = nullptr;
+  // The host's spool (runs/spool.h): when set, the trace's chunks and the result go to a journal on the local
+  // disk and the spool's uploader writes them to the store; the trace stream never waits on the store. A spool
+  // that cannot be written stops the run (safe state) and fails it with the reason, as a bench fault. The wait
+  // for the result to land is retry.give_up_s; past it the result stays in the spool (Outcome::spooled).
+  Spool* spool = nullptr;
 };
 
 Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& setup, const ExecuteContext& ctx);

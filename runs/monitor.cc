@@ -99,4 +99,20 @@ void Registry::WaitForWork(int timeout_ms) {
   work_cv_.wait_for(lock, std::chrono::milliseconds(timeout_ms), [&] { return work_generation_ != gen; });
 }
 
+void Registry::SetResultWaiting(std::int64_t run_id, double since_unix_s) {
+  std::lock_guard<std::mutex> lock(mu_);
+  waiting_[run_id] = since_unix_s;
+}
+
+void Registry::ClearResultWaiting(std::int64_t run_id) {
+  std::lock_guard<std::mutex> lock(mu_);
+  waiting_.erase(run_id);
+}
+
+double Registry::ResultWaitingSince(std::int64_t run_id) {
+  std::lock_guard<std::mutex> lock(mu_);
+  auto it = waiting_.find(run_id);
+  return it == waiting_.end() ? 0.0 : it->second;
+}
+
 }  // namespace vb::runs

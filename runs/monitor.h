@@ -81,6 +81,11 @@ class Registry {
   bool Progress(std::int64_t run_id, double* progress);
   // Live samples with sequence number >= *seq; advances *seq. False if the run is not executing here.
   bool SamplesSince(std::int64_t run_id, std::uint64_t* seq, std::vector<LiveSample>* out);
+  // A run whose experiment ended and whose result waits in this host's spool for the store (runs/spool.h), since
+  // when (unix s); 0 when it does not wait. The API shows it ("result waiting for the store since ...").
+  void SetResultWaiting(std::int64_t run_id, double since_unix_s);
+  void ClearResultWaiting(std::int64_t run_id);
+  double ResultWaitingSince(std::int64_t run_id);
   // Work signalling between submit handlers and idle workers.
   void NotifyWork();
   void WaitForWork(int timeout_ms);
@@ -95,6 +100,7 @@ class Registry {
   };
   std::mutex mu_;
   std::map<std::int64_t, Running> running_;
+  std::map<std::int64_t, double> waiting_;
   std::condition_variable work_cv_;
   std::uint64_t work_generation_ = 0;
 };

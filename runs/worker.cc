@@ -35,6 +35,7 @@ StatusOr<std::optional<Outcome>> Worker::ClaimAndExecute(db::Store* store) {
   };
   ctx.retry.give_up_s = policy_.hold_result_s;
   ctx.faults = &faults_;
+  ctx.spool = spool_;
   ctx.registry = registry_;
   ctx.stop = &stop_;
   ctx.current_monitor = &monitor_;
@@ -51,7 +52,7 @@ StatusOr<std::optional<Outcome>> Worker::ClaimAndExecute(db::Store* store) {
     std::lock_guard<std::mutex> lock(fault_mu_);
     if (out.status == db::RunStatus::kDone) {
       fault_.clear();
-    } else if (out.status == db::RunStatus::kFailed && out.bench_fault) {
+    } else if (out.bench_fault && (out.status == db::RunStatus::kFailed || out.spooled)) {
       fault_ = out.reason;
     }
   }

@@ -54,6 +54,8 @@ class Worker {
   void Stop();
 
   const BenchSetup& setup() const { return setup_; }
+  // Before Start(): the host's spool (runs/spool.h); nullptr (the default): the trace goes to the store directly.
+  void set_spool(Spool* spool) { spool_ = spool; }
   // Keep each run's whole trace in its Outcome (benchctl's local mode, for --trace-csv): memory grows with it.
   void set_keep_traces(bool keep) { keep_traces_ = keep; }
   std::int64_t current_run() const { return current_run_.load(); }
@@ -79,6 +81,7 @@ class Worker {
   mutable std::mutex fault_mu_;
   std::string fault_;
   ClaimPolicy policy_;
+  Spool* spool_ = nullptr;
   Registry* registry_;
   std::thread thread_;
   std::atomic<bool> stop_{false};

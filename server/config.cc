@@ -8,6 +8,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <set>
@@ -285,6 +286,25 @@ StatusOr<Settings> SettingsFromConfig(const valvebench::v1::ServerConfig& c, con
   if (!lab.ok()) return lab.status();
   s.lab = std::move(*lab);
   if (s.lab.enabled) s.nights.lab_host = s.lab.host;
+  // The spool: one directory per host process (the instance lock holds the store or the host identity, so a
+  // default derived from them is never shared by two processes).
+  if (c.spool_dir() == "none") {
+    s.spool_dir.clear();
+  } else if (!c.spool_dir().empty()) {
+    s.spool_dir = Resolve(base_dir, c.spool_dir());
+  } else if (!db::IsPostgresLocation(s.database_path)) {
+    s.spool_dir = s.database_path + ".spool" + (s.lab.enabled ? "-" + s.lab.host : std::string());
+  } else if (const char* state = std::getenv("STATE_DIRECTORY"); state != nullptr && *state != '\0') {
+    std::string first = state;  // systemd may list several, separated by ':'
+    first = first.substr(0, first.find(':'));
+    s.spool_dir = first + "/spool";
+  }
+  if (c.spool_max_mb() != 0.0) {
+    if (!(c.spool_max_mb() >= 1.0) || !std::isfinite(c.spool_max_mb()) || c.spool_max_mb() > 1e9)
+      return Status::InvalidArgument("spool_max_mb: must be 1 to 1e9 MB (0 = the default, 1024), got " +
+                                     FormatExact(c.spool_max_mb()));
+    s.spool_max_bytes = static_cast<std::uint64_t>(c.spool_max_mb() * 1e6);
+  }
   if (c.has_web()) {
     const std::string& a = c.web().listen_address();
     const size_t colon = a.rfind(':');

@@ -2,6 +2,7 @@
 // with errors that name the field, defaults applied.
 #pragma once
 
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -31,6 +32,9 @@ struct Settings : ServiceSettings {
   // The web dashboard's "host:port" (config "web"; docs/web.md); empty = no dashboard.
   std::string web_listen_address;
   valvebench::v1::WebConfig web;  // the whole block, limits checked (0 = default)
+  // The host's spool (config spool_dir, spool_max_mb; runs/spool.h): "" = none.
+  std::string spool_dir;
+  std::uint64_t spool_max_bytes = std::uint64_t{1} << 30;
 };
 
 StatusOr<Settings> LoadSettings(const std::string& config_path);

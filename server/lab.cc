@@ -52,6 +52,10 @@ Status LabHost::Beat(db::Store* store) {
   if (workers_ != nullptr)
     for (const auto& w : *workers_)
       if (const db::Lease lease = w->executing_lease(); lease.run_id != 0) executing.push_back(lease);
+  // And the runs whose trace or result the host's spool is still uploading: their host is alive and holds them
+  // (runs/spool.h); they lapse only if this host stops heartbeating.
+  if (spool_ != nullptr)
+    for (const db::Lease& lease : spool_->Uploading()) executing.push_back(lease);
   VB_RETURN_IF_ERROR(store->Heartbeat(me, setup_.lease_ttl_s, executing));
   const auto now = std::chrono::steady_clock::now();
   if (faults_.in_fault()) {

@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "runs/monitor.h"
+#include "runs/spool.h"
 #include "runs/store_faults.h"
 #include "runs/worker.h"
 #include "server/config.h"
@@ -40,6 +41,8 @@ class LabHost {
   // there (the database refuses it) is returned and no thread is started.
   Status Start();
   void Stop();
+  // Before Start(): the host's spool, whose uploading runs' leases the heartbeat renews too.
+  void set_spool(const runs::Spool* spool) { spool_ = spool; }
 
  private:
   void Loop();
@@ -52,6 +55,7 @@ class LabHost {
   double started_unix_s_;
   runs::Registry* registry_;
   const std::vector<std::unique_ptr<runs::Worker>>* workers_;
+  const runs::Spool* spool_ = nullptr;
   std::unique_ptr<db::Store> store_;
   runs::FaultLog faults_{"lab"};  // the store's faults as this thread meets them, logged once each
   // After a fault, lapsed leases are re-queued only from here on (one lease TTL after the store came back).

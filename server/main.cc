@@ -26,6 +26,7 @@
 #include "server/config.h"
 #include "server/instance_lock.h"
 #include "server/lab.h"
+#include "server/recovery.h"
 #include "server/nights.h"
 #include "server/retention.h"
 #include "service/service.h"
@@ -85,19 +86,23 @@ int main(int argc, char** argv) {
   }
   // In a lab only this host's runs: the others' are running on their hosts (docs/lab.md).
   const std::string host = settings->lab.enabled ? settings->lab.host : std::string();
-  auto recovered = (*store)->RecoverAfterCrash(host);
+  vb::runs::Registry registry;  // before the spool, which outlives nothing that uses it
+  // The spool's leftovers uploaded, then this host's running runs interrupted (server/recovery.h).
+  auto recovered = vb::server::RecoverAtStart(*settings, host, store->get());
   if (!recovered.ok()) {
-    spdlog::error("recovery failed: {}", recovered.status().message().c_str());
+    spdlog::error("{}", recovered.status().message().c_str());
     return 3;
   }
-  if (*recovered > 0)
+  if (recovered->interrupted > 0)
     spdlog::warn("{} run(s) were running when the server stopped: marked interrupted",
-                 *recovered);
+                 recovered->interrupted);
+  std::unique_ptr<vb::runs::Spool> spool = std::move(recovered->spool);
+  if (spool) spool->set_registry(&registry);
 
-  vb::runs::Registry registry;
   std::vector<std::unique_ptr<vb::runs::Worker>> workers;
   for (const auto& b : settings->benches) {
     workers.push_back(std::make_unique<vb::runs::Worker>(b, &registry));
+    workers.back()->set_spool(spool.get());
     if (settings->lab.enabled)
       workers.back()->set_claim_policy({settings->lab.host, settings->lab.lease_ttl_s, settings->lab.aging_s});
   }
@@ -139,12 +144,14 @@ int main(int argc, char** argv) {
     if (lab_setup.advertised_address.empty()) lab_setup.advertised_address = bound;
     lab = std::make_unique<vb::server::LabHost>(lab_setup, settings->database_path,
                                                 vb::server::BenchesJson(settings->benches), &registry, &workers);
+    lab->set_spool(spool.get());
     if (auto st = lab->Start(); !st.ok()) {
       spdlog::error("{}", st.message());
       server->Shutdown();
       return 3;
     }
   }
+  if (spool) spool->Start();
   for (auto& w : workers) w->Start(settings->database_path);
   std::unique_ptr<vb::server::NightScheduler> nights;
   if (settings->nights.enabled) {
@@ -217,6 +224,7 @@ int main(int argc, char** argv) {
   server->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(2));
   if (web) web->Stop();  // after Shutdown: that ends the live streams (SSE) the page's threads wait on
   for (auto& w : workers) w->Stop();
+  if (spool) spool->Stop();  // what it has not uploaded stays on disk for the next start
   if (lab) {
     // The runs this host stopped go back to the lab's queue now rather than when their leases lapse.
     lab->Stop();

@@ -128,7 +128,10 @@ grpc::Status BenchServiceImpl::FillRun(db::Store* store, const db::RunRecord& r,
   out->set_started_unix_s(r.started_unix_s);
   out->set_finished_unix_s(r.finished_unix_s);
   double progress = r.status == db::RunStatus::kDone ? 1.0 : r.progress;
-  if (r.status == db::RunStatus::kRunning) registry_->Progress(r.id, &progress);
+  if (r.status == db::RunStatus::kRunning) {
+    registry_->Progress(r.id, &progress);
+    out->set_result_waiting_since_unix_s(registry_->ResultWaitingSince(r.id));
+  }
   out->set_progress(progress);
   for (const auto& t : r.tags) out->add_tags(t);
   auto metrics = store->GetMetrics(r.id);

@@ -420,6 +420,29 @@ TEST_P(LabStoreTest, RecoverAfterCrashTouchesOnlyTheRestartedHostsRuns) {
   EXPECT_EQ(store_->GetRun(again.id)->status, RunStatus::kQueued);
 }
 
+// Issue 39: the interrupted entry carries the time the host stopped (its spool's last sign of life), on both
+// engines; the re-queue is dated now; a stop time in the store's future is taken as now.
+TEST_P(LabStoreTest, RecoverAfterCrashAtDatesTheInterruptionWithTheStop) {
+  (void)SubmitRuns(2);
+  RunRecord r = ClaimOrDie(store_.get(), Claim("host-a", "bench-a", 10.0));
+  const double stopped = NowS() - 100.0;
+  auto n = store_->RecoverAfterCrashAt("host-a", stopped);
+  ASSERT_TRUE(n.ok()) << n.status().ToString();
+  EXPECT_EQ(*n, 1);
+  auto h = store_->History(r.id);
+  ASSERT_TRUE(h.ok());
+  ASSERT_GE(h->size(), 2u);
+  EXPECT_EQ((*h)[h->size() - 2].status, RunStatus::kInterrupted);
+  EXPECT_NEAR((*h)[h->size() - 2].at_unix_s, stopped, 1e-3);
+  EXPECT_EQ(h->back().status, RunStatus::kQueued);
+  EXPECT_GT(h->back().at_unix_s, stopped + 90.0);
+  RunRecord again = ClaimOrDie(store_.get(), Claim("host-a", "bench-a", 10.0));
+  ASSERT_TRUE(store_->RecoverAfterCrashAt("host-a", NowS() + 3600.0).ok());
+  h = store_->History(again.id);
+  ASSERT_TRUE(h.ok());
+  EXPECT_LT((*h)[h->size() - 2].at_unix_s, NowS() + 1.0);
+}
+
 TEST_P(LabStoreTest, HostsAreListedWithTheirBenchesAndHeartbeats) {
   auto b = Open();
   const double t0 = NowS();

@@ -1,6 +1,8 @@
 // The real valvebench-server on a loopback port with a temporary database, driven through the C++ client.
 #include <gtest/gtest.h>
 
+#include <filesystem>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -373,6 +375,46 @@ TEST(Server, SigtermStopsCleanlyAndTheRunResumesAfterRestart) {
   const auto runs = WaitAll(again, {sub->run_ids(0)}, 30.0);
   ASSERT_EQ(runs.size(), 1u);
   EXPECT_EQ(runs[0].status(), v1::DONE);
+}
+
+// Issue 39: a server killed mid-run dates the run's `interrupted` with the time it stopped (its spool's last sign
+// of life), not the restart's; the spool (beside the SQLite file by default) holds nothing once the run is done.
+double UnixNow() {
+  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+}
+TEST(Server, AKilledServersRunIsInterruptedAtTheStopNotTheRestart) {
+  const std::string dir = TempDir("stopdate");
+  ServerProcess server(dir);
+  std::string addr = server.Start();
+  ASSERT_FALSE(addr.empty()) << server.Log();
+  auto olga = MakeClient(addr, testing::kOperatorToken);
+  auto sub = olga.Submit(ShortRun("slow", 2.0, true));
+  ASSERT_TRUE(sub.ok());
+  std::this_thread::sleep_for(std::chrono::milliseconds(1300));
+  const double killed_at = UnixNow();
+  server.Kill(SIGKILL);
+  std::this_thread::sleep_for(std::chrono::milliseconds(3500));
+  const double restarted_at = UnixNow();
+  addr = server.Start();
+  ASSERT_FALSE(addr.empty()) << server.Log();
+  auto again = MakeClient(addr, testing::kOperatorToken);
+  const auto runs = WaitAll(again, {sub->run_ids(0)}, 30.0);
+  ASSERT_EQ(runs.size(), 1u);
+  EXPECT_EQ(runs[0].status(), v1::DONE) << runs[0].reason();
+  int interrupted = 0;
+  for (const auto& h : runs[0].history()) {
+    if (h.status() != v1::INTERRUPTED) continue;
+    ++interrupted;
+    // The uploader rewrites the alive file about every second (a loaded machine: a little more); a journal's
+    // records are dated as they are written.
+    EXPECT_GT(h.at_unix_s(), killed_at - 2.5);
+    EXPECT_LT(h.at_unix_s(), killed_at + 0.1);
+    EXPECT_LT(h.at_unix_s(), restarted_at - 3.0);
+  }
+  EXPECT_EQ(interrupted, 1);
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  for (const auto& e : std::filesystem::directory_iterator(dir + "/runs.db.spool"))
+    EXPECT_NE(e.path().extension(), ".journal") << e.path();
 }
 
 // A run whose spec says never_requeue stays interrupted after a crash; the others run again.

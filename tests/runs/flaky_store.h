@@ -5,6 +5,9 @@
 #pragma once
 
 #include <atomic>
+#include <chrono>
+#include <memory>
+#include <thread>
 #include <string>
 
 #include "db/store.h"
@@ -14,6 +17,12 @@ namespace vb::runs::testing {
 class FlakyStore final : public db::Store {
  public:
   explicit FlakyStore(db::Store* inner) : inner_(inner) {}
+  // Owning its connection (a spool's uploader opens its own: runs/spool.h).
+  explicit FlakyStore(std::unique_ptr<db::Store> owned) : owned_(std::move(owned)), inner_(owned_.get()) {}
+
+  // While > 0, AppendTraceChunk and Finish take this long before they answer, as a database that does not answer
+  // until its deadline (a SIGSTOPped PostgreSQL) holds the caller.
+  std::atomic<int> hang_ms{0};
 
   // While down, every write of a run's path (and ClaimNext) fails before reaching the store.
   std::atomic<bool> down{false};
@@ -43,6 +52,7 @@ class FlakyStore final : public db::Store {
   Status Finish(const db::Lease& lease, db::RunStatus final_status, const std::string& reason,
                 const std::vector<db::Metric>& metrics) override {
     ++finish_calls;
+    Hang();
     if (down) return Down();
     if (fail_finishes.load() > 0) {
       --fail_finishes;
@@ -63,6 +73,9 @@ class FlakyStore final : public db::Store {
     return inner_->CancelRequested(run_id);
   }
   StatusOr<int> RecoverAfterCrash(const std::string& host) override { return inner_->RecoverAfterCrash(host); }
+  StatusOr<int> RecoverAfterCrashAt(const std::string& host, double stopped_unix_s) override {
+    return inner_->RecoverAfterCrashAt(host, stopped_unix_s);
+  }
   Status Heartbeat(const db::HostRecord& host, double lease_ttl_s, const std::vector<db::Lease>& executing) override {
     if (down) return Down();
     return inner_->Heartbeat(host, lease_ttl_s, executing);
@@ -88,6 +101,7 @@ class FlakyStore final : public db::Store {
     return inner_->StoredTraceBytes(submitter);
   }
   Status AppendTraceChunk(const db::Lease& lease, const db::TraceChunk& chunk) override {
+    Hang();
     if (down) return Down();
     Status st = inner_->AppendTraceChunk(lease, chunk);
     if (st.ok() && lose_chunk_answers.load() > 0) {
@@ -119,10 +133,14 @@ class FlakyStore final : public db::Store {
   StatusOr<db::PruneResult> Prune(const db::PruneRequest& request) override { return inner_->Prune(request); }
 
  private:
+  void Hang() {
+    if (const int ms = hang_ms.load(); ms > 0) std::this_thread::sleep_for(std::chrono::milliseconds(ms));
+  }
   Status Down() {
     ++failed_writes;
     return Status::Unavailable("store unavailable: injected (tests/runs/flaky_store.h)");
   }
+  std::unique_ptr<db::Store> owned_;
   db::Store* inner_;
 };
 
