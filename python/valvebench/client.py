@@ -145,8 +145,16 @@ class Run:
     def refresh(self):
         return self._client.get_run(self.id)
 
+    def metrics_text(self):
+        """The metrics one a line with unit and SI prefix, as `benchctl show` prints them ("rmse  953.3 \u00b5A")."""
+        return "\n".join("%-20s %s" % (k, units.format_quantity(v, units.metric_unit(k, self.controller)))
+                         for k, v in self.metrics.items())
+
     def __repr__(self):
         return "Run(%d %s [%s] %s)" % (self.id, self.name, self.controller, self.status)
+
+    def __str__(self):
+        return repr(self) + ("\n" + self.metrics_text() if self.metrics else "")
 
 
 class Trace:
