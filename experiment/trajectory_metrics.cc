@@ -38,8 +38,9 @@ double Root(const F& f, double a, double fa, double b, double fb) {
   return 0.5 * (a + b);
 }
 
-// The largest of f over the piece from its values v at the points t, refined by the parabola through the
-// largest interior point and its neighbours (its vertex evaluated with f).
+// The largest of f over the piece from its values v at the points t: an end, or an interior point refined by
+// golden-section search between its neighbours (f is smooth and, that close, unimodal): 40 steps shrink the
+// bracket by 0.618^40 = 4e-9, so the maximum is exact to the solver's own accuracy.
 template <class F>
 double Largest(const F& f, const double* t, const double* v) {
   int k = 0;
@@ -47,13 +48,26 @@ double Largest(const F& f, const double* t, const double* v) {
     if (v[j] > v[k]) k = j;
   double best = v[k];
   if (k > 0 && k < kPoints - 1) {
-    const double t0 = t[k - 1], t1 = t[k], t2 = t[k + 1];
-    const double d0 = (v[k] - v[k - 1]) / (t1 - t0), d1 = (v[k + 1] - v[k]) / (t2 - t1);
-    const double curv = (d1 - d0) / (t2 - t0);
-    if (curv < 0.0) {
-      const double tv = 0.5 * (t0 + t1) - d0 / (2.0 * curv);
-      if (tv > t0 && tv < t2) best = std::max(best, f(tv));
+    constexpr double kInvPhi = 0.6180339887498949;
+    double lo = t[k - 1], hi = t[k + 1];
+    double c = hi - kInvPhi * (hi - lo), d = lo + kInvPhi * (hi - lo);
+    double fc = f(c), fd = f(d);
+    for (int it = 0; it < 40; ++it) {
+      if (fc > fd) {
+        hi = d;
+        d = c;
+        fd = fc;
+        c = hi - kInvPhi * (hi - lo);
+        fc = f(c);
+      } else {
+        lo = c;
+        c = d;
+        fc = fd;
+        d = lo + kInvPhi * (hi - lo);
+        fd = f(d);
+      }
     }
+    best = std::max({best, fc, fd});
   }
   return best;
 }

@@ -9,9 +9,9 @@
 //     is integrated exactly; on the closed-form pieces (an exponential over a piece much shorter than L/R) the
 //     quadrature error is below 1e-12 relative. |e| is split at its zeros first (located on the piece to
 //     1e-15 s), so its kink costs nothing;
-//   * extremes (max |e|, max y, min and max i) take the piece's ends and nodes, refined by a parabola through
-//     the largest interior node and its neighbours: exact on the closed-form pieces at a constant reference
-//     (the exponential is monotone, the extremes are at the ends);
+//   * extremes (max |e|, max y, min and max i) take the piece's ends and nodes; an interior maximum is refined
+//     by golden-section search between its neighbouring nodes (to 4e-9 of their spacing). On the closed-form
+//     pieces at a constant reference the exponential is monotone and the extremes are the ends;
 //   * the settling instant is the last crossing of the band, located on the piece.
 // Lock- and allocation-free: it runs inside the control loop.
 #pragma once
