@@ -376,7 +376,7 @@ class Queue:
     """What queue() returns: the server's queue view (GetQueue), the one `benchctl queue` prints and the web
     dashboard's Lab page shows. `running` and `queued` are lists of (Run, position, eta_s): position 0 for a
     running run, 1 for the run claimed next, ...; eta_s the seconds until it should end (None when unknown).
-    `benches` are the bench dicts the estimate spreads work over, `live_benches` their count, `at_unix_s` when
+    `benches` are the bench dicts the estimate replays the claims on (each run only on the benches that can run it), `live_benches` their count, `at_unix_s` when
     the estimate was made."""
 
     def __init__(self, client, proto):
