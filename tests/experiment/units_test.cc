@@ -60,7 +60,8 @@ void ExpectWrittenRight(double v, const std::string& unit, const std::string& wh
   // The mantissa in [1, 1000) whenever the unit takes a prefix and the value is not 0 ([1, 1e6) for a squared
   // first factor: its prefix steps are 1e6).
   const double mantissa = std::abs(std::strtod(text.c_str(), nullptr));
-  const bool prefixable = !(unit.empty() || unit == "1" || unit == "%" || unit == "turns" || unit == "K");
+  const bool prefixable = !(unit.empty() || unit == "1" || unit == "%" || unit == "turns" || unit == "K" ||
+                            (unit[0] >= '0' && unit[0] <= '9'));  // "1/K": a reciprocal takes no prefix
   const double top = unit.rfind("^2", unit.find_first_of(" /*")) != std::string::npos ? 1e6 : 1e3;
   if (prefixable && v != 0 && std::abs(v) > 1e-12 && std::abs(v) < 1e9) {
     EXPECT_TRUE(mantissa >= 1 && mantissa < top + 0.5) << what << " written " << text;
