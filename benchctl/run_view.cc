@@ -114,8 +114,6 @@ std::string RunText(const RunView& r, const experiment::RunSummary* summary, boo
   for (const auto& [name, value] : OrderedMetrics(r.metrics))
     if (std::isfinite(value))
       out += fmt::format("  {:<20} {}\n", name, FormatQuantity(value, experiment::SiUnit(name, r.controller)));
-  if (summary != nullptr)
-    for (const auto& w : summary->warnings) out += "  warning: " + w + "\n";
   if (history)
     for (const auto& h : r.history)
       out += fmt::format("  history: {:<11} {}{}{}\n", RunStatusName(h.status), IsoLocalTime(h.at_unix_s),
