@@ -190,7 +190,7 @@ std::string RunsCsv(const std::vector<RunView>& runs, const std::vector<const ex
   out += ",status,bench,progress,duration_s,samples,wall_s";
   // Metric headers carry their unit (rmse_A, iae_A_s): the values are SI.
   const std::string law = runs.empty() ? "" : runs.front().controller;
-  for (const auto& c : columns) out += "," + experiment::MetricColumnName(c, law);
+  for (const auto& c : columns) out.append(",").append(experiment::MetricColumnName(c, law));
   out += "\n";
   for (std::size_t k = 0; k < runs.size(); ++k) {
     const RunView& r = runs[k];
