@@ -6,6 +6,9 @@
 // Exit codes (benchctl/cli_common.h): 0 success; 1 a run failed or was cancelled; 2 the request was refused
 // (bad input naming the field, not found, no capable bench, limits, permissions); 3 environment.
 #include <CLI/CLI.hpp>
+#include <algorithm>
+#include <vector>
+#include <set>
 #include <spdlog/sinks/stdout_sinks.h>
 #include <spdlog/spdlog.h>
 
@@ -34,6 +37,51 @@ using vb::benchctl::Fail;
 using vb::benchctl::kExitBadInput;
 using vb::benchctl::kExitOk;
 
+}  // namespace
+
+// "did you mean --metrics?" for a misspelt long option (issue 37): the closest option any command has, by
+// edit distance, when it is within a third of the name (at least 2 edits): close enough to be a typo, far
+// enough that unrelated options are not offered.
+namespace {
+std::size_t EditDistance(const std::string& a, const std::string& b) {
+  std::vector<std::size_t> row(b.size() + 1);
+  for (std::size_t j = 0; j <= b.size(); ++j) row[j] = j;
+  for (std::size_t i = 1; i <= a.size(); ++i) {
+    std::size_t diag = row[0];
+    row[0] = i;
+    for (std::size_t j = 1; j <= b.size(); ++j) {
+      const std::size_t up = row[j];
+      row[j] = std::min({row[j] + 1, row[j - 1] + 1, diag + (a[i - 1] == b[j - 1] ? 0 : 1)});
+      diag = up;
+    }
+  }
+  return row[b.size()];
+}
+
+void CollectOptions(const CLI::App* app, std::set<std::string>* names) {
+  for (const CLI::Option* o : app->get_options())
+    for (const auto& n : o->get_lnames()) names->insert(n);
+  for (const CLI::App* sub : app->get_subcommands([](const CLI::App*) { return true; })) CollectOptions(sub, names);
+}
+
+void SuggestOption(const CLI::App& app, int argc, char** argv) {
+  std::set<std::string> names;
+  CollectOptions(&app, &names);
+  for (int k = 1; k < argc; ++k) {
+    std::string arg = argv[k];
+    if (arg.rfind("--", 0) != 0 || arg.size() < 3) continue;
+    arg = arg.substr(2, arg.find('=') == std::string::npos ? std::string::npos : arg.find('=') - 2);
+    if (names.count(arg)) continue;
+    std::string best;
+    std::size_t best_d = std::max<std::size_t>(2, arg.size() / 3) + 1;
+    for (const auto& n : names)
+      if (const std::size_t d = EditDistance(arg, n); d < best_d) {
+        best_d = d;
+        best = n;
+      }
+    if (!best.empty()) std::fprintf(stderr, "benchctl: unknown option --%s: did you mean --%s?\n", arg.c_str(), best.c_str());
+  }
+}
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -148,6 +196,7 @@ int main(int argc, char** argv) {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     const int rc = app.exit(e);
+    if (rc != 0) SuggestOption(app, argc, argv);
     return rc == 0 ? 0 : kExitBadInput;
   }
   const vb::benchctl::Output out{json, csv};

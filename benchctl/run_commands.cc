@@ -65,7 +65,7 @@ std::string Duration(double s) {
 // A running run's remaining wall time, from its progress so far (by simulated time) and how long it has run.
 std::string Eta(const RunView& r, double now) {
   if (r.status != RunStatus::kRunning || r.started_unix_s <= 0.0) return "-";
-  const double left_s = RunningEta_s({r.id, r.status, r.priority, r.duration_s, r.progress, r.started_unix_s}, now);
+  const double left_s = RunningEta_s({r.id, r.status, r.priority, r.duration_s, r.progress, r.started_unix_s, "", ""}, now);
   return left_s < 0 ? "?" : Duration(left_s);
 }
 
@@ -261,11 +261,16 @@ int CmdQueue(Backend& backend, const QueueOptions& o, const Output& out) {
   for (const auto& q : rows) ++count[q.run.status];
   std::string counts;
   for (const auto& [status, n] : count) counts += fmt::format("{}{} {}", counts.empty() ? "" : ", ", n, RunStatusName(status));
-  std::printf("%zu runs on %s: %s%s\n", rows.size(), backend.Where().c_str(), counts.c_str(),
+  // A list cut at --limit says how many matched in all ("100 of 177 runs"), not only how many it shows.
+  const std::string how_many = more && more_count > 0
+                                   ? fmt::format("{} of {} runs", rows.size(), rows.size() + more_count)
+                                   : more ? fmt::format("the first {} runs", rows.size())
+                                          : fmt::format("{} runs", rows.size());
+  std::printf("%s on %s: %s%s%s\n", how_many.c_str(), backend.Where().c_str(), more ? "shown: " : "", counts.c_str(),
               count.count(RunStatus::kRunning) ? " (ETA: wall time left, from progress so far)" : "");
   if (default_view && any_queued)
-    std::printf("queued: position in claim order, ETA from the runs' durations over %d live bench%s\n", live,
-                live == 1 ? "" : "es");
+    std::printf("queued: position in claim order, ETA from the runs' durations on the live benches that can run "
+                "each (%d live)\n", live);
   const bool lab = std::any_of(rows.begin(), rows.end(), [](const QueueRow& q) { return !q.run.host.empty(); });
   std::printf("%6s %6s  %-11s %8s %5s %8s  %-16s %s%-20s %-10s %s\n", "id", "batch", "status", "progress", "pos", "ETA",
               "bench", lab ? "host         " : "", "controller", "submitter", "name");
@@ -362,6 +367,8 @@ int CmdExport(Backend& backend, std::int64_t run_id, const ExportOptions& o, boo
   if (!run.ok()) return Fail(run.status());
   auto trace = backend.GetTrace(run_id);
   if (!trace.ok()) return Fail(trace.status());
+  const std::size_t n_samples = trace->columns.empty() ? 0 : trace->columns.begin()->second.size();
+  const std::size_t n_channels = trace->channels.size();
   if (o.csv_stdout)
     if (auto st = WriteTraceCsv(*trace, stdout, "stdout"); !st.ok()) return Fail(st);
   if (!o.trace_csv.empty()) {
@@ -370,7 +377,17 @@ int CmdExport(Backend& backend, std::int64_t run_id, const ExportOptions& o, boo
     if (auto st = WriteTraceCsv(*trace, f.get(), o.trace_csv); !st.ok()) return Fail(st);
   }
   auto written = [&]() {
-    if (!json) return kExitOk;
+    if (!json) {
+      // Say what was written (issue 37: export printed nothing); on stderr when the trace itself is on stdout.
+      std::FILE* to = o.csv_stdout ? stderr : stdout;
+      for (const auto& [format, path] : {std::pair<const char*, const std::string*>{"trace CSV", &o.trace_csv},
+                                         {"HDF5", &o.hdf5},
+                                         {"MAT", &o.mat}})
+        if (!path->empty())
+          std::fprintf(to, "run %lld: %s written to %s (%zu samples, %zu channels)\n", static_cast<long long>(run_id),
+                       format, path->c_str(), n_samples, n_channels);
+      return kExitOk;
+    }
     Json files = Json::array();
     if (!o.trace_csv.empty()) files.push_back({{"format", "csv"}, {"path", o.trace_csv}});
     if (!o.hdf5.empty()) files.push_back({{"format", "hdf5"}, {"path", o.hdf5}});

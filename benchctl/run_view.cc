@@ -12,6 +12,7 @@
 #include "common/csv.h"
 #include "common/format.h"
 #include "experiment/compare.h"
+#include "common/units.h"
 #include "experiment/metrics.h"
 
 namespace vb::benchctl {
@@ -31,7 +32,9 @@ Json SummaryJson(const experiment::RunSummary& s) {
             {"samples", s.samples},
             {"ticks", s.ticks},
             {"wall_s", s.wall_s},
-            {"realtime_factor", s.realtime_factor}};
+            {"realtime_factor", s.realtime_factor},
+            {"metrics_from", s.metrics_from_trajectory ? "trajectory" : "samples"},
+            {"warnings", s.warnings}};
   if (s.loop.ticks > 0) {
     j["loop"] = {{"paced_ticks", s.loop.ticks},
                  {"overruns", s.loop.overruns},
@@ -110,9 +113,10 @@ std::string RunText(const RunView& r, const experiment::RunSummary* summary, boo
                          s.loop.ticks, s.loop.overruns, s.loop.jitter_p50_s * 1e6, s.loop.jitter_p99_s * 1e6,
                          s.loop.jitter_max_s * 1e6);
   }
-  for (const auto& [name, value] : OrderedMetrics(r.metrics))  // with its SI unit (docs/metrics.md)
-    if (const std::string unit = experiment::SiUnit(name, r.controller); std::isfinite(value))
-      out += fmt::format("  {:<20} {:.6g}{}{}\n", name, value, unit == "1" ? "" : " ", unit == "1" ? "" : unit);
+  // With its unit and SI prefix, as the web's run page writes it (common/units.h): "rmse  953.3 µA".
+  for (const auto& [name, value] : OrderedMetrics(r.metrics))
+    if (std::isfinite(value))
+      out += fmt::format("  {:<20} {}\n", name, FormatQuantity(value, experiment::SiUnit(name, r.controller)));
   if (history)
     for (const auto& h : r.history)
       out += fmt::format("  history: {:<11} {}{}{}\n", RunStatusName(h.status), IsoLocalTime(h.at_unix_s),
@@ -188,7 +192,9 @@ std::string RunsCsv(const std::vector<RunView>& runs, const std::vector<const ex
   std::string out = "id,batch_id,name,controller";
   for (const auto& a : axes) out.append(",").append(CsvQuoted(a));
   out += ",status,bench,progress,duration_s,samples,wall_s";
-  for (const auto& c : columns) out += "," + c;
+  // Metric headers carry their unit (rmse_A, iae_A_s): the values are SI.
+  const std::string law = runs.empty() ? "" : runs.front().controller;
+  for (const auto& c : columns) out.append(",").append(experiment::MetricColumnName(c, law));
   out += "\n";
   for (std::size_t k = 0; k < runs.size(); ++k) {
     const RunView& r = runs[k];

@@ -4,6 +4,7 @@
 #include <nlohmann/json.hpp>
 
 #include "common/csv.h"
+#include "common/units.h"
 #include "experiment/metrics.h"
 
 #include <algorithm>
@@ -54,7 +55,7 @@ MetricView ViewOf(const std::string& name, ExperimentKind kind) {
   if (name == "closing_delay_s") return {"close delay", "s"};
   if (name == "mean_position_m") return {"mean x", "m"};
   if (name == "mean_position_pct") return {"mean x", "%", 1, false};
-  if (name == "mean_flow_kg_per_s") return {"flow", "g/s", 1000};
+  if (name == "mean_flow_kg_per_s") return {"flow", "kg/s"};  // prefixed as a gram: mg/s, g/s
   if (name == "switching_rate_Hz") return {"sw rate", "Hz"};
   if (name == "diode_loss_W") return {"diode loss", "W"};
   if (name == "switching_loss_W") return {"sw loss", "W"};
@@ -111,19 +112,11 @@ size_t Width(const std::string& s) {  // display width: UTF-8 code points
 std::string PadLeft(const std::string& s, size_t w) { return std::string(w > Width(s) ? w - Width(s) : 0, ' ') + s; }
 std::string PadRight(const std::string& s, size_t w) { return s + std::string(w > Width(s) ? w - Width(s) : 0, ' '); }
 
-struct Prefix {
-  const char* symbol;
-  double scale;  // value in base unit * scale = value in prefixed unit
-};
-
-constexpr Prefix kPrefixes[] = {{"G", 1e-9}, {"M", 1e-6}, {"k", 1e-3}, {"", 1}, {"m", 1e3}, {"µ", 1e6}, {"n", 1e9}};
-
-// The prefix that puts the column's largest magnitude in [1, 1000).
-Prefix ChoosePrefix(double max_abs) {
-  if (!(max_abs > 0) || !std::isfinite(max_abs)) return {"", 1};
-  for (const auto& p : kPrefixes)
-    if (max_abs * p.scale >= 1.0 - 1e-12) return p;
-  return kPrefixes[std::size(kPrefixes) - 1];
+// The unit a view shows for values of largest magnitude `max_abs` (in the view's unit, after its factor): the
+// one rule of common/units.h (compound units prefixed on their first factor: mm^2, mg/s), or the unit as it is
+// for views without a prefix (%, counts).
+UnitChoice Shown(const MetricView& v, double max_abs) {
+  return v.prefix ? ChooseUnit(max_abs, v.unit) : UnitChoice{v.unit, 1.0};
 }
 
 // Decimals that give the column's largest value 4 significant digits (at most 4 decimals, none for counts).
@@ -151,10 +144,10 @@ ColumnDisplay ChooseDisplay(const std::string& label, const MetricView& v, const
       max_abs = std::max(max_abs, std::abs(s.mean * v.factor));
       if (s.mean != std::round(s.mean)) integer = false;
     }
-  const Prefix p = v.prefix ? ChoosePrefix(max_abs) : Prefix{"", 1};
+  const UnitChoice p = Shown(v, max_abs);
   ColumnDisplay d;
   d.label = label;
-  d.unit = v.unit.empty() ? "" : std::string(p.symbol) + v.unit;
+  d.unit = v.unit.empty() ? "" : p.unit;
   d.header = d.unit.empty() ? label : label + " [" + d.unit + "]";
   d.scale = v.factor * p.scale;
   d.decimals = v.decimals >= 0 ? v.decimals : DecimalsFor(max_abs * p.scale, integer);
@@ -244,10 +237,10 @@ TextColumn SweepColumn(const std::string& field, const std::vector<double>& valu
 std::string FormatSweepValue(const std::string& field, double value, double column_max) {
   MetricView v = ViewOf(Leaf(field), ExperimentKind::kGeneric);
   if (Leaf(field) == "duty") v = {"duty", "%", 100, false};
-  const Prefix p = v.prefix ? ChoosePrefix(column_max * v.factor) : Prefix{"", 1};
+  const UnitChoice p = Shown(v, column_max * v.factor);
   const double x = value * v.factor * p.scale;
   const std::string num = fmt::format("{}", std::round(x * 1e6) / 1e6);
-  return v.unit.empty() ? v.label + "=" + num : num + " " + p.symbol + v.unit;
+  return v.unit.empty() ? v.label + "=" + num : num + " " + p.unit;
 }
 
 // Seed 003 Table I (exact method; coil 28.5 ohm, 0.33 H, 24 V; I_amp = 0.05 A p-p), docs/dither.md: the
@@ -423,8 +416,23 @@ std::string SiUnit(const std::string& metric, const std::string& controller) {
   const MetricView v = ViewOf(metric, KindOf({controller}));
   if (v.unit == "%" && v.factor == 100) return "1";  // a ratio shown in %
   if (v.unit.empty()) return "1";
-  if (v.unit == "g/s") return "kg/s";
   return v.unit;
+}
+
+std::string MetricColumnName(const std::string& metric, const std::string& controller) {
+  const std::string unit = SiUnit(metric, controller);
+  if (unit.empty() || unit == "1" || unit == "%") return metric;
+  for (const char* suffix : {"_A", "_V", "_W", "_J", "_Hz", "_s", "_m", "_pct", "_kg_per_s", "_Pa", "_N"}) {
+    const std::string x = suffix;
+    if (metric.size() > x.size() && metric.compare(metric.size() - x.size(), x.size(), x) == 0) return metric;
+  }
+  std::string slug;
+  if (unit.size() > 6 && unit.compare(unit.size() - 6, 6, " s^0.5") == 0) {
+    slug = unit.substr(0, unit.size() - 6) + "_sqrt_s";
+  } else {
+    for (char ch : unit) slug += ch == ' ' || ch == '/' ? '_' : ch;
+  }
+  return metric + "_" + slug;
 }
 
 Comparison Compare(const std::vector<RunRecord>& runs) {
@@ -710,8 +718,8 @@ MetricDisplay DisplayOf(const Comparison& c, const std::string& metric) {
   double max_abs = 0;
   for (const auto& r : c.rows)
     if (const MetricStat* s = Stat(r, metric); s != nullptr && s->n > 0) max_abs = std::max(max_abs, std::abs(s->mean * v.factor));
-  const Prefix p = v.prefix ? ChoosePrefix(max_abs) : Prefix{"", 1};
-  const std::string unit = v.unit.empty() ? "" : std::string(p.symbol) + v.unit;
+  const UnitChoice p = Shown(v, max_abs);
+  const std::string unit = v.unit.empty() ? "" : p.unit;
   return {unit.empty() ? v.label : v.label + " [" + unit + "]", v.factor * p.scale};
 }
 
@@ -734,7 +742,7 @@ std::vector<std::string> DefaultMetricColumns(const Comparison& c) {
 
 std::vector<SiPrefix> SiPrefixes() {
   std::vector<SiPrefix> out;
-  for (const auto& p : kPrefixes) out.push_back({p.symbol, p.scale});
+  for (const auto& p : UnitPrefixes()) out.push_back({p.symbol, p.scale});
   return out;
 }
 
@@ -751,7 +759,12 @@ std::string ComparisonCsv(const Comparison& c) {
   std::ostringstream os;
   os << "rank,name,controller,runs,failed,pareto";
   for (const auto& a : axes) os << "," << CsvQuoted(a);
-  for (const auto& col : c.columns) os << "," << col << "," << col << "_spread";
+  // Unit-suffixed headers (rmse_A, iae_A_s): the values are SI, the header says which.
+  const std::string law = c.rows.empty() ? "" : c.rows.front().controller;
+  for (const auto& col : c.columns) {
+    const std::string name = MetricColumnName(col, law);
+    os << "," << name << "," << name << "_spread";
+  }
   os << "\n";
   os.precision(10);
   for (size_t i = 0; i < c.rows.size(); ++i) {

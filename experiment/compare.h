@@ -75,6 +75,10 @@ Comparison Compare(const std::vector<RunRecord>& runs);
 // A metric's SI unit as its JSON value carries it ("A" or "m" for rmse by the law, "V s^0.5", "1" for ratios
 // and counts, "" when unknown): for listings that print SI values.
 std::string SiUnit(const std::string& metric, const std::string& controller);
+// A metric's CSV column: its name when the name carries its unit (mean_current_A, energy_J) or it has none
+// (overshoot, switches), otherwise the name with its SI unit appended: rmse -> rmse_A (rmse_m for position
+// laws), iae -> iae_A_s, effort_l2 -> effort_l2_V_sqrt_s (python/valvebench/units.py metric_column).
+std::string MetricColumnName(const std::string& metric, const std::string& controller);
 
 // Which columns a table shows.
 struct TableOptions {

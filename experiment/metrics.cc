@@ -154,22 +154,7 @@ Metrics MetricsAccumulator::Finish() const {
   // Switching rate and the driver's losses (docs/metrics.md, "Effort per experiment kind").
   const double window_s = exact ? t_last_ - t_first_ : static_cast<double>(count_) * dt;
   m.switching_rate_Hz = window_s > 0 ? m.switches / window_s : kNaN;
-  m.diode_loss_W = m.switching_loss_W = m.driver_loss_W = kNaN;
-  if (driver_.low_side_flyback && std::isfinite(driver_.supply_V) && std::isfinite(driver_.diode_drop_V) &&
-      driver_.supply_V > 0 && window_s > 0) {
-    const double vs = driver_.supply_V, vd = driver_.diode_drop_V;
-    // Charge through the coil, Q = Q_on + Q_off, and energy into it, E = V_s Q_on - V_d Q_off (the switch puts
-    // V_s on the coil, the freewheeling diode -V_d, and no current flows otherwise): Q_off = (V_s Q - E)/(V_s + V_d).
-    const double q_C = m.mean_current_A * window_s;
-    const double q_off_C = std::max(0.0, (vs * q_C - m.energy_J) / (vs + vd));
-    m.diode_loss_W = vd * q_off_C / window_s;
-    // Mohan, Undeland, Robbins, Power Electronics (3rd ed.) eq. 2-6, P_s = 1/2 V I f_s (t_c(on) + t_c(off)),
-    // per edge: the switch blocks V_s + V_d while the diode conducts; |i| at the edges is the window's mean
-    // current (turn-on at the ripple's troughs, turn-off at its peaks: they average to the mean).
-    m.switching_loss_W =
-        0.5 * (vs + vd) * std::abs(m.mean_current_A) * driver_.switch_transition_s * m.switching_rate_Hz;
-    m.driver_loss_W = m.diode_loss_W + m.switching_loss_W;
-  }
+  FillDriverLosses(&m, driver_, window_s);
   // Ripple of an open-loop PWM run (seed 003 eqs. 10-11): peak-to-peak and mid-range of the current.
   m.ripple_pp_A = m.ripple_mid_A = kNaN;
   if (cv_ == ControlledVariable::kNone) {
@@ -212,6 +197,26 @@ Metrics MetricsAccumulator::Finish() const {
     m.closing_delay_s = closed_ ? closing_s_ : kNaN;
   }
   return m;
+}
+
+void FillDriverLosses(Metrics* mp, const DriverLossInputs& driver, double window_s) {
+  Metrics& m = *mp;
+  m.diode_loss_W = m.switching_loss_W = m.driver_loss_W = kNaN;
+  if (driver.low_side_flyback && std::isfinite(driver.supply_V) && std::isfinite(driver.diode_drop_V) &&
+      driver.supply_V > 0 && window_s > 0) {
+    const double vs = driver.supply_V, vd = driver.diode_drop_V;
+    // Charge through the coil, Q = Q_on + Q_off, and energy into it, E = V_s Q_on - V_d Q_off (the switch puts
+    // V_s on the coil, the freewheeling diode -V_d, and no current flows otherwise): Q_off = (V_s Q - E)/(V_s + V_d).
+    const double q_C = m.mean_current_A * window_s;
+    const double q_off_C = std::max(0.0, (vs * q_C - m.energy_J) / (vs + vd));
+    m.diode_loss_W = vd * q_off_C / window_s;
+    // Mohan, Undeland, Robbins, Power Electronics (3rd ed.) eq. 2-6, P_s = 1/2 V I f_s (t_c(on) + t_c(off)),
+    // per edge: the switch blocks V_s + V_d while the diode conducts; |i| at the edges is the window's mean
+    // current (turn-on at the ripple's troughs, turn-off at its peaks: they average to the mean).
+    m.switching_loss_W =
+        0.5 * (vs + vd) * std::abs(m.mean_current_A) * driver.switch_transition_s * m.switching_rate_Hz;
+    m.driver_loss_W = m.diode_loss_W + m.switching_loss_W;
+  }
 }
 
 Metrics ComputeMetrics(const Trace& tr, ControlledVariable cv, double start_s, double end_s, double x_min_m,

@@ -103,6 +103,10 @@ class MetricsAccumulator {
   bool opened_ = false, closed_ = false;
 };
 
+// The driver's losses (docs/metrics.md) from m's energy_J, mean_current_A and switching_rate_Hz over a window of
+// window_s; NaN unless the driver is the low-side switch with flyback diode.
+void FillDriverLosses(Metrics* m, const DriverLossInputs& driver, double window_s);
+
 // x_min_m/x_max_m: the stops, for the valve delays (ignored without a position channel).
 // The driver's losses need `driver`; effort_u_l2 and the PWM command are filled by the Runner (NaN here).
 Metrics ComputeMetrics(const Trace& trace, ControlledVariable cv, double start_s, double end_s, double x_min_m,

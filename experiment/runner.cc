@@ -7,6 +7,9 @@
 #include <sstream>
 
 #include "control/open_loop_pwm.h"
+#include "common/format.h"
+#include "experiment/trajectory_metrics.h"
+#include "model/flow.h"
 
 namespace vb::experiment {
 
@@ -34,6 +37,7 @@ std::string RunSummary::FullReport() const {
     os << "loop: " << loop.ticks << " paced ticks, " << loop.overruns << " overruns, jitter p50 "
        << loop.jitter_p50_s * 1e6 << " us, p99 " << loop.jitter_p99_s * 1e6 << " us, max "
        << loop.jitter_max_s * 1e6 << " us\n";
+  for (const auto& w : warnings) os << "warning: " << w << "\n";
   for (const auto& [name, value] : MetricList(metrics))
     if (!std::isnan(value)) os << "  " << name << " = " << value << "\n";
   return os.str();
@@ -175,6 +179,22 @@ RunSummary RunImpl(const Experiment& e, hw::Bench& bench, Trace* trace, const st
     sum.message = st.message();
   };
 
+  // The exact trajectory, where the bench has one: the metrics that integrate or extremise over time come from
+  // it, not from the recording (docs/metrics.md). The settling band is the reference just before the window's end.
+  const double exact_final_ref =
+      e.reference.has_reference() ? e.reference.At(std::nextafter(window_end_s, 0.0)).value
+                                  : std::numeric_limits<double>::quiet_NaN();
+  TrajectoryMetrics exact(e.controlled, &e.reference, e.metric_start_s, window_end_s, exact_final_ref,
+                          model::MassFlow_kg_per_s(e.plant, 1.0, e.run.supply_pressure_Pa));
+  sum.metrics_from_trajectory = bench.set_trajectory_sink(&exact);
+  struct DetachTrajectory {
+    hw::Bench* bench;
+    bool attached;
+    ~DetachTrajectory() {
+      if (attached) bench->set_trajectory_sink(nullptr);
+    }
+  } detach{&bench, sum.metrics_from_trajectory};
+
   TeeSink tee(&recorder, extra_sink);
   Status st = bench.Configure(e.run);
   if (st.ok()) st = bench.Start(&tee);
@@ -212,7 +232,9 @@ RunSummary RunImpl(const Experiment& e, hw::Bench& bench, Trace* trace, const st
     }
     if (!st.ok()) break;
     if (stream && stream->failed()) break;  // the recording cannot go on: Close() says why
-    st = bench.Apply(ctl.Step(m, e.reference.At(t), &state));
+    const SwitchCommand cmd = ctl.Step(m, e.reference.At(t), &state);
+    if (cmd.mode == SwitchCommand::Mode::kPwm) sum.max_carrier_Hz = std::max(sum.max_carrier_Hz, cmd.carrier_Hz);
+    st = bench.Apply(cmd);
     if (!st.ok()) break;
     if (u_slot >= 0) {
       accumulate_u(t);
@@ -262,6 +284,28 @@ RunSummary RunImpl(const Experiment& e, hw::Bench& bench, Trace* trace, const st
   sum.metrics = stream ? streamed_metrics.Finish()
                        : ComputeMetrics(*trace, e.controlled, e.metric_start_s, metric_end_s, e.plant.x_min_m,
                                         e.plant.x_max_m, driver);
+  if (sum.metrics_from_trajectory) {
+    exact.ApplyTo(&sum.metrics, e.plant.x_max_m, driver);
+  }
+  // The recording's rate against the fastest switching in the run: the carrier the law commanded, or for a law
+  // that switches the gate itself, half its measured switching rate (two edges per period). Below twice it
+  // (Nyquist) the trace aliases the ripple: on the emulator the metrics do not use the trace, so it is a note
+  // about the view; on hardware the metrics are the samples', so it is a warning about the numbers.
+  {
+    const double f_switch = std::max(sum.max_carrier_Hz, std::isfinite(sum.metrics.switching_rate_Hz)
+                                                             ? 0.5 * sum.metrics.switching_rate_Hz
+                                                             : 0.0);
+    if (f_switch > 0.0 && e.run.sample_rate_Hz > 0.0 && e.run.sample_rate_Hz < 2.0 * f_switch) {
+      const std::string rates = "recording.rate_Hz " + FormatNumber(e.run.sample_rate_Hz) +
+                                " Hz is below twice the " + FormatNumber(f_switch) + " Hz switching";
+      sum.warnings.push_back(
+          sum.metrics_from_trajectory
+              ? rates + ": the recorded trace aliases the ripple (a view only: the metrics are from the "
+                        "emulator's exact trajectory)"
+              : rates + ": tracking metrics, ripple and means come from these samples and alias the ripple; "
+                        "record at >= " + FormatNumber(2.0 * f_switch) + " Hz");
+    }
+  }
   if (u_slot >= 0 && sum.termination == RunSummary::Termination::kDone) {
     accumulate_u(sum.duration_s);
     sum.metrics.effort_u_l2 = std::sqrt(u2_int);

@@ -8,6 +8,7 @@
 
 #include <atomic>
 #include <string>
+#include <vector>
 
 #include "experiment/metrics.h"
 #include "experiment/spec.h"
@@ -31,6 +32,12 @@ struct RunSummary {
   std::uint64_t ticks = 0;
   hw::LoopStats loop;               // pacing (realtime runs)
   Metrics metrics;
+  // The metrics' source (docs/metrics.md, "Metrics from the run, not from its recording"): true when the bench
+  // handed over its exact trajectory (the emulator), false when they come from the recorded samples (hardware).
+  bool metrics_from_trajectory = false;
+  double max_carrier_Hz = 0.0;      // the fastest PWM carrier the law commanded (0: gate commands only)
+  // What the reader of the numbers must know (a recording below twice the carrier, ...), one sentence each.
+  std::vector<std::string> warnings;
 
   bool ok() const { return termination == Termination::kDone; }
   std::string BriefReport() const;

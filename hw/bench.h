@@ -65,6 +65,20 @@ class SampleSink {
   virtual void OnSample(const BenchSample& sample) = 0;
 };
 
+// The bench's exact trajectory, piece by piece (the emulator's event-exact pieces: docs/metrics.md, "Metrics
+// from the run, not from its recording"). A piece is smooth on [t0_s, t1_s]; At() is valid only during the
+// OnPiece call. Pieces arrive in time order and cover the run without gaps.
+class TrajectoryPiece {
+ public:
+  virtual ~TrajectoryPiece() = default;
+  virtual void At(double t_s, double* i_A, double* x_m) const = 0;  // x_m NaN without a position
+};
+class TrajectorySink {
+ public:
+  virtual ~TrajectorySink() = default;
+  virtual void OnPiece(double t0_s, double t1_s, const TrajectoryPiece& piece) = 0;
+};
+
 // How well a paced loop kept its deadlines.
 struct LoopStats {
   std::uint64_t ticks = 0;
@@ -100,6 +114,9 @@ class Bench {
   // Aborted("cancelled at t = ... s") and the Runner, seeing the flag, ends the run as cancelled. Benches whose
   // steps are short anyway need not do anything.
   virtual void set_cancel_flag(const std::atomic<bool>* /*cancel*/) {}
+  // Hands the run's exact trajectory to `sink` (null: stop) from the next Start(). False when the bench has no
+  // exact trajectory (hardware: its metrics come from its samples).
+  virtual bool set_trajectory_sink(TrajectorySink* /*sink*/) { return false; }
 };
 
 }  // namespace vb::hw

@@ -57,6 +57,11 @@ class EmulatedBench final : public Bench {
   void SafeState() noexcept override;
   LoopStats loop_stats() const override;
   void set_cancel_flag(const std::atomic<bool>* cancel) override { cancel_ = cancel; }
+  bool set_trajectory_sink(TrajectorySink* sink) override {
+    forwarder_.pieces = sink;
+    forwarder_.has_position = caps_.measures_position;
+    return true;
+  }
 
   const model::Simulator& simulator() const { return sim_; }
 
@@ -64,6 +69,24 @@ class EmulatedBench final : public Bench {
   class Forwarder final : public model::SimObserver {
    public:
     SampleSink* sink = nullptr;
+    TrajectorySink* pieces = nullptr;
+    bool has_position = false;
+    bool wants_pieces() const override { return pieces != nullptr; }
+    void OnPiece(double t0_s, double t1_s, const model::PieceView& piece) override {
+      class Adapter final : public TrajectoryPiece {
+       public:
+        Adapter(const model::PieceView* p, bool has_x) : p_(p), has_x_(has_x) {}
+        void At(double t_s, double* i_A, double* x_m) const override {
+          p_->At(t_s, i_A, x_m);
+          if (!has_x_) *x_m = kNotMeasured;
+        }
+
+       private:
+        const model::PieceView* p_;
+        bool has_x_;
+      };
+      pieces->OnPiece(t0_s, t1_s, Adapter(&piece, has_position));
+    }
     void OnSample(const model::PlantSample& s) override {
       if (sink)
         sink->OnSample(BenchSample{s.t_s, s.gate, s.v_coil_V, s.i_A, s.x_m, s.v_mps, s.v2_integral_V2s, s.energy_J,

@@ -71,6 +71,9 @@ class SafetyBench final : public Bench {
     inner_->set_cancel_flag(cancel);
   }
 
+  // The inner bench's exact trajectory passes through untouched (the interlocks act on samples and commands).
+  bool set_trajectory_sink(TrajectorySink* sink) override { return inner_->set_trajectory_sink(sink); }
+
   bool tripped() const { return tripped_.load(); }
   double coil_temp_C() const { return temp_C_; }
   const SafetyLimits& limits() const { return lim_; }

@@ -8,6 +8,34 @@ namespace {
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
+// A piece at rest with no current change (a blocked segment: the coil carries nothing).
+class FixedPiece final : public PieceView {
+ public:
+  FixedPiece(double i_A, double x_m) : i_A_(i_A), x_m_(x_m) {}
+  void At(double /*t_s*/, double* i_A, double* x_m) const override {
+    *i_A = i_A_;
+    *x_m = x_m_;
+  }
+
+ private:
+  double i_A_, x_m_;
+};
+
+// The closed-form piece: i = i_inf + d0 exp(-(t - t0)/tau) at a fixed position.
+class ExponentialPiece final : public PieceView {
+ public:
+  ExponentialPiece(const CurrentSensor* sensor, double t0, double i_inf, double d0, double tau, double x_m)
+      : sensor_(sensor), t0_(t0), i_inf_(i_inf), d0_(d0), tau_(tau), x_m_(x_m) {}
+  void At(double t_s, double* i_A, double* x_m) const override {
+    *i_A = sensor_->Static(i_inf_ + d0_ * std::exp(-(t_s - t0_) / tau_));
+    *x_m = x_m_;
+  }
+
+ private:
+  const CurrentSensor* sensor_;
+  double t0_, i_inf_, d0_, tau_, x_m_;
+};
+
 }  // namespace
 
 const char* EventKindName(EventKind kind) {
@@ -275,6 +303,10 @@ void Simulator::AdvanceClosedForm(const Segment& seg, double t_stop, SimObserver
   stepper_valid_ = false;
   const double t0 = t_;
   if (seg.blocked) {
+    if (obs != nullptr && obs->wants_pieces() && t_stop > t0) {
+      const FixedPiece piece(sensor_.Static(0.0), x_);
+      obs->OnPiece(t0, t_stop, piece);
+    }
     if (sample_period_s_ > 0.0 && obs) {
       for (double tk = SampleTime(next_sample_); tk < t_stop - kSameInstant_s; tk = SampleTime(++next_sample_))
         EmitSample(tk, 0.0, 0.0, x_, 0.0, v2_int_, vi_int_, obs);
@@ -347,6 +379,10 @@ void Simulator::AdvanceClosedForm(const Segment& seg, double t_stop, SimObserver
         EmitSample(tk, i, v0 - Rs * i, x_, 0.0, v2_at(dt, e), vi_at(dt, e), obs);
       }
     }
+  }
+  if (obs != nullptr && obs->wants_pieces() && best_t > t0) {
+    const ExponentialPiece piece(&sensor_, t0, i_inf, d0, tau, x_);
+    obs->OnPiece(t0, best_t, piece);
   }
   const double dt_end = best_t - t0, e_end = std::exp(-dt_end / tau);
   v2_int_ = v2_at(dt_end, e_end);
@@ -499,6 +535,28 @@ void Simulator::AdvanceOde(const Segment& seg, double t_stop, SimObserver* obs) 
       }
     }
 
+    if (obs != nullptr && obs->wants_pieces() && best_t > a) {
+      // The step's dense output between a and best_t (the terminal current as EmitSample measures it).
+      class DensePiece final : public PieceView {
+       public:
+        DensePiece(const Simulator* sim, const Segment* seg) : sim_(sim), seg_(seg) {}
+        void At(double t, double* i_A, double* x_m) const override {
+          State y;
+          sim_->stepper_.calc_state(t, y);
+          double i, x, v;
+          sim_->Unscale(y, &i, &x, &v);
+          if (seg_->blocked && sim_->plant_.params().effects.eddy_R_p_ohm == 0.0) i = 0.0;
+          *i_A = sim_->sensor_.Static(sim_->TerminalAt(*seg_, t, i, y[5]).i_A);
+          *x_m = std::clamp(x, sim_->x_lo_, sim_->x_hi_);
+        }
+
+       private:
+        const Simulator* sim_;
+        const Segment* seg_;
+      };
+      const DensePiece piece(this, &seg);
+      obs->OnPiece(a, best_t, piece);
+    }
     if (sample_period_s_ > 0.0 && obs) {
       const double limit = best_t - kSameInstant_s;
       for (double tk = SampleTime(next_sample_); tk < limit; tk = SampleTime(++next_sample_)) {

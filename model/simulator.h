@@ -67,10 +67,24 @@ struct PlantSample {
   std::uint64_t switches;   // gate transitions so far
 };
 
+// The trajectory inside one piece [t0, t1] of the simulation (between two events, gate edges or AdvanceTo ends;
+// on moving-spool pieces between two accepted solver steps): smooth there, evaluated from the closed form or the
+// solver's dense output. Valid only during the OnPiece call that hands it over.
+class PieceView {
+ public:
+  virtual ~PieceView() = default;
+  // The terminal current through the sensor's static chain (gain, offset: no lag, no latency) and the position.
+  virtual void At(double t_s, double* i_A, double* x_m) const = 0;
+};
+
 class SimObserver {
  public:
   virtual ~SimObserver() = default;
   virtual void OnSample(const PlantSample& sample) = 0;
+  // Every piece, in time order, with no gaps: the exact trajectory, for metrics that must not depend on the
+  // sample rate (docs/metrics.md). Observers that want it return true from wants_pieces().
+  virtual bool wants_pieces() const { return false; }
+  virtual void OnPiece(double /*t0_s*/, double /*t1_s*/, const PieceView& /*piece*/) {}
   virtual void OnEvent(EventKind /*kind*/, double /*t_s*/, double /*i_A*/, double /*x_m*/, double /*v_mps*/) {}
 };
 

@@ -391,6 +391,9 @@ Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& se
   }
   db::RunStatus status = StatusOf(out.summary.termination);
   std::string reason = out.summary.message;
+  // What the reader of the numbers must know (a recording below twice the carrier: docs/metrics.md), kept with
+  // the run so `show`, the run page and Python say it too.
+  for (const auto& w : out.summary.warnings) reason += (reason.empty() ? "" : "; ") + ("warning: " + w);
   if (status == db::RunStatus::kCancelled) {
     // Keep why it was cancelled (the request's reason, stored by RequestCancel), not only when.
     if (auto row = store->GetRun(run.id); row.ok() && !row->reason.empty()) reason = row->reason + "; " + reason;

@@ -145,8 +145,16 @@ class Run:
     def refresh(self):
         return self._client.get_run(self.id)
 
+    def metrics_text(self):
+        """The metrics one a line with unit and SI prefix, as `benchctl show` prints them ("rmse  953.3 \u00b5A")."""
+        return "\n".join("%-20s %s" % (k, units.format_quantity(v, units.metric_unit(k, self.controller)))
+                         for k, v in self.metrics.items())
+
     def __repr__(self):
         return "Run(%d %s [%s] %s)" % (self.id, self.name, self.controller, self.status)
+
+    def __str__(self):
+        return repr(self) + ("\n" + self.metrics_text() if self.metrics else "")
 
 
 class Trace:
@@ -368,7 +376,7 @@ class Queue:
     """What queue() returns: the server's queue view (GetQueue), the one `benchctl queue` prints and the web
     dashboard's Lab page shows. `running` and `queued` are lists of (Run, position, eta_s): position 0 for a
     running run, 1 for the run claimed next, ...; eta_s the seconds until it should end (None when unknown).
-    `benches` are the bench dicts the estimate spreads work over, `live_benches` their count, `at_unix_s` when
+    `benches` are the bench dicts the estimate replays the claims on (each run only on the benches that can run it), `live_benches` their count, `at_unix_s` when
     the estimate was made."""
 
     def __init__(self, client, proto):

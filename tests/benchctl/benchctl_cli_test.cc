@@ -164,7 +164,7 @@ TEST(BenchctlCli, TableOptionsPerRunLinesUnitsAndReportOnTheLocalStore) {
 
   Result single = RunBenchctl("run --local " + Example("standard/e3.json"));
   ASSERT_EQ(single.exit_code, 0) << single.out;
-  EXPECT_TRUE(std::regex_search(single.out, std::regex("\n  mean_current_A +[0-9.e+-]+ A\n"))) << single.out;
+  EXPECT_TRUE(std::regex_search(single.out, std::regex("\n  mean_current_A +[0-9.]+ [mµ]?A\n"))) << single.out;
   std::smatch sm;
   ASSERT_TRUE(std::regex_search(single.out, sm, std::regex("^run ([0-9]+) e3 ")));
   const std::string html = ::testing::TempDir() + "/benchctl-cli-run.html";

@@ -66,7 +66,10 @@ TEST_F(RegressCli, UnchangedPassesWorsenedGainFailsWithNamesAndNumbers) {
   EXPECT_NE(ok.find("failures=\"0\""), std::string::npos) << ok;
   EXPECT_NE(ok.find("<testcase classname=\"ci.hold/pi\" name=\"rmse\">"), std::string::npos) << ok;
 
-  SetPiGains(R"({"ki_V_per_A_s": 4080})");  // a tenth of the default integral gain
+  // A tenth of the default proportional gain: RMSE 0.83 -> 4.2 mA. (A tenth of the integral gain worsened the
+  // RMSE sampled at one phase of the ripple, 0.31 -> 1.1 mA, but from the trajectory it improves it, 0.83 ->
+  // 0.56 mA: issue 37, docs/regress.md.)
+  SetPiGains(R"({"kp_V_per_A": 37.7})");
   const std::string bad_xml = dir_ + "/bad.xml";
   Result worse = Benchctl("regress " + dir_ + "/ci.json --baseline main --local --junit " + bad_xml);
   EXPECT_EQ(worse.exit_code, 1) << worse.out;

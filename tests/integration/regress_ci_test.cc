@@ -54,12 +54,13 @@ TEST(CiRegression, SmallSuiteAgainstTheEmulatedBenchServerPasses) {
   EXPECT_NE(page.find("\"kind\":\"traces\",\"title\":\"Traces (drag to zoom, double-click to reset)\",\"runs\":[{"),
             std::string::npos);
 
-  // The same suite with the PI law's integral gain cut tenfold fails against the same baseline.
+  // The same suite with the PI law's proportional gain cut tenfold fails against the same baseline (RMSE 0.83
+  // -> 4.2 mA; docs/regress.md says why not the integral gain since issue 37).
   std::filesystem::copy_file(examples + "ci.json", dir + "/ci.json");
   std::string spec = ReadAll(examples + "ci-current-hold.json");
   const size_t law = spec.find("\"pi_current\": {}", spec.find("\"name\": \"pi\""));
   ASSERT_NE(law, std::string::npos);
-  spec.replace(law, 16, R"("pi_current": {"ki_V_per_A_s": 4080})");
+  spec.replace(law, 16, R"("pi_current": {"kp_V_per_A": 37.7})");
   std::ofstream(dir + "/ci-current-hold.json") << spec;
   auto worse = testing::RunCommand(std::string(VB_BENCHCTL) + " regress " + dir + "/ci.json --baseline " + examples +
                                    "ci-baseline.json --server " + addr + " --token " + testing::kOperatorToken +

@@ -522,6 +522,11 @@ try:
     wait(lambda: len(driver.find_elements(By.CSS_SELECTOR, ".trace-chart canvas")) >= 2 or None, what="trace charts")
     metrics = driver.find_element(By.ID, "metrics").text
     check("the run page shows metrics with units and SI prefixes", re.search(r"rmse -?[0-9.]+ [mµn]?A\b", metrics), metrics[:300])
+    # Issue 37: the one unit rule (common/units.h): the page writes a value as benchctl show and Python do.
+    fmt = driver.execute_script("return [[81.13e-6, 'm^2'], [0.02773, 'kg'], [7.514e-4, 'kg/s'], [9.533e-4, 'A'],"
+                                " [8.67476e-05, 'W'], [2e-3, 'N s/m'], [0, 'kg']].map((c) => VBFormat.value(c[0], c[1]))")
+    check("the page writes compound units as benchctl does (mm^2, g, mg/s)",
+          fmt == ["81.13 mm^2", "27.73 g", "751.4 mg/s", "953.3 \u00b5A", "86.75 \u00b5W", "2 mN s/m", "0 kg"], fmt)
     check("the run page links the export", driver.find_element(By.ID, "export-csv").get_attribute("href")
           .endswith("/api/runs/%s/trace.csv" % done_id))
     check_run_charts()
@@ -756,7 +761,7 @@ try:
         check("trace.csv parses with pandas (same samples)", len(csv_trace) == n and "i_A" in csv_trace.columns,
               (len(csv_trace), list(csv_trace.columns)))
         cmp_csv = pandas.read_csv(io.BytesIO(body_cc))
-        check("compare.csv parses with pandas: one row per law", len(cmp_csv) == 4 and "rmse" in cmp_csv.columns,
+        check("compare.csv parses with pandas: one row per law", len(cmp_csv) == 4 and "rmse_A" in cmp_csv.columns,
               cmp_csv.columns.tolist())
         check("compare.json parses: one row per law", len(json.loads(body_cj)["rows"]) == 4, body_cj[:200])
         ctype_r, body_r = download("/api/batches/%s/report.html" % batch, OPERATOR)

@@ -63,9 +63,10 @@ const VBCharts = (() => {
   }
   const finite = (v) => typeof v === 'number' && isFinite(v);
   const esc = (t) => String(t).replace(/[&<>"]/g, (c) => ({'&': '&amp;', '<': '&lt;', '>': '&gt;', '"': '&quot;'}[c]));
-  function axisTitle(label, symbol, unit) {
+  // `prefixed`: VBFormat.prefixFor's result (its `unit` is the prefixed unit: mm^2, mg/s).
+  function axisTitle(label, prefixed, unit) {
     if (!unit) return label;
-    return label + ' [' + symbol + unit + ']';
+    return label + ' [' + (prefixed && prefixed.unit ? prefixed.unit : unit) + ']';
   }
   function slug(t) { return String(t).toLowerCase().replace(/[^a-z0-9]+/g, '-').replace(/^-|-$/g, '') || 'chart'; }
 
@@ -169,8 +170,8 @@ const VBCharts = (() => {
         const px = VBFormat.prefixFor(Math.max(Math.abs(xr[0]), Math.abs(xr[1])), opts.x.unit);
         const py = VBFormat.prefixFor(Math.max(Math.abs(yr[0]), Math.abs(yr[1])), opts.y.unit);
         const xl = plotDiv.querySelector('.dygraph-xlabel'), yl = plotDiv.querySelector('.dygraph-ylabel');
-        if (xl) xl.textContent = axisTitle(opts.x.label, px.symbol, opts.x.unit);
-        if (yl) yl.textContent = opts.y.logic ? opts.y.label : axisTitle(opts.y.label, py.symbol, opts.y.unit);
+        if (xl) xl.textContent = axisTitle(opts.x.label, px, opts.x.unit);
+        if (yl) yl.textContent = opts.y.logic ? opts.y.label : axisTitle(opts.y.label, py, opts.y.unit);
         placeLabels(c, g);
       },
     });
@@ -320,7 +321,7 @@ const VBCharts = (() => {
       const L = 90, T = 10, W = L + nx * cw + 150, H = T + ny * ch + 50;
       const svg = s('svg', {xmlns: NS, width: W, height: H, viewBox: '0 0 ' + W + ' ' + H, class: 'vb-heatmap',
         'font-family': 'system-ui, sans-serif', 'font-size': 11});
-      s('rect', {x: 0, y: 0, width: W, height: H, fill: '#fff'}, svg);
+      s('rect', {x: 0, y: 0, width: W, height: H, fill: '#fff', class: 'vb-bg'}, svg);
       const zs = [];
       for (const x of opts.x.values) for (const y of opts.y.values) { const z = opts.z.get(x, y); if (finite(z)) zs.push(z); }
       const lo = Math.min(...zs), hi = Math.max(...zs);
@@ -334,7 +335,7 @@ const VBCharts = (() => {
           s('title', {}, r).textContent = opts.x.label + ' ' + opts.x.fmt(x) + ', ' + opts.y.label + ' ' + opts.y.fmt(y) +
             ': ' + (finite(z) ? opts.z.fmt(z) : 'no value');
           if (finite(z) && cw >= 34)
-            s('text', {x: L + i * cw + cw / 2, y: ty + ch / 2 + 4, 'text-anchor': 'middle', 'font-size': 10,
+            s('text', {x: L + i * cw + cw / 2, y: ty + ch / 2 + 4, 'text-anchor': 'middle', 'font-size': 10, class: 'vb-cell',
               fill: (hi > lo ? (z - lo) / (hi - lo) : 0.5) > 0.55 ? '#000' : '#fff'}, svg).textContent = opts.z.fmt(z);
         });
       });
@@ -381,7 +382,7 @@ const VBCharts = (() => {
       const H = T + opts.categories.length * (nb * bh + gap) + 54;
       const svg = s('svg', {xmlns: NS, width: W, height: H, viewBox: '0 0 ' + W + ' ' + H, class: 'vb-bars',
         'font-family': 'system-ui, sans-serif', 'font-size': 11});
-      s('rect', {x: 0, y: 0, width: W, height: H, fill: '#fff'}, svg);
+      s('rect', {x: 0, y: 0, width: W, height: H, fill: '#fff', class: 'vb-bg'}, svg);
       const X = (v) => L + (max > 0 ? v / max : 0) * (W - L - R);
       const t = VBFormat.ticks(0, max || 1, 5, opts.unit);
       const bottom = T + opts.categories.length * (nb * bh + gap);
@@ -390,7 +391,7 @@ const VBCharts = (() => {
         s('text', {x: X(k.v), y: bottom + 13, 'text-anchor': 'middle'}, svg).textContent = k.label;
       }
       s('text', {x: L + (W - L - R) / 2, y: bottom + 28, 'text-anchor': 'middle', 'font-size': 12}, svg).textContent =
-        axisTitle(opts.label, t.symbol, opts.unit);
+        axisTitle(opts.label, t, opts.unit);
       opts.categories.forEach((cat, i) => {
         const y0 = T + i * (nb * bh + gap);
         s('text', {x: L - 6, y: y0 + nb * bh / 2 + 4, 'text-anchor': 'end'}, svg).textContent = cat;

@@ -21,11 +21,35 @@ const VBFormat = (() => {
     prefixes = units.prefixes;
   }
 
-  // {symbol, scale} for a value range of the largest magnitude `maxAbs` (unit "" or "1": no prefix).
+  // The unit's first factor, its power and the rest ("m^2/m" -> m, 2, "^2/m"): common/units.cc's Split.
+  function split(unit) {
+    let end = unit.search(/[ /*]/);
+    if (end < 0) end = unit.length;
+    let head = unit.slice(0, end), rest = unit.slice(end), power = 1;
+    const caret = head.indexOf('^');
+    if (caret >= 0) { power = parseFloat(head.slice(caret + 1)); rest = head.slice(caret) + rest; head = head.slice(0, caret); }
+    return {base: head, power, rest};
+  }
+  function unprefixed(unit) {
+    return !unit || unit === '1' || unit === '%' || unit === 'turns' || unit === 'count' || unit === 'K' || /^[0-9.]/.test(unit);
+  }
+
+  // {symbol, scale, unit} for values of largest magnitude `maxAbs` in SI `unit`: the rule of common/units.h.
+  // Compound units take the prefix on their first factor raised to its power (m^2 -> mm^2 is 1e6), the
+  // kilogram is a prefixed gram (kg -> g, mg; kg/s -> mg/s). `unit` is the prefixed unit to print.
   function prefixFor(maxAbs, unit) {
-    if (!prefixes || !unit || unit === '1' || unit === '%' || !(maxAbs > 0) || !isFinite(maxAbs)) return {symbol: '', scale: 1};
-    for (const p of prefixes) if (maxAbs * p.scale >= 1 - 1e-12) return p;
-    return prefixes[prefixes.length - 1];
+    if (!prefixes || unprefixed(unit)) return {symbol: '', scale: 1, unit: unit || ''};
+    const f = split(unit);
+    let toBase = 1;
+    if (f.base === 'kg') { f.base = 'g'; toBase = Math.pow(1e3, f.power); }
+    let p = null;
+    if (maxAbs > 0 && isFinite(maxAbs)) {
+      p = prefixes[prefixes.length - 1];
+      for (const q of prefixes) if (maxAbs * toBase * Math.pow(q.scale, f.power) >= 1 - 1e-12) { p = q; break; }
+    } else {
+      p = prefixes.find((q) => q.symbol === (toBase !== 1 ? 'k' : '')) || {symbol: '', scale: 1};
+    }
+    return {symbol: p.symbol, scale: toBase * Math.pow(p.scale, f.power), unit: p.symbol + f.base + f.rest};
   }
 
   // A stat {mean, spread, n} in a column shown as `d` (the gateway's display): "12.34", "12.34 ± 0.5", "0", "–".
@@ -41,17 +65,18 @@ const VBFormat = (() => {
   function value(v, unit) {
     if (v === null || v === undefined || v === '' || (typeof v === 'number' && !isFinite(v)) || isNaN(Number(v))) return '–';
     const x = Number(v);
-    if (x === 0) return '0' + (unit && unit !== '1' ? ' ' + unit : '');
     const p = prefixFor(Math.abs(x), unit);
+    const suffix = p.unit && p.unit !== '1' ? ' ' + p.unit : '';
+    if (x === 0) return '0' + suffix;
     const y = x * p.scale;
     const digits = Number.isInteger(y) && Math.abs(y) < 1e9 ? String(y) : String(parseFloat(y.toPrecision(4)));
-    return digits + (unit && unit !== '1' ? ' ' + p.symbol + unit : '');
+    return digits + suffix;
   }
 
   // Axis ticks between lo and hi (about `n`): nice steps 1, 2, 5 × 10^k, labelled in the prefixed unit with as
   // many decimals as the step needs (never "0.0003" five times).
   function ticks(lo, hi, n, unit) {
-    if (!(hi > lo) || !isFinite(lo) || !isFinite(hi)) return {ticks: [], symbol: '', scale: 1};
+    if (!(hi > lo) || !isFinite(lo) || !isFinite(hi)) return {ticks: [], symbol: '', scale: 1, unit: unit || ''};
     const p = prefixFor(Math.max(Math.abs(lo), Math.abs(hi)), unit);
     let step = Math.pow(10, Math.floor(Math.log10((hi - lo) / n)));
     const err = (hi - lo) / n / step;
@@ -62,7 +87,7 @@ const VBFormat = (() => {
       const v = k * step;
       out.push({v, label: (Math.abs(v) < step * 1e-9 ? 0 : v * p.scale).toFixed(Math.min(decimals, 9))});
     }
-    return {ticks: out, symbol: p.symbol, scale: p.scale};
+    return {ticks: out, symbol: p.symbol, scale: p.scale, unit: p.unit};
   }
 
   return {load, use, prefixFor, cell, value, ticks};

@@ -350,7 +350,8 @@ function pageSubmit(main) {
     } catch (e) { out.replaceChildren(el('p', {class: 'error', text: errorText(e)})); }
   };
   main.replaceChildren(el('h1', {text: 'Submit a spec'}),
-    allowed ? null : el('p', {class: 'notice', id: 'role-notice', text: 'You can read this page, but submitting ' + VIEWER_REASON + '.'}),
+    // replaceChildren writes a null child as the text "null": leave the notice out instead.
+    ...(allowed ? [] : [el('p', {class: 'notice', id: 'role-notice', text: 'You can read this page, but submitting ' + VIEWER_REASON + '.'})]),
     el('section', {}, el('p', {class: 'muted'}, 'An experiment spec as protobuf JSON (docs/spec.md); variants, sweep ' +
       'axes and repeats expand into a batch. The server validates it and names the field it refuses.'),
     el('form', {onsubmit: submit}, text, el('div', {class: 'actions'}, batch,
@@ -363,7 +364,7 @@ function pageSubmit(main) {
 // as JSON to /api/import, which reads them as `benchctl import DIR` does and stores them with ImportRuns.
 function importSection(allowed) {
   const files = el('input', {id: 'import-files', type: 'file', multiple: true, accept: '.json,.csv,application/json,text/csv'});
-  const name = el('input', {id: 'import-name', type: 'text', size: 20, placeholder: 'dataset name', pattern: '[A-Za-z0-9][A-Za-z0-9._-]*'});
+  const name = el('input', {id: 'import-name', type: 'text', size: 20, placeholder: 'dataset name', pattern: '[A-Za-z0-9][A-Za-z0-9._\\-]*'});
   const out = el('div', {id: 'import-result'});
   const submit = async (ev) => {
     ev.preventDefault();
