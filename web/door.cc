@@ -570,6 +570,15 @@ void Door::WorkerLoop() {
     }
     SetBlocking(c->fd, true);
     DoorRequestState state;
+    bool share_released = false;
+    state.release_share = [this, &share_released, client = c->client] {
+      std::lock_guard<std::mutex> lock(mu_);
+      if (share_released) return;
+      share_released = true;
+      if (auto it = busy_per_client_.find(client); it != busy_per_client_.end() && --it->second <= 0)
+        busy_per_client_.erase(it);
+      work_cv_.notify_all();
+    };
     t_request = &state;
     ++c->requests;
     const bool last = c->requests >= limits_.max_requests_per_connection || c->peer_closed;
@@ -588,8 +597,10 @@ void Door::WorkerLoop() {
     {
       std::lock_guard<std::mutex> lock(mu_);
       busy_.erase(c->fd);  // before any close: Stop shuts down only sockets still owned here
-      if (auto it = busy_per_client_.find(c->client); it != busy_per_client_.end() && --it->second <= 0)
-        busy_per_client_.erase(it);
+      if (!share_released) {
+        if (auto it = busy_per_client_.find(c->client); it != busy_per_client_.end() && --it->second <= 0)
+          busy_per_client_.erase(it);
+      }
       if (busy_.empty()) idle_cv_.notify_all();
       work_cv_.notify_all();  // a request of this client may have waited for its share
     }

@@ -132,6 +132,9 @@ struct DoorRequestState {
   bool body_too_large = false;  // the body went past max_body_bytes (set by the door's stream)
   bool body_timed_out = false;  // the body did not arrive within body_timeout_s
   bool write_timed_out = false; // the client did not take the answer fast enough (DoorLimits::min_write_rate)
+  // Called by a route that holds its worker for long under caps of its own (a live view: per session and in
+  // all, below the workers): the request stops counting against its address's share of the workers.
+  std::function<void()> release_share;
 };
 // Null outside a door worker (e.g. the fuzz target's direct calls).
 DoorRequestState* CurrentDoorRequest();

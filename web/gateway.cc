@@ -1184,6 +1184,9 @@ class Routes {
       res.set_header("Connection", "close");
       return;
     }
+    // Capped per session and in all (below the workers): not against its address's share of the workers, so
+    // one address's tabs can follow as many runs as their sessions may.
+    if (DoorRequestState* door = CurrentDoorRequest(); door && door->release_share) door->release_share();
     struct Watch {
       grpc::ClientContext ctx;
       std::unique_ptr<grpc::ClientReader<v1::RunEvent>> reader;
