@@ -1858,9 +1858,11 @@ StatusOr<std::unique_ptr<Gateway>> Gateway::Start(const GatewayOptions& options,
   g->routes_ = routes;  // the handlers point into it
   // SO_REUSEADDR (a restarted server rebinds at once) but not cpp-httplib's default SO_REUSEPORT, which lets a
   // second server bind the same port and take half the connections: one server per port.
-  g->http_->set_socket_options([](socket_t sock) {
+  auto listening = std::make_shared<socket_t>(INVALID_SOCKET);
+  g->http_->set_socket_options([listening](socket_t sock) {
     int yes = 1;
     setsockopt(sock, SOL_SOCKET, SO_REUSEADDR, &yes, sizeof yes);
+    *listening = sock;
   });
   if (port == 0) {
     g->port_ = g->http_->bind_to_any_port(host);
@@ -1870,6 +1872,9 @@ StatusOr<std::unique_ptr<Gateway>> Gateway::Start(const GatewayOptions& options,
       return Status::Unavailable("web.listen_address: cannot listen on " + options.listen_address);
     g->port_ = port;
   }
+  // cpp-httplib listens with a backlog of 5: a burst of connections (600 slow heads) overflows it and every
+  // further SYN waits for its 1 s retransmit. listen() again on the bound socket sets the kernel's backlog.
+  if (*listening != INVALID_SOCKET) (void)::listen(*listening, 1024);
   httplib::Server* http = g->http_.get();
   g->thread_ = std::thread([http] { http->listen_after_bind(); });
   return g;
