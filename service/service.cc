@@ -31,22 +31,105 @@ namespace v1 = valvebench::v1;
 
 StorePool::Handle::~Handle() {
   if (store_ == nullptr) return;
-  std::lock_guard<std::mutex> lock(pool_->mu_);
-  pool_->free_.push_back(std::move(store_));
+  pool_->Release(std::move(store_));
+}
+
+void StorePool::CloseStale(std::vector<std::unique_ptr<db::Store>>* out) {
+  const auto now = Clock::now();
+  for (auto it = free_.begin(); it != free_.end();) {
+    if (std::chrono::duration<double>(now - it->since).count() > kIdle_s) {
+      out->push_back(std::move(it->store));
+      it = free_.erase(it);
+      --open_;
+    } else {
+      ++it;
+    }
+  }
+}
+
+void StorePool::Release(std::unique_ptr<db::Store> s) {
+  std::vector<std::unique_ptr<db::Store>> closing;  // closed outside the lock
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    CloseStale(&closing);
+    if (static_cast<int>(free_.size()) >= kMaxIdle) {
+      closing.push_back(std::move(s));
+      --open_;
+    } else {
+      free_.push_back({std::move(s), Clock::now()});
+    }
+  }
+  returned_.notify_one();
 }
 
 StatusOr<StorePool::Handle> StorePool::Acquire() {
+  std::vector<std::unique_ptr<db::Store>> closing;
   {
-    std::lock_guard<std::mutex> lock(mu_);
-    if (!free_.empty()) {
-      auto s = std::move(free_.back());
+    std::unique_lock<std::mutex> lock(mu_);
+    CloseStale(&closing);
+    const bool room = returned_.wait_for(lock, std::chrono::duration<double>(kAcquireWait_s),
+                                         [this] { return !free_.empty() || open_ < kMaxOpen; });
+    if (!room)
+      return Status::Unavailable("store: " + std::to_string(kMaxOpen) +
+                                 " connections in use, the server's limit; try again in a moment");
+    if (!free_.empty()) {  // the most recently used: the stale ones age out at the front
+      auto s = std::move(free_.back().store);
       free_.pop_back();
       return Handle(this, std::move(s));
     }
+    ++open_;  // taken now, opened below (outside the lock)
   }
   auto s = db::OpenStore(path_);  // a SQLite file or PostgreSQL
-  if (!s.ok()) return s.status();
+  if (!s.ok()) {
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      --open_;
+    }
+    returned_.notify_one();
+    return s.status();
+  }
   return Handle(this, std::move(s.value()));
+}
+
+int StorePool::open() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return open_;
+}
+
+int StorePool::idle() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return static_cast<int>(free_.size());
+}
+
+std::shared_ptr<void> StreamGate::Take(const std::string& user, const char* call, std::string* why) {
+  std::lock_guard<std::mutex> lock(mu_);
+  int& mine = per_user_[user];
+  if (total_ >= kMax || mine >= kMaxPerUser) {
+    *why = total_ >= kMax ? std::string(call) + ": the server has " + std::to_string(total_) +
+                                " streams open, its limit; try again later"
+                          : std::string(call) + ": user " + user + " has " + std::to_string(mine) +
+                                " streams open, the limit per user; close some";
+    if (mine == 0) per_user_.erase(user);
+    return nullptr;
+  }
+  ++mine;
+  ++total_;
+  struct Slot {
+    StreamGate* gate;
+    std::string user;
+    ~Slot() {
+      std::lock_guard<std::mutex> lock(gate->mu_);
+      --gate->total_;
+      auto it = gate->per_user_.find(user);
+      if (it != gate->per_user_.end() && --it->second <= 0) gate->per_user_.erase(it);
+    }
+  };
+  return std::shared_ptr<void>(new Slot{this, user}, [](void* p) { delete static_cast<Slot*>(p); });
+}
+
+int StreamGate::open() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return total_;
 }
 
 grpc::Status BenchServiceImpl::Authorize(grpc::ServerContext* ctx, Role need, Principal* who) const {
@@ -273,6 +356,9 @@ grpc::Status BenchServiceImpl::WatchRun(grpc::ServerContext* ctx, const v1::Watc
                                         grpc::ServerWriter<v1::RunEvent>* writer) {
   Principal who;
   if (auto st = Authorize(ctx, Role::kViewer, &who); !st.ok()) return st;
+  std::string full;
+  const auto slot = streams_.Take(who.user, "WatchRun", &full);
+  if (!slot) return grpc::Status(grpc::StatusCode::RESOURCE_EXHAUSTED, full);
   if (!std::isfinite(req->sample_rate_hz()))
     return ToGrpcStatus(Status::InvalidArgument("sample_rate_Hz: must be finite (0 = no live samples)"));
   runs::SampleThinner thinner(req->sample_rate_hz());
@@ -354,6 +440,9 @@ grpc::Status BenchServiceImpl::GetTrace(grpc::ServerContext* ctx, const v1::GetT
                                         grpc::ServerWriter<v1::TraceChunk>* writer) {
   Principal who;
   if (auto st = Authorize(ctx, Role::kViewer, &who); !st.ok()) return st;
+  std::string full;
+  const auto slot = streams_.Take(who.user, "GetTrace", &full);
+  if (!slot) return grpc::Status(grpc::StatusCode::RESOURCE_EXHAUSTED, full);
   if (auto st = CheckDecimation(req->max_points(), req->from_s(), req->to_s()); !st.ok()) return ToGrpcStatus(st);
   auto store = pool_->Acquire();
   if (!store.ok()) return ToGrpcStatus(store.status());

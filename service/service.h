@@ -2,8 +2,12 @@
 // Every handler authenticates first, maps core errors through ToGrpcStatus, and never lets an exception out.
 #pragma once
 
+#include <chrono>
+#include <condition_variable>
+#include <map>
 #include <memory>
 #include <mutex>
+#include <string>
 #include <vector>
 
 #include "db/store.h"
@@ -16,8 +20,16 @@
 namespace vb::server {
 
 // Store connections for handler threads (a Store is single-threaded; SQLite WAL lets them run side by side).
+// Bounded (issue 34: 1,000 live streams left 1,650 SQLite connections, 3,315 open files, until restart): at
+// most kMaxOpen connections at once (an Acquire beyond waits up to kAcquireWait_s for one to come back, then
+// UNAVAILABLE); at most kMaxIdle kept for reuse, and an idle one older than kIdle_s is closed. The stream caps
+// (StreamGate, 96 in all) stay below kMaxOpen so that unary calls always find a connection.
 class StorePool {
  public:
+  static constexpr int kMaxOpen = 128;
+  static constexpr int kMaxIdle = 8;
+  static constexpr double kIdle_s = 30.0;
+  static constexpr double kAcquireWait_s = 5.0;
   explicit StorePool(std::string path) : path_(std::move(path)) {}
   class Handle {
    public:
@@ -32,12 +44,42 @@ class StorePool {
     std::unique_ptr<db::Store> store_;
   };
   StatusOr<Handle> Acquire();
+  // Connections open now (in use and idle), and idle ones, for the tests and the log.
+  int open() const;
+  int idle() const;
 
  private:
   friend class Handle;
+  using Clock = std::chrono::steady_clock;
+  struct Idle {
+    std::unique_ptr<db::Store> store;
+    Clock::time_point since;
+  };
+  void Release(std::unique_ptr<db::Store> s);
+  void CloseStale(std::vector<std::unique_ptr<db::Store>>* out);  // with mu_ held: moves stale ones out
   std::string path_;
-  std::mutex mu_;
-  std::vector<std::unique_ptr<db::Store>> free_;
+  mutable std::mutex mu_;
+  std::condition_variable returned_;
+  std::vector<Idle> free_;
+  int open_ = 0;
+};
+
+// Concurrent server streams (WatchRun, GetTrace), per user and in all: each holds a gRPC thread and a store
+// connection for its whole life (issue 34: 1,000 viewer WatchRun streams, 913 threads, +1.3 GB). A stream
+// beyond a cap is refused with RESOURCE_EXHAUSTED naming the cap. Per user 64: the web dashboard's 48 live
+// views in all (GatewayOptions::max_streams, each its token's user's stream here) and its chart requests.
+class StreamGate {
+ public:
+  static constexpr int kMaxPerUser = 64;
+  static constexpr int kMax = 96;
+  // A place, or null with `why` set.
+  std::shared_ptr<void> Take(const std::string& user, const char* call, std::string* why);
+  int open() const;
+
+ private:
+  mutable std::mutex mu_;
+  int total_ = 0;
+  std::map<std::string, int> per_user_;
 };
 
 class BenchServiceImpl final : public valvebench::v1::BenchService::Service {
@@ -97,6 +139,7 @@ class BenchServiceImpl final : public valvebench::v1::BenchService::Service {
   StorePool* pool_;
   runs::Registry* registry_;
   const std::vector<std::unique_ptr<runs::Worker>>* workers_;
+  StreamGate streams_;
 };
 
 

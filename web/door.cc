@@ -1,8 +1,11 @@
 #include "web/door.h"
 
+#include "web/head.h"
+
 #include <arpa/inet.h>
 #include <fcntl.h>
 #include <netinet/in.h>
+#include <netinet/tcp.h>
 #include <openssl/err.h>
 #include <openssl/ssl.h>
 #include <poll.h>
@@ -11,6 +14,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstring>
 #include <string_view>
 
@@ -74,6 +78,16 @@ struct Door::Conn {
   Clock::time_point deadline;
   bool head_started = false;
   int requests = 0;
+  Clock::time_point since = Clock::now();  // accepted, or back from a worker
+  bool peer_closed = false;                // the client shut down its sending side after its request
+  size_t scanned = 0;                      // buf[0, scanned) holds no blank line: not searched again
+  // True when buf holds a whole head. Each byte is searched once however often the reader wakes (issue 34:
+  // rescanning every buffered head on each wake, 384 slow connections put the page's p50 at 387 ms).
+  bool HeadWhole() {
+    if (buf.find("\r\n\r\n", scanned > 3 ? scanned - 3 : 0) != std::string::npos) return true;
+    scanned = buf.size();
+    return false;
+  }
 };
 
 // The worker's view of a connection: the buffered head first; then, once cpp-httplib has parsed the head (the
@@ -149,16 +163,39 @@ class DoorStream : public httplib::Stream {
     }
   }
 
+  // A slow reader holds a worker: the time spent waiting for it to take bytes may be at most write_grace_s plus
+  // what it took, once the buffers were full, at min_write_rate (a live view writes little and rarely waits; a
+  // 1 Mbit/s link waits but takes 128 KiB/s; a reader taking 1 KiB/s is cut after the grace, issue 34).
   ssize_t write(const char* ptr, size_t size) override {
-    if (ssl_) {
-      const int n = SSL_write(ssl_, ptr, static_cast<int>(std::min<size_t>(size, 1 << 30)));
-      return n > 0 ? n : -1;
-    }
     for (;;) {
-      const ssize_t n = ::send(fd_, ptr, size, MSG_NOSIGNAL);
-      if (n < 0 && errno == EINTR) continue;
+      const double allowed_s =
+          write_grace_s_ + static_cast<double>(written_after_wait_) / min_write_rate_ - blocked_s_;
+      if (allowed_s <= 0) return WriteTimedOut();
+      pollfd p{fd_, POLLOUT, 0};
+      const auto t0 = Clock::now();
+      const int r = poll(&p, 1, static_cast<int>(std::ceil(std::min(allowed_s, 60.0) * 1000.0)));
+      const double waited_s = std::chrono::duration<double>(Clock::now() - t0).count();
+      blocked_s_ += waited_s;
+      if (waited_s > 0.001) waited_ = true;
+      if (r == 0) return WriteTimedOut();
+      if (r < 0) {
+        if (errno == EINTR) continue;
+        return -1;
+      }
+      if (ssl_) {
+        const int n = SSL_write(ssl_, ptr, static_cast<int>(std::min<size_t>(size, 1 << 30)));
+        if (n > 0 && waited_) written_after_wait_ += static_cast<size_t>(n);
+        return n > 0 ? n : -1;
+      }
+      const ssize_t n = ::send(fd_, ptr, size, MSG_NOSIGNAL | MSG_DONTWAIT);
+      if (n < 0 && (errno == EINTR || errno == EAGAIN || errno == EWOULDBLOCK)) continue;
+      if (n > 0 && waited_) written_after_wait_ += static_cast<size_t>(n);
       return n;
     }
+  }
+  void SetWriteLimits(double grace_s, double min_rate) {
+    write_grace_s_ = grace_s;
+    min_write_rate_ = std::max(1.0, min_rate);
   }
 
   void get_remote_ip_and_port(std::string& ip, int& port) const override { AddressOf(false, ip, port); }
@@ -198,6 +235,16 @@ class DoorStream : public httplib::Stream {
   Clock::time_point deadline_;
   Clock::time_point start_;
   size_t read_ = 0;  // body bytes read from the socket
+  bool waited_ = false;             // the socket's buffers have been full once
+  size_t written_after_wait_ = 0;   // bytes the reader took since (what fit in the buffers at first is no credit)
+  double blocked_s_ = 0;            // time spent waiting for the reader to take bytes
+  double write_grace_s_ = 5.0;
+  double min_write_rate_ = 16 * 1024.0;
+  ssize_t WriteTimedOut() {
+    state_->close_after = true;
+    state_->write_timed_out = true;
+    return -1;
+  }
   DoorRequestState* state_;
   static constexpr double kBodyGrace_s = 10.0;
   static constexpr double kMinBodyRate = 64 * 1024.0;  // bytes/s
@@ -231,8 +278,11 @@ void Door::Wake() {
 void Door::Refuse(int fd, int status, const char* message) {
   if (!ssl_ctx_) {
     const std::string a =
-        PlainAnswer(status, status == 429 ? "Too Many Requests" : status == 431 ? "Request Header Fields Too Large"
-                                                                                : "Request Timeout",
+        PlainAnswer(status,
+                    status == 429   ? "Too Many Requests"
+                    : status == 431 ? "Request Header Fields Too Large"
+                    : status == 400 ? "Bad Request"
+                                    : "Request Timeout",
                     message);
     (void)::send(fd, a.data(), a.size(), MSG_NOSIGNAL | MSG_DONTWAIT);
   }
@@ -251,7 +301,11 @@ void Door::Adopt(int fd) {
       return;
     }
     int& mine = per_client_[c->client];
-    if (open_ >= limits_.max_connections || mine >= limits_.max_connections_per_client) {
+    // At the total cap, a connection still waiting for its head (slow, or idle between requests) is shed to make
+    // room, rather than this one refused: slow heads from a few addresses cannot lock every other client out.
+    if (open_ >= limits_.max_connections && mine < limits_.max_connections_per_client && waiting_ - shed_ > 0) {
+      ++shed_;
+    } else if (open_ >= limits_.max_connections || mine >= limits_.max_connections_per_client) {
       const bool total = open_ >= limits_.max_connections;
       if (mine == 0) per_client_.erase(c->client);
       Refuse(fd, 429, total ? "too many open connections to the dashboard; try again later"
@@ -262,6 +316,10 @@ void Door::Adopt(int fd) {
     ++open_;
   }
   SetBlocking(fd, false);
+  // Answers go out as written (issue 34: Nagle's algorithm with the peer's delayed ACK cost 44 ms per request on
+  // a kept-alive connection).
+  const int one = 1;
+  (void)setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof(one));
   if (ssl_ctx_) {
     c->ssl = SSL_new(ssl_ctx_);
     if (!c->ssl) return Close(std::move(c));
@@ -336,7 +394,13 @@ bool Door::ReadSome(Conn& c) {
     } else {
       n = ::recv(c.fd, tmp, std::min(room, sizeof(tmp)), 0);
       if (n < 0) return errno == EAGAIN || errno == EWOULDBLOCK || errno == EINTR;
-      if (n == 0) return false;  // the peer closed
+      if (n == 0) {
+        // The peer closed its side: a complete request sent before the half-close is still answered (then the
+        // connection closes); anything else ends here.
+        if (c.buf.find("\r\n\r\n") == std::string::npos) return false;
+        c.peer_closed = true;
+        return true;
+      }
     }
     if (!c.head_started) {
       c.head_started = true;
@@ -350,11 +414,42 @@ void Door::ReaderLoop() {
   std::vector<std::unique_ptr<Conn>> conns;
   std::vector<pollfd> fds;
   for (;;) {
+    int shed = 0;
     {
       std::lock_guard<std::mutex> lock(mu_);
       if (stopping_) break;
       for (auto& c : incoming_) conns.push_back(std::move(c));
       incoming_.clear();
+      shed = shed_;
+      shed_ = 0;
+    }
+    if (shed > 0) {
+      // The total cap was reached: close the connections that have waited longest for their heads, slow heads
+      // (started, not finished) before idle kept-alive ones.
+      std::vector<Conn*> waiting;  // those without a whole head yet
+      for (auto& c : conns)
+        if (!c->HeadWhole()) waiting.push_back(c.get());
+      std::stable_sort(waiting.begin(), waiting.end(), [](const Conn* a, const Conn* b) {
+        if (a->head_started != b->head_started) return a->head_started;
+        return a->since < b->since;
+      });
+      if (static_cast<int>(waiting.size()) > shed) waiting.resize(static_cast<size_t>(shed));
+      for (auto& c : conns) {
+        if (std::find(waiting.begin(), waiting.end(), c.get()) == waiting.end()) continue;
+        if (c->head_started && c->handshaken) {
+          Refuse(c->fd, 408, "request head not received in time (the dashboard is at its connection limit)");
+          c->fd = -1;
+          if (c->ssl) SSL_free(c->ssl);
+          std::lock_guard<std::mutex> lock(mu_);
+          --open_;
+          auto it = per_client_.find(c->client);
+          if (it != per_client_.end() && --it->second <= 0) per_client_.erase(it);
+        } else {
+          Close(std::move(c));
+        }
+        c.reset();
+      }
+      conns.erase(std::remove(conns.begin(), conns.end(), nullptr), conns.end());
     }
     // TLS may hold decrypted bytes of a pipelined request that poll() cannot see.
     for (auto& c : conns)
@@ -365,7 +460,20 @@ void Door::ReaderLoop() {
     const auto now = Clock::now();
     Clock::time_point next = now + std::chrono::seconds(1);
     for (auto& c : conns) {
-      if (c->handshaken && c->buf.find("\r\n\r\n") != std::string::npos) {
+      bool whole = c->handshaken && c->HeadWhole();
+      HeadVerdict v;
+      if (whole) {
+        // The head's framing, Range and Accept-Encoding checked before cpp-httplib sees it (web/head.h); the
+        // empty lines it drops before a request line may leave no whole head yet.
+        v = FilterHead(&c->buf);
+        c->scanned = 0;
+        whole = v.status != 0 || c->HeadWhole();
+      }
+      if (whole && v.status != 0) {
+        Refuse(c->fd, v.status, v.message.c_str());
+        c->fd = -1;
+        to_close.push_back(std::move(c));
+      } else if (whole) {
         to_work.push_back(std::move(c));
       } else if (c->buf.size() > limits_.max_head_bytes) {
         Refuse(c->fd, 431, "request head (request line and headers) larger than the limit");
@@ -422,6 +530,10 @@ void Door::ReaderLoop() {
       }
     }
     conns = std::move(still);
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      waiting_ = static_cast<int>(conns.size());
+    }
   }
   for (auto& c : conns) Close(std::move(c));
   std::vector<std::unique_ptr<Conn>> left;
@@ -436,20 +548,44 @@ void Door::WorkerLoop() {
   for (;;) {
     std::unique_ptr<Conn> c;
     {
+      // The first waiting request whose client runs fewer than its share of the workers: one address cannot hold
+      // them all (issue 34: 66 trickled bodies held all 64).
+      const int per_client =
+          limits_.max_workers_per_client > 0 ? limits_.max_workers_per_client : std::max(1, limits_.workers / 4);
       std::unique_lock<std::mutex> lock(mu_);
-      work_cv_.wait(lock, [&] { return stopping_ || !ready_.empty(); });
-      if (ready_.empty()) return;  // stopping
-      c = std::move(ready_.front());
-      ready_.pop_front();
+      std::deque<std::unique_ptr<Conn>>::iterator pick;
+      work_cv_.wait(lock, [&] {
+        if (stopping_) return true;
+        pick = std::find_if(ready_.begin(), ready_.end(), [&](const std::unique_ptr<Conn>& r) {
+          auto it = busy_per_client_.find(r->client);
+          return it == busy_per_client_.end() || it->second < per_client;
+        });
+        return pick != ready_.end();
+      });
+      if (stopping_) return;
+      c = std::move(*pick);
+      ready_.erase(pick);
+      busy_.insert(c->fd);
+      ++busy_per_client_[c->client];
     }
     SetBlocking(c->fd, true);
     DoorRequestState state;
+    bool share_released = false;
+    state.release_share = [this, &share_released, client = c->client] {
+      std::lock_guard<std::mutex> lock(mu_);
+      if (share_released) return;
+      share_released = true;
+      if (auto it = busy_per_client_.find(client); it != busy_per_client_.end() && --it->second <= 0)
+        busy_per_client_.erase(it);
+      work_cv_.notify_all();
+    };
     t_request = &state;
     ++c->requests;
-    const bool last = c->requests >= limits_.max_requests_per_connection;
+    const bool last = c->requests >= limits_.max_requests_per_connection || c->peer_closed;
     // Chunk framing ("1000\r\n...\r\n") adds a little to a chunked body on the wire.
     const size_t budget = limits_.max_body_bytes + limits_.max_body_bytes / 16 + 4096;
     DoorStream strm(c->fd, c->ssl, std::move(c->buf), budget, After(limits_.body_timeout_s), &state);
+    strm.SetWriteLimits(limits_.write_grace_s, limits_.min_write_rate);
     bool closed = false;
     bool ok = false;
     try {
@@ -458,13 +594,25 @@ void Door::WorkerLoop() {
       ok = false;  // cpp-httplib's writer threw (a handler's content provider): the connection ends
     }
     t_request = nullptr;
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      busy_.erase(c->fd);  // before any close: Stop shuts down only sockets still owned here
+      if (!share_released) {
+        if (auto it = busy_per_client_.find(c->client); it != busy_per_client_.end() && --it->second <= 0)
+          busy_per_client_.erase(it);
+      }
+      if (busy_.empty()) idle_cv_.notify_all();
+      work_cv_.notify_all();  // a request of this client may have waited for its share
+    }
     if (!ok || closed || last || state.close_after) {
       Close(std::move(c));
       continue;
     }
     c->buf = strm.Leftover();
+    c->scanned = 0;
     c->head_started = !c->buf.empty();
     c->deadline = After(c->head_started ? limits_.head_timeout_s : limits_.idle_timeout_s);
+    c->since = Clock::now();
     SetBlocking(c->fd, false);
     bool back = false;
     {
@@ -482,12 +630,16 @@ void Door::WorkerLoop() {
   }
 }
 
-void Door::Stop() {
+void Door::Stop(double grace_s) {
   {
-    std::lock_guard<std::mutex> lock(mu_);
+    std::unique_lock<std::mutex> lock(mu_);
     if (stopping_ && !reader_.joinable()) return;
     stopping_ = true;
     work_cv_.notify_all();
+    // Running requests get the grace to finish their answers; then their sockets are shut down (a read or a
+    // write blocked on them fails at once, and the handler returns).
+    idle_cv_.wait_for(lock, std::chrono::duration<double>(std::max(0.0, grace_s)), [this] { return busy_.empty(); });
+    for (int fd : busy_) ::shutdown(fd, SHUT_RDWR);
   }
   Wake();
   if (reader_.joinable()) reader_.join();

@@ -26,6 +26,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <set>
 #include <string>
 #include <thread>
 #include <vector>
@@ -50,8 +51,10 @@ class Door {
 
   // A freshly accepted socket: the door owns it from here.
   void Adopt(int fd);
-  // Closes every waiting connection and joins the threads (running requests finish first).
-  void Stop();
+  // Closes every waiting connection and joins the threads. Running requests get `grace_s` to finish; then their
+  // sockets are shut down, so that a worker blocked reading a trickled body or writing to a slow reader (or
+  // streaming a live view) returns at once (SIGTERM must reach the end within the unit's stop timeout).
+  void Stop(double grace_s = 1.0);
 
   // Open connections now (for the tests' figures and the log).
   int open_connections() const;
@@ -75,6 +78,11 @@ class Door {
   std::vector<std::unique_ptr<Conn>> incoming_;  // adopted or back from a worker, not yet in the reader's set
   std::deque<std::unique_ptr<Conn>> ready_;      // a complete head, waiting for a worker
   std::map<std::string, int> per_client_;
+  std::set<int> busy_;  // sockets a worker runs a request on (shut down by Stop after its grace)
+  std::map<std::string, int> busy_per_client_;  // requests running per client address
+  int waiting_ = 0;  // connections in the reader's set (waiting for a head), as the reader last counted
+  int shed_ = 0;     // of those, how many the reader is to close to make room (the total cap was reached)
+  std::condition_variable idle_cv_;
   int open_ = 0;
   bool stopping_ = false;
   std::thread reader_;
@@ -123,6 +131,10 @@ struct DoorRequestState {
   bool close_after = false;     // do not keep the connection alive after this answer
   bool body_too_large = false;  // the body went past max_body_bytes (set by the door's stream)
   bool body_timed_out = false;  // the body did not arrive within body_timeout_s
+  bool write_timed_out = false; // the client did not take the answer fast enough (DoorLimits::min_write_rate)
+  // Called by a route that holds its worker for long under caps of its own (a live view: per session and in
+  // all, below the workers): the request stops counting against its address's share of the workers.
+  std::function<void()> release_share;
 };
 // Null outside a door worker (e.g. the fuzz target's direct calls).
 DoorRequestState* CurrentDoorRequest();

@@ -82,6 +82,18 @@ bool ValidUtf8(std::string_view s);
 int JsonDepth(std::string_view s);
 // The token of "Bearer <token>", or "" with `problem` saying why not (visible ASCII only: gRPC metadata).
 std::string BearerTokenOf(std::string_view header, std::string* problem);
+// An uploaded data file's header row (POST /api/import): "" when it has at most kMaxCsvColumns columns and no
+// name twice, else why not. Linear in the row (a set of names).
+inline constexpr size_t kMaxCsvColumns = 256;
+std::string CsvHeaderProblem(std::string_view text);
+// Where an import's temporary directory goes: <temp>/valvebench-import-<pid>-, and the removal at start of
+// those whose server process is gone (killed mid-import); returns how many were removed.
+std::string ImportTempPrefix();
+// The Content-Security-Policy of a served batch report (GET /api/batches/ID/report.html): the report is one
+// self-contained file whose charts are drawn by inline scripts, allowed here by their SHA-256 hashes and
+// nothing else (no other script, no fetch, no form).
+std::string ReportCsp(std::string_view html);
+int RemoveStaleImports();
 
 // The gateway's request handling without sockets, for the fuzz target (fuzz/gateway_fuzz.cc): `raw` is read as
 // the bytes of one connection (requests one after another), the answers' bytes come back.

@@ -16,6 +16,9 @@ struct DoorLimits {
   int max_connections = 512;             // open connections in all
   int max_connections_per_client = 128;  // per client address
   int workers = 64;                      // threads running requests (an SSE stream holds one)
+  int max_workers_per_client = 0;        // requests one address runs at once; 0 = workers / 4 (the rest wait)
+  double write_grace_s = 5.0;            // a reader may keep the server waiting this long to write, then
+  double min_write_rate = 16 * 1024.0;   // must have taken this many bytes/s of the time it kept it waiting
   int max_requests_per_connection = 1000;
 };
 

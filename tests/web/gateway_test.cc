@@ -648,6 +648,10 @@ TEST_F(WebGatewayTest, SessionDownloadsAndImport) {
   ASSERT_TRUE(report);
   ASSERT_EQ(report->status, 200) << report->body;
   EXPECT_NE(report->body.find("run " + id + ":"), std::string::npos);
+  // Its charts are inline scripts: its CSP allows exactly those (issue 34: the dashboard's CSP blocked them).
+  EXPECT_EQ(report->get_header_value_count("Content-Security-Policy"), 1u);
+  EXPECT_EQ(report->get_header_value("Content-Security-Policy"), vb::web::ReportCsp(report->body));
+  EXPECT_NE(report->get_header_value("Content-Security-Policy").find("'sha256-"), std::string::npos);
 
   // Import: field-named errors of the gateway and of the dataset reader, then the service's role check.
   auto post = [&](const Json& body, const char* token) {
