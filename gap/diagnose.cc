@@ -881,8 +881,9 @@ std::vector<std::string> ToRecord(const Dataset& ref, bool switch_on) {
   if (switch_on && pressures.size() < 3)
     out.push_back("switch-on runs at 3 or more supply pressures (they separate the preload from the pressure area)");
   if (supplies.size() < 2)
-    out.push_back("a pulling-in run at a second supply voltage (the current then rises at another rate, which "
-                  "separates the lift from the flight and R from L)");
+    out.push_back(switch_on ? "a pulling-in run at a second supply voltage (the current then rises at another rate, "
+                              "which separates the lift from the flight and R from L)"
+                            : "runs at a second supply voltage (they separate R from the sense chain's gain)");
   if (switch_on) {
     bool settles = true;
     for (const auto& r : ref.runs) {
@@ -962,6 +963,10 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds_in, const model::PlantParams& nom
     with_driver = ds_in;
     with_driver.driver = dev->driver;
     dsp = &with_driver;
+    // A reference identified from scratch saw its captures cleaned (offset, edge spike, polarity): the target
+    // gets the same, or a baseline offset would pass for a change of the sense chain.
+    if (d.reference.from_scratch)
+      for (const auto& note : CleanSwitchOnSession(&with_driver)) d.warnings.push_back("target " + note);
   }
   const Dataset& ds = *dsp;
   const std::vector<Split> split = MakeSplit(ds, &d.split_note);

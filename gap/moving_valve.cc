@@ -851,16 +851,37 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
         const double a = std::max({3.0 * std::abs(g.value[kAnet]), 3.0 * F / pmax, 1e-12});
         g.box[kAnet] = {-a, a, false};
       }
-      if (saturation) {
-        g.free.push_back(kBs);
+      // The core's saturation joins the global search whether stage 4 took it or not: a core that saturates
+      // hides its unsaturated open-gap inductance (the tail after the arrival shows the incremental one), so
+      // a larger L1 and a B_sat that bends it pay only together, a move no local stage makes.
+      // It adds a dimension and slower evaluations: only with budget for 3000 evaluations or more (CRS2 over
+      // 10-11 parameters needs a few thousand to beat the local stages; with fewer it searches worse).
+      bool with_saturation = saturation;
+      if (!saturation && global_evals >= 3000) {
+        auto p = PlantOf(family, g.value);
+        double imax = 0.0;
+        for (const auto& r : ds.runs) imax = std::max(imax, r.supply_V / g.value[kR]);
+        if (p.ok() && p->mu_r > 1.0) {
+          const double Lc = g.value[kL0] * (1.0 - 1.0 / p->mu_r);
+          g.value[kBs] = Lc * imax / (p->N_turns * p->A_e_m2);
+          g.value[kTanh] = 0.0;
+          g.box[kBs] = {g.value[kBs] / 30.0, g.value[kBs] * 3.0, true};
+          with_saturation = std::isfinite(g.value[kBs]) && g.value[kBs] > 0.0;
+        }
+        if (!with_saturation) g.value[kBs] = 0.0;
+      } else {
         box(kBs, 5.0, 5.0);
       }
+      if (with_saturation) g.free.push_back(kBs);
       g.Run(600, global_evals);
       record_outer("5 global (CRS2, " + std::to_string(global_evals) + " evaluations) and local, the fit being " +
                        Fmt(st.best / id.noise_floor_A) + "x the noise floor",
                    since, g.evaluations - before, g.best);
       evaluations += g.evaluations - before;
-      if (g.best < st.best) st = g;
+      if (g.best < st.best) {
+        st = g;
+        saturation = with_saturation;
+      }
     }
   }
   st.evaluations = evaluations;
