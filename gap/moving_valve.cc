@@ -457,7 +457,8 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
   if (Rs.empty())
     return Status::InvalidArgument("identify: no fit run's current rises above 10x its noise floor (" +
                                    Fmt(id.noise_floor_A * 1e3) + " mA) with the gate on: an open coil, a probe "
-                                   "not connected or the wrong channel; nothing to identify");
+                                   "not connected, the wrong channel, or a trace too noisy for its current (average "
+                                   "more sweeps); nothing to identify");
   std::sort(Rs.begin(), Rs.end());
   v[kR] = Rs[Rs.size() / 2];
   if (unsettled)
