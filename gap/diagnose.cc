@@ -205,8 +205,7 @@ double AdditionEvidence(double before_A, double after_A, double effective_sample
 // autocorrelation time is hundreds of samples, so its evidence is that of a handful of samples; a real cause
 // leaves noise, and every sample counts. The level is the one number, calibrated as a false addition rate on
 // draws no rule was tuned to.
-bool AddsACause(double before_A, double after_A, double effective_samples, double floor_A, double level) {
-  if (!(before_A > kSignificance * floor_A)) return false;  // nothing significant left to explain
+bool AddsACause(double before_A, double after_A, double effective_samples, double level) {
   return AdditionEvidence(before_A, after_A, effective_samples) >= level;
 }
 
@@ -295,7 +294,10 @@ Status SelectCombination(const Dataset& ds, const std::vector<bool>& fit_mask, c
   if (base < 0 || opt.max_effects < 2) return Status::Ok();
   const CandidateResult base_row = d->ranking[static_cast<std::size_t>(base)];
   const double floor = d->noise_floor_A;
-  if (!(base_row.holdout_rmse_after_A > kSignificance * floor)) return Status::Ok();  // nothing significant left
+  // Issue 26 searched only where the best single left a significant gap. The rule needs no such gate: a weak second
+  // cause beside a strong one can leave less than that and still be plain in thousands of independent samples, and
+  // an addition that fits noise loses likelihood on the holdout runs (its own change counts against it there).
+  if (opt.issue26_rules && !(base_row.holdout_rmse_after_A > kSignificance * floor)) return Status::Ok();
 
   // 1. The pool.
   std::vector<const CandidateResult*> structural, all_structural;
@@ -447,7 +449,7 @@ Status SelectCombination(const Dataset& ds, const std::vector<bool>& fit_mask, c
     step.after_A = best->holdout_rmse_after_A;
     step.effective_samples = EffectiveSamples(*best);
     step.evidence = AdditionEvidence(step.before_A, step.after_A, step.effective_samples);
-    bool take = AddsACause(step.before_A, step.after_A, step.effective_samples, floor, opt.addition_evidence);
+    bool take = AddsACause(step.before_A, step.after_A, step.effective_samples, opt.addition_evidence);
     if (opt.issue26_rules) {
       take = Issue26Decisive(step.before_A, step.after_A, floor);
       if (!take && size == current_effects + 1 && extends(tried_c[best_k])) {
@@ -598,7 +600,7 @@ Status FitNuisance(const Dataset& ds, const std::vector<bool>& fit_mask, const m
     step.effective_samples = EffectiveSamples(*best);
     step.evidence = AdditionEvidence(step.before_A, step.after_A, step.effective_samples);
     step.taken = issue26_rules ? Issue26Decisive(step.before_A, step.after_A, d->noise_floor_A)
-                               : AddsACause(step.before_A, step.after_A, step.effective_samples, d->noise_floor_A, level);
+                               : AddsACause(step.before_A, step.after_A, step.effective_samples, level);
     d->additions.push_back(step);
     if (!step.taken) return Status::Ok();
   }

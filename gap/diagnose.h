@@ -36,7 +36,7 @@ inline constexpr double kSignificance = 1.5;  // residual RMS / noise floor abov
 inline constexpr double kExplained = 0.6;
 // The one level of the rule for adding a cause (AddsACause): a false addition rate calibrated on draws
 // (perf_multicause; docs/gap.md, "One rule for adding a cause").
-inline constexpr double kAdditionEvidence = 8.0;     // a candidate explains the gap when it closes this fraction of it (docs/gap.md)
+inline constexpr double kAdditionEvidence = 16.0;     // a candidate explains the gap when it closes this fraction of it (docs/gap.md)
 
 struct PhaseStat {
   Phase phase;
@@ -194,9 +194,10 @@ struct Diagnosis {
 // leaves white (a real cause removed) counts every sample; one it leaves structured (a patch of the smaller
 // model's form error) counts one sample per structure length. effective_samples is n_eff.
 double AdditionEvidence(double before_A, double after_A, double effective_samples);
-// The rule: a cause is added when what the smaller model leaves is itself a significant gap (> kSignificance x
-// floor, the test the gap passed) and the evidence reaches `level`.
-bool AddsACause(double before_A, double after_A, double effective_samples, double floor_A, double level);
+// The rule: a cause is added when the evidence reaches `level`. No gate on the size of what the smaller model leaves:
+// an addition that only fits noise makes the holdout runs worse (its own change counts against it there), and a
+// weak cause beside a strong one is plain in thousands of independent samples.
+bool AddsACause(double before_A, double after_A, double effective_samples, double level);
 StatusOr<Diagnosis> Diagnose(const Dataset& dataset, const model::PlantParams& nominal,
                              const DiagnoseOptions& options = {});
 

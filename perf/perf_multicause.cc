@@ -433,7 +433,7 @@ std::string Replay(const Outcome& o, double level) {
     const bool drift = a.to.find('|') != std::string::npos;
     if (drift) {
       if (a.from != current) continue;
-      if (AddsACause(current_after, a.after_A, a.effective_samples, o.floor_A, level)) {
+      if (AddsACause(current_after, a.after_A, a.effective_samples, level)) {
         // The drift joins the verdict only when the diagnosis named it (its own gap was significant).
         const std::string param = a.to.substr(a.to.find('|') + 1);
         if (MembersOf(o.verdict).count(param)) current += "+" + param;
@@ -441,7 +441,7 @@ std::string Replay(const Outcome& o, double level) {
       }
       continue;
     }
-    if (AddsACause(current_after, a.after_A, a.effective_samples, o.floor_A, level)) {
+    if (AddsACause(current_after, a.after_A, a.effective_samples, level)) {
       current = a.to;
       current_after = a.after_A;
     }
@@ -542,7 +542,7 @@ int main(int argc, char** argv) {
               worst_cpu, total_cpu, seed, budget_scale);
   if (calibrate && !issue26) {
     std::printf("\nthe rule's level replayed on these draws' evidence:\n");
-    for (double l : {1.0, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 16.0, 24.0, 32.0, 48.0, 64.0}) {
+    for (double l : {2.0, 4.0, 8.0, 12.0, 16.0, 24.0, 32.0, 48.0, 64.0, 128.0, 256.0}) {
       Scores at;
       for (const auto& o : outcomes) Score(o.draw, Replay(o, l), &at);
       char label[64];
