@@ -643,6 +643,59 @@ Status FitNuisance(const Dataset& ds, const std::vector<bool>& fit_mask, const m
   return Status::Ok();
 }
 
+// A parametric member of a chosen combination is a cause only when the runs would show it by itself: its own
+// noise-free holdout gap (the effects switched off) is at least sqrt(kSignificance^2 - 1) floors, the residual that
+// makes a gap significant (the test FitNuisance applies to a drift found beside a verdict). A smaller one is
+// nuisance drift: re-fitted, reported, not named (the gapbench README's "none" rule for drifts too small to matter).
+void ParametricMembersOrDrift(const Dataset& ds, const std::vector<bool>& fit_mask, const model::PlantParams& nominal,
+                              const std::vector<std::vector<double>>& nominal_i, const model::SolverOptions& solver,
+                              Diagnosis* d) {
+  if (d->chosen != 0 || d->ranking.empty() || d->candidates.empty()) return;
+  Candidate& c = d->candidates.front();
+  CandidateResult& row = d->ranking.front();
+  if (c.param_members.empty() || c.effects.empty() || Members(c).size() < 2) return;
+  PredictOptions popt;
+  popt.solver = solver;
+  const double threshold = std::sqrt(kSignificance * kSignificance - 1.0) * d->noise_floor_A;
+  std::vector<std::string> keep;
+  for (const auto& p : c.param_members) {
+    auto alone = PredictMembers(ds, nominal, c, row, {"param:" + p}, popt);
+    const double gap = alone.ok() ? HoldoutRms(alone->i_A, nominal_i, fit_mask) : INFINITY;
+    if (gap >= threshold) {
+      keep.push_back(p);
+      continue;
+    }
+    Diagnosis::Drift drift;
+    drift.param = p;
+    drift.value = row.params.count(p) ? row.params.at(p) : NAN;
+    drift.nominal = *model::GetParam(nominal, p);
+    drift.gap_A = gap;
+    d->nuisance.push_back(drift);
+  }
+  if (keep.size() == c.param_members.size()) return;
+  {
+    std::vector<std::string> effects_only = c.effects;
+    for (const auto& p : keep) effects_only.push_back("param:" + p);
+    auto e = PredictMembers(ds, nominal, c, row, effects_only, popt);
+    if (e.ok()) {
+      std::vector<std::vector<double>> measured;
+      for (const auto& r : ds.runs) measured.push_back(r.i_A);
+      d->verdict_alone_holdout_A = HoldoutRms(e->i_A, measured, fit_mask);
+      for (auto& drift : d->nuisance) drift.effects_gap_A = HoldoutRms(e->i_A, nominal_i, fit_mask);
+    }
+  }
+  c.param_members = keep;
+  std::vector<std::string> m = Members(c);
+  std::string name;
+  for (const auto& x : m) name += (name.empty() ? "" : "+") + x;
+  c.name = name;
+  c.kind = m.size() >= 2 ? CauseKind::kCombination : CauseKind::kEffect;
+  row.name = name;
+  row.kind = c.kind;
+  d->verdict = name;
+  d->verdict_kind = VerdictKindOf(c.kind);
+}
+
 // Form error is not a cause (docs/gap.md): when the verdict leaves a significant residual on the holdout runs
 // and no addition passed the rule, what is left is said to be the verdict's own form error, with its size above
 // the floor and its length, instead of being answered with another cause.
@@ -1086,6 +1139,7 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds_in, const model::PlantParams& nom
                                      100.0 * row.closed);
     }
   }
+  if (!opt.issue26_rules) ParametricMembersOrDrift(ds, fit_mask, nominal, nominal_i, opt.attribution.solver, &d);
   MemberShares(ds, fit_mask, nominal, nominal_i, opt.attribution.solver, std::max(d.noise_floor_A, d.form_floor_A), &d);
   NoteFormError(ds, opt.addition_evidence, &d);
   // Overlays: measured, nominal and the verdict's (or, when unknown, the best candidate's) fitted current.
