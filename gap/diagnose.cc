@@ -297,7 +297,10 @@ Status SelectCombination(const Dataset& ds, const std::vector<bool>& fit_mask, c
   // Issue 26 searched only where the best single left a significant gap. The rule needs no such gate: a weak second
   // cause beside a strong one can leave less than that and still be plain in thousands of independent samples, and
   // an addition that fits noise loses likelihood on the holdout runs (its own change counts against it there).
-  if (opt.issue26_rules && !(base_row.holdout_rmse_after_A > kSignificance * floor)) return Status::Ok();
+  // Readings (periodic or sampled runs: a few values per run) have no residual structure to measure, so there the
+  // search stays where the best single leaves a significant gap, as before.
+  const bool waveforms = std::all_of(ds.runs.begin(), ds.runs.end(), [](const RunData& r) { return r.kind == RunKind::kWaveform; });
+  if ((opt.issue26_rules || !waveforms) && !(base_row.holdout_rmse_after_A > kSignificance * floor)) return Status::Ok();
 
   // 1. The pool.
   std::vector<const CandidateResult*> structural, all_structural;
