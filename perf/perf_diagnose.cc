@@ -28,7 +28,7 @@ int main(int argc, char** argv) {
   namespace fs = std::filesystem;
   std::vector<std::string> dirs;
   double budget_scale = 1.0;
-  bool issue26_rules = false;  // --rule issue26: the earlier hand-set rules for adding a cause (before/after tables)
+  int rule = -1;  // --rule: 0 the evidence rule, 1 issue 26's rules; -1 the library's default
   for (int k = 1; k < argc; ++k) {
     if (std::string(argv[k]) == "--rule" && k + 1 < argc) {
       const std::string v = argv[++k];
@@ -36,7 +36,7 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "--rule: evidence or issue26, got %s\n", v.c_str());
         return 2;
       }
-      issue26_rules = v == "issue26";
+      rule = v == "issue26" ? 1 : 0;
       continue;
     }
     if (std::string(argv[k]) == "--budget-scale" && k + 1 < argc) {
@@ -86,7 +86,7 @@ int main(int argc, char** argv) {
     vb::gap::DiagnoseOptions dopt;
     dopt.budget_s *= budget_scale;
     dopt.attribution.candidate_budget_s *= budget_scale;
-    dopt.issue26_rules = issue26_rules;
+    if (rule >= 0) dopt.issue26_rules = rule == 1;
     auto d = vb::gap::Diagnose(*ds, *plant, dopt);
     const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     const double cpu_s = static_cast<double>(std::clock() - c0) / CLOCKS_PER_SEC;
