@@ -113,7 +113,8 @@ struct Sse {
 
 Sse Evaluate(const Dataset& ds, const std::vector<bool>& fit_mask, const model::PlantParams& plant,
              const model::DriverParams& driver, const model::SolverOptions& solver, bool holdout_too,
-             std::vector<double>* fit_residuals = nullptr, const NominalReference* nominal = nullptr) {
+             std::vector<double>* fit_residuals = nullptr, const NominalReference* nominal = nullptr,
+             std::vector<std::vector<double>>* holdout_residuals = nullptr) {
   Sse out;
   PredictOptions popt;
   popt.solver = solver;
@@ -129,10 +130,13 @@ Sse Evaluate(const Dataset& ds, const std::vector<bool>& fit_mask, const model::
     const auto& meas = ds.runs[r].i_A;
     const auto& sim = pred->i_A[r];
     double e2 = 0.0;
+    std::vector<double>* run_holdout = nullptr;
+    if (!fit_mask[r] && holdout_residuals != nullptr) run_holdout = &holdout_residuals->emplace_back();
     for (std::size_t k = 0; k < meas.size(); ++k) {
       const double e = meas[k] - sim[k];
       e2 += e * e;
       if (fit_mask[r] && fit_residuals != nullptr) fit_residuals->push_back(e);
+      if (run_holdout != nullptr) run_holdout->push_back(e);
       if (nominal != nullptr) {
         const int p = static_cast<int>(nominal->phase[r][k]);
         const double d = sim[k] - nominal->i_A[r][k];
@@ -158,6 +162,36 @@ Sse Evaluate(const Dataset& ds, const std::vector<bool>& fit_mask, const model::
 double Rms(double sse, std::size_t n) { return n > 0 ? std::sqrt(sse / static_cast<double>(n)) : 0.0; }
 
 }  // namespace
+
+double IntegratedAutocorrelationTime(const std::vector<std::vector<double>>& series) {
+  // Second moments about zero, pooled over the series: a residual's mean is structure too (an offset the model
+  // misses is as correlated as it gets), so it is not removed.
+  auto moment = [&](std::size_t lag) {
+    double sum = 0.0;
+    std::size_t n = 0;
+    for (const auto& x : series) {
+      if (x.size() <= lag) continue;
+      for (std::size_t k = lag; k < x.size(); ++k) sum += x[k] * x[k - lag];
+      n += x.size() - lag;
+    }
+    return n > 0 ? sum / static_cast<double>(n) : 0.0;
+  };
+  std::size_t longest = 0;
+  for (const auto& x : series) longest = std::max(longest, x.size());
+  const double c0 = moment(0);
+  if (!(c0 > 0.0) || longest < 4) return 1.0;
+  // Geyer's initial positive sequence (Statistical Science 7, 1992): the sums of adjacent lags
+  // Gamma_m = rho_2m + rho_2m+1 are positive and decreasing for a stationary process; the sum stops at the first
+  // that is not (noise in the far lags), and each is held to the one before (the initial monotone sequence).
+  double tau = -1.0, last = INFINITY;
+  for (std::size_t m = 0; 2 * m + 1 < longest / 2; ++m) {
+    const double gamma = (m == 0 ? 1.0 : moment(2 * m) / c0) + moment(2 * m + 1) / c0;
+    if (!(gamma > 0.0)) break;
+    last = std::min(last, gamma);
+    tau += 2.0 * last;
+  }
+  return std::max(tau, 1.0);
+}
 
 StatusOr<NominalReference> ReplayNominal(const Dataset& ds, const model::PlantParams& nominal,
                                          const model::SolverOptions& solver) {
@@ -329,7 +363,8 @@ CandidateResult Fit(const Dataset& ds, const std::vector<bool>& fit_mask, const 
     return res;
   }
   std::vector<double> residuals;
-  const Sse s = Evaluate(ds, fit_mask, *plant, *driver, opt.solver, true, &residuals, &ref);
+  std::vector<std::vector<double>> holdout_residuals;
+  const Sse s = Evaluate(ds, fit_mask, *plant, *driver, opt.solver, true, &residuals, &ref, &holdout_residuals);
   if (!s.ok) {
     res.status = s.status;
     res.score = kInf;
@@ -339,6 +374,8 @@ CandidateResult Fit(const Dataset& ds, const std::vector<bool>& fit_mask, const 
   res.fit_rmse_A = Rms(s.fit, s.fit_n);
   res.holdout_rmse_before_A = holdout_before;
   res.holdout_rmse_after_A = Rms(s.holdout, s.holdout_n);
+  res.holdout_samples = s.holdout_n;
+  res.holdout_autocorrelation_time = IntegratedAutocorrelationTime(holdout_residuals);
   double diff_total = 0.0;
   for (double d : s.diff) diff_total += d;
   for (int p = 0; p < kPhaseCount; ++p) {

@@ -88,6 +88,11 @@ struct CandidateResult {
   double holdout_rmse_before_A = 0.0;
   double holdout_rmse_after_A = 0.0;
   double closed = 0.0;        // (before - after) / (before - noise floor), in [0, 1]
+  // The holdout residual as evidence (docs/gap.md, "Several causes"): how many samples it has, and its integrated
+  // autocorrelation time in samples (1 for white noise; the length of the structure a model leaves, when it
+  // leaves some). holdout_samples / holdout_autocorrelation_time is its number of independent samples.
+  std::size_t holdout_samples = 0;
+  double holdout_autocorrelation_time = 1.0;
   double score = 0.0;         // holdout RMSE x (1 + complexity_penalty x parameters): lower is better
   // Holdout RMSE after the fit in each phase of the nominal model (phases where the holdout runs have samples).
   std::array<double, kPhaseCount> phase_holdout_after_A{};
@@ -167,6 +172,11 @@ StatusOr<std::vector<CandidateResult>> Attribute(const Dataset& ds, const std::v
                                                  const model::PlantParams& nominal,
                                                  const std::vector<Candidate>& candidates, double noise_floor_A,
                                                  const AttributionOptions& options = {});
+
+// The integrated autocorrelation time of a residual (in samples; 1 for white noise), pooled over several series
+// (the holdout runs): tau = 1 + 2 sum_k rho_k, the sum cut by Geyer's initial positive sequence. n / tau is the
+// number of independent samples a correlated residual is worth as evidence.
+double IntegratedAutocorrelationTime(const std::vector<std::vector<double>>& series);
 
 // Two candidates as one (each one's parameters free, shared ones once; a parametric single becomes a
 // parametric member), for when no single cause closes the gap.

@@ -131,6 +131,15 @@ std::string DiagnosisJson(const Diagnosis& d) {
                          {"gap_A", m.gap_A}});
     j["members"] = members;
   }
+  if (!d.additions.empty()) {  // the evidence for each addition the rule judged (docs/gap.md)
+    nlohmann::ordered_json steps = nlohmann::ordered_json::array();
+    for (const auto& a : d.additions)
+      steps.push_back({{"from", a.from}, {"to", a.to}, {"holdout_rmse_before_A", a.before_A},
+                       {"holdout_rmse_after_A", a.after_A}, {"effective_samples", a.effective_samples},
+                       {"evidence", a.evidence}, {"taken", a.taken}});
+    j["additions"] = steps;
+  }
+  if (!d.form_error.empty()) j["form_error"] = d.form_error;
   nlohmann::ordered_json limits = nlohmann::ordered_json::array();
   for (const auto& l : d.detection_limits) {
     nlohmann::ordered_json params = nlohmann::ordered_json::object();
@@ -300,6 +309,12 @@ std::string DiagnosisReport(const Diagnosis& d) {
                             "the effects' {:.2f} mA)",
                             n.param, n.value, 100.0 * (n.value / n.nominal - 1.0), d.verdict_alone_holdout_A * 1e3,
                             d.ranking.front().holdout_rmse_after_A * 1e3, n.gap_A * 1e3, n.effects_gap_A * 1e3)},
+               2, 120, 0);
+  for (const auto& a : d.additions)
+    os << Wrap({fmt::format("addition {} -> {}: holdout {:.2f} -> {:.2f} mA, {:.0f} independent samples, evidence {:.1f}: "
+                            "{}",
+                            a.from, a.to, a.before_A * 1e3, a.after_A * 1e3, a.effective_samples, a.evidence,
+                            a.taken ? "taken" : "not taken")},
                2, 120, 0);
   for (const auto& w : d.warnings) os << Wrap({"warning: " + w}, 2, 120, 0);
   return os.str();

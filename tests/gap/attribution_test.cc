@@ -249,18 +249,72 @@ TEST(Attribution, ADriftTheRunsShowByItselfIsACause) {
 namespace vb::gap {
 namespace {
 
-// The specificity rule on the figures that motivated it: practice/p03 (remanence alone, our play operator's
-// form error patched about equally by dry friction and eddy currents) is not specific; practice2m/r08 (a real
-// end-stop bounce beside remanence, three times what the next addition removes) is.
-TEST(Attribution, AnAdditionIsSpecificWhenNoOtherPatchesAsMuch) {
-  EXPECT_FALSE(SpecificAddition(13.65e-3, 11.43e-3, 11.81e-3, 2.0e-3));  // p03: 56 vs 47 mA^2
-  EXPECT_TRUE(SpecificAddition(11.87e-3, 9.50e-3, 11.19e-3, 2.0e-3));   // r08: 51 vs 16 mA^2
-  // Nothing else tried beside it: no verdict on specificity.
-  EXPECT_FALSE(SpecificAddition(11.87e-3, 9.50e-3, INFINITY, 2.0e-3));
-  // What is left is already within the noise: nothing to add.
-  EXPECT_FALSE(SpecificAddition(2.9e-3, 2.1e-3, 2.9e-3, 2.0e-3));
-  // A removal that is no significant gap by itself, however specific.
-  EXPECT_FALSE(SpecificAddition(3.2e-3, 2.95e-3, 3.2e-3, 2.0e-3));
+// The residual's integrated autocorrelation time: 1 for white noise, (1 + rho) / (1 - rho) for a first-order
+// autoregression, pooled over runs.
+TEST(AdditionRule, AutocorrelationTimeOfWhiteAndCorrelatedResiduals) {
+  std::mt19937 rng(5);
+  std::normal_distribution<double> n01(0.0, 1.0);
+  std::vector<std::vector<double>> white(2), ar(2);
+  for (int r = 0; r < 2; ++r) {
+    double x = 0.0;
+    for (int k = 0; k < 20000; ++k) {
+      white[r].push_back(n01(rng));
+      x = 0.9 * x + n01(rng);
+      ar[r].push_back(x);
+    }
+  }
+  EXPECT_NEAR(IntegratedAutocorrelationTime(white), 1.0, 0.15);
+  EXPECT_NEAR(IntegratedAutocorrelationTime(ar), 19.0, 4.0);
+  EXPECT_EQ(IntegratedAutocorrelationTime({}), 1.0);
+}
+
+// The rule on residuals built to the two cases it must tell apart. The smaller model leaves a smooth structure
+// (6 mA, one period over each 80 ms run) in 2 mA of noise. An addition that only patches that structure (takes 40 % of it: what a second
+// effect does to another effect's form error) leaves a structured residual, worth a handful of independent
+// samples: refused, although it removes a significant energy. A real second cause leaves the noise: accepted.
+// And nothing is added to a model that leaves no significant gap.
+TEST(AdditionRule, RefusesAPatchOfFormErrorAndAcceptsARealSecondCause) {
+  std::mt19937 rng(11);
+  std::normal_distribution<double> noise(0.0, 2e-3);
+  const double floor = 2e-3;
+  std::vector<std::vector<double>> smaller(2), patch(2), real(2);
+  for (int r = 0; r < 2; ++r)
+    for (int k = 0; k < 4000; ++k) {
+      const double t = k * 2e-5;
+      const double structure = 6e-3 * std::sin(2.0 * M_PI * t / 0.08 + r);
+      const double e = noise(rng);
+      smaller[r].push_back(structure + e);
+      patch[r].push_back(0.6 * structure + e);
+      real[r].push_back(e);
+    }
+  auto rms = [](const std::vector<std::vector<double>>& x) {
+    double s = 0.0, n = 0.0;
+    for (const auto& r : x)
+      for (double v : r) {
+        s += v * v;
+        n += 1.0;
+      }
+    return std::sqrt(s / n);
+  };
+  auto n_eff = [](const std::vector<std::vector<double>>& x) {
+    return 8000.0 / IntegratedAutocorrelationTime(x);
+  };
+  const double before = rms(smaller);
+  ASSERT_GT(before, kSignificance * floor);
+  // The patch removes more than a significant gap's energy, which the earlier rules counted (it also would not
+  // have halved the remainder; the specific-addition rule would have taken it had nothing else patched as much).
+  EXPECT_GT(before * before - rms(patch) * rms(patch), (kSignificance * kSignificance - 1.0) * floor * floor);
+  EXPECT_LT(n_eff(patch), 40.0);
+  EXPECT_FALSE(AddsACause(before, rms(patch), n_eff(patch), kAdditionEvidence))
+      << AdditionEvidence(before, rms(patch), n_eff(patch));
+  EXPECT_GT(n_eff(real), 5000.0);
+  EXPECT_TRUE(AddsACause(before, rms(real), n_eff(real), kAdditionEvidence))
+      << AdditionEvidence(before, rms(real), n_eff(real));
+  // An addition that only fits noise makes the holdout runs worse: no evidence, however many samples.
+  EXPECT_FALSE(AddsACause(floor, 1.01 * floor, 8000.0, kAdditionEvidence));
+  // A weak real cause beside a strong one (1.2 mA left in 2 mA of noise, less than a significant gap by itself)
+  // is plain in 8000 white samples.
+  EXPECT_TRUE(AddsACause(std::hypot(1.2e-3, floor), floor, 8000.0, kAdditionEvidence));
 }
 
 }  // namespace
