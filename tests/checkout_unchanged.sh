@@ -2,7 +2,9 @@
 # The suite never writes into the checkout (issue 41): CTest runs `snapshot` before every test (fixture setup)
 # and `check` after all of them (fixture cleanup). The state is git's view of the tree outside the build folder,
 # ignored files included (a __pycache__/ is ignored by .gitignore but would still enter the package), with a hash
-# of every file git lists, so a file that was already dirty and is written again is caught too.
+# of every file git lists, so a file that was already dirty and is written again is caught too. Other build trees
+# (`build-*/`, as .gitignore names them: scripts/fuzz.sh's build-fuzz/, a sanitizer build) are left out with it:
+# they are written by builds, not by tests, and may be busy while the suite runs.
 #   checkout_unchanged.sh snapshot|check SOURCE_DIR BINARY_DIR STATE_FILE
 # Exit 0 when unchanged, 1 naming the files that changed, 77 (skipped) when SOURCE_DIR is not a git checkout.
 set -eu
@@ -17,7 +19,8 @@ case "$bin/" in
   *) exclude=":(exclude).git" ;;
 esac
 listing() {
-  git -C "$top" status --porcelain --ignored --untracked-files=all -- . "$exclude" | LC_ALL=C sort |
+  git -C "$top" status --porcelain --ignored --untracked-files=all -- . "$exclude" ":(exclude)build-*" |
+  LC_ALL=C sort |
   while IFS= read -r line; do
     path=${line#???}
     case "$path" in *" -> "*) path=${path#*" -> "} ;; esac

@@ -459,7 +459,7 @@ TEST(BenchctlCli, ImportWorksLocallyThroughTheService) {
   // Listed newest first, cut by --limit, saying so.
   Result listed = cli("queue --local --status done --limit 5");
   ASSERT_EQ(listed.exit_code, 0) << listed.out;
-  EXPECT_NE(listed.out.find("5 runs on local store " + dir + "/local.db"), std::string::npos) << listed.out;
+  EXPECT_NE(listed.out.find("5 of 12 runs on local store " + dir + "/local.db"), std::string::npos) << listed.out;
   EXPECT_NE(listed.out.find("--limit"), std::string::npos) << listed.out;
 }
 

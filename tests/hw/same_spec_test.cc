@@ -60,7 +60,12 @@ TEST(SameSpec, RunsUnchangedOnEmulatedHidAndU3) {
     SafetyBench safe(benches[k], lim);
     Ran r = RunOn(e, safe);
     ASSERT_TRUE(r.summary.ok()) << names[k] << ": " << r.summary.message;
-    mean[k] = r.summary.metrics.mean_current_A;
+    // The mean of the recorded samples: what the three benches record is what must agree. (The run's own
+    // mean_current_A differs by construction since issue 37: the emulator's is the trajectory's, the USB
+    // benches' the samples', docs/metrics.md.)
+    double sum_A = 0.0;
+    for (double i_A : r.trace.i_A) sum_A += i_A;
+    mean[k] = r.trace.size() > 0 ? sum_A / static_cast<double>(r.trace.size()) : 0.0;
     last[k] = r.trace.i_A.back();
     samples[k] = r.trace.size();
   }
