@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <csignal>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -22,6 +23,16 @@
 #include "web/gateway.h"
 
 namespace {
+
+// The door now answers some requests (a refused import, bad framing) before it has read their bodies and closes
+// the connection; the test's HTTP client then writes into a closed socket. A real client gets EPIPE there, not a
+// signal that ends the process: the test process ignores SIGPIPE as a browser does (it failed once with SIGPIPE
+// in 4 runs under the full suite).
+const bool kSigpipeIgnored = [] {
+  std::signal(SIGPIPE, SIG_IGN);
+  return true;
+}();
+
 
 using Json = nlohmann::json;
 using vb::testing::kOperatorToken;
