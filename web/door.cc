@@ -80,6 +80,10 @@ struct Door::Conn {
   int requests = 0;
   Clock::time_point since = Clock::now();  // accepted, or back from a worker
   bool peer_closed = false;                // the client shut down its sending side after its request
+  // Answered and half-closed: the reader discards what the client still sends until it closes, up to the
+  // deadline (Door::Linger).
+  bool lingering = false;
+  size_t discarded = 0;
   size_t scanned = 0;                      // buf[0, scanned) holds no blank line: not searched again
   // True when buf holds a whole head. Each byte is searched once however often the reader wakes (issue 34:
   // rescanning every buffered head on each wake, 384 slow connections put the page's p50 at 387 ms).
@@ -338,7 +342,7 @@ void Door::Adopt(int fd) {
 
 void Door::Close(std::unique_ptr<Conn> c) {
   if (c->ssl) {
-    if (c->handshaken) {
+    if (c->handshaken && !c->lingering) {  // a lingering one sent its close_notify already
       SetBlocking(c->fd, false);
       (void)SSL_shutdown(c->ssl);
     }
@@ -350,6 +354,49 @@ void Door::Close(std::unique_ptr<Conn> c) {
   --open_;
   auto it = per_client_.find(c->client);
   if (it != per_client_.end() && --it->second <= 0) per_client_.erase(it);
+}
+
+// A connection closed after its answer while the client may still be sending (a body refused before it was
+// read: a 401/403/413 on an upload, issue 34's "token before the body"): closing a socket with unread bytes makes
+// the kernel send RST, and an RST may reach the client before it has read the answer, which is then lost (CI saw
+// the import's 403 lost this way). So the door does what Apache's lingering close and nginx's lingering_time do:
+// it half-closes (FIN after the answer) and discards what still arrives until the client closes, for at most
+// kLinger_s and kLingerBytes. A client that closes at once (the usual case) costs nothing; one that keeps sending
+// holds only a connection slot (counted in its address's cap), never a worker.
+void Door::Linger(std::unique_ptr<Conn> c) {
+  SetBlocking(c->fd, false);
+  if (c->ssl && c->handshaken) (void)SSL_shutdown(c->ssl);  // close_notify; later bytes are discarded unread
+  if (::shutdown(c->fd, SHUT_WR) != 0) {
+    Close(std::move(c));
+    return;
+  }
+  c->lingering = true;
+  c->want_write = false;
+  c->discarded = 0;
+  c->buf.clear();
+  c->deadline = After(kLinger_s);
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (!stopping_) {
+      incoming_.push_back(std::move(c));
+    }
+  }
+  if (c) {
+    Close(std::move(c));
+  } else {
+    Wake();
+  }
+}
+
+bool Door::Discard(Conn& c) {
+  char tmp[16384];
+  for (;;) {
+    const ssize_t n = ::recv(c.fd, tmp, sizeof(tmp), 0);
+    if (n == 0) return false;
+    if (n < 0) return errno == EAGAIN || errno == EWOULDBLOCK || errno == EINTR;
+    c.discarded += static_cast<size_t>(n);
+    if (c.discarded > kLingerBytes) return false;
+  }
 }
 
 bool Door::ReadSome(Conn& c) {
@@ -453,13 +500,23 @@ void Door::ReaderLoop() {
     }
     // TLS may hold decrypted bytes of a pipelined request that poll() cannot see.
     for (auto& c : conns)
-      if (c && c->ssl && c->handshaken && SSL_pending(c->ssl) > 0 && !ReadSome(*c)) Close(std::move(c));
+      if (c && !c->lingering && c->ssl && c->handshaken && SSL_pending(c->ssl) > 0 && !ReadSome(*c))
+        Close(std::move(c));
     conns.erase(std::remove(conns.begin(), conns.end(), nullptr), conns.end());
     // Heads already whole (a pipelined request left by the previous one) go straight on.
     std::vector<std::unique_ptr<Conn>> keep, to_work, to_close;
     const auto now = Clock::now();
     Clock::time_point next = now + std::chrono::seconds(1);
     for (auto& c : conns) {
+      if (c->lingering) {
+        if (now >= c->deadline) {
+          to_close.push_back(std::move(c));
+        } else {
+          next = std::min(next, c->deadline);
+          keep.push_back(std::move(c));
+        }
+        continue;
+      }
       bool whole = c->handshaken && c->HeadWhole();
       HeadVerdict v;
       if (whole) {
@@ -523,7 +580,7 @@ void Door::ReaderLoop() {
         still.push_back(std::move(c));
         continue;
       }
-      if (ReadSome(*c)) {
+      if (c->lingering ? Discard(*c) : ReadSome(*c)) {
         still.push_back(std::move(c));
       } else {
         Close(std::move(c));
@@ -605,7 +662,11 @@ void Door::WorkerLoop() {
       work_cv_.notify_all();  // a request of this client may have waited for its share
     }
     if (!ok || closed || last || state.close_after) {
-      Close(std::move(c));
+      if (c->peer_closed) {
+        Close(std::move(c));
+      } else {
+        Linger(std::move(c));
+      }
       continue;
     }
     c->buf = strm.Leftover();

@@ -66,6 +66,12 @@ class Door {
   // Reads what the socket has; true when the connection stays in the reader's set.
   bool ReadSome(Conn& c);
   void Close(std::unique_ptr<Conn> c);
+  // Half-closes after the answer and hands the connection to the reader, which discards what still arrives.
+  void Linger(std::unique_ptr<Conn> c);
+  // Reads and drops what a lingering connection's socket has; false when it is to be closed now.
+  bool Discard(Conn& c);
+  static constexpr double kLinger_s = 2.0;             // Apache's lingering close waits 2 s
+  static constexpr size_t kLingerBytes = 16u << 20;    // two bodies at the default max_body_bytes
   void Refuse(int fd, int status, const char* message);
   void Wake();
 

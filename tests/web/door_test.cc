@@ -624,6 +624,28 @@ TEST_F(WebDoorTest, ImportChecksTheTokenBeforeTheBodyAndCapsTheColumns) {
   ExpectUp();
 }
 
+// A client that sends its whole upload before it reads (cpp-httplib's, curl's for small bodies, a script's) must
+// get the refusal, not a reset: the door answers before the body and then lingers, discarding the body, until
+// the client closes (web/door.cc, Door::Linger). Closing with the body unread made the kernel send RST, which
+// could reach the client before it read the 403 (CI lost WebGatewayTest.SessionDownloadsAndImport's this way).
+TEST_F(WebDoorTest, ARefusedUploadSentWholeStillGetsItsAnswer) {
+  // Larger than loopback's socket buffers hold (about 4 + 6 MiB at most), under the 8 MiB body limit: the
+  // answer comes while the client is still sending.
+  const std::string body((15 << 20) / 2, 'x');
+  for (int k = 0; k < 4; ++k) {
+    const int fd = Connect(port_);
+    ASSERT_GE(fd, 0);
+    const bool sent = SendAll(fd, "POST /api/import HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\n"
+                                  "Authorization: Bearer " + std::string(kViewerToken) + "\r\n"
+                                  "Content-Length: " + std::to_string(body.size()) + "\r\n\r\n" + body);
+    const std::string a = ReadAnswer(fd, 5.0);
+    ::close(fd);
+    EXPECT_TRUE(sent) << "attempt " << k << ": the upload was cut off by a reset";
+    EXPECT_EQ(StatusOf(a), 403) << "attempt " << k << ":\n" << a.substr(0, 400);
+  }
+  ExpectUp();
+}
+
 TEST(WebDoorChecks, CsvHeaderProblemIsLinearAndCapped) {
   EXPECT_EQ(vb::web::CsvHeaderProblem("t_s,gate,i_A\n0,1,2\n"), "");
   EXPECT_EQ(vb::web::CsvHeaderProblem("\xEF\xBB\xBFt_s,i_A\r\n"), "");
