@@ -134,10 +134,26 @@ int StreamGate::open() const {
 
 grpc::Status BenchServiceImpl::Authorize(grpc::ServerContext* ctx, Role need, Principal* who) const {
   const auto& md = ctx->client_metadata();
+  // An address past the failure limit is refused whatever it sends (a good token too: a scanner must not learn
+  // which of its guesses was right by the answer changing). In-process peers (the web door, which limits by the
+  // real client's address, and benchctl --local) have no address here and are not limited.
+  const std::string client = ClientAddressOfPeer(ctx->peer());
+  if (!client.empty()) {
+    if (const double wait_s = auth_failures_.Blocked_s(client); wait_s > 0)
+      return grpc::Status(grpc::StatusCode::RESOURCE_EXHAUSTED,
+                          "too many failed authentications from " + client + "; try again in " +
+                              std::to_string(static_cast<int>(std::ceil(wait_s))) + " s");
+  }
   auto it = md.find("authorization");
   if (it == md.end()) return Unauthenticated(Status::FailedPrecondition("missing authorization metadata"));
   auto p = settings_->auth.Authenticate(std::string_view(it->second.data(), it->second.size()));
-  if (!p.ok()) return Unauthenticated(p.status());
+  if (!p.ok()) {
+    if (!client.empty()) {
+      auth_failures_.Failed(client);
+      spdlog::warn("grpc: failed authentication from {}: {}", client, p.status().message());
+    }
+    return Unauthenticated(p.status());
+  }
   if (!p->AtLeast(need))
     return PermissionDenied("user " + p->user + " (" + RoleName(p->role) + ") needs the " + RoleName(need) +
                             " role for this call");

@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "common/failed_attempts.h"
 #include "db/store.h"
 #include "service/settings.h"
 #include "runs/admit.h"
@@ -140,6 +141,9 @@ class BenchServiceImpl final : public valvebench::v1::BenchService::Service {
   runs::Registry* registry_;
   const std::vector<std::unique_ptr<runs::Worker>>* workers_;
   StreamGate streams_;
+  // Failed authentications per client address (common/failed_attempts.h): the same limit as the web's, so
+  // that gRPC is no unlimited, unlogged oracle for guessing tokens (issue 34).
+  mutable FailedAttempts auth_failures_;
 };
 
 

@@ -31,6 +31,7 @@
 #include <cerrno>
 
 #include "common/csv.h"
+#include "common/failed_attempts.h"
 #include "common/queue_estimate.h"
 #include "experiment/compare.h"
 #include "gap/dataset.h"
@@ -452,36 +453,6 @@ class Sessions {
   std::map<std::string, std::deque<std::string>> by_token_;  // a token's sessions, oldest first
 };
 
-// Failed logins per client address: kMax within kWindow_s, then refused until the oldest ages out.
-class FailedLogins {
- public:
-  static constexpr int kMax = 10;
-  static constexpr double kWindow_s = 300;
-  void Failed(const std::string& client) {
-    std::lock_guard<std::mutex> lock(mu_);
-    auto& q = by_client_[client];
-    q.push_back(Clock::now());
-    while (q.size() > static_cast<size_t>(kMax)) q.pop_front();
-    if (by_client_.size() > 10000) by_client_.erase(by_client_.begin());
-  }
-  // Seconds until the next attempt is allowed; 0 = now.
-  double Blocked_s(const std::string& client) {
-    std::lock_guard<std::mutex> lock(mu_);
-    auto it = by_client_.find(client);
-    if (it == by_client_.end() || it->second.size() < static_cast<size_t>(kMax)) return 0;
-    const double age = std::chrono::duration<double>(Clock::now() - it->second.front()).count();
-    if (age >= kWindow_s) {
-      by_client_.erase(it);
-      return 0;
-    }
-    return kWindow_s - age;
-  }
-
- private:
-  using Clock = std::chrono::steady_clock;
-  std::mutex mu_;
-  std::map<std::string, std::deque<Clock::time_point>> by_client_;
-};
 
 }  // namespace
 
@@ -810,9 +781,9 @@ class Routes {
   }
 
   // Login: a JSON body only (a cross-site form can post text/plain, not application/json without a CORS
-  // preflight this server never grants), from this dashboard's origin, at most kMaxFailedLogins failures per
-  // client address in kFailedLoginWindow; each failure is logged. The cookie holds a random session id, not the
-  // token: logout revokes it.
+  // preflight this server never grants), from this dashboard's origin, at most FailedAttempts::kMax failures per
+  // client address in FailedAttempts::kWindow_s (common/failed_attempts.h); each failure is logged. The cookie
+  // holds a random session id, not the token: logout revokes it.
   void Login(const httplib::Request& req, httplib::Response& res) {
     if (req.get_header_value("Content-Type").rfind("application/json", 0) != 0)
       return SendErrorStatus(res, 415, "INVALID_ARGUMENT", "Content-Type: must be application/json");
@@ -1778,7 +1749,7 @@ class Routes {
 
   std::unique_ptr<v1::BenchService::Stub> stub_;
   Sessions sessions_;
-  FailedLogins logins_;
+  FailedAttempts logins_;  // common/failed_attempts.h
   std::mutex streams_mu_;
   int streams_ = 0;
   std::map<std::string, int> streams_per_session_;

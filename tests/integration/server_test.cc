@@ -11,6 +11,7 @@
 #include <thread>
 
 #include "client/client.h"
+#include "common/failed_attempts.h"
 #include "experiment/runner.h"
 #include "experiment/spec.h"
 #include "server_process.h"
@@ -71,6 +72,31 @@ std::vector<v1::Run> WaitAll(client::Client& c, const std::vector<std::int64_t>&
     std::this_thread::sleep_for(std::chrono::milliseconds(50));
   }
   return out;
+}
+
+// Issue 34: a token is guessed at most FailedAttempts::kMax times per address in its window, over gRPC as over the
+// web; then the address is refused whatever it sends, a good token too, and the answer says for how long.
+TEST(Server, FailedAuthenticationsAreLimitedPerAddress) {
+  ServerProcess server(TempDir("guess"), "");
+  const std::string addr = server.Start();
+  ASSERT_FALSE(addr.empty()) << server.Log();
+  auto viewer = MakeClient(addr, testing::kViewerToken);
+  ASSERT_TRUE(viewer.Benches().ok());
+  auto anonymous = MakeClient(addr, nullptr);
+  for (int k = 0; k < 12; ++k) EXPECT_FALSE(anonymous.Benches().ok());  // no token: not a guess, not counted
+  ASSERT_TRUE(viewer.Benches().ok());
+  for (int k = 0; k < FailedAttempts::kMax; ++k) {
+    auto guess = MakeClient(addr, ("guess-" + std::to_string(k)).c_str());
+    auto st = guess.Benches();
+    ASSERT_FALSE(st.ok());
+    EXPECT_NE(st.status().message().find("not authenticated"), std::string::npos) << k << ": " << st.status().message();
+  }
+  auto after = viewer.Benches();
+  ASSERT_FALSE(after.ok());
+  EXPECT_EQ(after.status().code(), StatusCode::kResourceExhausted) << after.status().message();
+  EXPECT_NE(after.status().message().find("too many failed authentications from 127.0.0.1"), std::string::npos)
+      << after.status().message();
+  EXPECT_NE(server.Log().find("failed authentication from 127.0.0.1"), std::string::npos);
 }
 
 TEST(Server, AuthenticationRolesAndErrorCodes) {
