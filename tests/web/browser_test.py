@@ -28,7 +28,7 @@ try:
     from selenium.webdriver.chrome.service import Service
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support.ui import WebDriverWait
-    from selenium.common.exceptions import StaleElementReferenceException
+    from selenium.common.exceptions import NoSuchElementException, StaleElementReferenceException
 except ImportError:
     missing.append("python3-selenium")
 if missing:
@@ -99,6 +99,21 @@ def wait(cond, timeout=20, what="condition"):
     except Exception as e:  # noqa: BLE001 (selenium's TimeoutException, and what the condition raises)
         check("wait for " + what, False, repr(e))
         return None
+
+
+def click(by, selector, timeout=10):
+    """Finds the element and clicks it, again if the page re-rendered it in between (the Lab, run and Runs pages
+    redraw as the server reports: an element found a moment ago may be gone, which made the test flaky under load)."""
+    end = time.time() + timeout
+    while True:
+        try:
+            driver.find_element(by, selector).click()
+            return True
+        except (StaleElementReferenceException, NoSuchElementException):
+            if time.time() > end:
+                check("click " + selector, False, "not found or always re-rendered within %d s" % timeout)
+                return False
+            time.sleep(0.1)
 
 
 def console_errors(allowed=()):
@@ -455,7 +470,7 @@ try:
                                      "e.children.length === 0 && /^\\d+ %$/.test(e.textContent.trim())).length;")
     check("the run page shows one progress figure", progress == 1, progress)
     if btn:
-        btn[0].click()
+        click(By.ID, "cancel")
         # Cancel asks for confirmation and a reason (a prompt); the reason is recorded with the user's name.
         alert = wait(lambda: driver.switch_to.alert, what="the cancel confirmation")
         if alert:
@@ -551,7 +566,7 @@ try:
     case_links = row[0].find_elements(By.CSS_SELECTOR, "td.regressed-cases a") if row else []
     shot("nights")
     if case_links:
-        case_links[0].click()
+        click(By.CSS_SELECTOR, "td.regressed-cases a")
         runs_rows = wait(lambda: driver.find_elements(By.CSS_SELECTOR, "#runs tr")[1:] or None, what="regressed runs")
         names = [r.find_elements(By.TAG_NAME, "td")[3].text for r in runs_rows or []]
         check("the regressed case links to its runs in the night's batch", len(names) >= 1 and
@@ -570,7 +585,7 @@ try:
         go("#/diagnosis")
         button = wait(lambda: driver.find_elements(By.CSS_SELECTOR, "button.diagnose") or None, what="diagnose button")
         if button:
-            button[0].click()
+            click(By.CSS_SELECTOR, "button.diagnose")
             busy = driver.execute_script("return [document.querySelector('button.diagnose').disabled, "
                                          "!!document.querySelector('#diagnosis-report .progress-bar')];")
             check("diagnosis: the button is disabled and a progress shows while it runs", busy == [True, True], busy)
@@ -583,7 +598,7 @@ try:
         page_shots("diagnosis")
         no_overflow("#/diagnosis with its report")
         # The overlay link opens the imported runs' traces overlaid.
-        driver.find_element(By.CSS_SELECTOR, "a.overlay").click()
+        click(By.CSS_SELECTOR, "a.overlay")
         over = wait(lambda: driver.find_elements(By.CSS_SELECTOR, "#overlay-current canvas") or None, what="diagnosis overlay")
         check("diagnosis: the overlay link opens a populated overlay", bool(over) and
               len(driver.find_elements(By.CSS_SELECTOR, "#overlay-current .vb-legend-item")) >= 2,
@@ -697,15 +712,15 @@ try:
           first_page[:5])
     check("the page says which runs it shows of how many",
           page_info() == "showing 1–25 of %d" % len(all_ids), page_info())
-    driver.find_element(By.ID, "page-next").click()
+    click(By.ID, "page-next")
     wait(lambda: page_rows() and page_rows() != first_page or None, what="the next page")
     check("Next shows the following runs", page_rows()[:1] == [str(sorted(all_ids, reverse=True)[25])] and
           page_info().startswith("showing 26–"), (page_rows()[:2], page_info()))
-    driver.find_element(By.ID, "page-prev").click()
+    click(By.ID, "page-prev")
     wait(lambda: page_rows() == first_page or None, what="the previous page")
-    driver.find_element(By.CSS_SELECTOR, "th[data-order='id'] a").click()  # newest first -> by id, descending
+    click(By.CSS_SELECTOR, "th[data-order='id'] a")  # newest first -> by id, descending
     time.sleep(0.5)
-    driver.find_element(By.CSS_SELECTOR, "th[data-order='id'] a").click()  # again: ascending
+    click(By.CSS_SELECTOR, "th[data-order='id'] a")  # again: ascending
     asc = wait(lambda: page_rows() and page_rows()[0] == str(all_ids[0]) and page_rows(), what="sorted by id")
     check("a click on a header sorts by it", bool(asc) and [int(i) for i in asc] == all_ids[:len(asc)],
           (asc or [])[:5])
@@ -885,6 +900,23 @@ try:
                 what="banner cleared")
     check("the banner clears when the server is back", bool(gone))
     console_errors()  # the outage's failed requests are expected
+
+    # 10. After the restart the page works without a reload (issue 37, point 4): its in-memory session died with
+    # the old server, so the page logs in again by itself; a live view (cookie-authorised) and a download work.
+    after = api("POST", "/api/runs", OPERATOR, {"spec": dict(spec, name="web-after-restart", duration_s=20.0)})["run_ids"][0]
+    go("#/run/%s" % after)
+    live = wait(lambda: int(driver.find_element(By.CSS_SELECTOR, "#traces .live-count").get_attribute("data-samples")
+                            or 0) > 0 or None, timeout=30, what="live samples after the restart")
+    check("a live view works after the restart without a reload", bool(live),
+          driver.find_element(By.ID, "traces").text[:300])
+    status = driver.execute_async_script(
+        "const done = arguments[arguments.length - 1];"
+        "fetch('/api/runs/%s/trace.csv', {credentials: 'same-origin'}).then((r) => done(r.status), () => done(0));" % start_id)
+    check("a download works after the restart without a reload (the cookie is new)", status == 200, status)
+    flash_now = driver.find_element(By.ID, "flash").text
+    check("no gRPC words on the page after the restart", "UNAVAILABLE" not in flash_now and
+          "authorization metadata" not in driver.find_element(By.ID, "main").text, flash_now)
+    api("POST", "/api/runs/%s/cancel" % after, OPERATOR, {})
 except SystemExit:
     raise
 except Exception as e:  # noqa: BLE001

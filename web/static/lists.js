@@ -82,7 +82,26 @@ function setConnected(ok, why) {
     connectionLost = false;
     b.hidden = true;
     document.body.classList.remove('stale');
+    afterReconnect();
   }
+}
+// The server is back after an outage. It may have restarted, and its sessions live in its memory: the cookie that
+// live views and downloads use is then unknown to it ("missing authorization metadata", 401). So the page logs in
+// again with the token this tab holds (a bearer call, which a restart does not affect) and redraws the current
+// view, whose live streams reopen with the new cookie: no reload needed (issue 37, point 4). Views holding the
+// user's unsent input (Submit, Import) are not redrawn; their next action goes out with the new session.
+async function afterReconnect() {
+  if (token()) {
+    try { await api('POST', '/api/login', {token: token()}); } catch (e) {
+      if (e instanceof ApiError && e.status === 401) {  // the token itself is no longer configured
+        sessionStorage.removeItem(TOKEN_KEY);
+        showLoggedOut();
+        flash('The server is back but no longer knows your token: log in again.');
+      }
+      return;
+    }
+  }
+  if (!/^#\/(submit|import)/.test(location.hash)) route();
 }
 // Probes the server while the banner shows; a page whose own polling stopped still learns it is back.
 function startConnectionProbe() {
