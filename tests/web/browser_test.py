@@ -116,6 +116,18 @@ def click(by, selector, timeout=10):
             time.sleep(0.1)
 
 
+def text_of(by, selector, timeout=10):
+    """The element's text, read again if the page re-rendered it between finding and reading (see click())."""
+    end = time.time() + timeout
+    while True:
+        try:
+            return driver.find_element(by, selector).text
+        except StaleElementReferenceException:
+            if time.time() > end:
+                raise
+            time.sleep(0.1)
+
+
 def console_errors(allowed=()):
     """SEVERE console entries since the last call, minus the allowed patterns."""
     out = []
@@ -279,7 +291,7 @@ def check_compare_page(batch, runs):
 
 
 def check_diagnosis_page():
-    size = driver.find_element(By.CSS_SELECTOR, "#diagnosis-report .verdict-box").text
+    size = text_of(By.CSS_SELECTOR, "#diagnosis-report .verdict-box")
     check("diagnosis: the verdict with its size (the gap before and after, with units)",
           re.search(r"closes \d+ % of the hold-out gap: RMSE [0-9.]+ [mµ]?A → [0-9.]+ [mµ]?A", size), size)
     check("diagnosis: the effect's fitted parameter with its unit (supply_resistance.R_s in ohm)",
@@ -437,7 +449,7 @@ try:
                 what="submission result")
     live_id = link[0].text.lstrip("#") if link else None
     check("the submission is queued", live_id is not None and live_id.isdigit(),
-          driver.find_element(By.ID, "main").text[-600:])
+          text_of(By.ID, "main")[-600:])
     if live_id is None:
         raise RuntimeError("no run to follow")
 
@@ -451,9 +463,9 @@ try:
     time.sleep(1.0)
     later = samples()
     check("live samples arrive and keep arriving", bool(first) and later > first, (first, later))
-    bench_text = driver.find_element(By.CSS_SELECTOR, "#benches").text
+    bench_text = text_of(By.CSS_SELECTOR, "#benches")
     check("the bench shows what it runs", ("running #%s" % live_id) in bench_text, bench_text)
-    queue_text = driver.find_element(By.CSS_SELECTOR, "#queue").text
+    queue_text = text_of(By.CSS_SELECTOR, "#queue")
     check("the queue shows the run with an ETA", "web-live" in queue_text and re.search(r"\d+(\.\d)? s|min", queue_text),
           queue_text)
     shot("lab")
@@ -477,11 +489,11 @@ try:
             alert.send_keys("valve chatter seen")
             alert.accept()
     cancelled = wait(lambda: "CANCELLED" in driver.find_element(By.TAG_NAME, "h1").text, what="cancelled run")
-    check("the run is cancelled from the page", bool(cancelled), driver.find_element(By.TAG_NAME, "h1").text)
+    check("the run is cancelled from the page", bool(cancelled), text_of(By.TAG_NAME, "h1"))
     stored = api("GET", "/api/runs/" + live_id, VIEWER)["run"]
     check("the store says cancelled, by whom and why", stored["status"] == "CANCELLED" and
           stored.get("reason", "").startswith("cancelled by olga: valve chatter seen"), stored.get("reason"))
-    flash_text = driver.find_element(By.ID, "flash").text
+    flash_text = text_of(By.ID, "flash")
     check("the page says the result of the cancel", "cancelled" in flash_text.lower(), flash_text)
 
     # 4b. A run watched from its start (issue 24, M3): its first sample is at t_s = 0, which proto3 JSON would
@@ -525,7 +537,7 @@ try:
     check("the comparison has one row per law", table is not None and len(table) == 4, table)
     plots = wait(lambda: len(driver.find_elements(By.CSS_SELECTOR, "#pareto canvas, #overlay-current canvas, "
                                                   "#overlay-error canvas")) >= 3 or None, what="comparison plots")
-    legend = driver.find_element(By.ID, "overlay-current").text
+    legend = text_of(By.ID, "overlay-current")
     check("the overlays show every run", all(("#%s" % r["id"]) in legend for r in runs) and plots is not None, legend)
     check_compare_page(batch, runs)
     law_colours = {l[0]: l[1] for l in (chart_info("#pareto") or [{"legend": []}])[0]["legend"]}
@@ -537,7 +549,7 @@ try:
     done_id = str(runs[0]["id"])
     go("#/run/" + done_id)
     wait(lambda: len(driver.find_elements(By.CSS_SELECTOR, ".trace-chart canvas")) >= 2 or None, what="trace charts")
-    metrics = driver.find_element(By.ID, "metrics").text
+    metrics = text_of(By.ID, "metrics")
     check("the run page shows metrics with units and SI prefixes", re.search(r"rmse -?[0-9.]+ [mµn]?A\b", metrics), metrics[:300])
     # Issue 37: the one unit rule (common/units.h): the page writes a value as benchctl show and Python do.
     fmt = driver.execute_script("return [[81.13e-6, 'm^2'], [0.02773, 'kg'], [7.514e-4, 'kg/s'], [9.533e-4, 'A'],"
@@ -602,7 +614,7 @@ try:
         over = wait(lambda: driver.find_elements(By.CSS_SELECTOR, "#overlay-current canvas") or None, what="diagnosis overlay")
         check("diagnosis: the overlay link opens a populated overlay", bool(over) and
               len(driver.find_elements(By.CSS_SELECTOR, "#overlay-current .vb-legend-item")) >= 2,
-              driver.find_element(By.ID, "main").text[:300])
+              text_of(By.ID, "main")[:300])
         page_shots("diagnosis-overlay", widths=(1400,))
         # Re-run of an imported run: refused with a clear message by the API, the page's button disabled.
         imp = api("GET", "/api/runs?tag=imported&page_size=1", VIEWER)["runs"][0]["id"]
@@ -668,7 +680,7 @@ try:
         go(page)
         time.sleep(0.6)
         check(page + " renders without an error", not driver.find_elements(By.CSS_SELECTOR, "main .error"),
-              driver.find_element(By.ID, "main").text[:300])
+              text_of(By.ID, "main")[:300])
         no_overflow(page)
     go("#/runs")
     time.sleep(0.5)
@@ -748,7 +760,7 @@ try:
     wait(lambda: page_rows() or None, what="runs table")
     for w in (1400, 1024):
         shot_at("runs", w)
-    header_text = driver.find_element(By.ID, "session-text").text
+    header_text = text_of(By.ID, "session-text")
     check("the header shows the user and the role", "olga" in header_text and "operator" in header_text, header_text)
 
     # 7d. Downloads of every format the CLI writes, with their content types, parsed as a user would.
@@ -832,7 +844,7 @@ try:
     check("an operator sees Cancel on its own run only",
           not driver.find_elements(By.CSS_SELECTOR, "#queue tr[data-run='%s'] button.cancel" % theirs) and
           driver.find_elements(By.CSS_SELECTOR, "#queue tr[data-run='%s'] button.cancel" % mine),
-          driver.find_element(By.ID, "queue").text[:400])
+          text_of(By.ID, "queue")[:400])
     api("POST", "/api/runs/%s/cancel" % theirs, OPERATOR2, {})
     api("POST", "/api/runs/%s/cancel" % mine, OPERATOR, {})
     errors = console_errors()
@@ -853,13 +865,13 @@ try:
     go("#/")
     wait(lambda: driver.find_elements(By.CSS_SELECTOR, "#queue tr[data-run='%s']" % running) or None, what="queue (viewer)")
     check("a viewer sees no Cancel in the queue", not driver.find_elements(By.CSS_SELECTOR, "#queue button.cancel"),
-          driver.find_element(By.ID, "queue").text[:300])
+          text_of(By.ID, "queue")[:300])
     nav = [a.text for a in driver.find_elements(By.CSS_SELECTOR, "#nav a") if a.is_displayed()]
     check("a viewer's navigation has no Submit", "Submit" not in nav, nav)
     go("#/run/%s" % running)
     wait(lambda: driver.find_elements(By.CSS_SELECTOR, "#traces .live-count") or None, what="run page (viewer)")
     check("a viewer sees no Cancel or Re-run on a run", not driver.find_elements(By.CSS_SELECTOR, "#cancel, #rerun"),
-          driver.find_element(By.CSS_SELECTOR, "#main .actions").text)
+          text_of(By.CSS_SELECTOR, "#main .actions"))
     go("#/submit")
     wait(lambda: driver.find_elements(By.ID, "spec") or None, what="spec editor (viewer)")
     button = driver.find_element(By.ID, "submit")
@@ -888,7 +900,7 @@ try:
     banner = wait(lambda: driver.find_element(By.ID, "disconnected").is_displayed() and
                   driver.find_element(By.ID, "disconnected").text, what="disconnected banner")
     check("a banner says the server is gone", bool(banner) and "Disconnected" in banner and "retrying" in banner, banner)
-    check("no 'Failed to fetch' over the page", "Failed to fetch" not in driver.find_element(By.ID, "flash").text)
+    check("no 'Failed to fetch' over the page", "Failed to fetch" not in text_of(By.ID, "flash"))
     shot_at("disconnected", 1024)
     config["web"]["listen_address"] = "127.0.0.1:%d" % web_port
     config["nights"]["cron"] = "0 2 * * *"
@@ -908,14 +920,14 @@ try:
     live = wait(lambda: int(driver.find_element(By.CSS_SELECTOR, "#traces .live-count").get_attribute("data-samples")
                             or 0) > 0 or None, timeout=30, what="live samples after the restart")
     check("a live view works after the restart without a reload", bool(live),
-          driver.find_element(By.ID, "traces").text[:300])
+          text_of(By.ID, "traces")[:300])
     status = driver.execute_async_script(
         "const done = arguments[arguments.length - 1];"
         "fetch('/api/runs/%s/trace.csv', {credentials: 'same-origin'}).then((r) => done(r.status), () => done(0));" % start_id)
     check("a download works after the restart without a reload (the cookie is new)", status == 200, status)
-    flash_now = driver.find_element(By.ID, "flash").text
+    flash_now = text_of(By.ID, "flash")
     check("no gRPC words on the page after the restart", "UNAVAILABLE" not in flash_now and
-          "authorization metadata" not in driver.find_element(By.ID, "main").text, flash_now)
+          "authorization metadata" not in text_of(By.ID, "main"), flash_now)
     api("POST", "/api/runs/%s/cancel" % after, OPERATOR, {})
 except SystemExit:
     raise
