@@ -929,6 +929,15 @@ try:
     check("no gRPC words on the page after the restart", "UNAVAILABLE" not in flash_now and
           "authorization metadata" not in text_of(By.ID, "main"), flash_now)
     api("POST", "/api/runs/%s/cancel" % after, OPERATOR, {})
+
+    # 11. The served batch report draws its charts in the browser under its own CSP (issue 34: the dashboard's CSP
+    # blocked its inline scripts, so it drew none): the report's scripts are allowed by their hashes, nothing else.
+    console_errors()
+    driver.get(base + "/api/batches/%s/report.html" % batch)  # a navigation: the session cookie authorises it
+    drawn = wait(lambda: driver.execute_script("return document.querySelectorAll('canvas, svg.plot').length") or None,
+                 what="the report's charts")
+    csp = [e for e in console_errors() if "Content Security Policy" in e or "Refused" in e]
+    check("the served report draws its charts under its CSP", bool(drawn) and not csp, (drawn, csp))
 except SystemExit:
     raise
 except Exception as e:  # noqa: BLE001
