@@ -26,16 +26,17 @@ const char* VerdictKindName(VerdictKind kind) {
     case VerdictKind::kCombination: return "combination";
     case VerdictKind::kEitherOf: return "either_of";
     case VerdictKind::kUnknown: return "unknown";
+    case VerdictKind::kUndetermined: return "undetermined";
   }
   return "unknown";
 }
 
 StatusOr<VerdictKind> ParseVerdictKind(std::string_view name) {
   for (VerdictKind k : {VerdictKind::kNone, VerdictKind::kEffect, VerdictKind::kParameter, VerdictKind::kCombination,
-                        VerdictKind::kEitherOf, VerdictKind::kUnknown})
+                        VerdictKind::kEitherOf, VerdictKind::kUnknown, VerdictKind::kUndetermined})
     if (name == VerdictKindName(k)) return k;
   return Status::InvalidArgument("verdict kind: '" + std::string(name) +
-                                 "' is not none, effect, parameter, combination, either_of or unknown");
+                                 "' is not none, effect, parameter, combination, either_of, unknown or undetermined");
 }
 
 VerdictKind VerdictKindOf(CauseKind cause) {
@@ -886,9 +887,43 @@ void LandmarksAndTrends(const Dataset& ds, const std::vector<std::vector<double>
   }
 }
 
-// Step 5's verdict: the best row when it may be the verdict and closes kExplained of the gap, "none" when
-// against a reference only the model's form error is left, else "unknown"; and what the verdict is confusable with.
-void Decide(Diagnosis* out) {
+// "Nothing changed", when the evidence can carry it: against a reference only when the reference was identified to
+// within kReferenceIdentified x its noise floor (diagnose.h); otherwise `undetermined`, with the reference's fit
+// error against its noise, the smallest change these runs could have shown and what to record to do better.
+void NoneOrUndetermined(Diagnosis* out, const std::string& none_reason) {
+  Diagnosis& d = *out;
+  d.chosen = -1;
+  if (!d.has_reference || d.reference.identified()) {
+    d.verdict = "none";
+    d.verdict_kind = VerdictKind::kNone;
+    d.verdict_reason = none_reason;
+    return;
+  }
+  d.verdict = "undetermined";
+  d.verdict_kind = VerdictKind::kUndetermined;
+  // The target's gap becomes significant at kSignificance x max(noise, the reference's error); a change adds its
+  // own signature in quadrature to what the reference leaves, so the smallest it could be seen at is
+  // sqrt(kSignificance^2 - 1) x that floor.
+  const double floor = std::max({d.noise_floor_A, d.reference.fit_rmse_A, d.measurement_noise_A});
+  d.smallest_visible_A = std::sqrt(kSignificance * kSignificance - 1.0) * floor;
+  d.verdict_reason = fmt::format(
+      "cannot tell: the reference is identified at {:.2f} mA RMS against its noise floor of {:.2f} mA ({:.1f}x; "
+      "`none` needs at most {:.0f}x), so a change whose own signature on the current is below {:.2f} mA RMS "
+      "cannot be told from the reference's own fit error ({})",
+      d.reference.fit_rmse_A * 1e3, d.reference.noise_floor_A * 1e3,
+      d.reference.noise_floor_A > 0.0 ? d.reference.fit_rmse_A / d.reference.noise_floor_A : INFINITY,
+      kReferenceIdentified, d.smallest_visible_A * 1e3, none_reason);
+  std::string record;
+  for (const auto& r : d.reference.to_record) record += (record.empty() ? "" : "; ") + r;
+  if (!record.empty()) d.verdict_reason += "; to do better: " + record;
+}
+
+// Step 5's verdict, decided here and only here: the best row when it may be the verdict and closes kExplained of
+// the gap (among rows the data cannot separate from it, the one the declared conditions or a from-scratch
+// moving valve's data determine: ChooseAmongConfusable, gap/moving_valve.h), "none" when against a reference
+// only the model's form error is left and the reference was identified (else "undetermined"), else "unknown";
+// and what the verdict is confusable with.
+void Decide(Diagnosis* out, const Dataset& target) {
   Diagnosis& d = *out;
   const double floor = std::max(d.noise_floor_A, d.form_floor_A);
   const CandidateResult& best = d.ranking.front();
@@ -897,10 +932,8 @@ void Decide(Diagnosis* out) {
     // Against a reference: nothing fits this session's fit runs better than the device as identified there,
     // and the holdout runs are no worse: nothing changed but the model's own form error. (Without a
     // reference the same picture is also what an effect outside the catalog looks like: that stays unknown.)
-    d.verdict = "none";
-    d.verdict_kind = VerdictKind::kNone;
-    d.verdict_reason = "what is left is the model's own form error: no candidate fits better, and the holdout "
-                       "runs are within " + FormatNumber(kSignificance) + "x of it";
+    NoneOrUndetermined(&d, "what is left is the model's own form error: no candidate fits better, and the holdout "
+                           "runs are within " + FormatNumber(kSignificance) + "x of it");
   } else if (best.status.ok() && best.disqualified.empty() && best.closed >= kExplained) {
     d.chosen = 0;
     d.verdict = best.name;
@@ -941,6 +974,10 @@ void Decide(Diagnosis* out) {
     }
     if (best.name == d.chosen_combination)
       d.confusable.insert(d.confusable.end(), d.combination_alternatives.begin(), d.combination_alternatives.end());
+    // The verdict is written once, from the row chosen among the confusable ones.
+    const std::string either = ChooseAmongConfusable(&d, target);
+    d.verdict = either.empty() ? d.ranking.front().name : either;
+    d.verdict_kind = either.empty() ? VerdictKindOf(d.ranking.front().kind) : VerdictKind::kEitherOf;
   }
 }
 
@@ -955,6 +992,33 @@ double SharedTemperatureC(const Dataset& ds) {
     tmax = std::max(tmax, r.temperature_C());
   }
   return std::isfinite(tmin) && tmax - tmin <= 1.0 ? 0.5 * (tmin + tmax) : NAN;
+}
+
+// What would identify a reference better, from what its runs are (said with an `undetermined` verdict).
+std::vector<std::string> ToRecord(const Dataset& ref, bool switch_on) {
+  std::vector<std::string> out;
+  std::set<double> pressures, supplies;
+  for (const auto& r : ref.runs) pressures.insert(r.supply_pressure_Pa), supplies.insert(r.supply_V);
+  if (switch_on && pressures.size() < 3)
+    out.push_back("switch-on runs at 3 or more supply pressures (they separate the preload from the pressure area)");
+  if (supplies.size() < 2)
+    out.push_back(switch_on ? "a pulling-in run at a second supply voltage (the current then rises at another rate, "
+                              "which separates the lift from the flight and R from L)"
+                            : "runs at a second supply voltage (they separate R from the sense chain's gain)");
+  if (switch_on) {
+    bool settles = true;
+    for (const auto& r : ref.runs) {
+      if (r.i_A.size() < 20) continue;
+      const std::size_t n = r.i_A.size();
+      // The last tenth still rising by more than 1 % of the final value: the window ends before the final current.
+      settles = settles && std::abs(r.i_A[n - 1] - r.i_A[n - 1 - n / 10]) < 0.01 * std::abs(r.i_A[n - 1]);
+    }
+    if (!settles)
+      out.push_back("a longer window, until the current settles (5 L/R), so the final current gives R directly");
+  }
+  out.push_back("more sweeps averaged per trace (the noise floor falls as 1/sqrt(sweeps))");
+  out.push_back("or a reference fit on fewer parameters, the rest held at values measured on the valve (--reference-params)");
+  return out;
 }
 }  // namespace
 
@@ -977,6 +1041,8 @@ StatusOr<FittedDevice> ReferenceDevice(const Dataset& reference, const model::Pl
       for (const auto& h : id->held) out->notes.push_back(h.name + " held at " + FormatNumber(h.value));
       for (const auto& n : id->notes) out->notes.push_back(n);
       out->temperature_C = SharedTemperatureC(reference);
+      out->noise_floor_A = id->noise_floor_A;
+      out->to_record = ToRecord(reference, true);
     }
     return dev;
   }
@@ -994,6 +1060,8 @@ StatusOr<FittedDevice> ReferenceDevice(const Dataset& reference, const model::Pl
     out->fit_rmse_A = id->fit.fit_rmse_A;
     out->params = id->fit.params;
     out->temperature_C = SharedTemperatureC(reference);
+    out->noise_floor_A = id->noise_floor_A;
+    out->to_record = ToRecord(reference, false);
   }
   return dev;
 }
@@ -1016,6 +1084,10 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds_in, const model::PlantParams& nom
     with_driver = ds_in;
     with_driver.driver = dev->driver;
     dsp = &with_driver;
+    // A reference identified from scratch saw its captures cleaned (offset, edge spike, polarity): the target
+    // gets the same, or a baseline offset would pass for a change of the sense chain.
+    if (d.reference.from_scratch)
+      for (const auto& note : CleanSwitchOnSession(&with_driver)) d.warnings.push_back("target " + note);
   }
   const Dataset& ds = *dsp;
   const std::vector<Split> split = MakeSplit(ds, &d.split_note);
@@ -1045,10 +1117,8 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds_in, const model::PlantParams& nom
   }
 
   if (!d.significant) {
-    d.verdict = "none";
-    d.verdict_kind = VerdictKind::kNone;
-    d.verdict_reason = d.has_reference ? "the change from the reference is within its own fit error"
-                                       : "the residual is within the noise floor";
+    NoneOrUndetermined(&d, d.has_reference ? "the change from the reference is within its own fit error"
+                                           : "the residual is within the noise floor");
     return d;
   }
   if (!opt.attribute) {
@@ -1120,9 +1190,7 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds_in, const model::PlantParams& nom
       break;
     }
 
-  Decide(&d);
-  if (d.reference.from_scratch) PreferDeterminedChange(&d, ds);
-  PreferDeclaredTemperature(&d, ds);
+  Decide(&d, ds);
   const CandidateResult& best = d.ranking.front();
 
   if (opt.fit_nuisance) {

@@ -77,6 +77,8 @@ std::string DiagnosisJson(const Diagnosis& d) {
                       {"temperature_C", NumOrNull(d.reference.temperature_C)},
                       {"fit_rmse_A", d.reference.fit_rmse_A},
                       {"params", params}};
+    j["reference"]["noise_floor_A"] = d.reference.noise_floor_A;
+    j["reference"]["identified"] = d.reference.identified();
     if (d.reference.from_scratch) {
       j["reference"]["from_scratch"] = true;
       j["reference"]["notes"] = d.reference.notes;
@@ -110,6 +112,10 @@ std::string DiagnosisJson(const Diagnosis& d) {
   j["verdict"] = d.verdict;
   j["verdict_kind"] = VerdictKindName(d.verdict_kind);
   j["verdict_reason"] = d.verdict_reason;
+  if (d.verdict_kind == VerdictKind::kUndetermined) {
+    j["smallest_visible_A"] = NumOrNull(d.smallest_visible_A);
+    j["to_record"] = d.reference.to_record;
+  }
   if (!d.nuisance.empty()) {
     nlohmann::ordered_json drift = nlohmann::ordered_json::array();
     for (const auto& n : d.nuisance)
