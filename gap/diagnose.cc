@@ -5,6 +5,7 @@
 #include "gap/opening_dip.h"
 #include "gap/predict.h"
 
+#include <boost/math/distributions/fisher_f.hpp>
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
@@ -210,6 +211,33 @@ bool AddsACause(double before_A, double after_A, double effective_samples, doubl
   return AdditionEvidence(before_A, after_A, effective_samples) >= level;
 }
 
+Parsimony ParsimonyTest(double before_A, int params_before, double tau_before, double after_A, int params_after,
+                        double tau_after, std::size_t holdout_samples, int compared, double level) {
+  Parsimony out;
+  out.level = level / static_cast<double>(std::max(compared, 1));
+  const double tau = std::max({tau_before, tau_after, 1.0});
+  out.samples = static_cast<double>(holdout_samples) / (std::isfinite(tau) ? tau : 1.0);
+  // A larger model with no more free parameters (a different effect in place of one) is judged on one.
+  const double extra = std::max(params_after - params_before, 1);
+  const double df2 = out.samples - static_cast<double>(params_after);
+  if (level >= 1.0) {  // the test switched off (DiagnoseOptions::parsimony_level = 1)
+    out.passes = true;
+    return out;
+  }
+  // Fewer independent samples than the larger model has parameters, or no improvement: nothing to test, and a
+  // model that cannot be tested is not taken.
+  if (!(df2 >= 1.0) || !(before_A > after_A) || !(after_A > 0.0) || !std::isfinite(before_A)) {
+    out.f = 0.0;
+    out.p_value = 1.0;
+    return out;
+  }
+  out.f = ((before_A * before_A - after_A * after_A) / extra) / (after_A * after_A / df2);
+  const boost::math::fisher_f_distribution<double> dist(extra, df2);
+  out.p_value = boost::math::cdf(boost::math::complement(dist, out.f));
+  out.passes = out.p_value <= out.level;
+  return out;
+}
+
 namespace {
 
 // Issue 26's rules, kept only so that perf_multicause measures before and after on the same draws
@@ -268,6 +296,16 @@ bool EffectVanished(const Candidate& c, const CandidateResult& r, const std::str
 bool AnyEffectVanished(const Candidate& c, const CandidateResult& r) {
   return std::any_of(c.effects.begin(), c.effects.end(),
                      [&](const std::string& e) { return EffectVanished(c, r, e); });
+}
+
+void RecordParsimony(const Parsimony& p, int params_before, int params_after, Diagnosis::Addition* step) {
+  step->params_before = params_before;
+  step->params_after = params_after;
+  step->f_statistic = p.f;
+  step->p_value = p.p_value;
+  step->level = p.level;
+  step->parsimony_samples = p.samples;
+  step->parsimonious = p.passes;
 }
 
 // Several causes (docs/gap.md, "Several causes"): a small beam search, then a parsimonious choice on the
@@ -427,6 +465,7 @@ Status SelectCombination(const Dataset& ds, const std::vector<bool>& fit_mask, c
   //    taken when the rule (AddsACause) accepts it against the model taken so far; a size may be skipped when
   //    no model of it passes but a larger one does.
   const CandidateResult* current = &base_row;
+  int current_params = static_cast<int>(candidate_of(base_row.name)->params.size());
   std::vector<std::string> current_members = Members(*candidate_of(base_row.name));
   std::size_t current_effects = 1;
   std::vector<std::string> accepted;
@@ -438,8 +477,10 @@ Status SelectCombination(const Dataset& ds, const std::vector<bool>& fit_mask, c
   for (std::size_t size = 2; size <= static_cast<std::size_t>(opt.max_effects); ++size) {
     const CandidateResult* best = nullptr;
     std::size_t best_k = 0;
+    int compared = 0;
     for (std::size_t k = 0; k < tried.size(); ++k) {
       if (Members(tried_c[k]).size() != size || !tried[k].status.ok() || !tried[k].disqualified.empty()) continue;
+      ++compared;
       if (best == nullptr || tried[k].score < best->score) {
         best = &tried[k];
         best_k = k;
@@ -465,10 +506,20 @@ Status SelectCombination(const Dataset& ds, const std::vector<bool>& fit_mask, c
         take = Issue26Specific(step.before_A, step.after_A, next_after, floor);
       }
     }
+    // Parsimony, whichever rule: the larger model must close significantly more than the one taken so far, its
+    // extra free parameters counted (ParsimonyTest; practice3 m03: a warmer coil's R beside dry friction and a
+    // preload that patch the reference's form error at the new operating point).
+    const Parsimony parsimony =
+        ParsimonyTest(step.before_A, current_params, current->holdout_autocorrelation_time, step.after_A,
+                      static_cast<int>(tried_c[best_k].params.size()), best->holdout_autocorrelation_time,
+                      best->holdout_samples, compared, opt.parsimony_level);
+    RecordParsimony(parsimony, current_params, static_cast<int>(tried_c[best_k].params.size()), &step);
+    take = take && parsimony.passes;
     step.taken = take;
     d->additions.push_back(step);
     if (take) {
       current = best;
+      current_params = static_cast<int>(tried_c[best_k].params.size());
       current_members = Members(tried_c[best_k]);
       current_effects = size;
       accepted.push_back(best->name);
@@ -567,7 +618,7 @@ StatusOr<Predicted> PredictMembers(const Dataset& ds, const model::PlantParams& 
 // generator's convention: a drift the runs show by itself is news to the user.)
 Status FitNuisance(const Dataset& ds, const std::vector<bool>& fit_mask, const model::PlantParams& nominal,
                    const std::vector<std::vector<double>>& nominal_i, const AttributionOptions& attribution,
-                   double level, bool issue26_rules, Diagnosis* d) {
+                   double level, bool issue26_rules, double parsimony_level, Diagnosis* d) {
   // Only beside a verdict: a drift never turns "unknown" into a name (an effect outside the catalog plus a
   // free parameter would close more than either, and must stay unknown).
   if (d->chosen != 0 || d->ranking.empty() || d->candidates.empty()) return Status::Ok();
@@ -592,9 +643,16 @@ Status FitNuisance(const Dataset& ds, const std::vector<bool>& fit_mask, const m
   auto fitted = Attribute(ds, fit_mask, nominal, trials, d->noise_floor_A, attribution);
   if (!fitted.ok()) return fitted.status();
   const CandidateResult* best = nullptr;
+  int compared = 0;
   for (const auto& row : *fitted)
-    if (row.status.ok() && row.disqualified.empty() && (best == nullptr || row.score < best->score)) best = &row;
+    if (row.status.ok() && row.disqualified.empty()) {
+      ++compared;
+      if (best == nullptr || row.score < best->score) best = &row;
+    }
   if (best == nullptr) return Status::Ok();
+  const Candidate* best_c = nullptr;
+  for (const auto& t : trials)
+    if (t.name == best->name) best_c = &t;
   {
     Diagnosis::Addition step;
     step.from = verdict.name;
@@ -605,12 +663,17 @@ Status FitNuisance(const Dataset& ds, const std::vector<bool>& fit_mask, const m
     step.evidence = AdditionEvidence(step.before_A, step.after_A, step.effective_samples);
     step.taken = issue26_rules ? Issue26Decisive(step.before_A, step.after_A, d->noise_floor_A)
                                : AddsACause(step.before_A, step.after_A, step.effective_samples, level);
+    // Parsimony: the freed parameter must earn its place on the holdout runs (ParsimonyTest).
+    const int p_before = static_cast<int>(verdict_c.params.size());
+    const int p_after = static_cast<int>(best_c->params.size());
+    const Parsimony parsimony =
+        ParsimonyTest(step.before_A, p_before, verdict.holdout_autocorrelation_time, step.after_A, p_after,
+                      best->holdout_autocorrelation_time, best->holdout_samples, compared, parsimony_level);
+    RecordParsimony(parsimony, p_before, p_after, &step);
+    step.taken = step.taken && parsimony.passes;
     d->additions.push_back(step);
     if (!step.taken) return Status::Ok();
   }
-  const Candidate* best_c = nullptr;
-  for (const auto& t : trials)
-    if (t.name == best->name) best_c = &t;
   const std::string param = best_c->params.back().name;
   Candidate refined_c = *best_c;
   refined_c.param_members.push_back(param);
@@ -709,8 +772,12 @@ void NoteFormError(const Dataset& ds, double level, Diagnosis* d) {
   const double floor = std::max(d->noise_floor_A, d->form_floor_A);
   if (!(row.holdout_rmse_after_A > kSignificance * floor)) return;
   double refused = -INFINITY;  // the strongest evidence for an addition that did not pass
+  const Diagnosis::Addition* strongest = nullptr;
   for (const auto& a : d->additions)
-    if (!a.taken && a.from == row.name) refused = std::max(refused, a.evidence);
+    if (!a.taken && a.from == row.name && a.evidence > refused) {
+      refused = a.evidence;
+      strongest = &a;
+    }
   double dt_s = NAN;
   for (const auto& r : ds.runs)
     if (r.sample_period_s > 0.0) dt_s = r.sample_period_s;
@@ -719,7 +786,12 @@ void NoteFormError(const Dataset& ds, double level, Diagnosis* d) {
                                  "floor), structured over about {:.0f} samples{}",
                                  row.name, 1e3 * own_A, row.holdout_autocorrelation_time,
                                  std::isfinite(dt_s) ? fmt::format(" ({:.2f} ms)", 1e3 * dt_s * row.holdout_autocorrelation_time) : "");
-  if (std::isfinite(refused))
+  if (strongest != nullptr && !strongest->parsimonious)
+    text += fmt::format(": a form error, not another cause (the best addition, {}, does not earn its {} extra "
+                        "parameters: F {:.2f} on {:.0f} independent samples, p {:.2g} against {:.2g})",
+                        strongest->to, strongest->params_after - strongest->params_before, strongest->f_statistic,
+                        strongest->parsimony_samples, strongest->p_value, strongest->level);
+  else if (std::isfinite(refused))
     text += fmt::format(": a form error, not another cause (the best addition's evidence {:.1f} is below {:.1f})",
                         refused, level);
   else
@@ -1196,7 +1268,7 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds_in, const model::PlantParams& nom
   if (opt.fit_nuisance) {
     const double floor_closed = std::max(d.noise_floor_A, d.form_floor_A);
     const std::string before_drift = d.ranking.front().name;
-    if (auto st = FitNuisance(ds, fit_mask, nominal, nominal_i, attribution, opt.addition_evidence, opt.issue26_rules, &d); !st.ok()) return st;
+    if (auto st = FitNuisance(ds, fit_mask, nominal, nominal_i, attribution, opt.addition_evidence, opt.issue26_rules, opt.parsimony_level, &d); !st.ok()) return st;
     auto& row = d.ranking.front();
     if (!d.nuisance.empty() || row.name != before_drift) {
       const double denom = row.holdout_rmse_before_A - floor_closed;

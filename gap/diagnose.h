@@ -46,6 +46,11 @@ inline constexpr double kExplained = 0.6;     // a candidate explains the gap wh
 // The one level of the rule for adding a cause (AddsACause): a false addition rate calibrated on draws
 // (perf_multicause; docs/gap.md, "One rule for adding a cause").
 inline constexpr double kAdditionEvidence = 16.0;
+// Parsimony (docs/gap.md, "Parsimony: a larger model must earn its parameters"): the familywise level of the
+// F-test every addition must also pass (ParsimonyTest). 1 %: a model that is right with what it has gains a
+// cause that is not there at most once in a hundred diagnoses per step, whatever how many larger models were
+// compared (Bonferroni over them); what that costs is stated with the test.
+inline constexpr double kParsimonyLevel = 0.01;
 
 struct PhaseStat {
   Phase phase;
@@ -102,6 +107,8 @@ struct DiagnoseOptions {
   // Attribution.AMaskedSecondCauseIsFoundBesideTheStrongerOne expects (evidence 9 on 29 independent samples);
   // docs/gap.md, "Figures (issue 36)". false: the evidence rule (perf_multicause and perf_diagnose --rule evidence).
   bool issue26_rules = true;
+  // The parsimony F-test's familywise level (ParsimonyTest), beside either rule; 1: off (for before/after figures).
+  double parsimony_level = kParsimonyLevel;
   bool fit_nuisance = true;              // re-fit drifted nominal parameters beside a structural verdict
   double budget_s = 50.0;                // wall time for the whole attribution (singles, then pairs)
   bool detection_limits = true;          // the smallest magnitude of each effect the data would show
@@ -207,6 +214,11 @@ struct Diagnosis {
   struct Addition {
     std::string from, to;
     double before_A = NAN, after_A = NAN, effective_samples = NAN, evidence = NAN;
+    // The parsimony F-test (ParsimonyTest): the free parameters of each model, the statistic, its p-value and the
+    // level it had to reach (kParsimonyLevel over the larger models compared); parsimonious: it did.
+    int params_before = 0, params_after = 0;
+    double f_statistic = NAN, p_value = NAN, level = NAN, parsimony_samples = NAN;
+    bool parsimonious = true;
     bool taken = false;
   };
   std::vector<Addition> additions;
@@ -226,6 +238,29 @@ double AdditionEvidence(double before_A, double after_A, double effective_sample
 // an addition that only fits noise makes the holdout runs worse (its own change counts against it there), and a
 // weak cause beside a strong one is plain in thousands of independent samples.
 bool AddsACause(double before_A, double after_A, double effective_samples, double level);
+
+// Parsimony: a larger model (a combination, or a cause with a drifted parameter beside it) stands only when it
+// closes significantly more of the held-out gap than the smaller one it extends, its extra free parameters
+// counted. The nested-model F-test on the holdout residual sums, counted in independent samples:
+//   F = ((before^2 - after^2) / (p_after - p_before)) / (after^2 / (n_eff - p_after)),
+//   n_eff = samples / max(tau_before, tau_after),
+// against F(p_after - p_before, n_eff - p_after) at level kParsimonyLevel / compared (Bonferroni: the larger model
+// is the best of `compared` by its holdout score). Why the longer autocorrelation time: under the null (the smaller
+// model is right, what it leaves is noise and the reference's or the model's own form error), the smaller model's
+// residual is what the statistic's samples are; a larger model that patches that form error leaves a whiter
+// residual, and counting samples by it (AdditionEvidence) is counting exactly the patch as evidence. Why count the
+// parameters on runs they were not fitted to: a holdout run of the same valve shares its form error with the fit
+// runs, so the freedom a patch used there carries over; on independent noise the count only makes the test
+// conservative. Error rates: at most kParsimonyLevel false additions per step when the smaller model's residual is
+// Gaussian with n_eff independent samples; the price is that a real further cause is missed unless it removes at
+// least a fraction Dp F_crit / (n_eff - p_after + Dp F_crit) of what the smaller model leaves (with 21 independent
+// samples, 3 extra parameters and 5 models compared: 57 %; with 10: 90 %).
+struct Parsimony {
+  double samples = NAN, f = NAN, p_value = NAN, level = NAN;
+  bool passes = false;
+};
+Parsimony ParsimonyTest(double before_A, int params_before, double tau_before, double after_A, int params_after,
+                        double tau_after, std::size_t holdout_samples, int compared, double level = kParsimonyLevel);
 StatusOr<Diagnosis> Diagnose(const Dataset& dataset, const model::PlantParams& nominal,
                              const DiagnoseOptions& options = {});
 
