@@ -49,7 +49,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     ds.runs.push_back(std::move(run));
   }
   vb::gap::MovingIdentifyOptions o;
-  o.budget_s = 0.2;
+  o.max_evaluations = 300;  // a few stages' worth: the fuzzer checks guards, not fits
   o.threads = 1;
   auto id = vb::gap::IdentifyMovingValve(ds, family, o);
   if (!id.ok()) {

@@ -1099,7 +1099,7 @@ StatusOr<FittedDevice> ReferenceDevice(const Dataset& reference, const model::Pl
   if (fit.params.empty() && fit.fixed.empty() && IsSwitchOnSession(reference, nominal)) {
     // A moving valve with no parameter list: identified from scratch from its switch-on curves.
     MovingIdentifyOptions mo;
-    mo.budget_s = std::min(fit.budget_s, 55.0);
+    mo.max_evaluations = fit.scratch_max_evaluations;
     mo.solver = fit.attribution.solver;
     mo.progress = fit.scratch_progress;
     auto id = IdentifyMovingValve(reference, nominal, mo);

@@ -150,7 +150,10 @@ struct Stage {
   std::vector<int> free;
   model::SolverOptions solver;
   int threads = 2;
-  Clock::time_point deadline;
+  // Evaluations left for the whole identification (shared by every copy of the stage; MovingIdentifyOptions::
+  // max_evaluations): the optimisers stop when it reaches 0.
+  int* remaining = nullptr;
+  bool Exhausted() const { return remaining != nullptr && *remaining <= 0; }
   int evaluations = 0;
   double best = INFINITY;
   // What an evaluation that makes no valve, fails to simulate or gives a non-finite error returns: a large finite
@@ -176,6 +179,7 @@ struct Stage {
   // The fit runs' RMS error (a large value where the parameters make no valve or the simulation fails).
   double Rms(const std::array<double, kCount>& v) {
     ++evaluations;
+    if (remaining != nullptr) --*remaining;
     auto fail = [&](const std::string& why) {
       if (failures++ == 0) first_failure = why;
       return penalty;
@@ -197,7 +201,7 @@ struct Stage {
       u[j] = std::clamp(ToU(free[j], value[free[j]]), 0.0, 1.0);
       if (!std::isfinite(u[j])) u[j] = 0.5;  // a box or value that broke: the box's middle
     }
-    if (k == 0 || Clock::now() > deadline) return;
+    if (k == 0 || Exhausted()) return;
     if (global_evaluations > 0) {
       // A seeded controlled random search over the whole box first (NLopt CRS2 with local mutation): the dip's
       // time has several basins (lift against flight), which a local search from one start does not leave.
@@ -208,7 +212,7 @@ struct Stage {
       } g{this, INFINITY, u};
       auto gf = [](const std::vector<double>& x, std::vector<double>&, void* data) -> double {
         auto* c = static_cast<GCtx*>(data);
-        if (Clock::now() > c->s->deadline) throw nlopt::forced_stop();
+        if (c->s->Exhausted()) throw nlopt::forced_stop();
         const double e = c->s->Rms(c->s->At(x));
         if (e < c->best) c->best = e, c->at = x;
         return e;
@@ -232,7 +236,7 @@ struct Stage {
     } ctx{this};
     auto f = [](const std::vector<double>& x, std::vector<double>&, void* data) -> double {
       Stage* s = static_cast<Ctx*>(data)->s;
-      if (Clock::now() > s->deadline) throw nlopt::forced_stop();
+      if (s->Exhausted()) throw nlopt::forced_stop();
       const double e = s->Rms(s->At(x));
       if (e < s->best) s->best = e;
       return e;
@@ -249,7 +253,7 @@ struct Stage {
     try {
       o.optimize(x, minf);
     } catch (const std::exception&) {
-      // Out of time or a roundoff stop: NLopt leaves the best point it reached in x.
+      // Out of evaluations or a roundoff stop: NLopt leaves the best point it reached in x.
     }
     const auto v = At(x);
     const double e = Rms(v);
@@ -379,8 +383,9 @@ std::vector<std::string> CleanSwitchOnSession(Dataset* ds) {
 StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const model::PlantParams& family,
                                                    const MovingIdentifyOptions& options) {
   const auto t0 = Clock::now();
-  if (!(options.budget_s > 0.0) || !std::isfinite(options.budget_s))
-    return Status::InvalidArgument("identify: the wall-time budget must be a finite number of seconds > 0");
+  if (options.max_evaluations < 100)
+    return Status::InvalidArgument("identify: max_evaluations must be at least 100 (got " +
+                                   std::to_string(options.max_evaluations) + ")");
   if (!IsSwitchOnSession(ds_in, family))
     return Status::InvalidArgument(
         "identify from scratch: needs waveform runs of a moving valve from rest with a gate step (no held stroke) "
@@ -583,13 +588,13 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
   }
 
   // ---- the stages ----------------------------------------------------------------------------------------
-  const auto deadline = t0 + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(options.budget_s));
+  int remaining = options.max_evaluations;
   Stage st;
   st.ds = &ds;
   st.family = &family;
   st.solver = options.solver;
   st.threads = options.threads;
-  st.deadline = deadline;
+  st.remaining = &remaining;
   st.value = v;
   {
     double peak = 0.0;
@@ -740,7 +745,7 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
       g.value[kL1] = std::clamp(g.value[kL1], 1.01 * g.value[kL0], r_hi);
       for (double kr : {0.05, 0.15, 0.5, 1.5, 5.0})
         for (double bf : {0.01, 0.1, 1.0, 10.0})
-          for (int j = -4; j <= 4 && Clock::now() < deadline; ++j) {
+          for (int j = -4; j <= 4 && !g.Exhausted(); ++j) {
             auto x = g.value;
             x[kK] = kr * x[kF0] / stroke;
             x[kB] = v[kB] * bf;
@@ -780,7 +785,7 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
     Stage best4 = st;
     best4.best = INFINITY;
     constexpr std::size_t kForms = 3;  // Frohlich's knee, tanh, arctan (model/coil.h)
-    for (std::size_t e = 0; e < kForms * ends.size() && Clock::now() < deadline; ++e) {
+    for (std::size_t e = 0; e < kForms * ends.size() && remaining > 0; ++e) {
       const auto since = Clock::now();
       Stage s4 = ends[e / kForms];
       s4.value[kTanh] = static_cast<double>(e % kForms);  // every form the effect has
@@ -813,13 +818,11 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
   // Stage 5: a global search where the local stages stalled. A fit left above kReferenceIdentified x the noise
   // floor (gap/diagnose.h: beyond that the excess is systematic) is a wrong basin or a form error; a seeded
   // controlled random search (CRS2) over every parameter at once, in boxes a decade or more around the best
-  // end (R tighter: the final current pins it), with what remains of the budget (a fifth kept back for the
-  // uncertainty and the predictions), then a local polish. It replaces the stages' end only when it fits better.
+  // end (R tighter: the final current pins it), with what remains of the evaluation budget (at most 20000; 700
+  // kept back for the local polish and the final check), then a local polish. It replaces the stages' end only
+  // when it fits better. A count, not a time: the same data and options give the same fit on any machine.
   if (any_motion && st.best > kReferenceIdentified * id.noise_floor_A) {
-    const double elapsed = Seconds(t0);
-    const double per_eval = elapsed / std::max(evaluations, 1);
-    const double left = options.budget_s - elapsed - 0.2 * options.budget_s;
-    const int global_evals = static_cast<int>(std::min(20000.0, 0.8 * left / std::max(per_eval, 1e-4)));
+    const int global_evals = std::min(20000, remaining - 700);
     if (global_evals >= 200) {
       const auto since = Clock::now();
       Stage g = st;
@@ -1058,9 +1061,9 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
   }
   id.evaluations = st.evaluations;
   id.seconds = Seconds(t0);
-  if (Clock::now() > deadline)
-    id.notes.push_back("the wall-time budget (" + Fmt(options.budget_s) + " s) ended a stage early: the fit may "
-                       "not have converged");
+  if (remaining <= 0)
+    id.notes.push_back("the evaluation budget (" + std::to_string(options.max_evaluations) +
+                       " evaluations) ended a stage early: the fit may not have converged");
   return id;
 }
 

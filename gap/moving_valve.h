@@ -61,7 +61,12 @@ struct HeldValue {
 };
 
 struct MovingIdentifyOptions {
-  double budget_s = 55.0;   // wall time for all stages
+  // The work for all stages, in evaluations (one evaluation simulates every fit run once): deterministic, so the
+  // result does not depend on how loaded the machine is. Stages 1-4 take about 9300 at most (their own counts);
+  // the global stage 5, where the local stages stalled, gets what is left (at most 20000), less 700 kept for its
+  // local polish and the final check. Sized so one identification takes < 60 s of CPU on the slowest practice4
+  // valve (docs/real-data.md, "A population of valves"): on 2 idle cores its wall time is at most its CPU time.
+  int max_evaluations = 30000;
   int threads = 2;          // runs simulated concurrently
   model::SolverOptions solver = AttributionOptions::FastSolver();
   std::function<void(const std::string&)> progress;  // one line per stage (benchctl prints it on stderr)

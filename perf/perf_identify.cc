@@ -7,7 +7,10 @@
 //    sqrt(8) sigma of systematic error).
 //  - withheld cases: diagnose target/ against reference/; success when the verdict contains one of the label's
 //    accept words. labels.json is read for scoring only; valves.json (the truth) is never read.
-// Prints one row per case, the success rate with its Wilson 95 % interval, and the time per case.
+// Prints one row per case, the success rate with its Wilson 95 % interval, the wall and CPU time per case, and the
+// load average before and after (/proc/loadavg). The identification's budget is a count of evaluations
+// (--evaluations N, default MovingIdentifyOptions's), so the rates do not depend on the load; the times do, and the
+// CPU time (both threads) bounds the wall time the same case takes on 2 idle cores.
 //
 // --population N: also N valves of the independent population (perf/independent_valve.h: a plant written
 // apart from model/, with a tabulated B-H steel, an eddy ladder, Stribeck friction and a flow-dependent
@@ -15,7 +18,7 @@
 // each is identified on 1, 2 and 4 bar and predicts 6 bar and 0.75x supply. Success as for the predict cases;
 // "strict" when fit and holdout are both within 3x the noise floor.
 //
-// Usage: perf_identify [--sets practice3,practice4 | --sets none] [--only SUBSTRING] [--budget S] [--verbose]
+// Usage: perf_identify [--sets practice3,practice4 | --sets none] [--only SUBSTRING] [--evaluations N] [--verbose]
 //                      [--population N] [--seed SEED]
 #include <nlohmann/json.hpp>
 
@@ -25,6 +28,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <ctime>
 #include <filesystem>
 #include <fstream>
 #include <random>
@@ -60,14 +64,24 @@ std::pair<double, double> Wilson(int k, int n) {
 
 struct Tally {
   int ok = 0, n = 0;
-  double seconds = 0.0, worst_s = 0.0;
+  double seconds = 0.0, worst_s = 0.0, cpu_s = 0.0, worst_cpu_s = 0.0;
 };
+
+// Process CPU time over all threads.
+double CpuSeconds() { return static_cast<double>(std::clock()) / CLOCKS_PER_SEC; }
+
+std::string LoadAverage() {
+  std::ifstream f("/proc/loadavg");
+  std::string a, b, c;
+  f >> a >> b >> c;
+  return a.empty() ? "unknown" : a + " " + b + " " + c;
+}
 
 }  // namespace
 
 int main(int argc, char** argv) {
   std::string sets = "practice3,practice4", only;
-  double budget_s = 55.0;
+  int evaluations = vb::gap::MovingIdentifyOptions{}.max_evaluations;
   int population = 0;
   bool verbose = false;
   unsigned seed = 35;
@@ -77,8 +91,8 @@ int main(int argc, char** argv) {
       sets = argv[++a];
     } else if (arg == "--only" && a + 1 < argc) {
       only = argv[++a];
-    } else if (arg == "--budget" && a + 1 < argc) {
-      budget_s = std::atof(argv[++a]);
+    } else if (arg == "--evaluations" && a + 1 < argc) {
+      evaluations = std::atoi(argv[++a]);
     } else if (arg == "--verbose") {
       verbose = true;
     } else if (arg == "--population" && a + 1 < argc) {
@@ -86,14 +100,15 @@ int main(int argc, char** argv) {
     } else if (arg == "--seed" && a + 1 < argc) {
       seed = static_cast<unsigned>(std::atoi(argv[++a]));
     } else {
-      std::fprintf(stderr, "usage: perf_identify [--sets practice3,practice4|none] [--only SUBSTRING] [--budget S] "
-                           "[--population N] [--seed SEED]\n");
+      std::fprintf(stderr, "usage: perf_identify [--sets practice3,practice4|none] [--only SUBSTRING] [--evaluations N] "
+                           "[--population N] [--seed SEED] [--verbose]\n");
       return 2;
     }
   }
   const auto family = vb::model::Preset("taghizadeh2009");
   if (!family.ok()) return 1;
-  std::printf("%-18s %-9s %-9s %-52s %-4s %7s\n", "case", "kind", "truth", "result", "ok", "s");
+  std::printf("load average at the start: %s; %d evaluations per identification\n", LoadAverage().c_str(), evaluations);
+  std::printf("%-18s %-9s %-9s %-52s %-4s %7s %7s\n", "case", "kind", "truth", "result", "ok", "s", "cpu_s");
   Tally all, predict, withheld;
   std::stringstream names(sets);
   for (std::string set; std::getline(names, set, ',');) {
@@ -109,6 +124,7 @@ int main(int argc, char** argv) {
       if (!only.empty() && name.find(only) == std::string::npos) continue;
       const std::string kind = label.value("kind", "");
       const auto t0 = Clock::now();
+      const double c0 = CpuSeconds();
       bool ok = false;
       std::string result, truth = label.value("truth", "-");
       if (kind == "predict") {
@@ -117,7 +133,7 @@ int main(int argc, char** argv) {
           result = "load: " + ds.status().message();
         } else {
           vb::gap::MovingIdentifyOptions mo;
-          mo.budget_s = budget_s;
+          mo.max_evaluations = evaluations;
           if (verbose) mo.progress = [](const std::string& l) { std::fprintf(stderr, "  %s\n", l.c_str()); };
           auto id = vb::gap::IdentifyMovingValve(*ds, *family, mo);
           if (!id.ok()) {
@@ -139,7 +155,7 @@ int main(int argc, char** argv) {
         } else {
           vb::gap::DiagnoseOptions o;
           o.reference = &*reference;
-          o.reference_fit.budget_s = budget_s;
+          o.reference_fit.scratch_max_evaluations = evaluations;
           if (verbose) o.reference_fit.scratch_progress = [](const std::string& l) { std::fprintf(stderr, "  %s\n", l.c_str()); };
           auto d = vb::gap::Diagnose(*target, *family, o);
           if (!d.ok()) {
@@ -156,15 +172,18 @@ int main(int argc, char** argv) {
         continue;
       }
       const double s = std::chrono::duration<double>(Clock::now() - t0).count();
+      const double cpu = CpuSeconds() - c0;
       if (result.size() > 52) result = result.substr(0, 52);
-      std::printf("%-18s %-9s %-9s %-52s %-4s %7.1f\n", name.c_str(), kind.c_str(), truth.c_str(), result.c_str(),
-                  ok ? "yes" : "NO", s);
+      std::printf("%-18s %-9s %-9s %-52s %-4s %7.1f %7.1f\n", name.c_str(), kind.c_str(), truth.c_str(), result.c_str(),
+                  ok ? "yes" : "NO", s, cpu);
       std::fflush(stdout);
       for (Tally* t : {&all, kind == "predict" ? &predict : &withheld}) {
         t->ok += ok;
         ++t->n;
         t->seconds += s;
         t->worst_s = std::max(t->worst_s, s);
+        t->cpu_s += cpu;
+        t->worst_cpu_s = std::max(t->worst_cpu_s, cpu);
       }
     }
   }
@@ -205,11 +224,13 @@ int main(int argc, char** argv) {
       ds.runs.push_back(std::move(run));
     }
     const auto t0 = Clock::now();
+    const double c0 = CpuSeconds();
     vb::gap::MovingIdentifyOptions mo;
-    mo.budget_s = budget_s;
+    mo.max_evaluations = evaluations;
     if (verbose) mo.progress = [](const std::string& l) { std::fprintf(stderr, "  %s\n", l.c_str()); };
     auto id = vb::gap::IdentifyMovingValve(ds, *family, mo);
     const double s = std::chrono::duration<double>(Clock::now() - t0).count();
+    const double cpu = CpuSeconds() - c0;
     char buf[200];
     bool ok = false, tight = false;
     if (!id.ok()) {
@@ -224,21 +245,26 @@ int main(int argc, char** argv) {
     char name[32], truth[32];
     std::snprintf(name, sizeof name, "indep_%d", j);
     std::snprintf(truth, sizeof truth, "%gV %.2gA", v.supply_V, v.supply_V / v.R_ohm);
-    std::printf("%-18s %-9s %-9s %-52s %-4s %7.1f\n", name, "predict", truth, buf, ok ? (tight ? "yes" : "yes~") : "NO", s);
+    std::printf("%-18s %-9s %-9s %-52s %-4s %7.1f %7.1f\n", name, "predict", truth, buf, ok ? (tight ? "yes" : "yes~") : "NO",
+                s, cpu);
     std::fflush(stdout);
     for (Tally* t : {&pop}) {
       t->ok += ok;
       ++t->n;
       t->seconds += s;
       t->worst_s = std::max(t->worst_s, s);
+      t->cpu_s += cpu;
+      t->worst_cpu_s = std::max(t->worst_cpu_s, cpu);
     }
     strict.ok += tight;
     ++strict.n;
   }
   auto line = [](const char* what, const Tally& t) {
     const auto [lo, hi] = Wilson(t.ok, t.n);
-    std::printf("%-9s %2d of %2d (%.0f %%, Wilson 95 %% %.0f-%.0f %%); %.1f s per case, worst %.1f s\n", what, t.ok, t.n,
-                t.n ? 100.0 * t.ok / t.n : 0.0, 100.0 * lo, 100.0 * hi, t.n ? t.seconds / t.n : 0.0, t.worst_s);
+    std::printf("%-9s %2d of %2d (%.0f %%, Wilson 95 %% %.0f-%.0f %%); %.1f s per case, worst %.1f s; CPU %.1f s per "
+                "case, worst %.1f s\n",
+                what, t.ok, t.n, t.n ? 100.0 * t.ok / t.n : 0.0, 100.0 * lo, 100.0 * hi, t.n ? t.seconds / t.n : 0.0,
+                t.worst_s, t.n ? t.cpu_s / t.n : 0.0, t.worst_cpu_s);
   };
   line("predict", predict);
   line("withheld", withheld);
@@ -247,5 +273,6 @@ int main(int argc, char** argv) {
     line("indep.", pop);
     line("strict", strict);
   }
+  std::printf("load average at the end: %s\n", LoadAverage().c_str());
   return 0;
 }

@@ -4,7 +4,6 @@
 // it ends well, not how well it fits: docs/real-data.md and perf/perf_identify.cc measure that).
 #include <gtest/gtest.h>
 
-#include <chrono>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
@@ -86,13 +85,9 @@ TEST_P(OddCapture, EndsInAFiniteFitOrAClearRefusal) {
     return;
   }
   MovingIdentifyOptions o;
-  o.budget_s = 3.0;
+  o.max_evaluations = 1500;
   o.threads = 1;
-  const auto t0 = std::chrono::steady_clock::now();
   auto id = IdentifyMovingValve(*ds, Family(), o);
-  const double took = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  // The budget holds (a hang is a failure): 3 s of search plus the uncertainty and the prediction of each run.
-  EXPECT_LT(took, 30.0) << odd.name;
   if (!id.ok()) {
     const std::string why = id.status().message();
     EXPECT_FALSE(why.empty());
@@ -102,6 +97,8 @@ TEST_P(OddCapture, EndsInAFiniteFitOrAClearRefusal) {
     }
   } else {
     EXPECT_NE(std::string(odd.name), "open_coil") << "an open coil has nothing to identify";
+    // The budget holds (a hang or a runaway search is a failure), counted, not timed: the same on any machine.
+    EXPECT_LE(id->evaluations, o.max_evaluations + 100) << odd.name;
     EXPECT_TRUE(std::isfinite(id->fit_rmse_A)) << odd.name;
     for (const auto& [name, v] : id->values) EXPECT_TRUE(std::isfinite(v)) << odd.name << ": " << name;
     for (const auto& [name, v] : id->fitted) EXPECT_TRUE(std::isfinite(v)) << odd.name << ": " << name;
