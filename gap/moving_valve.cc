@@ -1299,10 +1299,19 @@ std::string PreferDeterminedChange(Diagnosis* d, const Dataset& target) {
     return "";
   }
   auto confusable = [&](const std::string& name) { return Confusable(*d, name); };
-  if (chosen == "param:k" && confusable("param:delta"))
-    ChooseRow(d, "param:delta",
-              "named the preload rather than the stiffness: both change the force on the closed plunger that "
-              "the switch-on sees, and the runs do not resolve the stiffness's change along the stroke");
+  // A stiffness confusable with a constant force on the plunger (the preload, or a supply pressure other than
+  // declared: (A2 - A1) P adds to k delta, seed 000 eq. 9-10) becomes that force: the data determine the force on
+  // the closed plunger, which all of them change; the stiffness also changes it along the stroke, which the runs
+  // did not resolve, or it would not be confusable. The preload first (the same spring), else the pressure.
+  if (chosen == "param:k")
+    for (const char* force : {"param:delta", "supply_pressure"})
+      if (confusable(force)) {
+        ChooseRow(d, force,
+                  std::string("named ") + (force == std::string("param:delta") ? "the preload" : "the supply pressure") +
+                      " rather than the stiffness: both change the force on the closed plunger that the switch-on "
+                      "sees, and the runs do not resolve the stiffness's change along the stroke");
+        break;
+      }
   const std::string now = d->ranking.front().name;
   const bool force = now == "param:delta" || now == "supply_pressure";
   const std::string other = now == "param:delta" ? "supply_pressure" : "param:delta";

@@ -134,9 +134,9 @@ std::vector<Candidate> MovingValveCandidates(const model::PlantParams& reference
 //    the reference's: the declared conditions predict that change, and on a coil R and the gain are degenerate
 //    (issue 25: 3 of 11 hot-vs-cold strokes of a held solenoid came out a lone sensor term).
 //  - A reference identified from scratch (a moving valve): a spring stiffness (param:k) confusable with the
-//    preload (param:delta) becomes the preload: both change the force on the closed plunger, which the
-//    switch-on sees (the dip's time); k also changes it along the stroke, which the runs did not resolve, or k
-//    would not be confusable. A preload confusable with a supply pressure other than declared, on runs that all
+//    preload (param:delta), or else with a supply pressure other than declared, becomes that constant force:
+//    each changes the force on the closed plunger, which the switch-on sees (the dip's time); k also changes it
+//    along the stroke, which the runs did not resolve, or k would not be confusable. A preload confusable with a supply pressure other than declared, on runs that all
 //    declare one pressure, is "either of": one constant force either way (seed 000 eq. 9-10: k delta and
 //    (A2 - A1) P add).
 std::string ChooseAmongConfusable(Diagnosis* d, const Dataset& target);
