@@ -169,24 +169,34 @@ bool IsCombination(const CandidateResult& row) { return row.kind == CauseKind::k
 // A structural candidate fits the coil resistance as well as its effect. When it does no better on the
 // holdout runs than R alone (by a twentieth of the gap), its effect added nothing the data can see: it may
 // not be the verdict. On valve-runs/1 waveforms this never bites (each effect there has its own signature).
+// The same holds for a combination that frees R (SelectCombination): its effects together must add what R alone
+// does not, or they only patch the form error that is left once R is right (practice3 m03: a warmer coil's R,
+// with dry friction and a preload that cancel each other, 1.45 -> 0.92 mA on a gap of 16 mA).
+const CandidateResult* RAlone(const Diagnosis& d) {
+  for (const auto& row : d.ranking)
+    if (row.name == "param:R" && row.status.ok()) return &row;
+  return nullptr;
+}
+bool RAloneDoesAsWell(const Diagnosis& d, const Candidate& c, const CandidateResult& row) {
+  const CandidateResult* r_alone = RAlone(d);
+  if (r_alone == nullptr || &row == r_alone) return false;
+  const double gap = r_alone->holdout_rmse_before_A - d.noise_floor_A;
+  if (!(gap > 0.0)) return false;
+  const bool r_free = std::any_of(c.params.begin(), c.params.end(), [](const FreeParam& f) { return f.name == "R"; });
+  return r_free && row.holdout_rmse_after_A > r_alone->holdout_rmse_after_A - 0.05 * gap;
+}
+constexpr const char* kRAloneWords =
+    "R alone (param:R) does as well on the holdout runs: the effect adds nothing the data shows";
+
 template <typename CandidateOf>
 void DisqualifyWhatRAloneExplains(Diagnosis* d, CandidateOf candidate_of) {
-  const CandidateResult* r_alone = nullptr;
-  for (const auto& row : d->ranking)
-    if (row.name == "param:R" && row.status.ok()) r_alone = &row;
-  if (r_alone == nullptr) return;
-  const double gap = r_alone->holdout_rmse_before_A - d->noise_floor_A;
-  if (!(gap > 0.0)) return;
   bool changed = false;
   for (auto& row : d->ranking) {
     if (IsParametric(row) || !row.status.ok() || !row.disqualified.empty()) continue;
     const Candidate* c = candidate_of(row.name);
     if (c == nullptr) continue;
-    const bool r_free = std::any_of(c->params.begin(), c->params.end(), [](const FreeParam& f) { return f.name == "R"; });
-    if (!r_free) continue;
-    if (row.holdout_rmse_after_A > r_alone->holdout_rmse_after_A - 0.05 * gap) {
-      Disqualify(&row, Disqualification::kRAloneDoesAsWell,
-                 "R alone (param:R) does as well on the holdout runs: the effect adds nothing the data shows");
+    if (RAloneDoesAsWell(*d, *c, row)) {
+      Disqualify(&row, Disqualification::kRAloneDoesAsWell, kRAloneWords);
       changed = true;
     }
   }
@@ -211,11 +221,11 @@ bool AddsACause(double before_A, double after_A, double effective_samples, doubl
   return AdditionEvidence(before_A, after_A, effective_samples) >= level;
 }
 
-Parsimony ParsimonyTest(double before_A, int params_before, double tau_before, double after_A, int params_after,
-                        double tau_after, std::size_t holdout_samples, int compared, double level) {
+Parsimony ParsimonyTest(double before_A, int params_before, double after_A, int params_after, double tau_after,
+                        std::size_t holdout_samples, int compared, double level) {
   Parsimony out;
   out.level = level / static_cast<double>(std::max(compared, 1));
-  const double tau = std::max({tau_before, tau_after, 1.0});
+  const double tau = std::max(tau_after, 1.0);  // the larger model's residual estimates the error (see the header)
   out.samples = static_cast<double>(holdout_samples) / (std::isfinite(tau) ? tau : 1.0);
   // A larger model with no more free parameters (a different effect in place of one) is judged on one.
   const double extra = std::max(params_after - params_before, 1);
@@ -382,6 +392,10 @@ Status SelectCombination(const Dataset& ds, const std::vector<bool>& fit_mask, c
           if (row.status.ok() && row.disqualified.empty() && AnyEffectVanished(c, row))
             Disqualify(&row, Disqualification::kMemberVanished,
                        "one of its effects was fitted where it vanishes: a smaller combination");
+          if (row.status.ok() && row.disqualified.empty() && RAloneDoesAsWell(*d, c, row))
+            Disqualify(&row, Disqualification::kRAloneDoesAsWell,
+                       "R alone (param:R) does as well on the holdout runs: its effects together add nothing the "
+                       "data shows");
           tried.push_back(std::move(row));
           tried_c.push_back(c);
           break;
@@ -510,9 +524,8 @@ Status SelectCombination(const Dataset& ds, const std::vector<bool>& fit_mask, c
     // extra free parameters counted (ParsimonyTest; practice3 m03: a warmer coil's R beside dry friction and a
     // preload that patch the reference's form error at the new operating point).
     const Parsimony parsimony =
-        ParsimonyTest(step.before_A, current_params, current->holdout_autocorrelation_time, step.after_A,
-                      static_cast<int>(tried_c[best_k].params.size()), best->holdout_autocorrelation_time,
-                      best->holdout_samples, compared, opt.parsimony_level);
+        ParsimonyTest(step.before_A, current_params, step.after_A, static_cast<int>(tried_c[best_k].params.size()),
+                      best->holdout_autocorrelation_time, best->holdout_samples, compared, opt.parsimony_level);
     RecordParsimony(parsimony, current_params, static_cast<int>(tried_c[best_k].params.size()), &step);
     take = take && parsimony.passes;
     step.taken = take;
@@ -667,8 +680,8 @@ Status FitNuisance(const Dataset& ds, const std::vector<bool>& fit_mask, const m
     const int p_before = static_cast<int>(verdict_c.params.size());
     const int p_after = static_cast<int>(best_c->params.size());
     const Parsimony parsimony =
-        ParsimonyTest(step.before_A, p_before, verdict.holdout_autocorrelation_time, step.after_A, p_after,
-                      best->holdout_autocorrelation_time, best->holdout_samples, compared, parsimony_level);
+        ParsimonyTest(step.before_A, p_before, step.after_A, p_after, best->holdout_autocorrelation_time,
+                      best->holdout_samples, compared, parsimony_level);
     RecordParsimony(parsimony, p_before, p_after, &step);
     step.taken = step.taken && parsimony.passes;
     d->additions.push_back(step);
