@@ -47,7 +47,7 @@ struct IdentifyOptions {
   // Progress lines of a from-scratch identification (gap/moving_valve.h), when no parameter is named.
   std::function<void(const std::string&)> scratch_progress;
   // The evaluation budget of a from-scratch identification (MovingIdentifyOptions::max_evaluations).
-  int scratch_max_evaluations = 30000;
+  int scratch_max_evaluations = 20000;
 };
 
 // What the data says about each fitted parameter.

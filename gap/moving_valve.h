@@ -63,10 +63,12 @@ struct HeldValue {
 struct MovingIdentifyOptions {
   // The work for all stages, in evaluations (one evaluation simulates every fit run once): deterministic, so the
   // result does not depend on how loaded the machine is. Stages 1-4 take about 9300 at most (their own counts);
-  // the global stage 5, where the local stages stalled, gets what is left (at most 20000), less 700 kept for its
-  // local polish and the final check. Sized so one identification takes < 60 s of CPU on the slowest practice4
-  // valve (docs/real-data.md, "A population of valves"): on 2 idle cores its wall time is at most its CPU time.
-  int max_evaluations = 30000;
+  // the global stage 5, where the local stages stalled, gets what is left (about 10000), less 700 kept for its
+  // local polish and the final check. Sized by CPU time, which the load does not change: at 30000 the slowest
+  // practice4 valve (p41_3, about 2.7 ms of CPU per evaluation) took 82 s of CPU; at 20000 it stays under 60 s,
+  // and on 2 idle cores an identification's wall time is at most its CPU time (docs/real-data.md, "A population
+  // of valves").
+  int max_evaluations = 20000;
   int threads = 2;          // runs simulated concurrently
   model::SolverOptions solver = AttributionOptions::FastSolver();
   std::function<void(const std::string&)> progress;  // one line per stage (benchctl prints it on stderr)
