@@ -518,10 +518,15 @@ int GapCli::Convert() {
       nlohmann::ordered_json j = {{"directory", run->directory}, {"run", run->run_id}, {"file", run->file},
                                   {"samples", run->samples}, {"sample_period_s", run->sample_period_s},
                                   {"gate_on_s", run->gate_on_s}};
+      j["offset_removed_A"] = run->cleaning.offset_A;
+      j["spike_samples_masked"] = run->cleaning.spike_samples;
+      j["spike_A"] = run->cleaning.spike_A;
+      j["inverted"] = run->cleaning.inverted;
       std::cout << j.dump(2) << "\n";
     } else {
       std::printf("run %s: %zu samples every %.6g s, gate on at %.6g s, written to %s\n", run->run_id.c_str(),
                   run->samples, run->sample_period_s, run->gate_on_s, run->directory.c_str());
+      if (!run->cleaning.note.empty()) std::printf("  %s\n", run->cleaning.note.c_str());
     }
     return kExitOk;
   }

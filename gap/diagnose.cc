@@ -5,6 +5,7 @@
 #include "gap/opening_dip.h"
 #include "gap/predict.h"
 
+#include <boost/math/distributions/fisher_f.hpp>
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
@@ -26,16 +27,17 @@ const char* VerdictKindName(VerdictKind kind) {
     case VerdictKind::kCombination: return "combination";
     case VerdictKind::kEitherOf: return "either_of";
     case VerdictKind::kUnknown: return "unknown";
+    case VerdictKind::kUndetermined: return "undetermined";
   }
   return "unknown";
 }
 
 StatusOr<VerdictKind> ParseVerdictKind(std::string_view name) {
   for (VerdictKind k : {VerdictKind::kNone, VerdictKind::kEffect, VerdictKind::kParameter, VerdictKind::kCombination,
-                        VerdictKind::kEitherOf, VerdictKind::kUnknown})
+                        VerdictKind::kEitherOf, VerdictKind::kUnknown, VerdictKind::kUndetermined})
     if (name == VerdictKindName(k)) return k;
   return Status::InvalidArgument("verdict kind: '" + std::string(name) +
-                                 "' is not none, effect, parameter, combination, either_of or unknown");
+                                 "' is not none, effect, parameter, combination, either_of, unknown or undetermined");
 }
 
 VerdictKind VerdictKindOf(CauseKind cause) {
@@ -167,24 +169,34 @@ bool IsCombination(const CandidateResult& row) { return row.kind == CauseKind::k
 // A structural candidate fits the coil resistance as well as its effect. When it does no better on the
 // holdout runs than R alone (by a twentieth of the gap), its effect added nothing the data can see: it may
 // not be the verdict. On valve-runs/1 waveforms this never bites (each effect there has its own signature).
+// The same holds for a combination that frees R (SelectCombination): its effects together must add what R alone
+// does not, or they only patch the form error that is left once R is right (practice3 m03: a warmer coil's R,
+// with dry friction and a preload that cancel each other, 1.45 -> 0.92 mA on a gap of 16 mA).
+const CandidateResult* RAlone(const Diagnosis& d) {
+  for (const auto& row : d.ranking)
+    if (row.name == "param:R" && row.status.ok()) return &row;
+  return nullptr;
+}
+bool RAloneDoesAsWell(const Diagnosis& d, const Candidate& c, const CandidateResult& row) {
+  const CandidateResult* r_alone = RAlone(d);
+  if (r_alone == nullptr || &row == r_alone) return false;
+  const double gap = r_alone->holdout_rmse_before_A - d.noise_floor_A;
+  if (!(gap > 0.0)) return false;
+  const bool r_free = std::any_of(c.params.begin(), c.params.end(), [](const FreeParam& f) { return f.name == "R"; });
+  return r_free && row.holdout_rmse_after_A > r_alone->holdout_rmse_after_A - 0.05 * gap;
+}
+constexpr const char* kRAloneWords =
+    "R alone (param:R) does as well on the holdout runs: the effect adds nothing the data shows";
+
 template <typename CandidateOf>
 void DisqualifyWhatRAloneExplains(Diagnosis* d, CandidateOf candidate_of) {
-  const CandidateResult* r_alone = nullptr;
-  for (const auto& row : d->ranking)
-    if (row.name == "param:R" && row.status.ok()) r_alone = &row;
-  if (r_alone == nullptr) return;
-  const double gap = r_alone->holdout_rmse_before_A - d->noise_floor_A;
-  if (!(gap > 0.0)) return;
   bool changed = false;
   for (auto& row : d->ranking) {
     if (IsParametric(row) || !row.status.ok() || !row.disqualified.empty()) continue;
     const Candidate* c = candidate_of(row.name);
     if (c == nullptr) continue;
-    const bool r_free = std::any_of(c->params.begin(), c->params.end(), [](const FreeParam& f) { return f.name == "R"; });
-    if (!r_free) continue;
-    if (row.holdout_rmse_after_A > r_alone->holdout_rmse_after_A - 0.05 * gap) {
-      Disqualify(&row, Disqualification::kRAloneDoesAsWell,
-                 "R alone (param:R) does as well on the holdout runs: the effect adds nothing the data shows");
+    if (RAloneDoesAsWell(*d, *c, row)) {
+      Disqualify(&row, Disqualification::kRAloneDoesAsWell, kRAloneWords);
       changed = true;
     }
   }
@@ -207,6 +219,33 @@ double AdditionEvidence(double before_A, double after_A, double effective_sample
 // draws no rule was tuned to.
 bool AddsACause(double before_A, double after_A, double effective_samples, double level) {
   return AdditionEvidence(before_A, after_A, effective_samples) >= level;
+}
+
+Parsimony ParsimonyTest(double before_A, int params_before, double after_A, int params_after, double tau_after,
+                        std::size_t holdout_samples, int compared, double level) {
+  Parsimony out;
+  out.level = level / static_cast<double>(std::max(compared, 1));
+  const double tau = std::max(tau_after, 1.0);  // the larger model's residual estimates the error (see the header)
+  out.samples = static_cast<double>(holdout_samples) / (std::isfinite(tau) ? tau : 1.0);
+  // A larger model with no more free parameters (a different effect in place of one) is judged on one.
+  const double extra = std::max(params_after - params_before, 1);
+  const double df2 = out.samples - static_cast<double>(params_after);
+  if (level >= 1.0) {  // the test switched off (DiagnoseOptions::parsimony_level = 1)
+    out.passes = true;
+    return out;
+  }
+  // Fewer independent samples than the larger model has parameters, or no improvement: nothing to test, and a
+  // model that cannot be tested is not taken.
+  if (!(df2 >= 1.0) || !(before_A > after_A) || !(after_A > 0.0) || !std::isfinite(before_A)) {
+    out.f = 0.0;
+    out.p_value = 1.0;
+    return out;
+  }
+  out.f = ((before_A * before_A - after_A * after_A) / extra) / (after_A * after_A / df2);
+  const boost::math::fisher_f_distribution<double> dist(extra, df2);
+  out.p_value = boost::math::cdf(boost::math::complement(dist, out.f));
+  out.passes = out.p_value <= out.level;
+  return out;
 }
 
 namespace {
@@ -267,6 +306,16 @@ bool EffectVanished(const Candidate& c, const CandidateResult& r, const std::str
 bool AnyEffectVanished(const Candidate& c, const CandidateResult& r) {
   return std::any_of(c.effects.begin(), c.effects.end(),
                      [&](const std::string& e) { return EffectVanished(c, r, e); });
+}
+
+void RecordParsimony(const Parsimony& p, int params_before, int params_after, Diagnosis::Addition* step) {
+  step->params_before = params_before;
+  step->params_after = params_after;
+  step->f_statistic = p.f;
+  step->p_value = p.p_value;
+  step->level = p.level;
+  step->parsimony_samples = p.samples;
+  step->parsimonious = p.passes;
 }
 
 // Several causes (docs/gap.md, "Several causes"): a small beam search, then a parsimonious choice on the
@@ -343,6 +392,10 @@ Status SelectCombination(const Dataset& ds, const std::vector<bool>& fit_mask, c
           if (row.status.ok() && row.disqualified.empty() && AnyEffectVanished(c, row))
             Disqualify(&row, Disqualification::kMemberVanished,
                        "one of its effects was fitted where it vanishes: a smaller combination");
+          if (row.status.ok() && row.disqualified.empty() && RAloneDoesAsWell(*d, c, row))
+            Disqualify(&row, Disqualification::kRAloneDoesAsWell,
+                       "R alone (param:R) does as well on the holdout runs: its effects together add nothing the "
+                       "data shows");
           tried.push_back(std::move(row));
           tried_c.push_back(c);
           break;
@@ -426,6 +479,7 @@ Status SelectCombination(const Dataset& ds, const std::vector<bool>& fit_mask, c
   //    taken when the rule (AddsACause) accepts it against the model taken so far; a size may be skipped when
   //    no model of it passes but a larger one does.
   const CandidateResult* current = &base_row;
+  int current_params = static_cast<int>(candidate_of(base_row.name)->params.size());
   std::vector<std::string> current_members = Members(*candidate_of(base_row.name));
   std::size_t current_effects = 1;
   std::vector<std::string> accepted;
@@ -437,8 +491,10 @@ Status SelectCombination(const Dataset& ds, const std::vector<bool>& fit_mask, c
   for (std::size_t size = 2; size <= static_cast<std::size_t>(opt.max_effects); ++size) {
     const CandidateResult* best = nullptr;
     std::size_t best_k = 0;
+    int compared = 0;
     for (std::size_t k = 0; k < tried.size(); ++k) {
       if (Members(tried_c[k]).size() != size || !tried[k].status.ok() || !tried[k].disqualified.empty()) continue;
+      ++compared;
       if (best == nullptr || tried[k].score < best->score) {
         best = &tried[k];
         best_k = k;
@@ -464,10 +520,19 @@ Status SelectCombination(const Dataset& ds, const std::vector<bool>& fit_mask, c
         take = Issue26Specific(step.before_A, step.after_A, next_after, floor);
       }
     }
+    // Parsimony, whichever rule: the larger model must close significantly more than the one taken so far, its
+    // extra free parameters counted (ParsimonyTest; practice3 m03: a warmer coil's R beside dry friction and a
+    // preload that patch the reference's form error at the new operating point).
+    const Parsimony parsimony =
+        ParsimonyTest(step.before_A, current_params, step.after_A, static_cast<int>(tried_c[best_k].params.size()),
+                      best->holdout_autocorrelation_time, best->holdout_samples, compared, opt.parsimony_level);
+    RecordParsimony(parsimony, current_params, static_cast<int>(tried_c[best_k].params.size()), &step);
+    take = take && parsimony.passes;
     step.taken = take;
     d->additions.push_back(step);
     if (take) {
       current = best;
+      current_params = static_cast<int>(tried_c[best_k].params.size());
       current_members = Members(tried_c[best_k]);
       current_effects = size;
       accepted.push_back(best->name);
@@ -566,7 +631,7 @@ StatusOr<Predicted> PredictMembers(const Dataset& ds, const model::PlantParams& 
 // generator's convention: a drift the runs show by itself is news to the user.)
 Status FitNuisance(const Dataset& ds, const std::vector<bool>& fit_mask, const model::PlantParams& nominal,
                    const std::vector<std::vector<double>>& nominal_i, const AttributionOptions& attribution,
-                   double level, bool issue26_rules, Diagnosis* d) {
+                   double level, bool issue26_rules, double parsimony_level, Diagnosis* d) {
   // Only beside a verdict: a drift never turns "unknown" into a name (an effect outside the catalog plus a
   // free parameter would close more than either, and must stay unknown).
   if (d->chosen != 0 || d->ranking.empty() || d->candidates.empty()) return Status::Ok();
@@ -591,9 +656,16 @@ Status FitNuisance(const Dataset& ds, const std::vector<bool>& fit_mask, const m
   auto fitted = Attribute(ds, fit_mask, nominal, trials, d->noise_floor_A, attribution);
   if (!fitted.ok()) return fitted.status();
   const CandidateResult* best = nullptr;
+  int compared = 0;
   for (const auto& row : *fitted)
-    if (row.status.ok() && row.disqualified.empty() && (best == nullptr || row.score < best->score)) best = &row;
+    if (row.status.ok() && row.disqualified.empty()) {
+      ++compared;
+      if (best == nullptr || row.score < best->score) best = &row;
+    }
   if (best == nullptr) return Status::Ok();
+  const Candidate* best_c = nullptr;
+  for (const auto& t : trials)
+    if (t.name == best->name) best_c = &t;
   {
     Diagnosis::Addition step;
     step.from = verdict.name;
@@ -604,12 +676,17 @@ Status FitNuisance(const Dataset& ds, const std::vector<bool>& fit_mask, const m
     step.evidence = AdditionEvidence(step.before_A, step.after_A, step.effective_samples);
     step.taken = issue26_rules ? Issue26Decisive(step.before_A, step.after_A, d->noise_floor_A)
                                : AddsACause(step.before_A, step.after_A, step.effective_samples, level);
+    // Parsimony: the freed parameter must earn its place on the holdout runs (ParsimonyTest).
+    const int p_before = static_cast<int>(verdict_c.params.size());
+    const int p_after = static_cast<int>(best_c->params.size());
+    const Parsimony parsimony =
+        ParsimonyTest(step.before_A, p_before, step.after_A, p_after, best->holdout_autocorrelation_time,
+                      best->holdout_samples, compared, parsimony_level);
+    RecordParsimony(parsimony, p_before, p_after, &step);
+    step.taken = step.taken && parsimony.passes;
     d->additions.push_back(step);
     if (!step.taken) return Status::Ok();
   }
-  const Candidate* best_c = nullptr;
-  for (const auto& t : trials)
-    if (t.name == best->name) best_c = &t;
   const std::string param = best_c->params.back().name;
   Candidate refined_c = *best_c;
   refined_c.param_members.push_back(param);
@@ -708,8 +785,12 @@ void NoteFormError(const Dataset& ds, double level, Diagnosis* d) {
   const double floor = std::max(d->noise_floor_A, d->form_floor_A);
   if (!(row.holdout_rmse_after_A > kSignificance * floor)) return;
   double refused = -INFINITY;  // the strongest evidence for an addition that did not pass
+  const Diagnosis::Addition* strongest = nullptr;
   for (const auto& a : d->additions)
-    if (!a.taken && a.from == row.name) refused = std::max(refused, a.evidence);
+    if (!a.taken && a.from == row.name && a.evidence > refused) {
+      refused = a.evidence;
+      strongest = &a;
+    }
   double dt_s = NAN;
   for (const auto& r : ds.runs)
     if (r.sample_period_s > 0.0) dt_s = r.sample_period_s;
@@ -718,7 +799,12 @@ void NoteFormError(const Dataset& ds, double level, Diagnosis* d) {
                                  "floor), structured over about {:.0f} samples{}",
                                  row.name, 1e3 * own_A, row.holdout_autocorrelation_time,
                                  std::isfinite(dt_s) ? fmt::format(" ({:.2f} ms)", 1e3 * dt_s * row.holdout_autocorrelation_time) : "");
-  if (std::isfinite(refused))
+  if (strongest != nullptr && !strongest->parsimonious)
+    text += fmt::format(": a form error, not another cause (the best addition, {}, does not earn its {} extra "
+                        "parameters: F {:.2f} on {:.0f} independent samples, p {:.2g} against {:.2g})",
+                        strongest->to, strongest->params_after - strongest->params_before, strongest->f_statistic,
+                        strongest->parsimony_samples, strongest->p_value, strongest->level);
+  else if (std::isfinite(refused))
     text += fmt::format(": a form error, not another cause (the best addition's evidence {:.1f} is below {:.1f})",
                         refused, level);
   else
@@ -886,9 +972,43 @@ void LandmarksAndTrends(const Dataset& ds, const std::vector<std::vector<double>
   }
 }
 
-// Step 5's verdict: the best row when it may be the verdict and closes kExplained of the gap, "none" when
-// against a reference only the model's form error is left, else "unknown"; and what the verdict is confusable with.
-void Decide(Diagnosis* out) {
+// "Nothing changed", when the evidence can carry it: against a reference only when the reference was identified to
+// within kReferenceIdentified x its noise floor (diagnose.h); otherwise `undetermined`, with the reference's fit
+// error against its noise, the smallest change these runs could have shown and what to record to do better.
+void NoneOrUndetermined(Diagnosis* out, const std::string& none_reason) {
+  Diagnosis& d = *out;
+  d.chosen = -1;
+  if (!d.has_reference || d.reference.identified()) {
+    d.verdict = "none";
+    d.verdict_kind = VerdictKind::kNone;
+    d.verdict_reason = none_reason;
+    return;
+  }
+  d.verdict = "undetermined";
+  d.verdict_kind = VerdictKind::kUndetermined;
+  // The target's gap becomes significant at kSignificance x max(noise, the reference's error); a change adds its
+  // own signature in quadrature to what the reference leaves, so the smallest it could be seen at is
+  // sqrt(kSignificance^2 - 1) x that floor.
+  const double floor = std::max({d.noise_floor_A, d.reference.fit_rmse_A, d.measurement_noise_A});
+  d.smallest_visible_A = std::sqrt(kSignificance * kSignificance - 1.0) * floor;
+  d.verdict_reason = fmt::format(
+      "cannot tell: the reference is identified at {:.2f} mA RMS against its noise floor of {:.2f} mA ({:.1f}x; "
+      "`none` needs at most {:.0f}x), so a change whose own signature on the current is below {:.2f} mA RMS "
+      "cannot be told from the reference's own fit error ({})",
+      d.reference.fit_rmse_A * 1e3, d.reference.noise_floor_A * 1e3,
+      d.reference.noise_floor_A > 0.0 ? d.reference.fit_rmse_A / d.reference.noise_floor_A : INFINITY,
+      kReferenceIdentified, d.smallest_visible_A * 1e3, none_reason);
+  std::string record;
+  for (const auto& r : d.reference.to_record) record += (record.empty() ? "" : "; ") + r;
+  if (!record.empty()) d.verdict_reason += "; to do better: " + record;
+}
+
+// Step 5's verdict, decided here and only here: the best row when it may be the verdict and closes kExplained of
+// the gap (among rows the data cannot separate from it, the one the declared conditions or a from-scratch
+// moving valve's data determine: ChooseAmongConfusable, gap/moving_valve.h), "none" when against a reference
+// only the model's form error is left and the reference was identified (else "undetermined"), else "unknown";
+// and what the verdict is confusable with.
+void Decide(Diagnosis* out, const Dataset& target) {
   Diagnosis& d = *out;
   const double floor = std::max(d.noise_floor_A, d.form_floor_A);
   const CandidateResult& best = d.ranking.front();
@@ -897,10 +1017,8 @@ void Decide(Diagnosis* out) {
     // Against a reference: nothing fits this session's fit runs better than the device as identified there,
     // and the holdout runs are no worse: nothing changed but the model's own form error. (Without a
     // reference the same picture is also what an effect outside the catalog looks like: that stays unknown.)
-    d.verdict = "none";
-    d.verdict_kind = VerdictKind::kNone;
-    d.verdict_reason = "what is left is the model's own form error: no candidate fits better, and the holdout "
-                       "runs are within " + FormatNumber(kSignificance) + "x of it";
+    NoneOrUndetermined(&d, "what is left is the model's own form error: no candidate fits better, and the holdout "
+                           "runs are within " + FormatNumber(kSignificance) + "x of it");
   } else if (best.status.ok() && best.disqualified.empty() && best.closed >= kExplained) {
     d.chosen = 0;
     d.verdict = best.name;
@@ -941,6 +1059,10 @@ void Decide(Diagnosis* out) {
     }
     if (best.name == d.chosen_combination)
       d.confusable.insert(d.confusable.end(), d.combination_alternatives.begin(), d.combination_alternatives.end());
+    // The verdict is written once, from the row chosen among the confusable ones.
+    const std::string either = ChooseAmongConfusable(&d, target);
+    d.verdict = either.empty() ? d.ranking.front().name : either;
+    d.verdict_kind = either.empty() ? VerdictKindOf(d.ranking.front().kind) : VerdictKind::kEitherOf;
   }
 }
 
@@ -956,6 +1078,33 @@ double SharedTemperatureC(const Dataset& ds) {
   }
   return std::isfinite(tmin) && tmax - tmin <= 1.0 ? 0.5 * (tmin + tmax) : NAN;
 }
+
+// What would identify a reference better, from what its runs are (said with an `undetermined` verdict).
+std::vector<std::string> ToRecord(const Dataset& ref, bool switch_on) {
+  std::vector<std::string> out;
+  std::set<double> pressures, supplies;
+  for (const auto& r : ref.runs) pressures.insert(r.supply_pressure_Pa), supplies.insert(r.supply_V);
+  if (switch_on && pressures.size() < 3)
+    out.push_back("switch-on runs at 3 or more supply pressures (they separate the preload from the pressure area)");
+  if (supplies.size() < 2)
+    out.push_back(switch_on ? "a pulling-in run at a second supply voltage (the current then rises at another rate, "
+                              "which separates the lift from the flight and R from L)"
+                            : "runs at a second supply voltage (they separate R from the sense chain's gain)");
+  if (switch_on) {
+    bool settles = true;
+    for (const auto& r : ref.runs) {
+      if (r.i_A.size() < 20) continue;
+      const std::size_t n = r.i_A.size();
+      // The last tenth still rising by more than 1 % of the final value: the window ends before the final current.
+      settles = settles && std::abs(r.i_A[n - 1] - r.i_A[n - 1 - n / 10]) < 0.01 * std::abs(r.i_A[n - 1]);
+    }
+    if (!settles)
+      out.push_back("a longer window, until the current settles (5 L/R), so the final current gives R directly");
+  }
+  out.push_back("more sweeps averaged per trace (the noise floor falls as 1/sqrt(sweeps))");
+  out.push_back("or a reference fit on fewer parameters, the rest held at values measured on the valve (--reference-params)");
+  return out;
+}
 }  // namespace
 
 StatusOr<FittedDevice> ReferenceDevice(const Dataset& reference, const model::PlantParams& nominal,
@@ -963,7 +1112,7 @@ StatusOr<FittedDevice> ReferenceDevice(const Dataset& reference, const model::Pl
   if (fit.params.empty() && fit.fixed.empty() && IsSwitchOnSession(reference, nominal)) {
     // A moving valve with no parameter list: identified from scratch from its switch-on curves.
     MovingIdentifyOptions mo;
-    mo.budget_s = std::min(fit.budget_s, 55.0);
+    mo.max_evaluations = fit.scratch_max_evaluations;
     mo.solver = fit.attribution.solver;
     mo.progress = fit.scratch_progress;
     auto id = IdentifyMovingValve(reference, nominal, mo);
@@ -977,6 +1126,8 @@ StatusOr<FittedDevice> ReferenceDevice(const Dataset& reference, const model::Pl
       for (const auto& h : id->held) out->notes.push_back(h.name + " held at " + FormatNumber(h.value));
       for (const auto& n : id->notes) out->notes.push_back(n);
       out->temperature_C = SharedTemperatureC(reference);
+      out->noise_floor_A = id->noise_floor_A;
+      out->to_record = ToRecord(reference, true);
     }
     return dev;
   }
@@ -994,6 +1145,8 @@ StatusOr<FittedDevice> ReferenceDevice(const Dataset& reference, const model::Pl
     out->fit_rmse_A = id->fit.fit_rmse_A;
     out->params = id->fit.params;
     out->temperature_C = SharedTemperatureC(reference);
+    out->noise_floor_A = id->noise_floor_A;
+    out->to_record = ToRecord(reference, false);
   }
   return dev;
 }
@@ -1016,6 +1169,10 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds_in, const model::PlantParams& nom
     with_driver = ds_in;
     with_driver.driver = dev->driver;
     dsp = &with_driver;
+    // A reference identified from scratch saw its captures cleaned (offset, edge spike, polarity): the target
+    // gets the same, or a baseline offset would pass for a change of the sense chain.
+    if (d.reference.from_scratch)
+      for (const auto& note : CleanSwitchOnSession(&with_driver)) d.warnings.push_back("target " + note);
   }
   const Dataset& ds = *dsp;
   const std::vector<Split> split = MakeSplit(ds, &d.split_note);
@@ -1045,10 +1202,8 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds_in, const model::PlantParams& nom
   }
 
   if (!d.significant) {
-    d.verdict = "none";
-    d.verdict_kind = VerdictKind::kNone;
-    d.verdict_reason = d.has_reference ? "the change from the reference is within its own fit error"
-                                       : "the residual is within the noise floor";
+    NoneOrUndetermined(&d, d.has_reference ? "the change from the reference is within its own fit error"
+                                           : "the residual is within the noise floor");
     return d;
   }
   if (!opt.attribute) {
@@ -1120,15 +1275,13 @@ StatusOr<Diagnosis> Diagnose(const Dataset& ds_in, const model::PlantParams& nom
       break;
     }
 
-  Decide(&d);
-  if (d.reference.from_scratch) PreferDeterminedChange(&d, ds);
-  PreferDeclaredTemperature(&d, ds);
+  Decide(&d, ds);
   const CandidateResult& best = d.ranking.front();
 
   if (opt.fit_nuisance) {
     const double floor_closed = std::max(d.noise_floor_A, d.form_floor_A);
     const std::string before_drift = d.ranking.front().name;
-    if (auto st = FitNuisance(ds, fit_mask, nominal, nominal_i, attribution, opt.addition_evidence, opt.issue26_rules, &d); !st.ok()) return st;
+    if (auto st = FitNuisance(ds, fit_mask, nominal, nominal_i, attribution, opt.addition_evidence, opt.issue26_rules, opt.parsimony_level, &d); !st.ok()) return st;
     auto& row = d.ranking.front();
     if (!d.nuisance.empty() || row.name != before_drift) {
       const double denom = row.holdout_rmse_before_A - floor_closed;

@@ -77,6 +77,8 @@ std::string DiagnosisJson(const Diagnosis& d) {
                       {"temperature_C", NumOrNull(d.reference.temperature_C)},
                       {"fit_rmse_A", d.reference.fit_rmse_A},
                       {"params", params}};
+    j["reference"]["noise_floor_A"] = d.reference.noise_floor_A;
+    j["reference"]["identified"] = d.reference.identified();
     if (d.reference.from_scratch) {
       j["reference"]["from_scratch"] = true;
       j["reference"]["notes"] = d.reference.notes;
@@ -110,6 +112,10 @@ std::string DiagnosisJson(const Diagnosis& d) {
   j["verdict"] = d.verdict;
   j["verdict_kind"] = VerdictKindName(d.verdict_kind);
   j["verdict_reason"] = d.verdict_reason;
+  if (d.verdict_kind == VerdictKind::kUndetermined) {
+    j["smallest_visible_A"] = NumOrNull(d.smallest_visible_A);
+    j["to_record"] = d.reference.to_record;
+  }
   if (!d.nuisance.empty()) {
     nlohmann::ordered_json drift = nlohmann::ordered_json::array();
     for (const auto& n : d.nuisance)
@@ -130,7 +136,10 @@ std::string DiagnosisJson(const Diagnosis& d) {
     for (const auto& a : d.additions)
       steps.push_back({{"from", a.from}, {"to", a.to}, {"holdout_rmse_before_A", a.before_A},
                        {"holdout_rmse_after_A", a.after_A}, {"effective_samples", a.effective_samples},
-                       {"evidence", a.evidence}, {"taken", a.taken}});
+                       {"evidence", a.evidence}, {"params_before", a.params_before}, {"params_after", a.params_after},
+                       {"parsimony_samples", a.parsimony_samples}, {"f_statistic", a.f_statistic},
+                       {"p_value", a.p_value}, {"level", a.level}, {"parsimonious", a.parsimonious},
+                       {"taken", a.taken}});
     j["additions"] = steps;
   }
   if (!d.form_error.empty()) j["form_error"] = d.form_error;
@@ -305,10 +314,12 @@ std::string DiagnosisReport(const Diagnosis& d) {
                             d.ranking.front().holdout_rmse_after_A * 1e3, n.gap_A * 1e3, n.effects_gap_A * 1e3)},
                2, 120, 0);
   for (const auto& a : d.additions)
-    os << Wrap({fmt::format("addition {} -> {}: holdout {:.2f} -> {:.2f} mA, {:.0f} independent samples, evidence {:.1f}: "
-                            "{}",
+    os << Wrap({fmt::format("addition {} -> {}: holdout {:.2f} -> {:.2f} mA, {:.0f} independent samples, evidence {:.1f}; "
+                            "parsimony {} -> {} parameters, F {:.2f} on {:.0f} independent samples, p {:.2g} "
+                            "against {:.2g}: {}",
                             a.from, a.to, a.before_A * 1e3, a.after_A * 1e3, a.effective_samples, a.evidence,
-                            a.taken ? "taken" : "not taken")},
+                            a.params_before, a.params_after, a.f_statistic, a.parsimony_samples, a.p_value, a.level,
+                            a.taken ? "taken" : a.parsimonious ? "not taken" : "not taken (not parsimonious)")},
                2, 120, 0);
   for (const auto& w : d.warnings) os << Wrap({"warning: " + w}, 2, 120, 0);
   return os.str();

@@ -38,11 +38,16 @@ struct IdentifyOptions {
   // scratch); the default boxes (nominal x [0.5, 1.5]) are for a local re-fit.
   enum class Global { kAuto, kOn, kOff };
   Global global = Global::kAuto;
-  double budget_s = 600.0;            // wall time for the whole identification
+  // A watchdog, not a budget: the work is bounded by evaluation counts (attribution.max_evaluations, raised to 200
+  // per parameter, and global_evaluations_per_param), so results do not depend on the machine's load; this wall
+  // time only stops a fit that would otherwise run away (it binds on a machine 100x slower than these need).
+  double budget_s = 600.0;
   int global_evaluations_per_param = 150;
   AttributionOptions attribution;
   // Progress lines of a from-scratch identification (gap/moving_valve.h), when no parameter is named.
   std::function<void(const std::string&)> scratch_progress;
+  // The evaluation budget of a from-scratch identification (MovingIdentifyOptions::max_evaluations).
+  int scratch_max_evaluations = 20000;
 };
 
 // What the data says about each fitted parameter.

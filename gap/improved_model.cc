@@ -54,6 +54,9 @@ StatusOr<valvebench::v1::ModelSpec> ImprovedModel(const Diagnosis& d, const valv
   if (d.verdict_kind == VerdictKind::kUnknown)
     return Status::FailedPrecondition("no candidate in the catalog explains the gap (verdict unknown); the "
                                       "diagnosis stands, no model written");
+  if (d.verdict_kind == VerdictKind::kUndetermined)
+    return Status::FailedPrecondition("the reference was not identified well enough to tell (verdict undetermined); "
+                                      "the diagnosis stands, no model written");
   // The model the diagnosis started from; with a reference: as identified there.
   valvebench::v1::ModelSpec base = nominal;
   model::DriverParams driver = driver_in;

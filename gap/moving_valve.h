@@ -61,7 +61,14 @@ struct HeldValue {
 };
 
 struct MovingIdentifyOptions {
-  double budget_s = 55.0;   // wall time for all stages
+  // The work for all stages, in evaluations (one evaluation simulates every fit run once): deterministic, so the
+  // result does not depend on how loaded the machine is. Stages 1-4 take about 9300 at most (their own counts);
+  // the global stage 5, where the local stages stalled, gets what is left (about 10000), less 700 kept for its
+  // local polish and the final check. Sized by CPU time, which the load does not change: at 30000 the slowest
+  // practice4 valve (p41_3, about 2.7 ms of CPU per evaluation) took 82 s of CPU; at 20000 it stays under 60 s,
+  // and on 2 idle cores an identification's wall time is at most its CPU time (docs/real-data.md, "A population
+  // of valves").
+  int max_evaluations = 20000;
   int threads = 2;          // runs simulated concurrently
   model::SolverOptions solver = AttributionOptions::FastSolver();
   std::function<void(const std::string&)> progress;  // one line per stage (benchctl prints it on stderr)
@@ -100,6 +107,10 @@ struct MovingIdentification {
 // anything else.
 bool IsSwitchOnSession(const Dataset& ds, const model::PlantParams& family);
 
+// Removes each switch-on run's baseline offset, masks the switching spike at the gate edge and fixes an
+// inverted polarity (gap/scope_csv.h CleanSwitchOnCapture); returns one note per run it changed.
+std::vector<std::string> CleanSwitchOnSession(Dataset* ds);
+
 // Identifies the valve on the fit runs (the manifest's split; every run when none is held out) and predicts
 // every run with it.
 StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds, const model::PlantParams& family,
@@ -112,22 +123,24 @@ std::string MovingIdentificationReport(const MovingIdentification& id);
 // path): the coil resistance, the supply pressure (the declared one scaled: the pressure area), the spring
 // preload, stiffness, mass and damping, a plunger that no longer moves (`stuck`), dry friction, and the sense
 // chain's offset and gain; resistance_temperature where runs declare temperatures.
-// Among confusable candidates on a moving valve, the one the data determine (called by Diagnose after its
-// verdict when the reference was identified from scratch):
-//  - a spring stiffness (param:k) confusable with the preload (param:delta) becomes the preload: both change the
-//    force on the closed plunger, which the switch-on sees (the dip's time); k also changes it along the stroke,
-//    which the runs did not resolve, or k would not be confusable;
-//  - a preload confusable with a supply pressure other than declared, on runs that all declare one pressure: one
-//    constant force either way (seed 000 eq. 9-10: k delta and (A2 - A1) P add), so the verdict names both.
-void PreferDeterminedChange(Diagnosis* d, const Dataset& target);
-
-// Against a reference (any device): a sense-chain verdict (sensor_gain, sensor_offset) confusable with the
-// winding's resistance (resistance_temperature, param:R) becomes the resistance when the runs declare a winding
-// more than 1 K from the reference's: the declared conditions predict that change, and on a coil R and the
-// gain are degenerate (issue 25: 3 of 11 hot-vs-cold strokes of a held solenoid came out a lone sensor term).
-void PreferDeclaredTemperature(Diagnosis* d, const Dataset& target);
-
 std::vector<Candidate> MovingValveCandidates(const model::PlantParams& reference, const Dataset& target,
                                              const std::vector<bool>& fit_mask, double reference_C);
+
+// Among the candidates the data cannot separate from the best row (d->confusable, d->chosen == 0), the one the
+// declared conditions or the data determine; part of the verdict's decision (gap/diagnose.cc Decide), before the
+// verdict is written from the chosen row. It may move a confusable row to the front (the old one becomes
+// confusable) and appends its reason to d->verdict_reason. Returns the verdict's text when the data leave
+// either of two (VerdictKind::kEitherOf), else "" (the verdict is the first row's name).
+//  - Any reference: a sense-chain row (sensor_gain, sensor_offset) confusable with the winding's resistance
+//    (resistance_temperature, param:R) becomes the resistance when the runs declare a winding more than 1 K from
+//    the reference's: the declared conditions predict that change, and on a coil R and the gain are degenerate
+//    (issue 25: 3 of 11 hot-vs-cold strokes of a held solenoid came out a lone sensor term).
+//  - A reference identified from scratch (a moving valve): a spring stiffness (param:k) confusable with the
+//    preload (param:delta), or else with a supply pressure other than declared, becomes that constant force:
+//    each changes the force on the closed plunger, which the switch-on sees (the dip's time); k also changes it
+//    along the stroke, which the runs did not resolve, or k would not be confusable. A preload confusable with a supply pressure other than declared, on runs that all
+//    declare one pressure, is "either of": one constant force either way (seed 000 eq. 9-10: k delta and
+//    (A2 - A1) P add).
+std::string ChooseAmongConfusable(Diagnosis* d, const Dataset& target);
 
 }  // namespace vb::gap

@@ -5,6 +5,7 @@
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
+#include <cstdio>
 #include <charconv>
 #include <cmath>
 #include <filesystem>
@@ -53,6 +54,87 @@ bool Number(const std::string& s, double* v) {
 std::string Quote(const std::string& s) { return "'" + (s.size() > 40 ? s.substr(0, 40) + "..." : s) + "'"; }
 
 }  // namespace
+
+namespace {
+double Median(std::vector<double> x) {
+  if (x.empty()) return 0.0;
+  const std::size_t h = x.size() / 2;
+  std::nth_element(x.begin(), x.begin() + static_cast<std::ptrdiff_t>(h), x.end());
+  return x[h];
+}
+}  // namespace
+
+CaptureCleaning CleanSwitchOnCapture(std::vector<double>* i_A_ptr, const std::vector<std::int8_t>& gate, double dt_s,
+                                     double noise_A) {
+  CaptureCleaning c;
+  std::vector<double>& i = *i_A_ptr;
+  const std::size_t n = std::min(i.size(), gate.size());
+  std::size_t on = 0;
+  while (on < n && gate[on] == 0) ++on;
+  if (on == 0 || on >= n || !(dt_s > 0.0)) return c;
+  for (double x : i)
+    if (!std::isfinite(x)) return c;  // the loader refuses such traces; nothing to clean
+  // The noise: the median absolute second difference (robust to the spike itself): for white noise of sigma s a
+  // second difference has sigma sqrt(6) s, and its median absolute value is 0.6745 of that. Floored at 1e-4 of
+  // the trace's largest value (finer than any scope's step: a 14-bit ADC's is 6e-5 of its range), so a
+  // quantised trace whose second differences are mostly 0 does not make every sample an outlier.
+  double peak = 0.0;
+  for (std::size_t k = 0; k < n; ++k) peak = std::max(peak, std::abs(i[k]));
+  double sigma = noise_A;
+  if (!(sigma > 0.0)) {
+    std::vector<double> d2;
+    for (std::size_t k = 2; k < n; ++k) d2.push_back(std::abs(i[k] - 2.0 * i[k - 1] + i[k - 2]));
+    sigma = Median(d2) / (0.6745 * std::sqrt(6.0));
+  }
+  sigma = std::max(sigma, 1e-4 * peak);
+  if (!(sigma > 0.0)) return c;  // an all-zero trace: nothing to clean
+  std::vector<std::string> said;
+  char buf[200];
+  // The baseline: the pre-trigger samples' median, away from the edge's last 2 samples (a spike may start there).
+  const std::size_t pre_end = on > 4 ? on - 2 : on;
+  if (pre_end >= 3) {
+    const double off = Median(std::vector<double>(i.begin(), i.begin() + static_cast<std::ptrdiff_t>(pre_end)));
+    const double se = 1.25 * sigma / std::sqrt(static_cast<double>(pre_end));
+    if (std::abs(off) > 4.0 * se) {
+      for (double& x : i) x -= off;
+      c.offset_A = off;
+      std::snprintf(buf, sizeof buf, "a baseline offset of %.4g mA (the median of %zu pre-trigger samples) removed",
+                    off * 1e3, pre_end);
+      said.push_back(buf);
+    }
+  }
+  // The polarity.
+  double on_sum = 0.0;
+  for (std::size_t k = on; k < n; ++k) on_sum += i[k];
+  const double on_mean = on_sum / static_cast<double>(n - on);
+  if (on_mean < -6.0 * sigma) {
+    for (double& x : i) x = -x;
+    c.inverted = true;
+    said.push_back("the trace was negative with the gate on (a probe or shunt wired the other way): negated");
+  }
+  // The spike at the edge.
+  const std::size_t span = std::max<std::size_t>(2, static_cast<std::size_t>(std::ceil(50e-6 / dt_s)));
+  const std::size_t from = on >= 2 ? on - 2 : 0, to = std::min(n, on + span);
+  const std::vector<double> raw(i.begin(), i.begin() + static_cast<std::ptrdiff_t>(n));
+  for (std::size_t k = from; k < to; ++k) {
+    const std::size_t a = k >= 3 ? k - 3 : 0, b = std::min(n, k + 4);
+    const double med = Median(std::vector<double>(raw.begin() + static_cast<std::ptrdiff_t>(a),
+                                                  raw.begin() + static_cast<std::ptrdiff_t>(b)));
+    const double dev = raw[k] - med;
+    if (std::abs(dev) > 6.0 * sigma) {
+      i[k] = med;
+      ++c.spike_samples;
+      if (std::abs(dev) > std::abs(c.spike_A)) c.spike_A = dev;
+    }
+  }
+  if (c.spike_samples > 0) {
+    std::snprintf(buf, sizeof buf, "a switching spike at the gate edge (%d sample%s, up to %+.4g mA) masked by the "
+                  "running median of 7 samples", c.spike_samples, c.spike_samples == 1 ? "" : "s", c.spike_A * 1e3);
+    said.push_back(buf);
+  }
+  for (const auto& w : said) c.note += (c.note.empty() ? "" : "; ") + w;
+  return c;
+}
 
 StatusOr<ScopeRun> ConvertScopeCsv(const std::string& csv_path, const std::string& out_dir, const ScopeCsvOptions& o) {
   const std::string name = fs::path(csv_path).filename().string();
@@ -233,19 +315,27 @@ StatusOr<ScopeRun> ConvertScopeCsv(const std::string& csv_path, const std::strin
   if (t_start < last)
     return Status::InvalidArgument("--t-start-s: " + std::to_string(t_start) + " s is before the dataset's last run (" +
                                    std::to_string(last) + " s); runs are listed in time order");
+  std::vector<double> current(t.size());
+  for (std::size_t k = 0; k < t.size(); ++k) current[k] = o.shunt_ohm > 0.0 ? v[k] / o.shunt_ohm : v[k] * o.probe_A_per_V;
+  if (o.clean) {
+    const std::vector<std::int8_t> g8(gate.begin(), gate.end());
+    out.cleaning = CleanSwitchOnCapture(&current, g8, dt, 0.0);
+  }
   std::ofstream csv(fs::path(out_dir) / out.file);
   if (!csv) return Status::InvalidArgument((fs::path(out_dir) / out.file).string() + ": cannot write");
   csv << "t_s,gate,i_A\n";
   char buf[96];
   for (std::size_t k = 0; k < t.size(); ++k) {
-    const double i = o.shunt_ohm > 0.0 ? v[k] / o.shunt_ohm : v[k] * o.probe_A_per_V;
-    std::snprintf(buf, sizeof buf, "%.9g,%d,%.9g\n", static_cast<double>(k) * dt, gate[k], i);
+    std::snprintf(buf, sizeof buf, "%.9g,%d,%.9g\n", static_cast<double>(k) * dt, gate[k], current[k]);
     csv << buf;
   }
   nlohmann::ordered_json run = {{"id", out.run_id}, {"file", out.file}, {"supply_V", o.supply_V},
                                 {"supply_pressure_Pa", o.supply_pressure_Pa}, {"t_start_s", t_start}};
   if (!o.split.empty()) run["split"] = o.split;
   m["runs"].push_back(run);
+  // What the cleaning did is kept with the data (the manifest's description; a run has no free-text key).
+  if (!out.cleaning.note.empty())
+    m["description"] = m.value("description", std::string()) + "; run " + out.run_id + ": " + out.cleaning.note;
   csv.close();
   {
     std::ofstream mf(manifest_path);

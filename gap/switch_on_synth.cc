@@ -2,6 +2,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -40,8 +41,13 @@ Status WriteSwitchOnSession(const std::string& directory, const model::PlantPara
   m["description"] = "synthetic switch-on session (gap/switch_on_synth.h)";
   m["sensor"] = {{"noise_A", scope.noise_A}, {"averaged", scope.averaged}, {"adc_lsb_A", scope.lsb_A}};
   nlohmann::ordered_json list = nlohmann::ordered_json::array();
+  std::uniform_int_distribution<std::size_t> where(0, n - 1);
+  std::size_t on = 0;
+  while (on < n && gate[on] == 0) ++on;
   for (std::size_t r = 0; r < runs.size(); ++r) {
     const auto& plan = runs[r];
+    std::vector<bool> glitch(n, false);
+    for (int g = 0; g < scope.glitches; ++g) glitch[where(rng)] = true;
     const std::string file = plan.id + ".csv";
     std::ofstream out(directory + "/" + file);
     if (!out) return Status::InvalidArgument(directory + "/" + file + ": cannot write");
@@ -49,8 +55,16 @@ Status WriteSwitchOnSession(const std::string& directory, const model::PlantPara
     char buf[96];
     for (std::size_t k = 0; k < n; ++k) {
       double sum = 0.0;
-      for (int s = 0; s < scope.averaged; ++s) sum += (*reps)[r].i_A[k] + noise(rng);
-      double i = sum / scope.averaged;
+      const double truth_A = scope.open_coil ? 0.0 : (*reps)[r].i_A[k];
+      for (int s = 0; s < scope.averaged; ++s) sum += truth_A + noise(rng);
+      double i = sum / scope.averaged + scope.offset_A;
+      if (k >= on && k < on + static_cast<std::size_t>(std::max(scope.spike_samples, 0)))
+        i += scope.spike_A * std::pow(0.5, static_cast<double>(k - on));
+      const double t = static_cast<double>(k) * scope.sample_period_s + t_start_s + 2.0 * static_cast<double>(r);
+      i += scope.ripple_A * std::sin(2.0 * M_PI * scope.ripple_Hz * t);
+      if (glitch[k]) i += scope.glitch_A;
+      if (scope.clip_A > 0.0) i = std::clamp(i, -scope.clip_A, scope.clip_A);
+      if (scope.inverted) i = -i;
       if (scope.lsb_A > 0.0) i = std::round(i / scope.lsb_A) * scope.lsb_A;
       std::snprintf(buf, sizeof buf, "%.5f,%d,%.6g\n", static_cast<double>(k) * scope.sample_period_s, gate[k], i);
       out << buf;

@@ -28,6 +28,20 @@ struct ScopeChain {
   double pre_trigger_s = 1e-4;           // the gate rises here
   double duration_s = 0.0101;            // the trace's length
   unsigned seed = 1;
+  // A real scope's artefacts (issue 35: odd but legal captures), each off by default. Applied to the averaged
+  // trace in this order, then the resolution: a baseline offset; a switching spike of spike_A decaying by half
+  // per sample over spike_samples samples from the gate's edge (either sign); mains ripple; glitches (isolated
+  // samples off by glitch_A, at random); clipping at +-clip_A; the polarity inverted; an open coil (the trace is
+  // the chain's noise alone).
+  double offset_A = 0.0;
+  double spike_A = 0.0;
+  int spike_samples = 0;
+  double ripple_A = 0.0, ripple_Hz = 50.0;
+  double glitch_A = 0.0;
+  int glitches = 0;
+  double clip_A = 0.0;                   // 0: no clipping
+  bool inverted = false;
+  bool open_coil = false;
 };
 
 // Simulates every run from rest with the gate stepping on at pre_trigger_s and writes `directory`/manifest.json

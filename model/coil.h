@@ -22,8 +22,8 @@ struct Magnetics {
 // Linear (seed 000 eq. 7-8, seed 002 eq. 6): lambda = L(x) i, F = 1/2 i^2 dL/dx. magnetic_saturation: a
 // saturating core in parallel with the air path it can never lose (the core at mu_r -> 1):
 //   lambda = ls f(u) + La i,   u = Lc i / ls,   La = L / mu_r,  Lc = L - La,  ls = N A_e B_sat
-// with the knee f Frohlich's f(u) = u / (1 + |u|) (the classic magnetisation-curve fit, a gradual knee) or
-// tanh(u) (a sharp one); both give lambda = L i at small currents. Co-energy W' = ls^2/Lc G(u) + La i^2 / 2,
+// with the knee f Frohlich's f(u) = u / (1 + |u|) (the classic magnetisation-curve fit, a gradual knee),
+// tanh(u) (a sharp one) or (2/pi) atan(pi u / 2) (between the two); all give lambda = L i at small currents. Co-energy W' = ls^2/Lc G(u) + La i^2 / 2,
 // G' = f (Frohlich: G = |u| - ln(1 + |u|); tanh: G = ln cosh u), so at constant i
 //   F = dW'/dx = (dLc/dx) (ls i f(u) / Lc - ls^2 / Lc^2 G(u)) + (dLa/dx) i^2 / 2.
 // The air path keeps the incremental inductance >= La: deep saturation stays physical and non-stiff.
@@ -45,7 +45,14 @@ inline Magnetics MagneticsAt(const Plant& plant, double i, double x) {
   const double u = Lc * i / ls;
   const double au = std::abs(u);
   double f, df, G;
-  if (pp.effects.saturation_tanh >= 0.5) {
+  if (pp.effects.saturation_tanh >= 1.5) {
+    // arctan (a knee between Frohlich's and tanh's): f = (2/pi) atan(pi u / 2), slope 1 at 0;
+    // G = (2/pi) (|u| atan(pi |u| / 2) - ln(1 + (pi u / 2)^2) / pi).
+    const double a = 0.5 * M_PI * au;
+    f = (2.0 / M_PI) * std::atan(0.5 * M_PI * u);
+    df = 1.0 / (1.0 + a * a);
+    G = (2.0 / M_PI) * (au * std::atan(a) - std::log1p(a * a) / M_PI);
+  } else if (pp.effects.saturation_tanh >= 0.5) {
     f = std::tanh(u);
     df = 1.0 - f * f;
     G = au + std::log1p(std::exp(-2.0 * au)) - M_LN2;  // ln cosh u, stable for large |u|

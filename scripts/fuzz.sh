@@ -28,6 +28,7 @@ targets=(
   fuzz_u3_protocol:u3_protocol:128
   fuzz_gateway:gateway:16384
   fuzz_scope_csv:scope_csv:8192
+  fuzz_identify:identify:2048
 )
 mkdir -p "$build/artifacts"
 failed=0

@@ -325,15 +325,15 @@ TEST(PreferDeclared, WarmerWindingNamesTheResistanceOverAConfusableSenseGain) {
   hot.coil_C = 41.0;
   target.runs.push_back(hot);
   Diagnosis same = d;
-  PreferDeclaredTemperature(&d, target);
-  EXPECT_EQ(d.verdict, "resistance_temperature");
+  EXPECT_EQ(ChooseAmongConfusable(&d, target), "");  // one cause, not "either of"
+  EXPECT_EQ(d.chosen, 0);
   EXPECT_EQ(d.ranking.front().name, "resistance_temperature");
   EXPECT_EQ(d.candidates.front().name, "resistance_temperature");
   EXPECT_NE(std::find(d.confusable.begin(), d.confusable.end(), "sensor_gain"), d.confusable.end());
   // At the reference's temperature nothing predicts a change of R: the ranking stands.
   target.runs.front().coil_C = 26.5;
-  PreferDeclaredTemperature(&same, target);
-  EXPECT_EQ(same.verdict, "sensor_gain");
+  EXPECT_EQ(ChooseAmongConfusable(&same, target), "");
+  EXPECT_EQ(same.ranking.front().name, "sensor_gain");
 }
 
 // ---- scope captures in (benchctl convert --channel) -------------------------------------------------------------

@@ -149,14 +149,16 @@ namespace {
 // The saturated force is the co-energy derivative: compare with a finite difference of W'(i, x) = int lambda di
 // integrated numerically (Simpson), at currents from linear to deep saturation.
 TEST(Effects, SaturatedForceIsTheCoEnergyDerivative) {
-  for (const double tanh_knee : {0.0, 1.0}) {  // Frohlich's knee and the tanh knee
-    SCOPED_TRACE(tanh_knee > 0.5 ? "tanh" : "Frohlich");
+  for (const double tanh_knee : {0.0, 1.0, 2.0}) {  // Frohlich's knee, the tanh knee and the arctan knee
+    SCOPED_TRACE(tanh_knee > 1.5 ? "arctan" : tanh_knee > 0.5 ? "tanh" : "Frohlich");
     PlantParams p = WithEffect("taghizadeh2009", "magnetic_saturation", {{"B_sat", 1.5}, {"tanh", tanh_knee}});
     Plant plant(p);
     Simulator sim(plant, DriverParams{}, Conditions{24.0, 0.0});
     const double ls = p.N_turns * p.A_e_m2 * 1.5;
     const double air = 1.0 / p.mu_r;  // the air path's share of L (docs/model.md)
-    auto knee = [&](double u) { return tanh_knee > 0.5 ? std::tanh(u) : u / (1.0 + std::abs(u)); };
+    auto knee = [&](double u) {
+      return tanh_knee > 1.5 ? 2.0 / M_PI * std::atan(0.5 * M_PI * u) : tanh_knee > 0.5 ? std::tanh(u) : u / (1.0 + std::abs(u));
+    };
     auto lambda = [&](double i, double x) {
       const double L = plant.L_H(x);
       return ls * knee((1.0 - air) * L * i / ls) + air * L * i;

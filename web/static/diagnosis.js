@@ -53,7 +53,7 @@ function showDiagnosis(d, out, took_s) {
   const actions = el('div', {class: 'actions'},
     model ? el('a', {id: 'improved-model', download: 'improved-model.json', class: 'button',
       href: URL.createObjectURL(new Blob([model], {type: 'application/json'})), text: 'download the improved model (JSON)'})
-      : el('span', {class: 'muted', id: 'improved-model-none', text: v.verdict && v.verdict !== 'unknown' && v.verdict !== 'none'
+      : el('span', {class: 'muted', id: 'improved-model-none', text: v.verdict && v.verdict !== 'unknown' && v.verdict !== 'none' && v.verdict !== 'undetermined'
         ? 'the server sent no improved model (DiagnoseRunsResponse.improved_model_json is empty)' : 'no improved model (no effect attributed)'}),
     el('a', {download: 'diagnosis.json', href: URL.createObjectURL(new Blob([JSON.stringify(v, null, 2)], {type: 'application/json'})),
       text: 'diagnosis JSON'}),
