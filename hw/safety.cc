@@ -70,6 +70,7 @@ Status SafetyBench::Trip(std::string reason) {
     std::lock_guard<std::mutex> lock(inner_mu_);
     inner_->SafeState();
   }
+  safe_after_trip_.store(true, std::memory_order_release);
   on_ = false;
   return Tripped();
 }
@@ -119,6 +120,7 @@ void SafetyBench::WatchdogLoop() {
       Claim("software watchdog: no call from the control loop for " + FormatNumber(idle_s) + " s (limit " +
             FormatNumber(lim_.watchdog_s) + " s)");
       inner_->SafeState();
+      if (tripped_.load()) safe_after_trip_.store(true, std::memory_order_release);
       inner_mu_.unlock();
       if (tripped_.load()) break;
     }

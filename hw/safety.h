@@ -74,7 +74,9 @@ class SafetyBench final : public Bench {
   // The inner bench's exact trajectory passes through untouched (the interlocks act on samples and commands).
   bool set_trajectory_sink(TrajectorySink* sink) override { return inner_->set_trajectory_sink(sink); }
 
-  bool tripped() const { return tripped_.load(); }
+  // A trip was claimed and the inner bench's safe state has been applied (not only claimed: the watchdog thread
+  // claims, then drives the bench safe; a caller that sees true may rely on the gate being off).
+  bool tripped() const { return safe_after_trip_.load(std::memory_order_acquire); }
   double coil_temp_C() const { return temp_C_; }
   const SafetyLimits& limits() const { return lim_; }
 
@@ -109,6 +111,7 @@ class SafetyBench final : public Bench {
   std::mutex inner_mu_;                      // the loop's calls into inner_ vs the watchdog's SafeState
   std::atomic<bool> claimed_{false};         // the first tripper writes reason_, then sets tripped_
   std::atomic<bool> tripped_{false};
+  std::atomic<bool> safe_after_trip_{false};  // set after SafeState() of a trip (tripped())
   std::string reason_;
   std::atomic<std::int64_t> last_beat_ns_{0};
   std::thread watchdog_;
