@@ -387,6 +387,7 @@ grpc::Status BenchServiceImpl::WatchRun(grpc::ServerContext* ctx, const v1::Watc
   bool first = true;
   db::RunStatus last_status = db::RunStatus::kQueued;
   double last_progress = -1.0;
+  std::int64_t last_fence = -1;     // the attempt the last event was about (RunRecord::fence)
   // An interactive run watched by its submitter is cancelled when that watch goes away before the run ends.
   bool owns_interactive = false;
   if (auto r = (*store)->GetRun(req->run_id()); r.ok() && r->submitter == who.user) {
@@ -435,6 +436,13 @@ grpc::Status BenchServiceImpl::WatchRun(grpc::ServerContext* ctx, const v1::Watc
         }
       }
     }
+    // One attempt's progress never goes back: between the loop's end (the registry forgets the run) and its result
+    // reaching the store (the spool, docs/lab.md) the store still says running with the progress it last stored,
+    // which may be older than what this stream already sent (CI saw 62 %, then 0 %, then done). A new attempt
+    // (another fence) starts again from what it reports.
+    if (r->status == db::RunStatus::kRunning && last_status == db::RunStatus::kRunning && r->fence == last_fence)
+      progress = std::max(progress, last_progress);
+    last_fence = r->fence;
     ev.set_progress(progress);
     const bool changed = first || r->status != last_status || std::abs(progress - last_progress) >= 0.01 ||
                          ev.samples_size() > 0;
