@@ -25,6 +25,7 @@
 #include "gap/stored_runs.h"
 #include "gap/suggest.h"
 #include "gap/identify.h"
+#include "gap/track.h"
 #include "gap/improved_model.h"
 #include "gap/moving_valve.h"
 #include "gap/scope_csv.h"
@@ -341,16 +342,32 @@ GapCli::GapCli(CLI::App* app, SharedOptions shared) : shared_(shared) {
   import_->add_flag("--local", local_, "the local store, even if a server is configured");
   import_->add_option("--db", *shared_.store_path, "local store");
   server_opts(import_);
+
+  track_ = app->add_subcommand("track", "a bench's valve tracked session by session: each determined parameter's "
+                                        "value, control limits and the first session flagged (docs/track.md)");
+  track_->add_option("sessions", track_dirs_, "switch-on session directories (valve-runs/2), in time order")
+      ->required()
+      ->expected(2, -1);
+  track_->add_option("--model", model_, "preset name or model file (ModelSpec JSON); default: the first session's");
+  track_->add_option("--limit", track_limits_, "declared limits: NAME=VALUE,... (e.g. R=70): the drift's projected "
+                                               "crossing is reported")
+      ->delimiter(',')
+      ->allow_extra_args(false);
+  track_->add_option("--arl0", track_arl0_, "the detector's in-control run length per parameter, in sessions "
+                                            "(sets the CUSUM's interval)")
+      ->capture_default_str();
+  track_->add_flag("--json", *shared_.json, "machine-readable output on stdout");
 }
 
 bool GapCli::parsed() const {
-  return diagnose_->parsed() || identify_->parsed() || convert_->parsed() || import_->parsed();
+  return diagnose_->parsed() || identify_->parsed() || convert_->parsed() || import_->parsed() || track_->parsed();
 }
 
 int GapCli::Run(const ClientFactory& make_client) {
   if (diagnose_->parsed()) return Diagnose(make_client);
   if (identify_->parsed()) return Identify();
   if (convert_->parsed()) return Convert();
+  if (track_->parsed()) return Track();
   return Import(make_client);
 }
 
@@ -557,6 +574,53 @@ int GapCli::Convert() {
 int GapCli::Import(const ClientFactory& make_client) {
   auto backend = ChooseBackend(local_ ? "" : *shared_.server, *shared_.store_path, make_client);
   return ImportDataset(*backend, dataset_dir_, *shared_.json);
+}
+
+// Exit 0: every session tracked and nothing flagged; 1: a parameter flagged (the valve changed); 2: bad input.
+int GapCli::Track() {
+  std::vector<gap::TrackSession> sessions;
+  for (const auto& dir : track_dirs_) {
+    auto ds = Load(dir);
+    if (!ds.ok()) return Fail(ds.status().WithContext("track"));
+    std::string name = std::filesystem::path(dir).lexically_normal().filename().string();
+    if (name.empty()) name = std::filesystem::path(dir).lexically_normal().parent_path().filename().string();
+    sessions.push_back({name, std::move(*ds)});
+  }
+  // Sessions named alike (night1/session, night2/session) are told apart by their parent directory.
+  std::map<std::string, int> seen;
+  for (const auto& s : sessions) ++seen[s.name];
+  for (std::size_t i = 0; i < sessions.size(); ++i)
+    if (seen[sessions[i].name] > 1) {
+      const auto path = std::filesystem::path(track_dirs_[i]).lexically_normal();
+      const auto dir = path.filename().empty() ? path.parent_path() : path;
+      sessions[i].name = dir.parent_path().filename().string() + "/" + dir.filename().string();
+    }
+  auto nominal = NominalFor(sessions.front().dataset, model_);
+  if (!nominal.ok()) return Fail(nominal.status());
+  for (auto& s : sessions) {
+    if (nominal->driver) s.dataset.driver = *nominal->driver;
+    if (!gap::IsSwitchOnSession(s.dataset, nominal->plant))
+      return Fail(Status::InvalidArgument("track: " + s.name + " is not a switch-on session of a moving valve "
+                                          "(waveform runs from rest with one gate step, a reluctance-law family)"));
+  }
+  gap::TrackOptions o;
+  o.target_arl0_sessions = track_arl0_;
+  for (const auto& l : track_limits_) {
+    auto v = gap::ParseFixed(l, "--limit");
+    if (!v.ok()) return Fail(v.status());
+    o.limits[v->first] = v->second;
+  }
+  o.progress = [](const std::string& line) { std::fprintf(stderr, "benchctl: track: %s\n", line.c_str()); };
+  auto t = gap::TrackSessions(sessions, nominal->plant, o);
+  if (!t.ok()) return Fail(t.status());
+  for (const auto& [name, value] : o.limits) {
+    bool known = false;
+    for (const auto& p : t->parameters) known = known || p.name == name;
+    if (!known) std::fprintf(stderr, "benchctl: warning: --limit %s: no tracked parameter has that name\n", name.c_str());
+  }
+  if (*shared_.json) std::cout << gap::TrackingJson(*t) << "\n";
+  else std::cout << gap::TrackingReport(*t);
+  return t->flags.empty() ? kExitOk : kExitRunFailed;
 }
 
 }  // namespace vb::benchctl

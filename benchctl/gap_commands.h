@@ -6,6 +6,8 @@
 //            [--json]
 //   convert READINGS.csv OUTDIR [--shunt-ohm R] [--amp-ref-ohm R] [--adc-lsb-V V] [--averaged N] [--model M]
 //   import DATASET                         (store a dataset's waveform runs on a server)
+//   track SESSION_DIR... [--model M] [--limit NAME=VALUE,...] [--arl0 SESSIONS] [--json]
+//                                          (a valve tracked night by night, gap/track.h; exit 1 when flagged)
 // --json is JSON on stdout; files are --json-out and --model-out (the ModelSpec --model reads back). The old
 // spellings --json FILE, --emit-model FILE and identify --out FILE still work, with a note on stderr.
 // SPEC is NAME, NAME=LO:HI, NAME@START or NAME=LO:HI@START (gap/identify.h).
@@ -33,6 +35,7 @@ class GapCli {
   int Identify();
   int Convert();
   int Import(const ClientFactory& make_client);
+  int Track();
   // --model-out, or its deprecated spelling `old` (with a note on stderr).
   std::string ModelOut(const std::string& old, const char* old_flag) const;
 
@@ -41,6 +44,9 @@ class GapCli {
   CLI::App* identify_ = nullptr;
   CLI::App* convert_ = nullptr;
   CLI::App* import_ = nullptr;
+  CLI::App* track_ = nullptr;
+  std::vector<std::string> track_dirs_, track_limits_;
+  double track_arl0_ = 20000.0;
   std::string dataset_dir_, model_, json_path_, json_out_, model_out_, suggest_out_, emit_model_, reference_dir_, out_path_,
       csv_path_, out_dir_;
   bool local_ = false;

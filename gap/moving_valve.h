@@ -60,6 +60,8 @@ struct HeldValue {
   std::string why;
 };
 
+struct MovingIdentification;
+
 struct MovingIdentifyOptions {
   // The work for all stages, in evaluations (one evaluation simulates every fit run once): deterministic, so the
   // result does not depend on how loaded the machine is. Stages 1-4 take about 9300 at most (their own counts);
@@ -72,6 +74,9 @@ struct MovingIdentifyOptions {
   int threads = 2;          // runs simulated concurrently
   model::SolverOptions solver = AttributionOptions::FastSolver();
   std::function<void(const std::string&)> progress;  // one line per stage (benchctl prints it on stderr)
+  // The same valve identified before (another night's session, gap/track.h): its values and effects start one
+  // local fit of everything together instead of the stages; nullptr: from scratch. Not owned.
+  const MovingIdentification* warm_start = nullptr;
 };
 
 struct MovingIdentification {

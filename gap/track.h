@@ -1,0 +1,119 @@
+// A bench's valve tracked session by session (issue 38, docs/track.md): every session (a valve-runs/2 switch-on
+// dataset, one night of a bench) is identified, the first from scratch and each later one warm-started from the
+// one before (gap/moving_valve.h: the same basin, so a change between nights is the valve's, not the search's);
+// each determined parameter (or product) then goes through a self-starting two-sided CUSUM:
+//   - the reference is the sessions before (at most the first kBaselineMax, none after a flag): their mean, and a
+//     variance that is the larger of their scatter and the identifications' own (Gauss-Newton) variances;
+//   - a session's deviation from the reference, over that spread times sqrt(1 + 1/n), is Student-t with n - 1
+//     degrees of freedom when nothing changed (normal where the identifications' own sigma is the larger); it is mapped to a standard normal z through the t's distribution
+//     (Hawkins 1987, "Self-starting CUSUM charts for location and scale"), so z is N(0, 1) however few reference
+//     sessions there are and the false-alarm rate is the CUSUM's own;
+//   - C+ = max(0, C+ + z - k), C- = max(0, C- - z - k) with k = 0.5 (tuned to a shift of 1 sigma) and h set for a
+//     target in-control run length (TrackOptions); a flag when either passes h.
+// A CUSUM rather than an EWMA: the changes a valve goes through are steps (a connector, shorted turns) and slow
+// drifts (wear, a spring relaxing); the CUSUM is the optimal detector of a step (Moustakides 1986) and sums a drift
+// as it grows, and its change-point estimate (the last session where the statistic was 0) gives the drift's start.
+#pragma once
+
+#include <functional>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "common/status.h"
+#include "gap/dataset.h"
+#include "gap/moving_valve.h"
+#include "model/params.h"
+
+namespace vb::gap {
+
+struct TrackSession {
+  std::string name;  // the directory's name
+  Dataset dataset;
+};
+
+struct TrackOptions {
+  MovingIdentifyOptions identify;  // the first session's identification (from scratch); later ones warm-start
+  // The CUSUM's reference value k (in sigma) and its decision interval h: the target in-control average run
+  // length per parameter (two-sided) sets h (CusumInterval). 20000 sessions: with ten parameters tracked over 100
+  // sessions the chance of any false flag is about 5 % (10 x 100 / 20000).
+  double k_sigma = 0.5;
+  double target_arl0_sessions = 20000.0;
+  // Sessions before monitoring starts: a reference of 3 (2 degrees of freedom) is the fewest the t's transform
+  // stays usable with. At most baseline_max sessions form the reference (a cap freezes an estimated mean whose
+  // error then acts on every later session as a shift: measured, it multiplied the false alarms by 8 at 10).
+  int min_reference = 3;
+  int baseline_max = 1000;
+  // A session joins the reference this many sessions after it was judged (when nothing was flagged meanwhile):
+  // a 3-sigma step is flagged within 5 sessions on average (CusumArl), before it could dilute its own reference;
+  // a drift is absorbed only as far as it was 5 sessions ago.
+  int guard_sessions = 5;
+  // Declared limits (name -> value, e.g. "R" -> 70): the drift's projected crossing is reported.
+  std::map<std::string, double> limits;
+  std::function<void(const std::string&)> progress;
+};
+
+struct TrackedValue {
+  double value = NAN, sigma = NAN;  // the identification's value and 1-sigma (Gauss-Newton)
+  double z = NAN;                   // the standardised deviation from the reference (NaN: in the reference)
+  double cusum_up = 0.0, cusum_down = 0.0;
+};
+
+struct TrackedParameter {
+  std::string name, unit, meaning;
+  std::vector<TrackedValue> sessions;  // one per session, in order
+  int reference_sessions = 0;          // how many sessions formed the final reference
+  double center = NAN, spread = NAN;   // the reference's mean and the sigma the limits use
+  double lower_limit = NAN, upper_limit = NAN;  // center -+ 3 spread (a Shewhart view of the same sigma)
+  int flagged = -1;                    // the first flagged session's index (-1: none)
+  int change_start = -1;               // the CUSUM's change-point estimate (first session of the change)
+  std::string direction;               // "up" or "down"
+  double drift_per_session = NAN, drift_sigma = NAN;  // least squares from change_start to the last session
+  double limit = NAN;                  // the declared limit (NaN: none)
+  double projected_crossing = NAN;     // the session number (1-based, may lie beyond the series) it crosses it
+  double smallest_step = NAN;          // the smallest step the CUSUM flags within 5 sessions on average, in units
+  double trend_per_session = NAN, trend_sigma = NAN;  // least squares over every session (the unflagged view)
+};
+
+struct TrackFlag {
+  std::string session, parameter, unit, direction;
+  int session_index = -1;
+  double change = NAN, change_relative = NAN;  // the flagged session's value minus the reference's mean
+  double z = NAN;
+  std::string since;                           // the session the change started (the CUSUM's estimate)
+  double drift_per_session = NAN, drift_sigma = NAN;
+  double projected_crossing = NAN;
+};
+
+struct Tracking {
+  std::vector<std::string> sessions;
+  std::vector<double> fit_rmse_A, noise_floor_A;
+  std::vector<std::string> session_errors;  // "" where the session was identified
+  std::vector<TrackedParameter> parameters;
+  std::vector<TrackFlag> flags;             // in session order; within a session, the largest |z| first
+  double h_sigma = NAN, k_sigma = NAN, target_arl0_sessions = NAN;
+  std::vector<std::string> notes;
+};
+
+// The decision interval h of a two-sided CUSUM with reference value k whose in-control average run length is
+// `arl0` (Siegmund's approximation, each side 2 arl0).
+double CusumInterval(double k_sigma, double arl0);
+// Siegmund's approximation of a one-sided CUSUM's average run length for a mean shift of `shift` sigma.
+double CusumArl(double shift_sigma, double k_sigma, double h_sigma);
+
+// The self-starting transform: a deviation `d` from a reference of n sessions with spread s (the t statistic
+// d / (s sqrt(1 + 1/n)) with n - 1 degrees of freedom) as a standard normal deviate. `estimated` false: s is
+// known (the identifications' own sigma, larger than the scatter), and the statistic is already normal.
+double SelfStartingZ(double d, double s, int n, bool estimated = true);
+
+// Runs the detector over values already identified (one per session, NaN: a session without a value).
+void TrackParameter(TrackedParameter* p, const TrackOptions& options);
+
+// Identifies every session and tracks every parameter the first session determines.
+StatusOr<Tracking> TrackSessions(const std::vector<TrackSession>& sessions, const model::PlantParams& family,
+                                 const TrackOptions& options = {});
+
+std::string TrackingJson(const Tracking& t);
+std::string TrackingReport(const Tracking& t);
+
+}  // namespace vb::gap
