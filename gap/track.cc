@@ -206,6 +206,15 @@ StatusOr<Tracking> TrackSessions(const std::vector<TrackSession>& sessions, cons
       options.progress("session " + sessions[i].name + ": " +
                        (previous ? "warm start from the session before" : "identifying from scratch"));
     auto id = IdentifyMovingValve(ds, family, mo);
+    if (id.ok() && previous == nullptr) {
+      // The first session from scratch, then polished from its own end as every later one will be: the chain
+      // starts converged (a from-scratch end left above the optimum would make the next nights descend further
+      // and their parameters trend with the search).
+      const MovingIdentification scratch = *id;
+      mo.warm_start = &scratch;
+      auto polished = IdentifyMovingValve(ds, family, mo);
+      if (polished.ok() && polished->fit_rmse_A <= scratch.fit_rmse_A) id = std::move(polished);
+    }
     if (!id.ok()) {
       t.session_errors.push_back(id.status().message());
       t.fit_rmse_A.push_back(NAN);
@@ -240,9 +249,18 @@ StatusOr<Tracking> TrackSessions(const std::vector<TrackSession>& sessions, cons
     }
     t.notes.push_back("every run declares its winding's temperature: R is referred to 20 C (copper, alpha 3.93e-3 1/K)");
   }
+  // A parameter is tracked when at least half of the identified sessions determine it (1-sigma below half its
+  // value): one session whose Gauss-Newton step failed must not drop it, nor one lucky session add it.
+  int identified = 0;
+  for (const auto& id : ids) identified += id.has_value();
   for (const auto& d : first->determined) {
-    if (!d.determined) {
-      t.notes.push_back(d.name + " is not determined by the first session (1-sigma above half its value): not tracked");
+    int determined = 0;
+    for (const auto& id : ids)
+      if (id)
+        for (const auto& e : id->determined) determined += e.name == d.name && e.determined;
+    if (2 * determined < identified) {
+      t.notes.push_back(d.name + " is determined in " + std::to_string(determined) + " of " +
+                        std::to_string(identified) + " sessions (1-sigma below half its value): not tracked");
       continue;
     }
     TrackedParameter p;
