@@ -125,6 +125,22 @@ const std::vector<ParamInfo>& ParamTable() {
   return table;
 }
 
+std::string ParamUnit(std::string_view name) {
+  if (const ParamInfo* p = FindParam(name)) return std::string(p->unit);
+  const std::size_t dot = name.find('.');
+  if (dot == std::string_view::npos) return "";
+  const std::string_view effect = name.substr(0, dot);
+  std::string_view field = name.substr(dot + 1);
+  constexpr std::string_view kExcess = "_excess";
+  if (field.size() > kExcess.size() && field.substr(field.size() - kExcess.size()) == kExcess)
+    field.remove_suffix(kExcess.size());
+  for (const auto& e : EffectCatalog())
+    if (e.name == effect)
+      for (const auto& q : e.params)
+        if (q.name == field) return std::string(q.unit);
+  return "";
+}
+
 const ParamInfo* FindParam(std::string_view name) {
   for (const auto& info : ParamTable())
     if (info.name == name) return &info;

@@ -97,6 +97,10 @@ struct ParamInfo {
 };
 const std::vector<ParamInfo>& ParamTable();
 const ParamInfo* FindParam(std::string_view name);
+// The SI unit of a parameter by any name a fit reports: a plant parameter ("R"), an effect's
+// ("supply_resistance.R_s"), or a fit's reparametrisation "effect.X_excess" (a difference of two X, e.g.
+// coulomb_friction.F_s_excess = F_s - F_c: X's unit). Empty when the name is unknown.
+std::string ParamUnit(std::string_view name);
 
 // Sets a parameter by name; InvalidArgument naming the parameter if unknown or out of bounds.
 Status SetParam(PlantParams* p, std::string_view name, double value);

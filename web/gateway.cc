@@ -1246,24 +1246,15 @@ class Routes {
     res.set_content(Dump(j), kJson);
   }
 
-  // The unit of every fitted parameter a diagnosis names, from the model's own tables: a plant parameter ("R":
-  // model::ParamTable) or an effect's ("supply_resistance.R_s": model::EffectCatalog). Unknown ones are left out.
+  // The unit of every fitted parameter a diagnosis names, from the model's own tables (model::ParamUnit: a plant
+  // parameter, an effect's, a fit's "X_excess"). Unknown ones are left out.
   static Json DiagnosisParamUnits(const Json& d) {
     Json units = Json::object();
     auto add = [&](const Json& params) {
       if (!params.is_object()) return;
       for (const auto& [name, value] : params.items()) {
         (void)value;
-        if (const model::ParamInfo* p = model::FindParam(name)) {
-          units[name] = std::string(p->unit);
-          continue;
-        }
-        const size_t dot = name.find('.');
-        if (dot == std::string::npos) continue;
-        for (const auto& e : model::EffectCatalog())
-          if (e.name == std::string_view(name).substr(0, dot))
-            for (const auto& q : e.params)
-              if (q.name == std::string_view(name).substr(dot + 1)) units[name] = std::string(q.unit);
+        if (const std::string unit = model::ParamUnit(name); !unit.empty()) units[name] = unit;
       }
     };
     if (!d.is_object()) return units;

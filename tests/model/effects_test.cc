@@ -34,6 +34,19 @@ double StepCurrent(const PlantParams& p, double t_s, Simulator** keep = nullptr)
   return i;
 }
 
+// Every name a fit reports has its unit: plant parameters, every effect's parameters, and the fit's
+// reparametrisation coulomb_friction.F_s_excess (a force: the diagnosis page printed it without a unit).
+TEST(Effects, EveryFittedNameHasItsUnit) {
+  EXPECT_EQ(ParamUnit("R"), "ohm");
+  EXPECT_EQ(ParamUnit("coulomb_friction.F_s_excess"), "N");
+  EXPECT_EQ(ParamUnit("coulomb_friction.F_c"), "N");
+  for (const auto& p : ParamTable()) EXPECT_FALSE(ParamUnit(p.name).empty()) << p.name;
+  for (const auto& e : EffectCatalog())
+    for (const auto& q : e.params) EXPECT_EQ(ParamUnit(std::string(e.name) + "." + std::string(q.name)), q.unit) << e.name;
+  EXPECT_EQ(ParamUnit("no_such.thing"), "");
+  EXPECT_EQ(ParamUnit("coulomb_friction._excess"), "");
+}
+
 TEST(Effects, CatalogNamesAndErrors) {
   const auto names = EffectNames();
   for (const char* n : {"none", "coil_heating", "magnetic_saturation", "eddy_currents", "residual_magnetism",
