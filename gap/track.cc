@@ -57,6 +57,23 @@ std::string Num(double v) {
 
 nlohmann::ordered_json NumJ(double v) { return std::isfinite(v) ? nlohmann::ordered_json(v) : nlohmann::ordered_json(); }
 
+// The physical changes that move a tracked quantity (what a flag on it reads as; the current alone does not
+// tell them apart further).
+std::string Reading(const std::string& name) {
+  if (name == "R") return "a warmer or aging winding, a corroding connector or a series resistance in the leads";
+  if (name == "L0" || name == "L1")
+    return "the magnetic circuit: shorted turns move L0 and L1 by the same fraction, a core or gap change moves them "
+           "apart";
+  if (name == "R_p") return "eddy currents in the core (its material or lamination)";
+  if (name == "F0*x_max") return "the spring's preload (a relaxing or replaced spring) or the stroke";
+  if (name == "k*x_max^2") return "the spring's stiffness or the stroke";
+  if (name == "A_net*x_max") return "the pressure area (seat wear) or a supply pressure other than declared";
+  if (name == "m*x_max^2") return "the moving mass or the stroke";
+  if (name == "b*x_max^2") return "damping: friction in the guide, wear, a fluid of another viscosity";
+  if (name == "B_sat") return "the core's saturation (its material or temperature)";
+  return "";
+}
+
 }  // namespace
 
 double CusumArl(double shift_sigma, double k_sigma, double h_sigma) {
@@ -286,6 +303,8 @@ StatusOr<Tracking> TrackSessions(const std::vector<TrackSession>& sessions, cons
     f.session_index = p.flagged;
     f.session = t.sessions[p.flagged];
     f.parameter = p.name, f.unit = p.unit, f.direction = p.direction;
+    f.meaning = p.meaning;
+    if (const std::string r = Reading(p.name); !r.empty()) f.meaning += "; moved by " + r;
     f.change = p.sessions[p.flagged].value - p.center;
     f.change_relative = f.change / std::abs(p.center);
     f.z = p.sessions[p.flagged].z;
@@ -340,7 +359,8 @@ std::string TrackingJson(const Tracking& t) {
   j["parameters"] = ps;
   nlohmann::ordered_json flags = nlohmann::ordered_json::array();
   for (const auto& f : t.flags)
-    flags.push_back({{"session", f.session}, {"parameter", f.parameter}, {"unit", f.unit}, {"direction", f.direction},
+    flags.push_back({{"session", f.session}, {"parameter", f.parameter}, {"meaning", f.meaning}, {"unit", f.unit},
+                     {"direction", f.direction},
                      {"change", NumJ(f.change)}, {"change_relative", NumJ(f.change_relative)}, {"z", NumJ(f.z)},
                      {"since", f.since}, {"drift_per_session", NumJ(f.drift_per_session)},
                      {"drift_sigma", NumJ(f.drift_sigma)}, {"projected_crossing_session", NumJ(f.projected_crossing)}});
@@ -392,15 +412,16 @@ std::string TrackingReport(const Tracking& t) {
                   100.0 * f.change_relative, f.z, f.since.c_str());
     o << buf;
     if (std::isfinite(f.drift_per_session)) {
-      std::snprintf(buf, sizeof buf, "; drift %s +- %s %s per session", Num(f.drift_per_session).c_str(),
-                    Num(f.drift_sigma).c_str(), f.unit.c_str());
+      const bool drifting = std::abs(f.drift_per_session) > 2.0 * f.drift_sigma;
+      std::snprintf(buf, sizeof buf, drifting ? "; drifting %s +- %s %s per session" : "; a step, no drift after it (%s +- %s %s per session)",
+                    Num(f.drift_per_session).c_str(), Num(f.drift_sigma).c_str(), f.unit.c_str());
       o << buf;
     }
     if (std::isfinite(f.projected_crossing)) {
       std::snprintf(buf, sizeof buf, "; reaches its limit at session %.1f", f.projected_crossing);
       o << buf;
     }
-    o << "\n";
+    o << "\n     " << f.meaning << "\n";
   }
   for (const auto& p : t.parameters)
     if (p.flagged < 0 && std::isfinite(p.smallest_step)) {

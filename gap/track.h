@@ -77,6 +77,7 @@ struct TrackedParameter {
 
 struct TrackFlag {
   std::string session, parameter, unit, direction;
+  std::string meaning;  // what the parameter is, and the physical changes that move it
   int session_index = -1;
   double change = NAN, change_relative = NAN;  // the flagged session's value minus the reference's mean
   double z = NAN;
