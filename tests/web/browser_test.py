@@ -556,6 +556,20 @@ try:
                                 " [8.67476e-05, 'W'], [2e-3, 'N s/m'], [0, 'kg']].map((c) => VBFormat.value(c[0], c[1]))")
     check("the page writes compound units as benchctl does (mm^2, g, mg/s)",
           fmt == ["81.13 mm^2", "27.73 g", "751.4 mg/s", "953.3 \u00b5A", "86.75 \u00b5W", "2 mN s/m", "0 kg"], fmt)
+    # Issue 37, point 3: a live chart never bridges a hole in the stream, and a flat hold is not autoscaled onto
+    # rounding. The page's own functions (charts.js), fed a 200 Hz stream with 0.4 s missing.
+    live = driver.execute_script("""
+        const h = VBCharts.holes(), breaks = [];
+        const ts = [];
+        for (let i = 0; i < 20; i++) ts.push(i * 0.005);
+        for (let i = 0; i < 5; i++) ts.push(0.5 + i * 0.005);
+        for (const t of ts) { const b = h.step(t); if (b !== null) breaks.push(b); }
+        return [breaks, h.gaps, h.missing_s, VBCharts.minSpanRange([[0, 0.5], [1, 0.5 + 1e-12]], 1e-3),
+                VBCharts.minSpanRange([[0, 0.1], [1, 0.4]], 1e-3)];""")
+    check("a hole in a live stream is broken, counted and measured, not bridged",
+          len(live[0]) == 1 and abs(live[0][0] - 0.1) < 1e-9 and live[1] == 1 and abs(live[2] - 0.4) < 1e-9, live)
+    check("a flat 500 mA hold is drawn over at least 2 % of its value, not its rounding",
+          live[3] and abs((live[3][1] - live[3][0]) - 0.01) < 1e-9 and live[4] is None, live)
     check("the run page links the export", driver.find_element(By.ID, "export-csv").get_attribute("href")
           .endswith("/api/runs/%s/trace.csv" % done_id))
     check_run_charts()

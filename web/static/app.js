@@ -181,14 +181,16 @@ function liveView(runId, box, onEnd) {
   const cG = VBCharts.plot(charts, {title: 'Gate (logic level, live)', class: 'live-gate', x: {label: 't', unit: 's'},
     y: {label: 'gate', unit: '', logic: true}, series: [{name: 'gate', color: C[3], step: true}], rows: [], height: 90}, cleanups);
   let dirty = false, n = 0, lastT = -Infinity;
+  const holes = VBCharts.holes();  // gaps in the stream, drawn as holes (charts.js)
   const timer = setInterval(() => {
     if (!dirty || !cI.g) return;
     dirty = false;
     const span = [rowsI[0][0], rowsI[rowsI.length - 1][0]];
     const range = span[1] > span[0] ? span : null;  // one time range for the three
     cI.rows = rowsI; cX.rows = rowsX; cG.rows = rowsG;
-    cI.g.updateOptions({file: rowsI, dateWindow: range});
-    cX.g.updateOptions({file: rowsX, dateWindow: range});
+    // Never narrower than 1 mA, 1 µm or 2 % of the largest magnitude (VBCharts.minSpanRange).
+    cI.g.updateOptions({file: rowsI, dateWindow: range, valueRange: VBCharts.minSpanRange(rowsI, 1e-3)});
+    cX.g.updateOptions({file: rowsX, dateWindow: range, valueRange: VBCharts.minSpanRange(rowsX, 1e-6)});
     cG.g.updateOptions({file: rowsG, dateWindow: range});
   }, 250);
   const es = new EventSource('/api/runs/' + runId + '/events?rate_Hz=200');
@@ -201,6 +203,9 @@ function liveView(runId, box, onEnd) {
       // missing one is still read as 0, and NaN (no reference) arrives as "NaN".
       const t = typeof s.t_s === 'number' ? s.t_s : 0;
       if (!(t > lastT)) continue;  // a reconnected stream starts over from the run's buffer
+      // A hole in the stream is drawn as a hole, never bridged by a line: a row of nulls breaks the three lines.
+      const hole = holes.step(t);
+      if (hole !== null) { rowsI.push([hole, null, null]); rowsX.push([hole, null]); rowsG.push([hole, null]); }
       lastT = t;
       rowsI.push([t, s.i_A === undefined ? 0 : num(s.i_A), s.ref === undefined ? 0 : num(s.ref)]);
       rowsX.push([t, s.x_m === undefined ? 0 : num(s.x_m)]);
@@ -208,8 +213,10 @@ function liveView(runId, box, onEnd) {
       n++;
     }
     if (rowsI.length > MAX) { for (const r of [rowsI, rowsX, rowsG]) r.splice(0, r.length - MAX); }
-    counter.textContent = n + ' samples';
+    counter.textContent = n + ' samples' + (holes.gaps ? ' · ' + holes.gaps + (holes.gaps === 1 ? ' gap' : ' gaps') +
+      ' (' + VBFormat.value(holes.missing_s, 's') + ' not received: drawn as holes)' : '');
     counter.dataset.samples = String(n);
+    counter.dataset.gaps = String(holes.gaps);
     dirty = rowsI.length > 0;  // a queued run's events carry no samples; dygraphs refuses an empty file
   });
   es.addEventListener('end', (ev) => {

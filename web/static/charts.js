@@ -414,5 +414,43 @@ const VBCharts = (() => {
     return box;
   }
 
-  return {Palette, PALETTE, plot, linkTime, heatmap, bars, legend, toSvg, pngOf, svgText, esc, el: h};
+  // Gaps in a live stream (issue 37: a chart must not invent data). step(t) takes each new sample's time in
+  // order and returns the time at which to break the lines (a row of nulls) when the interval before t is a
+  // hole, else null. A hole: an interval over 5x the stream's typical one (the median of the last 64) and over
+  // 20 ms; the first 8 intervals only learn. gaps and missing_s count what was not received.
+  function holes() {
+    const recent = [];
+    const st = {gaps: 0, missing_s: 0, last: -Infinity};
+    st.step = (t) => {
+      const last = st.last;
+      st.last = t;
+      if (!Number.isFinite(last)) return null;
+      const dt = t - last;
+      const typical = recent.length >= 8 ? [...recent].sort((a, b) => a - b)[recent.length >> 1] : null;
+      if (typical !== null && dt > 5 * typical && dt > 0.02) {
+        st.gaps++;
+        st.missing_s += dt - typical;
+        return last + typical;
+      }
+      recent.push(dt);
+      if (recent.length > 64) recent.shift();
+      return null;
+    };
+    return st;
+  }
+
+  // A y range never narrower than 2 % of the largest magnitude in `rows` ([x, y1, y2, ...]) nor than `floor`
+  // (issue 37: a flat 500 mA hold autoscaled onto 1e-12 A of rounding, ticks "500.00000 0002"); null when the
+  // data span more (the chart's own range).
+  function minSpanRange(rows, floor) {
+    let lo = Infinity, hi = -Infinity;
+    for (const r of rows) for (let k = 1; k < r.length; k++) if (Number.isFinite(r[k])) { lo = Math.min(lo, r[k]); hi = Math.max(hi, r[k]); }
+    if (!(hi >= lo)) return null;
+    const span = Math.max(0.02 * Math.max(Math.abs(lo), Math.abs(hi)), floor);
+    if (hi - lo >= span) return null;
+    const mid = (hi + lo) / 2;
+    return [mid - span / 2, mid + span / 2];
+  }
+
+  return {Palette, PALETTE, plot, linkTime, heatmap, bars, legend, toSvg, pngOf, svgText, esc, el: h, holes, minSpanRange};
 })();
