@@ -1047,10 +1047,31 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
       for (std::size_t k = 0; ok && k < n; ++k) J(static_cast<Eigen::Index>(k), static_cast<Eigen::Index>(j)) = -(e[k] - base[k]) / h;
     }
     std::vector<double> rel_sigma(kCount, NAN);
+    double correlation_factor = 1.0;  // (1 + rho) / (1 - rho): rel_sigma / sqrt of it is the white-noise sigma
     if (ok && n > q) {
       double s2 = 0.0;
       for (double e : base) s2 += e * e;
       s2 /= static_cast<double>(n - q);
+      // Residuals that are not white (a form error leaves slow structure; samples closer than the chain's
+      // bandwidth are correlated) carry fewer independent samples than n: with lag-1 autocorrelation rho (AR(1)),
+      // the variance of a mean grows by (1 + rho) / (1 - rho), and so does every parameter's here. Measured per
+      // run over consecutive samples, pooled; rho clipped to [0, 0.999] (a factor of at most 2000).
+      {
+        double num = 0.0, den = 0.0;
+        std::size_t k0 = 0;
+        for (std::size_t r = 0; r < ds.runs.size(); ++r) {
+          if (!fit[r]) continue;
+          const std::size_t len = ds.runs[r].i_A.size();
+          for (std::size_t k = k0; k < k0 + len && k < base.size(); ++k) {
+            den += base[k] * base[k];
+            if (k + 1 < k0 + len && k + 1 < base.size()) num += base[k] * base[k + 1];
+          }
+          k0 += len;
+        }
+        const double rho = den > 0.0 ? std::clamp(num / den, 0.0, 0.999) : 0.0;
+        correlation_factor = (1.0 + rho) / (1.0 - rho);
+        s2 *= correlation_factor;
+      }
       const Eigen::MatrixXd H = J.transpose() * J;
       // The covariance s2 H^-1, through H scaled to a unit diagonal and its eigen-decomposition: a direction the
       // runs do not see (an eigenvalue below 1e-10 of the largest: a parameter with no effect, as the damping of
@@ -1109,6 +1130,7 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
         d.sigma = row.p == kAnet ? rs * std::max(std::abs(v[row.p]), 1e-9) * row.scale : rs * std::abs(d.value);
         // Determined: the 1-sigma is below half the value (a factor the data pins to better than 1.5x).
         d.determined = row.p == kAnet ? d.sigma < 0.5 * std::abs(d.value) || d.sigma < 1e-12 : rs < 0.5;
+        d.sigma_white = d.sigma / std::sqrt(correlation_factor);
       }
       id.determined.push_back(d);
     }
@@ -1199,6 +1221,8 @@ std::string MovingIdentificationJson(const MovingIdentification& id) {
   for (const auto& d : id.determined)
     det.push_back({{"name", d.name}, {"unit", d.unit}, {"meaning", d.meaning}, {"value", d.value},
                    {"sigma", std::isfinite(d.sigma) ? nlohmann::ordered_json(d.sigma) : nlohmann::ordered_json(nullptr)},
+                   {"sigma_white", std::isfinite(d.sigma_white) ? nlohmann::ordered_json(d.sigma_white)
+                                                                : nlohmann::ordered_json(nullptr)},
                    {"determined", d.determined}});
   j["determined"] = det;
   nlohmann::ordered_json held = nlohmann::ordered_json::array();

@@ -48,11 +48,15 @@ struct RunMarks {
 };
 
 // A quantity the current determines (a parameter or a product of parameters with the held stroke), with its
-// 1-sigma (Gauss-Newton at the optimum, NaN when not determined).
+// 1-sigma (Gauss-Newton at the optimum, NaN when not determined). `sigma` counts the residuals' lag-1
+// autocorrelation (a form error leaves slow structure: fewer independent samples, the accuracy of the value);
+// `sigma_white` is the same as if they were white (what the noise alone moves it by from one recording to the
+// next of the same valve: its repeatability, gap/track.h).
 struct DeterminedValue {
   std::string name, unit, meaning;
   double value = 0.0, sigma = NAN;
   bool determined = true;
+  double sigma_white = NAN;
 };
 struct HeldValue {
   std::string name;
