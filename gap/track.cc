@@ -153,7 +153,7 @@ void TrackParameter(TrackedParameter* p, const TrackOptions& o) {
       p->direction = up > h ? "up" : "down";
       p->change_start = (up > h ? up_zero : down_zero) + 1;
     } else if (p->flagged < 0 && std::abs(v.z) <= kJoin_z) {
-      pending.push_back(j);  // in control so far: it joins the reference kGuardSessions later
+      pending.push_back(j);  // in control so far: it joins the reference guard_sessions later
     }
   }
   p->reference_sessions = static_cast<int>(ref.size());
