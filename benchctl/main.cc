@@ -16,6 +16,7 @@
 #include <cstdio>
 #include <iostream>
 
+#include "common/edit_distance.h"
 #include "benchctl/cli_common.h"
 #include "benchctl/gap_commands.h"
 #include "benchctl/hw_commands.h"
@@ -43,21 +44,6 @@ using vb::benchctl::kExitOk;
 // edit distance, when it is within a third of the name (at least 2 edits): close enough to be a typo, far
 // enough that unrelated options are not offered.
 namespace {
-std::size_t EditDistance(const std::string& a, const std::string& b) {
-  std::vector<std::size_t> row(b.size() + 1);
-  for (std::size_t j = 0; j <= b.size(); ++j) row[j] = j;
-  for (std::size_t i = 1; i <= a.size(); ++i) {
-    std::size_t diag = row[0];
-    row[0] = i;
-    for (std::size_t j = 1; j <= b.size(); ++j) {
-      const std::size_t up = row[j];
-      row[j] = std::min({row[j] + 1, row[j - 1] + 1, diag + (a[i - 1] == b[j - 1] ? 0 : 1)});
-      diag = up;
-    }
-  }
-  return row[b.size()];
-}
-
 void CollectOptions(const CLI::App* app, std::set<std::string>* names) {
   for (const CLI::Option* o : app->get_options())
     for (const auto& n : o->get_lnames()) names->insert(n);
@@ -75,7 +61,7 @@ void SuggestOption(const CLI::App& app, int argc, char** argv) {
     std::string best;
     std::size_t best_d = std::max<std::size_t>(2, arg.size() / 3) + 1;
     for (const auto& n : names)
-      if (const std::size_t d = EditDistance(arg, n); d < best_d) {
+      if (const std::size_t d = vb::EditDistance(arg, n); d < best_d) {
         best_d = d;
         best = n;
       }

@@ -11,6 +11,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "common/edit_distance.h"
 #include "common/format.h"
 #include "control/open_loop_pwm.h"
 #include "experiment/bounds.h"
@@ -33,23 +34,6 @@ namespace pb = google::protobuf;
 using valvebench::v1::ControllerSpec;
 
 namespace {
-
-// Edit distance, case-insensitive (a field differing only in case is the closest there is).
-std::size_t Distance(std::string_view a, std::string_view b) {
-  std::vector<std::size_t> row(b.size() + 1);
-  for (std::size_t j = 0; j <= b.size(); ++j) row[j] = j;
-  for (std::size_t i = 1; i <= a.size(); ++i) {
-    std::size_t diag = row[0];
-    row[0] = i;
-    for (std::size_t j = 1; j <= b.size(); ++j) {
-      const std::size_t up = row[j];
-      const bool same = std::tolower(static_cast<unsigned char>(a[i - 1])) == std::tolower(static_cast<unsigned char>(b[j - 1]));
-      row[j] = std::min({row[j] + 1, row[j - 1] + 1, diag + (same ? 0 : 1)});
-      diag = up;
-    }
-  }
-  return row[b.size()];
-}
 
 // protobuf's "(LOC) NAME: Cannot find field." for a misspelt field, rewritten as "LOC.NAME: unknown field; did
 // you mean 'X'?" with X the closest field of that message (docs/spec.md: specs reject unknown fields, so a
@@ -85,7 +69,7 @@ std::string ExplainUnknownField(const std::string& message) {
   for (int k = 0; k < d->field_count(); ++k) {
     const std::string& candidate = d->field(k)->name();
     known += (k ? ", " : "") + candidate;
-    if (const std::size_t dist = Distance(name, candidate); dist < best_d) {
+    if (const std::size_t dist = EditDistance(name, candidate, /*ignore_case=*/true); dist < best_d) {
       best_d = dist;
       best = candidate;
     }
