@@ -618,35 +618,39 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
   bool saturation = false;
   std::vector<Stage> ends;  // every start's end (stages 2-3)
   int evaluations = 0;
-  // The boxes of stage 3 around the current values, set again before every pass: a restart in the same box
-  // from the same point retraces BOBYQA's path; boxes centred on the new end give it a fresh trust region.
-  auto boxes = [&] {
-    st.free = {kR, kL0};
-    set_box(kR, 1.3, 1.3);
-    set_box(kL0, 1.5, 1.5);
+  // Stage 3's free parameters and boxes around s's current values (everything together: R within r_box, L0
+  // 1.5x, the eddy branch 3x, L1 inside what the held gap allows, the preload 1.5x, stiffness and mass 3x, the
+  // damping 10x, the pressure area +-100 %; the saturation 3x when it is in the model). The polish sets them again
+  // before every pass: a restart in the same box from the same point retraces BOBYQA's path; boxes centred on
+  // the new end give it a fresh trust region.
+  auto stage3_boxes = [&](Stage& s, double r_box, bool with_saturation) {
+    auto box = [&s](int p, double f) { s.box[p] = {s.value[p] / f, s.value[p] * f, true}; };
+    s.free = {kR, kL0};
+    box(kR, r_box);
+    box(kL0, 1.5);
     if (eddy) {
-      st.free.push_back(kRp);
-      set_box(kRp, 3.0, 3.0);
+      s.free.push_back(kRp);
+      box(kRp, 3.0);
     }
     if (any_motion) {
-      for (int p : {kL1, kF0, kK, kM, kB}) st.free.push_back(p);
-      st.box[kL1] = {std::max(1.01 * st.value[kL0], st.value[kL1] / 1.5),
-                     std::min(0.98 * r_max * st.value[kL0] * 1.5, st.value[kL1] * 1.5), true};
-      if (!(st.box[kL1].hi > st.box[kL1].lo)) st.box[kL1] = {st.value[kL1] * 0.99, st.value[kL1] * 1.01, true};
-      st.value[kL1] = std::clamp(st.value[kL1], st.box[kL1].lo, st.box[kL1].hi);
-      set_box(kF0, 1.5, 1.5);
-      set_box(kK, 3.0, 3.0);
-      set_box(kM, 3.0, 3.0);
-      set_box(kB, 10.0, 10.0);
+      for (int p : {kL1, kF0, kK, kM, kB}) s.free.push_back(p);
+      s.box[kL1] = {std::max(1.01 * s.value[kL0] / 1.5, s.value[kL1] / 1.5),
+                    std::min(0.98 * r_max * s.value[kL0] / 1.5, s.value[kL1] * 1.5), true};
+      if (!(s.box[kL1].hi > s.box[kL1].lo)) s.box[kL1] = {s.value[kL1] * 0.99, s.value[kL1] * 1.01, true};
+      s.value[kL1] = std::clamp(s.value[kL1], s.box[kL1].lo, s.box[kL1].hi);
+      box(kF0, 1.5);
+      box(kK, 3.0);
+      box(kM, 3.0);
+      box(kB, 10.0);
       if (pressures) {
-        st.free.push_back(kAnet);
-        const double a = std::max(std::abs(st.value[kAnet]), 1e-9);
-        st.box[kAnet] = {st.value[kAnet] - a, st.value[kAnet] + a, false};
+        s.free.push_back(kAnet);
+        const double a = std::max(std::abs(s.value[kAnet]), 1e-9);
+        s.box[kAnet] = {s.value[kAnet] - a, s.value[kAnet] + a, false};
       }
     }
-    if (saturation) {
-      st.free.push_back(kBs);
-      set_box(kBs, 3.0, 3.0);
+    if (with_saturation) {
+      s.free.push_back(kBs);
+      box(kBs, 3.0);
     }
   };
   // The polish: BOBYQA over everything together, restarted from its end in re-centred boxes while a pass still
@@ -657,7 +661,7 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
   auto polish = [&] {
     double before = INFINITY;
     for (int pass = 0; pass < 10 && remaining > 0; ++pass) {
-      boxes();
+      stage3_boxes(st, 1.3, saturation);
       st.best = INFINITY;
       st.Run(std::min(remaining, 1500));
       if (!(st.best < before * (1.0 - 0.005))) break;
@@ -778,28 +782,7 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
         const auto since = Clock::now();
         const int before = st.evaluations;
         st.best = INFINITY;
-        st.free = {kR, kL0};
-        set_box(kR, 1.1, 1.1);
-        set_box(kL0, 1.5, 1.5);
-        if (eddy) {
-          st.free.push_back(kRp);
-          set_box(kRp, 3.0, 3.0);
-        }
-        if (any_motion) {
-          for (int p : {kL1, kF0, kK, kM, kB}) st.free.push_back(p);
-          st.box[kL1] = {std::max(1.01 * st.value[kL0] / 1.5, st.value[kL1] / 1.5), std::min(0.98 * r_max * st.value[kL0] / 1.5, st.value[kL1] * 1.5), true};
-          if (!(st.box[kL1].hi > st.box[kL1].lo)) st.box[kL1] = {st.value[kL1] * 0.99, st.value[kL1] * 1.01, true};
-          st.value[kL1] = std::clamp(st.value[kL1], st.box[kL1].lo, st.box[kL1].hi);
-          set_box(kF0, 1.5, 1.5);
-          set_box(kK, 3.0, 3.0);
-          set_box(kM, 3.0, 3.0);
-          set_box(kB, 10.0, 10.0);
-          if (pressures) {
-            st.free.push_back(kAnet);
-            const double a = std::max(std::abs(st.value[kAnet]), 1e-9);
-            st.box[kAnet] = {st.value[kAnet] - a, st.value[kAnet] + a, false};
-          }
-        }
+        stage3_boxes(st, 1.1, false);
         st.Run(500);
         record("3 all together", since, st.evaluations - before, st.best);
       }
