@@ -604,6 +604,9 @@ int GapCli::Track() {
                                           "(waveform runs from rest with one gate step, a reluctance-law family)"));
   }
   gap::TrackOptions o;
+  if (!(track_arl0_ > 1.0) || !std::isfinite(track_arl0_))
+    return Fail(Status::InvalidArgument("--arl0: the in-control run length must be a number of sessions above 1 (got " +
+                                        std::to_string(track_arl0_) + ")"));
   o.target_arl0_sessions = track_arl0_;
   for (const auto& l : track_limits_) {
     auto v = gap::ParseFixed(l, "--limit");

@@ -381,33 +381,43 @@ std::string TrackingReport(const Tracking& t) {
   std::ostringstream o;
   char buf[400];
   std::snprintf(buf, sizeof buf,
-                "%zu sessions; detector: self-starting two-sided CUSUM, k = %.2g sigma, h = %.3g sigma "
-                "(in-control run length %.0f sessions per parameter)\n\n",
+                "%zu sessions; a self-starting two-sided CUSUM per parameter, k %.2g, h %.3g sigma "
+                "(in control: %.0f sessions)\n\n",
                 t.sessions.size(), t.k_sigma, t.h_sigma, t.target_arl0_sessions);
   o << buf;
-  std::snprintf(buf, sizeof buf, "%-18s %10s", "session", "fit [mA]");
-  o << buf;
-  for (const auto& p : t.parameters) {
-    std::snprintf(buf, sizeof buf, " %14s", (p.name + " [" + p.unit + "]").c_str());
+  // The table in blocks of 5 parameters: 28 + 5 x 18 = 118 columns, within a 120-column terminal.
+  constexpr std::size_t kPerBlock = 5;
+  for (std::size_t first = 0; first < std::max<std::size_t>(t.parameters.size(), 1); first += kPerBlock) {
+    const std::size_t end = std::min(t.parameters.size(), first + kPerBlock);
+    if (first > 0) o << "\n";
+    std::snprintf(buf, sizeof buf, "%-17s %10s", "session", "fit [mA]");
     o << buf;
-  }
-  o << "\n";
-  for (std::size_t i = 0; i < t.sessions.size(); ++i) {
-    std::snprintf(buf, sizeof buf, "%-18s %10s", t.sessions[i].c_str(), Num(t.fit_rmse_A[i] * 1e3).c_str());
-    o << buf;
-    for (const auto& p : t.parameters) {
-      const auto& v = p.sessions[i];
-      std::string cell = Num(v.value);
-      if (static_cast<int>(i) == p.flagged) cell += " !";
-      else if (std::isfinite(v.z) && std::abs(v.z) > 3.0) cell += " *";
-      std::snprintf(buf, sizeof buf, " %14s", cell.c_str());
+    for (std::size_t k = first; k < end; ++k) {
+      const auto& p = t.parameters[k];
+      std::snprintf(buf, sizeof buf, " %17s", (p.name + " [" + p.unit + "]").c_str());
       o << buf;
     }
     o << "\n";
+    for (std::size_t i = 0; i < t.sessions.size(); ++i) {
+      std::snprintf(buf, sizeof buf, "%-17s %10s", t.sessions[i].c_str(), Num(t.fit_rmse_A[i] * 1e3).c_str());
+      o << buf;
+      for (std::size_t k = first; k < end; ++k) {
+        const auto& p = t.parameters[k];
+        const auto& v = p.sessions[i];
+        std::string cell = Num(v.value);
+        if (static_cast<int>(i) == p.flagged) cell += " !";
+        else if (std::isfinite(v.z) && std::abs(v.z) > 3.0) cell += " *";
+        std::snprintf(buf, sizeof buf, " %17s", cell.c_str());
+        o << buf;
+      }
+      o << "\n";
+    }
   }
-  o << "\nlimits (reference mean -+ 3 sigma; sigma the larger of the nights' scatter and the identification's own):\n";
+  o << "(! the session flagged; * more than 3 sigma from the reference)\n";
+  o << "\nlimits: the reference's mean -+ 3 sigma (sigma the larger of the sessions' scatter and the identification's\n"
+       "own); the smallest step flagged within 5 sessions on average\n";
   for (const auto& p : t.parameters) {
-    std::snprintf(buf, sizeof buf, "  %-12s %12s .. %-12s %s (center %s over %d sessions; smallest step seen within 5 sessions %s)\n",
+    std::snprintf(buf, sizeof buf, "  %-12s %12s .. %-12s %-6s center %-12s (%d sessions); smallest step %s\n",
                   p.name.c_str(), Num(p.lower_limit).c_str(), Num(p.upper_limit).c_str(), p.unit.c_str(),
                   Num(p.center).c_str(), p.reference_sessions, Num(p.smallest_step).c_str());
     o << buf;
@@ -415,13 +425,13 @@ std::string TrackingReport(const Tracking& t) {
   o << "\n";
   if (t.flags.empty()) o << "no parameter flagged\n";
   for (const auto& f : t.flags) {
-    std::snprintf(buf, sizeof buf, "FLAG %s: %s %s by %s %s (%+.2f %%, z %.2f), changing since %s", f.session.c_str(),
+    std::snprintf(buf, sizeof buf, "FLAG %s: %s %s by %s %s (%+.2f %%, z %.2f), changing since %s\n    ", f.session.c_str(),
                   f.parameter.c_str(), f.direction.c_str(), Num(std::abs(f.change)).c_str(), f.unit.c_str(),
                   100.0 * f.change_relative, f.z, f.since.c_str());
     o << buf;
     if (std::isfinite(f.drift_per_session)) {
       const bool drifting = std::abs(f.drift_per_session) > 2.0 * f.drift_sigma;
-      std::snprintf(buf, sizeof buf, drifting ? "; drifting %s +- %s %s per session" : "; a step, no drift after it (%s +- %s %s per session)",
+      std::snprintf(buf, sizeof buf, drifting ? "drifting %s +- %s %s per session" : "a step, no drift after it (%s +- %s %s per session)",
                     Num(f.drift_per_session).c_str(), Num(f.drift_sigma).c_str(), f.unit.c_str());
       o << buf;
     }
@@ -429,16 +439,14 @@ std::string TrackingReport(const Tracking& t) {
       std::snprintf(buf, sizeof buf, "; reaches its limit at session %.1f", f.projected_crossing);
       o << buf;
     }
-    o << "\n     " << f.meaning << "\n";
+    o << "\n    " << f.meaning << "\n";
   }
   for (const auto& p : t.parameters)
     if (p.flagged < 0 && std::isfinite(p.smallest_step)) {
       std::snprintf(buf, sizeof buf,
-                    "%s: no change seen; a step below %s %s (%.2g %%) or a drift slower than that over the series is "
-                    "too small for these sessions to see (trend %s +- %s per session)",
-                    p.name.c_str(), Num(p.smallest_step).c_str(), p.unit.c_str(),
-                    100.0 * p.smallest_step / std::abs(p.center), Num(p.trend_per_session).c_str(),
-                    Num(p.trend_sigma).c_str());
+                    "%s: no change seen; a step below %.3g %s (%.2g %%) is too small to see; trend %.2g +- %.2g a session",
+                    p.name.c_str(), p.smallest_step, p.unit.c_str(), 100.0 * p.smallest_step / std::abs(p.center),
+                    p.trend_per_session, p.trend_sigma);
       o << buf;
       if (std::isfinite(p.projected_crossing)) {
         std::snprintf(buf, sizeof buf, "; the trend reaches the limit %s at session %.1f", Num(p.limit).c_str(),

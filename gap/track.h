@@ -41,7 +41,7 @@ struct TrackOptions {
   double target_arl0_sessions = 20000.0;
   // Sessions before monitoring starts: a reference of 3 (2 degrees of freedom) is the fewest the t's transform
   // stays usable with. At most baseline_max sessions form the reference (a cap freezes an estimated mean whose
-  // error then acts on every later session as a shift: measured, it multiplied the false alarms by 8 at 10).
+  // error then acts on every later session as a shift: at 10, 12 of 500 in-control series were flagged where 1.4 are expected: tests/gap/track_test.cc's draws).
   int min_reference = 3;
   int baseline_max = 1000;
   // A session joins the reference this many sessions after it was judged (when nothing was flagged meanwhile):
