@@ -260,6 +260,7 @@ Door::Door(const DoorLimits& limits, SSL_CTX* ssl_ctx, ServeFn serve)
   for (int fd : wake_)
     if (fd >= 0) SetBlocking(fd, false);
   reader_ = std::thread([this] { ReaderLoop(); });
+  if (ssl_ctx_) handshaker_ = std::thread([this] { HandshakeLoop(); });
   for (int k = 0; k < std::max(1, limits_.workers); ++k) workers_.emplace_back([this] { WorkerLoop(); });
 }
 
@@ -580,6 +581,10 @@ void Door::ReaderLoop() {
         still.push_back(std::move(c));
         continue;
       }
+      if (!c->handshaken && !c->lingering) {
+        QueueHandshake(std::move(c));
+        continue;
+      }
       if (c->lingering ? Discard(*c) : ReadSome(*c)) {
         still.push_back(std::move(c));
       } else {
@@ -599,6 +604,64 @@ void Door::ReaderLoop() {
     left.swap(incoming_);
   }
   for (auto& c : left) Close(std::move(c));
+}
+
+void Door::QueueHandshake(std::unique_ptr<Conn> c) {
+  std::lock_guard<std::mutex> lock(mu_);
+  if (stopping_) {
+    incoming_.push_back(std::move(c));  // closed with the reader's others
+    return;
+  }
+  auto& mine = handshakes_[c->client];
+  if (mine.empty()) handshake_turns_.push_back(c->client);
+  mine.push_back(std::move(c));
+  handshake_cv_.notify_one();
+}
+
+// One handshake step (SSL_accept on what has arrived: the ClientHello's step costs the signature) per turn,
+// client addresses in turn, then the connection goes back to the reader (or to the workers' queue through it).
+void Door::HandshakeLoop() {
+  for (;;) {
+    std::unique_ptr<Conn> c;
+    {
+      std::unique_lock<std::mutex> lock(mu_);
+      handshake_cv_.wait(lock, [this] { return stopping_ || !handshake_turns_.empty(); });
+      if (stopping_) break;
+      const std::string client = handshake_turns_.front();
+      handshake_turns_.pop_front();
+      auto it = handshakes_.find(client);
+      c = std::move(it->second.front());
+      it->second.pop_front();
+      if (it->second.empty()) {
+        handshakes_.erase(it);
+      } else {
+        handshake_turns_.push_back(client);
+      }
+    }
+    if (Clock::now() >= c->deadline || !ReadSome(*c)) {
+      Close(std::move(c));
+      continue;
+    }
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      if (!stopping_) {
+        incoming_.push_back(std::move(c));
+      }
+    }
+    if (c) {
+      Close(std::move(c));
+    } else {
+      Wake();
+    }
+  }
+  std::map<std::string, std::deque<std::unique_ptr<Conn>>> left;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    left.swap(handshakes_);
+    handshake_turns_.clear();
+  }
+  for (auto& [client, queue] : left)
+    for (auto& c : queue) Close(std::move(c));
 }
 
 void Door::WorkerLoop() {
@@ -697,12 +760,14 @@ void Door::Stop(double grace_s) {
     if (stopping_ && !reader_.joinable()) return;
     stopping_ = true;
     work_cv_.notify_all();
+    handshake_cv_.notify_all();
     // Running requests get the grace to finish their answers; then their sockets are shut down (a read or a
     // write blocked on them fails at once, and the handler returns).
     idle_cv_.wait_for(lock, std::chrono::duration<double>(std::max(0.0, grace_s)), [this] { return busy_.empty(); });
     for (int fd : busy_) ::shutdown(fd, SHUT_RDWR);
   }
   Wake();
+  if (handshaker_.joinable()) handshaker_.join();
   if (reader_.joinable()) reader_.join();
   for (auto& t : workers_)
     if (t.joinable()) t.join();

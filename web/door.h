@@ -6,9 +6,12 @@
 //
 // Here a connection holds a worker thread only while a complete request head is in hand:
 //  - one reader thread accepts the connections handed over by the server's accept loop and reads each request
-//    head (and the TLS handshake) without blocking, into a buffer of at most max_head_bytes, within
+//    head without blocking, into a buffer of at most max_head_bytes, within
 //    head_timeout_s of the head's first byte (idle_timeout_s for an idle keep-alive connection); a slow or
 //    oversized head costs a file descriptor and a few KiB, never a thread, and is closed (408/431) at its limit;
+//  - TLS handshakes (their CPU: a signature each) run on a thread of their own, one handshake step at a time,
+//    taking client addresses in turn: a handshake flood from a few addresses costs one core at most, and another
+//    client's handshake waits for one step per flooding address, not for the whole queue;
 //  - a complete head goes to the worker pool, where cpp-httplib parses and routes it over a Stream that serves
 //    the buffered bytes first, then reads the body from the socket with at most max_body_bytes (+ chunk framing)
 //    and within body_timeout_s, whatever the framing;
@@ -63,6 +66,9 @@ class Door {
   struct Conn;
   void ReaderLoop();
   void WorkerLoop();
+  void HandshakeLoop();
+  // Hands a connection whose TLS handshake has bytes to process to the handshake thread.
+  void QueueHandshake(std::unique_ptr<Conn> c);
   // Reads what the socket has; true when the connection stays in the reader's set.
   bool ReadSome(Conn& c);
   void Close(std::unique_ptr<Conn> c);
@@ -86,12 +92,17 @@ class Door {
   std::map<std::string, int> per_client_;
   std::set<int> busy_;  // sockets a worker runs a request on (shut down by Stop after its grace)
   std::map<std::string, int> busy_per_client_;  // requests running per client address
+  // Connections with a handshake step to do, per client address, and the addresses in their turn's order.
+  std::map<std::string, std::deque<std::unique_ptr<Conn>>> handshakes_;
+  std::deque<std::string> handshake_turns_;
+  std::condition_variable handshake_cv_;
   int waiting_ = 0;  // connections in the reader's set (waiting for a head), as the reader last counted
   int shed_ = 0;     // of those, how many the reader is to close to make room (the total cap was reached)
   std::condition_variable idle_cv_;
   int open_ = 0;
   bool stopping_ = false;
   std::thread reader_;
+  std::thread handshaker_;
   std::vector<std::thread> workers_;
 };
 
