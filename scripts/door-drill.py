@@ -1,11 +1,13 @@
-#!/usr/bin/env python3
+#!/usr/bin/python3
 """The doors drill (docs/web.md "Hostile load", issue 34): floods a valvebench-server of its own, on loopback
 only (127.0.0.1, its own temporary directory and ports), with the requests, connections and streams of issue 34,
 each bounded in count and time, and prints per flood what the attacker got, the server's RSS and CPU, and the
-page's latency for another client meanwhile (GET / and GET /api/benches every 50 ms). Then SIGTERM under slow
-imports: the time until the process has exited.
+page's latency for another client meanwhile (GET / and GET /api/benches every 50 ms) and, for the gRPC floods, an
+authenticated ListBenches's latency. A second server of its own serves the dashboard over TLS (a fresh RSA-2048
+certificate, openssl) for the handshake flood. Then SIGTERM under slow imports: the time until the process has
+exited. Needs Debian's python3-grpcio (scripts/setup.sh) for the gRPC floods: run it with /usr/bin/python3.
 
-Usage: scripts/door-drill.py [--build DIR] [--keep]
+Usage: scripts/door-drill.py [--build DIR] [--keep] [--only NAME]
   --build  the build tree with bin/valvebench-server (default: build)
 Exit 0 when every flood was bounded (page p99 < 100 ms where the issue asks it, the server up after each, SIGTERM
 within 5 s); 1 otherwise; 2 bad usage; 3 the server did not start.
@@ -13,9 +15,11 @@ within 5 s); 1 otherwise; 2 bad usage; 3 the server did not start.
 import argparse
 import hashlib
 import json
+import multiprocessing
 import os
 import signal
 import socket
+import ssl
 import statistics
 import subprocess
 import sys
@@ -49,19 +53,24 @@ def fds(pid):
     return len(os.listdir(f"/proc/{pid}/fd"))
 
 
-def connect(port, src=None, timeout=5.0):
+TLS_CLIENT = ssl.create_default_context()
+TLS_CLIENT.check_hostname = False
+TLS_CLIENT.verify_mode = ssl.CERT_NONE
+
+
+def connect(port, src=None, timeout=5.0, tls=False):
     s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
     s.settimeout(timeout)
     if src:
         s.bind((src, 0))
     s.connect((HOST, port))
-    return s
+    return TLS_CLIENT.wrap_socket(s) if tls else s
 
 
-def exchange(port, raw, timeout=5.0, src=None):
+def exchange(port, raw, timeout=5.0, src=None, tls=False):
     """One request on a fresh connection: (status, bytes of the answer)."""
     try:
-        s = connect(port, src, timeout)
+        s = connect(port, src, timeout, tls)
         s.sendall(raw)
         data = bytearray()
         head_end, length = -1, None
@@ -86,19 +95,23 @@ def exchange(port, raw, timeout=5.0, src=None):
 
 
 class PageProbe:
-    """Another client (127.0.0.9): GET / and GET /api/benches every 50 ms; latency of each pair."""
+    """Another client (127.0.0.9): GET / and GET /api/benches every 50 ms, each on a new connection (over TLS: a
+    handshake each); latency of each pair."""
 
-    def __init__(self, port):
-        self.port, self.times, self.failed, self.stop = port, [], 0, threading.Event()
+    def __init__(self, port, tls=False):
+        self.port, self.tls, self.times, self.failed, self.stop = port, tls, [], 0, threading.Event()
         self.thread = threading.Thread(target=self.run, daemon=True)
+
+    def probe(self):
+        a, _ = exchange(self.port, b"GET / HTTP/1.1\r\nHost: x\r\n\r\n", 5.0, "127.0.0.9", self.tls)
+        b, _ = exchange(self.port, f"GET /api/benches HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer {VIEWER}\r\n\r\n"
+                        .encode(), 5.0, "127.0.0.9", self.tls)
+        return a == 200 and b == 200
 
     def run(self):
         while not self.stop.is_set():
             t0 = time.monotonic()
-            a, _ = exchange(self.port, b"GET / HTTP/1.1\r\nHost: x\r\n\r\n", 5.0, "127.0.0.9")
-            b, _ = exchange(self.port, f"GET /api/benches HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer {VIEWER}\r\n\r\n"
-                            .encode(), 5.0, "127.0.0.9")
-            if a == 200 and b == 200:
+            if self.probe():
                 self.times.append(time.monotonic() - t0)
             else:
                 self.failed += 1
@@ -114,14 +127,110 @@ class PageProbe:
 
     def summary(self):
         if not self.times:
-            return f"page: no answer ({self.failed} failed)", float("inf")
+            return f"{self.name}: no answer ({self.failed} failed)", float("inf")
         t = sorted(self.times)
         p99 = t[min(len(t) - 1, int(0.99 * len(t)))]
-        return (f"page p50 {statistics.median(t) * 1e3:.1f} ms, p99 {p99 * 1e3:.1f} ms, max {t[-1] * 1e3:.1f} ms, "
+        return (f"{self.name} p50 {statistics.median(t) * 1e3:.1f} ms, p99 {p99 * 1e3:.1f} ms, max {t[-1] * 1e3:.1f} ms, "
                 f"{self.failed} failed of {len(t) + self.failed}"), p99
 
+    name = "page"
 
-def start_server(build, work):
+
+class GrpcProbe(PageProbe):
+    """Another gRPC client: an authenticated ListBenches on its own channel every 50 ms."""
+
+    name = "gRPC ListBenches"
+
+    def __init__(self, port):
+        super().__init__(port)
+        self.why = {}
+        import grpc
+        self.channel = grpc.insecure_channel(f"{HOST}:{port}")
+        self.call = self.channel.unary_unary("/valvebench.v1.BenchService/ListBenches")
+
+    def probe(self):
+        try:
+            self.call(b"", metadata=[("authorization", "Bearer " + VIEWER)], timeout=5.0)
+            return True
+        except Exception as e:  # grpc.RpcError: counted as failed, its code and words kept
+            why = f"{e.code().name}: {e.details()}" if hasattr(e, "code") else str(e)
+            self.why[why] = self.why.get(why, 0) + 1
+            return False
+
+    def summary(self):
+        text, p99 = super().summary()
+        return text + "".join(f" ({n} x {why})" for why, n in self.why.items()), p99
+
+    def __exit__(self, *a):
+        super().__exit__(*a)
+        self.channel.close()
+
+
+class PeakRss:
+    """The server's peak RSS, sampled every 20 ms."""
+
+    def __init__(self, pid):
+        self.pid, self.peak, self.stop = pid, rss_kib(pid), threading.Event()
+        self.thread = threading.Thread(target=self.run, daemon=True)
+
+    def run(self):
+        while not self.stop.is_set():
+            self.peak = max(self.peak, rss_kib(self.pid))
+            self.stop.wait(0.02)
+
+    def __enter__(self):
+        self.thread.start()
+        return self
+
+    def __exit__(self, *a):
+        self.stop.set()
+        self.thread.join()
+
+
+def idle_connections(grpc_port, server_pid):
+    """1,100 TCP connections to gRPC that never speak, held 0.5 s (an attacker's process); whether gRPC still
+    answers while they are held, and the server's descriptors before and during."""
+    socks, f0 = [], fds(server_pid)
+    for _ in range(1100):
+        try:
+            socks.append(connect(grpc_port))
+        except OSError:
+            break
+    time.sleep(0.5)
+    f1 = fds(server_pid)
+    answers = grpc_answers(grpc_port)
+    for s in socks:
+        s.close()
+    return len(socks), f0, f1, answers
+
+
+def big_message_call(grpc_port):
+    """One unauthenticated 60 MB ImportRuns call (an attacker's process); its status code."""
+    import grpc
+    ch = grpc.insecure_channel(f"{HOST}:{grpc_port}", options=[("grpc.max_send_message_length", -1)])
+    try:
+        ch.unary_unary("/valvebench.v1.BenchService/ImportRuns")(b"\x0a" + b"\0" * 59_999_999, timeout=30)
+        return "OK"
+    except grpc.RpcError as e:
+        return e.code().name
+    finally:
+        ch.close()
+
+
+def handshake_attacker(args):
+    """TLS handshakes one after another from one address for `seconds` (an attacker's process); how many."""
+    port, src, seconds = args
+    done, stop = 0, time.monotonic() + seconds
+    while time.monotonic() < stop:
+        try:
+            connect(port, src, 5.0, tls=True).close()
+            done += 1
+        except OSError:
+            pass
+    return done
+
+
+def start_server(build, work, tls=False):
     cfg = {
         "listen_address": f"{HOST}:0", "database_path": os.path.join(work, "runs.db"),
         "benches": [{"name": "emu-a", "kind": "emulated", "model": {"preset": "taghizadeh2009"}},
@@ -130,6 +239,8 @@ def start_server(build, work):
                    {"user": "olga", "role": "operator", "token_sha256": sha(OPERATOR)}],
         "web": {"listen_address": f"{HOST}:0"},
     }
+    if tls:
+        cfg["tls"] = {"cert_file": os.path.join(work, "cert.pem"), "key_file": os.path.join(work, "key.pem")}
     with open(os.path.join(work, "server.json"), "w") as f:
         json.dump(cfg, f)
     log = open(os.path.join(work, "server.log"), "w+")
@@ -141,7 +252,8 @@ def start_server(build, work):
         text = log.read()
         if "listening on " in text and "web dashboard on " in text:
             grpc_port = int(text.split("listening on ")[1].split()[0].rsplit(":", 1)[1])
-            web_port = int(text.split("web dashboard on http://127.0.0.1:")[1].split("/")[0])
+            web_port = int(text.split("web dashboard on http" + ("s" if tls else "") + "://127.0.0.1:")[1]
+                           .split("/")[0])
             break
         if proc.poll() is not None:
             break
@@ -165,6 +277,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--build", default="build")
     ap.add_argument("--keep", action="store_true")
+    ap.add_argument("--only", help="run only the floods whose names contain this (e.g. 'TLS', 'gRPC')")
     args = ap.parse_args()
     work = tempfile.mkdtemp(prefix="door-drill-")
     proc, grpc_port, web_port, log = start_server(args.build, work)
@@ -175,21 +288,31 @@ def main():
     pid, ok = proc.pid, True
     print(f"door-drill: server pid {pid}, gRPC {grpc_port}, web {web_port}, work {work}")
 
-    def flood(name, body, page_limit_s=0.1):
+    def flood(name, body, page_limit_s=0.1, server_pid=None, port=None, tls=False, grpc_probe=False):
         nonlocal ok
-        r0, c0 = rss_kib(pid), cpu_s(pid)
-        with PageProbe(web_port) as probe:
+        if args.only and args.only not in name:
+            return
+        server_pid, port = server_pid or pid, port or web_port
+        r0, c0 = rss_kib(server_pid), cpu_s(server_pid)
+        with PageProbe(port, tls) as probe, PeakRss(server_pid) as peak:
+            gprobe = GrpcProbe(grpc_port).__enter__() if grpc_probe else None
             time.sleep(0.2)
             what = body()
             time.sleep(0.2)
-        r1, c1 = rss_kib(pid), cpu_s(pid)
+            if gprobe:
+                gprobe.__exit__()
+        r1, c1 = rss_kib(server_pid), cpu_s(server_pid)
         page, p99 = probe.summary()
-        up = exchange(web_port, f"GET /api/benches HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer {VIEWER}\r\n\r\n"
-                      .encode())[0] == 200
+        if gprobe:
+            gpage, gp99 = gprobe.summary()
+            page += "; " + gpage
+            p99 = max(p99, gp99)
+        up = exchange(port, f"GET /api/benches HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer {VIEWER}\r\n\r\n"
+                      .encode(), tls=tls)[0] == 200
         bounded = up and p99 < page_limit_s
         ok &= bounded
-        print(f"  {name}: {what}; RSS {r0 / 1024:.0f} -> {r1 / 1024:.0f} MiB, server CPU {c1 - c0:.2f} s; {page}; "
-              f"{'up' if up else 'DOWN'}{'' if bounded else '  <-- NOT BOUNDED'}")
+        print(f"  {name}: {what}; RSS {r0 / 1024:.0f} -> {r1 / 1024:.0f} MiB (peak {peak.peak / 1024:.0f}), server CPU "
+              f"{c1 - c0:.2f} s; {page}; {'up' if up else 'DOWN'}{'' if bounded else '  <-- NOT BOUNDED'}")
 
     def ranges():
         req = b"GET /dygraph.min.js HTTP/1.1\r\nHost: x\r\nRange: bytes=0-" + b",0-" * 2699 + b"\r\n\r\n"
@@ -239,20 +362,18 @@ def main():
         return f"50 asset requests asking for brotli: {got[0][1]} bytes each"
 
     def idle_grpc():
-        socks, f0 = [], fds(pid)
-        for _ in range(1100):
-            try:
-                socks.append(connect(grpc_port))
-            except OSError:
-                break
-        time.sleep(0.5)
-        f1 = fds(pid)
-        answers = grpc_answers(grpc_port)
-        for s in socks:
-            s.close()
+        with multiprocessing.get_context("spawn").Pool(1) as pool:
+            held, f0, f1, answers = pool.apply(idle_connections, (grpc_port, pid))
         nonlocal ok
         ok &= answers
-        return f"{len(socks)} idle TCP connections to gRPC: server fds {f0} -> {f1}, gRPC answers: {answers}"
+        return f"{held} idle TCP connections to gRPC: server fds {f0} -> {f1}, gRPC answers: {answers}"
+
+    def grpc_big_messages():
+        # Attackers in processes of their own (not threads of the probes' interpreter, whose lock they would hold),
+        # started fresh ("spawn": gRPC's Python library does not survive a fork once it has a channel).
+        with multiprocessing.get_context("spawn").Pool(8) as pool:
+            codes = pool.map(big_message_call, [grpc_port] * 100, chunksize=1)
+        return f"100 unauthenticated 60 MB gRPC calls, 8 at once: {sorted(set(codes))}"
 
     def bearer_guesses():
         got = [exchange(web_port, f"GET /api/benches HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer guess{k}\r\n\r\n"
@@ -267,6 +388,7 @@ def main():
     flood("brotli", brotli)
     flood("idle gRPC", idle_grpc)
     flood("bearer guesses", bearer_guesses)
+    flood("big gRPC messages", grpc_big_messages, grpc_probe=True)
 
     # SIGTERM with slow imports in flight.
     socks = []
@@ -289,6 +411,27 @@ def main():
         s.close()
     ok &= rc == 0 and exit_s < 5.0
     print(f"  SIGTERM with 8 slow imports in flight: exit {rc} after {exit_s:.2f} s")
+
+    # TLS handshakes: a server of its own with the dashboard over TLS.
+    tls_work = os.path.join(work, "tls")
+    os.makedirs(tls_work)
+    subprocess.run(["openssl", "req", "-x509", "-newkey", "rsa:2048", "-nodes", "-days", "2", "-subj", "/CN=localhost",
+                    "-keyout", os.path.join(tls_work, "key.pem"), "-out", os.path.join(tls_work, "cert.pem")],
+                   check=True, capture_output=True)
+    tproc, _, tls_port, tlog = start_server(args.build, tls_work, tls=True)
+    if not tls_port:
+        tlog.seek(0)
+        print(tlog.read()[-3000:], file=sys.stderr)
+        return 3
+
+    def handshakes():
+        with multiprocessing.get_context("spawn").Pool(4) as pool:
+            done = pool.map(handshake_attacker, [(tls_port, f"127.0.0.{2 + k}", 3.0) for k in range(4)])
+        return f"{sum(done)} TLS handshakes in 3 s from 4 addresses ({sum(done) / 3:.0f}/s)"
+
+    flood("TLS handshakes", handshakes, server_pid=tproc.pid, port=tls_port, tls=True)
+    tproc.send_signal(signal.SIGTERM)
+    tproc.wait(timeout=30)
     print(f"door-drill: {'bounded' if ok else 'NOT BOUNDED'}")
     if not args.keep:
         subprocess.run(["rm", "-rf", work])

@@ -37,6 +37,9 @@
 #include "db/open_store.h"
 #include "web/gateway.h"
 
+// What gRPC's transport may buffer in all (see the quota below).
+constexpr int kGrpcMemoryQuotaBytes = 64 << 20;
+
 int main(int argc, char** argv) {
   CLI::App app{"valvebench-server: the bench server"};
   std::string config_path;
@@ -139,6 +142,16 @@ int main(int argc, char** argv) {
   // A connection that has not finished its TLS handshake and sent HTTP/2's SETTINGS within 10 s is closed (gRPC's
   // default is 120 s): idle sockets that never speak do not pile up towards the open-file limit.
   builder.AddChannelArgument(GRPC_ARG_SERVER_HANDSHAKE_TIMEOUT_MS, 10'000);
+  // gRPC 1.51 reads a whole message (up to the 64 MiB limit) before its size is checked and before any handler or
+  // interceptor sees the call's token, so unauthenticated calls could hold N x 64 MiB (issue 34: 20 at once took
+  // the RSS to 782 MiB). A memory quota bounds what the transport buffers in all: under its pressure gRPC shrinks
+  // its flow-control windows and, at the limit, closes connections (GOAWAY), so a flood costs tens of MiB, not GiB;
+  // the price is that other clients' calls may fail with UNAVAILABLE during such a flood (docs/server.md,
+  // "Limits under hostile load", measured). 64 MiB holds four of the largest legitimate messages in flight (a
+  // client streams an import above 16 MiB, client/client.cc).
+  grpc::ResourceQuota quota("valvebench-server");
+  quota.Resize(kGrpcMemoryQuotaBytes);
+  builder.SetResourceQuota(quota);
   builder.AddListeningPort(settings->listen_address, creds, &port);
   vb::server::HostService(&builder, &service);  // as a local service hosts it (service/hosting.h), plus the port
   std::unique_ptr<grpc::Server> server = builder.BuildAndStart();
