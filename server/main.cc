@@ -13,6 +13,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include <algorithm>
 #include <csignal>
 #include <cstdio>
 #include <ctime>
@@ -26,6 +27,7 @@
 #include <thread>
 
 #include "server/config.h"
+#include "server/grpc_listener.h"
 #include "server/instance_lock.h"
 #include "server/lab.h"
 #include "server/recovery.h"
@@ -58,15 +60,25 @@ int main(int argc, char** argv) {
   spdlog::set_pattern("%Y-%m-%dT%H:%M:%S.%eZ %l valvebench-server: %v", spdlog::pattern_time_type::utc);
   spdlog::flush_on(spdlog::level::info);
 
-  // Open files: each gRPC or web connection, pooled store connection and live stream holds one, and gRPC 1.51's
-  // listener stops for good at its first EMFILE. The soft limit goes up to the hard one (the unit sets
-  // LimitNOFILE=65536; a shell's soft default is often 1024).
-  if (rlimit nofile{}; getrlimit(RLIMIT_NOFILE, &nofile) == 0 && nofile.rlim_cur < nofile.rlim_max) {
-    const rlim_t was = nofile.rlim_cur;
-    nofile.rlim_cur = nofile.rlim_max;
-    if (setrlimit(RLIMIT_NOFILE, &nofile) == 0)
-      spdlog::info("open files: limit raised from {} to {}", static_cast<unsigned long long>(was),
-                   static_cast<unsigned long long>(nofile.rlim_cur));
+  // Open files: each gRPC or web connection, pooled store connection and live stream holds one. The soft limit
+  // goes up to the hard one (the unit sets LimitNOFILE=65536; a shell's soft default is often 1024), and the gRPC
+  // connections get what the other doors leave: the web's 512 connections, the store's 128, 64 for the rest
+  // (logs, the database's files, the listeners), so a flood of idle gRPC connections cannot take the descriptors
+  // the page and the store need (4096 at most; at a limit of 1024, 320).
+  vb::server::GrpcListenerLimits grpc_limits;
+  if (rlimit nofile{}; getrlimit(RLIMIT_NOFILE, &nofile) == 0) {
+    if (nofile.rlim_cur < nofile.rlim_max) {
+      const rlim_t was = nofile.rlim_cur;
+      nofile.rlim_cur = nofile.rlim_max;
+      if (setrlimit(RLIMIT_NOFILE, &nofile) == 0)
+        spdlog::info("open files: limit raised from {} to {}", static_cast<unsigned long long>(was),
+                     static_cast<unsigned long long>(nofile.rlim_cur));
+      getrlimit(RLIMIT_NOFILE, &nofile);
+    }
+    const long left = static_cast<long>(std::min<rlim_t>(nofile.rlim_cur, 1 << 20)) - 512 - 128 - 64;
+    grpc_limits.max_connections = static_cast<int>(std::clamp(left, 32L, 4096L));
+    grpc_limits.max_connections_per_client =
+        std::min(grpc_limits.max_connections_per_client, std::max(8, grpc_limits.max_connections / 2));
   }
 
   // Block the shutdown signals in every thread; one thread waits for them.
@@ -153,13 +165,30 @@ int main(int argc, char** argv) {
   grpc::ResourceQuota quota("valvebench-server");
   quota.Resize(kGrpcMemoryQuotaBytes);
   builder.SetResourceQuota(quota);
-  builder.AddListeningPort(settings->listen_address, creds, &port);
+  // A TCP address is bound and accepted by the server's own listener (server/grpc_listener.h: connection caps, and
+  // it survives running out of descriptors, which gRPC 1.51's accept loop does not); a unix: socket by gRPC.
+  std::unique_ptr<vb::server::GrpcListener> listener;
+  std::shared_ptr<grpc::experimental::ExternalConnectionAcceptor> acceptor;
+  if (settings->listen_address.rfind("unix:", 0) == 0) {
+    builder.AddListeningPort(settings->listen_address, creds, &port);
+  } else {
+    auto bound_listener = vb::server::GrpcListener::Bind(settings->listen_address, grpc_limits);
+    if (!bound_listener.ok()) {
+      spdlog::error("{} (is the port in use by another server?)", bound_listener.status().message().c_str());
+      return 3;
+    }
+    listener = std::move(*bound_listener);
+    port = listener->port();
+    acceptor = builder.experimental().AddExternalConnectionAcceptor(
+        grpc::ServerBuilder::experimental_type::ExternalConnectionType::FROM_FD, creds);
+  }
   vb::server::HostService(&builder, &service);  // as a local service hosts it (service/hosting.h), plus the port
   std::unique_ptr<grpc::Server> server = builder.BuildAndStart();
   if (server == nullptr || port == 0) {
     spdlog::error("cannot listen on {} (is the port in use by another server?)", settings->listen_address.c_str());
     return 3;
   }
+  if (listener) listener->Start(acceptor);
   // Health by service name (grpc.health.v1 Check with service "valvebench.v1.BenchService") answers SERVING, not
   // NOT_FOUND (issue 14); the overall status ("") is SERVING by default.
   server->GetHealthCheckService()->SetServingStatus(valvebench::v1::BenchService::service_full_name(), true);
@@ -268,6 +297,7 @@ int main(int argc, char** argv) {
   }).detach();
   if (nights) nights->Stop();
   if (retention) retention->Stop();
+  if (listener) listener->Stop();  // no new gRPC connections
   server->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(2));
   if (web) web->Stop();  // after Shutdown: that ends the live streams (SSE) the page's threads wait on
   spdlog::info("doors closed {:.2f} s after the signal",
