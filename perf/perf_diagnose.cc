@@ -1,7 +1,7 @@
 // The gap diagnosis on labelled datasets: time per dataset (target: < 60 s for a 12-run session on 2 cores)
 // and whether the verdict names the labelled effect. Prints a table; it is a benchmark, not a test.
 //
-// Usage: perf_diagnose [--budget-scale X] [--rule evidence|issue26] [DATASET_DIR...]   (default: every dataset under
+// Usage: perf_diagnose [--budget-scale X] [--rule evidence|issue26] [--level L] [DATASET_DIR...]   (default: every dataset under
 //        ../shared/gapbench/practice, with labels.json beside them when present)
 // --budget-scale X multiplies the diagnosis's wall-time budgets (whole and per candidate): on a machine shared
 // with other work the wall clock runs out before the CPU work is done, which changes verdicts, not speed. The
@@ -29,7 +29,16 @@ int main(int argc, char** argv) {
   std::vector<std::string> dirs;
   double budget_scale = 1.0;
   int rule = -1;  // --rule: 0 the evidence rule, 1 issue 26's rules; -1 the library's default
+  double level = 0.0;  // --level: the evidence rule's level; 0 the library's default
   for (int k = 1; k < argc; ++k) {
+    if (std::string(argv[k]) == "--level" && k + 1 < argc) {
+      level = std::atof(argv[++k]);
+      if (!(level > 0.0)) {
+        std::fprintf(stderr, "--level: must be > 0, got %s\n", argv[k]);
+        return 2;
+      }
+      continue;
+    }
     if (std::string(argv[k]) == "--rule" && k + 1 < argc) {
       const std::string v = argv[++k];
       if (v != "evidence" && v != "issue26") {
@@ -87,6 +96,7 @@ int main(int argc, char** argv) {
     dopt.budget_s *= budget_scale;
     dopt.attribution.candidate_budget_s *= budget_scale;
     if (rule >= 0) dopt.issue26_rules = rule == 1;
+    if (level > 0.0) dopt.addition_evidence = level;
     auto d = vb::gap::Diagnose(*ds, *plant, dopt);
     const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     const double cpu_s = static_cast<double>(std::clock() - c0) / CLOCKS_PER_SEC;
