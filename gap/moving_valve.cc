@@ -595,6 +595,17 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
   st.ds = &ds;
   st.family = &family;
   st.solver = options.solver;
+  if (st.solver.max_work == 0) {
+    // A cap on each simulation's work (ODE steps and pieces; the simulator's watchdog), so that one evaluation
+    // cannot take minutes (issue 35: some plants of one valve's global stage, stiff at the edges of their boxes,
+    // took 100x the 2-3 ms of the others, and that identification 337 s of CPU). A run's normal work is a few
+    // hundred to a few thousand (steps of at most max_step_s, a piece per gate edge; samples come from the dense
+    // output); 20 per sample plus 20000 is over ten times that, and a plant that needs more is answered as a
+    // failed evaluation (the optimiser's wall), not waited for.
+    std::size_t longest = 0;
+    for (const auto& r : ds.runs) longest = std::max(longest, r.gate.size());
+    st.solver.max_work = 20 * static_cast<std::uint64_t>(longest) + 20000;
+  }
   st.threads = options.threads;
   st.remaining = &remaining;
   st.value = v;
