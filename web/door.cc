@@ -342,15 +342,18 @@ void Door::Adopt(int fd) {
 }
 
 void Door::Close(std::unique_ptr<Conn> c) {
+  // fd < 0: Refuse answered and closed the socket already; only the TLS state and the accounting are left.
   if (c->ssl) {
-    if (c->handshaken && !c->lingering) {  // a lingering one sent its close_notify already
+    if (c->fd >= 0 && c->handshaken && !c->lingering) {  // a lingering one sent its close_notify already
       SetBlocking(c->fd, false);
       (void)SSL_shutdown(c->ssl);
     }
     SSL_free(c->ssl);
   }
-  ::shutdown(c->fd, SHUT_RDWR);
-  ::close(c->fd);
+  if (c->fd >= 0) {
+    ::shutdown(c->fd, SHUT_RDWR);
+    ::close(c->fd);
+  }
   std::lock_guard<std::mutex> lock(mu_);
   --open_;
   auto it = per_client_.find(c->client);
@@ -487,15 +490,8 @@ void Door::ReaderLoop() {
         if (c->head_started && c->handshaken) {
           Refuse(c->fd, 408, "request head not received in time (the dashboard is at its connection limit)");
           c->fd = -1;
-          if (c->ssl) SSL_free(c->ssl);
-          std::lock_guard<std::mutex> lock(mu_);
-          --open_;
-          auto it = per_client_.find(c->client);
-          if (it != per_client_.end() && --it->second <= 0) per_client_.erase(it);
-        } else {
-          Close(std::move(c));
         }
-        c.reset();
+        Close(std::move(c));
       }
       conns.erase(std::remove(conns.begin(), conns.end(), nullptr), conns.end());
     }
@@ -549,17 +545,7 @@ void Door::ReaderLoop() {
       }
     }
     conns = std::move(keep);
-    for (auto& c : to_close) {
-      if (c->fd < 0) {  // already answered and closed by Refuse: only the accounting
-        if (c->ssl) SSL_free(c->ssl);
-        std::lock_guard<std::mutex> lock(mu_);
-        --open_;
-        auto it = per_client_.find(c->client);
-        if (it != per_client_.end() && --it->second <= 0) per_client_.erase(it);
-      } else {
-        Close(std::move(c));
-      }
-    }
+    for (auto& c : to_close) Close(std::move(c));
     if (!to_work.empty()) {
       std::lock_guard<std::mutex> lock(mu_);
       for (auto& c : to_work) ready_.push_back(std::move(c));
