@@ -1396,49 +1396,40 @@ class Routes {
     r.set_run_id(id);
     auto reader = stub_->GetTrace(&ctx, r);
     v1::TraceChunk chunk;
+    vb::TraceDecoder decoder;  // the one decoder (proto/trace_chunk.h), as for the charts and the CSV
     std::size_t bytes = 0;
-    std::int64_t k = 0;
+    auto abandon = [&] {
+      ctx.TryCancel();
+      while (reader->Read(&chunk)) {
+      }
+      (void)reader->Finish();
+    };
     while (reader->Read(&chunk)) {
-      const std::size_t n = static_cast<std::size_t>(std::max(0, chunk.samples()));
-      const std::size_t nch = static_cast<std::size_t>(chunk.channels_size());
-      if (f.channels.empty()) {
-        f.t0_s = chunk.t0_s();
-        f.sample_period_s = chunk.sample_period_s();
-        f.channels.push_back({"t_s", exportfile::ChannelUnit("t_s", f.controller), {}});
-        for (const auto& name : chunk.channels())
-          if (name != "t_s") f.channels.push_back({name, exportfile::ChannelUnit(name, f.controller), {}});
+      if (auto bad = vb::api::DecodeChunk(chunk, &decoder); !bad.ok()) {
+        abandon();
+        return SendError(res, grpc::StatusCode::DATA_LOSS, fmt::format("run {}: {}", id, bad.message()));
       }
-      if (chunk.data().size() != n * nch * 8 || nch + (f.channels.size() > nch ? 1 : 0) != f.channels.size()) {
-        ctx.TryCancel();
-        while (reader->Read(&chunk)) {
-        }
-        (void)reader->Finish();
-        return SendError(res, grpc::StatusCode::DATA_LOSS, fmt::format("run {}: a trace chunk of the wrong size", id));
-      }
-      bytes += chunk.data().size() + n * 8;
+      bytes += chunk.data().size() + static_cast<std::size_t>(std::max(0, chunk.samples())) * 8;  // + the times
       if (bytes > kMaxFileTraceBytes) {
-        ctx.TryCancel();
-        while (reader->Read(&chunk)) {
-        }
-        (void)reader->Finish();
+        abandon();
         return SendErrorStatus(res, 413, "RESOURCE_EXHAUSTED",
                                fmt::format("run {}: the trace is larger than {} MiB, too large for a {} file from the "
                                            "page; use benchctl export {} --{} FILE",
                                            id, kMaxFileTraceBytes >> 20, format, id, format == "h5" ? "hdf5" : "mat"));
       }
-      for (std::size_t i = 0; i < n; ++i)
-        f.channels[0].values.push_back(f.t0_s + static_cast<double>(k + static_cast<std::int64_t>(i)) * f.sample_period_s);
-      std::size_t out_ch = 1;
-      for (std::size_t ch = 0; ch < nch; ++ch) {
-        if (chunk.channels(static_cast<int>(ch)) == "t_s") continue;
-        auto& v = f.channels[out_ch++].values;
-        const std::size_t at = v.size();
-        v.resize(at + n);
-        std::memcpy(v.data() + at, chunk.data().data() + ch * n * 8, n * 8);  // little-endian float64, channel-major
-      }
-      k += static_cast<std::int64_t>(n);
     }
     if (auto st = reader->Finish(); !st.ok()) return SendError(res, st);
+    vb::TraceColumns trace = decoder.Take();
+    f.t0_s = trace.t0_s;
+    f.sample_period_s = trace.sample_period_s;
+    {
+      std::vector<double> t(trace.samples());
+      for (std::size_t i = 0; i < t.size(); ++i) t[i] = trace.TimeAt(i);
+      f.channels.push_back({"t_s", exportfile::ChannelUnit("t_s", f.controller), std::move(t)});
+    }
+    for (const auto& name : trace.channels)
+      if (name != "t_s")
+        f.channels.push_back({name, exportfile::ChannelUnit(name, f.controller), std::move(trace.columns[name])});
     char path[] = "/tmp/valvebench-web-XXXXXX";
     const int fd = mkstemp(path);
     if (fd < 0) return SendError(res, grpc::StatusCode::UNAVAILABLE, "export: cannot create a temporary file");
