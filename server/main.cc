@@ -158,10 +158,9 @@ int main(int argc, char** argv) {
   // interceptor sees the call's token, so unauthenticated calls could hold N x 64 MiB (issue 34: 20 at once took
   // the RSS to 782 MiB). A memory quota bounds what the transport buffers in all: under its pressure gRPC shrinks
   // its flow-control windows and, at the limit, closes connections (GOAWAY): 20 such calls at once peaked at
-  // 209-258 MiB of RSS instead of 782 MiB;
-  // the price is that other clients' calls may fail with UNAVAILABLE during such a flood (docs/server.md,
-  // "Limits under hostile load", measured). 64 MiB holds four of the largest legitimate messages in flight (a
-  // client streams an import above 16 MiB, client/client.cc).
+  // 209 MiB of RSS instead of 782 MiB. The price is that other clients' calls may fail with UNAVAILABLE during
+  // such a flood (docs/server.md, "Limits under hostile load", measured). 64 MiB holds four of the largest
+  // legitimate messages in flight (a client streams an import above 16 MiB, client/client.cc).
   grpc::ResourceQuota quota("valvebench-server");
   quota.Resize(kGrpcMemoryQuotaBytes);
   builder.SetResourceQuota(quota);
