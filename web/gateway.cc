@@ -256,6 +256,16 @@ void Deadline(grpc::ClientContext* ctx, double seconds) {
                     std::chrono::milliseconds(static_cast<long long>(seconds * 1000.0)));
 }
 
+// Ends a server stream before its end (a bad chunk, a cap, a client gone): cancels the call, reads what is still
+// in flight into `scratch` and finishes it, so that the reader can be destroyed.
+template <class Reader, class Message>
+void Abandon(grpc::ClientContext* ctx, Reader* reader, Message* scratch) {
+  ctx->TryCancel();
+  while (reader->Read(scratch)) {
+  }
+  (void)reader->Finish();
+}
+
 // A query parameter as a number; false (and a 400 naming it) when present but not a number.
 bool NumberParam(const httplib::Request& req, httplib::Response& res, const char* name, double* out) {
   if (!req.has_param(name)) return true;
@@ -350,15 +360,11 @@ grpc::Status ReadTraceRows(v1::BenchService::Stub* stub, const httplib::Request&
   vb::Status bad;
   while (reader->Read(&c)) {
     if (bad = vb::api::DecodeChunk(c, &decoder); !bad.ok()) {
-      ctx.TryCancel();
-      while (reader->Read(&c)) {
-      }
-      break;
+      Abandon(&ctx, reader.get(), &c);
+      return grpc::Status(grpc::StatusCode::DATA_LOSS, bad.message());
     }
   }
-  const grpc::Status st = reader->Finish();
-  if (!bad.ok()) return grpc::Status(grpc::StatusCode::DATA_LOSS, bad.message());
-  if (!st.ok()) return st;
+  if (const grpc::Status st = reader->Finish(); !st.ok()) return st;
   const vb::TraceColumns& t = decoder.trace();
   out->t0_s = t.t0_s;
   out->period_s = t.sample_period_s;
@@ -1051,10 +1057,7 @@ class Routes {
       }
       ~Download() {
         if (finished || !reader) return;
-        ctx.TryCancel();  // the client went away mid-download: end the RPC before its reader goes
-        while (reader->Read(&chunk)) {
-        }
-        (void)reader->Finish();
+        Abandon(&ctx, reader.get(), &chunk);  // the client went away mid-download: end the RPC before its reader goes
       }
     };
     auto d = std::make_shared<Download>();
@@ -1398,20 +1401,14 @@ class Routes {
     v1::TraceChunk chunk;
     vb::TraceDecoder decoder;  // the one decoder (proto/trace_chunk.h), as for the charts and the CSV
     std::size_t bytes = 0;
-    auto abandon = [&] {
-      ctx.TryCancel();
-      while (reader->Read(&chunk)) {
-      }
-      (void)reader->Finish();
-    };
     while (reader->Read(&chunk)) {
       if (auto bad = vb::api::DecodeChunk(chunk, &decoder); !bad.ok()) {
-        abandon();
+        Abandon(&ctx, reader.get(), &chunk);
         return SendError(res, grpc::StatusCode::DATA_LOSS, fmt::format("run {}: {}", id, bad.message()));
       }
       bytes += chunk.data().size() + static_cast<std::size_t>(std::max(0, chunk.samples())) * 8;  // + the times
       if (bytes > kMaxFileTraceBytes) {
-        abandon();
+        Abandon(&ctx, reader.get(), &chunk);
         return SendErrorStatus(res, 413, "RESOURCE_EXHAUSTED",
                                fmt::format("run {}: the trace is larger than {} MiB, too large for a {} file from the "
                                            "page; use benchctl export {} --{} FILE",
@@ -1523,23 +1520,20 @@ class Routes {
         bool too_big = false, bad = false;
         while (reader->Read(&chunk)) {
           bytes += chunk.data().size();
-          if (bytes > kMaxReportTraceBytes) {
-            too_big = true;
-            ctx.TryCancel();
-            continue;
-          }
-          if (!vb::api::DecodeChunk(chunk, &decoder).ok()) {
-            bad = true;
-            ctx.TryCancel();
-          }
+          too_big = bytes > kMaxReportTraceBytes;
+          bad = !too_big && !vb::api::DecodeChunk(chunk, &decoder).ok();
+          if (too_big || bad) break;
         }
-        if (!too_big && !bad) {
+        grpc::Status st;
+        if (too_big || bad) {
+          Abandon(&ctx, reader.get(), &chunk);
+        } else {
           vb::TraceColumns cols = decoder.Take();
           t.t0_s = cols.t0_s;
           t.sample_period_s = cols.sample_period_s;
           t.channels = std::move(cols.columns);
+          st = reader->Finish();
         }
-        const grpc::Status st = reader->Finish();
         if (bad) return SendError(res, grpc::StatusCode::DATA_LOSS, fmt::format("run {}: its trace's chunks do not decode", run.id()));
         if (!too_big && st.ok() && !t.channels.empty()) {
           info.trace = std::move(t);
