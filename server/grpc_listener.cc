@@ -197,12 +197,12 @@ void GrpcListener::AcceptFrom(int listen_fd) {
     bool total = open >= limits_.max_connections;
     if (total && mine() < limits_.max_connections_per_client && ShedFromTheLargest(client)) total = false;
     if (total || mine() >= limits_.max_connections_per_client) {
-      ::close(fd);
       long n;
       {
         std::lock_guard<std::mutex> lock(mu_);
         n = total ? ++counts_.refused_total_cap : ++counts_.refused_client_cap;
       }
+      ::close(fd);  // after the count: whoever sees the close sees it counted
       if (n == 1 || n % 1000 == 0)
         spdlog::warn("grpc: connection from {} closed: {} ({} such so far)", client,
                      total ? "the server has " + std::to_string(limits_.max_connections) + " gRPC connections open"
