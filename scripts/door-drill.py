@@ -95,28 +95,19 @@ def exchange(port, raw, timeout=5.0, src=None, tls=False):
         return 0, 0
 
 
-class PageProbe:
-    """Another client (127.0.0.9): GET / and GET /api/benches every 50 ms, each on a new connection (over TLS: a
-    handshake each); latency of each pair."""
+class Background:
+    """A thread that calls self.tick() every self.every_s while the `with` block runs."""
 
-    def __init__(self, port, tls=False):
-        self.port, self.tls, self.times, self.failed, self.stop = port, tls, [], 0, threading.Event()
+    every_s = 0.05
+
+    def __init__(self):
+        self.stop = threading.Event()
         self.thread = threading.Thread(target=self.run, daemon=True)
-
-    def probe(self):
-        a, _ = exchange(self.port, b"GET / HTTP/1.1\r\nHost: x\r\n\r\n", 5.0, "127.0.0.9", self.tls)
-        b, _ = exchange(self.port, f"GET /api/benches HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer {VIEWER}\r\n\r\n"
-                        .encode(), 5.0, "127.0.0.9", self.tls)
-        return a == 200 and b == 200
 
     def run(self):
         while not self.stop.is_set():
-            t0 = time.monotonic()
-            if self.probe():
-                self.times.append(time.monotonic() - t0)
-            else:
-                self.failed += 1
-            self.stop.wait(0.05)
+            self.tick()
+            self.stop.wait(self.every_s)
 
     def __enter__(self):
         self.thread.start()
@@ -125,6 +116,28 @@ class PageProbe:
     def __exit__(self, *a):
         self.stop.set()
         self.thread.join()
+
+
+class PageProbe(Background):
+    """Another client (127.0.0.9): GET / and GET /api/benches every 50 ms, each on a new connection (over TLS: a
+    handshake each); latency of each pair."""
+
+    def __init__(self, port, tls=False):
+        super().__init__()
+        self.port, self.tls, self.times, self.failed = port, tls, [], 0
+
+    def probe(self):
+        a, _ = exchange(self.port, b"GET / HTTP/1.1\r\nHost: x\r\n\r\n", 5.0, "127.0.0.9", self.tls)
+        b, _ = exchange(self.port, f"GET /api/benches HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer {VIEWER}\r\n\r\n"
+                        .encode(), 5.0, "127.0.0.9", self.tls)
+        return a == 200 and b == 200
+
+    def tick(self):
+        t0 = time.monotonic()
+        if self.probe():
+            self.times.append(time.monotonic() - t0)
+        else:
+            self.failed += 1
 
     def summary(self):
         if not self.times:
@@ -167,25 +180,17 @@ class GrpcProbe(PageProbe):
         self.channel.close()
 
 
-class PeakRss:
+class PeakRss(Background):
     """The server's peak RSS, sampled every 20 ms."""
 
+    every_s = 0.02
+
     def __init__(self, pid):
-        self.pid, self.peak, self.stop = pid, rss_kib(pid), threading.Event()
-        self.thread = threading.Thread(target=self.run, daemon=True)
+        super().__init__()
+        self.pid, self.peak = pid, rss_kib(pid)
 
-    def run(self):
-        while not self.stop.is_set():
-            self.peak = max(self.peak, rss_kib(self.pid))
-            self.stop.wait(0.02)
-
-    def __enter__(self):
-        self.thread.start()
-        return self
-
-    def __exit__(self, *a):
-        self.stop.set()
-        self.thread.join()
+    def tick(self):
+        self.peak = max(self.peak, rss_kib(self.pid))
 
 
 def idle_connections(grpc_port, server_pid):

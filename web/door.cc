@@ -379,14 +379,16 @@ void Door::Linger(std::unique_ptr<Conn> c) {
   c->discarded = 0;
   c->buf.clear();
   c->deadline = After(kLinger_s);
+  BackToReader(std::move(c));
+}
+
+void Door::BackToReader(std::unique_ptr<Conn> c) {
   {
     std::lock_guard<std::mutex> lock(mu_);
-    if (!stopping_) {
-      incoming_.push_back(std::move(c));
-    }
+    if (!stopping_) incoming_.push_back(std::move(c));
   }
   if (c) {
-    Close(std::move(c));
+    Close(std::move(c));  // stopping: the reader may be gone
   } else {
     Wake();
   }
@@ -628,17 +630,7 @@ void Door::HandshakeLoop() {
       Close(std::move(c));
       continue;
     }
-    {
-      std::lock_guard<std::mutex> lock(mu_);
-      if (!stopping_) {
-        incoming_.push_back(std::move(c));
-      }
-    }
-    if (c) {
-      Close(std::move(c));
-    } else {
-      Wake();
-    }
+    BackToReader(std::move(c));
   }
   std::map<std::string, std::deque<std::unique_ptr<Conn>>> left;
   {
@@ -724,19 +716,7 @@ void Door::WorkerLoop() {
     c->deadline = After(c->head_started ? limits_.head_timeout_s : limits_.idle_timeout_s);
     c->since = Clock::now();
     SetBlocking(c->fd, false);
-    bool back = false;
-    {
-      std::lock_guard<std::mutex> lock(mu_);
-      if (!stopping_) {
-        incoming_.push_back(std::move(c));
-        back = true;
-      }
-    }
-    if (back) {
-      Wake();
-    } else {
-      Close(std::move(c));
-    }
+    BackToReader(std::move(c));
   }
 }
 

@@ -74,6 +74,8 @@ class Door {
   void Close(std::unique_ptr<Conn> c);
   // Half-closes after the answer and hands the connection to the reader, which discards what still arrives.
   void Linger(std::unique_ptr<Conn> c);
+  // Gives a connection (back) to the reader's set and wakes it; closes it when the door is stopping.
+  void BackToReader(std::unique_ptr<Conn> c);
   // Reads and drops what a lingering connection's socket has; false when it is to be closed now.
   bool Discard(Conn& c);
   static constexpr double kLinger_s = 2.0;             // Apache's lingering close waits 2 s
