@@ -156,9 +156,9 @@ int main(int argc, char** argv) {
   builder.AddChannelArgument(GRPC_ARG_SERVER_HANDSHAKE_TIMEOUT_MS, 10'000);
   // gRPC 1.51 reads a whole message (up to the 64 MiB limit) before its size is checked and before any handler or
   // interceptor sees the call's token, so unauthenticated calls could hold N x 64 MiB (issue 34: 20 at once took
-  // the RSS to 782 MiB). A memory quota bounds what the transport buffers in all: under its pressure gRPC shrinks
+  // the RSS to 771 MiB). A memory quota bounds what the transport buffers in all: under its pressure gRPC shrinks
   // its flow-control windows and, at the limit, closes connections (GOAWAY): 20 such calls at once peaked at
-  // 209 MiB of RSS instead of 782 MiB. The price is that other clients' calls may fail with UNAVAILABLE during
+  // 227 MiB of RSS instead of 771 MiB. The price is that other clients' calls may fail with UNAVAILABLE during
   // such a flood (docs/server.md, "Limits under hostile load", measured). 64 MiB holds four of the largest
   // legitimate messages in flight (a client streams an import above 16 MiB, client/client.cc).
   grpc::ResourceQuota quota("valvebench-server");
