@@ -57,6 +57,7 @@ struct BenchSample {
   double v2_integral_V2s;   // integral of v_coil^2 dt
   double energy_J;          // integral of v_coil i dt
   double switches;          // gate transitions so far
+  double gate_on_s;         // integral of the gate dt: its on-time so far (the live stream's duty)
 };
 
 class SampleSink {

@@ -13,7 +13,7 @@ BenchSample CurrentOnlySample(double t_s, std::int8_t gate, double i_A) {
   b.v_coil_V = kNotMeasured;
   b.i_A = i_A;
   b.x_m = b.v_mps = kNotMeasured;
-  b.v2_integral_V2s = b.energy_J = b.switches = kNotMeasured;
+  b.v2_integral_V2s = b.energy_J = b.switches = b.gate_on_s = kNotMeasured;
   return b;
 }
 

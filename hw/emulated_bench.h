@@ -90,7 +90,7 @@ class EmulatedBench final : public Bench {
     void OnSample(const model::PlantSample& s) override {
       if (sink)
         sink->OnSample(BenchSample{s.t_s, s.gate, s.v_coil_V, s.i_A, s.x_m, s.v_mps, s.v2_integral_V2s, s.energy_J,
-                                   static_cast<double>(s.switches)});
+                                   static_cast<double>(s.switches), s.gate_on_s});
     }
   };
   void RunPwmTo(double t_s);

@@ -79,6 +79,7 @@ void Simulator::Reset() {
   v_ = 0.0;
   v2_int_ = vi_int_ = 0.0;
   switches_ = 0;
+  gate_on_before_s_ = gate_on_since_s_ = 0.0;
   const Effects& fx = plant_.params().effects;
   dT_ = fx.heating ? fx.heating_dT0_K : 0.0;
   sensor_.Reset();
@@ -135,6 +136,8 @@ void Simulator::SetSamplePeriod(double period_s) {
 void Simulator::SetGate(int gate) {
   if (!driver_.SetGate(gate, t_)) return;
   ++switches_;
+  if (driver_.gate() != 0) gate_on_since_s_ = t_;
+  else gate_on_before_s_ += t_ - gate_on_since_s_;
   stepper_valid_ = false;
 }
 
@@ -237,6 +240,7 @@ void Simulator::EmitSample(double t, double i_meas, double v_term, double x, dou
   s.v2_integral_V2s = v2_int;
   s.energy_J = vi_int;
   s.switches = switches_;
+  s.gate_on_s = gate_on_before_s_ + (driver_.gate() != 0 ? std::max(0.0, t - gate_on_since_s_) : 0.0);
   obs->OnSample(s);
 }
 

@@ -65,6 +65,7 @@ struct PlantSample {
   double v2_integral_V2s;   // integral of v_coil^2 dt
   double energy_J;          // integral of v_coil * i dt
   std::uint64_t switches;   // gate transitions so far
+  double gate_on_s;         // integral of the gate command dt: the time it was on so far (exact, at its edges)
 };
 
 // The trajectory inside one piece [t0, t1] of the simulation (between two events, gate edges or AdvanceTo ends;
@@ -230,6 +231,8 @@ class Simulator {
   Play play_ = Play::kInside;
   bool frozen_ = false;                   // the current integrated piece holds the spool
   std::uint64_t switches_ = 0;
+  double gate_on_before_s_ = 0.0;  // the gate's on-time up to its last falling edge
+  double gate_on_since_s_ = 0.0;   // its last rising edge
   double ode_piece_v2_ = 0.0, ode_piece_vi_ = 0.0;  // integrals at the ODE stepper's restart time
   Contact contact_ = Contact::kLower;
 

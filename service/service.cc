@@ -353,10 +353,15 @@ Status StoredSamples(db::Store* store, std::int64_t run_id, std::int32_t* next_c
     const double* ref = column("ref");
     for (std::int32_t k = 0; k < c.samples; ++k) {
       const double t_s = t != nullptr ? t[k] : c.t0_s + k * c.sample_period_s;
-      if (!thinner->Keep(t_s)) continue;
+      const int g = gate != nullptr ? static_cast<int>(gate[k]) : 0;
+      double duty = 0.0;
+      std::uint64_t lost = 0;
+      // Each stored sample is one recorded sample: the duty is their mean (the stored trace has no on-time).
+      if (!thinner->Keep(t_s, g != 0 ? 1.0 : 0.0, 0, &duty, &lost)) continue;
       auto* ls = ev->add_samples();
       ls->set_t_s(t_s);
-      ls->set_gate(gate != nullptr ? static_cast<int>(gate[k]) : 0);
+      ls->set_gate(g);
+      ls->set_duty(duty);
       ls->set_i_a(i != nullptr ? i[k] : std::nan(""));
       ls->set_x_m(x != nullptr ? x[k] : std::nan(""));
       ls->set_ref(ref != nullptr ? ref[k] : std::nan(""));
@@ -381,6 +386,8 @@ grpc::Status BenchServiceImpl::WatchRun(grpc::ServerContext* ctx, const v1::Watc
   auto store = pool_->Acquire();
   if (!store.ok()) return ToGrpcStatus(store.status());
   std::uint64_t seq = 0;
+  bool seq_started = false;         // samples before this watch's first read are not its losses
+  std::uint64_t dropped = 0;        // live samples this watch lost (RunEvent.dropped_samples)
   std::int32_t next_chunk = 0;      // a run on another host: the first stored chunk not yet sent
   std::int64_t watched_fence = -1;
   int polls = 0;
@@ -424,12 +431,18 @@ grpc::Status BenchServiceImpl::WatchRun(grpc::ServerContext* ctx, const v1::Watc
       }
       if (here && req->sample_rate_hz() > 0.0) {  // 0 (or less): no live samples (proto: "0 = none")
         std::vector<runs::LiveSample> samples;
-        registry_->SamplesSince(r->id, &seq, &samples);
+        registry_->SamplesSince(r->id, &seq, &samples, seq_started ? &dropped : nullptr);
+        seq_started = true;
         for (const auto& s : samples) {
-          if (!thinner.Keep(s.t_s)) continue;
+          // Losses before a thinned-out sample are carried to the next kept one (thinning is not a loss).
+          double duty = 0.0;
+          std::uint64_t lost = 0;
+          if (!thinner.Keep(s.t_s, s.duty, s.dropped_before, &duty, &lost)) continue;
+          dropped += lost;
           auto* ls = ev.add_samples();
           ls->set_t_s(s.t_s);
           ls->set_gate(s.gate);
+          ls->set_duty(duty);
           ls->set_i_a(s.i_A);
           ls->set_x_m(s.x_m);
           ls->set_ref(s.ref);
@@ -444,6 +457,7 @@ grpc::Status BenchServiceImpl::WatchRun(grpc::ServerContext* ctx, const v1::Watc
       progress = std::max(progress, last_progress);
     last_fence = r->fence;
     ev.set_progress(progress);
+    ev.set_dropped_samples(static_cast<std::int64_t>(dropped));
     const bool changed = first || r->status != last_status || std::abs(progress - last_progress) >= 0.01 ||
                          ev.samples_size() > 0;
     if (changed && !writer->Write(ev)) {  // the client went away

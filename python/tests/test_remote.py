@@ -48,3 +48,24 @@ def test_local_false_without_a_server_is_refused(monkeypatch):
     monkeypatch.delenv("VALVEBENCH_SERVER", raising=False)
     with pytest.raises(valvebench.InvalidArgument, match="server: none given"):
         valvebench.Client(local=False)
+
+
+def test_live_samples_carry_the_gate_duty(remote):
+    """A 20 kHz PWM at duty 0.3 watched at 50 samples a second: each live sample's duty is the gate's mean over
+    its interval (0.3), where the kept instants' gate levels are 0 or 1 (issue 37: the live view drew a fast
+    PWM as solid "on")."""
+    spec = {"name": "py-live-duty",
+            "bench": {"kind": "emulated", "model": {"preset": "taghizadeh2009"}, "driver": {"kind": "low_side_flyback"}},
+            "conditions": {"supply_V": 15.0, "supply_pressure_Pa": 0.0},
+            "controller": {"open_loop_pwm": {"segments": [{"start_s": 0.0, "frequency_Hz": 20000.0, "duty": 0.3}]}},
+            "duration_s": 1.5, "realtime": True, "recording": {"rate_Hz": 50000.0}}
+    batch = remote.submit(spec)
+    events = []
+    run = remote.watch(batch.run_ids[0], progress=events.append, sample_rate_Hz=50.0)
+    assert run.status == "done", run.reason
+    duty = [d for p in events for d in p.duty]
+    gates = {s[1] for p in events for s in p.samples}
+    assert len(duty) >= 20, len(duty)                      # about 1.5 s at 50 per second, watched from its start
+    assert all(abs(d - 0.3) < 0.02 for d in duty[1:]), duty   # the first interval may start mid-period
+    assert gates <= {0, 1}
+    assert all(p.dropped_samples == 0 for p in events)     # an idle server keeps up

@@ -77,9 +77,12 @@ def load_spec(spec):
 
 class Progress:
     """One WatchRun event: run_id, status ('queued', 'running', 'done', ...), progress 0..1, reason, and the
-    live downsampled samples (t_s, gate, i_A, x_m, ref) when asked for."""
+    live downsampled samples (t_s, gate, i_A, x_m, ref) when asked for; ``duty`` has each sample's gate duty
+    over the interval since the previous one (a PWM thinned to the asked rate reads as its duty, not as the
+    level of the kept instant), and ``dropped_samples`` counts the live samples the server could not deliver
+    to this watch so far (its buffer was full or the watcher fell behind; thinning is not a loss)."""
 
-    __slots__ = ("run_id", "status", "progress", "reason", "samples")
+    __slots__ = ("run_id", "status", "progress", "reason", "samples", "duty", "dropped_samples")
 
     def __init__(self, ev):
         self.run_id = ev.run_id
@@ -87,6 +90,8 @@ class Progress:
         self.progress = ev.progress
         self.reason = ev.reason
         self.samples = [(s.t_s, s.gate, s.i_A, s.x_m, s.ref) for s in ev.samples]
+        self.duty = [s.duty for s in ev.samples]
+        self.dropped_samples = ev.dropped_samples
 
     def __repr__(self):
         return "Progress(run %d %s %.0f%%)" % (self.run_id, self.status, 100 * self.progress)

@@ -296,6 +296,114 @@ TEST(LiveTap, SamplesCarryTheReferenceOfTheControlledVariable) {
   EXPECT_TRUE(std::isnan(got[0].ref));
 }
 
+// The live gate is each interval's duty (issue 37: a fast PWM streamed at 200 Hz drew as solid "on"). A 20 kHz
+// PWM at duty 0.3 recorded at 50 kHz: the samples' mean aliases (five sample phases per two periods, one or two
+// of them in the on-time: 0.2 or 0.4), the emulator's on-time integral gives 0.3.
+TEST(LiveTap, EachSampleCarriesTheGatesExactDutyOverItsInterval) {
+  auto spec = E3();
+  spec.set_duration_s(0.02);
+  auto* seg = spec.mutable_controller()->mutable_open_loop_pwm()->mutable_segments();
+  seg->Clear();
+  auto* s0 = seg->Add();
+  s0->set_start_s(0.0);
+  s0->set_frequency_hz(20000.0);
+  s0->set_duty(0.3);
+  auto e = experiment::BuildExperiment(spec);
+  ASSERT_TRUE(e.ok()) << e.status().ToString();
+  hw::EmulatedBench bench(experiment::EmulatedBenchFor(*e));
+  LiveTap tap(50, &e->reference);  // 50 kHz / 50: a live sample per ms
+  experiment::Trace trace;
+  experiment::RunMonitor monitor;
+  ASSERT_TRUE(experiment::Runner::Run(*e, bench, &trace, &monitor, &tap).ok());
+  std::vector<LiveSample> got;
+  tap.Drain(&got);
+  ASSERT_GE(got.size(), 19u);
+  double sampled_mean = 0.0;
+  for (const double g : trace.gate) sampled_mean += g;
+  sampled_mean /= static_cast<double>(trace.gate.size());
+  // 0.4, or 0.2 where the sample that falls on a rising edge reads the level before it: aliased either way.
+  EXPECT_GT(std::abs(sampled_mean - 0.3), 0.05) << "the recording's mean (what the page drew before)";
+  for (std::size_t k = 1; k < got.size(); ++k) {
+    EXPECT_NEAR(got[k].duty, 0.3, 1e-3) << "t = " << got[k].t_s;
+    EXPECT_EQ(got[k].dropped_before, 0u);
+  }
+
+  // A bench without the on-time integral (hardware: NaN) gets the recorded samples' mean.
+  LiveTap device(4);
+  hw::BenchSample b{};
+  b.gate_on_s = std::numeric_limits<double>::quiet_NaN();
+  for (int k = 0; k < 8; ++k) {
+    b.t_s = k * 1e-3;
+    b.gate = static_cast<std::int8_t>(k == 1 || k >= 5 ? 1 : 0);
+    device.OnSample(b);
+  }
+  got.clear();
+  device.Drain(&got);
+  ASSERT_EQ(got.size(), 2u);
+  EXPECT_DOUBLE_EQ(got[0].duty, 0.25);
+  EXPECT_DOUBLE_EQ(got[1].duty, 0.75);
+}
+
+// A full ring drops live samples without blocking the loop; the next sample that fits says how many were lost,
+// and a watcher that fell behind the registry's backlog is told how many it missed (RunEvent.dropped_samples).
+TEST(LiveTap, LossesAreCountedWhereTheyHappen) {
+  LiveTap tap(1);
+  hw::BenchSample b{};
+  const int fed = 8192 + 10;  // the ring holds 8191
+  for (int k = 0; k < fed; ++k) {
+    b.t_s = k * 1e-3;
+    tap.OnSample(b);
+  }
+  std::vector<LiveSample> got;
+  tap.Drain(&got);
+  ASSERT_EQ(got.size(), 8191u);
+  for (const auto& s : got) EXPECT_EQ(s.dropped_before, 0u);
+  b.t_s = fed * 1e-3;
+  tap.OnSample(b);
+  got.clear();
+  tap.Drain(&got);
+  ASSERT_EQ(got.size(), 1u);
+  EXPECT_EQ(got[0].dropped_before, 11u);
+
+  Registry registry;
+  experiment::RunMonitor monitor;
+  LiveTap live(1);
+  registry.Add(3, &monitor, &live, 100.0);
+  std::uint64_t fast = 0, slow = 0, missed = 0;
+  std::vector<LiveSample> out;
+  for (int round = 0; round < 4; ++round) {  // 4 x 6000 samples: the fast watcher reads each round
+    for (int k = 0; k < 6000; ++k) {
+      b.t_s = (round * 6000 + k) * 1e-3;
+      live.OnSample(b);
+    }
+    out.clear();
+    ASSERT_TRUE(registry.SamplesSince(3, &fast, &out, &missed));
+    EXPECT_EQ(out.size(), 6000u);
+  }
+  EXPECT_EQ(missed, 0u);
+  out.clear();
+  ASSERT_TRUE(registry.SamplesSince(3, &slow, &out, &missed));  // the backlog keeps the newest 16384
+  EXPECT_EQ(out.size(), 16384u);
+  EXPECT_EQ(missed, 24000u - 16384u);
+}
+
+// A kept sample speaks for the ones thinned out before it: their mean duty and their summed losses.
+TEST(SampleThinner, AKeptSampleCarriesTheDutyAndLossesOfWhatItStandsFor) {
+  SampleThinner thin(250.0);  // a 1 kHz stream thinned to one in four
+  double duty = -1.0;
+  std::uint64_t lost = 99;
+  std::vector<std::pair<double, std::uint64_t>> kept;
+  for (int k = 0; k < 12; ++k) {
+    const double d = k % 4 == 0 ? 1.0 : 0.0;  // the interval's duty
+    if (thin.Keep(k * 1e-3, d, k == 5 ? 3 : 0, &duty, &lost)) kept.emplace_back(duty, lost);
+  }
+  ASSERT_EQ(kept.size(), 3u);  // at 0, 4 and 8 ms
+  EXPECT_DOUBLE_EQ(kept[0].first, 1.0);   // the first stands for itself
+  EXPECT_DOUBLE_EQ(kept[1].first, 0.25);  // 1, 2, 3 and 4 ms: one of four on
+  EXPECT_EQ(kept[1].second, 0u);
+  EXPECT_EQ(kept[2].second, 3u);          // lost before 5 ms, reported with the 8 ms sample
+}
+
 // WatchRun's sample_rate_Hz (issue 14: 0 and 10 Hz both streamed 1 kHz).
 TEST(SampleThinner, KeepsAtMostTheRequestedRateAndNoneForZero) {
   auto kept = [](double rate_Hz) {

@@ -316,6 +316,12 @@ def check_diagnosis_page():
     bars = driver.find_elements(By.CSS_SELECTOR, "#diagnosis-phases .vb-bar")
     check("diagnosis: residual by phase as bars", len(bars) >= 4, len(bars))
     check("diagnosis: detection limits shown", bool(driver.find_elements(By.CSS_SELECTOR, "#detection-limits")))
+    # Every qualifier the text report gives a limit (the range's end, the range's weakest) is on the page too.
+    report = text_of(By.CSS_SELECTOR, "#diagnosis-report pre.report")
+    limits = text_of(By.ID, "detection-limits")
+    for said in ("the range's weakest", "the range's end"):
+        check("diagnosis: a detection limit at %s is said so on the page as in the report" % said,
+              (said in report) == (said in limits), (said, report[-800:], limits[-800:]))
     report_w, main_w = driver.execute_script("return [document.querySelector('#diagnosis-report pre.report').clientWidth, "
                                              "document.querySelector('#main').clientWidth];")
     check("diagnosis: the text report is full width", report_w >= 0.9 * (main_w - 40), (report_w, main_w))
@@ -440,7 +446,10 @@ try:
     # 2. Submit a long real-time run from the Submit page.
     with open(os.path.join(examples_dir, "standard", "e3.json")) as f:
         spec = json.load(f)
-    spec.update({"name": "web-live", "realtime": True, "duration_s": 30.0})
+    # Pull in, then hold with a 20 kHz PWM at duty 0.3: the live view must show the hold as its duty (issue 37).
+    spec.update({"name": "web-live", "realtime": True, "duration_s": 30.0,
+                 "controller": {"open_loop_pwm": {"segments": [{"start_s": 0.0, "frequency_Hz": 0.0, "duty": 1.0},
+                                                               {"start_s": 0.05, "frequency_Hz": 20000.0, "duty": 0.3}]}}})
     go("#/submit")
     area = wait(lambda: driver.find_elements(By.ID, "spec") or None, what="spec editor")
     driver.execute_script("document.getElementById('spec').value = arguments[0];", json.dumps(spec, indent=2))
@@ -450,6 +459,10 @@ try:
     live_id = link[0].text.lstrip("#") if link else None
     check("the submission is queued", live_id is not None and live_id.isdigit(),
           text_of(By.ID, "main")[-600:])
+    said = text_of(By.ID, "submit-result")
+    check("the submission says how many runs and links the batch's comparison",
+          re.search(r"Queued batch \d+: 1 run \(#\d+\)", said) and
+          bool(driver.find_elements(By.CSS_SELECTOR, "#submit-result a#compare-submitted[href^='#/compare?batch=']")), said)
     if live_id is None:
         raise RuntimeError("no run to follow")
 
@@ -476,6 +489,20 @@ try:
     btn = wait(lambda: driver.find_elements(By.ID, "cancel") or None, what="cancel button")
     wait(lambda: int(driver.find_element(By.CSS_SELECTOR, "#traces .live-count").get_attribute("data-samples") or 0) > 0,
          what="live samples on the run page")
+    # The gate is drawn as its duty over each streamed interval: the 20 kHz hold at 0.3 streamed at 200 Hz reads
+    # 0.3, not a level of 0 or 1 at the kept instants.
+    duty = wait(lambda: driver.execute_script("""
+        const d = document.querySelector('#traces .live-gate .vb-plot');
+        const g = d && d.vbChart && d.vbChart.g; if (!g) return null;
+        const v = []; for (let r = 0; r < g.numRows(); r++) { const y = g.getValue(r, 1); if (y !== null) v.push(y); }
+        return v.some((y) => y > 0.25 && y < 0.35) ? [d.closest('.vb-chart').querySelector('.vb-chart-title').textContent, v]
+                                                   : null;"""), what="the live duty of the PWM hold")
+    check("the live gate is drawn as its duty over each interval (0.3 for a 20 kHz hold at 0.3)",
+          duty is not None and "duty" in duty[0] and all(-1e-9 <= y <= 1 + 1e-9 for y in duty[1]) and
+          sum(1 for y in duty[1] if abs(y - 0.3) < 0.01) >= len(duty[1]) // 2,
+          duty and (duty[0], duty[1][:40]))
+    check("the server says it dropped nothing for an idle page",
+          driver.find_element(By.CSS_SELECTOR, "#traces .live-count").get_attribute("data-dropped") == "0")
     shot("run-live")
     wait(lambda: driver.find_elements(By.CSS_SELECTOR, "#traces .progress") or None, what="the live progress")
     progress = driver.execute_script("return Array.from(document.querySelectorAll('#main *')).filter((e) => "

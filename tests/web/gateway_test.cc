@@ -387,7 +387,7 @@ TEST_F(WebGatewayTest, LiveSamplesCarryEveryFieldFromTheStart) {
     const Json ev = Json::parse(line.substr(6));
     for (const auto& sample : ev["samples"]) {
       ++samples;
-      for (const char* field : {"t_s", "gate", "i_A", "x_m", "ref"}) {
+      for (const char* field : {"t_s", "gate", "duty", "i_A", "x_m", "ref"}) {
         if (!sample.contains(field)) {
           ++missing;
           example = sample.dump();
@@ -397,6 +397,7 @@ TEST_F(WebGatewayTest, LiveSamplesCarryEveryFieldFromTheStart) {
   }
   EXPECT_GE(samples, 20u) << stream.substr(0, 1500);
   EXPECT_EQ(missing, 0u) << example;
+  EXPECT_NE(stream.find("\"dropped_samples\""), std::string::npos) << "the server's loss count on every event";
 }
 
 // An interactive run is cancelled when its submitter's watch goes away: the page's streams come and go, so the

@@ -178,9 +178,12 @@ function liveView(runId, box, onEnd) {
     height: 170}, cleanups);
   const cX = VBCharts.plot(charts, {title: 'Spool position (live)', class: 'live-position', x: {label: 't', unit: 's'},
     y: {label: 'x', unit: 'm'}, series: [{name: 'x (measured)', color: C[2]}], rows: [], height: 150}, cleanups);
-  const cG = VBCharts.plot(charts, {title: 'Gate (logic level, live)', class: 'live-gate', x: {label: 't', unit: 's'},
-    y: {label: 'gate', unit: '', logic: true}, series: [{name: 'gate', color: C[3], step: true}], rows: [], height: 90}, cleanups);
-  let dirty = false, n = 0, lastT = -Infinity;
+  // The gate as its duty over each streamed interval (the server's mean of the gate there): a 20 kHz PWM thinned
+  // to 200 Hz would otherwise show whichever level each kept instant saw (solid "on" at a high duty).
+  const cG = VBCharts.plot(charts, {title: 'Gate duty (live, mean over each interval)', class: 'live-gate',
+    x: {label: 't', unit: 's'}, y: {label: 'duty', unit: ''}, series: [{name: 'duty', color: C[3]}], rows: [],
+    height: 90}, cleanups);
+  let dirty = false, n = 0, lastT = -Infinity, dropped = 0;
   const holes = VBCharts.holes();  // gaps in the stream, drawn as holes (charts.js)
   const timer = setInterval(() => {
     if (!dirty || !cI.g) return;
@@ -191,7 +194,7 @@ function liveView(runId, box, onEnd) {
     // Never narrower than 1 mA, 1 µm or 2 % of the largest magnitude (VBCharts.minSpanRange).
     cI.g.updateOptions({file: rowsI, dateWindow: range, valueRange: VBCharts.minSpanRange(rowsI, 1e-3)});
     cX.g.updateOptions({file: rowsX, dateWindow: range, valueRange: VBCharts.minSpanRange(rowsX, 1e-6)});
-    cG.g.updateOptions({file: rowsG, dateWindow: range});
+    cG.g.updateOptions({file: rowsG, dateWindow: range, valueRange: [-0.05, 1.05]});
   }, 250);
   const es = new EventSource('/api/runs/' + runId + '/events?rate_Hz=200');
   const MAX = 20000;
@@ -209,14 +212,19 @@ function liveView(runId, box, onEnd) {
       lastT = t;
       rowsI.push([t, s.i_A === undefined ? 0 : num(s.i_A), s.ref === undefined ? 0 : num(s.ref)]);
       rowsX.push([t, s.x_m === undefined ? 0 : num(s.x_m)]);
-      rowsG.push([t, num(s.gate || 0)]);
+      // A server older than the duty field sends none: the gate level then stands for it.
+      rowsG.push([t, s.duty === undefined ? num(s.gate || 0) : num(s.duty)]);
       n++;
     }
     if (rowsI.length > MAX) { for (const r of [rowsI, rowsX, rowsG]) r.splice(0, r.length - MAX); }
+    // The server's own count of what this view lost (int64: a string in protobuf JSON).
+    dropped = Math.max(dropped, Number(e.dropped_samples || 0));
     counter.textContent = n + ' samples' + (holes.gaps ? ' · ' + holes.gaps + (holes.gaps === 1 ? ' gap' : ' gaps') +
-      ' (' + VBFormat.value(holes.missing_s, 's') + ' not received: drawn as holes)' : '');
+      ' (' + VBFormat.value(holes.missing_s, 's') + ' not received: drawn as holes)' : '') +
+      (dropped ? ' · ' + dropped + ' samples dropped by the server (this view fell behind)' : '');
     counter.dataset.samples = String(n);
     counter.dataset.gaps = String(holes.gaps);
+    counter.dataset.dropped = String(dropped);
     dirty = rowsI.length > 0;  // a queued run's events carry no samples; dygraphs refuses an empty file
   });
   es.addEventListener('end', (ev) => {
