@@ -262,6 +262,10 @@ function sweepCharts(body, c, d, keys, names, palette, shown) {
         return i === undefined ? null : value(i);
       })));
       grid.className = '';
+      if (data.every((r) => r.slice(1).every((v) => v === null))) {
+        grid.append(el('p', {class: 'muted sweep-none', text: 'No ' + dm.label + ' for these runs; pick another metric above.'}));
+        return;
+      }
       VBCharts.plot(grid, {title: dm.label + ' vs ' + ax.label + ', one curve per case', class: 'sweep-curve',
         x: {label: ax.header, unit: ''}, y: {label: dm.header, unit: ''}, rows: data, pad: 0.04, height: 320,
         series: groups.map((g) => ({name: g, color: palette.colorOf(g), points: true, width: 1.6}))}, cleanups);
@@ -273,6 +277,12 @@ function sweepCharts(body, c, d, keys, names, palette, shown) {
       const mine = axesOf(idx);
       if (mine.length === 0 || mine.length > 2) {
         grid.append(el('p', {class: 'muted', text: gname + ': ' + mine.length + ' sweep axes: see the table.'}));
+        continue;
+      }
+      // A case without this metric (an open-loop sweep has no RMSE: it has no reference) gets a sentence, not an
+      // empty chart (issue 37: a night's comparison drew an empty RMSE-vs-duty chart).
+      if (idx.every((i) => value(i) === null)) {
+        grid.append(el('p', {class: 'muted sweep-none', text: gname + ': no ' + dm.label + ' for these runs; pick another metric above.'}));
         continue;
       }
       const xi = mine.length === 2 && /duty$/.test(mine[1].field) ? 1 : 0;

@@ -118,8 +118,11 @@ function showDiagnosis(d, out, took_s) {
   out.append(el('section', {id: 'detection-limits'}, el('h2', {text: 'Detection limits'}), limits.length === 0 ?
     el('p', {class: 'muted', text: 'No detection limits computed for this diagnosis.'}) :
     el('div', {class: 'scroll'}, el('table', {}, el('tr', {}, ['effect', 'detectable', 'smallest detectable', 'residual at the limit'].map((t) => el('th', {text: t}))),
-      limits.map((l) => el('tr', {}, el('td', {text: l.effect}), el('td', {text: l.detectable ? 'yes' : (l.below_range ? 'below range' : 'no')}),
-        el('td', {class: 'wrap', text: Object.entries(l.params || {}).map(([k, x]) => k + ' = ' + fmtParam(x, k)).join(', ') || '–'}),
+      // Worded as benchctl diagnose words them (gap/diagnosis_report.cc): a limit at the searched range's end is
+      // not the smallest change that shows, only a bound on it.
+      limits.map((l) => el('tr', {}, el('td', {text: l.effect}), el('td', {text: !l.detectable ? 'no' : 'yes'}),
+        el('td', {class: 'wrap', text: (Object.entries(l.params || {}).map(([k, x]) => k + ' = ' + fmtParam(x, k)).join(', ') || '–') +
+          (!l.detectable ? ' (not detectable even there: the range\'s end)' : l.below_range ? ' (shown even there: the range\'s weakest)' : '')}),
         el('td', {class: 'num', text: A(l.residual_at_limit_A)})))))));
   out.append(el('section', {}, el('h2', {text: 'Report (as benchctl diagnose prints it)'}), el('pre', {class: 'report', text: d.report || ''})));
 }

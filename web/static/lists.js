@@ -364,8 +364,13 @@ function pageSubmit(main) {
     if (batch.value.trim()) body.batch_name = batch.value.trim();
     try {
       const r = await api('POST', '/api/runs', body);
-      out.replaceChildren(el('p', {class: 'ok'}, 'Queued batch ', el('a', {href: '#/runs?batch=' + r.batch_id, text: r.batch_id}),
-        ': runs ', r.run_ids.map((id, k) => [k ? ', ' : '', runLink(id)])));
+      // A sweep can queue hundreds of runs: their count, the first few, and where to follow the batch as a whole.
+      const ids = r.run_ids || [], SHOWN = 8;
+      out.replaceChildren(el('p', {class: 'ok', id: 'submitted'}, 'Queued batch ', el('a', {href: '#/runs?batch=' + r.batch_id, text: r.batch_id}),
+        ': ' + ids.length + (ids.length === 1 ? ' run (' : ' runs ('), ids.slice(0, SHOWN).map((id, k) => [k ? ', ' : '', runLink(id)]),
+        ids.length > SHOWN ? ', … ' + (ids.length - SHOWN) + ' more' : '', ') · ',
+        el('a', {href: '#/runs?batch=' + r.batch_id, text: 'follow the batch'}), ' · ',
+        el('a', {href: '#/compare?batch=' + r.batch_id, id: 'compare-submitted', text: 'compare this batch'})));
     } catch (e) { out.replaceChildren(el('p', {class: 'error', text: errorText(e)})); }
   };
   main.replaceChildren(el('h1', {text: 'Submit a spec'}),
