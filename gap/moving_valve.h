@@ -45,6 +45,13 @@ struct RunMarks {
   double supply_V = 0.0, pressure_Pa = 0.0;
   SwitchOnMarks measured, predicted;
   double rmse_A = 0.0;
+  // Holdout runs: the prediction band from valves drawn from the identified values' covariance (NaN/0 for fit
+  // runs or when no covariance was computed): the pointwise spread, RMS over the run; how many draws pull in.
+  double band_spread_A = NAN;
+  int band_draws = 0, band_pull_in_draws = 0;
+  int band_failed_draws = 0;          // draws that were not a valve the family simulates
+  // Two of the sixteen draws on the other side of the identified valve's outcome, or not simulating.
+  bool pull_in_undetermined = false;
 };
 
 // A quantity the current determines (a parameter or a product of parameters with the held stroke), with its
@@ -107,6 +114,11 @@ struct MovingIdentification {
   double holdout_rmse_after_A = NAN;   // the identified valve on the holdout runs
   int fit_runs = 0, holdout_runs = 0;
   std::vector<RunMarks> landmarks;
+  // Whether the holdout predictions are a property of what the fit runs determine; empty when they are, else
+  // why not (decided in one place, IdentifyMovingValve): the fit runs over 3x the noise floor (a form the family
+  // lacks), or a holdout run without a band (its draws do not simulate), with draws that disagree on pull-in,
+  // or with a band over 3x the noise floor. Empty too when there is no holdout run.
+  std::string prediction_undetermined;
   int evaluations = 0;
   double seconds = 0.0;
 };

@@ -48,6 +48,9 @@ struct IndependentValve {
   int averaged = 4;
   double lsb_A = 1.0 / 480.0;
   double offset_A = 0.0, spike_A = 0.0;
+  // For ablation studies (perf_identify --ablate core): a linear core of this relative permeability instead of
+  // the steel's table (0 = the table).
+  double linear_core_mu_r = 0.0;
 };
 
 // H (A/m) of the steel at B (T): 1010-like steel, piecewise linear; beyond the table the slope is mu0.
@@ -76,7 +79,8 @@ inline std::vector<double> SimulateSwitchOn(const IndependentValve& v, double su
   auto current_mag = [&](double lambda, double x) {
     const double B = lambda / (v.N * v.A_m2);
     const double g = v.g_res_m + v.stroke_m - x;
-    return (SteelH(B) * v.l_core_m + 2.0 * B * g / mu0) / v.N;
+    const double H = v.linear_core_mu_r > 0.0 ? B / (mu0 * v.linear_core_mu_r) : SteelH(B);
+    return (H * v.l_core_m + 2.0 * B * g / mu0) / v.N;
   };
   auto vL_of = [&](const std::array<double, 4>& y, double V) {
     const double im = current_mag(y[0], y[2]);

@@ -19,7 +19,7 @@
 // "strict" when fit and holdout are both within 3x the noise floor.
 //
 // Usage: perf_identify [--sets practice3,practice4 | --sets none] [--only SUBSTRING] [--evaluations N] [--verbose]
-//                      [--population N] [--seed SEED]
+//                      [--population N] [--seed SEED] [--ablate flow,stribeck,ladder,eddy,core,scope]
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
@@ -83,6 +83,9 @@ int main(int argc, char** argv) {
   std::string sets = "practice3,practice4", only;
   int evaluations = vb::gap::MovingIdentifyOptions{}.max_evaluations;
   int population = 0;
+  // --ablate flow,stribeck,ladder,eddy,core,scope: the same draws with forms of the independent plant taken out,
+  // to see which of them the identification's family misses (the draws are made first, so the valves are the same).
+  std::string ablate;
   bool verbose = false;
   unsigned seed = 35;
   for (int a = 1; a < argc; ++a) {
@@ -95,13 +98,15 @@ int main(int argc, char** argv) {
       evaluations = std::atoi(argv[++a]);
     } else if (arg == "--verbose") {
       verbose = true;
+    } else if (arg == "--ablate" && a + 1 < argc) {
+      ablate = argv[++a];
     } else if (arg == "--population" && a + 1 < argc) {
       population = std::atoi(argv[++a]);
     } else if (arg == "--seed" && a + 1 < argc) {
       seed = static_cast<unsigned>(std::atoi(argv[++a]));
     } else {
       std::fprintf(stderr, "usage: perf_identify [--sets practice3,practice4|none] [--only SUBSTRING] [--evaluations N] "
-                           "[--population N] [--seed SEED] [--verbose]\n");
+                           "[--population N] [--seed SEED] [--ablate flow,stribeck,ladder,eddy,core,scope] [--verbose]\n");
       return 2;
     }
   }
@@ -110,6 +115,12 @@ int main(int argc, char** argv) {
   std::printf("load average at the start: %s; %d evaluations per identification\n", LoadAverage().c_str(), evaluations);
   std::printf("%-18s %-9s %-9s %-52s %-4s %7s %7s\n", "case", "kind", "truth", "result", "ok", "s", "cpu_s");
   Tally all, predict, withheld;
+  // The identification's verdict on its own prediction against what the holdouts show (valves), and the band's
+  // coverage (holdout runs): for practice4's predict cases and for the population.
+  struct Band {
+    int pass = 0, miss = 0, flagged_pass = 0, flagged_miss = 0;  // valves
+    int runs = 0, covered = 0, outcome_seen = 0;                 // holdout runs
+  } pband, band;
   std::stringstream names(sets);
   for (std::string set; std::getline(names, set, ',');) {
     if (set == "none") continue;
@@ -145,6 +156,10 @@ int main(int argc, char** argv) {
                           id->holdout_rmse_after_A * 1e3, limit * 1e3, id->noise_floor_A * 1e3);
             result = buf;
             ok = std::isfinite(id->holdout_rmse_after_A) && id->holdout_rmse_after_A <= limit;
+            (ok ? pband.flagged_pass : pband.flagged_miss) += !id->prediction_undetermined.empty();
+            if (verbose && !id->prediction_undetermined.empty())
+              std::printf("    prediction undetermined: %s\n", id->prediction_undetermined.c_str());
+            (ok ? pband.pass : pband.miss) += 1;
           }
         }
       } else if (kind == "withheld") {
@@ -190,7 +205,14 @@ int main(int argc, char** argv) {
   Tally pop, strict;
   for (int j = 0; j < population; ++j) {
     std::mt19937 rng(seed * 1000u + static_cast<unsigned>(j));
-    const vb::perf::IndependentValve v = vb::perf::DrawValve(rng);
+    vb::perf::IndependentValve v = vb::perf::DrawValve(rng);
+    auto has = [&](const char* form) { return ablate.find(form) != std::string::npos; };
+    if (has("flow")) v.c_flow = 0.0;
+    if (has("stribeck")) v.Fc_N = v.Fs_N = 0.0;
+    if (has("ladder") || has("eddy")) v.Re2_ohm = 1e12, v.Le2_H = 1e12;  // the second rung carries nothing (tau 1 s)
+    if (has("eddy")) v.Re1_ohm = 1e12;
+    if (has("core")) v.linear_core_mu_r = 3000.0;
+    if (has("scope")) v.offset_A = v.spike_A = 0.0;
     const std::size_t on = static_cast<std::size_t>(std::llround(1e-4 / v.dt_s));
     const std::size_t n = on + static_cast<std::size_t>(std::llround(0.01 / v.dt_s)) + 1;
     vb::gap::Dataset ds;
@@ -247,6 +269,35 @@ int main(int argc, char** argv) {
     std::snprintf(truth, sizeof truth, "%gV %.2gA", v.supply_V, v.supply_V / v.R_ohm);
     std::printf("%-18s %-9s %-9s %-52s %-4s %7.1f %7.1f\n", name, "predict", truth, buf, ok ? (tight ? "yes" : "yes~") : "NO",
                 s, cpu);
+    // Is a miss said beforehand (the identification's own verdict on its prediction,
+    // MovingIdentification::prediction_undetermined)? And does the band cover what the holdout shows (RMSE within
+    // 3x the noise and the band's spread together)?
+    if (id.ok()) {
+      const bool warned = !id->prediction_undetermined.empty();
+      for (const auto& m : id->landmarks) {
+        if (m.split != vb::Split::kHoldout || m.band_draws == 0) continue;
+        ++band.runs;
+        const double spread = std::isfinite(m.band_spread_A) ? m.band_spread_A : 0.0;
+        band.covered += m.rmse_A <= 3.0 * std::hypot(id->noise_floor_A, spread);
+        band.outcome_seen += m.measured.pulls_in ? m.band_pull_in_draws > 0 : m.band_pull_in_draws < m.band_draws;
+      }
+      (ok ? band.flagged_pass : band.flagged_miss) += warned;
+      (ok ? band.pass : band.miss) += 1;
+    }
+    if (verbose && id.ok() && !id->prediction_undetermined.empty())
+      std::printf("    prediction undetermined: %s\n", id->prediction_undetermined.c_str());
+    if (verbose && id.ok()) {  // each run: measured and predicted pull-in (the dip), its RMSE and band
+      for (const auto& m : id->landmarks) {
+        std::printf("    %-12s %s %4.1f V %3.0f bar  pull-in measured %s %.2f ms, model %s %.2f ms  rmse %.2f mA\n",
+                    m.run.c_str(), m.split == vb::Split::kHoldout ? "holdout" : "fit    ", m.supply_V,
+                    m.pressure_Pa / 1e5, m.measured.pulls_in ? "yes" : "no ", m.measured.pull_in_s * 1e3,
+                    m.predicted.pulls_in ? "yes" : "no ", m.predicted.pull_in_s * 1e3, m.rmse_A * 1e3);
+        if (m.band_draws > 0)
+          std::printf("    %-12s band: spread %.2f mA, %d of %d draws pull in%s\n", m.run.c_str(),
+                      m.band_spread_A * 1e3, m.band_pull_in_draws, m.band_draws,
+                      m.pull_in_undetermined ? " (UNDETERMINED)" : "");
+      }
+    }
     std::fflush(stdout);
     for (Tally* t : {&pop}) {
       t->ok += ok;
@@ -267,11 +318,24 @@ int main(int argc, char** argv) {
                 t.worst_s, t.n ? t.cpu_s / t.n : 0.0, t.worst_cpu_s);
   };
   line("predict", predict);
+  if (pband.pass + pband.miss > 0)
+    std::printf("predict  prediction undetermined: on %d of %d misses, on %d of %d passes\n", pband.flagged_miss,
+                pband.miss, pband.flagged_pass, pband.pass);
   line("withheld", withheld);
   line("all", all);
   if (population > 0) {
     line("indep.", pop);
     line("strict", strict);
+    const auto [mlo, mhi] = Wilson(band.flagged_miss, band.miss);
+    const auto [plo, phi] = Wilson(band.flagged_pass, band.pass);
+    const auto [clo, chi] = Wilson(band.covered, band.runs);
+    std::printf("band     misses said beforehand (prediction undetermined): %d of %d (Wilson 95 %% %.0f-%.0f %%); "
+                "passes flagged anyway: %d of %d (%.0f-%.0f %%)\n",
+                band.flagged_miss, band.miss, 100.0 * mlo, 100.0 * mhi, band.flagged_pass, band.pass, 100.0 * plo,
+                100.0 * phi);
+    std::printf("band     holdout runs within 3x hypot(noise, band spread): %d of %d (%.0f-%.0f %%); measured pull-in "
+                "among the draws' outcomes: %d of %d\n",
+                band.covered, band.runs, 100.0 * clo, 100.0 * chi, band.outcome_seen, band.runs);
   }
   std::printf("load average at the end: %s\n", LoadAverage().c_str());
   return 0;

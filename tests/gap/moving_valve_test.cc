@@ -186,8 +186,20 @@ TEST(MovingValveSynthetic, OtherValveIdentifiedAndPredictedAtAnotherPressureAndS
     if (d.name == "m*x_max^2") {
       EXPECT_NEAR(d.value / (0.006 * 0.25e-3 * 0.25e-3), 1.0, 0.3);
     }
+  // Holdouts well inside what the fit runs determine: every draw from the identified values' uncertainty
+  // simulates and agrees on pull-in, and the band is narrower than the 5 mA goal.
+  for (const auto& r : id->landmarks) {
+    if (r.split != Split::kHoldout) continue;
+    EXPECT_EQ(r.band_draws, 16) << r.run;
+    EXPECT_FALSE(r.pull_in_undetermined) << r.run;
+    EXPECT_LT(r.band_spread_A, 5e-3) << r.run;
+  }
+  EXPECT_EQ(id->prediction_undetermined, "") << "a valve of the family fitted at the noise floor";
+  EXPECT_NE(MovingIdentificationReport(*id).find("holdout prediction band"), std::string::npos);
+  EXPECT_NE(MovingIdentificationJson(*id).find("\"pull_in_undetermined\": false"), std::string::npos);
   Cleanup(dir);
 }
+
 
 // The same valve with a saturating core (tanh form) and a softer spring: the saturation must join the
 // identified model (it is decisive) and the holdout runs stay within 5 mA.
