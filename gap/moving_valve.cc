@@ -1375,7 +1375,8 @@ std::string MovingIdentificationJson(const MovingIdentification& id) {
                                {"supply_pressure_Pa", r.pressure_Pa}, {"rmse_A", r.rmse_A},
                                {"measured", marks(r.measured)}, {"predicted", marks(r.predicted)}};
     if (r.band_draws > 0)
-      one["band"] = {{"draws", r.band_draws}, {"failed_draws", r.band_failed_draws}, {"pull_in_draws", r.band_pull_in_draws},
+      one["band"] = {{"draws", r.band_draws}, {"failed_draws", r.band_failed_draws},
+                     {"pull_in_draws", r.band_pull_in_draws},
                      {"spread_A", num(r.band_spread_A)}, {"pull_in_undetermined", r.pull_in_undetermined}};
     lm.push_back(std::move(one));
   }
@@ -1462,7 +1463,9 @@ std::string MovingIdentificationReport(const MovingIdentification& id) {
     banded = true;
     std::snprintf(buf, sizeof buf, "  %-16s spread %.2f mA RMS; %d of %d draws pull in%s%s\n", r.run.c_str(),
                   r.band_spread_A * 1e3, r.band_pull_in_draws, r.band_draws,
-                  r.band_failed_draws > 0 ? (", " + std::to_string(r.band_failed_draws) + " do not simulate").c_str() : "",
+                  r.band_failed_draws > 0
+                      ? (", " + std::to_string(r.band_failed_draws) + " do not simulate").c_str()
+                      : "",
                   r.pull_in_undetermined ? ": pull-in UNDETERMINED at these conditions" : "");
     os << buf;
   }

@@ -106,7 +106,8 @@ int main(int argc, char** argv) {
       seed = static_cast<unsigned>(std::atoi(argv[++a]));
     } else {
       std::fprintf(stderr, "usage: perf_identify [--sets practice3,practice4|none] [--only SUBSTRING] [--evaluations N] "
-                           "[--population N] [--seed SEED] [--ablate flow,stribeck,ladder,eddy,core,scope] [--verbose]\n");
+                           "[--population N] [--seed SEED] [--ablate flow,stribeck,ladder,eddy,core,scope] "
+                           "[--verbose]\n");
       return 2;
     }
   }

@@ -17,7 +17,8 @@ void LiveTap::OnSample(const hw::BenchSample& s) {
   gate_sum_ += s.gate != 0 ? 1.0 : 0.0;
   if (++count_ < decimation_) return;
   // The gate's duty over (previous live sample, this one]: from the bench's exact on-time integral where it has
-  // one (a 20 kHz PWM recorded at 50 kHz aliases in the samples' mean: 0.4 for a duty of 0.3), else that mean.
+  // one (a 20 kHz PWM recorded at 50 kHz aliases in the samples' mean: 0.2 or 0.4 for a duty of 0.3), else
+  // that mean.
   const double span_s = s.t_s - origin_t_s_;
   double duty = gate_sum_ / count_;
   if (std::isfinite(s.gate_on_s) && std::isfinite(origin_on_s_) && span_s > 0.0)
