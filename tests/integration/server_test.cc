@@ -213,7 +213,21 @@ TEST(Server, KilledMidQueueLosesNothingAndRunsNothingTwice) {
   auto sub = olga.Submit(spec);
   ASSERT_TRUE(sub.ok()) << sub.status().message();
   const std::vector<std::int64_t> ids(sub->run_ids().begin(), sub->run_ids().end());
-  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  // Killed while a run executes: a fixed 300 ms sleep sometimes landed between two runs' 50 ms (or before the
+  // first started on a loaded machine) and nothing was interrupted. The newest run the store says is running
+  // is killed within a few ms of being seen, well inside its 50 ms.
+  const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+  bool seen_running = false;
+  while (!seen_running && std::chrono::steady_clock::now() < give_up) {
+    for (std::int64_t id : ids) {
+      auto r = olga.GetRun(id);
+      if (r.ok() && r->status() == v1::RUNNING && r->progress() < 0.5) {
+        seen_running = true;
+        break;
+      }
+    }
+  }
+  ASSERT_TRUE(seen_running) << "no run was seen executing";
   server.Kill(SIGKILL);
 
   addr = server.Start();
