@@ -524,6 +524,7 @@ try:
     check("under load the live chart bridges no hole (no drawn segment over 25 ms)",
           seg is not None and seg[0] > 100 and seg[1] <= 0.025 + 1e-9, (seg, text_of(By.CSS_SELECTOR, "#traces .live-count")))
     shot("run-live")
+    shot("run-live-traces", "#traces")  # the live charts themselves: current, position, the gate's duty
     wait(lambda: driver.find_elements(By.CSS_SELECTOR, "#traces .progress") or None, what="the live progress")
     progress = driver.execute_script("return Array.from(document.querySelectorAll('#main *')).filter((e) => "
                                      "e.children.length === 0 && /^\\d+ %$/.test(e.textContent.trim())).length;")
