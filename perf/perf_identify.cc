@@ -100,6 +100,15 @@ int main(int argc, char** argv) {
       verbose = true;
     } else if (arg == "--ablate" && a + 1 < argc) {
       ablate = argv[++a];
+      std::stringstream forms(ablate);
+      for (std::string form; std::getline(forms, form, ',');) {
+        if (form == "none" || form == "flow" || form == "stribeck" || form == "ladder" || form == "eddy" ||
+            form == "core" || form == "scope")
+          continue;
+        std::fprintf(stderr, "--ablate: unknown form '%s' (flow, stribeck, ladder, eddy, core, scope, none)\n",
+                     form.c_str());
+        return 2;
+      }
     } else if (arg == "--population" && a + 1 < argc) {
       population = std::atoi(argv[++a]);
     } else if (arg == "--seed" && a + 1 < argc) {
