@@ -266,6 +266,20 @@ TEST(Registry, AnOlderAttemptEndingLeavesTheNewerOneRegistered) {
   EXPECT_FALSE(registry.Cancel(9));
 }
 
+// Runs `spec` on the emulator with a live tap taking every `decimation`-th sample: the live samples and the trace.
+::testing::AssertionResult RunTapped(const experiment::ExperimentSpec& spec, int decimation,
+                                     std::vector<LiveSample>* live, experiment::Trace* trace) {
+  auto e = experiment::BuildExperiment(spec);
+  if (!e.ok()) return ::testing::AssertionFailure() << e.status().ToString();
+  hw::EmulatedBench bench(experiment::EmulatedBenchFor(*e));
+  LiveTap tap(decimation, &e->reference);
+  experiment::RunMonitor monitor;
+  if (auto st = experiment::Runner::Run(*e, bench, trace, &monitor, &tap); !st.ok())
+    return ::testing::AssertionFailure() << st.message;
+  tap.Drain(live);
+  return ::testing::AssertionSuccess();
+}
+
 // The live stream carries the reference (issue 14: LiveSample.ref was always 0): a PI current law on the
 // seed-001 profile, 0.9 A for 6 ms then 0.5 A.
 TEST(LiveTap, SamplesCarryTheReferenceOfTheControlledVariable) {
@@ -274,15 +288,9 @@ TEST(LiveTap, SamplesCarryTheReferenceOfTheControlledVariable) {
   spec->clear_variants();
   spec->set_duration_s(0.02);
   spec->clear_metric_window();
-  auto e = experiment::BuildExperiment(*spec);
-  ASSERT_TRUE(e.ok()) << e.status().ToString();
-  hw::EmulatedBench bench(experiment::EmulatedBenchFor(*e));
-  LiveTap tap(50, &e->reference);
-  experiment::Trace trace;
-  experiment::RunMonitor monitor;
-  ASSERT_TRUE(experiment::Runner::Run(*e, bench, &trace, &monitor, &tap).ok());
   std::vector<LiveSample> got;
-  tap.Drain(&got);
+  experiment::Trace trace;
+  ASSERT_TRUE(RunTapped(*spec, 50, &got, &trace));
   ASSERT_GT(got.size(), 10u);
   for (const LiveSample& s : got) EXPECT_EQ(s.ref, s.t_s < 0.006 ? 0.9 : 0.5) << "t = " << s.t_s;
   // Without a profile (an open-loop run), NaN: "no reference", not a reference of 0.
@@ -308,15 +316,9 @@ TEST(LiveTap, EachSampleCarriesTheGatesExactDutyOverItsInterval) {
   s0->set_start_s(0.0);
   s0->set_frequency_hz(20000.0);
   s0->set_duty(0.3);
-  auto e = experiment::BuildExperiment(spec);
-  ASSERT_TRUE(e.ok()) << e.status().ToString();
-  hw::EmulatedBench bench(experiment::EmulatedBenchFor(*e));
-  LiveTap tap(50, &e->reference);  // 50 kHz / 50: a live sample per ms
-  experiment::Trace trace;
-  experiment::RunMonitor monitor;
-  ASSERT_TRUE(experiment::Runner::Run(*e, bench, &trace, &monitor, &tap).ok());
   std::vector<LiveSample> got;
-  tap.Drain(&got);
+  experiment::Trace trace;
+  ASSERT_TRUE(RunTapped(spec, 50, &got, &trace));  // 50 kHz / 50: a live sample per ms
   ASSERT_GE(got.size(), 19u);
   double sampled_mean = 0.0;
   for (const double g : trace.gate) sampled_mean += g;
