@@ -465,7 +465,7 @@ void PredictionBand(const Dataset& ds, const model::PlantParams& family, const s
                          "not pin this condition");
     if (rm.pull_in_undetermined)
       id->notes.push_back("holdout run " + rm.run + ": pull-in undetermined (of " + std::to_string(good[r]) +
-                         " valves drawn from the identified values' uncertainty " + std::to_string(pulls[r]) +
+                         " valves drawn from the identified values' uncertainty, " + std::to_string(pulls[r]) +
                          " pull in, " + std::to_string(good[r] - pulls[r]) + " do not): its prediction is not "
                          "a property of what the fit runs determine; a fit run at this pressure or supply would "
                          "decide it");
