@@ -67,6 +67,9 @@ Status EmulatedBench::Configure(const RunConfig& config) {
 
 Status EmulatedBench::Start(SampleSink* sink) {
   forwarder_.sink = sink;
+  forwarder_.noise_A = opt_.current_noise_A;
+  forwarder_.rng.seed(opt_.noise_seed);
+  forwarder_.normal.reset();
   sim_.SetConditions(model::Conditions{config_.supply_V, config_.supply_pressure_Pa});
   sim_.SetDisturbance(opt_.disturbance);
   sim_.Reset();

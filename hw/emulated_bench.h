@@ -11,6 +11,7 @@
 #include <array>
 #include <chrono>
 #include <cstdint>
+#include <random>
 #include <string>
 
 #include "hw/bench.h"
@@ -26,6 +27,10 @@ struct EmulatedBenchOptions {
   model::Disturbance disturbance;         // robustness runs (seed 002 IV.D)
   double max_supply_V = 1000.0;
   double max_current_A = 100.0;
+  // White noise (1-sigma) added to each recorded current sample, as a sense chain adds it (0: the exact current).
+  // Drawn from a generator seeded with noise_seed at each Start: no allocation in the loop.
+  double current_noise_A = 0.0;
+  std::uint64_t noise_seed = 1;
 };
 
 // Fixed-size log histogram of durations (100 ns .. 10 s): percentiles without allocation in the loop.
@@ -87,9 +92,13 @@ class EmulatedBench final : public Bench {
       };
       pieces->OnPiece(t0_s, t1_s, Adapter(&piece, has_position));
     }
+    double noise_A = 0.0;
+    std::mt19937_64 rng;
+    std::normal_distribution<double> normal{0.0, 1.0};
     void OnSample(const model::PlantSample& s) override {
+      const double i_A = noise_A > 0.0 ? s.i_A + noise_A * normal(rng) : s.i_A;
       if (sink)
-        sink->OnSample(BenchSample{s.t_s, s.gate, s.v_coil_V, s.i_A, s.x_m, s.v_mps, s.v2_integral_V2s, s.energy_J,
+        sink->OnSample(BenchSample{s.t_s, s.gate, s.v_coil_V, i_A, s.x_m, s.v_mps, s.v2_integral_V2s, s.energy_J,
                                    static_cast<double>(s.switches), s.gate_on_s});
     }
   };

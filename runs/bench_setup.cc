@@ -1,5 +1,9 @@
 #include "runs/bench_setup.h"
 
+#include <atomic>
+#include <random>
+#include <string>
+
 #include "experiment/runner.h"
 #include "hw/hid/hid_bench.h"
 #include "hw/hid/hidapi_transport.h"
@@ -7,6 +11,30 @@
 #include "hw/u3/u3_bench.h"
 
 namespace vb::runs {
+
+namespace {
+constexpr char kNightNumberPrefix[] = "night-number:";
+}  // namespace
+
+double DriftFactor(const ValveDrift& d, int night) {
+  if (night < d.from_night || night < 1) return 1.0;
+  return 1.0 + d.step + d.per_night * static_cast<double>(night - d.from_night);
+}
+
+int NightNumberOf(const valvebench::v1::ExperimentSpec& spec) {
+  const std::string prefix = kNightNumberPrefix;
+  for (const auto& t : spec.tags())
+    if (t.rfind(prefix, 0) == 0) {
+      try {
+        return std::max(0, std::stoi(t.substr(prefix.size())));
+      } catch (const std::exception&) {
+        return 0;
+      }
+    }
+  return 0;
+}
+
+std::string NightNumberTag(int night) { return kNightNumberPrefix + std::to_string(night); }
 
 BenchSetup LocalEmulatorSetup() {
   BenchSetup b;
@@ -55,6 +83,26 @@ StatusOr<std::unique_ptr<hw::Bench>> OpenBench(const BenchSetup& setup, const ex
   hw::EmulatedBenchOptions opts = setup.emulated;
   opts.plant = e.plant;
   opts.disturbance = e.disturbance;
+  if (!setup.drift.empty()) {
+    int night = NightNumberOf(e.spec);
+    if (night > 0) {
+      int seen = setup.night_seen->load();
+      while (night > seen && !setup.night_seen->compare_exchange_weak(seen, night)) {
+      }
+    } else {
+      night = setup.night_seen->load();
+    }
+    for (const auto& d : setup.drift) {
+      auto v = model::GetParam(opts.plant, d.parameter);
+      if (!v.ok()) return v.status().WithContext("bench " + setup.name + " drift");
+      if (auto st = model::SetParam(&opts.plant, d.parameter, *v * DriftFactor(d, night)); !st.ok())
+        return st.WithContext("bench " + setup.name + " drift on night " + std::to_string(night));
+    }
+  }
+  if (setup.current_noise_A > 0.0) {
+    opts.current_noise_A = setup.current_noise_A;
+    opts.noise_seed = std::random_device{}();
+  }
   return std::unique_ptr<hw::Bench>(std::make_unique<hw::EmulatedBench>(opts));
 }
 

@@ -4,8 +4,10 @@
 // the next run. Execute() wraps it in the safety interlocks.
 #pragma once
 
+#include <atomic>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "common/bench_kind.h"
 #include "experiment/spec.h"
@@ -15,6 +17,24 @@
 #include "valvebench/v1/config.pb.h"
 
 namespace vb::runs {
+
+// An emulated valve changing night by night (config "drift"; issue 38): the parameter (model/params.h name) is
+// multiplied by DriftFactor on night n, the lab's n-th night.
+struct ValveDrift {
+  std::string parameter;
+  double step = 0.0;       // relative step at from_night
+  double per_night = 0.0;  // relative change per night after from_night
+  int from_night = 1;
+};
+
+// 1 + step + per_night (night - from_night) on nights >= from_night; 1 before (and on night 0: no night yet).
+double DriftFactor(const ValveDrift& d, int night);
+
+// The night a run belongs to: its tag "night-number:N" (the nights scheduler tags every run of a night), else 0.
+int NightNumberOf(const valvebench::v1::ExperimentSpec& spec);
+
+// The tag the nights scheduler gives every run of the lab's n-th night.
+std::string NightNumberTag(int night);
 
 struct BenchSetup {
   std::string name;
@@ -34,6 +54,12 @@ struct BenchSetup {
   // An emulated bench paced to the wall clock (config "pace": "realtime"): every run on it is realtime, as on
   // hardware (docs/lab.md).
   bool paced = false;
+  // Emulated: the valve's drift night by night, and white noise on the recorded current (config "drift",
+  // "current_noise_A"). A run of a night applies that night's drift; a run outside the nights applies the last
+  // night this process's workers ran on the bench (night_seen, shared by the setup's copies; 0 until the first).
+  std::vector<ValveDrift> drift;
+  double current_noise_A = 0.0;
+  std::shared_ptr<std::atomic<int>> night_seen = std::make_shared<std::atomic<int>>(0);
 };
 
 // The local emulator bench of `benchctl run --local`: class "local", the spec's own plant, no interlocks.

@@ -1,4 +1,5 @@
 #include "server/config.h"
+#include "server/health_check.h"
 #include "service/prune_rules.h"
 
 #include <fmt/format.h>
@@ -224,6 +225,8 @@ StatusOr<Settings> SettingsFromConfig(const valvebench::v1::ServerConfig& c, con
     if (*kind != BenchKind::kEmulated) {
       auto hw = HardwareSetup(b, field, &setup);
       if (!hw.ok()) return hw;
+      VB_RETURN_IF_ERROR(DriftFromConfig(b, field, &setup));
+      VB_RETURN_IF_ERROR(ValidateHealthCheck(b, setup.caps, field));
       s.benches.push_back(std::move(setup));
       continue;
     }
@@ -249,6 +252,8 @@ StatusOr<Settings> SettingsFromConfig(const valvebench::v1::ServerConfig& c, con
     auto safety = SafetyFromConfig(b.safety(), setup.caps.max_current_A, /*hardware=*/false, field);
     if (!safety.ok()) return safety.status();
     setup.safety = *safety;
+    VB_RETURN_IF_ERROR(DriftFromConfig(b, field, &setup));
+    VB_RETURN_IF_ERROR(ValidateHealthCheck(b, setup.caps, field));
     s.benches.push_back(std::move(setup));
   }
   auto auth = Authenticator::Create(c.tokens());

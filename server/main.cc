@@ -48,6 +48,11 @@ int main(int argc, char** argv) {
   app.add_option("--config", config_path, "server configuration (protobuf JSON)")->required();
   bool run_night_now = false;
   app.add_flag("--run-night-now", run_night_now, "run one night at start (tests)")->group("");
+  int simulate_nights = 0;
+  app.add_option("--simulate-nights", simulate_nights,
+                 "run N nights at start, back to back, dated the N days ending today (tests, demos)")
+      ->check(CLI::Range(1, 3650))
+      ->group("");
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -93,8 +98,8 @@ int main(int argc, char** argv) {
     spdlog::error("{}", settings.status().message().c_str());
     return 2;
   }
-  if (run_night_now && !settings->nights.enabled) {
-    spdlog::error("--run-night-now: the config has no \"nights\" block");
+  if ((run_night_now || simulate_nights > 0) && !settings->nights.enabled) {
+    spdlog::error("--run-night-now/--simulate-nights: the config has no \"nights\" block");
     return 2;
   }
   // One server per store, or per lab host identity (server/instance_lock.h): taken before the store is opened,
@@ -214,8 +219,9 @@ int main(int argc, char** argv) {
   std::unique_ptr<vb::server::NightScheduler> nights;
   if (settings->nights.enabled) {
     nights = std::make_unique<vb::server::NightScheduler>(
-        settings->nights, &pool, [&service](const vb::runs::Submission& s) { return service.Queue(s); });
-    nights->Start(run_night_now);
+        settings->nights, settings->benches, &pool,
+        [&service](const vb::runs::Submission& s) { return service.Queue(s); });
+    nights->Start(simulate_nights > 0 ? simulate_nights : (run_night_now ? 1 : 0));
   }
   std::unique_ptr<vb::server::RetentionScheduler> retention;
   if (settings->retention.enabled) {

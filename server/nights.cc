@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <set>
 
 #include <spdlog/spdlog.h>
 #include <cstdio>
@@ -10,6 +11,7 @@
 #include "regress/compare.h"
 #include "regress/cron.h"
 #include "regress/suite.h"
+#include "server/health_check.h"
 #include "runs/query.h"
 
 namespace vb::server {
@@ -27,13 +29,14 @@ double WallClock() {
 
 }  // namespace
 
-NightScheduler::NightScheduler(NightsSetup setup, StorePool* pool, SubmitFn submit, ClockFn clock)
-    : setup_(std::move(setup)), pool_(pool), submit_(std::move(submit)), clock_(clock ? std::move(clock) : WallClock) {}
+NightScheduler::NightScheduler(NightsSetup setup, std::vector<runs::BenchSetup> benches, StorePool* pool,
+                               SubmitFn submit, ClockFn clock)
+    : setup_(std::move(setup)), benches_(std::move(benches)), pool_(pool), submit_(std::move(submit)), clock_(clock ? std::move(clock) : WallClock) {}
 
 NightScheduler::~NightScheduler() { Stop(); }
 
-void NightScheduler::Start(bool run_now) {
-  thread_ = std::thread([this, run_now] { Loop(run_now); });
+void NightScheduler::Start(int nights_now) {
+  thread_ = std::thread([this, nights_now] { Loop(nights_now); });
 }
 
 void NightScheduler::Stop() {
@@ -41,7 +44,7 @@ void NightScheduler::Stop() {
   if (thread_.joinable()) thread_.join();
 }
 
-void NightScheduler::Loop(bool run_now) {
+void NightScheduler::Loop(int nights_now) {
   auto cron = regress::Cron::Parse(setup_.cron);
   if (!cron.ok()) {  // validated with the config; kept as a guard
     spdlog::error("nights.cron: {}", cron.status().message().c_str());
@@ -52,7 +55,8 @@ void NightScheduler::Loop(bool run_now) {
     if (id.status().code() == StatusCode::kAlreadyExists) spdlog::info("{}", id.status().message());
     else if (!id.ok()) spdlog::error("night: {}", id.status().message().c_str());
   };
-  if (run_now) night(clock_());
+  constexpr double kDay_s = 86400.0;
+  for (int k = nights_now - 1; k >= 0 && !stop_signal_.stopped(); --k) night(clock_() - k * kDay_s);
   for (;;) {
     auto next = cron->NextUnix(clock_(), setup_.utc);
     if (!next.ok()) {
@@ -91,6 +95,17 @@ StatusOr<std::int64_t> NightScheduler::SaveNight(const std::string& date, std::i
   return id;
 }
 
+StatusOr<int> NightScheduler::NightNumber(const std::string& date) {
+  auto store = pool_->Acquire();
+  if (!store.ok()) return store.status();
+  auto nights = (*store)->ListRegressions(/*nights_only=*/true, 1000);
+  if (!nights.ok()) return nights.status();
+  std::set<std::string> before;
+  for (const auto& n : *nights)
+    if (!n.night.empty() && n.night < date) before.insert(n.night);
+  return static_cast<int>(before.size()) + 1;
+}
+
 StatusOr<std::int64_t> NightScheduler::RunNight(double fire_unix_s) {
   const std::string date = regress::DateOf(fire_unix_s, setup_.utc);
   if (!setup_.lab_host.empty()) {
@@ -105,6 +120,8 @@ StatusOr<std::int64_t> NightScheduler::RunNight(double fire_unix_s) {
   }
   const double started_unix_s = clock_();
   std::int64_t batch_id = 0;
+  int night_number = 0;
+  regress::Json health = regress::Json::array();
   std::string suite_name, baseline_name;
   int baseline_version = 0;
   auto error = [&](const Status& st) {
@@ -113,9 +130,30 @@ StatusOr<std::int64_t> NightScheduler::RunNight(double fire_unix_s) {
                        {"baseline", {{"name", baseline_name}, {"version", baseline_version}}},
                        {"batch_id", batch_id},
                        {"started_unix_s", started_unix_s},
+                       {"night_number", night_number},
+                       {"health", health},
                        {"error", st.message()}};
     return SaveNight(date, batch_id, "error", j.dump(), clock_());
   };
+
+  auto number = NightNumber(date);
+  if (!number.ok()) return error(number.status().WithContext("the night's number"));
+  night_number = *number;
+  // Each bench's health check, queued ahead of the suite (its runs' priority): a failed submission is recorded
+  // in the night and does not stop it.
+  for (const auto& bench : benches_) {
+    auto specs = HealthCheckSpecs(bench, date, night_number);
+    if (specs.empty()) continue;
+    auto queued = submit_(runs::Submission{"nights", "health:" + date, std::move(specs), {}, ""});
+    if (!queued.ok()) {
+      spdlog::error("night {}: health check of {}: {}", date, bench.name, queued.status().message());
+      health.push_back({{"bench", bench.name}, {"error", queued.status().message()}});
+      continue;
+    }
+    health.push_back({{"bench", bench.name}, {"batch_id", queued->batch_id}, {"runs", queued->run_ids}});
+    spdlog::info("night {}: health check of {}: batch {}, {} runs", date, bench.name,
+                 static_cast<long long>(queued->batch_id), static_cast<int>(queued->run_ids.size()));
+  }
 
   auto suite = regress::LoadSuite(setup_.suite_path);
   if (!suite.ok()) return error(suite.status().WithContext("nights.suite_file " + setup_.suite_path));
@@ -133,6 +171,7 @@ StatusOr<std::int64_t> NightScheduler::RunNight(double fire_unix_s) {
     keys.push_back(r.key);
     r.spec.add_tags("night");
     r.spec.add_tags("night:" + date);
+    r.spec.add_tags(runs::NightNumberTag(night_number));
     specs.push_back(std::move(r.spec));
   }
   auto queued = submit_(runs::Submission{"nights", "night:" + date, std::move(specs), std::move(keys), ""});
@@ -177,6 +216,29 @@ StatusOr<std::int64_t> NightScheduler::RunNight(double fire_unix_s) {
     stop_signal_.SleepFor(kPollPeriod_s);
   }
 
+  // The health checks end too before the night is stored: the night's record is then complete (a bench's
+  // tracking reads every check of the nights stored).
+  for (const auto& h : health) {
+    if (!h.contains("batch_id")) continue;
+    const std::int64_t id = h["batch_id"].get<std::int64_t>();
+    for (;;) {
+      if (stop_signal_.stopped())
+        return Status::Aborted("night " + date + ": the server stopped before the health check (batch " +
+                               std::to_string(id) + ") finished; nothing stored");
+      auto store = pool_->Acquire();
+      if (!store.ok()) return error(store.status());
+      auto listed = runs::ListBatch(store->get(), id);
+      if (!listed.ok()) return error(listed.status());
+      bool done = true;
+      for (const auto& r : *listed) done = done && (Ended(r.status) || r.status == RunStatus::kInterrupted);
+      if (done) break;
+      if (clock_() - started_unix_s > kNightDeadline_s)
+        return error(Status::Unavailable("health check batch " + std::to_string(id) + " did not finish within " +
+                                         std::to_string(static_cast<int>(kNightDeadline_s / 3600)) + " h"));
+      stop_signal_.SleepFor(kPollPeriod_s);
+    }
+  }
+
   regress::RegressResult r = regress::Compare(suite->suite, *baseline, regress::Summarise(measured));
   r.batch_id = batch_id;
   r.where = "server nights";
@@ -184,6 +246,8 @@ StatusOr<std::int64_t> NightScheduler::RunNight(double fire_unix_s) {
   r.seed = seed;
   regress::Json j = regress::ResultToJson(r);
   j["started_unix_s"] = started_unix_s;
+  j["night_number"] = night_number;
+  j["health"] = health;
   return SaveNight(date, batch_id, r.verdict(), j.dump(), clock_());
 }
 

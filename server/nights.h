@@ -1,5 +1,6 @@
 // The nightly regression (config "nights", docs/regress.md): a thread that sleeps until the next cron fire
-// (UTC), submits the suite's runs as one batch "night:YYYY-MM-DD" (tags "night" and "night:YYYY-MM-DD",
+// (UTC), queues each bench's health check (server/health_check.h) as a batch "health:YYYY-MM-DD", submits the
+// suite's runs as one batch "night:YYYY-MM-DD" (tags "night", "night:YYYY-MM-DD" and the night's number,
 // submitter "nights"), waits for them, compares them with the baseline (regress::Compare, the rule of
 // `benchctl regress`) and stores the verdict in the regressions table as a night.
 #pragma once
@@ -28,13 +29,17 @@ class NightScheduler {
   // Wall clock in unix seconds; injectable for tests.
   using ClockFn = std::function<double()>;
 
-  NightScheduler(NightsSetup setup, StorePool* pool, SubmitFn submit, ClockFn clock = {});
+  // benches: the configured benches; those with a "health" block get their health check before each night's
+  // suite (server/health_check.h).
+  NightScheduler(NightsSetup setup, std::vector<runs::BenchSetup> benches, StorePool* pool, SubmitFn submit,
+                 ClockFn clock = {});
   ~NightScheduler();
   NightScheduler(const NightScheduler&) = delete;
   NightScheduler& operator=(const NightScheduler&) = delete;
 
-  // Starts the thread; run_now: one night at once (the --run-night-now test hook), then the schedule.
-  void Start(bool run_now);
+  // Starts the thread; nights_now > 0: that many nights at once, back to back, dated the nights_now days ending
+  // today (the --run-night-now and --simulate-nights hooks: a lab lives 60 nights in minutes), then the schedule.
+  void Start(int nights_now);
   // Wakes the thread and joins it. A night in progress is abandoned (its runs stay in the queue; nothing is
   // stored for it).
   void Stop();
@@ -44,11 +49,14 @@ class NightScheduler {
   StatusOr<std::int64_t> RunNight(double fire_unix_s);
 
  private:
-  void Loop(bool run_now);
+  void Loop(int nights_now);
+  // The lab's number for the night `date`: 1 + the distinct other nights stored (the newest 1000).
+  StatusOr<int> NightNumber(const std::string& date);
   StatusOr<std::int64_t> SaveNight(const std::string& date, std::int64_t batch_id, const std::string& verdict,
                                    const std::string& result_json, double finished_unix_s);
 
   NightsSetup setup_;
+  std::vector<runs::BenchSetup> benches_;
   StorePool* pool_;
   SubmitFn submit_;
   ClockFn clock_;

@@ -1,0 +1,97 @@
+#include "server/health_check.h"
+
+#include <cmath>
+
+#include <fmt/format.h>
+
+#include "common/bench_kind.h"
+
+namespace vb::server {
+
+namespace v1 = valvebench::v1;
+
+Status ValidateHealthCheck(const v1::BenchConfig& b, const hw::Capabilities& caps, const std::string& field) {
+  if (!b.has_health()) return Status::Ok();
+  const auto& h = b.health();
+  const std::string f = field + ".health";
+  if (h.supply_v_size() == 0) return Status::InvalidArgument(f + ".supply_V: give at least one supply");
+  for (int i = 0; i < h.supply_v_size(); ++i)
+    if (!(h.supply_v(i) > 0.0) || h.supply_v(i) > caps.max_supply_V)
+      return Status::InvalidArgument(fmt::format("{}.supply_V[{}]: {} V is outside (0, {}] (the bench's max_supply_V)",
+                                                 f, i, h.supply_v(i), caps.max_supply_V));
+  if (h.supply_pressure_pa_size() == 0)
+    return Status::InvalidArgument(f + ".supply_pressure_Pa: give at least one pressure (0 for none)");
+  for (int i = 0; i < h.supply_pressure_pa_size(); ++i)
+    if (!(h.supply_pressure_pa(i) >= 0.0) || !std::isfinite(h.supply_pressure_pa(i)))
+      return Status::InvalidArgument(fmt::format("{}.supply_pressure_Pa[{}]: must be a gauge pressure >= 0, got {}", f,
+                                                 i, h.supply_pressure_pa(i)));
+  if (h.duration_s() != 0.0 && !(h.duration_s() > 2 * kHealthPreTrigger_s && h.duration_s() <= 10.0))
+    return Status::InvalidArgument(fmt::format("{}.duration_s: must be in (0.0002, 10] s, got {}", f, h.duration_s()));
+  if (h.record_rate_hz() != 0.0 && !(h.record_rate_hz() >= 1e3 && h.record_rate_hz() <= caps.max_sample_rate_Hz))
+    return Status::InvalidArgument(fmt::format("{}.record_rate_Hz: must be in [1000, {}] Hz (the bench's limit), got {}",
+                                               f, caps.max_sample_rate_Hz, h.record_rate_hz()));
+  return Status::Ok();
+}
+
+Status DriftFromConfig(const v1::BenchConfig& b, const std::string& field, runs::BenchSetup* setup) {
+  const bool emulated = setup->kind == BenchKind::kEmulated;
+  if (!emulated && (b.drift_size() > 0 || b.current_noise_a() != 0.0))
+    return Status::InvalidArgument(field + ".drift/current_noise_A: only an emulated bench's valve is told how to "
+                                           "change (a hardware valve drifts on its own)");
+  if (!(b.current_noise_a() >= 0.0) || !std::isfinite(b.current_noise_a()))
+    return Status::InvalidArgument(fmt::format("{}.current_noise_A: must be >= 0 A, got {}", field, b.current_noise_a()));
+  setup->current_noise_A = b.current_noise_a();
+  for (int i = 0; i < b.drift_size(); ++i) {
+    const auto& d = b.drift(i);
+    const std::string f = fmt::format("{}.drift[{}]", field, i);
+    if (!model::GetParam(setup->emulated.plant, d.parameter()).ok())
+      return Status::InvalidArgument(f + ".parameter: '" + d.parameter() +
+                                     "' is not a model parameter (the names spec files use: R, N, k, delta, b, m, mu_r, ...)");
+    if (!std::isfinite(d.step()) || !std::isfinite(d.per_night()) || d.step() <= -1.0)
+      return Status::InvalidArgument(f + ".step/per_night: must be finite, and step > -1 (a factor above 0)");
+    if (d.step() == 0.0 && d.per_night() == 0.0)
+      return Status::InvalidArgument(f + ": give a step or a per_night change (both are 0)");
+    if (d.from_night() < 1) return Status::InvalidArgument(f + ".from_night: must be >= 1 (the lab's first night is 1)");
+    setup->drift.push_back({d.parameter(), d.step(), d.per_night(), d.from_night()});
+  }
+  return Status::Ok();
+}
+
+std::vector<experiment::ExperimentSpec> HealthCheckSpecs(const runs::BenchSetup& bench, const std::string& date,
+                                                          int night_number) {
+  std::vector<experiment::ExperimentSpec> specs;
+  if (!bench.config.has_health()) return specs;
+  const auto& h = bench.config.health();
+  const double duration_s = h.duration_s() > 0.0 ? h.duration_s() : kHealthDefaultDuration_s;
+  const double rate_Hz = h.record_rate_hz() > 0.0 ? h.record_rate_hz() : kHealthDefaultRate_Hz;
+  for (double v : h.supply_v())
+    for (double p : h.supply_pressure_pa()) {
+      experiment::ExperimentSpec s;
+      s.set_name(fmt::format("health-{:g}V-{:g}Pa", v, p));
+      s.set_description(fmt::format("nightly health check of {}: switch-on from rest at {:g} V and {:g} Pa", bench.name,
+                                    v, p));
+      for (const std::string& t : {std::string("health"), "health:" + bench.name, std::string("night"),
+                                   "night:" + date, runs::NightNumberTag(night_number)})
+        s.add_tags(t);
+      s.mutable_bench()->set_kind(std::string(BenchKindName(bench.kind)));
+      s.mutable_bench()->set_name(bench.name);
+      if (bench.kind == BenchKind::kEmulated) {
+        *s.mutable_bench()->mutable_model() = bench.model;
+        *s.mutable_bench()->mutable_driver() = bench.config.driver();
+      }
+      s.mutable_conditions()->set_supply_v(v);
+      s.mutable_conditions()->set_supply_pressure_pa(p);
+      auto* pwm = s.mutable_controller()->mutable_open_loop_pwm();
+      auto* off = pwm->add_segments();
+      off->set_start_s(0.0), off->set_frequency_hz(0.0), off->set_duty(0.0);
+      auto* on = pwm->add_segments();
+      on->set_start_s(kHealthPreTrigger_s), on->set_frequency_hz(0.0), on->set_duty(1.0);
+      s.set_duration_s(duration_s);
+      s.mutable_recording()->set_rate_hz(rate_Hz);
+      s.set_priority(kHealthPriority);
+      specs.push_back(std::move(s));
+    }
+  return specs;
+}
+
+}  // namespace vb::server

@@ -1,0 +1,34 @@
+// The nightly health check of a bench (config "health"; issue 38, docs/track.md "On the server"): before each
+// night's suite, one switch-on run per supply and pressure on the bench, from rest (the gate low for 0.1 ms, then
+// high to the end), stored as any run. `benchctl health BENCH` tracks a bench's checks night by night (the same
+// gap::TrackSessions as `benchctl track`). Each run is tagged "health", "health:<bench>", "night",
+// "night:<date>" and the night's number (runs::NightNumberTag), pinned to its bench, and queued ahead of the
+// suite (priority kHealthPriority).
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "common/status.h"
+#include "experiment/spec.h"
+#include "runs/bench_setup.h"
+
+namespace vb::server {
+
+constexpr int kHealthPriority = 100;
+constexpr double kHealthPreTrigger_s = 1e-4;   // the gate rises here (a recorded rest before it: the offset)
+constexpr double kHealthDefaultDuration_s = 0.0101;
+constexpr double kHealthDefaultRate_Hz = 1e5;
+
+// Checks the bench's "health" block (when it has one) against its capabilities; the message names the field.
+Status ValidateHealthCheck(const valvebench::v1::BenchConfig& bench, const hw::Capabilities& caps,
+                           const std::string& field);
+
+// Checks the bench's "drift" entries (emulated benches only) and fills setup->drift.
+Status DriftFromConfig(const valvebench::v1::BenchConfig& bench, const std::string& field, runs::BenchSetup* setup);
+
+// The night's health runs for one bench (empty when it has no "health" block).
+std::vector<experiment::ExperimentSpec> HealthCheckSpecs(const runs::BenchSetup& bench, const std::string& date,
+                                                          int night_number);
+
+}  // namespace vb::server
