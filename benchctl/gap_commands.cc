@@ -357,10 +357,25 @@ GapCli::GapCli(CLI::App* app, SharedOptions shared) : shared_(shared) {
                                             "(sets the CUSUM's interval)")
       ->capture_default_str();
   track_->add_flag("--json", *shared_.json, "machine-readable output on stdout");
+
+  health_ = app->add_subcommand("health", "each bench's valve tracked from its nightly health checks (the server's "
+                                          "or the local store's runs tagged health): as track, per bench");
+  health_->add_option("bench", health_bench_, "the bench (default: every bench with health checks stored)");
+  health_->add_option("--model", model_, "preset name or model file (ModelSpec JSON); default: the checks' own");
+  health_->add_option("--limit", track_limits_, "declared limits: NAME=VALUE,... (e.g. R=70)")
+      ->delimiter(',')
+      ->allow_extra_args(false);
+  health_->add_option("--arl0", track_arl0_, "the detector's in-control run length per parameter, in nights")
+      ->capture_default_str();
+  health_->add_flag("--json", *shared_.json, "machine-readable output on stdout");
+  health_->add_flag("--local", local_, "the local store, even if a server is configured");
+  health_->add_option("--db", *shared_.store_path, "local store");
+  server_opts(health_);
 }
 
 bool GapCli::parsed() const {
-  return diagnose_->parsed() || identify_->parsed() || convert_->parsed() || import_->parsed() || track_->parsed();
+  return diagnose_->parsed() || identify_->parsed() || convert_->parsed() || import_->parsed() || track_->parsed() ||
+         health_->parsed();
 }
 
 int GapCli::Run(const ClientFactory& make_client) {
@@ -368,6 +383,7 @@ int GapCli::Run(const ClientFactory& make_client) {
   if (identify_->parsed()) return Identify();
   if (convert_->parsed()) return Convert();
   if (track_->parsed()) return Track();
+  if (health_->parsed()) return Health(make_client);
   return Import(make_client);
 }
 
@@ -576,6 +592,36 @@ int GapCli::Import(const ClientFactory& make_client) {
   return ImportDataset(*backend, dataset_dir_, *shared_.json);
 }
 
+StatusOr<gap::Tracking> GapCli::TrackValve(std::vector<gap::TrackSession>* sessions) {
+  auto nominal = NominalFor(sessions->front().dataset, model_);
+  if (!nominal.ok()) return nominal.status();
+  for (auto& s : *sessions) {
+    if (nominal->driver) s.dataset.driver = *nominal->driver;
+    if (!gap::IsSwitchOnSession(s.dataset, nominal->plant))
+      return Status::InvalidArgument("track: " + s.name + " is not a switch-on session of a moving valve "
+                                     "(waveform runs from rest with one gate step, a reluctance-law family)");
+  }
+  gap::TrackOptions o;
+  if (!(track_arl0_ > 1.0) || !std::isfinite(track_arl0_))
+    return Status::InvalidArgument("--arl0: the in-control run length must be a number of sessions above 1 (got " +
+                                   std::to_string(track_arl0_) + ")");
+  o.target_arl0_sessions = track_arl0_;
+  for (const auto& l : track_limits_) {
+    auto v = gap::ParseFixed(l, "--limit");
+    if (!v.ok()) return v.status();
+    o.limits[v->first] = v->second;
+  }
+  o.progress = [](const std::string& line) { std::fprintf(stderr, "benchctl: track: %s\n", line.c_str()); };
+  auto t = gap::TrackSessions(*sessions, nominal->plant, o);
+  if (!t.ok()) return t.status();
+  for (const auto& [name, value] : o.limits) {
+    bool known = false;
+    for (const auto& p : t->parameters) known = known || p.name == name;
+    if (!known) std::fprintf(stderr, "benchctl: warning: --limit %s: no tracked parameter has that name\n", name.c_str());
+  }
+  return t;
+}
+
 // Exit 0: every session tracked and nothing flagged; 1: a parameter flagged (the valve changed); 2: bad input.
 int GapCli::Track() {
   std::vector<gap::TrackSession> sessions;
@@ -595,35 +641,84 @@ int GapCli::Track() {
       const auto dir = path.filename().empty() ? path.parent_path() : path;
       sessions[i].name = dir.parent_path().filename().string() + "/" + dir.filename().string();
     }
-  auto nominal = NominalFor(sessions.front().dataset, model_);
-  if (!nominal.ok()) return Fail(nominal.status());
-  for (auto& s : sessions) {
-    if (nominal->driver) s.dataset.driver = *nominal->driver;
-    if (!gap::IsSwitchOnSession(s.dataset, nominal->plant))
-      return Fail(Status::InvalidArgument("track: " + s.name + " is not a switch-on session of a moving valve "
-                                          "(waveform runs from rest with one gate step, a reluctance-law family)"));
-  }
-  gap::TrackOptions o;
-  if (!(track_arl0_ > 1.0) || !std::isfinite(track_arl0_))
-    return Fail(Status::InvalidArgument("--arl0: the in-control run length must be a number of sessions above 1 (got " +
-                                        std::to_string(track_arl0_) + ")"));
-  o.target_arl0_sessions = track_arl0_;
-  for (const auto& l : track_limits_) {
-    auto v = gap::ParseFixed(l, "--limit");
-    if (!v.ok()) return Fail(v.status());
-    o.limits[v->first] = v->second;
-  }
-  o.progress = [](const std::string& line) { std::fprintf(stderr, "benchctl: track: %s\n", line.c_str()); };
-  auto t = gap::TrackSessions(sessions, nominal->plant, o);
+  auto t = TrackValve(&sessions);
   if (!t.ok()) return Fail(t.status());
-  for (const auto& [name, value] : o.limits) {
-    bool known = false;
-    for (const auto& p : t->parameters) known = known || p.name == name;
-    if (!known) std::fprintf(stderr, "benchctl: warning: --limit %s: no tracked parameter has that name\n", name.c_str());
-  }
   if (*shared_.json) std::cout << gap::TrackingJson(*t) << "\n";
   else std::cout << gap::TrackingReport(*t);
   return t->flags.empty() ? kExitOk : kExitRunFailed;
+}
+
+// Each bench's nightly health checks (server/health_check.h: runs tagged "health:<bench>" and "night:<date>"),
+// one session per night in date order, tracked as `track` tracks directories. Exit 0: nothing flagged on any
+// bench; 1: a parameter flagged; 2: bad input or no checks stored.
+int GapCli::Health(const ClientFactory& make_client) {
+  auto backend = ChooseBackend(local_ ? "" : *shared_.server, *shared_.store_path, make_client);
+  RunFilter filter;
+  filter.status = RunStatus::kDone;
+  filter.tag = health_bench_.empty() ? "health" : "health:" + health_bench_;
+  filter.limit = 1000;
+  bool more = false;
+  auto listed = backend->ListRuns(filter, &more);
+  if (!listed.ok()) return Fail(listed.status().WithContext("health"));
+  if (listed->empty())
+    return Fail(Status::NotFound("health: no health checks stored " +
+                                 (health_bench_.empty() ? std::string("for any bench") : "for bench " + health_bench_) +
+                                 " at " + backend->Where() + " (a bench's \"health\" block in the server config)"));
+  if (more)
+    std::fprintf(stderr, "benchctl: health: more than %d checks stored; the newest %d are tracked\n", filter.limit,
+                 filter.limit);
+  // bench -> night (date) -> run ids.
+  std::map<std::string, std::map<std::string, std::vector<std::int64_t>>> nights;
+  for (const auto& r : *listed) {
+    std::string date;
+    for (const auto& t : r.tags)
+      if (t.rfind("night:", 0) == 0) date = t.substr(6);
+    if (date.empty() || r.bench.empty()) continue;
+    nights[r.bench][date].push_back(r.id);
+  }
+  Json out = {{"benches", Json::array()}, {"flags", Json::array()}};
+  bool flagged = false;
+  for (auto& [bench, by_night] : nights) {
+    if (by_night.size() < 2) {
+      std::fprintf(stderr, "benchctl: health: %s: %zu night stored; tracking needs two\n", bench.c_str(),
+                   by_night.size());
+      out["benches"].push_back({{"bench", bench}, {"nights", by_night.size()}, {"error", "tracking needs two nights"}});
+      continue;
+    }
+    std::vector<gap::TrackSession> sessions;
+    for (auto& [date, ids] : by_night) {
+      std::sort(ids.begin(), ids.end());
+      std::vector<gap::StoredRun> stored;
+      for (std::int64_t id : ids) {
+        auto one = FetchStoredRun(*backend, id);
+        if (!one.ok()) return Fail(one.status().WithContext("health " + bench));
+        stored.push_back(std::move(*one));
+      }
+      auto ds = gap::DatasetOfStoredRuns(std::move(stored));
+      if (!ds.ok()) return Fail(ds.status().WithContext("health " + bench + " night " + date));
+      sessions.push_back({date, std::move(*ds)});
+    }
+    std::fprintf(stderr, "benchctl: health: %s: %zu nights, %s to %s\n", bench.c_str(), sessions.size(),
+                 sessions.front().name.c_str(), sessions.back().name.c_str());
+    auto t = TrackValve(&sessions);
+    if (!t.ok()) return Fail(t.status().WithContext("health " + bench));
+    flagged = flagged || !t->flags.empty();
+    if (*shared_.json) {
+      Json one = Json::parse(gap::TrackingJson(*t));
+      Json entry = {{"bench", bench}, {"nights", sessions.size()}};
+      for (auto& [k, v] : one.items()) entry[k] = v;
+      for (const auto& f : one["flags"]) {
+        Json g = {{"bench", bench}};
+        for (auto& [k, v] : f.items()) g[k] = v;
+        out["flags"].push_back(g);
+      }
+      out["benches"].push_back(std::move(entry));
+    } else {
+      std::cout << "== bench " << bench << " (" << sessions.size() << " nights) ==\n" << gap::TrackingReport(*t) << "\n";
+    }
+  }
+  if (*shared_.json) std::cout << out.dump(2) << "\n";
+  return flagged ? kExitRunFailed : kExitOk;
 }
 
 }  // namespace vb::benchctl

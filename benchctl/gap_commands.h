@@ -8,6 +8,8 @@
 //   import DATASET                         (store a dataset's waveform runs on a server)
 //   track SESSION_DIR... [--model M] [--limit NAME=VALUE,...] [--arl0 SESSIONS] [--json]
 //                                          (a valve tracked night by night, gap/track.h; exit 1 when flagged)
+//   health [BENCH] [--model M] [--limit ...] [--arl0 NIGHTS] [--json]
+//                                          (each bench's nightly health checks tracked, server/health_check.h)
 // --json is JSON on stdout; files are --json-out and --model-out (the ModelSpec --model reads back). The old
 // spellings --json FILE, --emit-model FILE and identify --out FILE still work, with a note on stderr.
 // SPEC is NAME, NAME=LO:HI, NAME@START or NAME=LO:HI@START (gap/identify.h).
@@ -21,6 +23,7 @@
 #include <vector>
 
 #include "benchctl/regress_commands.h"
+#include "gap/track.h"
 
 namespace vb::benchctl {
 
@@ -36,6 +39,9 @@ class GapCli {
   int Convert();
   int Import(const ClientFactory& make_client);
   int Track();
+  int Health(const ClientFactory& make_client);
+  // The sessions of one valve tracked (their family, or --model) with --limit and --arl0.
+  StatusOr<gap::Tracking> TrackValve(std::vector<gap::TrackSession>* sessions);
   // --model-out, or its deprecated spelling `old` (with a note on stderr).
   std::string ModelOut(const std::string& old, const char* old_flag) const;
 
@@ -45,6 +51,8 @@ class GapCli {
   CLI::App* convert_ = nullptr;
   CLI::App* import_ = nullptr;
   CLI::App* track_ = nullptr;
+  CLI::App* health_ = nullptr;
+  std::string health_bench_;
   std::vector<std::string> track_dirs_, track_limits_;
   double track_arl0_ = 20000.0;
   std::string dataset_dir_, model_, json_path_, json_out_, model_out_, suggest_out_, emit_model_, reference_dir_, out_path_,
