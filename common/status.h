@@ -87,3 +87,13 @@ class [[nodiscard]] StatusOr {
     ::vb::Status vb_status_ = (expr);     \
     if (!vb_status_.ok()) return vb_status_; \
   } while (0)
+
+// `lhs = value of expr` (a StatusOr), or return its status from the enclosing function. lhs may declare:
+// VB_ASSIGN_OR_RETURN(auto rows, Query(...));
+#define VB_STATUS_CONCAT_INNER_(a, b) a##b
+#define VB_STATUS_CONCAT_(a, b) VB_STATUS_CONCAT_INNER_(a, b)
+#define VB_ASSIGN_OR_RETURN(lhs, expr) VB_ASSIGN_OR_RETURN_IMPL_(VB_STATUS_CONCAT_(vb_status_or_, __LINE__), lhs, expr)
+#define VB_ASSIGN_OR_RETURN_IMPL_(tmp, lhs, expr) \
+  auto tmp = (expr);                              \
+  if (!tmp.ok()) return tmp.status();             \
+  lhs = std::move(tmp).value()

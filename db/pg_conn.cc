@@ -393,7 +393,7 @@ StatusOr<Result> Connection::ExecOnce(const std::string& sql, const Params& para
   auto it = prepared_.find(sql);
   if (it == prepared_.end()) {
     const std::string name = Cat("vb", prepared_.size());
-    VB_PG_ASSIGN_OR_RETURN(PGresult * prep, Run(sql, [&] {
+    VB_ASSIGN_OR_RETURN(PGresult * prep, Run(sql, [&] {
                              return PQsendPrepare(conn_, name.c_str(), sql.c_str(), static_cast<int>(params.size()),
                                                   params.types().data());
                            }));
@@ -403,7 +403,7 @@ StatusOr<Result> Connection::ExecOnce(const std::string& sql, const Params& para
   std::vector<const char*> values;
   std::vector<int> lengths, formats;
   params.Arrays(&values, &lengths, &formats);
-  VB_PG_ASSIGN_OR_RETURN(PGresult * r, Run(sql, [&] {
+  VB_ASSIGN_OR_RETURN(PGresult * r, Run(sql, [&] {
                            return PQsendQueryPrepared(conn_, it->second.c_str(), static_cast<int>(params.size()),
                                                       values.data(), lengths.data(), formats.data(),
                                                       /*resultFormat=*/1);
@@ -412,13 +412,13 @@ StatusOr<Result> Connection::ExecOnce(const std::string& sql, const Params& para
 }
 
 Status Connection::Script(const std::string& sql) {
-  VB_PG_ASSIGN_OR_RETURN(PGresult * r, Run(sql, [&] { return PQsendQuery(conn_, sql.c_str()); }));
+  VB_ASSIGN_OR_RETURN(PGresult * r, Run(sql, [&] { return PQsendQuery(conn_, sql.c_str()); }));
   PQclear(r);
   return Status::Ok();
 }
 
 StatusOr<std::int64_t> Connection::QueryInt(const std::string& sql, const Params& params) {
-  VB_PG_ASSIGN_OR_RETURN(Result r, Exec(sql, params));
+  VB_ASSIGN_OR_RETURN(Result r, Exec(sql, params));
   if (r.rows() < 1 || r.columns() < 1) return Status::Internal(Cat("\"", sql, "\" returned no row"));
   return r.Int(0, 0);
 }

@@ -22,14 +22,6 @@
 struct pg_conn;
 struct pg_result;
 
-// `lhs = value of expr`, or return its error status.
-#define VB_PG_CONCAT_(a, b) a##b
-#define VB_PG_CONCAT(a, b) VB_PG_CONCAT_(a, b)
-#define VB_PG_ASSIGN_OR_RETURN(lhs, expr) VB_PG_ASSIGN_OR_RETURN_IMPL(VB_PG_CONCAT(vb_pg_so_, __LINE__), lhs, expr)
-#define VB_PG_ASSIGN_OR_RETURN_IMPL(tmp, lhs, expr) \
-  auto tmp = (expr);                                \
-  if (!tmp.ok()) return tmp.status();               \
-  lhs = std::move(tmp).value()
 
 namespace vb::db::pg {
 

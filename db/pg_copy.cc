@@ -191,7 +191,7 @@ StatusOr<CopySummary> CopySqliteToPostgres(const std::string& sqlite_path, const
   }
   SqliteReader src;
   VB_RETURN_IF_ERROR(src.Open(sqlite_path));
-  VB_PG_ASSIGN_OR_RETURN(const std::int64_t running, src.Int("SELECT count(*) FROM runs WHERE status = 'running'"));
+  VB_ASSIGN_OR_RETURN(const std::int64_t running, src.Int("SELECT count(*) FROM runs WHERE status = 'running'"));
   if (running > 0) {
     return Status::FailedPrecondition(Cat("--from: ", running, " runs in '", sqlite_path,
                                           "' are running: stop the "
@@ -203,13 +203,13 @@ StatusOr<CopySummary> CopySqliteToPostgres(const std::string& sqlite_path, const
     if (!target.ok()) return target.status();
     summary.target_version = (*target)->schema_version();
   }
-  VB_PG_ASSIGN_OR_RETURN(std::unique_ptr<pg::Connection> dst, pg::Connection::Open(pg_location));
+  VB_ASSIGN_OR_RETURN(std::unique_ptr<pg::Connection> dst, pg::Connection::Open(pg_location));
   pg::Transaction txn(dst.get());
   VB_RETURN_IF_ERROR(txn.Begin());
   // Nobody else writes while the ids are decided: the copy takes the tables it fills.
   VB_RETURN_IF_ERROR(dst->Script("LOCK TABLE batches, runs, status_history, baselines, regressions IN EXCLUSIVE MODE"));
   if (!options.into_non_empty) {
-    VB_PG_ASSIGN_OR_RETURN(const std::int64_t held,
+    VB_ASSIGN_OR_RETURN(const std::int64_t held,
                            dst->QueryInt("SELECT (SELECT count(*) FROM runs) + (SELECT count(*) FROM batches) + "
                                          "(SELECT count(*) FROM baselines) + (SELECT count(*) FROM regressions)"));
     if (held > 0) {
@@ -292,7 +292,7 @@ StatusOr<StoreInfo> ReadStoreInfo(const std::string& location) {
   std::unique_ptr<pg::Connection> pgc;
   std::optional<sql::Connection> lite;
   if (postgres) {
-    VB_PG_ASSIGN_OR_RETURN(pgc, pg::Connection::Open(location));
+    VB_ASSIGN_OR_RETURN(pgc, pg::Connection::Open(location));
   } else {
     auto c = sql::Connection::Open(location);
     if (!c.ok()) return c.status();
@@ -303,16 +303,16 @@ StatusOr<StoreInfo> ReadStoreInfo(const std::string& location) {
   };
   for (RunStatus s : {RunStatus::kQueued, RunStatus::kRunning, RunStatus::kDone, RunStatus::kFailed,
                       RunStatus::kCancelled, RunStatus::kInterrupted}) {
-    VB_PG_ASSIGN_OR_RETURN(const std::int64_t n,
+    VB_ASSIGN_OR_RETURN(const std::int64_t n,
                            count(Cat("SELECT count(*) FROM runs WHERE status = '", RunStatusName(s), "'")));
     info.runs_by_status.emplace_back(std::string(RunStatusName(s)), n);
   }
   for (const char* table :
        {"batches", "runs", "status_history", "metrics", "trace_chunks", "baselines", "regressions"}) {
-    VB_PG_ASSIGN_OR_RETURN(const std::int64_t n, count(Cat("SELECT count(*) FROM ", table)));
+    VB_ASSIGN_OR_RETURN(const std::int64_t n, count(Cat("SELECT count(*) FROM ", table)));
     info.rows.emplace_back(table, n);
   }
-  VB_PG_ASSIGN_OR_RETURN(info.trace_bytes,
+  VB_ASSIGN_OR_RETURN(info.trace_bytes,
                          count(postgres ? "SELECT COALESCE(SUM(octet_length(data)), 0)::int8 FROM trace_chunks"
                                         : "SELECT COALESCE(SUM(length(data)), 0) FROM trace_chunks"));
   return info;

@@ -182,10 +182,10 @@ std::span<const Migration> Migrations() { return kMigrations; }
 int CurrentVersion() { return kMigrations[std::size(kMigrations) - 1].version; }
 
 StatusOr<int> ReadVersion(pg::Connection* conn) {
-  VB_PG_ASSIGN_OR_RETURN(const std::int64_t exists,
+  VB_ASSIGN_OR_RETURN(const std::int64_t exists,
                          conn->QueryInt("SELECT (to_regclass('schema_version') IS NOT NULL)::int::int8"));
   if (exists == 0) return 0;
-  VB_PG_ASSIGN_OR_RETURN(pg::Result r, conn->Exec("SELECT version FROM schema_version"));
+  VB_ASSIGN_OR_RETURN(pg::Result r, conn->Exec("SELECT version FROM schema_version"));
   if (r.rows() != 1) {
     return Status::DataLoss(Cat(conn->location(), ": schema_version has ", r.rows(), " rows (exactly 1 expected)"));
   }
@@ -203,14 +203,14 @@ StatusOr<int> Migrate(pg::Connection* conn, std::span<const Migration> migration
   pg::Transaction txn(conn);
   VB_RETURN_IF_ERROR(txn.Begin());
   VB_RETURN_IF_ERROR(conn->Exec(kLockSql).status());
-  VB_PG_ASSIGN_OR_RETURN(int version, ReadVersion(conn));
+  VB_ASSIGN_OR_RETURN(int version, ReadVersion(conn));
   if (version > known) {
     return Status::FailedPrecondition(Cat(where, " has schema version ", version, ", newer than this build knows (",
                                           known, "); use a newer valvebench (the database was left untouched)"));
   }
   if (version < 0) return Status::DataLoss(Cat(where, " has schema version ", version, " (must not be negative)"));
   if (version == 0) {
-    VB_PG_ASSIGN_OR_RETURN(const std::int64_t tables,
+    VB_ASSIGN_OR_RETURN(const std::int64_t tables,
                            conn->QueryInt("SELECT count(*) FROM pg_catalog.pg_tables WHERE schemaname = "
                                           "current_schema()"));
     if (tables != 0) {

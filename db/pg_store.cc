@@ -136,7 +136,7 @@ class PgStore final : public Store {
 };
 
 StatusOr<RunStatus> PgStore::StatusOf(std::int64_t run_id) {
-  VB_PG_ASSIGN_OR_RETURN(Result r, conn_->Exec("SELECT status FROM runs WHERE id = $1", Params().Int(run_id)));
+  VB_ASSIGN_OR_RETURN(Result r, conn_->Exec("SELECT status FROM runs WHERE id = $1", Params().Int(run_id)));
   if (r.rows() == 0) return RunNotFound(run_id);
   return rules::StoredStatus(r.Text(0, 0), Cat("run ", run_id));
 }
@@ -159,7 +159,7 @@ struct PgRow {
 };
 
 StatusOr<RunRecord> PgStore::ReadRun(const Result& row, int k) {
-  VB_PG_ASSIGN_OR_RETURN(RunRecord r, rules::RunFromRow(PgRow{row, k}));
+  VB_ASSIGN_OR_RETURN(RunRecord r, rules::RunFromRow(PgRow{row, k}));
   std::vector<std::pair<std::string, std::string>> items;
   if (!SplitPrefixed(row.Text(k, 23), 0, &items)) return Status::DataLoss(Cat("run ", r.id, ": unreadable tags"));
   for (auto& [tag, _] : items) r.tags.push_back(std::move(tag));
@@ -171,7 +171,7 @@ StatusOr<RunRecord> PgStore::ReadRun(const Result& row, int k) {
 
 StatusOr<RunRecord> PgStore::LoadRun(std::int64_t run_id) {
   static const std::string sql = Cat("SELECT ", kRunColumns, " FROM runs WHERE id = $1");
-  VB_PG_ASSIGN_OR_RETURN(Result r, conn_->Exec(sql, Params().Int(run_id)));
+  VB_ASSIGN_OR_RETURN(Result r, conn_->Exec(sql, Params().Int(run_id)));
   if (r.rows() == 0) return RunNotFound(run_id);
   return ReadRun(r, 0);
 }
@@ -184,7 +184,7 @@ StatusOr<std::int64_t> PgStore::SubmitBatch(const std::string& submitter, const 
   VB_RETURN_IF_ERROR(checks::ValidateBatch(submitter, runs));
   pg::Transaction txn(conn_.get());
   VB_RETURN_IF_ERROR(txn.Begin());
-  VB_PG_ASSIGN_OR_RETURN(
+  VB_ASSIGN_OR_RETURN(
       const std::int64_t batch_id,
       conn_->QueryInt("INSERT INTO batches (submitter, name, spec_json, created) VALUES ($1, $2, $3, " VB_PG_NOW
                       ") RETURNING id",
@@ -192,7 +192,7 @@ StatusOr<std::int64_t> PgStore::SubmitBatch(const std::string& submitter, const 
   std::vector<std::int64_t> ids;
   ids.reserve(runs.size());
   for (const RunRecord& r : runs) {
-    VB_PG_ASSIGN_OR_RETURN(
+    VB_ASSIGN_OR_RETURN(
         const std::int64_t id,
         conn_->QueryInt(
             "INSERT INTO runs (batch_id, name, controller, bench_kind, requested_bench, bench_name, "
@@ -242,7 +242,7 @@ StatusOr<std::optional<RunRecord>> PgStore::ClaimNext(const ClaimRequest& reques
   // The inner SELECT locks the first compatible queued run that no other claimer has locked (SKIP LOCKED): two
   // claimers never wait for each other and never get the same run; a run another claimer claimed and committed
   // meanwhile is re-checked against status = 'queued' and passed over.
-  VB_PG_ASSIGN_OR_RETURN(
+  VB_ASSIGN_OR_RETURN(
       Result claimed,
       conn_->Exec("UPDATE runs SET status = 'running', bench_name = $2, host = $3, fence = fence + 1, "
                   "started = " VB_PG_NOW ", finished = 0, progress = 0, reason = '', cancel_requested = false, "
@@ -263,16 +263,16 @@ StatusOr<std::optional<RunRecord>> PgStore::ClaimNext(const ClaimRequest& reques
                                 request.host.empty()
                                     ? Cat("claimed by bench ", request.bench_name)
                                     : Cat("claimed by bench ", request.bench_name, " on host ", request.host)));
-  VB_PG_ASSIGN_OR_RETURN(RunRecord run, LoadRun(id));
+  VB_ASSIGN_OR_RETURN(RunRecord run, LoadRun(id));
   VB_RETURN_IF_ERROR(txn.Commit());
   return std::optional<RunRecord>(std::move(run));
 }
 
 Status PgStore::CheckLease(pg::Transaction* txn, const Lease& lease, const std::string& what) {
-  VB_PG_ASSIGN_OR_RETURN(Result r, conn_->Exec("SELECT status, fence, host FROM runs WHERE id = $1 FOR UPDATE",
+  VB_ASSIGN_OR_RETURN(Result r, conn_->Exec("SELECT status, fence, host FROM runs WHERE id = $1 FOR UPDATE",
                                                Params().Int(lease.run_id)));
   if (r.rows() == 0) return RunNotFound(lease.run_id);
-  VB_PG_ASSIGN_OR_RETURN(const RunStatus status, rules::StoredStatus(r.Text(0, 0), Cat("run ", lease.run_id)));
+  VB_ASSIGN_OR_RETURN(const RunStatus status, rules::StoredStatus(r.Text(0, 0), Cat("run ", lease.run_id)));
   const std::int64_t fence = r.Int(0, 1);
   const std::string host = r.Text(0, 2);
   std::optional<std::string> stale = rules::StaleWriteWhy(lease, what, status, fence, host);
@@ -311,7 +311,7 @@ Status PgStore::Finish(const Lease& lease, RunStatus final_status, const std::st
     // A retry of a Finish whose COMMIT was sent but whose answer was lost (the connection dropped): if the run
     // is already in exactly the state this attempt writes, that first try committed. Nothing to do, and not a
     // stale write (docs/lab.md, "When the database fails").
-    VB_PG_ASSIGN_OR_RETURN(Result r, conn_->Exec("SELECT status, fence, reason FROM runs WHERE id = $1 FOR UPDATE",
+    VB_ASSIGN_OR_RETURN(Result r, conn_->Exec("SELECT status, fence, reason FROM runs WHERE id = $1 FOR UPDATE",
                                                  Params().Int(run_id)));
     if (r.rows() == 1 && r.Int(0, 1) == lease.fence && r.Text(0, 0) == RunStatusName(final_status) &&
         r.Text(0, 2) == reason) {
@@ -339,10 +339,10 @@ Status PgStore::Finish(const Lease& lease, RunStatus final_status, const std::st
 StatusOr<RunStatus> PgStore::RequestCancel(std::int64_t run_id, const std::string& reason) {
   pg::Transaction txn(conn_.get());
   VB_RETURN_IF_ERROR(txn.Begin());
-  VB_PG_ASSIGN_OR_RETURN(Result r,
+  VB_ASSIGN_OR_RETURN(Result r,
                          conn_->Exec("SELECT status FROM runs WHERE id = $1 FOR UPDATE", Params().Int(run_id)));
   if (r.rows() == 0) return RunNotFound(run_id);
-  VB_PG_ASSIGN_OR_RETURN(const RunStatus status, rules::StoredStatus(r.Text(0, 0), Cat("run ", run_id)));
+  VB_ASSIGN_OR_RETURN(const RunStatus status, rules::StoredStatus(r.Text(0, 0), Cat("run ", run_id)));
   if (status == RunStatus::kQueued) {
     VB_RETURN_IF_ERROR(conn_
                            ->Exec("UPDATE runs SET status = 'cancelled', reason = $2, finished = " VB_PG_NOW
@@ -366,7 +366,7 @@ StatusOr<RunStatus> PgStore::RequestCancel(std::int64_t run_id, const std::strin
 }
 
 StatusOr<bool> PgStore::CancelRequested(std::int64_t run_id) {
-  VB_PG_ASSIGN_OR_RETURN(Result r,
+  VB_ASSIGN_OR_RETURN(Result r,
                          conn_->Exec("SELECT cancel_requested FROM runs WHERE id = $1", Params().Int(run_id)));
   if (r.rows() == 0) return RunNotFound(run_id);
   return r.Int(0, 0) != 0;
@@ -383,7 +383,7 @@ StatusOr<std::vector<std::int64_t>> PgStore::Interrupt(const std::string& select
     std::string cancel_reason;
     std::string host;
   };
-  VB_PG_ASSIGN_OR_RETURN(Result rows, conn_->Exec(select_sql, params));
+  VB_ASSIGN_OR_RETURN(Result rows, conn_->Exec(select_sql, params));
   std::vector<Running> running;
   for (int k = 0; k < rows.rows(); ++k) {
     running.push_back({rows.Int(k, 0), rows.Int(k, 1) != 0, rows.Int(k, 2) != 0, rows.Text(k, 3), rows.Text(k, 4)});
@@ -403,7 +403,7 @@ StatusOr<std::vector<std::int64_t>> PgStore::Interrupt(const std::string& select
                            .status());
     std::int64_t times = 0;
     if (!r.cancel_requested && r.requeue) {
-      VB_PG_ASSIGN_OR_RETURN(times, conn_->QueryInt("SELECT count(*) FROM status_history WHERE run_id = $1 AND "
+      VB_ASSIGN_OR_RETURN(times, conn_->QueryInt("SELECT count(*) FROM status_history WHERE run_id = $1 AND "
                                                     "status = 'interrupted'",
                                                     Params().Int(r.id)));
     }
@@ -481,7 +481,7 @@ Status PgStore::Heartbeat(const HostRecord& host, double lease_ttl_s, const std:
 }
 
 StatusOr<std::vector<HostRecord>> PgStore::ListHosts() {
-  VB_PG_ASSIGN_OR_RETURN(Result r, conn_->Exec("SELECT name, address, benches_json, started, heartbeat FROM hosts "
+  VB_ASSIGN_OR_RETURN(Result r, conn_->Exec("SELECT name, address, benches_json, started, heartbeat FROM hosts "
                                                "ORDER BY name"));
   std::vector<HostRecord> out;
   for (int k = 0; k < r.rows(); ++k) {
@@ -494,7 +494,7 @@ StatusOr<std::vector<std::int64_t>> PgStore::RequeueLapsed() {
   pg::Transaction txn(conn_.get());
   VB_RETURN_IF_ERROR(txn.Begin());
   // SKIP LOCKED: a run another host is reaping (or writing for) right now is left to it.
-  VB_PG_ASSIGN_OR_RETURN(std::vector<std::int64_t> ids,
+  VB_ASSIGN_OR_RETURN(std::vector<std::int64_t> ids,
                          Interrupt("SELECT id, requeue_on_interrupt, cancel_requested, reason, host FROM runs "
                                    "WHERE status = 'running' AND lease_expires > 0 AND lease_expires < " VB_PG_NOW
                                    " ORDER BY id FOR UPDATE SKIP LOCKED",
@@ -507,7 +507,7 @@ StatusOr<std::vector<StaleWrite>> PgStore::StaleWrites(std::int32_t limit, std::
   VB_RETURN_IF_ERROR(checks::CheckListLimit(limit));
   pg::Transaction txn(conn_.get());
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
-  VB_PG_ASSIGN_OR_RETURN(Result r, conn_->Exec("SELECT run_id, fence, current_fence, host, what, at FROM stale_writes "
+  VB_ASSIGN_OR_RETURN(Result r, conn_->Exec("SELECT run_id, fence, current_fence, host, what, at FROM stale_writes "
                                                "ORDER BY id LIMIT $1",
                                                Params().Int(limit)));
   std::vector<StaleWrite> out;
@@ -515,7 +515,7 @@ StatusOr<std::vector<StaleWrite>> PgStore::StaleWrites(std::int32_t limit, std::
     out.push_back({r.Int(k, 0), r.Int(k, 1), r.Int(k, 2), r.Text(k, 3), r.Text(k, 4), r.Double(k, 5)});
   }
   if (total != nullptr) {
-    VB_PG_ASSIGN_OR_RETURN(*total, conn_->QueryInt("SELECT count(*) FROM stale_writes"));
+    VB_ASSIGN_OR_RETURN(*total, conn_->QueryInt("SELECT count(*) FROM stale_writes"));
   }
   VB_RETURN_IF_ERROR(txn.Commit());
   return out;
@@ -523,7 +523,7 @@ StatusOr<std::vector<StaleWrite>> PgStore::StaleWrites(std::int32_t limit, std::
 
 StatusOr<bool> PgStore::ClaimNight(const std::string& night, const std::string& host) {
   VB_RETURN_IF_ERROR(checks::CheckNightClaim(night, host));
-  VB_PG_ASSIGN_OR_RETURN(Result r, conn_->Exec("INSERT INTO nights_claimed (night, host, at) VALUES ($1, $2, " VB_PG_NOW
+  VB_ASSIGN_OR_RETURN(Result r, conn_->Exec("INSERT INTO nights_claimed (night, host, at) VALUES ($1, $2, " VB_PG_NOW
                                                ") ON CONFLICT (night) DO NOTHING",
                                                Params().Text(night).Text(host)));
   return r.affected() == 1;
@@ -547,11 +547,11 @@ Params ParamsOf(const run_query::Query& q) {
 StatusOr<std::vector<RunRecord>> PgStore::ListRuns(const RunFilter& f) {
   VB_RETURN_IF_ERROR(checks::ValidateFilter(f));
   const run_query::Query q = run_query::Page(f, run_query::Dialect::kPostgres);
-  VB_PG_ASSIGN_OR_RETURN(Result r, conn_->Exec(Cat("SELECT ", kRunColumns, q.sql), ParamsOf(q)));
+  VB_ASSIGN_OR_RETURN(Result r, conn_->Exec(Cat("SELECT ", kRunColumns, q.sql), ParamsOf(q)));
   std::vector<RunRecord> out;
   out.reserve(static_cast<std::size_t>(r.rows()));
   for (int k = 0; k < r.rows(); ++k) {
-    VB_PG_ASSIGN_OR_RETURN(RunRecord run, ReadRun(r, k));
+    VB_ASSIGN_OR_RETURN(RunRecord run, ReadRun(r, k));
     out.push_back(std::move(run));
   }
   return out;
@@ -567,12 +567,12 @@ StatusOr<std::vector<StatusChange>> PgStore::History(std::int64_t run_id) {
   pg::Transaction txn(conn_.get());
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
   VB_RETURN_IF_ERROR(StatusOf(run_id).status());
-  VB_PG_ASSIGN_OR_RETURN(Result r, conn_->Exec("SELECT status, at, reason FROM status_history WHERE run_id = $1 "
+  VB_ASSIGN_OR_RETURN(Result r, conn_->Exec("SELECT status, at, reason FROM status_history WHERE run_id = $1 "
                                                "ORDER BY id",
                                                Params().Int(run_id)));
   std::vector<StatusChange> out;
   for (int k = 0; k < r.rows(); ++k) {
-    VB_PG_ASSIGN_OR_RETURN(const RunStatus s, rules::StoredStatus(r.Text(k, 0), Cat("history of run ", run_id)));
+    VB_ASSIGN_OR_RETURN(const RunStatus s, rules::StoredStatus(r.Text(k, 0), Cat("history of run ", run_id)));
     out.push_back({s, r.Double(k, 1), r.Text(k, 2)});
   }
   VB_RETURN_IF_ERROR(txn.Commit());
@@ -584,7 +584,7 @@ StatusOr<std::vector<Metric>> PgStore::GetMetrics(std::int64_t run_id) {
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
   VB_RETURN_IF_ERROR(StatusOf(run_id).status());
   // COLLATE "C": byte order, as SQLite's ORDER BY on text.
-  VB_PG_ASSIGN_OR_RETURN(Result r, conn_->Exec("SELECT name, value FROM metrics WHERE run_id = $1 "
+  VB_ASSIGN_OR_RETURN(Result r, conn_->Exec("SELECT name, value FROM metrics WHERE run_id = $1 "
                                                "ORDER BY name COLLATE \"C\"",
                                                Params().Int(run_id)));
   std::vector<Metric> out;
@@ -627,7 +627,7 @@ Status PgStore::AppendTraceChunk(const Lease& lease, const TraceChunk& chunk) {
   VB_RETURN_IF_ERROR(txn.Begin());
   // Trace chunks keep SQLite's rule (any status), but only the lease's attempt may write them.
   VB_RETURN_IF_ERROR(CheckLease(&txn, lease, Cat("trace chunk ", chunk.index)));
-  VB_PG_ASSIGN_OR_RETURN(Result last, conn_->Exec("SELECT idx, channels FROM trace_chunks WHERE run_id = $1 "
+  VB_ASSIGN_OR_RETURN(Result last, conn_->Exec("SELECT idx, channels FROM trace_chunks WHERE run_id = $1 "
                                                   "ORDER BY idx DESC LIMIT 1",
                                                   Params().Int(run_id)));
   const bool any = last.rows() > 0;
@@ -679,7 +679,7 @@ Status PgStore::ReadChunks(std::int64_t run_id, const std::function<Status(Trace
   pg::Transaction txn(conn_.get());
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
   VB_RETURN_IF_ERROR(StatusOf(run_id).status());
-  VB_PG_ASSIGN_OR_RETURN(Result meta, conn_->Exec("SELECT idx, t0, period, samples, channels, codec "
+  VB_ASSIGN_OR_RETURN(Result meta, conn_->Exec("SELECT idx, t0, period, samples, channels, codec "
                                                   "FROM trace_chunks WHERE run_id = $1 ORDER BY idx",
                                                   Params().Int(run_id)));
   std::int64_t total = 0;
@@ -695,7 +695,7 @@ Status PgStore::ReadChunks(std::int64_t run_id, const std::function<Status(Trace
     if (c.index != k) return Status::DataLoss(Cat(what, ": expected chunk ", k, " (a chunk is missing)"));
     const std::size_t values = c.channels.size() * static_cast<std::size_t>(c.samples);
     const std::int64_t codec = meta.Int(k, 5);
-    VB_PG_ASSIGN_OR_RETURN(Result data, conn_->Exec("SELECT data FROM trace_chunks WHERE run_id = $1 AND idx = $2",
+    VB_ASSIGN_OR_RETURN(Result data, conn_->Exec("SELECT data FROM trace_chunks WHERE run_id = $1 AND idx = $2",
                                                     Params().Int(run_id).Int(c.index)));
     if (data.rows() != 1) return Status::DataLoss(Cat(what, ": vanished while being read"));
     const std::string_view bytes = data.Bytes(0, 0);
@@ -725,11 +725,11 @@ StatusOr<std::int32_t> PgStore::SaveBaseline(const std::string& name, const std:
   VB_RETURN_IF_ERROR(txn.Begin());
   // Two hosts saving under one name at once: the second waits here, then numbers after the first.
   VB_RETURN_IF_ERROR(conn_->Exec("SELECT pg_advisory_xact_lock(hashtext($1))", Params().Text(name)).status());
-  VB_PG_ASSIGN_OR_RETURN(const std::int64_t last, conn_->QueryInt("SELECT COALESCE(MAX(version), 0)::int8 FROM "
+  VB_ASSIGN_OR_RETURN(const std::int64_t last, conn_->QueryInt("SELECT COALESCE(MAX(version), 0)::int8 FROM "
                                                                   "baselines WHERE name = $1",
                                                                   Params().Text(name)));
   const std::int64_t version = last + 1;
-  VB_PG_ASSIGN_OR_RETURN(const std::int64_t id,
+  VB_ASSIGN_OR_RETURN(const std::int64_t id,
                          conn_->QueryInt("INSERT INTO baselines (name, version, created, source, note) VALUES "
                                          "($1, $2, " VB_PG_NOW ", $3, $4) RETURNING id",
                                          Params().Text(name).Int(version).Text(source).Text(note)));
@@ -769,7 +769,7 @@ StatusOr<BaselineRecord> PgStore::GetBaseline(const std::string& name, std::int3
   b.created_unix_s = head->Double(0, 2);
   b.source = head->Text(0, 3);
   b.note = head->Text(0, 4);
-  VB_PG_ASSIGN_OR_RETURN(Result m, conn_->Exec("SELECT case_name, metric, mean, spread, n FROM baseline_metrics "
+  VB_ASSIGN_OR_RETURN(Result m, conn_->Exec("SELECT case_name, metric, mean, spread, n FROM baseline_metrics "
                                                "WHERE baseline_id = $1 ORDER BY case_name COLLATE \"C\", "
                                                "metric COLLATE \"C\"",
                                                Params().Int(id)));
@@ -782,7 +782,7 @@ StatusOr<BaselineRecord> PgStore::GetBaseline(const std::string& name, std::int3
 }
 
 StatusOr<std::vector<BaselineRecord>> PgStore::ListBaselines() {
-  VB_PG_ASSIGN_OR_RETURN(Result r, conn_->Exec("SELECT name, version, created, source, note FROM baselines "
+  VB_ASSIGN_OR_RETURN(Result r, conn_->Exec("SELECT name, version, created, source, note FROM baselines "
                                                "ORDER BY name COLLATE \"C\", version"));
   std::vector<BaselineRecord> out;
   for (int k = 0; k < r.rows(); ++k) {
@@ -832,7 +832,7 @@ StatusOr<std::int64_t> PgStore::SaveRegression(const RegressionRecord& record) {
 
 StatusOr<RegressionRecord> PgStore::GetRegression(std::int64_t id) {
   static const std::string sql = Cat("SELECT ", kRegressionColumns, ", result_json FROM regressions WHERE id = $1");
-  VB_PG_ASSIGN_OR_RETURN(Result r, conn_->Exec(sql, Params().Int(id)));
+  VB_ASSIGN_OR_RETURN(Result r, conn_->Exec(sql, Params().Int(id)));
   if (r.rows() == 0) return Status::NotFound(Cat("regression ", id, " not found"));
   RegressionRecord out = ReadRegression(r, 0);
   out.result_json = r.Text(0, 8);
@@ -841,7 +841,7 @@ StatusOr<RegressionRecord> PgStore::GetRegression(std::int64_t id) {
 
 StatusOr<std::vector<RegressionRecord>> PgStore::ListRegressions(bool nights_only, std::int32_t limit) {
   VB_RETURN_IF_ERROR(checks::CheckListLimit(limit));
-  VB_PG_ASSIGN_OR_RETURN(Result r,
+  VB_ASSIGN_OR_RETURN(Result r,
                          conn_->Exec(Cat("SELECT ", kRegressionColumns, " FROM regressions",
                                          nights_only ? " WHERE night != ''" : "", " ORDER BY id DESC LIMIT $1"),
                                      Params().Int(limit)));
@@ -859,30 +859,30 @@ StatusOr<PruneResult> PgStore::Prune(const PruneRequest& request) {
   VB_RETURN_IF_ERROR(txn.Begin(request.dry_run ? TxnKind::kRead : TxnKind::kWrite));
   PruneFacts facts;
   {
-    VB_PG_ASSIGN_OR_RETURN(Result r, conn_->Exec("SELECT id, batch_id, night, suite FROM regressions "
+    VB_ASSIGN_OR_RETURN(Result r, conn_->Exec("SELECT id, batch_id, night, suite FROM regressions "
                                                  "WHERE batch_id != 0"));
     for (int k = 0; k < r.rows(); ++k)
       facts.regressions.push_back({r.Int(k, 0), r.Int(k, 1), r.Text(k, 2), r.Text(k, 3)});
   }
   {
-    VB_PG_ASSIGN_OR_RETURN(Result r, conn_->Exec("SELECT name, version, source FROM baselines ORDER BY id"));
+    VB_ASSIGN_OR_RETURN(Result r, conn_->Exec("SELECT name, version, source FROM baselines ORDER BY id"));
     for (int k = 0; k < r.rows(); ++k)
       facts.baselines.push_back({r.Text(k, 0), static_cast<std::int32_t>(r.Int(k, 1)), r.Text(k, 2)});
   }
   {
     // No row locks: only finished runs are deleted, and nothing writes to a finished run any more.
-    VB_PG_ASSIGN_OR_RETURN(Result r, conn_->Exec("SELECT id, batch_id, name, status, finished FROM runs"));
+    VB_ASSIGN_OR_RETURN(Result r, conn_->Exec("SELECT id, batch_id, name, status, finished FROM runs"));
     facts.runs.reserve(static_cast<std::size_t>(r.rows()));
     for (int k = 0; k < r.rows(); ++k) {
       PruneFacts::Run run{r.Int(k, 0), r.Int(k, 1), r.Text(k, 2), RunStatus::kDone, r.Double(k, 4)};
-      VB_PG_ASSIGN_OR_RETURN(run.status, rules::StoredStatus(r.Text(k, 3), Cat("run ", run.id)));
+      VB_ASSIGN_OR_RETURN(run.status, rules::StoredStatus(r.Text(k, 3), Cat("run ", run.id)));
       facts.runs.push_back(std::move(run));
     }
   }
   PrunePlan plan = PlanPrune(facts, request);
   PruneResult& out = plan.result;
   for (std::int64_t id : plan.doomed) {
-    VB_PG_ASSIGN_OR_RETURN(const std::int64_t bytes,
+    VB_ASSIGN_OR_RETURN(const std::int64_t bytes,
                            conn_->QueryInt("SELECT COALESCE(SUM(octet_length(data)), 0)::int8 FROM trace_chunks "
                                            "WHERE run_id = $1",
                                            Params().Int(id)));
@@ -894,7 +894,7 @@ StatusOr<PruneResult> PgStore::Prune(const PruneRequest& request) {
     }
     out.batches_deleted = 0;
     for (std::int64_t b : plan.empty_batches) {
-      VB_PG_ASSIGN_OR_RETURN(Result del, conn_->Exec("DELETE FROM batches WHERE id = $1 AND NOT EXISTS "
+      VB_ASSIGN_OR_RETURN(Result del, conn_->Exec("DELETE FROM batches WHERE id = $1 AND NOT EXISTS "
                                                      "(SELECT 1 FROM runs WHERE batch_id = $1)",
                                                      Params().Int(b)));
       out.batches_deleted += del.affected();
@@ -913,8 +913,8 @@ StatusOr<std::unique_ptr<Store>> OpenPgStore(const std::string& location) {
             "\"host=... dbname=...\"): \"",
             location, "\""));
   }
-  VB_PG_ASSIGN_OR_RETURN(std::unique_ptr<pg::Connection> conn, pg::Connection::Open(location));
-  VB_PG_ASSIGN_OR_RETURN(const int version, pg_schema::Migrate(conn.get(), pg_schema::Migrations()));
+  VB_ASSIGN_OR_RETURN(std::unique_ptr<pg::Connection> conn, pg::Connection::Open(location));
+  VB_ASSIGN_OR_RETURN(const int version, pg_schema::Migrate(conn.get(), pg_schema::Migrations()));
   return std::unique_ptr<Store>(std::make_unique<PgStore>(std::move(conn), version));
 }
 

@@ -16,11 +16,11 @@ using sql::Stmt;
 
 StatusOr<int> InsertBaseline(sql::Connection* conn, const std::string& name, const std::string& source,
                              const std::string& note, const std::vector<BaselineEntry>& entries, double now) {
-  VB_DB_ASSIGN_OR_RETURN(Stmt last, conn->Prepare("SELECT COALESCE(MAX(version), 0) FROM baselines WHERE name = ?1"));
+  VB_ASSIGN_OR_RETURN(Stmt last, conn->Prepare("SELECT COALESCE(MAX(version), 0) FROM baselines WHERE name = ?1"));
   last.Bind(1, name);
-  VB_DB_ASSIGN_OR_RETURN(const bool row, last.Step());
+  VB_ASSIGN_OR_RETURN(const bool row, last.Step());
   const int version = row ? static_cast<int>(last.Int(0)) + 1 : 1;
-  VB_DB_ASSIGN_OR_RETURN(Stmt ins, conn->Prepare("INSERT INTO baselines (name, version, created, source, note) "
+  VB_ASSIGN_OR_RETURN(Stmt ins, conn->Prepare("INSERT INTO baselines (name, version, created, source, note) "
                                                  "VALUES (?1, ?2, ?3, ?4, ?5)"));
   ins.Bind(1, name);
   ins.Bind(2, version);
@@ -30,7 +30,7 @@ StatusOr<int> InsertBaseline(sql::Connection* conn, const std::string& name, con
   VB_RETURN_IF_ERROR(ins.Run());
   const std::int64_t id = sqlite3_last_insert_rowid(conn->raw());
   for (const BaselineEntry& e : entries) {
-    VB_DB_ASSIGN_OR_RETURN(Stmt m, conn->Prepare("INSERT INTO baseline_metrics (baseline_id, case_name, metric, mean, "
+    VB_ASSIGN_OR_RETURN(Stmt m, conn->Prepare("INSERT INTO baseline_metrics (baseline_id, case_name, metric, mean, "
                                                  "spread, n) VALUES (?1, ?2, ?3, ?4, ?5, ?6)"));
     m.Bind(1, id);
     m.Bind(2, e.case_name);
@@ -45,14 +45,14 @@ StatusOr<int> InsertBaseline(sql::Connection* conn, const std::string& name, con
 
 StatusOr<BaselineRecord> LoadBaseline(sql::Connection* conn, const std::string& name, int version) {
   if (version < 0) return Status::InvalidArgument(Cat("version: must be >= 1 (0 = newest), got ", version));
-  VB_DB_ASSIGN_OR_RETURN(
+  VB_ASSIGN_OR_RETURN(
       Stmt st, conn->Prepare(version == 0 ? "SELECT id, version, created, source, note FROM baselines WHERE name = ?1 "
                                             "ORDER BY version DESC LIMIT 1"
                                           : "SELECT id, version, created, source, note FROM baselines WHERE name = ?1 "
                                             "AND version = ?2"));
   st.Bind(1, name);
   if (version != 0) st.Bind(2, version);
-  VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+  VB_ASSIGN_OR_RETURN(const bool row, st.Step());
   if (!row) {
     return Status::NotFound(version == 0 ? Cat("baseline '", name, "' not found")
                                          : Cat("baseline '", name, "' has no version ", version));
@@ -64,11 +64,11 @@ StatusOr<BaselineRecord> LoadBaseline(sql::Connection* conn, const std::string& 
   b.created_unix_s = st.Double(2);
   b.source = st.Text(3);
   b.note = st.Text(4);
-  VB_DB_ASSIGN_OR_RETURN(Stmt m, conn->Prepare("SELECT case_name, metric, mean, spread, n FROM baseline_metrics "
+  VB_ASSIGN_OR_RETURN(Stmt m, conn->Prepare("SELECT case_name, metric, mean, spread, n FROM baseline_metrics "
                                                "WHERE baseline_id = ?1 ORDER BY case_name, metric"));
   m.Bind(1, id);
   while (true) {
-    VB_DB_ASSIGN_OR_RETURN(const bool more, m.Step());
+    VB_ASSIGN_OR_RETURN(const bool more, m.Step());
     if (!more) break;
     b.entries.push_back({m.Text(0), m.Text(1), m.Double(2), m.Double(3), static_cast<std::int32_t>(m.Int(4))});
   }
@@ -76,11 +76,11 @@ StatusOr<BaselineRecord> LoadBaseline(sql::Connection* conn, const std::string& 
 }
 
 StatusOr<std::vector<BaselineRecord>> ListBaselines(sql::Connection* conn) {
-  VB_DB_ASSIGN_OR_RETURN(
+  VB_ASSIGN_OR_RETURN(
       Stmt st, conn->Prepare("SELECT name, version, created, source, note FROM baselines ORDER BY name, version"));
   std::vector<BaselineRecord> out;
   while (true) {
-    VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+    VB_ASSIGN_OR_RETURN(const bool row, st.Step());
     if (!row) break;
     BaselineRecord b;
     b.name = st.Text(0);
@@ -94,7 +94,7 @@ StatusOr<std::vector<BaselineRecord>> ListBaselines(sql::Connection* conn) {
 }
 
 StatusOr<std::int64_t> InsertRegression(sql::Connection* conn, const RegressionRecord& r, double now) {
-  VB_DB_ASSIGN_OR_RETURN(Stmt st, conn->Prepare("INSERT INTO regressions (suite, baseline_name, baseline_version, "
+  VB_ASSIGN_OR_RETURN(Stmt st, conn->Prepare("INSERT INTO regressions (suite, baseline_name, baseline_version, "
                                                 "batch_id, night, created, verdict, result_json) VALUES "
                                                 "(?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8)"));
   st.Bind(1, r.suite);
@@ -127,10 +127,10 @@ RegressionRecord ReadRegression(const Stmt& st) {
 }  // namespace
 
 StatusOr<RegressionRecord> LoadRegression(sql::Connection* conn, std::int64_t id) {
-  VB_DB_ASSIGN_OR_RETURN(Stmt st, conn->Prepare(Cat("SELECT ", kRegressionColumns,
+  VB_ASSIGN_OR_RETURN(Stmt st, conn->Prepare(Cat("SELECT ", kRegressionColumns,
                                                     ", result_json FROM regressions WHERE id = ?1")));
   st.Bind(1, id);
-  VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+  VB_ASSIGN_OR_RETURN(const bool row, st.Step());
   if (!row) return Status::NotFound(Cat("regression ", id, " not found"));
   RegressionRecord r = ReadRegression(st);
   r.result_json = st.Text(8);
@@ -138,13 +138,13 @@ StatusOr<RegressionRecord> LoadRegression(sql::Connection* conn, std::int64_t id
 }
 
 StatusOr<std::vector<RegressionRecord>> ListRegressions(sql::Connection* conn, bool nights_only, int limit) {
-  VB_DB_ASSIGN_OR_RETURN(
+  VB_ASSIGN_OR_RETURN(
       Stmt st, conn->Prepare(Cat("SELECT ", kRegressionColumns, " FROM regressions",
                                  nights_only ? " WHERE night != ''" : "", " ORDER BY id DESC LIMIT ?1")));
   st.Bind(1, static_cast<std::int64_t>(limit));
   std::vector<RegressionRecord> out;
   while (true) {
-    VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+    VB_ASSIGN_OR_RETURN(const bool row, st.Step());
     if (!row) break;
     out.push_back(ReadRegression(st));
   }

@@ -215,7 +215,7 @@ std::span<const Migration> Migrations() { return kMigrations; }
 int CurrentVersion() { return kMigrations[std::size(kMigrations) - 1].version; }
 
 StatusOr<int> ReadVersion(sql::Connection* conn) {
-  VB_DB_ASSIGN_OR_RETURN(const std::int64_t v, conn->QueryInt("PRAGMA user_version"));
+  VB_ASSIGN_OR_RETURN(const std::int64_t v, conn->QueryInt("PRAGMA user_version"));
   return static_cast<int>(v);
 }
 

@@ -217,14 +217,14 @@ Transaction::~Transaction() {
 }
 
 Status Transaction::Begin(Kind kind) {
-  VB_DB_ASSIGN_OR_RETURN(Stmt begin, conn_->Prepare(kind == Kind::kWrite ? "BEGIN IMMEDIATE" : "BEGIN"));
+  VB_ASSIGN_OR_RETURN(Stmt begin, conn_->Prepare(kind == Kind::kWrite ? "BEGIN IMMEDIATE" : "BEGIN"));
   VB_RETURN_IF_ERROR(begin.Run());
   open_ = true;
   return Status::Ok();
 }
 
 Status Transaction::Commit() {
-  VB_DB_ASSIGN_OR_RETURN(Stmt commit, conn_->Prepare("COMMIT"));
+  VB_ASSIGN_OR_RETURN(Stmt commit, conn_->Prepare("COMMIT"));
   VB_RETURN_IF_ERROR(commit.Run());
   open_ = false;
   return Status::Ok();

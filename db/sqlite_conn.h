@@ -143,11 +143,3 @@ class Transaction {
 
 }  // namespace vb::db::sql
 
-// `lhs = value of expr`, or return its status from the enclosing function.
-#define VB_DB_CONCAT_INNER(a, b) a##b
-#define VB_DB_CONCAT(a, b) VB_DB_CONCAT_INNER(a, b)
-#define VB_DB_ASSIGN_OR_RETURN(lhs, expr) VB_DB_ASSIGN_OR_RETURN_IMPL(VB_DB_CONCAT(vb_db_so_, __LINE__), lhs, expr)
-#define VB_DB_ASSIGN_OR_RETURN_IMPL(tmp, lhs, expr) \
-  auto tmp = (expr);                                \
-  if (!tmp.ok()) return tmp.status();               \
-  lhs = std::move(tmp).value()

@@ -136,15 +136,15 @@ class SqliteStore final : public Store {
 };
 
 StatusOr<RunStatus> SqliteStore::StatusOf(std::int64_t run_id) {
-  VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT status FROM runs WHERE id = ?1"));
+  VB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT status FROM runs WHERE id = ?1"));
   st.Bind(1, run_id);
-  VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+  VB_ASSIGN_OR_RETURN(const bool row, st.Step());
   if (!row) return RunNotFound(run_id);
   return rules::StoredStatus(st.Text(0), Cat("run ", run_id));
 }
 
 Status SqliteStore::AddHistory(std::int64_t run_id, RunStatus status, double at, const std::string& reason) {
-  VB_DB_ASSIGN_OR_RETURN(
+  VB_ASSIGN_OR_RETURN(
       Stmt st, conn_.Prepare("INSERT INTO status_history (run_id, status, at, reason) VALUES (?1, ?2, ?3, ?4)"));
   st.Bind(1, run_id);
   st.Bind(2, RunStatusName(status));
@@ -154,21 +154,21 @@ Status SqliteStore::AddHistory(std::int64_t run_id, RunStatus status, double at,
 }
 
 StatusOr<RunRecord> SqliteStore::ReadRun(const Stmt& row) {
-  VB_DB_ASSIGN_OR_RETURN(RunRecord r, rules::RunFromRow(row));
-  VB_DB_ASSIGN_OR_RETURN(Stmt sweep,
+  VB_ASSIGN_OR_RETURN(RunRecord r, rules::RunFromRow(row));
+  VB_ASSIGN_OR_RETURN(Stmt sweep,
                          conn_.Prepare("SELECT field, value FROM run_sweep WHERE run_id = ?1 ORDER BY axis"));
   sweep.Bind(1, r.id);
   while (true) {
-    VB_DB_ASSIGN_OR_RETURN(const bool more, sweep.Step());
+    VB_ASSIGN_OR_RETURN(const bool more, sweep.Step());
     if (!more) break;
     r.key.sweep.push_back({sweep.Text(0), sweep.Double(1)});
   }
 
   // Tags come back in submission order (rowid order).
-  VB_DB_ASSIGN_OR_RETURN(Stmt tags, conn_.Prepare("SELECT tag FROM run_tags WHERE run_id = ?1 ORDER BY rowid"));
+  VB_ASSIGN_OR_RETURN(Stmt tags, conn_.Prepare("SELECT tag FROM run_tags WHERE run_id = ?1 ORDER BY rowid"));
   tags.Bind(1, r.id);
   while (true) {
-    VB_DB_ASSIGN_OR_RETURN(const bool more, tags.Step());
+    VB_ASSIGN_OR_RETURN(const bool more, tags.Step());
     if (!more) break;
     r.tags.push_back(tags.Text(0));
   }
@@ -176,9 +176,9 @@ StatusOr<RunRecord> SqliteStore::ReadRun(const Stmt& row) {
 }
 
 StatusOr<RunRecord> SqliteStore::LoadRun(std::int64_t run_id) {
-  VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare(Cat("SELECT ", kRunColumns, " FROM runs WHERE id = ?1")));
+  VB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare(Cat("SELECT ", kRunColumns, " FROM runs WHERE id = ?1")));
   st.Bind(1, run_id);
-  VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+  VB_ASSIGN_OR_RETURN(const bool row, st.Step());
   if (!row) return RunNotFound(run_id);
   return ReadRun(st);
 }
@@ -193,7 +193,7 @@ StatusOr<std::int64_t> SqliteStore::SubmitBatch(const std::string& submitter, co
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kWrite));
 
-  VB_DB_ASSIGN_OR_RETURN(
+  VB_ASSIGN_OR_RETURN(
       Stmt batch, conn_.Prepare("INSERT INTO batches (submitter, name, spec_json, created) VALUES (?1, ?2, ?3, ?4)"));
   batch.Bind(1, submitter);
   batch.Bind(2, name);
@@ -205,7 +205,7 @@ StatusOr<std::int64_t> SqliteStore::SubmitBatch(const std::string& submitter, co
   std::vector<std::int64_t> ids;
   ids.reserve(runs.size());
   for (const RunRecord& r : runs) {
-    VB_DB_ASSIGN_OR_RETURN(
+    VB_ASSIGN_OR_RETURN(
         Stmt run,
         conn_.Prepare("INSERT INTO runs (batch_id, name, controller, bench_kind, requested_bench, bench_name, "
                       "spec_json, submitter, priority, status, requeue_on_interrupt, submitted, key_name, "
@@ -229,7 +229,7 @@ StatusOr<std::int64_t> SqliteStore::SubmitBatch(const std::string& submitter, co
     const std::int64_t id = sqlite3_last_insert_rowid(conn_.raw());
     ids.push_back(id);
     for (std::size_t a = 0; a < r.key.sweep.size(); ++a) {
-      VB_DB_ASSIGN_OR_RETURN(Stmt sw, conn_.Prepare("INSERT INTO run_sweep (run_id, axis, field, value) "
+      VB_ASSIGN_OR_RETURN(Stmt sw, conn_.Prepare("INSERT INTO run_sweep (run_id, axis, field, value) "
                                                     "VALUES (?1, ?2, ?3, ?4)"));
       sw.Bind(1, id);
       sw.Bind(2, static_cast<std::int64_t>(a));
@@ -238,7 +238,7 @@ StatusOr<std::int64_t> SqliteStore::SubmitBatch(const std::string& submitter, co
       VB_RETURN_IF_ERROR(sw.Run());
     }
     for (const std::string& tag : r.tags) {
-      VB_DB_ASSIGN_OR_RETURN(Stmt t, conn_.Prepare("INSERT INTO run_tags (run_id, tag) VALUES (?1, ?2)"));
+      VB_ASSIGN_OR_RETURN(Stmt t, conn_.Prepare("INSERT INTO run_tags (run_id, tag) VALUES (?1, ?2)"));
       t.Bind(1, id);
       t.Bind(2, tag);
       VB_RETURN_IF_ERROR(t.Run());
@@ -263,7 +263,7 @@ StatusOr<std::optional<RunRecord>> SqliteStore::ClaimNext(const ClaimRequest& re
   // With aging: a queued run's priority rises by one for every aging_s it has waited since it was submitted
   // (docs/lab.md, "Priorities and aging"), so every queued run is looked at (the order is not an index's).
   const bool aging = request.aging_s > 0;
-  VB_DB_ASSIGN_OR_RETURN(
+  VB_ASSIGN_OR_RETURN(
       Stmt pick, conn_.Prepare(aging ? "SELECT id FROM runs WHERE status = 'queued' "
                                        "AND (bench_kind = '' OR bench_kind = ?1) "
                                        "AND (bench_name = '' OR bench_name = ?2) "
@@ -279,13 +279,13 @@ StatusOr<std::optional<RunRecord>> SqliteStore::ClaimNext(const ClaimRequest& re
     pick.Bind(3, now);
     pick.Bind(4, request.aging_s);
   }
-  VB_DB_ASSIGN_OR_RETURN(const bool found, pick.Step());
+  VB_ASSIGN_OR_RETURN(const bool found, pick.Step());
   if (!found) return std::optional<RunRecord>();  // the destructor ends the (empty) transaction
   const std::int64_t id = pick.Int(0);
 
   // The next attempt: a new fencing token; the lease (if any) lapses lease_ttl_s from now unless the host's
   // heartbeats renew it.
-  VB_DB_ASSIGN_OR_RETURN(Stmt claim, conn_.Prepare("UPDATE runs SET status = 'running', bench_name = ?2, "
+  VB_ASSIGN_OR_RETURN(Stmt claim, conn_.Prepare("UPDATE runs SET status = 'running', bench_name = ?2, "
                                                    "started = ?3, finished = 0, progress = 0, reason = '', "
                                                    "cancel_requested = 0, fence = fence + 1, host = ?4, "
                                                    "lease_expires = ?5 WHERE id = ?1"));
@@ -298,7 +298,7 @@ StatusOr<std::optional<RunRecord>> SqliteStore::ClaimNext(const ClaimRequest& re
   VB_RETURN_IF_ERROR(AddHistory(id, RunStatus::kRunning, now,
                                 request.host.empty() ? Cat("claimed by bench ", bench_name)
                                                      : Cat("claimed by bench ", bench_name, " on host ", request.host)));
-  VB_DB_ASSIGN_OR_RETURN(RunRecord run, LoadRun(id));
+  VB_ASSIGN_OR_RETURN(RunRecord run, LoadRun(id));
   VB_RETURN_IF_ERROR(txn.Commit());
   return std::optional<RunRecord>(std::move(run));
 }
@@ -309,7 +309,7 @@ Status SqliteStore::SetProgress(const Lease& lease, double progress) {
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kWrite));
   VB_RETURN_IF_ERROR(CheckLease(lease, "progress", &txn));
-  VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("UPDATE runs SET progress = ?2 WHERE id = ?1"));
+  VB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("UPDATE runs SET progress = ?2 WHERE id = ?1"));
   st.Bind(1, run_id);
   st.Bind(2, progress);
   VB_RETURN_IF_ERROR(st.Run());
@@ -326,15 +326,15 @@ Status SqliteStore::Finish(const Lease& lease, RunStatus final_status, const std
   {
     // A retry of a Finish that committed but whose caller did not learn it: the run is already in exactly the
     // state this attempt writes. Nothing to do, and not a stale write (as on PostgreSQL; docs/lab.md).
-    VB_DB_ASSIGN_OR_RETURN(Stmt done, conn_.Prepare("SELECT status, fence, reason FROM runs WHERE id = ?1"));
+    VB_ASSIGN_OR_RETURN(Stmt done, conn_.Prepare("SELECT status, fence, reason FROM runs WHERE id = ?1"));
     done.Bind(1, run_id);
-    VB_DB_ASSIGN_OR_RETURN(const bool row, done.Step());
+    VB_ASSIGN_OR_RETURN(const bool row, done.Step());
     if (row && done.Text(0) == RunStatusName(final_status) && done.Int(1) == lease.fence && done.Text(2) == reason)
       return Status::Ok();
   }
   VB_RETURN_IF_ERROR(CheckLease(lease, Cat("finish ", RunStatusName(final_status)), &txn));
   const double now = NowUnixS();
-  VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("UPDATE runs SET status = ?2, reason = ?3, finished = ?4, "
+  VB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("UPDATE runs SET status = ?2, reason = ?3, finished = ?4, "
                                                 "progress = CASE WHEN ?2 = 'done' THEN 1.0 ELSE progress END, "
                                                 "lease_expires = 0 WHERE id = ?1"));
   st.Bind(1, run_id);
@@ -345,7 +345,7 @@ Status SqliteStore::Finish(const Lease& lease, RunStatus final_status, const std
   VB_RETURN_IF_ERROR(AddHistory(run_id, final_status, now, reason));
   for (const Metric& m : metrics) {
     // NaN binds as NULL (SQLite's rule) and GetMetrics() turns NULL back into NaN.
-    VB_DB_ASSIGN_OR_RETURN(Stmt ins, conn_.Prepare("INSERT INTO metrics (run_id, name, value) VALUES (?1, ?2, ?3)"));
+    VB_ASSIGN_OR_RETURN(Stmt ins, conn_.Prepare("INSERT INTO metrics (run_id, name, value) VALUES (?1, ?2, ?3)"));
     ins.Bind(1, run_id);
     ins.Bind(2, m.name);
     ins.Bind(3, m.value);
@@ -357,10 +357,10 @@ Status SqliteStore::Finish(const Lease& lease, RunStatus final_status, const std
 StatusOr<RunStatus> SqliteStore::RequestCancel(std::int64_t run_id, const std::string& reason) {
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kWrite));
-  VB_DB_ASSIGN_OR_RETURN(const RunStatus status, StatusOf(run_id));
+  VB_ASSIGN_OR_RETURN(const RunStatus status, StatusOf(run_id));
   if (status == RunStatus::kQueued) {
     const double now = NowUnixS();
-    VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("UPDATE runs SET status = 'cancelled', reason = ?2, "
+    VB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("UPDATE runs SET status = 'cancelled', reason = ?2, "
                                                   "finished = ?3 WHERE id = ?1"));
     st.Bind(1, run_id);
     st.Bind(2, reason);
@@ -373,7 +373,7 @@ StatusOr<RunStatus> SqliteStore::RequestCancel(std::int64_t run_id, const std::s
   if (status == RunStatus::kRunning) {
     // The worker polls CancelRequested() and ends the run with Finish(kCancelled); the reason is kept in the
     // row meanwhile (the status does not change, so there is no history row yet).
-    VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("UPDATE runs SET cancel_requested = 1, reason = ?2 WHERE id = ?1"));
+    VB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("UPDATE runs SET cancel_requested = 1, reason = ?2 WHERE id = ?1"));
     st.Bind(1, run_id);
     st.Bind(2, reason);
     VB_RETURN_IF_ERROR(st.Run());
@@ -387,9 +387,9 @@ StatusOr<RunStatus> SqliteStore::RequestCancel(std::int64_t run_id, const std::s
 StatusOr<bool> SqliteStore::CancelRequested(std::int64_t run_id) {
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
-  VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT cancel_requested FROM runs WHERE id = ?1"));
+  VB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT cancel_requested FROM runs WHERE id = ?1"));
   st.Bind(1, run_id);
-  VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+  VB_ASSIGN_OR_RETURN(const bool row, st.Step());
   if (!row) return RunNotFound(run_id);
   const bool requested = st.Int(0) != 0;
   VB_RETURN_IF_ERROR(txn.Commit());
@@ -397,24 +397,24 @@ StatusOr<bool> SqliteStore::CancelRequested(std::int64_t run_id) {
 }
 
 StatusOr<std::int64_t> SqliteStore::InterruptionsOfRun(std::int64_t run_id) {
-  VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT COUNT(*) FROM status_history WHERE run_id = ?1 AND "
+  VB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT COUNT(*) FROM status_history WHERE run_id = ?1 AND "
                                                 "status = 'interrupted'"));
   st.Bind(1, run_id);
-  VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+  VB_ASSIGN_OR_RETURN(const bool row, st.Step());
   return row ? st.Int(0) : 0;
 }
 
 Status SqliteStore::CheckLease(const Lease& lease, const std::string& what, Transaction* txn) {
-  VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT status, fence, host FROM runs WHERE id = ?1"));
+  VB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT status, fence, host FROM runs WHERE id = ?1"));
   st.Bind(1, lease.run_id);
-  VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+  VB_ASSIGN_OR_RETURN(const bool row, st.Step());
   if (!row) return RunNotFound(lease.run_id);
-  VB_DB_ASSIGN_OR_RETURN(const RunStatus status, rules::StoredStatus(st.Text(0), Cat("run ", lease.run_id)));
+  VB_ASSIGN_OR_RETURN(const RunStatus status, rules::StoredStatus(st.Text(0), Cat("run ", lease.run_id)));
   const std::int64_t fence = st.Int(1);
   const std::string host = st.Text(2);
   std::optional<std::string> stale = rules::StaleWriteWhy(lease, what, status, fence, host);
   if (!stale) return Status::Ok();
-  VB_DB_ASSIGN_OR_RETURN(Stmt log, conn_.Prepare("INSERT INTO stale_writes (run_id, fence, current_fence, host, "
+  VB_ASSIGN_OR_RETURN(Stmt log, conn_.Prepare("INSERT INTO stale_writes (run_id, fence, current_fence, host, "
                                                  "what, at) VALUES (?1, ?2, ?3, ?4, ?5, ?6)"));
   log.Bind(1, lease.run_id);
   log.Bind(2, lease.fence);
@@ -434,16 +434,16 @@ Status SqliteStore::InterruptRunning(const std::vector<std::int64_t>& ids, const
     bool requeue = false, cancel_requested = false;
     std::string cancel_reason;
     {
-      VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT requeue_on_interrupt, cancel_requested, reason "
+      VB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT requeue_on_interrupt, cancel_requested, reason "
                                                     "FROM runs WHERE id = ?1 AND status = 'running'"));
       st.Bind(1, id);
-      VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+      VB_ASSIGN_OR_RETURN(const bool row, st.Step());
       if (!row) continue;
       requeue = st.Int(0) != 0;
       cancel_requested = st.Int(1) != 0;
       cancel_reason = st.Text(2);
     }
-    VB_DB_ASSIGN_OR_RETURN(Stmt stop, conn_.Prepare("UPDATE runs SET status = 'interrupted', reason = ?2, "
+    VB_ASSIGN_OR_RETURN(Stmt stop, conn_.Prepare("UPDATE runs SET status = 'interrupted', reason = ?2, "
                                                     "finished = ?3, lease_expires = 0 WHERE id = ?1"));
     stop.Bind(1, id);
     stop.Bind(2, reason);
@@ -453,11 +453,11 @@ Status SqliteStore::InterruptRunning(const std::vector<std::int64_t>& ids, const
 
     std::int64_t times = 0;
     if (!cancel_requested && requeue) {
-      VB_DB_ASSIGN_OR_RETURN(times, InterruptionsOfRun(id));
+      VB_ASSIGN_OR_RETURN(times, InterruptionsOfRun(id));
     }
     const rules::AfterInterrupt next = rules::AfterInterruption(cancel_requested, cancel_reason, requeue, times, reason);
     if (next.status == RunStatus::kCancelled || next.status == RunStatus::kFailed) {
-      VB_DB_ASSIGN_OR_RETURN(Stmt end, conn_.Prepare("UPDATE runs SET status = ?2, reason = ?3 WHERE id = ?1"));
+      VB_ASSIGN_OR_RETURN(Stmt end, conn_.Prepare("UPDATE runs SET status = ?2, reason = ?3 WHERE id = ?1"));
       end.Bind(1, id);
       end.Bind(2, RunStatusName(next.status));
       end.Bind(3, next.reason);
@@ -468,13 +468,13 @@ Status SqliteStore::InterruptRunning(const std::vector<std::int64_t>& ids, const
       // it), no host and no lease; its fence stays, so the interrupted attempt's late writes are refused, and the
       // next claim takes fence + 1. The partial trace of the interrupted attempt is dropped: the rerun writes its
       // own from chunk 0.
-      VB_DB_ASSIGN_OR_RETURN(Stmt requeue_st, conn_.Prepare("UPDATE runs SET status = 'queued', bench_name = "
+      VB_ASSIGN_OR_RETURN(Stmt requeue_st, conn_.Prepare("UPDATE runs SET status = 'queued', bench_name = "
                                                             "requested_bench, started = 0, finished = 0, "
                                                             "progress = 0, cancel_requested = 0, host = '', "
                                                             "lease_expires = 0 WHERE id = ?1"));
       requeue_st.Bind(1, id);
       VB_RETURN_IF_ERROR(requeue_st.Run());
-      VB_DB_ASSIGN_OR_RETURN(Stmt drop, conn_.Prepare("DELETE FROM trace_chunks WHERE run_id = ?1"));
+      VB_ASSIGN_OR_RETURN(Stmt drop, conn_.Prepare("DELETE FROM trace_chunks WHERE run_id = ?1"));
       drop.Bind(1, id);
       VB_RETURN_IF_ERROR(drop.Run());
       VB_RETURN_IF_ERROR(AddHistory(id, RunStatus::kQueued, now, next.reason));
@@ -489,13 +489,13 @@ StatusOr<int> SqliteStore::RecoverAfterCrashAt(const std::string& host, double s
   std::vector<std::int64_t> running;
   {
     // "" = one machine: every running run is this server's. A host in a lab touches only its own runs.
-    VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare(host.empty() ? "SELECT id FROM runs WHERE status = 'running' "
+    VB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare(host.empty() ? "SELECT id FROM runs WHERE status = 'running' "
                                                                   "ORDER BY id"
                                                                 : "SELECT id FROM runs WHERE status = 'running' "
                                                                   "AND host = ?1 ORDER BY id"));
     if (!host.empty()) st.Bind(1, host);
     while (true) {
-      VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+      VB_ASSIGN_OR_RETURN(const bool row, st.Step());
       if (!row) break;
       running.push_back(st.Int(0));
     }
@@ -512,7 +512,7 @@ Status SqliteStore::Heartbeat(const HostRecord& host, double lease_ttl_s, const 
   const double now = NowUnixS();
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kWrite));
-  VB_DB_ASSIGN_OR_RETURN(Stmt up, conn_.Prepare("INSERT INTO hosts (name, address, benches_json, started, heartbeat) "
+  VB_ASSIGN_OR_RETURN(Stmt up, conn_.Prepare("INSERT INTO hosts (name, address, benches_json, started, heartbeat) "
                                                 "VALUES (?1, ?2, ?3, ?4, ?5) ON CONFLICT (name) DO UPDATE SET "
                                                 "address = excluded.address, benches_json = excluded.benches_json, "
                                                 "started = excluded.started, heartbeat = excluded.heartbeat"));
@@ -524,7 +524,7 @@ Status SqliteStore::Heartbeat(const HostRecord& host, double lease_ttl_s, const 
   VB_RETURN_IF_ERROR(up.Run());
   if (lease_ttl_s > 0) {
     for (const Lease& lease : executing) {
-      VB_DB_ASSIGN_OR_RETURN(Stmt renew, conn_.Prepare("UPDATE runs SET lease_expires = ?2 WHERE status = 'running' "
+      VB_ASSIGN_OR_RETURN(Stmt renew, conn_.Prepare("UPDATE runs SET lease_expires = ?2 WHERE status = 'running' "
                                                        "AND host = ?1 AND id = ?3 AND fence = ?4"));
       renew.Bind(1, host.name);
       renew.Bind(2, now + lease_ttl_s);
@@ -539,11 +539,11 @@ Status SqliteStore::Heartbeat(const HostRecord& host, double lease_ttl_s, const 
 StatusOr<std::vector<HostRecord>> SqliteStore::ListHosts() {
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
-  VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT name, address, benches_json, started, heartbeat FROM hosts "
+  VB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT name, address, benches_json, started, heartbeat FROM hosts "
                                                 "ORDER BY name"));
   std::vector<HostRecord> out;
   while (true) {
-    VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+    VB_ASSIGN_OR_RETURN(const bool row, st.Step());
     if (!row) break;
     out.push_back({st.Text(0), st.Text(1), st.Text(2), st.Double(3), st.Double(4)});
   }
@@ -558,11 +558,11 @@ StatusOr<std::vector<std::int64_t>> SqliteStore::RequeueLapsed() {
   std::vector<std::int64_t> lapsed;
   std::map<std::int64_t, std::string> host_of;
   {
-    VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT id, host FROM runs WHERE status = 'running' AND "
+    VB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT id, host FROM runs WHERE status = 'running' AND "
                                                   "lease_expires > 0 AND lease_expires < ?1 ORDER BY id"));
     st.Bind(1, now);
     while (true) {
-      VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+      VB_ASSIGN_OR_RETURN(const bool row, st.Step());
       if (!row) break;
       lapsed.push_back(st.Int(0));
       host_of[st.Int(0)] = st.Text(1);
@@ -581,16 +581,16 @@ StatusOr<std::vector<StaleWrite>> SqliteStore::StaleWrites(std::int32_t limit, s
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
   if (total != nullptr) {
-    VB_DB_ASSIGN_OR_RETURN(Stmt count, conn_.Prepare("SELECT count(*) FROM stale_writes"));
-    VB_DB_ASSIGN_OR_RETURN(const bool row, count.Step());
+    VB_ASSIGN_OR_RETURN(Stmt count, conn_.Prepare("SELECT count(*) FROM stale_writes"));
+    VB_ASSIGN_OR_RETURN(const bool row, count.Step());
     *total = row ? count.Int(0) : 0;
   }
-  VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT run_id, fence, current_fence, host, what, at FROM "
+  VB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT run_id, fence, current_fence, host, what, at FROM "
                                                 "stale_writes ORDER BY id LIMIT ?1"));
   st.Bind(1, static_cast<std::int64_t>(limit));
   std::vector<StaleWrite> out;
   while (true) {
-    VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+    VB_ASSIGN_OR_RETURN(const bool row, st.Step());
     if (!row) break;
     out.push_back({st.Int(0), st.Int(1), st.Int(2), st.Text(3), st.Text(4), st.Double(5)});
   }
@@ -602,7 +602,7 @@ StatusOr<bool> SqliteStore::ClaimNight(const std::string& night, const std::stri
   VB_RETURN_IF_ERROR(checks::CheckNightClaim(night, host));
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kWrite));
-  VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("INSERT INTO nights_claimed (night, host, at) VALUES (?1, ?2, ?3) "
+  VB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("INSERT INTO nights_claimed (night, host, at) VALUES (?1, ?2, ?3) "
                                                 "ON CONFLICT (night) DO NOTHING"));
   st.Bind(1, night);
   st.Bind(2, host);
@@ -618,7 +618,7 @@ StatusOr<bool> SqliteStore::ClaimNight(const std::string& night, const std::stri
 StatusOr<RunRecord> SqliteStore::GetRun(std::int64_t run_id) {
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
-  VB_DB_ASSIGN_OR_RETURN(RunRecord run, LoadRun(run_id));
+  VB_ASSIGN_OR_RETURN(RunRecord run, LoadRun(run_id));
   VB_RETURN_IF_ERROR(txn.Commit());
   return run;
 }
@@ -637,13 +637,13 @@ StatusOr<std::vector<RunRecord>> SqliteStore::ListRuns(const RunFilter& f) {
   const run_query::Query q = run_query::Page(f, run_query::Dialect::kSqlite);
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
-  VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare(Cat("SELECT ", kRunColumns, q.sql)));
+  VB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare(Cat("SELECT ", kRunColumns, q.sql)));
   BindQuery(&st, q);
   std::vector<RunRecord> out;
   while (true) {
-    VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+    VB_ASSIGN_OR_RETURN(const bool row, st.Step());
     if (!row) break;
-    VB_DB_ASSIGN_OR_RETURN(RunRecord run, ReadRun(st));
+    VB_ASSIGN_OR_RETURN(RunRecord run, ReadRun(st));
     out.push_back(std::move(run));
   }
   VB_RETURN_IF_ERROR(txn.Commit());
@@ -655,9 +655,9 @@ StatusOr<std::int64_t> SqliteStore::CountRuns(const RunFilter& f) {
   const run_query::Query q = run_query::Count(f, run_query::Dialect::kSqlite);
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
-  VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare(Cat("SELECT count(*)", q.sql)));
+  VB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare(Cat("SELECT count(*)", q.sql)));
   BindQuery(&st, q);
-  VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+  VB_ASSIGN_OR_RETURN(const bool row, st.Step());
   if (!row) return Status::Internal("count(*) returned no row");
   const std::int64_t n = st.Int(0);
   VB_RETURN_IF_ERROR(txn.Commit());
@@ -668,14 +668,14 @@ StatusOr<std::vector<StatusChange>> SqliteStore::History(std::int64_t run_id) {
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
   VB_RETURN_IF_ERROR(StatusOf(run_id).status());
-  VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT status, at, reason FROM status_history "
+  VB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT status, at, reason FROM status_history "
                                                 "WHERE run_id = ?1 ORDER BY id"));
   st.Bind(1, run_id);
   std::vector<StatusChange> out;
   while (true) {
-    VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+    VB_ASSIGN_OR_RETURN(const bool row, st.Step());
     if (!row) break;
-    VB_DB_ASSIGN_OR_RETURN(const RunStatus s, rules::StoredStatus(st.Text(0), Cat("history of run ", run_id)));
+    VB_ASSIGN_OR_RETURN(const RunStatus s, rules::StoredStatus(st.Text(0), Cat("history of run ", run_id)));
     out.push_back({s, st.Double(1), st.Text(2)});
   }
   VB_RETURN_IF_ERROR(txn.Commit());
@@ -686,11 +686,11 @@ StatusOr<std::vector<Metric>> SqliteStore::GetMetrics(std::int64_t run_id) {
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
   VB_RETURN_IF_ERROR(StatusOf(run_id).status());
-  VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT name, value FROM metrics WHERE run_id = ?1 ORDER BY name"));
+  VB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT name, value FROM metrics WHERE run_id = ?1 ORDER BY name"));
   st.Bind(1, run_id);
   std::vector<Metric> out;
   while (true) {
-    VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+    VB_ASSIGN_OR_RETURN(const bool row, st.Step());
     if (!row) break;
     out.push_back({st.Text(0), st.IsNull(1) ? std::nan("") : st.Double(1)});
   }
@@ -702,12 +702,12 @@ StatusOr<std::int64_t> SqliteStore::CountQueued(const std::string& submitter) {
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
   // Two texts so that each uses its index (runs_queue, runs_submitter).
-  VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare(submitter.empty()
+  VB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare(submitter.empty()
                                                     ? "SELECT count(*) FROM runs WHERE status = 'queued'"
                                                     : "SELECT count(*) FROM runs WHERE submitter = ?1 AND "
                                                       "status = 'queued'"));
   if (!submitter.empty()) st.Bind(1, submitter);
-  VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+  VB_ASSIGN_OR_RETURN(const bool row, st.Step());
   if (!row) return Status::Internal("count(*) returned no row");
   const std::int64_t n = st.Int(0);
   VB_RETURN_IF_ERROR(txn.Commit());
@@ -719,10 +719,10 @@ StatusOr<std::int64_t> SqliteStore::StoredTraceBytes(const std::string& submitte
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
   // runs_submitter finds the user's runs, the trace_chunks primary key their chunks; length() reads the
   // record header, not the BLOB.
-  VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT COALESCE(SUM(length(c.data)), 0) FROM runs r "
+  VB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT COALESCE(SUM(length(c.data)), 0) FROM runs r "
                                                 "JOIN trace_chunks c ON c.run_id = r.id WHERE r.submitter = ?1"));
   st.Bind(1, submitter);
-  VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+  VB_ASSIGN_OR_RETURN(const bool row, st.Step());
   if (!row) return Status::Internal("sum() returned no row");
   const std::int64_t n = st.Int(0);
   VB_RETURN_IF_ERROR(txn.Commit());
@@ -752,10 +752,10 @@ Status SqliteStore::AppendTraceChunk(const Lease& lease, const TraceChunk& chunk
   VB_RETURN_IF_ERROR(CheckLease(lease, Cat("trace chunk ", chunk.index), &txn));
   {
     // The last chunk so far (primary key order); its channels must match (all chunks of a trace share them).
-    VB_DB_ASSIGN_OR_RETURN(Stmt last, conn_.Prepare("SELECT idx, channels FROM trace_chunks WHERE run_id = ?1 "
+    VB_ASSIGN_OR_RETURN(Stmt last, conn_.Prepare("SELECT idx, channels FROM trace_chunks WHERE run_id = ?1 "
                                                     "ORDER BY idx DESC LIMIT 1"));
     last.Bind(1, run_id);
-    VB_DB_ASSIGN_OR_RETURN(const bool any, last.Step());
+    VB_ASSIGN_OR_RETURN(const bool any, last.Step());
     const std::int64_t next = any ? last.Int(0) + 1 : 0;
     if (chunk.index < next) {
       return Status::AlreadyExists(Cat(where, "already stored for run ", run_id, " (the next index is ", next, ")"));
@@ -769,7 +769,7 @@ Status SqliteStore::AppendTraceChunk(const Lease& lease, const TraceChunk& chunk
     }
   }
 
-  VB_DB_ASSIGN_OR_RETURN(Stmt ins, conn_.Prepare("INSERT INTO trace_chunks (run_id, idx, t0, period, samples, "
+  VB_ASSIGN_OR_RETURN(Stmt ins, conn_.Prepare("INSERT INTO trace_chunks (run_id, idx, t0, period, samples, "
                                                  "channels, data, codec) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8)"));
   ins.Bind(1, run_id);
   ins.Bind(2, static_cast<std::int64_t>(chunk.index));
@@ -805,21 +805,21 @@ Status SqliteStore::ReadChunks(std::int64_t run_id, const std::function<Status(T
   VB_RETURN_IF_ERROR(StatusOf(run_id).status());
   std::int64_t total = 0;
   {
-    VB_DB_ASSIGN_OR_RETURN(Stmt sum, conn_.Prepare("SELECT COALESCE(SUM(samples), 0) FROM trace_chunks WHERE run_id = ?1"));
+    VB_ASSIGN_OR_RETURN(Stmt sum, conn_.Prepare("SELECT COALESCE(SUM(samples), 0) FROM trace_chunks WHERE run_id = ?1"));
     sum.Bind(1, run_id);
-    VB_DB_ASSIGN_OR_RETURN(const bool row, sum.Step());
+    VB_ASSIGN_OR_RETURN(const bool row, sum.Step());
     if (row) total = sum.Int(0);
   }
   // length(data) comes from the record header without reading the BLOB; the BLOB itself is then copied straight
   // into the chunk's buffer by incremental BLOB I/O (one copy instead of two).
-  VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT rowid, idx, t0, period, samples, channels, length(data), "
+  VB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT rowid, idx, t0, period, samples, channels, length(data), "
                                                 "codec FROM trace_chunks WHERE run_id = ?1 ORDER BY idx"));
   st.Bind(1, run_id);
   sql::BlobReader blob(conn_.raw(), "trace_chunks", "data");
   TraceChunk c;  // reused unless fn takes it: its buffer keeps its capacity from chunk to chunk
   std::int32_t expected = 0;
   while (true) {
-    VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+    VB_ASSIGN_OR_RETURN(const bool row, st.Step());
     if (!row) break;
     c.index = static_cast<std::int32_t>(st.Int(1));
     c.t0_s = st.Double(2);
@@ -834,13 +834,13 @@ Status SqliteStore::ReadChunks(std::int64_t run_id, const std::function<Status(T
     const std::int64_t codec = st.Int(7);
     if (codec == static_cast<std::int64_t>(trace::Codec::kRawFloat64)) {  // written before schema v4
       VB_RETURN_IF_ERROR(trace::CheckSize(static_cast<std::size_t>(st.Int(6)), values, what));
-      VB_DB_ASSIGN_OR_RETURN(const std::size_t bytes, blob.Open(st.Int(0)));
+      VB_ASSIGN_OR_RETURN(const std::size_t bytes, blob.Open(st.Int(0)));
       VB_RETURN_IF_ERROR(trace::CheckSize(bytes, values, what));
       c.data.resize(values);
       VB_RETURN_IF_ERROR(blob.Read(c.data.data(), bytes));
       trace::FromLittleEndian(&c.data);
     } else if (codec == static_cast<std::int64_t>(trace::Codec::kShuffledZstd)) {
-      VB_DB_ASSIGN_OR_RETURN(const std::size_t bytes, blob.Open(st.Int(0)));
+      VB_ASSIGN_OR_RETURN(const std::size_t bytes, blob.Open(st.Int(0)));
       blob_.resize(bytes);
       VB_RETURN_IF_ERROR(blob.Read(blob_.data(), bytes));
       c.data.resize(values);
@@ -865,53 +865,53 @@ StatusOr<PruneResult> SqliteStore::Prune(const PruneRequest& request) {
 
   PruneFacts facts;
   {
-    VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT id, batch_id, night, suite FROM regressions "
+    VB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT id, batch_id, night, suite FROM regressions "
                                                   "WHERE batch_id != 0"));
     while (true) {
-      VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+      VB_ASSIGN_OR_RETURN(const bool row, st.Step());
       if (!row) break;
       facts.regressions.push_back({st.Int(0), st.Int(1), st.Text(2), st.Text(3)});
     }
   }
   {
-    VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT name, version, source FROM baselines ORDER BY id"));
+    VB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT name, version, source FROM baselines ORDER BY id"));
     while (true) {
-      VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+      VB_ASSIGN_OR_RETURN(const bool row, st.Step());
       if (!row) break;
       facts.baselines.push_back({st.Text(0), static_cast<std::int32_t>(st.Int(1)), st.Text(2)});
     }
   }
   {
-    VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT id, batch_id, name, status, finished FROM runs"));
+    VB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT id, batch_id, name, status, finished FROM runs"));
     while (true) {
-      VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+      VB_ASSIGN_OR_RETURN(const bool row, st.Step());
       if (!row) break;
       PruneFacts::Run r{st.Int(0), st.Int(1), st.Text(2), RunStatus::kDone, st.Double(4)};
-      VB_DB_ASSIGN_OR_RETURN(r.status, rules::StoredStatus(st.Text(3), Cat("run ", r.id)));
+      VB_ASSIGN_OR_RETURN(r.status, rules::StoredStatus(st.Text(3), Cat("run ", r.id)));
       facts.runs.push_back(std::move(r));
     }
   }
   PrunePlan plan = PlanPrune(facts, request);
   PruneResult& out = plan.result;
   {
-    VB_DB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT COALESCE(SUM(length(data)), 0) FROM trace_chunks "
+    VB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT COALESCE(SUM(length(data)), 0) FROM trace_chunks "
                                                   "WHERE run_id = ?1"));
     for (std::int64_t id : plan.doomed) {
       st.Reset();
       st.Bind(1, id);
-      VB_DB_ASSIGN_OR_RETURN(const bool row, st.Step());
+      VB_ASSIGN_OR_RETURN(const bool row, st.Step());
       if (row) out.trace_bytes += st.Int(0);
     }
   }
   if (!request.dry_run) {
     // Children go with their run (ON DELETE CASCADE): tags, history, metrics, sweep point, trace chunks.
-    VB_DB_ASSIGN_OR_RETURN(Stmt del, conn_.Prepare("DELETE FROM runs WHERE id = ?1"));
+    VB_ASSIGN_OR_RETURN(Stmt del, conn_.Prepare("DELETE FROM runs WHERE id = ?1"));
     for (std::int64_t id : plan.doomed) {
       del.Reset();
       del.Bind(1, id);
       VB_RETURN_IF_ERROR(del.Run());
     }
-    VB_DB_ASSIGN_OR_RETURN(Stmt empty, conn_.Prepare("DELETE FROM batches WHERE id = ?1 AND NOT EXISTS "
+    VB_ASSIGN_OR_RETURN(Stmt empty, conn_.Prepare("DELETE FROM batches WHERE id = ?1 AND NOT EXISTS "
                                                      "(SELECT 1 FROM runs WHERE batch_id = ?1)"));
     out.batches_deleted = 0;
     for (std::int64_t b : plan.empty_batches) {
@@ -943,7 +943,7 @@ StatusOr<std::unique_ptr<Store>> Store::Open(const std::string& path) {
     return Status::InvalidArgument("path: must not be empty (\":memory:\" opens a private in-memory database)");
   }
   const std::string where = Cat("database '", path, "'");
-  VB_DB_ASSIGN_OR_RETURN(sql::Connection conn, sql::Connection::Open(path));
+  VB_ASSIGN_OR_RETURN(sql::Connection conn, sql::Connection::Open(path));
   sqlite3_busy_timeout(conn.raw(), kBusyTimeoutMs);
   if (sqlite3_db_readonly(conn.raw(), "main") == 1) {
     return Status::Unavailable(Cat(where, ": the file is read-only, and the store must write to it"));
@@ -998,7 +998,7 @@ StatusOr<std::int32_t> SqliteStore::SaveBaseline(const std::string& name, const 
   VB_RETURN_IF_ERROR(checks::ValidateBaseline(name, entries));
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kWrite));
-  VB_DB_ASSIGN_OR_RETURN(const int version,
+  VB_ASSIGN_OR_RETURN(const int version,
                          regress_tables::InsertBaseline(&conn_, name, source, note, entries, NowUnixS()));
   VB_RETURN_IF_ERROR(txn.Commit());
   return version;
@@ -1007,7 +1007,7 @@ StatusOr<std::int32_t> SqliteStore::SaveBaseline(const std::string& name, const 
 StatusOr<BaselineRecord> SqliteStore::GetBaseline(const std::string& name, std::int32_t version) {
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
-  VB_DB_ASSIGN_OR_RETURN(BaselineRecord b, regress_tables::LoadBaseline(&conn_, name, version));
+  VB_ASSIGN_OR_RETURN(BaselineRecord b, regress_tables::LoadBaseline(&conn_, name, version));
   VB_RETURN_IF_ERROR(txn.Commit());
   return b;
 }
@@ -1015,7 +1015,7 @@ StatusOr<BaselineRecord> SqliteStore::GetBaseline(const std::string& name, std::
 StatusOr<std::vector<BaselineRecord>> SqliteStore::ListBaselines() {
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
-  VB_DB_ASSIGN_OR_RETURN(std::vector<BaselineRecord> out, regress_tables::ListBaselines(&conn_));
+  VB_ASSIGN_OR_RETURN(std::vector<BaselineRecord> out, regress_tables::ListBaselines(&conn_));
   VB_RETURN_IF_ERROR(txn.Commit());
   return out;
 }
@@ -1024,7 +1024,7 @@ StatusOr<std::int64_t> SqliteStore::SaveRegression(const RegressionRecord& recor
   VB_RETURN_IF_ERROR(checks::CheckRegression(record));
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kWrite));
-  VB_DB_ASSIGN_OR_RETURN(const std::int64_t id, regress_tables::InsertRegression(&conn_, record, NowUnixS()));
+  VB_ASSIGN_OR_RETURN(const std::int64_t id, regress_tables::InsertRegression(&conn_, record, NowUnixS()));
   VB_RETURN_IF_ERROR(txn.Commit());
   return id;
 }
@@ -1032,7 +1032,7 @@ StatusOr<std::int64_t> SqliteStore::SaveRegression(const RegressionRecord& recor
 StatusOr<RegressionRecord> SqliteStore::GetRegression(std::int64_t id) {
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
-  VB_DB_ASSIGN_OR_RETURN(RegressionRecord r, regress_tables::LoadRegression(&conn_, id));
+  VB_ASSIGN_OR_RETURN(RegressionRecord r, regress_tables::LoadRegression(&conn_, id));
   VB_RETURN_IF_ERROR(txn.Commit());
   return r;
 }
@@ -1041,7 +1041,7 @@ StatusOr<std::vector<RegressionRecord>> SqliteStore::ListRegressions(bool nights
   VB_RETURN_IF_ERROR(checks::CheckListLimit(limit));
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kRead));
-  VB_DB_ASSIGN_OR_RETURN(std::vector<RegressionRecord> out,
+  VB_ASSIGN_OR_RETURN(std::vector<RegressionRecord> out,
                          regress_tables::ListRegressions(&conn_, nights_only, limit));
   VB_RETURN_IF_ERROR(txn.Commit());
   return out;
