@@ -8,6 +8,7 @@
 #include <sstream>
 
 #include "common/format.h"
+#include "gap/text_wrap.h"
 #include "gap/diagnose.h"
 
 namespace vb::gap {
@@ -32,31 +33,6 @@ nlohmann::ordered_json RowJson(const CandidateResult& r) {
   if (!r.status.ok()) row["error"] = r.status.message();
   if (!r.disqualified.empty()) row["disqualified"] = r.disqualified;
   return row;
-}
-
-// Words (split further at spaces) on lines of at most `width` columns, each indented by `indent` (the first by
-// `first`, when given: a hanging indent).
-std::string Wrap(const std::vector<std::string>& items, std::size_t indent, std::size_t width = 120,
-                 std::size_t first = std::string::npos) {
-  std::string out, line;
-  auto pad = [&]() { return out.empty() && first != std::string::npos ? first : indent; };
-  for (const auto& item : items) {
-    std::istringstream in(item);
-    std::string word;
-    bool first = true;
-    while (in >> word) {
-      const std::string piece = (first && !line.empty() ? "  " : line.empty() ? "" : " ") + word;
-      if (!line.empty() && pad() + line.size() + piece.size() > width) {
-        out += std::string(pad(), ' ') + line + "\n";
-        line = word;
-      } else {
-        line += piece;
-      }
-      first = false;
-    }
-  }
-  if (!line.empty()) out += std::string(pad(), ' ') + line + "\n";
-  return out;
 }
 
 nlohmann::ordered_json NumOrNull(double v) { return std::isfinite(v) ? nlohmann::ordered_json(v) : nlohmann::ordered_json(nullptr); }

@@ -1,4 +1,5 @@
 #include "gap/moving_valve.h"
+#include "gap/text_wrap.h"
 
 #include <nlohmann/json.hpp>
 #include <nlopt.hpp>
@@ -1396,30 +1397,33 @@ std::string MovingIdentificationReport(const MovingIdentification& id) {
   std::snprintf(buf, sizeof buf, "model family %s, identified from scratch; noise floor %.3f mA; %d model evaluations, %.1f s\n",
                 id.model.c_str(), id.noise_floor_A * 1e3, id.evaluations, id.seconds);
   os << buf;
-  if (!id.split_note.empty()) os << id.split_note << "\n";
+  // Every line within 120 columns (a terminal's): long texts wrap under their own first column.
+  if (!id.split_note.empty()) os << Wrap({id.split_note}, 2, 120, 0);
+  os << "stages (fit RMS, evaluations, what was fitted):\n";
   for (const auto& s : id.stages) {
-    std::snprintf(buf, sizeof buf, "  stage %-70s %8.3f mA  (%d evaluations)\n", s.name.c_str(), s.fit_rmse_A * 1e3, s.evaluations);
-    os << buf;
+    std::snprintf(buf, sizeof buf, "  %8.3f mA %6d  ", s.fit_rmse_A * 1e3, s.evaluations);
+    os << Hanging(buf, "stage " + s.name);
   }
   os << "what the switch-on current determines:\n";
   for (const auto& d : id.determined) {
     if (d.determined)
-      std::snprintf(buf, sizeof buf, "  %-12s %12.5g %-7s +- %-10.3g %s\n", d.name.c_str(), d.value, d.unit.c_str(), d.sigma,
-                    d.meaning.c_str());
+      std::snprintf(buf, sizeof buf, "  %-12s %12.5g %-7s +- %-10.3g ", d.name.c_str(), d.value, d.unit.c_str(), d.sigma);
     else
-      std::snprintf(buf, sizeof buf, "  %-12s %12.5g %-7s (not determined by these runs) %s\n", d.name.c_str(), d.value,
-                    d.unit.c_str(), d.meaning.c_str());
-    os << buf;
+      std::snprintf(buf, sizeof buf, "  %-12s %12.5g %-7s (not determined by these runs) ", d.name.c_str(), d.value,
+                    d.unit.c_str());
+    os << Hanging(buf, d.meaning);
   }
   os << "held at stated values:\n";
   for (const auto& h : id.held) {
     std::snprintf(buf, sizeof buf, "  %-8s = %-10.4g ", h.name.c_str(), h.value);
-    os << buf << h.why << "\n";
+    os << Hanging(buf, h.why);
   }
-  for (const auto& n : id.notes) os << "note: " << n << "\n";
-  os << "the family's parameters as set:";
-  for (const auto& [k, v] : id.values) os << " " << k << "=" << Fmt(v);
-  os << "\n";
+  for (const auto& n : id.notes) os << Hanging("note: ", n);
+  std::vector<std::string> set;
+  for (const auto& [k, v] : id.values) set.push_back(k + "=" + Fmt(v));
+  std::string joined;
+  for (const auto& x : set) joined += (joined.empty() ? "" : " ") + x;
+  os << Hanging("the family's parameters as set: ", joined);
   if (std::isfinite(id.holdout_rmse_after_A))
     std::snprintf(buf, sizeof buf, "fit runs %.3f mA RMS; holdout runs %.3f mA RMS (the family's preset: %.3f mA)\n",
                   id.fit_rmse_A * 1e3, id.holdout_rmse_after_A * 1e3, id.holdout_rmse_before_A * 1e3);
@@ -1452,10 +1456,9 @@ std::string MovingIdentificationReport(const MovingIdentification& id) {
     os << buf;
   }
   if (id.holdout_runs > 0)
-    os << "prediction of the holdout runs: "
-       << (id.prediction_undetermined.empty() ? "determined by the fit runs"
-                                              : "UNDETERMINED (" + id.prediction_undetermined + ")")
-       << "\n";
+    os << Hanging("prediction of the holdout runs: ",
+                  id.prediction_undetermined.empty() ? "determined by the fit runs"
+                                                     : "UNDETERMINED (" + id.prediction_undetermined + ")");
   bool banded = false;
   for (const auto& r : id.landmarks) {
     if (r.band_draws == 0) continue;
