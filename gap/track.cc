@@ -195,93 +195,144 @@ void TrackParameter(TrackedParameter* p, const TrackOptions& o) {
   }
 }
 
-StatusOr<Tracking> TrackSessions(const std::vector<TrackSession>& sessions, const model::PlantParams& family,
-                                 const TrackOptions& options) {
-  if (sessions.size() < 2) return Status::InvalidArgument("track: give at least two sessions (in time order)");
+namespace {
+
+Status CheckTrackOptions(const TrackOptions& options) {
   if (!(options.k_sigma > 0.0) || !(options.target_arl0_sessions > 1.0))
     return Status::InvalidArgument("track: k must be > 0 and the target run length > 1 session");
   if (options.min_reference < 2 || options.baseline_max < options.min_reference)
     return Status::InvalidArgument("track: the reference needs at least 2 sessions and baseline_max >= min_reference");
+  return Status::Ok();
+}
+
+}  // namespace
+
+StatusOr<MovingIdentification> IdentifyForTracking(const Dataset& session, const model::PlantParams& family,
+                                                   const MovingIdentification* anchor, const TrackOptions& options) {
+  Dataset ds = session;
+  for (auto& r : ds.runs) r.split = Split::kFit;
+  MovingIdentifyOptions mo = options.identify;
+  mo.warm_start = anchor;
+  auto id = IdentifyMovingValve(ds, family, mo);
+  if (id.ok() && anchor == nullptr) {
+    // The first session from scratch, then polished from its own end as every later one will be: the chain
+    // starts converged (a from-scratch end left above the optimum would make the next nights descend further
+    // and their parameters trend with the search).
+    const MovingIdentification scratch = *id;
+    mo.warm_start = &scratch;
+    auto polished = IdentifyMovingValve(ds, family, mo);
+    if (polished.ok() && polished->fit_rmse_A <= scratch.fit_rmse_A) id = std::move(polished);
+  }
+  return id;
+}
+
+SessionValues ValuesOfSession(const std::string& name, const Dataset& ds, const StatusOr<MovingIdentification>& id) {
+  SessionValues v;
+  v.name = name;
+  bool temperatures = !ds.runs.empty();
+  double sum_C = 0.0;
+  for (const auto& r : ds.runs) {
+    temperatures = temperatures && std::isfinite(r.temperature_C());
+    sum_C += r.temperature_C();
+  }
+  if (temperatures) v.temperature_C = sum_C / static_cast<double>(ds.runs.size());
+  if (!id.ok()) {
+    v.error = id.status().message();
+    return v;
+  }
+  v.fit_rmse_A = id->fit_rmse_A;
+  v.noise_floor_A = id->noise_floor_A;
+  v.determined = id->determined;
+  return v;
+}
+
+std::string SessionValuesJson(const SessionValues& v) {
+  nlohmann::ordered_json j;
+  j["session"] = v.name;
+  if (!v.error.empty()) j["error"] = v.error;
+  j["fit_rmse_A"] = NumJ(v.fit_rmse_A);
+  j["noise_floor_A"] = NumJ(v.noise_floor_A);
+  j["temperature_C"] = NumJ(v.temperature_C);
+  j["determined"] = nlohmann::ordered_json::array();
+  for (const auto& d : v.determined)
+    j["determined"].push_back({{"name", d.name},
+                               {"unit", d.unit},
+                               {"meaning", d.meaning},
+                               {"value", NumJ(d.value)},
+                               {"sigma", NumJ(d.sigma)},
+                               {"sigma_white", NumJ(d.sigma_white)},
+                               {"determined", d.determined}});
+  return j.dump();
+}
+
+StatusOr<SessionValues> SessionValuesFromJson(const std::string& json) {
+  const auto j = nlohmann::json::parse(json, nullptr, false);
+  if (!j.is_object() || !j.contains("session") || !j["session"].is_string())
+    return Status::InvalidArgument("a session's values: not a JSON object with \"session\"");
+  auto num = [](const nlohmann::json& o, const char* k) {
+    return o.contains(k) && o[k].is_number() ? o[k].get<double>() : NAN;
+  };
+  SessionValues v;
+  v.name = j["session"].get<std::string>();
+  v.error = j.value("error", std::string());
+  v.fit_rmse_A = num(j, "fit_rmse_A");
+  v.noise_floor_A = num(j, "noise_floor_A");
+  v.temperature_C = num(j, "temperature_C");
+  if (j.contains("determined") && j["determined"].is_array())
+    for (const auto& d : j["determined"]) {
+      if (!d.is_object() || !d.contains("name") || !d["name"].is_string())
+        return Status::InvalidArgument("a session's values (" + v.name + "): a determined value without a name");
+      DeterminedValue e;
+      e.name = d["name"].get<std::string>();
+      e.unit = d.value("unit", std::string());
+      e.meaning = d.value("meaning", std::string());
+      e.value = num(d, "value");
+      e.sigma = num(d, "sigma");
+      e.sigma_white = num(d, "sigma_white");
+      e.determined = d.value("determined", true);
+      v.determined.push_back(std::move(e));
+    }
+  return v;
+}
+
+StatusOr<Tracking> TrackValues(const std::vector<SessionValues>& sessions, const TrackOptions& options) {
+  if (sessions.size() < 2) return Status::InvalidArgument("track: give at least two sessions (in time order)");
+  VB_RETURN_IF_ERROR(CheckTrackOptions(options));
   Tracking t;
   t.k_sigma = options.k_sigma;
   t.target_arl0_sessions = options.target_arl0_sessions;
   t.h_sigma = CusumInterval(options.k_sigma, options.target_arl0_sessions);
-  std::vector<std::optional<MovingIdentification>> ids(sessions.size());
-  // Every later session starts from the first one identified (the anchor), not from the session before: a
-  // chain of warm starts walks along the directions the runs barely determine (measured on the independent
-  // plant: R wandered 1.3 % and back on a clean valve as L1, B_sat and R_p traded off), while starts from one
-  // point make each session's end a function of its own data.
-  const MovingIdentification* previous = nullptr;
-  bool temperatures = true;  // every fit run of every session declares its winding's temperature
-  for (std::size_t i = 0; i < sessions.size(); ++i) {
-    t.sessions.push_back(sessions[i].name);
-    // Every run is fitted: a night's session is data on the valve, not a prediction test.
-    Dataset ds = sessions[i].dataset;
-    for (auto& r : ds.runs) {
-      r.split = Split::kFit;
-      temperatures = temperatures && std::isfinite(r.temperature_C());
-    }
-    MovingIdentifyOptions mo = options.identify;
-    mo.warm_start = previous;
-    if (options.progress)
-      options.progress("session " + sessions[i].name + ": " +
-                       (previous ? "warm start from the first session" : "identifying from scratch"));
-    auto id = IdentifyMovingValve(ds, family, mo);
-    if (id.ok() && previous == nullptr) {
-      // The first session from scratch, then polished from its own end as every later one will be: the chain
-      // starts converged (a from-scratch end left above the optimum would make the next nights descend further
-      // and their parameters trend with the search).
-      const MovingIdentification scratch = *id;
-      mo.warm_start = &scratch;
-      auto polished = IdentifyMovingValve(ds, family, mo);
-      if (polished.ok() && polished->fit_rmse_A <= scratch.fit_rmse_A) id = std::move(polished);
-    }
-    if (!id.ok()) {
-      t.session_errors.push_back(id.status().message());
-      t.fit_rmse_A.push_back(NAN);
-      t.noise_floor_A.push_back(NAN);
-      continue;
-    }
-    t.session_errors.push_back("");
-    t.fit_rmse_A.push_back(id->fit_rmse_A);
-    t.noise_floor_A.push_back(id->noise_floor_A);
-    ids[i] = std::move(*id);
-    if (previous == nullptr) previous = &*ids[i];
+  const SessionValues* first = nullptr;
+  bool temperatures = true;  // every run of every session declares its winding's temperature
+  for (const auto& s : sessions) {
+    t.sessions.push_back(s.name);
+    t.session_errors.push_back(s.error);
+    t.fit_rmse_A.push_back(s.error.empty() ? s.fit_rmse_A : NAN);
+    t.noise_floor_A.push_back(s.error.empty() ? s.noise_floor_A : NAN);
+    temperatures = temperatures && std::isfinite(s.temperature_C);
+    if (first == nullptr && s.error.empty()) first = &s;
   }
-  const MovingIdentification* first = nullptr;
-  for (const auto& id : ids)
-    if (id) {
-      first = &*id;
-      break;
-    }
   if (first == nullptr) {
     return Status::InvalidArgument("track: no session could be identified; the first session's error: " +
-                                   t.session_errors.front());
+                                   sessions.front().error);
   }
   // Winding temperatures declared everywhere: R is referred to 20 C (copper, 3.93e-3 1/K) so that a warmer night
   // is not a resistance change.
   const double alpha = 3.93e-3;
-  std::vector<double> temp_C(sessions.size(), NAN);
-  if (temperatures) {
-    for (std::size_t i = 0; i < sessions.size(); ++i) {
-      double s = 0;
-      for (const auto& r : sessions[i].dataset.runs) s += r.temperature_C() / sessions[i].dataset.runs.size();
-      temp_C[i] = s;
-    }
+  if (temperatures)
     t.notes.push_back("every run declares its winding's temperature: R is referred to 20 C (copper, alpha 3.93e-3 1/K)");
-  }
   // A parameter is tracked when at least half of the identified sessions determine it (1-sigma below half its
   // value): one session whose Gauss-Newton step failed must not drop it, nor one lucky session add it. The sigma
   // is the white-noise one (DeterminedValue::sigma_white): night to night the same valve's form error is the
   // same, so what moves a value between recordings is the noise and the conditions; the scatter of the nights
   // (the reference's) carries the conditions.
   int identified = 0;
-  for (const auto& id : ids) identified += id.has_value();
+  for (const auto& s : sessions) identified += s.error.empty();
   for (const auto& d : first->determined) {
     int determined = 0;
-    for (const auto& id : ids)
-      if (id)
-        for (const auto& e : id->determined)
+    for (const auto& s : sessions)
+      if (s.error.empty())
+        for (const auto& e : s.determined)
           determined += e.name == d.name && std::isfinite(e.sigma_white) && e.sigma_white < 0.5 * std::abs(e.value);
     if (2 * determined < identified) {
       t.notes.push_back(d.name + " is repeatable in " + std::to_string(determined) + " of " +
@@ -290,13 +341,13 @@ StatusOr<Tracking> TrackSessions(const std::vector<TrackSession>& sessions, cons
     }
     TrackedParameter p;
     p.name = d.name, p.unit = d.unit, p.meaning = d.meaning;
-    for (std::size_t i = 0; i < sessions.size(); ++i) {
+    for (const auto& s : sessions) {
       TrackedValue v;
-      if (ids[i])
-        for (const auto& e : ids[i]->determined)
+      if (s.error.empty())
+        for (const auto& e : s.determined)
           if (e.name == d.name) v.value = e.value, v.sigma = e.sigma_white;
       if (d.name == "R" && temperatures) {
-        const double f = 1.0 + alpha * (temp_C[i] - 20.0);
+        const double f = 1.0 + alpha * (s.temperature_C - 20.0);
         v.value /= f, v.sigma /= f;
       }
       p.sessions.push_back(v);
@@ -328,6 +379,27 @@ StatusOr<Tracking> TrackSessions(const std::vector<TrackSession>& sessions, cons
   for (std::size_t i = 0; i < sessions.size(); ++i)
     if (!t.session_errors[i].empty()) t.notes.push_back("session " + t.sessions[i] + " not identified: " + t.session_errors[i]);
   return t;
+}
+
+StatusOr<Tracking> TrackSessions(const std::vector<TrackSession>& sessions, const model::PlantParams& family,
+                                 const TrackOptions& options) {
+  if (sessions.size() < 2) return Status::InvalidArgument("track: give at least two sessions (in time order)");
+  VB_RETURN_IF_ERROR(CheckTrackOptions(options));
+  // Every later session starts from the first one identified (the anchor), not from the session before: a
+  // chain of warm starts walks along the directions the runs barely determine (measured on the independent
+  // plant: R wandered 1.3 % and back on a clean valve as L1, B_sat and R_p traded off), while starts from one
+  // point make each session's end a function of its own data.
+  std::optional<MovingIdentification> anchor;
+  std::vector<SessionValues> values;
+  for (const auto& s : sessions) {
+    if (options.progress)
+      options.progress("session " + s.name + ": " +
+                       (anchor ? "warm start from the first session" : "identifying from scratch"));
+    auto id = IdentifyForTracking(s.dataset, family, anchor ? &*anchor : nullptr, options);
+    values.push_back(ValuesOfSession(s.name, s.dataset, id));
+    if (id.ok() && !anchor) anchor = std::move(*id);
+  }
+  return TrackValues(values, options);
 }
 
 std::string TrackingJson(const Tracking& t) {

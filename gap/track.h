@@ -110,6 +110,28 @@ double SelfStartingZ(double d, double s, int n, bool estimated = true);
 // Runs the detector over values already identified (one per session, NaN: a session without a value).
 void TrackParameter(TrackedParameter* p, const TrackOptions& options);
 
+// One session's values as the tracking takes them: what a server keeps per night (its JSON below), so that a
+// bench's history is tracked without identifying every night again.
+struct SessionValues {
+  std::string name;
+  std::string error;                        // "" when identified
+  double fit_rmse_A = NAN, noise_floor_A = NAN;
+  double temperature_C = NAN;               // the runs' mean declared winding temperature (NaN: not every run declares)
+  std::vector<DeterminedValue> determined;  // the identification's, in its order
+};
+
+// A session identified for tracking: from scratch, then polished from its own end (anchor == nullptr: the first
+// session), or one local fit warm-started from the anchor (every later session; docs/track.md, step 1). Every run
+// is fitted: a night's session is data on the valve, not a prediction test.
+StatusOr<MovingIdentification> IdentifyForTracking(const Dataset& ds, const model::PlantParams& family,
+                                                   const MovingIdentification* anchor, const TrackOptions& options);
+SessionValues ValuesOfSession(const std::string& name, const Dataset& ds, const StatusOr<MovingIdentification>& id);
+std::string SessionValuesJson(const SessionValues& v);
+StatusOr<SessionValues> SessionValuesFromJson(const std::string& json);
+
+// Tracks sessions already identified: every parameter the first identified session determines.
+StatusOr<Tracking> TrackValues(const std::vector<SessionValues>& sessions, const TrackOptions& options);
+
 // Identifies every session and tracks every parameter the first session determines.
 StatusOr<Tracking> TrackSessions(const std::vector<TrackSession>& sessions, const model::PlantParams& family,
                                  const TrackOptions& options = {});
