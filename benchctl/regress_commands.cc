@@ -321,14 +321,21 @@ int RegressCli::Run(const ClientFactory& make_client) {
                      {"improved", n.improved()},
                      {"started_unix_s", n.started_unix_s()},
                      {"finished_unix_s", n.finished_unix_s()},
-                     {"summary", n.summary()}});
+                     {"summary", n.summary()},
+                     {"valve_changes", n.valve_changes()},
+                     {"cause", n.cause()},
+                     {"cause_reason", n.cause_reason()}});
       std::cout << a.dump(2) << "\n";
     } else {
       if (resp->nights_size() == 0) std::printf("no nights yet on %s\n", server.c_str());
-      for (const auto& n : resp->nights())
+      for (const auto& n : resp->nights()) {
         std::printf("%s  %-9s  batch %-5lld %s vs %s  %s\n", n.date().c_str(), n.verdict().c_str(),
                     static_cast<long long>(n.batch_id()), n.suite().c_str(), n.baseline().c_str(),
                     n.summary().c_str());
+        for (const auto& v : n.valve_changes()) std::printf("            valve changed: %s\n", v.c_str());
+        if (!n.cause().empty())
+          std::printf("            cause: %s (%s)\n", n.cause().c_str(), n.cause_reason().c_str());
+      }
     }
     // The newest night decides: a script can gate on "did last night pass" (no nights yet is not a failure).
     if (resp->nights_size() > 0 && resp->nights(0).verdict() != "passed") return kExitRunFailed;

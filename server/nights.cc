@@ -166,12 +166,15 @@ StatusOr<std::int64_t> NightScheduler::RunNight(double fire_unix_s) {
   auto runs = regress::ExpandSuite(suite->suite, seed);
   if (!runs.ok()) return error(runs.status());
   std::vector<v1::ExperimentSpec> specs;
+  std::map<std::string, experiment::ExperimentSpec> case_specs;          // each case's first run (the replay's)
+  std::map<std::string, std::vector<std::string>> case_benches;          // the benches that ran each case
   std::vector<RunKey> keys;
   for (auto& r : *runs) {
     keys.push_back(r.key);
     r.spec.add_tags("night");
     r.spec.add_tags("night:" + date);
     r.spec.add_tags(runs::NightNumberTag(night_number));
+    case_specs.emplace(r.key.CaseName(), r.spec);
     specs.push_back(std::move(r.spec));
   }
   auto queued = submit_(runs::Submission{"nights", "night:" + date, std::move(specs), std::move(keys), ""});
@@ -202,6 +205,9 @@ StatusOr<std::int64_t> NightScheduler::RunNight(double fire_unix_s) {
         m.name = r.key.DisplayName();
         m.case_name = r.key.CaseName();
         m.ok = r.status == db::RunStatus::kDone;
+        auto& ran = case_benches[m.case_name];
+        if (!r.bench_name.empty() && std::find(ran.begin(), ran.end(), r.bench_name) == ran.end())
+          ran.push_back(r.bench_name);
         m.reason = m.ok ? "" : std::string(db::RunStatusName(r.status)) + (r.reason.empty() ? "" : ": " + r.reason);
         auto metrics = (*store)->GetMetrics(r.id);
         if (!metrics.ok()) return error(metrics.status());
@@ -247,8 +253,82 @@ StatusOr<std::int64_t> NightScheduler::RunNight(double fire_unix_s) {
   regress::Json j = regress::ResultToJson(r);
   j["started_unix_s"] = started_unix_s;
   j["night_number"] = night_number;
+  TwinNight(date, r, case_specs, case_benches, &health, &j);
   j["health"] = health;
   return SaveNight(date, batch_id, r.verdict(), j.dump(), clock_());
+}
+
+void NightScheduler::TwinNight(const std::string& date, const regress::RegressResult& r,
+                               const std::map<std::string, experiment::ExperimentSpec>& case_specs,
+                               const std::map<std::string, std::vector<std::string>>& case_benches,
+                               regress::Json* health, regress::Json* j) {
+  bool checked = false;
+  for (const auto& h : *health) checked = checked || h.contains("batch_id");
+  if (!checked) return;
+  // The benches' earlier nights from the store (the newest 1000 nights): their values, and each bench's first
+  // check (the anchor after a restart).
+  std::map<std::string, std::map<std::string, gap::SessionValues>> history;  // bench -> date -> values
+  std::map<std::string, std::pair<std::string, std::int64_t>> first;         // bench -> (date, batch)
+  {
+    auto store = pool_->Acquire();
+    if (!store.ok()) {
+      (*j)["twin_error"] = store.status().message();
+      return;
+    }
+    auto nights = (*store)->ListRegressions(/*nights_only=*/true, 1000);
+    if (!nights.ok()) {
+      (*j)["twin_error"] = nights.status().message();
+      return;
+    }
+    for (const auto& brief : *nights) {
+      if (brief.night.empty() || brief.night >= date) continue;
+      auto rec = (*store)->GetRegression(brief.id);
+      if (!rec.ok()) continue;
+      const auto stored = regress::Json::parse(rec->result_json, nullptr, false);
+      if (!stored.is_object() || !stored.contains("health") || !stored["health"].is_array()) continue;
+      for (const auto& h : stored["health"]) {
+        if (!h.is_object() || !h.contains("bench") || !h.contains("batch_id")) continue;
+        const std::string bench = h["bench"].get<std::string>();
+        auto f = first.find(bench);
+        if (f == first.end() || brief.night < f->second.first)
+          first[bench] = {brief.night, h["batch_id"].get<std::int64_t>()};
+        if (!h.contains("values")) continue;
+        auto v = gap::SessionValuesFromJson(h["values"].dump());
+        if (v.ok()) history[bench][brief.night] = std::move(*v);
+      }
+    }
+  }
+  for (auto& h : *health) {
+    if (!h.contains("batch_id")) continue;
+    const std::string bench = h["bench"].get<std::string>();
+    const auto f = first.find(bench);
+    const gap::SessionValues tonight =
+        twins_.Identify(bench, date, h["batch_id"].get<std::int64_t>(), f == first.end() ? 0 : f->second.second);
+    h["values"] = regress::Json::parse(gap::SessionValuesJson(tonight));
+    if (!tonight.error.empty()) spdlog::warn("night {}: health check of {} not identified: {}", date, bench, tonight.error);
+    std::vector<gap::SessionValues> past;
+    for (const auto& [d, v] : history[bench]) past.push_back(v);
+    if (past.empty()) {
+      h["tracking"] = "the bench's first checked night: its reference starts here";
+      continue;
+    }
+    auto t = twins_.Track(past, tonight);
+    if (!t.ok()) {
+      h["tracking"] = t.status().message();
+      continue;
+    }
+    const auto tj = regress::Json::parse(gap::TrackingJson(*t));
+    h["tracked_nights"] = t->sessions.size();
+    h["flags"] = tj["flags"];
+    for (const auto& flag : t->flags)
+      spdlog::info("night {}: bench {}: {} {} {:+.2f} % since {} (flagged {})", date, bench, flag.parameter,
+                   flag.direction, 100.0 * flag.change_relative, flag.since, flag.session);
+  }
+  if (r.regressed()) {
+    (*j)["cause"] = twins_.Attribute(r, case_specs, case_benches);
+    spdlog::info("night {}: cause {}: {}", date, (*j)["cause"].value("verdict", ""),
+                 (*j)["cause"].value("reason", ""));
+  }
 }
 
 }  // namespace vb::server

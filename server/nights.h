@@ -8,6 +8,7 @@
 #include <condition_variable>
 #include <cstdint>
 #include <functional>
+#include <map>
 #include <mutex>
 #include <string>
 #include <thread>
@@ -15,6 +16,7 @@
 
 #include "common/status.h"
 #include "runs/admit.h"
+#include "server/bench_twin.h"
 #include "server/config.h"
 #include "server/stop_signal.h"
 #include "service/service.h"
@@ -52,12 +54,19 @@ class NightScheduler {
   void Loop(int nights_now);
   // The lab's number for the night `date`: 1 + the distinct other nights stored (the newest 1000).
   StatusOr<int> NightNumber(const std::string& date);
+  // The bench twin's part of a night (server/bench_twin.h): each checked bench's values and flags into its
+  // `health` entry, and a regressed night's cause into j["cause"].
+  void TwinNight(const std::string& date, const regress::RegressResult& r,
+                 const std::map<std::string, experiment::ExperimentSpec>& case_specs,
+                 const std::map<std::string, std::vector<std::string>>& case_benches, regress::Json* health,
+                 regress::Json* j);
   StatusOr<std::int64_t> SaveNight(const std::string& date, std::int64_t batch_id, const std::string& verdict,
                                    const std::string& result_json, double finished_unix_s);
 
   NightsSetup setup_;
   std::vector<runs::BenchSetup> benches_;
   StorePool* pool_;
+  BenchTwins twins_{pool_};
   SubmitFn submit_;
   ClockFn clock_;
   std::thread thread_;

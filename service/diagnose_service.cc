@@ -11,6 +11,7 @@
 #include "model/params.h"
 #include "service/grpc_status.h"
 #include "service/service.h"
+#include "service/stored_run.h"
 
 namespace vb::server {
 
@@ -19,6 +20,9 @@ namespace v1 = valvebench::v1;
 namespace {
 
 constexpr int kMaxRuns = 100;
+
+
+}  // namespace
 
 // One stored run, from the store: its conditions from its spec, its gate and current from its trace.
 StatusOr<gap::StoredRun> LoadStoredRun(db::Store* store, std::int64_t id) {
@@ -55,8 +59,6 @@ StatusOr<gap::StoredRun> LoadStoredRun(db::Store* store, std::int64_t id) {
   s.i_A = std::move(trace.columns["i_A"]);
   return s;
 }
-
-}  // namespace
 
 grpc::Status BenchServiceImpl::DiagnoseRuns(grpc::ServerContext* ctx, const v1::DiagnoseRunsRequest* req,
                                             v1::DiagnoseRunsResponse* resp) {

@@ -1,5 +1,6 @@
 // BenchServiceImpl::ListNights: the scheduled regression nights (server/nights.h) from the regressions table.
 #include <algorithm>
+#include <cstdio>
 #include <string>
 
 #include "regress/compare.h"
@@ -66,6 +67,22 @@ grpc::Status BenchServiceImpl::ListNights(grpc::ServerContext* ctx, const v1::Li
         if (std::find(n->regressed_cases().begin(), n->regressed_cases().end(), c) == n->regressed_cases().end())
           n->add_regressed_cases(c);
       }
+    if (obj.contains("health") && obj["health"].is_array())
+      for (const auto& h : obj["health"]) {
+        if (!h.is_object() || !h.contains("flags") || !h["flags"].is_array()) continue;
+        for (const auto& f : h["flags"]) {
+          const double rel = f.value("change_relative", 0.0);
+          char pct[32];
+          std::snprintf(pct, sizeof pct, "%+.1f %%", 100.0 * rel);
+          n->add_valve_changes(h.value("bench", std::string()) + ": " + f.value("parameter", std::string()) + " " +
+                               f.value("direction", std::string()) + " " + pct + " since " +
+                               f.value("since", std::string()) + ", flagged " + f.value("session", std::string()));
+        }
+      }
+    if (obj.contains("cause") && obj["cause"].is_object()) {
+      n->set_cause(obj["cause"].value("verdict", std::string()));
+      n->set_cause_reason(obj["cause"].value("reason", std::string()));
+    }
     n->set_regression_id(rec->id);
     n->set_suite(rec->suite);
     n->set_baseline(rec->baseline_name.empty() ? ""

@@ -1,0 +1,185 @@
+#include "server/bench_twin.h"
+
+#include <cmath>
+
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include "experiment/runner.h"
+#include "gap/stored_runs.h"
+#include "hw/emulated_bench.h"
+#include "model/params.h"
+#include "runs/execute.h"
+#include "runs/query.h"
+#include "service/stored_run.h"
+
+namespace vb::server {
+
+StatusOr<gap::Dataset> BenchTwins::LoadCheck(std::int64_t batch_id, model::PlantParams* family) const {
+  auto store = pool_->Acquire();
+  if (!store.ok()) return store.status();
+  auto listed = runs::ListBatch(store->get(), batch_id);
+  if (!listed.ok()) return listed.status();
+  std::vector<gap::StoredRun> stored;
+  for (const auto& r : *listed) {
+    if (r.status != db::RunStatus::kDone) continue;  // a run that failed tonight leaves the others
+    auto s = LoadStoredRun(store->get(), r.id);
+    if (!s.ok()) return s.status();
+    stored.push_back(std::move(*s));
+  }
+  if (stored.empty()) return Status::FailedPrecondition(fmt::format("health check batch {}: no run finished", batch_id));
+  auto ds = gap::DatasetOfStoredRuns(std::move(stored));
+  if (!ds.ok()) return ds.status().WithContext(fmt::format("health check batch {}", batch_id));
+  auto preset = model::Preset(ds->model.empty() ? "taghizadeh2009" : ds->model);
+  if (!preset.ok()) return preset.status();
+  *family = *preset;
+  if (!gap::IsSwitchOnSession(*ds, *family))
+    return Status::FailedPrecondition(fmt::format(
+        "health check batch {}: not a switch-on session of a moving valve (model {})", batch_id, ds->model));
+  return ds;
+}
+
+gap::SessionValues BenchTwins::Identify(const std::string& bench, const std::string& date, std::int64_t batch_id,
+                                        std::int64_t first_batch_id) {
+  Twin& twin = twins_[bench];
+  twin.tonight.reset();
+  gap::TrackOptions options;
+  model::PlantParams family;
+  auto ds = LoadCheck(batch_id, &family);
+  if (!ds.ok()) return gap::ValuesOfSession(date, gap::Dataset{}, StatusOr<gap::MovingIdentification>(ds.status()));
+  if (!twin.anchor && first_batch_id != 0 && first_batch_id != batch_id) {
+    // The anchor is the bench's first check (docs/track.md, step 1), identified again after a restart.
+    model::PlantParams first_family;
+    auto first = LoadCheck(first_batch_id, &first_family);
+    if (first.ok()) {
+      auto id = gap::IdentifyForTracking(*first, first_family, nullptr, options);
+      if (id.ok()) twin.anchor = std::move(*id);
+      else spdlog::warn("bench {}: its first health check (batch {}) not identified: {}", bench, first_batch_id,
+                        id.status().message());
+    }
+  }
+  auto id = gap::IdentifyForTracking(*ds, family, twin.anchor ? &*twin.anchor : nullptr, options);
+  gap::SessionValues values = gap::ValuesOfSession(date, *ds, id);
+  if (id.ok()) {
+    if (!twin.anchor) {
+      twin.anchor = *id;
+      twin.anchor_date = date;
+    }
+    twin.tonight = std::move(*id);
+    twin.tonight_date = date;
+  }
+  return values;
+}
+
+StatusOr<gap::Tracking> BenchTwins::Track(const std::vector<gap::SessionValues>& history,
+                                          const gap::SessionValues& tonight) const {
+  std::vector<gap::SessionValues> all = history;
+  all.push_back(tonight);
+  return gap::TrackValues(all, gap::TrackOptions{});
+}
+
+namespace {
+
+// One run of `spec` on the emulator with `plant` in place of the spec's: the named metric.
+StatusOr<double> ReplayMetric(const experiment::ExperimentSpec& spec, const model::PlantParams& plant,
+                              const std::string& metric) {
+  auto e = experiment::BuildExperiment(spec);
+  if (!e.ok()) return e.status();
+  e->plant = plant;
+  hw::EmulatedBench bench(experiment::EmulatedBenchFor(*e));
+  experiment::Trace trace;
+  const experiment::RunSummary s = experiment::Runner::Run(*e, bench, &trace);
+  if (!s.ok()) return Status::Internal("the replay failed: " + s.message);
+  for (const auto& m : runs::RecordedMetrics(s.metrics))
+    if (m.name == metric) return m.value;
+  return Status::NotFound("the replay has no metric " + metric);
+}
+
+}  // namespace
+
+regress::Json BenchTwins::Attribute(const regress::RegressResult& result,
+                                    const std::map<std::string, experiment::ExperimentSpec>& specs,
+                                    const std::map<std::string, std::vector<std::string>>& benches) const {
+  regress::Json cases = regress::Json::array();
+  int valve = 0, code = 0, undetermined = 0;
+  std::string first_undetermined;
+  for (const auto& f : result.findings) {
+    if (f.verdict != regress::Verdict::kRegressed) continue;
+    regress::Json c = {{"case", f.case_name}, {"metric", f.metric}, {"observed_change", f.delta},
+                       {"allowed", f.allowed}};
+    std::string why;
+    double anchor_sum = 0.0, tonight_sum = 0.0;
+    int n = 0;
+    const auto spec = specs.find(f.case_name);
+    const auto ran = benches.find(f.case_name);
+    if (!std::isfinite(f.delta)) {
+      why = "the metric has no value on one side";
+    } else if (spec == specs.end() || ran == benches.end() || ran->second.empty()) {
+      why = "the case's runs are not known";
+    } else {
+      for (const auto& b : ran->second) {
+        const auto t = twins_.find(b);
+        if (t == twins_.end() || !t->second.anchor || !t->second.tonight) {
+          why = "bench " + b + " ran it and has no identified health check tonight (a \"health\" block)";
+          break;
+        }
+        auto a = ReplayMetric(spec->second, t->second.anchor->plant, f.metric);
+        auto now = ReplayMetric(spec->second, t->second.tonight->plant, f.metric);
+        if (!a.ok() || !now.ok()) {
+          why = "the replay on bench " + b + "'s valve: " + (a.ok() ? now.status() : a.status()).message();
+          break;
+        }
+        anchor_sum += *a, tonight_sum += *now, ++n;
+      }
+    }
+    std::string verdict;
+    if (why.empty() && n > 0) {
+      // The valve's share of the change: the same code on tonight's valve against the bench's first-night valve.
+      const double valve_change = (tonight_sum - anchor_sum) / n;
+      c["replay_first_night_valve"] = anchor_sum / n;
+      c["replay_tonight_valve"] = tonight_sum / n;
+      c["valve_change"] = valve_change;
+      const double share = valve_change / f.delta;
+      c["valve_share"] = share;
+      if (share >= 0.5) {
+        verdict = "valve";  // tonight's valve alone makes at least half the change, in its direction
+      } else if (std::abs(valve_change) <= f.allowed) {
+        verdict = "code";   // the valve's change alone stays within what the suite allows
+      } else {
+        verdict = "undetermined";
+        why = fmt::format("the valve makes {:.0f} % of the change and more than the suite allows: both changed, or "
+                          "the identification misses what moved",
+                          100.0 * share);
+      }
+    } else {
+      verdict = "undetermined";
+    }
+    c["verdict"] = verdict;
+    if (!why.empty()) c["reason"] = why;
+    (verdict == "valve" ? valve : verdict == "code" ? code : undetermined)++;
+    if (verdict == "undetermined" && first_undetermined.empty()) first_undetermined = f.case_name + " " + f.metric + ": " + why;
+    cases.push_back(std::move(c));
+  }
+  regress::Json out = {{"cases", cases}};
+  if (cases.empty()) {
+    out["verdict"] = "undetermined";
+    out["reason"] = "no metric regressed (runs failed): the replay compares metrics";
+  } else if (undetermined > 0) {
+    out["verdict"] = "undetermined";
+    out["reason"] = first_undetermined;
+  } else if (valve > 0 && code > 0) {
+    out["verdict"] = "undetermined";
+    out["reason"] = fmt::format("tonight's valve reproduces {} regressed metric(s) and not {}: both changed", valve, code);
+  } else if (valve > 0) {
+    out["verdict"] = "valve";
+    out["reason"] = "the same code on tonight's identified valve reproduces every regressed metric (the bench's "
+                    "first-night valve does not)";
+  } else {
+    out["verdict"] = "code";
+    out["reason"] = "tonight's identified valve, under the same code, stays within the suite's allowance on every "
+                    "regressed metric: the code changed";
+  }
+  return out;
+}
+
+}  // namespace vb::server

@@ -1,0 +1,56 @@
+// The bench twin on the server (issue 38, docs/track.md "On the server"): each night, each checked bench's health
+// check identified (the bench's first night from scratch, every later one warm-started from it), its values kept
+// in the night's record, the bench's nights tracked from those records (gap::TrackValues: no night identified
+// twice); and a regressed night's failing comparison replayed on the emulator with the bench's first-night valve
+// and tonight's valve under the same code: when tonight's valve alone reproduces the change, the valve changed;
+// when it does not, the code did.
+#pragma once
+
+#include <cstdint>
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "common/status.h"
+#include "db/store.h"
+#include "experiment/spec.h"
+#include "gap/track.h"
+#include "regress/compare.h"
+#include "service/service.h"
+
+namespace vb::server {
+
+class BenchTwins {
+ public:
+  explicit BenchTwins(StorePool* pool) : pool_(pool) {}
+
+  // Tonight's health check of `bench` (the runs of its batch) identified; keeps the identification for Attribute.
+  // The first night of a bench (or the first after a restart) identifies the bench's first stored check from
+  // scratch as the anchor (`first_batch_id`: its batch; 0 = tonight is the first).
+  gap::SessionValues Identify(const std::string& bench, const std::string& date, std::int64_t batch_id,
+                              std::int64_t first_batch_id);
+
+  // The bench's nights tracked: the values stored in earlier nights' records (`history`, in date order) and
+  // tonight's.
+  StatusOr<gap::Tracking> Track(const std::vector<gap::SessionValues>& history, const gap::SessionValues& tonight) const;
+
+  // Why a regressed night regressed: every regressed finding's case replayed on the emulator with each bench's
+  // anchor valve and tonight's valve (`specs`: the case's spec; `benches`: which benches ran the case tonight).
+  // {"verdict": "valve" | "code" | "undetermined", "reason", "cases": [...]}.
+  regress::Json Attribute(const regress::RegressResult& result,
+                          const std::map<std::string, experiment::ExperimentSpec>& specs,
+                          const std::map<std::string, std::vector<std::string>>& benches) const;
+
+ private:
+  struct Twin {
+    std::optional<gap::MovingIdentification> anchor, tonight;
+    std::string anchor_date, tonight_date;
+  };
+  StatusOr<gap::Dataset> LoadCheck(std::int64_t batch_id, model::PlantParams* family) const;
+
+  StorePool* pool_;
+  std::map<std::string, Twin> twins_;
+};
+
+}  // namespace vb::server
