@@ -426,7 +426,7 @@ async function pageNights(main) {
       : [el('span', {class: 'muted', text: 'No night scheduled (config "nights").'})]));
     box.replaceChildren(nights.length === 0 ? el('p', {class: 'muted', text: 'No night has run yet (config "nights").'}) :
       el('table', {id: 'nights', class: 'wide'}, el('tr', {}, ['date', 'verdict', 'regressed / unchanged / improved', 'suite', 'baseline',
-        'started', 'finished', 'runs', 'regressed cases', 'summary'].map((h) => el('th', {text: h}))),
+        'started', 'finished', 'runs', 'regressed cases', 'summary', 'valve and cause'].map((h) => el('th', {text: h}))),
       nights.map((x) => el('tr', {}, el('td', {class: 'nowrap', text: x.date}),
         el('td', {}, el('span', {class: 'verdict-' + x.verdict, text: x.verdict})),
         el('td', {class: 'num', text: (x.regressed_count || 0) + ' / ' + (x.unchanged || 0) + ' / ' + (x.improved || 0)}),
@@ -438,7 +438,11 @@ async function pageNights(main) {
           ' ', el('a', {href: '/api/batches/' + x.batch_id + '/report.html', target: '_blank', text: 'report'})] : '–'),
         el('td', {class: 'regressed-cases'}, (x.regressed_cases || []).map((c, k) => [k ? ', ' : '',
           el('a', {href: '#/runs?batch=' + x.batch_id + '&name=' + encodeURIComponent(c)}, breakable(c))])),
-        el('td', {class: 'summary long', text: x.summary || ''})))));
+        el('td', {class: 'summary long', text: x.summary || ''}),
+        // The bench twin (docs/track.md "On the server"): the valve changes flagged by this night, and why a
+        // regressed night regressed (the valve, the code, or undetermined with the reason).
+        el('td', {class: 'valve-cause long'}, (x.valve_changes || []).map((v) => el('div', {text: 'valve changed: ' + v}))
+          .concat(x.cause ? [el('div', {class: 'cause-' + x.cause, text: 'cause: ' + x.cause + (x.cause_reason ? ' (' + x.cause_reason + ')' : '')})] : []))))));
   } catch (e) { showError(e, box); }
 }
 
