@@ -208,6 +208,17 @@ StatusOr<v1::ListNightsResponse> Client::ListNights(int limit) {
   return resp;
 }
 
+StatusOr<v1::GetBenchHealthResponse> Client::GetBenchHealth(const std::string& bench) {
+  grpc::ClientContext ctx;
+  Prepare(&ctx, opt_.deadline_s);
+  v1::GetBenchHealthRequest req;
+  req.set_bench(bench);
+  v1::GetBenchHealthResponse resp;
+  auto st = stub_->GetBenchHealth(&ctx, req, &resp);
+  if (!st.ok()) return Error(st);
+  return resp;
+}
+
 StatusOr<v1::ListBenchesResponse> Client::Benches() {
   grpc::ClientContext ctx;
   Prepare(&ctx, opt_.deadline_s);

@@ -53,6 +53,8 @@ class Client {
   // The running runs and the queue with positions and ETAs, and the benches the estimate is over.
   StatusOr<valvebench::v1::GetQueueResponse> GetQueue();
   StatusOr<valvebench::v1::ListNightsResponse> ListNights(int limit);
+  // The bench twin's tracking of `bench` ("" = every checked bench), from the server's nights.
+  StatusOr<valvebench::v1::GetBenchHealthResponse> GetBenchHealth(const std::string& bench);
   // The gap diagnosis of stored runs, computed by the server (seconds to a minute).
   StatusOr<valvebench::v1::DiagnoseRunsResponse> DiagnoseRuns(const std::vector<std::int64_t>& run_ids,
                                                               const std::string& model = "", double deadline_s = 300.0);

@@ -12,6 +12,7 @@
 #include "regress/cron.h"
 #include "regress/suite.h"
 #include "server/health_check.h"
+#include "service/bench_health.h"
 #include "runs/query.h"
 
 namespace vb::server {
@@ -267,37 +268,19 @@ void NightScheduler::TwinNight(const std::string& date, const regress::RegressRe
   if (!checked) return;
   // The benches' earlier nights from the store (the newest 1000 nights): their values, and each bench's first
   // check (the anchor after a restart).
-  std::map<std::string, std::map<std::string, gap::SessionValues>> history;  // bench -> date -> values
-  std::map<std::string, std::pair<std::string, std::int64_t>> first;         // bench -> (date, batch)
+  StoredHealth stored;
   {
     auto store = pool_->Acquire();
-    if (!store.ok()) {
-      (*j)["twin_error"] = store.status().message();
+    auto loaded = store.ok() ? LoadStoredHealth(store->get(), date) : StatusOr<StoredHealth>(store.status());
+    if (!loaded.ok()) {
+      (*j)["twin_error"] = loaded.status().message();
+      spdlog::error("night {}: the benches' stored health: {}", date, loaded.status().message());
       return;
     }
-    auto nights = (*store)->ListRegressions(/*nights_only=*/true, 1000);
-    if (!nights.ok()) {
-      (*j)["twin_error"] = nights.status().message();
-      return;
-    }
-    for (const auto& brief : *nights) {
-      if (brief.night.empty() || brief.night >= date) continue;
-      auto rec = (*store)->GetRegression(brief.id);
-      if (!rec.ok()) continue;
-      const auto stored = regress::Json::parse(rec->result_json, nullptr, false);
-      if (!stored.is_object() || !stored.contains("health") || !stored["health"].is_array()) continue;
-      for (const auto& h : stored["health"]) {
-        if (!h.is_object() || !h.contains("bench") || !h.contains("batch_id")) continue;
-        const std::string bench = h["bench"].get<std::string>();
-        auto f = first.find(bench);
-        if (f == first.end() || brief.night < f->second.first)
-          first[bench] = {brief.night, h["batch_id"].get<std::int64_t>()};
-        if (!h.contains("values")) continue;
-        auto v = gap::SessionValuesFromJson(h["values"].dump());
-        if (v.ok()) history[bench][brief.night] = std::move(*v);
-      }
-    }
+    stored = std::move(*loaded);
   }
+  auto& history = stored.values;
+  auto& first = stored.first_check;
   for (auto& h : *health) {
     if (!h.contains("batch_id")) continue;
     const std::string bench = h["bench"].get<std::string>();

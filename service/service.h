@@ -118,6 +118,9 @@ class BenchServiceImpl final : public valvebench::v1::BenchService::Service {
   // service/nights_service.cc
   grpc::Status ListNights(grpc::ServerContext* ctx, const valvebench::v1::ListNightsRequest* req,
                           valvebench::v1::ListNightsResponse* resp) override;
+  // service/bench_health.cc
+  grpc::Status GetBenchHealth(grpc::ServerContext* ctx, const valvebench::v1::GetBenchHealthRequest* req,
+                              valvebench::v1::GetBenchHealthResponse* resp) override;
   // service/prune_service.cc
   grpc::Status PruneRuns(grpc::ServerContext* ctx, const valvebench::v1::PruneRunsRequest* req,
                          valvebench::v1::PruneRunsResponse* resp) override;

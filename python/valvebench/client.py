@@ -635,6 +635,38 @@ class Client:
         req = api_pb2.CompareRunsRequest(batch_id=batch_id or 0, run_ids=list(run_ids))
         return Comparison(self._call(self._api.CompareRuns, req))
 
+    def health(self, bench=""):
+        """The bench twin (GetBenchHealth; docs/track.md "On the server"): each checked bench's valve parameters night
+        by night, as the server identified them after each night's health check and tracked them with a
+        self-starting CUSUM. A pandas DataFrame, one row per bench, night and parameter: bench, night, parameter,
+        unit, value, sigma, z (NaN: in the reference), lower_limit, upper_limit (the reference's mean -+ 3 sigma),
+        flagged (True on the night the parameter was flagged). Its attrs hold "flags" (one dict per flag: bench,
+        night, parameter, direction, change_relative, z, since, drift_per_night, meaning) and "notes".
+        bench="" takes every bench with checks stored; an unknown bench raises NOT_FOUND."""
+        resp = self._call(self._api.GetBenchHealth, api_pb2.GetBenchHealthRequest(bench=bench),
+                          context="bench %s" % bench if bench else "")
+        pd = _pandas()
+        rows, flags, notes = [], [], []
+        for b in resp.benches:
+            for p in b.parameters:
+                for k, night in enumerate(b.nights):
+                    rows.append({"bench": b.bench, "night": night, "parameter": p.name, "unit": p.unit,
+                                 "value": p.value[k] if k < len(p.value) else float("nan"),
+                                 "sigma": p.sigma[k] if k < len(p.sigma) else float("nan"),
+                                 "z": p.z[k] if k < len(p.z) else float("nan"),
+                                 "lower_limit": p.lower_limit, "upper_limit": p.upper_limit,
+                                 "flagged": night == p.flagged_night})
+            for f in b.flags:
+                flags.append({"bench": b.bench, "night": f.night, "parameter": f.parameter, "unit": f.unit,
+                              "direction": f.direction, "change": f.change, "change_relative": f.change_relative,
+                              "z": f.z, "since": f.since, "drift_per_night": f.drift_per_night, "meaning": f.meaning})
+            notes.extend("%s: %s" % (b.bench, n) for n in b.notes)
+        df = pd.DataFrame(rows, columns=["bench", "night", "parameter", "unit", "value", "sigma", "z", "lower_limit",
+                                         "upper_limit", "flagged"])
+        df.attrs["flags"] = flags
+        df.attrs["notes"] = notes
+        return df
+
     def benches(self):
         """The server's benches as dicts (name, kind, driver, model, max_supply_V, busy, ...)."""
         resp = self._call(self._api.ListBenches, api_pb2.ListBenchesRequest())

@@ -14,6 +14,7 @@
 #include <thread>
 
 #include "../common/run_command.h"
+#include "client/client.h"
 #include "runs/bench_setup.h"
 #include "server/config.h"
 #include "server/health_check.h"
@@ -190,6 +191,29 @@ TEST(BenchTwin, AValveThatChangedIsNamedAsTheCauseOfTheRegressedNights) {
     EXPECT_EQ(first.rfind("emu-a: R up", 0), 0u) << first;
     EXPECT_NE(first.find("since " + dates[3]), std::string::npos) << first;
   }
+
+  // The server's own tracking, as every door reads it (GetBenchHealth): the nights it identified, R flagged.
+  client::ClientOptions o;
+  o.address = addr;
+  o.token = testing::kViewerToken;
+  client::Client c(o);
+  auto served = c.GetBenchHealth("emu-a");
+  ASSERT_TRUE(served.ok()) << served.status().message();
+  ASSERT_EQ(served->benches_size(), 1);
+  const auto& bh = served->benches(0);
+  EXPECT_EQ(std::vector<std::string>(bh.nights().begin(), bh.nights().end()), dates);
+  ASSERT_GT(bh.flags_size(), 0) << bh.report();
+  EXPECT_EQ(bh.flags(0).parameter(), "R") << bh.report();
+  EXPECT_EQ(bh.flags(0).since(), dates[3]) << bh.report();
+  for (const auto& p : bh.parameters()) {
+    EXPECT_EQ(p.value_size(), 5) << p.name();
+    if (p.name() == "R") {
+      EXPECT_EQ(p.flagged_night(), bh.flags(0).night());
+    }
+  }
+  EXPECT_NE(bh.report().find("FLAG"), std::string::npos) << bh.report();
+  auto unknown = c.GetBenchHealth("emu-c");
+  EXPECT_EQ(unknown.status().code(), StatusCode::kNotFound) << unknown.status().message();
 
   const auto r = testing::RunCommand(std::string(VB_BENCHCTL) + " health --json --server " + addr + " --token " +
                                      testing::kViewerToken);

@@ -1,0 +1,76 @@
+"""client.health(): the bench twin's tracking as the server keeps it (docs/track.md "On the server"), on a real
+valvebench-server that lives four nights at start (--simulate-nights) with a bench whose coil resistance is 15 %
+higher from night 4."""
+import hashlib
+import json
+import re
+import signal
+import subprocess
+import time
+
+import pytest
+
+import valvebench
+
+from conftest import SOURCE_DIR, VIEWER
+
+
+@pytest.fixture(scope="module")
+def twin_server(tmp_path_factory):
+    work = tmp_path_factory.mktemp("twin")
+    suites = SOURCE_DIR + "/examples/suites/"
+    config = {"listen_address": "127.0.0.1:0", "database_path": "runs.db",
+              "benches": [{"name": "emu-a", "kind": "emulated", "model": {"preset": "taghizadeh2009"},
+                           "health": {"supply_V": [24, 20], "supply_pressure_Pa": [100000, 250000, 400000]},
+                           "current_noise_A": 0.002,
+                           "drift": [{"parameter": "R", "step": 0.15, "from_night": 4}]}],
+              "nights": {"cron": "0 2 * * *", "suite_file": suites + "ci.json",
+                         "baseline_file": suites + "ci-baseline.json"},
+              "tokens": [{"user": "view", "role": "viewer", "token_sha256": hashlib.sha256(VIEWER.encode()).hexdigest()}]}
+    (work / "server.json").write_text(json.dumps(config))
+    log = open(work / "server.log", "w+")
+    proc = subprocess.Popen([valvebench.find_tool("valvebench-server"), "--config", str(work / "server.json"),
+                             "--simulate-nights", "4"], stderr=log, stdout=subprocess.DEVNULL)
+    address = None
+    for _ in range(400):
+        log.seek(0)
+        m = re.search(r"listening on (\S+)", log.read())
+        if m:
+            address = m.group(1)
+            break
+        time.sleep(0.02)
+    assert address, "server did not start"
+    # Four nights stored: the fourth night's line in the log.
+    stored = 0
+    for _ in range(3000):
+        log.seek(0)
+        stored = len(re.findall(r"night \S+: (passed|regressed|error) ", log.read()))
+        if stored >= 4:
+            break
+        time.sleep(0.1)
+    assert stored >= 4, "the server stored %d nights in 300 s" % stored
+    yield address
+    proc.send_signal(signal.SIGTERM)
+    proc.wait(timeout=30)
+
+
+def test_health_is_a_dataframe_with_the_flagged_parameter(twin_server):
+    c = valvebench.Client(twin_server, VIEWER)
+    df = c.health("emu-a")
+    assert list(df.columns) == ["bench", "night", "parameter", "unit", "value", "sigma", "z", "lower_limit",
+                                "upper_limit", "flagged"]
+    nights = sorted(df["night"].unique())
+    assert len(nights) == 4
+    r = df[df["parameter"] == "R"].sort_values("night")
+    assert list(r["unit"].unique()) == ["ohm"]
+    # R 15 % higher from night 4, flagged there and not before.
+    assert r["value"].iloc[3] / r["value"].iloc[:3].mean() == pytest.approx(1.15, abs=0.02)
+    assert not r["flagged"].iloc[:3].any()
+    flags = df.attrs["flags"]
+    assert flags and flags[0]["parameter"] == "R" and flags[0]["since"] == nights[3], flags
+    assert flags[0]["change_relative"] == pytest.approx(0.15, abs=0.02)
+    # Every bench with checks: the same one here.
+    assert set(c.health()["bench"]) == {"emu-a"}
+    with pytest.raises(valvebench.Error) as e:
+        c.health("emu-z")
+    assert e.value.code == "NOT_FOUND"
