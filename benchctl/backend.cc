@@ -141,6 +141,11 @@ StatusOr<v1::ListBenchesResponse> Backend::Benches() {
   return c_->Benches();
 }
 
+StatusOr<v1::GetBenchHealthResponse> Backend::BenchHealth(const std::string& bench) {
+  VB_BACKEND_READY();
+  return c_->GetBenchHealth(bench);
+}
+
 StatusOr<Submitted> Backend::Submit(const experiment::ExperimentSpec& spec, bool realtime) {
   VB_BACKEND_READY();
   experiment::ExperimentSpec s = spec;

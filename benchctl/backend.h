@@ -80,6 +80,8 @@ class Backend final {
   StatusOr<Trace> GetTrace(std::int64_t run_id);
   // The benches runs go to here, and the USB devices the service's machine sees.
   StatusOr<valvebench::v1::ListBenchesResponse> Benches();
+  // The bench twin's tracking kept by the service's nights (GetBenchHealth; "" = every checked bench).
+  StatusOr<valvebench::v1::GetBenchHealthResponse> BenchHealth(const std::string& bench);
   // Queues a spec's runs as one batch (realtime: paced to the wall clock).
   StatusOr<Submitted> Submit(const experiment::ExperimentSpec& spec, bool realtime);
   // What a local service executed of a run (summary with loop jitter, and the trace if kept); nullopt remotely.

@@ -368,6 +368,8 @@ GapCli::GapCli(CLI::App* app, SharedOptions shared) : shared_(shared) {
   health_->add_option("--arl0", track_arl0_, "the detector's in-control run length per parameter, in nights")
       ->capture_default_str();
   health_->add_flag("--json", *shared_.json, "machine-readable output on stdout");
+  health_->add_flag("--recompute", health_recompute_, "identify every stored check here again instead of reading "
+                                                      "the tracking the server's nights kept");
   health_->add_flag("--local", local_, "the local store, even if a server is configured");
   health_->add_option("--db", *shared_.store_path, "local store");
   server_opts(health_);
@@ -653,6 +655,46 @@ int GapCli::Track() {
 // bench; 1: a parameter flagged; 2: bad input or no checks stored.
 int GapCli::Health(const ClientFactory& make_client) {
   auto backend = ChooseBackend(local_ ? "" : *shared_.server, *shared_.store_path, make_client);
+  // The tracking the service's nights kept (GetBenchHealth): each night identified once, by the server. Without
+  // it (no nights with checks stored, --local, --recompute), the stored checks are identified here.
+  // --limit, --arl0 and --model change the tracking: the checks are then identified here with them.
+  const bool options_given = !track_limits_.empty() || track_arl0_ != gap::TrackOptions{}.target_arl0_sessions ||
+                             !model_.empty();
+  if (!health_recompute_ && !options_given) {
+    auto served = backend->BenchHealth(health_bench_);
+    if (served.ok() && served->benches_size() > 0) {
+      Json out = {{"source", "the server's nights"}, {"benches", Json::array()}, {"flags", Json::array()}};
+      bool flagged = false;
+      for (const auto& b : served->benches()) {
+        Json entry = {{"bench", b.bench()}, {"nights", b.nights_size()}};
+        if (b.tracking_json().empty()) {
+          std::string why;
+          for (const auto& n : b.notes()) why += (why.empty() ? "" : "; ") + n;
+          entry["error"] = why;
+          if (!*shared_.json) std::cout << "== bench " << b.bench() << ": " << why << "\n";
+          out["benches"].push_back(std::move(entry));
+          continue;
+        }
+        const Json one = Json::parse(b.tracking_json());
+        for (auto& [k, v] : one.items()) entry[k] = v;
+        for (const auto& f : one["flags"]) {
+          Json g = {{"bench", b.bench()}};
+          for (auto& [k, v] : f.items()) g[k] = v;
+          out["flags"].push_back(g);
+          flagged = true;
+        }
+        out["benches"].push_back(std::move(entry));
+        if (!*shared_.json)
+          std::cout << "== bench " << b.bench() << " (" << b.nights_size() << " nights, as the server's nights tracked "
+                    << "them) ==\n" << b.report() << "\n";
+      }
+      if (*shared_.json) std::cout << out.dump(2) << "\n";
+      return flagged ? kExitRunFailed : kExitOk;
+    }
+    if (!served.ok() && served.status().code() != StatusCode::kNotFound) return Fail(served.status().WithContext("health"));
+    std::fprintf(stderr, "benchctl: health: no tracking kept by the nights at %s; identifying the stored checks here\n",
+                 backend->Where().c_str());
+  }
   RunFilter filter;
   filter.status = RunStatus::kDone;
   filter.tag = health_bench_.empty() ? "health" : "health:" + health_bench_;
@@ -676,7 +718,7 @@ int GapCli::Health(const ClientFactory& make_client) {
     if (date.empty() || r.bench.empty()) continue;
     nights[r.bench][date].push_back(r.id);
   }
-  Json out = {{"benches", Json::array()}, {"flags", Json::array()}};
+  Json out = {{"source", "identified here"}, {"benches", Json::array()}, {"flags", Json::array()}};
   bool flagged = false;
   for (auto& [bench, by_night] : nights) {
     if (by_night.size() < 2) {

@@ -8,7 +8,7 @@
 //   import DATASET                         (store a dataset's waveform runs on a server)
 //   track SESSION_DIR... [--model M] [--limit NAME=VALUE,...] [--arl0 SESSIONS] [--json]
 //                                          (a valve tracked night by night, gap/track.h; exit 1 when flagged)
-//   health [BENCH] [--model M] [--limit ...] [--arl0 NIGHTS] [--json]
+//   health [BENCH] [--model M] [--limit ...] [--arl0 NIGHTS] [--recompute] [--json]
 //                                          (each bench's nightly health checks tracked, server/health_check.h)
 // --json is JSON on stdout; files are --json-out and --model-out (the ModelSpec --model reads back). The old
 // spellings --json FILE, --emit-model FILE and identify --out FILE still work, with a note on stderr.
@@ -53,6 +53,7 @@ class GapCli {
   CLI::App* track_ = nullptr;
   CLI::App* health_ = nullptr;
   std::string health_bench_;
+  bool health_recompute_ = false;
   std::vector<std::string> track_dirs_, track_limits_;
   double track_arl0_ = 20000.0;
   std::string dataset_dir_, model_, json_path_, json_out_, model_out_, suggest_out_, emit_model_, reference_dir_, out_path_,

@@ -61,6 +61,7 @@ v1::BenchHealth BenchHealthOf(const std::string& bench, const gap::Tracking& t) 
   for (const auto& n : t.notes) b.add_notes(n);
   b.set_k_sigma(t.k_sigma), b.set_h_sigma(t.h_sigma), b.set_target_arl0_nights(t.target_arl0_sessions);
   b.set_report(gap::TrackingReport(t));
+  b.set_tracking_json(gap::TrackingJson(t));
   return b;
 }
 
