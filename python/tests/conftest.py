@@ -39,18 +39,11 @@ def local_client(tmp_path_factory):
         yield c
 
 
-@pytest.fixture(scope="module")
-def remote_server(tmp_path_factory):
-    """A valvebench-server on 127.0.0.1 (free port): yields its address."""
-    work = tmp_path_factory.mktemp("server")
-    config = {"listen_address": "127.0.0.1:0", "database_path": "runs.db",
-              "benches": [{"name": "emu-a", "kind": "emulated", "model": {"preset": "taghizadeh2009"}},
-                          {"name": "emu-b", "kind": "emulated", "model": {"preset": "taghizadeh2009"}}],
-              "tokens": [{"user": "op", "role": "operator", "token_sha256": hashlib.sha256(OPERATOR.encode()).hexdigest()},
-                         {"user": "view", "role": "viewer", "token_sha256": hashlib.sha256(VIEWER.encode()).hexdigest()}]}
+def start_server(work, config, *args):
+    """Starts valvebench-server with `config` (a dict) in `work`: returns (process, log file, address)."""
     (work / "server.json").write_text(json.dumps(config))
     log = open(work / "server.log", "w+")
-    proc = subprocess.Popen([valvebench.find_tool("valvebench-server"), "--config", str(work / "server.json")],
+    proc = subprocess.Popen([valvebench.find_tool("valvebench-server"), "--config", str(work / "server.json"), *args],
                             stderr=log, stdout=subprocess.DEVNULL)
     address = None
     for _ in range(400):
@@ -61,6 +54,19 @@ def remote_server(tmp_path_factory):
             break
         time.sleep(0.02)
     assert address, "server did not start"
+    return proc, log, address
+
+
+@pytest.fixture(scope="module")
+def remote_server(tmp_path_factory):
+    """A valvebench-server on 127.0.0.1 (free port): yields its address."""
+    work = tmp_path_factory.mktemp("server")
+    config = {"listen_address": "127.0.0.1:0", "database_path": "runs.db",
+              "benches": [{"name": "emu-a", "kind": "emulated", "model": {"preset": "taghizadeh2009"}},
+                          {"name": "emu-b", "kind": "emulated", "model": {"preset": "taghizadeh2009"}}],
+              "tokens": [{"user": "op", "role": "operator", "token_sha256": hashlib.sha256(OPERATOR.encode()).hexdigest()},
+                         {"user": "view", "role": "viewer", "token_sha256": hashlib.sha256(VIEWER.encode()).hexdigest()}]}
+    proc, _, address = start_server(work, config)
     yield address
     proc.send_signal(signal.SIGTERM)
     proc.wait(timeout=10)

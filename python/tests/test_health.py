@@ -2,17 +2,15 @@
 valvebench-server that lives six nights at start (--simulate-nights) with a bench whose coil resistance is 15 %
 higher from night 4."""
 import hashlib
-import json
 import re
 import signal
-import subprocess
 import time
 
 import pytest
 
 import valvebench
 
-from conftest import SOURCE_DIR, VIEWER
+from conftest import SOURCE_DIR, VIEWER, start_server
 
 
 @pytest.fixture(scope="module")
@@ -27,19 +25,7 @@ def twin_server(tmp_path_factory):
               "nights": {"cron": "0 2 * * *", "suite_file": suites + "ci.json",
                          "baseline_file": suites + "ci-baseline.json"},
               "tokens": [{"user": "view", "role": "viewer", "token_sha256": hashlib.sha256(VIEWER.encode()).hexdigest()}]}
-    (work / "server.json").write_text(json.dumps(config))
-    log = open(work / "server.log", "w+")
-    proc = subprocess.Popen([valvebench.find_tool("valvebench-server"), "--config", str(work / "server.json"),
-                             "--simulate-nights", "6"], stderr=log, stdout=subprocess.DEVNULL)
-    address = None
-    for _ in range(400):
-        log.seek(0)
-        m = re.search(r"listening on (\S+)", log.read())
-        if m:
-            address = m.group(1)
-            break
-        time.sleep(0.02)
-    assert address, "server did not start"
+    proc, log, address = start_server(work, config, "--simulate-nights", "6")
     # Six nights stored: the sixth night's line in the log.
     stored = 0
     for _ in range(3000):

@@ -247,16 +247,7 @@ TEST(BenchTwin, AValveThatChangedIsNamedAsTheCauseOfTheRegressedNights) {
 TEST(BenchTwin, ACodeRegressionOnAnUnchangedValveIsNamedAsTheCode) {
   const std::string dir = ::testing::TempDir() + "/vb-twin-code-" + std::to_string(::getpid());
   std::filesystem::remove_all(dir);
-  std::filesystem::create_directories(dir);
-  std::filesystem::copy_file(kSuites + "ci.json", dir + "/ci.json");
-  std::ifstream in(kSuites + "ci-current-hold.json");
-  std::stringstream ss;
-  ss << in.rdbuf();
-  std::string spec = ss.str();
-  const size_t law = spec.find("\"pi_current\": {}", spec.find("\"name\": \"pi\""));
-  ASSERT_NE(law, std::string::npos);
-  spec.replace(law, 16, R"("pi_current": {"kp_V_per_A": 37.7})");
-  std::ofstream(dir + "/ci-current-hold.json") << spec;
+  ASSERT_EQ(testing::WriteWorseCiSuite(kSuites, dir), "");
   const std::string benches = R"([{"name": "emu-a", "kind": "emulated", "model": {"preset": "taghizadeh2009"}, )" +
                               std::string(kHealth) + "}]";
   testing::ServerProcess server(dir, R"("nights": {"cron": "0 2 * * *", "suite_file": "ci.json", "baseline_file": ")" +

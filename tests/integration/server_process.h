@@ -39,6 +39,23 @@ inline valvebench::v1::ServerConfig MinimalConfig() {
   return c;
 }
 
+// Writes into `dir` examples/suites/ci.json and its hold spec with the PI law's proportional gain cut tenfold (a
+// worse controller that regresses against the committed baseline; docs/regress.md says why not the integral gain
+// since issue 37). Returns "" or what went wrong.
+inline std::string WriteWorseCiSuite(const std::string& suites_dir, const std::string& dir) {
+  std::filesystem::create_directories(dir);
+  std::filesystem::copy_file(suites_dir + "ci.json", dir + "/ci.json", std::filesystem::copy_options::overwrite_existing);
+  std::ifstream in(suites_dir + "ci-current-hold.json");
+  std::stringstream ss;
+  ss << in.rdbuf();
+  std::string spec = ss.str();
+  const size_t law = spec.find("\"pi_current\": {}", spec.find("\"name\": \"pi\""));
+  if (law == std::string::npos) return "ci-current-hold.json has no pi variant with an empty pi_current";
+  spec.replace(law, 16, R"("pi_current": {"kp_V_per_A": 37.7})");
+  std::ofstream(dir + "/ci-current-hold.json") << spec;
+  return "";
+}
+
 inline constexpr const char* kViewerToken = "viewer-token-1";
 inline constexpr const char* kOperatorToken = "operator-token-1";
 inline constexpr const char* kOperator2Token = "operator-token-2";
