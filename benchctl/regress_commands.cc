@@ -14,6 +14,7 @@
 #include "proto/api_convert.h"
 #include "service/local_records.h"
 #include "experiment/spec.h"
+#include "gap/text_wrap.h"
 #include "regress/compare.h"
 #include "regress/suite.h"
 
@@ -329,12 +330,14 @@ int RegressCli::Run(const ClientFactory& make_client) {
     } else {
       if (resp->nights_size() == 0) std::printf("no nights yet on %s\n", server.c_str());
       for (const auto& n : resp->nights()) {
-        std::printf("%s  %-9s  batch %-5lld %s vs %s  %s\n", n.date().c_str(), n.verdict().c_str(),
-                    static_cast<long long>(n.batch_id()), n.suite().c_str(), n.baseline().c_str(),
-                    n.summary().c_str());
-        for (const auto& v : n.valve_changes()) std::printf("            valve changed: %s\n", v.c_str());
+        char head[256];
+        std::snprintf(head, sizeof head, "%s  %-9s  batch %-5lld %s vs %s  ", n.date().c_str(), n.verdict().c_str(),
+                      static_cast<long long>(n.batch_id()), n.suite().c_str(), n.baseline().c_str());
+        std::cout << gap::Hanging(head, n.summary());
+        // Under the night, within 120 columns: the bench twin's lines (docs/track.md "On the server").
+        for (const auto& v : n.valve_changes()) std::cout << gap::Hanging("            valve changed: ", v);
         if (!n.cause().empty())
-          std::printf("            cause: %s (%s)\n", n.cause().c_str(), n.cause_reason().c_str());
+          std::cout << gap::Hanging("            cause: " + n.cause() + ": ", n.cause_reason());
       }
     }
     // The newest night decides: a script can gate on "did last night pass" (no nights yet is not a failure).
