@@ -69,6 +69,12 @@ grpc::Status BenchServiceImpl::GetBenchHealth(grpc::ServerContext* ctx, const v1
                                               v1::GetBenchHealthResponse* resp) {
   Principal who;
   if (auto st = Authorize(ctx, Role::kViewer, &who); !st.ok()) return st;
+  // A bench name is echoed in the NOT_FOUND message: a huge one would not fit the status's metadata.
+  constexpr std::size_t kMaxBenchName = 256;
+  if (req->bench().size() > kMaxBenchName)
+    return ToGrpcStatus(Status::InvalidArgument("bench: " + std::to_string(req->bench().size()) +
+                                                " bytes, longer than a bench name (" + std::to_string(kMaxBenchName) +
+                                                ")"));
   auto store = pool_->Acquire();
   if (!store.ok()) return ToGrpcStatus(store.status());
   auto stored = LoadStoredHealth(store->get());

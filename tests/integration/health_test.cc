@@ -218,6 +218,9 @@ TEST(BenchTwin, AValveThatChangedIsNamedAsTheCauseOfTheRegressedNights) {
   EXPECT_NE(bh.report().find("FLAG"), std::string::npos) << bh.report();
   auto unknown = c.GetBenchHealth("emu-c");
   EXPECT_EQ(unknown.status().code(), StatusCode::kNotFound) << unknown.status().message();
+  auto huge = c.GetBenchHealth(std::string(100000, 'a'));  // echoed whole, it overflowed the status metadata
+  EXPECT_EQ(huge.status().code(), StatusCode::kInvalidArgument) << huge.status().message();
+  EXPECT_EQ(huge.status().message().rfind("bench: 100000 bytes", 0), 0u) << huge.status().message().substr(0, 200);
 
   const auto r = testing::RunCommand(std::string(VB_BENCHCTL) + " health --json --server " + addr + " --token " +
                                      testing::kViewerToken);
