@@ -598,6 +598,7 @@ class Routes {
     s.Get("/api/diagnose", [this](const auto& q, auto& r) { Diagnose(q, r); });
     s.Get("/api/units", [this](const auto& q, auto& r) { Units(q, r); });
     s.Get("/api/nights", [this](const auto& q, auto& r) { Nights(q, r); });
+    s.Get("/api/health", [this](const auto& q, auto& r) { Health(q, r); });
     s.set_pre_routing_handler([this](const httplib::Request& req, httplib::Response& res) {
       return Admit(req, res) ? httplib::Server::HandlerResponse::Unhandled : httplib::Server::HandlerResponse::Handled;
     });
@@ -1650,6 +1651,20 @@ class Routes {
       if (auto next = options_.next_night_unix_s(); next.ok()) j["next_night_unix_s"] = *next;
     }
     res.set_content(Dump(j), kJson);
+  }
+
+  // Each bench's tracked valve (GetBenchHealth, docs/track.md "On the server"): ?bench= one bench, else every
+  // bench with checks stored. The service checks the name (length, known bench).
+  void Health(const httplib::Request& req, httplib::Response& res) {
+    v1::GetBenchHealthRequest r;
+    r.set_bench(req.get_param_value("bench"));
+    grpc::ClientContext ctx;
+    Authorize(req, &ctx);
+    Deadline(&ctx, 30.0);
+    v1::GetBenchHealthResponse out;
+    auto st = stub_->GetBenchHealth(&ctx, r, &out);
+    if (!st.ok()) return SendError(res, st);
+    res.set_content(ToJson(out), kJson);
   }
 
   // Who the bearer token is (user, role), from the server's own Authenticator: the page shows it in its header

@@ -61,8 +61,12 @@ with open(os.path.join(work, "ci-current-hold.json"), "w") as f:
 config = {"listen_address": "127.0.0.1:0", "database_path": "runs.db",
           "nights": {"cron": "0 2 * * *", "suite_file": "ci.json",
                      "baseline_file": os.path.join(suites, "ci-baseline.json")},
-          "benches": [{"name": "emu-1", "kind": "emulated", "model": {"preset": "taghizadeh2009"}},
-                      {"name": "emu-2", "kind": "emulated", "model": {"preset": "taghizadeh2009"}}],
+          # Both checked before each night (the Bench health page, and a cause for every regressed case whichever
+          # bench ran it): a switch-on run at two supplies and two pressures.
+          "benches": [{"name": "emu-1", "kind": "emulated", "model": {"preset": "taghizadeh2009"}, "current_noise_A": 0.002,
+                       "health": {"supply_V": [24, 20], "supply_pressure_Pa": [100000, 400000]}},
+                      {"name": "emu-2", "kind": "emulated", "model": {"preset": "taghizadeh2009"}, "current_noise_A": 0.002,
+                       "health": {"supply_V": [24, 20], "supply_pressure_Pa": [100000, 400000]}}],
           "tokens": [{"user": "olga", "role": "operator", "token_sha256": sha(OPERATOR)},
                      {"user": "vic", "role": "viewer", "token_sha256": sha(VIEWER)},
                      {"user": "oscar", "role": "operator", "token_sha256": sha(OPERATOR2)}],
@@ -70,7 +74,10 @@ config = {"listen_address": "127.0.0.1:0", "database_path": "runs.db",
 with open(os.path.join(work, "server.json"), "w") as f:
     json.dump(config, f)
 log = open(os.path.join(work, "server.log"), "w+")
-proc = subprocess.Popen([server_bin, "--config", os.path.join(work, "server.json"), "--run-night-now"], stderr=log,
+# Three nights lived at start (--simulate-nights 3, docs/track.md): each regressed (the PI law got worse), each with
+# emu-1's health check identified and tracked.
+NIGHTS = 3
+proc = subprocess.Popen([server_bin, "--config", os.path.join(work, "server.json"), "--simulate-nights", str(NIGHTS)], stderr=log,
                         stdout=subprocess.DEVNULL)
 failures = []
 driver = None
@@ -414,8 +421,8 @@ try:
     if base is None:
         raise SystemExit(1)
 
-    for _ in range(300):  # the night's runs first, so that the benches are idle for what follows
-        if api("GET", "/api/nights", VIEWER).get("nights"):
+    for _ in range(1800):  # the nights' runs first, so that the benches are idle for what follows
+        if len(api("GET", "/api/nights", VIEWER).get("nights", [])) >= NIGHTS:
             break
         time.sleep(0.1)
     night = api("GET", "/api/nights", VIEWER).get("nights", [{}])[0]
@@ -637,6 +644,11 @@ try:
           any(h.endswith("#/compare?batch=%s" % night.get("batch_id")) for h in links), links)
     cases = night.get("regressed_cases", [])
     check("the night names its regressed case", cases == ["current-hold/pi"] or (len(cases) == 1 and "pi" in cases[0]), cases)
+    # The bench twin's column: the PI gain cut on an unchanged valve is the code's doing (docs/track.md).
+    cause = row[0].find_elements(By.CSS_SELECTOR, "td.valve-cause") if row else []
+    check("the night names the code as its cause", bool(cause) and "cause: code" in cause[0].text and
+          night.get("cause") == "code", (cause[0].text if cause else "", night.get("cause"), night.get("cause_reason")))
+
     case_links = row[0].find_elements(By.CSS_SELECTOR, "td.regressed-cases a") if row else []
     shot("nights")
     if case_links:
@@ -647,6 +659,38 @@ try:
               all(n.startswith(cases[0]) for n in names), names)
     else:
         check("the night links its regressed case", False, row[0].text if row else "")
+
+    # 7a. Bench health: emu-1's tracked parameters night by night with the reference's limits, its fits, no flag.
+    go("#/health")
+    wait(lambda: len(driver.find_elements(By.CSS_SELECTOR, "#health-emu-1 .health-parameter canvas")) >= 2 or None,
+         what="bench health charts")
+    health = api("GET", "/api/health?bench=emu-1", VIEWER)
+    bench_h = (health.get("benches") or [{}])[0]
+    check("GetBenchHealth through the web: emu-1 with its nights", bench_h.get("bench") == "emu-1" and
+          len(bench_h.get("nights", [])) == NIGHTS, bench_h.get("nights"))
+    names = [p["name"] for p in bench_h.get("parameters", [])]
+    shown = driver.execute_script(
+        "return Array.from(document.querySelectorAll('#health-emu-1 .health-parameter')).map((b) => {"
+        "  const c = b.querySelector('.vb-plot').vbChart;"
+        "  return [b.dataset.parameter, c.rows.length, c.rows.filter((r) => r[1] !== null).length,"
+        "          c.rows.every((r) => r[3] < r[2] && r[2] < r[4])]; });")
+    check("a chart per tracked parameter, R first", [x[0] for x in shown] == names and names[:1] == ["R"], (shown, names))
+    check("each chart: a value per night and the limits around the reference's mean",
+          bool(shown) and all(x[1] == NIGHTS and x[2] == NIGHTS and x[3] for x in shown), shown)
+    info = chart_info("#health-emu-1")
+    r_chart = [c for c in info if c and c["title"].startswith("R ")]
+    check("R's chart in ohm with its limits in the legend", bool(r_chart) and "[ohm]" in r_chart[0]["ylabel"] and
+          any("upper limit" in x[0] for x in r_chart[0]["legend"]), r_chart[:1])
+    check("the fit of each night beside its noise floor", any(c and c["title"].startswith("Fit of each night") and
+                                                             "[mA]" in c["ylabel"] for c in info), [c and c["title"] for c in info])
+    check("an unchanged valve: no parameter flagged", text_of(By.CSS_SELECTOR, "#health-emu-1 .health-clean") ==
+          "No parameter flagged over %d nights." % NIGHTS and not bench_h.get("flags"), bench_h.get("flags"))
+    try:
+        bad = api("GET", "/api/health?bench=no-such-bench", VIEWER)
+    except urllib.error.HTTPError as e:
+        bad = (e.code, e.read().decode())
+    check("an unknown bench is a 404 naming it", bad[0] == 404 and "no-such-bench" in bad[1], bad)
+    page_shots("health")
 
     # 7b. The diagnosis: practice set p07 imported with benchctl, diagnosed on the server from the page.
     p07 = os.path.abspath(os.path.join(examples_dir, "..", "..", "shared", "gapbench", "practice", "p07"))
@@ -864,7 +908,7 @@ try:
     links = [a.get_attribute("href") or "" for a in driver.find_elements(By.CSS_SELECTOR, "a")]
 
     # 7e. Every page fits 1024 px: no element wider than the viewport (tables wrap); screenshots at both widths.
-    for page, name in (("#/", "lab"), ("#/runs", None), ("#/nights", "nights"), ("#/submit", None),
+    for page, name in (("#/", "lab"), ("#/runs", None), ("#/nights", "nights"), ("#/health", None), ("#/submit", None),
                        ("#/run/" + done_id, None), ("#/compare?batch=%s" % batch, None), ("#/diagnosis", None)):
         go(page)
         time.sleep(1.2)

@@ -131,6 +131,7 @@ const routes = [
   [/^\/submit$/, pageSubmit],
   [/^\/compare$/, pageCompare],
   [/^\/nights$/, pageNights],
+  [/^\/health$/, pageHealth],
   [/^\/diagnosis$/, pageDiagnosis],
 ];
 
