@@ -161,6 +161,9 @@ RegressCli::RegressCli(CLI::App* app, SharedOptions shared) : shared_(shared) {
   nights_ = app->add_subcommand("nights", "the server's scheduled regression nights, newest first (exit 1 if the "
                                           "latest did not pass)");
   nights_->add_option("--limit", limit_, "how many nights (1-1000, default 10)");
+  nights_->add_option("--junit", junit_path_,
+                      "write the nights as JUnit XML here (a testcase per night; a regressed night's failure "
+                      "message starts with its cause)");
   common(nights_, /*with_db=*/false);  // nights are the server's: its scheduler runs them into its own store
 }
 
@@ -308,6 +311,18 @@ int RegressCli::Run(const ClientFactory& make_client) {
     auto c = make_client();
     auto resp = c->ListNights(limit_);
     if (!resp.ok()) return Fail(resp.status());
+    if (!junit_path_.empty()) {
+      std::vector<regress::NightOutcome> outcomes;
+      for (const auto& n : resp->nights()) {
+        regress::NightOutcome o;
+        o.date = n.date(), o.verdict = n.verdict(), o.suite = n.suite(), o.baseline = n.baseline();
+        o.summary = n.summary(), o.cause = n.cause(), o.cause_reason = n.cause_reason(), o.batch_id = n.batch_id();
+        o.regressed_cases.assign(n.regressed_cases().begin(), n.regressed_cases().end());
+        o.valve_changes.assign(n.valve_changes().begin(), n.valve_changes().end());
+        outcomes.push_back(std::move(o));
+      }
+      if (auto st = WriteFile(junit_path_, regress::NightsJUnitXml(outcomes)); !st.ok()) return Fail(st);
+    }
     if (json) {
       Json a = Json::array();
       for (const auto& n : resp->nights())

@@ -47,6 +47,23 @@ int EntryOfCase(const Suite& suite, const std::string& c) {
   return best;
 }
 
+
+StatusOr<Stat> StatFrom(const Json& j, const std::string& where) {
+  if (!j.is_object()) return Status::InvalidArgument(where + ": expected {mean, spread, n}");
+  Stat s;
+  if (!j.contains("n") || !j["n"].is_number_integer() || j["n"].get<int>() < 0)
+    return Status::InvalidArgument(where + ".n: must be an integer >= 0");
+  s.n = j["n"].get<int>();
+  s.mean = j.contains("mean") ? NumFrom(j["mean"]) : kNaN;
+  if (s.n > 0 && !std::isfinite(s.mean)) return Status::InvalidArgument(where + ".mean: must be a finite number");
+  s.spread = j.contains("spread") ? NumFrom(j["spread"]) : 0.0;
+  if (!std::isfinite(s.spread) || s.spread < 0)
+    return Status::InvalidArgument(where + ".spread: must be finite and >= 0");
+  return s;
+}
+
+}  // namespace
+
 std::string XmlEscape(const std::string& s) {
   std::string out;
   for (char ch : s) {
@@ -67,22 +84,6 @@ std::string XmlEscape(const std::string& s) {
   }
   return out;
 }
-
-StatusOr<Stat> StatFrom(const Json& j, const std::string& where) {
-  if (!j.is_object()) return Status::InvalidArgument(where + ": expected {mean, spread, n}");
-  Stat s;
-  if (!j.contains("n") || !j["n"].is_number_integer() || j["n"].get<int>() < 0)
-    return Status::InvalidArgument(where + ".n: must be an integer >= 0");
-  s.n = j["n"].get<int>();
-  s.mean = j.contains("mean") ? NumFrom(j["mean"]) : kNaN;
-  if (s.n > 0 && !std::isfinite(s.mean)) return Status::InvalidArgument(where + ".mean: must be a finite number");
-  s.spread = j.contains("spread") ? NumFrom(j["spread"]) : 0.0;
-  if (!std::isfinite(s.spread) || s.spread < 0)
-    return Status::InvalidArgument(where + ".spread: must be finite and >= 0");
-  return s;
-}
-
-}  // namespace
 
 const char* VerdictName(Verdict v) {
   switch (v) {
@@ -414,6 +415,50 @@ std::string JUnitXml(const RegressResult& r) {
     } else {
       os << ">\n      <system-out>" << XmlEscape(f.message) << "</system-out>\n    </testcase>\n";
     }
+  }
+  os << "  </testsuite>\n</testsuites>\n";
+  return os.str();
+}
+
+std::string NightsJUnitXml(const std::vector<NightOutcome>& nights) {
+  int failures = 0, errors = 0;
+  for (const auto& n : nights) {
+    if (n.verdict == "error") ++errors;
+    else if (n.verdict != "passed") ++failures;
+  }
+  const int tests = static_cast<int>(nights.size());
+  std::ostringstream os;
+  os << "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n";
+  os << "<testsuites name=\"valvebench nights\" tests=\"" << tests << "\" failures=\"" << failures << "\" errors=\""
+     << errors << "\">\n";
+  os << "  <testsuite name=\"nights\" tests=\"" << tests << "\" failures=\"" << failures << "\" errors=\"" << errors
+     << "\" skipped=\"0\">\n";
+  for (const auto& n : nights) {
+    // The body: what a person reads in the CI's page (the night's summary, its cases, the valve, the cause).
+    std::ostringstream body;
+    body << "night: " << n.date << "\nverdict: " << n.verdict << "\nsuite: " << n.suite << "\nbaseline: " << n.baseline
+         << "\nbatch: " << n.batch_id << "\nsummary: " << n.summary << "\n";
+    if (!n.regressed_cases.empty()) {
+      body << "regressed cases:";
+      for (const auto& c : n.regressed_cases) body << " " << c;
+      body << "\n";
+    }
+    for (const auto& v : n.valve_changes) body << "valve changed: " << v << "\n";
+    if (!n.cause.empty()) body << "cause: " << n.cause << ": " << n.cause_reason << "\n";
+    // The message: the summary and, for a regressed night, its cause (the bench twin's verdict) up front.
+    std::string message = n.summary;
+    if (!n.cause.empty()) message = "cause: " + n.cause + " (" + n.cause_reason + "); " + message;
+    os << "    <testcase classname=\"nights." << XmlEscape(n.suite) << "\" name=\"" << XmlEscape(n.date) << "\">\n";
+    if (n.verdict == "error") {
+      os << "      <error type=\"night-error\" message=\"" << XmlEscape(message) << "\">" << XmlEscape(body.str())
+         << "</error>\n";
+    } else if (n.verdict != "passed") {
+      os << "      <failure type=\"regression\" message=\"" << XmlEscape(message) << "\">" << XmlEscape(body.str())
+         << "</failure>\n";
+    } else {
+      os << "      <system-out>" << XmlEscape(body.str()) << "</system-out>\n";
+    }
+    os << "    </testcase>\n";
   }
   os << "  </testsuite>\n</testsuites>\n";
   return os.str();

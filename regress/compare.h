@@ -105,4 +105,17 @@ std::string ResultTable(const RegressResult& r);   // for people: summary line, 
 // a testcase "run" with a <failure>.
 std::string JUnitXml(const RegressResult& r);
 
+// A scheduled night as ListNights gives it (the server's record), for its JUnit XML.
+struct NightOutcome {
+  std::string date, verdict, suite, baseline, summary, cause, cause_reason;
+  std::int64_t batch_id = 0;
+  std::vector<std::string> regressed_cases, valve_changes;
+};
+// JUnit XML of nights: one testcase per night (classname "nights.<suite>", name its date); a regressed night is a
+// <failure> whose message starts with its cause ("cause: valve (...)"; the bench twin, docs/track.md), an error
+// night an <error>; the body lists the summary, the regressed cases, the valve changes and the cause.
+std::string NightsJUnitXml(const std::vector<NightOutcome>& nights);
+// Text escaped for XML attributes and character data (control characters XML 1.0 forbids dropped).
+std::string XmlEscape(const std::string& s);
+
 }  // namespace vb::regress

@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <chrono>
 #include <fstream>
+#include <iterator>
 #include <sstream>
 #include <nlohmann/json.hpp>
 #include <set>
@@ -247,6 +248,19 @@ TEST(BenchTwin, AValveThatChangedIsNamedAsTheCauseOfTheRegressedNights) {
                                            " --token " + testing::kViewerToken);
   EXPECT_EQ(missing.exit_code, 2) << missing.out;
   EXPECT_NE(missing.out.find("no health checks stored for bench emu-c"), std::string::npos) << missing.out;
+
+  // The nights as JUnit XML (a CI's page): the newest night fails with its cause first and the valve change.
+  const std::string xml_path = dir + "/nights.xml";
+  const auto junit = testing::RunCommand(std::string(VB_BENCHCTL) + " nights --junit " + xml_path + " --server " +
+                                         addr + " --token " + testing::kViewerToken);
+  EXPECT_EQ(junit.exit_code, 1) << junit.out;  // the newest night regressed
+  std::ifstream in(xml_path);
+  const std::string xml((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const auto night = xml.find("name=\"" + dates[kNights - 1] + "\"");
+  ASSERT_NE(night, std::string::npos) << xml;
+  EXPECT_EQ(xml.find("<failure type=\"regression\" message=\"cause: valve (", night), xml.find("<failure", night)) << xml;
+  EXPECT_NE(xml.find("valve changed: emu-a: R up", night), std::string::npos) << xml;
+  EXPECT_NE(xml.find("failures=\"" + std::to_string(kNights - 3) + "\""), std::string::npos) << xml;
 }
 
 // The same bench without drift, under a suite whose PI law's proportional gain was cut tenfold (nights_test's
@@ -272,6 +286,13 @@ TEST(BenchTwin, ACodeRegressionOnAnUnchangedValveIsNamedAsTheCode) {
     EXPECT_EQ(n["cause"], "code") << n.dump(1) << "\n" << server.Log();
     EXPECT_TRUE(n["valve_changes"].empty()) << n.dump(1);
   }
+  const auto junit = testing::RunCommand(std::string(VB_BENCHCTL) + " nights --junit " + dir + "/nights.xml --server " +
+                                         addr + " --token " + testing::kViewerToken);
+  EXPECT_EQ(junit.exit_code, 1) << junit.out;
+  std::ifstream in(dir + "/nights.xml");
+  const std::string xml((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_NE(xml.find("<failure type=\"regression\" message=\"cause: code ("), std::string::npos) << xml;
+  EXPECT_NE(xml.find(R"(tests="3" failures="3")"), std::string::npos) << xml;
   const auto again = testing::RunCommand(std::string(VB_BENCHCTL) + " health emu-a --recompute --json --server " +
                                          addr + " --token " + testing::kViewerToken);
   EXPECT_EQ(again.exit_code, 0) << again.out;

@@ -270,6 +270,36 @@ TEST(JUnitTest, EscapesNames) {
   EXPECT_EQ(xml.find("x < y"), std::string::npos);
 }
 
+// A night per testcase: a regressed night fails with its cause first, an error night is an <error>, a passed
+// night carries its summary and valve changes as output; counts match; names escaped.
+TEST(JUnitTest, NightsWithTheirCause) {
+  NightOutcome valve;
+  valve.date = "2026-11-28", valve.verdict = "regressed", valve.suite = "ci", valve.baseline = "ci v1";
+  valve.summary = "1 regressed, 14 unchanged; first: rmse < baseline";
+  valve.cause = "valve", valve.cause_reason = "tonight's valve reproduces it";
+  valve.batch_id = 12;
+  valve.regressed_cases = {"map/duty=0.3"};
+  valve.valve_changes = {"emu-a: R up +15.0 % since 2026-11-27, flagged 2026-11-28"};
+  NightOutcome passed;
+  passed.date = "2026-11-27", passed.verdict = "passed", passed.suite = "ci", passed.summary = "15 unchanged";
+  passed.valve_changes = {"emu-b: L0 down -6.0 % since 2026-11-25, flagged 2026-11-27"};
+  NightOutcome error;
+  error.date = "2026-11-26", error.verdict = "error", error.suite = "ci", error.summary = "nights.suite_file: gone";
+  const std::string xml = NightsJUnitXml({valve, passed, error});
+  EXPECT_NE(xml.find(R"(<testsuites name="valvebench nights" tests="3" failures="1" errors="1">)"), std::string::npos) << xml;
+  EXPECT_NE(xml.find(R"(<testcase classname="nights.ci" name="2026-11-28">)"), std::string::npos) << xml;
+  EXPECT_NE(xml.find(R"(<failure type="regression" message="cause: valve (tonight&apos;s valve reproduces it); 1 regressed)"),
+            std::string::npos) << xml;
+  EXPECT_NE(xml.find("valve changed: emu-a: R up +15.0 % since 2026-11-27"), std::string::npos) << xml;
+  EXPECT_NE(xml.find("regressed cases: map/duty=0.3"), std::string::npos) << xml;
+  EXPECT_NE(xml.find("first: rmse &lt; baseline"), std::string::npos) << xml;
+  EXPECT_EQ(xml.find("rmse < baseline"), std::string::npos) << xml;
+  EXPECT_NE(xml.find(R"(<error type="night-error" message="nights.suite_file: gone">)"), std::string::npos) << xml;
+  const auto out = xml.find("<system-out>");
+  ASSERT_NE(out, std::string::npos) << xml;
+  EXPECT_NE(xml.find("valve changed: emu-b: L0 down", out), std::string::npos) << xml;
+}
+
 // ---- cron ----
 
 CivilMinute At(int y, int mo, int d, int h, int mi) { return {y, mo, d, h, mi}; }
