@@ -146,6 +146,11 @@ StatusOr<v1::GetBenchHealthResponse> Backend::BenchHealth(const std::string& ben
   return c_->GetBenchHealth(bench);
 }
 
+StatusOr<v1::DiagnoseRunsResponse> Backend::DiagnoseRuns(const v1::DiagnoseRunsRequest& request) {
+  VB_BACKEND_READY();
+  return c_->DiagnoseRuns(request);
+}
+
 StatusOr<Submitted> Backend::Submit(const experiment::ExperimentSpec& spec, bool realtime) {
   VB_BACKEND_READY();
   experiment::ExperimentSpec s = spec;

@@ -82,6 +82,8 @@ class Backend final {
   StatusOr<valvebench::v1::ListBenchesResponse> Benches();
   // The bench twin's tracking kept by the service's nights (GetBenchHealth; "" = every checked bench).
   StatusOr<valvebench::v1::GetBenchHealthResponse> BenchHealth(const std::string& bench);
+  // The gap diagnosis of stored runs, computed by the service (DiagnoseRuns: one diagnosis for every door).
+  StatusOr<valvebench::v1::DiagnoseRunsResponse> DiagnoseRuns(const valvebench::v1::DiagnoseRunsRequest& request);
   // Queues a spec's runs as one batch (realtime: paced to the wall clock).
   StatusOr<Submitted> Submit(const experiment::ExperimentSpec& spec, bool realtime);
   // What a local service executed of a run (summary with loop jitter, and the trace if kept); nullopt remotely.

@@ -221,21 +221,63 @@ StatusOr<gap::StoredRun> FetchStoredRun(Backend& backend, std::int64_t id) {
   return s;
 }
 
+// Stored runs are diagnosed by the service (DiagnoseRuns), the server's or the local one: the same diagnosis the
+// web page and Python get (issue 40: one diagnosis of stored runs).
 int StoredDiagnose(Backend& backend, const std::vector<std::int64_t>& run_ids, const std::string& model,
                    const DiagnoseOutput& out) {
-  std::vector<gap::StoredRun> stored;
-  for (std::int64_t id : run_ids) {
-    auto s = FetchStoredRun(backend, id);
-    if (!s.ok()) return Fail(s.status());
-    stored.push_back(std::move(*s));
+  valvebench::v1::DiagnoseRunsRequest req;
+  for (std::int64_t id : run_ids) req.add_run_ids(id);
+  if (!model.empty()) {
+    if (model::Preset(model).ok()) {
+      req.set_model(model);
+    } else {  // a model file: its spec travels (values, identified driver)
+      auto nominal = LoadNominal(model);
+      if (!nominal.ok()) return Fail(nominal.status());
+      *req.mutable_model_spec() = nominal->spec;
+    }
   }
-  auto ds = gap::DatasetOfStoredRuns(std::move(stored));
-  if (!ds.ok()) return Fail(ds.status());
-  auto nominal = LoadNominal(model.empty() ? ds->model : model);
-  if (!nominal.ok()) return Fail(nominal.status());
-  gap::DiagnoseOptions options;
-  options.model_name = model.empty() ? ds->model : model;
-  return DiagnoseAndReport(*ds, *nominal, "stored runs (" + backend.Where() + ")", out, options);
+  req.set_suggest(!out.suggest_out.empty());
+  if (isatty(STDERR_FILENO))
+    std::fprintf(stderr, "benchctl: diagnosing %zu stored runs on the %s (seconds to a minute) ...\n", run_ids.size(),
+                 backend.Where().c_str());
+  auto resp = backend.DiagnoseRuns(req);
+  if (!resp.ok()) return Fail(resp.status().WithContext("stored runs (" + backend.Where() + ")"));
+  auto write = [](const std::string& path, const std::string& text) {
+    std::ofstream f(path);
+    f << text;
+    f.close();
+    return f ? Status::Ok() : Status::Unavailable(path + ": cannot write");
+  };
+  if (!out.suggest_out.empty() && !resp->suggestion_spec_json().empty())
+    if (auto st = write(out.suggest_out, resp->suggestion_spec_json()); !st.ok()) return Fail(st);
+  if (!out.json_out.empty())
+    if (auto st = write(out.json_out, resp->report_json() + "\n"); !st.ok()) return Fail(st);
+  if (out.json_stdout) {
+    if (req.suggest()) {
+      auto j = nlohmann::ordered_json::parse(resp->report_json());
+      j["suggestion"] = nlohmann::ordered_json::parse(resp->suggestion_json());
+      std::cout << j.dump(2) << "\n";
+    } else {
+      std::cout << resp->report_json() << "\n";
+    }
+  } else {
+    std::cout << resp->report();
+    if (req.suggest()) {
+      std::cout << resp->suggestion_report();
+      if (!resp->suggestion_spec_json().empty())
+        std::cout << "  spec written to " << out.suggest_out << " (benchctl run " << out.suggest_out << ")\n";
+    }
+  }
+  if (out.model_out.empty()) return kExitOk;
+  if (resp->improved_model_json().empty()) {
+    const auto j = nlohmann::json::parse(resp->report_json(), nullptr, false);
+    const std::string verdict = j.is_object() ? j.value("verdict", std::string("?")) : std::string("?");
+    return Fail(Status::FailedPrecondition("--model-out: no effect was attributed (verdict " + verdict +
+                                           "); the diagnosis stands, no model written"));
+  }
+  if (auto st = write(out.model_out, resp->improved_model_json()); !st.ok()) return Fail(st);
+  if (!out.json_stdout) std::cout << "improved model written to " << out.model_out << "\n";
+  return kExitOk;
 }
 
 int ImportDataset(Backend& backend, const std::string& dataset_dir, bool json) {

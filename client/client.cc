@@ -239,13 +239,17 @@ StatusOr<v1::GetQueueResponse> Client::GetQueue() {
 
 StatusOr<v1::DiagnoseRunsResponse> Client::DiagnoseRuns(const std::vector<std::int64_t>& run_ids,
                                                         const std::string& model, double deadline_s) {
-  grpc::ClientContext ctx;
-  Prepare(&ctx, deadline_s);
   v1::DiagnoseRunsRequest req;
   for (std::int64_t id : run_ids) req.add_run_ids(id);
   req.set_model(model);
+  return DiagnoseRuns(req, deadline_s);
+}
+
+StatusOr<v1::DiagnoseRunsResponse> Client::DiagnoseRuns(const v1::DiagnoseRunsRequest& request, double deadline_s) {
+  grpc::ClientContext ctx;
+  Prepare(&ctx, deadline_s);
   v1::DiagnoseRunsResponse resp;
-  auto st = stub_->DiagnoseRuns(&ctx, req, &resp);
+  auto st = stub_->DiagnoseRuns(&ctx, request, &resp);
   if (!st.ok()) return Error(st);
   return resp;
 }

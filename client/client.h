@@ -58,6 +58,9 @@ class Client {
   // The gap diagnosis of stored runs, computed by the server (seconds to a minute).
   StatusOr<valvebench::v1::DiagnoseRunsResponse> DiagnoseRuns(const std::vector<std::int64_t>& run_ids,
                                                               const std::string& model = "", double deadline_s = 300.0);
+  // The same with every field of the request (a model file's ModelSpec, the next runs suggested).
+  StatusOr<valvebench::v1::DiagnoseRunsResponse> DiagnoseRuns(const valvebench::v1::DiagnoseRunsRequest& request,
+                                                              double deadline_s = 300.0);
   StatusOr<valvebench::v1::SubmitRunResponse> ImportRuns(const valvebench::v1::ImportRunsRequest& request,
                                                          double deadline_s = 300.0);
 

@@ -8,6 +8,8 @@
 #include "gap/diagnose.h"
 #include "gap/improved_model.h"
 #include "gap/stored_runs.h"
+#include "gap/suggest.h"
+#include "experiment/spec.h"
 #include "model/params.h"
 #include "service/grpc_status.h"
 #include "service/service.h"
@@ -86,15 +88,46 @@ grpc::Status BenchServiceImpl::DiagnoseRuns(grpc::ServerContext* ctx, const v1::
   }
   auto ds = gap::DatasetOfStoredRuns(std::move(stored));
   if (!ds.ok()) return ToGrpcStatus(ds.status());
-  const std::string model_name = req->model().empty() ? ds->model : req->model();
-  auto nominal = model::Preset(model_name);
-  if (!nominal.ok()) return ToGrpcStatus(Status::InvalidArgument("model: unknown preset '" + model_name + "'"));
+  // The nominal model: a model file's spec (its values and identified driver, as `benchctl diagnose --model
+  // FILE` reads one), a preset, or the runs' own.
+  if (req->has_model_spec() && !req->model().empty())
+    return ToGrpcStatus(Status::InvalidArgument("model: give a preset or model_spec, not both"));
+  valvebench::v1::ModelSpec nominal_spec;
+  std::string model_name;
+  model::PlantParams nominal;
+  if (req->has_model_spec()) {
+    nominal_spec = req->model_spec();
+    auto plant = experiment::BuildPlant(nominal_spec);
+    if (!plant.ok()) return ToGrpcStatus(plant.status().WithContext("model_spec"));
+    nominal = *plant;
+    if (nominal_spec.has_identified_driver()) {
+      auto driver = experiment::BuildDriver(nominal_spec.identified_driver());
+      if (!driver.ok()) return ToGrpcStatus(driver.status().WithContext("model_spec.identified_driver"));
+      ds->driver = *driver;  // the model's identified driver replaces the runs' declared one (as the CLI does)
+    }
+    model_name = nominal_spec.preset().empty() ? std::string("model file") : nominal_spec.preset() + " (model file)";
+  } else {
+    model_name = req->model().empty() ? ds->model : req->model();
+    auto preset = model::Preset(model_name);
+    if (!preset.ok()) return ToGrpcStatus(Status::InvalidArgument("model: unknown preset '" + model_name + "'"));
+    nominal = *preset;
+    nominal_spec.set_preset(model_name);
+  }
   gap::DiagnoseOptions options;
   options.model_name = model_name;
-  auto d = gap::Diagnose(*ds, *nominal, options);
+  auto d = gap::Diagnose(*ds, nominal, options);
   if (!d.ok()) return ToGrpcStatus(d.status().WithContext("stored runs"));
   resp->set_report(gap::DiagnosisReport(*d));
   resp->set_report_json(gap::DiagnosisJson(*d));
+  if (req->suggest()) {
+    auto s = gap::SuggestNextRuns(*ds, nominal, *d);
+    if (!s.ok()) return ToGrpcStatus(s.status().WithContext("suggest"));
+    resp->set_suggestion_report(gap::SuggestionReport(*s));
+    resp->set_suggestion_json(gap::SuggestionJson(*s));
+    if (!s->runs.empty())
+      resp->set_suggestion_spec_json(gap::SuggestionSpecJson(
+          *s, "next-experiment", nominal_spec.preset().empty() ? model::kDefaultPreset : nominal_spec.preset()));
+  }
   // The improved model, built as `benchctl diagnose --model-out` builds it (gap/improved_model.h); "" when no
   // effect was attributed (verdict none or unknown: api.proto).
   std::string runs;
@@ -102,8 +135,6 @@ grpc::Status BenchServiceImpl::DiagnoseRuns(grpc::ServerContext* ctx, const v1::
     if (k > 0) runs += ',';
     runs += std::to_string(req->run_ids(k));
   }
-  valvebench::v1::ModelSpec nominal_spec;
-  nominal_spec.set_preset(model_name);
   auto improved = gap::ImprovedModel(*d, nominal_spec, ds->driver, "the server's DiagnoseRuns on runs " + runs);
   if (d->chosen >= 0 && improved.ok()) resp->set_improved_model_json(gap::ModelSpecJson(*improved));
   return grpc::Status::OK;

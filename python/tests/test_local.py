@@ -167,7 +167,8 @@ def test_import_runs_from_arrays(local_client, shared):
 
 
 def test_import_dataset_and_diagnose_stored_runs(local_client, shared):
-    """benchctl's reader and diagnosis behind the Python call: p07's answer is supply_resistance (labels.json)."""
+    """benchctl's reader and the service's diagnosis (DiagnoseRuns) behind the Python calls: p07's answer is
+    supply_resistance (labels.json)."""
     p07 = os.path.join(shared, "gapbench", "practice", "p07")
     if not os.path.isdir(p07):
         pytest.skip("no ../shared/gapbench/practice/p07")
@@ -175,6 +176,9 @@ def test_import_dataset_and_diagnose_stored_runs(local_client, shared):
     assert len(batch) == 12 and all("dataset:p07" in r.tags for r in batch)
     diagnosis = local_client.diagnose(batch=batch)
     assert diagnosis.verdict == "supply_resistance", diagnosis.verdict_reason
+    # The service's DiagnoseRuns: its text report and the improved model come along.
+    assert "supply_resistance" in diagnosis.report
+    assert "supply_resistance" in diagnosis.improved_model_json
     ranking = diagnosis.ranking()
     assert ranking.index[0] == "supply_resistance"
     assert ranking.loc["supply_resistance", "params"]["supply_resistance.R_s"] == pytest.approx(0.8, rel=0.25)

@@ -745,16 +745,30 @@ class Client:
                 raise (InvalidArgument if proc.returncode == 2 else Error)(
                     proc.stderr.strip().replace("benchctl: ", "", 1))
             return Diagnosis(json.loads(proc.stdout))
-        out = self._benchctl(["diagnose", "--runs", ",".join(str(r) for r in run_ids), "--json"] + extra,
-                             "diagnose")
-        return Diagnosis(json.loads(out))
+        # Stored runs: the service's DiagnoseRuns (the diagnosis benchctl diagnose --runs and the web page get).
+        req = api_pb2.DiagnoseRunsRequest(run_ids=[int(r) for r in run_ids])
+        if model and os.path.isfile(os.fspath(model)):
+            with open(os.fspath(model)) as f:
+                try:
+                    json_format.Parse(f.read(), req.model_spec)
+                except json_format.ParseError as e:
+                    raise InvalidArgument("model: %s: %s" % (os.fspath(model), e)) from None
+        elif model:
+            req.model = model
+        resp = self._call(self._api.DiagnoseRuns, req, "diagnose", timeout_s=max(self.timeout_s or 0, 300.0))
+        return Diagnosis(json.loads(resp.report_json), report=resp.report,
+                         improved_model_json=resp.improved_model_json)
 
 
 class Diagnosis:
-    """benchctl diagnose's result: ``data`` is the JSON (docs/gap.md); verdict, gap, ranking as a DataFrame."""
+    """benchctl diagnose's result: ``data`` is the JSON (docs/gap.md); verdict, gap, ranking as a DataFrame.
+    Of stored runs (the server's DiagnoseRuns) also ``report`` (the text benchctl prints) and
+    ``improved_model_json`` (the model with the effect added, "" when none was attributed)."""
 
-    def __init__(self, data):
+    def __init__(self, data, report="", improved_model_json=""):
         self.data = data
+        self.report = report
+        self.improved_model_json = improved_model_json
         self.verdict = data.get("verdict", "")
         self.verdict_reason = data.get("verdict_reason", "")
         self.gap = data.get("gap", {})

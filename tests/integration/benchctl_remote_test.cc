@@ -269,10 +269,32 @@ TEST(BenchctlRemote, ImportThenDiagnoseStoredRuns) {
   from_server.erase("description");
   from_cli.erase("description");
   EXPECT_EQ(from_server, from_cli);
+  // A model file as the nominal model (DiagnoseRunsRequest.model_spec): the improved model already holds the
+  // supply resistance, so the diagnosis against it is named after the file and no longer finds that effect
+  // first; and --suggest's plan comes from the service too (the spec file written only when a run would tell).
+  Result against = Benchctl("diagnose --runs " + ids + " --json --model " + dir + "/improved.json --suggest " + dir +
+                            "/next.json " + op);
+  ASSERT_EQ(against.exit_code, 0) << against.out;
+  const auto aj = nlohmann::json::parse(against.out, nullptr, false);
+  ASSERT_TRUE(aj.is_object()) << against.out;
+  EXPECT_EQ(aj["model"], "taghizadeh2009 (model file)") << aj["model"];
+  EXPECT_NE(aj["verdict"], "supply_resistance") << aj["verdict_reason"];
+  EXPECT_LT(aj["gap"]["holdout_rmse_A"].get<double>(), diag["gap"]["holdout_rmse_A"].get<double>()) << aj["gap"].dump();
+  EXPECT_TRUE(aj.contains("suggestion")) << against.out.substr(0, 300);
+  Result bad_model = Benchctl("diagnose --runs " + ids + " --model " + dir + "/nonexistent.json " + op);
+  EXPECT_EQ(bad_model.exit_code, 2) << bad_model.out;
+  EXPECT_NE(bad_model.out.find("neither a preset nor a readable file"), std::string::npos) << bad_model.out;
+  valvebench::v1::DiagnoseRunsRequest both;
+  both.add_run_ids(id_list[0]);
+  both.set_model("taghizadeh2009");
+  both.mutable_model_spec()->set_preset("taghizadeh2009");
+  auto both_refused = c.DiagnoseRuns(both);
+  ASSERT_FALSE(both_refused.ok());
+  EXPECT_NE(both_refused.status().message().find("not both"), std::string::npos) << both_refused.status().message();
   auto twice = c.DiagnoseRuns({id_list[0], id_list[0]});
   ASSERT_FALSE(twice.ok());
   EXPECT_NE(twice.status().message().find("run_ids[1]"), std::string::npos) << twice.status().message();
-  auto none = c.DiagnoseRuns({});
+  auto none = c.DiagnoseRuns(std::vector<std::int64_t>{});
   EXPECT_EQ(none.status().code(), StatusCode::kInvalidArgument);
 
   // A bad dataset is refused before anything is sent, naming the file and line.
