@@ -338,6 +338,7 @@ int RegressCli::Run(const ClientFactory& make_client) {
                      {"started_unix_s", n.started_unix_s()},
                      {"finished_unix_s", n.finished_unix_s()},
                      {"summary", n.summary()},
+                     {"regressed_cases", n.regressed_cases()},
                      {"valve_changes", n.valve_changes()},
                      {"cause", n.cause()},
                      {"cause_reason", n.cause_reason()}});
