@@ -65,7 +65,9 @@ std::string Reading(const std::string& name) {
     return "the magnetic circuit: shorted turns move L0 and L1 by the same fraction, a core or gap change moves them "
            "apart";
   if (name == "R_p") return "eddy currents in the core (its material or lamination)";
-  if (name == "F0*x_max") return "the spring's preload (a relaxing or replaced spring) or the stroke";
+  if (name == "F0*x_max")
+    return "the spring's preload (a relaxing or replaced spring), the stroke, or dry friction in the guide (it "
+           "opposes the pull-in as a preload does; the switch-on current does not tell them apart)";
   if (name == "k*x_max^2") return "the spring's stiffness or the stroke";
   if (name == "A_net*x_max") return "the pressure area (seat wear) or a supply pressure other than declared";
   if (name == "m*x_max^2") return "the moving mass or the stroke";

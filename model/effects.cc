@@ -97,4 +97,50 @@ Status AddEffect(Effects* effects, std::string_view name, const std::vector<std:
   return Status::Ok();
 }
 
+namespace {
+
+StatusOr<const EffectParamInfo*> FindEffectParam(std::string_view dotted) {
+  // Messages through a stream: GCC 12's -Wrestrict misfires on "'" + std::string + "..." here.
+  std::ostringstream os;
+  os << "'" << dotted << "': ";
+  const std::size_t dot = dotted.find('.');
+  if (dot == std::string_view::npos) {
+    os << "not an effect parameter (effect.parameter)";
+    return Status::InvalidArgument(os.str());
+  }
+  const std::string_view effect = dotted.substr(0, dot), field = dotted.substr(dot + 1);
+  for (const auto& e : EffectCatalog()) {
+    if (e.name != effect) continue;
+    for (const auto& q : e.params)
+      if (q.name == field) return &q;
+    os << "unknown parameter of " << effect << " (known: ";
+    for (std::size_t k = 0; k < e.params.size(); ++k) os << (k ? ", " : "") << e.params[k].name;
+    os << ")";
+    return Status::InvalidArgument(os.str());
+  }
+  os << "unknown effect '" << effect << "'";
+  return Status::InvalidArgument(os.str());
+}
+
+}  // namespace
+
+StatusOr<double> GetEffectParam(const Effects& e, std::string_view dotted) {
+  auto p = FindEffectParam(dotted);
+  if (!p.ok()) return p.status();
+  return e.*((*p)->field);
+}
+
+Status SetEffectParam(Effects* e, std::string_view dotted, double value) {
+  auto p = FindEffectParam(dotted);
+  if (!p.ok()) return p.status();
+  if (!std::isfinite(value) || value < (*p)->min || value > (*p)->max) {
+    std::ostringstream os;
+    os << dotted << " = " << value << " " << (*p)->unit << " is outside [" << (*p)->min << ", " << (*p)->max << "]";
+    return Status::InvalidArgument(os.str());
+  }
+  e->*((*p)->field) = value;
+  if (dotted == "coulomb_friction.F_c" && e->friction_F_s_N < value) e->friction_F_s_N = value;
+  return Status::Ok();
+}
+
 }  // namespace vb::model

@@ -98,6 +98,12 @@ struct EffectInfo {
   std::vector<EffectParamInfo> params;
 };
 const std::vector<EffectInfo>& EffectCatalog();
+
+// One effect parameter by its dotted name ("coulomb_friction.F_c"), as fits report them; InvalidArgument naming
+// the name when the effect or parameter is unknown, or (set) the value is outside the parameter's bounds.
+// Setting coulomb_friction.F_c above F_s raises F_s with it (static friction is at least the kinetic).
+StatusOr<double> GetEffectParam(const Effects& e, std::string_view dotted);
+Status SetEffectParam(Effects* e, std::string_view dotted, double value);
 std::vector<std::string> EffectNames();  // including "none" and the param:NAME form
 
 // Turns an effect on with the given parameters (unspecified ones keep their defaults). Errors name the effect

@@ -21,6 +21,20 @@ double DriftFactor(const ValveDrift& d, int night) {
   return 1.0 + d.step + d.per_night * static_cast<double>(night - d.from_night);
 }
 
+Status ApplyDrift(const std::vector<ValveDrift>& drift, int night, model::PlantParams* plant) {
+  for (const auto& d : drift) {
+    if (night < d.from_night || night < 1) continue;  // the model's own value until the drift starts
+    // A plant parameter ("R") or an effect's ("coulomb_friction.F_c": the plant's effects).
+    const bool effect = d.parameter.find('.') != std::string::npos;
+    auto v = effect ? model::GetEffectParam(plant->effects, d.parameter) : model::GetParam(*plant, d.parameter);
+    if (!v.ok()) return v.status().WithContext("drift");
+    const double value = (d.base != 0.0 ? d.base : *v) * DriftFactor(d, night);
+    auto st = effect ? model::SetEffectParam(&plant->effects, d.parameter, value) : model::SetParam(plant, d.parameter, value);
+    if (!st.ok()) return st.WithContext("drift on night " + std::to_string(night));
+  }
+  return Status::Ok();
+}
+
 int NightNumberOf(const valvebench::v1::ExperimentSpec& spec) {
   const std::string prefix = kNightNumberPrefix;
   for (const auto& t : spec.tags())
@@ -92,12 +106,7 @@ StatusOr<std::unique_ptr<hw::Bench>> OpenBench(const BenchSetup& setup, const ex
     } else {
       night = setup.night_seen->load();
     }
-    for (const auto& d : setup.drift) {
-      auto v = model::GetParam(opts.plant, d.parameter);
-      if (!v.ok()) return v.status().WithContext("bench " + setup.name + " drift");
-      if (auto st = model::SetParam(&opts.plant, d.parameter, *v * DriftFactor(d, night)); !st.ok())
-        return st.WithContext("bench " + setup.name + " drift on night " + std::to_string(night));
-    }
+    if (auto st = ApplyDrift(setup.drift, night, &opts.plant); !st.ok()) return st.WithContext("bench " + setup.name);
   }
   if (setup.current_noise_A > 0.0) {
     opts.current_noise_A = setup.current_noise_A;

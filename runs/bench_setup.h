@@ -25,10 +25,14 @@ struct ValveDrift {
   double step = 0.0;       // relative step at from_night
   double per_night = 0.0;  // relative change per night after from_night
   int from_night = 1;
+  double base = 0.0;       // the value the factor multiplies (0: the model's own)
 };
 
 // 1 + step + per_night (night - from_night) on nights >= from_night; 1 before (and on night 0: no night yet).
 double DriftFactor(const ValveDrift& d, int night);
+// The plant of night `night`: each drift's parameter (a plant parameter, or an effect's "effect.param") set to
+// its base (the model's own unless given) times DriftFactor, from its from_night on; unchanged before.
+Status ApplyDrift(const std::vector<ValveDrift>& drift, int night, model::PlantParams* plant);
 
 // The night a run belongs to: its tag "night-number:N" (the nights scheduler tags every run of a night), else 0.
 int NightNumberOf(const valvebench::v1::ExperimentSpec& spec);

@@ -44,15 +44,26 @@ Status DriftFromConfig(const v1::BenchConfig& b, const std::string& field, runs:
   for (int i = 0; i < b.drift_size(); ++i) {
     const auto& d = b.drift(i);
     const std::string f = fmt::format("{}.drift[{}]", field, i);
-    if (!model::GetParam(setup->emulated.plant, d.parameter()).ok())
+    const bool effect = d.parameter().find('.') != std::string::npos;
+    auto own = effect ? model::GetEffectParam(setup->emulated.plant.effects, d.parameter())
+                      : model::GetParam(setup->emulated.plant, d.parameter());
+    if (!own.ok())
       return Status::InvalidArgument(f + ".parameter: '" + d.parameter() +
-                                     "' is not a model parameter (the names spec files use: R, N, k, delta, b, m, mu_r, ...)");
+                                     "' is not a model parameter (the names spec files use: R, N, k, delta, b, m, mu_r, "
+                                     "...) nor an effect's (coulomb_friction.F_c, eddy_currents.R_p, ...): " +
+                                     own.status().message());
+    if (!std::isfinite(d.base()) || d.base() < 0.0)
+      return Status::InvalidArgument(fmt::format("{}.base: must be >= 0 (0: the model's own value), got {}", f, d.base()));
+    if (d.base() == 0.0 && *own == 0.0)
+      return Status::InvalidArgument(f + ".base: " + d.parameter() +
+                                     " is 0 in the bench's model, so a relative drift keeps it 0: give the value it "
+                                     "starts from (base)");
     if (!std::isfinite(d.step()) || !std::isfinite(d.per_night()) || d.step() <= -1.0)
       return Status::InvalidArgument(f + ".step/per_night: must be finite, and step > -1 (a factor above 0)");
     if (d.step() == 0.0 && d.per_night() == 0.0)
       return Status::InvalidArgument(f + ": give a step or a per_night change (both are 0)");
     if (d.from_night() < 1) return Status::InvalidArgument(f + ".from_night: must be >= 1 (the lab's first night is 1)");
-    setup->drift.push_back({d.parameter(), d.step(), d.per_night(), d.from_night()});
+    setup->drift.push_back({d.parameter(), d.step(), d.per_night(), d.from_night(), d.base()});
   }
   return Status::Ok();
 }

@@ -16,6 +16,7 @@
 
 #include "../common/run_command.h"
 #include "client/client.h"
+#include "model/params.h"
 #include "runs/bench_setup.h"
 #include "server/config.h"
 #include "server/health_check.h"
@@ -66,6 +67,23 @@ TEST(HealthConfig, ValidatesAndNamesTheField) {
   EXPECT_NE(ConfigError(c).find("benches[0].drift[0]: give a step or a per_night"), std::string::npos)
       << ConfigError(c);
   d->set_step(0.04);
+  // Dry friction growing in the guide: an effect the preset lacks, so it needs the value it starts from.
+  auto* f = c.mutable_benches(0)->add_drift();
+  f->set_parameter("coulomb_friction.F_x");
+  f->set_per_night(0.5);
+  f->set_from_night(3);
+  EXPECT_NE(ConfigError(c).find("benches[0].drift[1].parameter: 'coulomb_friction.F_x'"), std::string::npos)
+      << ConfigError(c);
+  EXPECT_NE(ConfigError(c).find("unknown parameter of coulomb_friction (known: F_c, F_s)"), std::string::npos)
+      << ConfigError(c);
+  f->set_parameter("coulomb_friction.F_c");
+  EXPECT_NE(ConfigError(c).find("benches[0].drift[1].base: coulomb_friction.F_c is 0 in the bench's model"),
+            std::string::npos) << ConfigError(c);
+  f->set_base(-0.3);
+  EXPECT_NE(ConfigError(c).find("benches[0].drift[1].base: must be >= 0"), std::string::npos) << ConfigError(c);
+  f->set_base(0.3);
+  EXPECT_EQ(ConfigError(c), "");
+  c.mutable_benches(0)->mutable_drift()->RemoveLast();
   c.mutable_benches(0)->set_current_noise_a(-1e-3);
   EXPECT_NE(ConfigError(c).find("benches[0].current_noise_A"), std::string::npos) << ConfigError(c);
   c.mutable_benches(0)->set_current_noise_a(1e-3);
@@ -95,6 +113,22 @@ TEST(ValveDrift, AStepAndARampFromTheirNight) {
   EXPECT_EQ(runs::DriftFactor(ramp, 9), 1.0);
   EXPECT_DOUBLE_EQ(runs::DriftFactor(ramp, 10), 1.0);
   EXPECT_DOUBLE_EQ(runs::DriftFactor(ramp, 30), 0.8);
+
+  // Applied to a plant: R relative to its own, dry friction from nothing (its base), F_s kept >= F_c.
+  auto plant = model::Preset("taghizadeh2009");
+  ASSERT_TRUE(plant.ok());
+  const double R0 = plant->R_ohm;
+  const std::vector<runs::ValveDrift> drift = {step, {"coulomb_friction.F_c", 0.0, 0.5, 3, 0.3}};
+  model::PlantParams night2 = *plant, night5 = *plant;
+  ASSERT_TRUE(runs::ApplyDrift(drift, 2, &night2).ok());
+  EXPECT_EQ(night2.R_ohm, R0);
+  EXPECT_EQ(night2.effects.friction_F_c_N, 0.0);
+  ASSERT_TRUE(runs::ApplyDrift(drift, 5, &night5).ok());
+  EXPECT_DOUBLE_EQ(night5.R_ohm, 1.04 * R0);
+  EXPECT_DOUBLE_EQ(night5.effects.friction_F_c_N, 0.3 * 2.0);  // 0.3 N x (1 + 0.5 x 2)
+  EXPECT_GE(night5.effects.friction_F_s_N, night5.effects.friction_F_c_N);
+  model::PlantParams bad = *plant;
+  EXPECT_FALSE(runs::ApplyDrift({{"coulomb_friction.F_c", 0.0, 1e6, 1, 1.0}}, 100, &bad).ok());
 
   valvebench::v1::ExperimentSpec spec;
   EXPECT_EQ(runs::NightNumberOf(spec), 0);
