@@ -290,7 +290,7 @@ StatusOr<Settings> SettingsFromConfig(const valvebench::v1::ServerConfig& c, con
   auto lab = LabFromConfig(c);
   if (!lab.ok()) return lab.status();
   s.lab = std::move(*lab);
-  if (s.lab.enabled) s.nights.lab_host = s.lab.host;
+  if (s.lab.enabled) s.nights.lab_host = s.lab.host, s.nights.lab_lease_ttl_s = s.lab.lease_ttl_s;
   // The spool: one directory per host process (the instance lock holds the store or the host identity, so a
   // default derived from them is never shared by two processes).
   if (c.spool_dir() == "none") {

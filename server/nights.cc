@@ -13,6 +13,7 @@
 #include "regress/suite.h"
 #include "server/health_check.h"
 #include "service/bench_health.h"
+#include "service/lab_benches.h"
 #include "runs/query.h"
 
 namespace vb::server {
@@ -68,6 +69,29 @@ void NightScheduler::Loop(int nights_now) {
     if (!stop_signal_.SleepUntil(*next)) return;
     night(*next);
   }
+}
+
+std::vector<runs::BenchSetup> NightScheduler::CheckedBenches() {
+  std::vector<runs::BenchSetup> out = benches_;
+  if (setup_.lab_host.empty()) return out;
+  // In a lab the host that claimed the night checks every live host's benches (docs/track.md, "In a lab"): each
+  // host registers its benches' health blocks with its heartbeat, and a check pinned to a bench runs on the host
+  // that has it. A host whose heartbeat is three lease TTLs behind ours (the store's clock on both) is gone: its
+  // checks would hold the night until its deadline.
+  auto store = pool_->Acquire();
+  auto hosts = store.ok() ? (*store)->ListHosts() : StatusOr<std::vector<db::HostRecord>>(store.status());
+  if (!hosts.ok()) {
+    spdlog::warn("nights: the lab's hosts: {}; only this host's benches are checked", hosts.status().message());
+    return out;
+  }
+  double newest = 0.0;
+  for (const auto& h : *hosts) newest = std::max(newest, h.heartbeat_unix_s);
+  std::vector<db::HostRecord> live;
+  for (const auto& h : *hosts)
+    if (h.heartbeat_unix_s >= newest - 3.0 * setup_.lab_lease_ttl_s) live.push_back(h);
+  for (auto& b : OtherHostsBenches(live, setup_.lab_host))
+    if (b.config.has_health()) out.push_back(std::move(b));
+  return out;
 }
 
 StatusOr<std::int64_t> NightScheduler::SaveNight(const std::string& date, std::int64_t batch_id,
@@ -142,7 +166,7 @@ StatusOr<std::int64_t> NightScheduler::RunNight(double fire_unix_s) {
   night_number = *number;
   // Each bench's health check, queued ahead of the suite (its runs' priority): a failed submission is recorded
   // in the night and does not stop it.
-  for (const auto& bench : benches_) {
+  for (const auto& bench : CheckedBenches()) {
     auto specs = HealthCheckSpecs(bench, date, night_number);
     if (specs.empty()) continue;
     auto queued = submit_(runs::Submission{"nights", "health:" + date, std::move(specs), {}, ""});

@@ -64,6 +64,8 @@ class NightScheduler {
                                    const std::string& result_json, double finished_unix_s);
 
   NightsSetup setup_;
+  // The benches whose health check tonight queues: this host's, and in a lab every live host's that has one.
+  std::vector<runs::BenchSetup> CheckedBenches();
   std::vector<runs::BenchSetup> benches_;
   StorePool* pool_;
   BenchTwins twins_{pool_};

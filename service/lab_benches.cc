@@ -53,6 +53,19 @@ std::string BenchesJson(const std::vector<BenchSetup>& benches) {
                      {"max_current_A", b.caps.max_current_A},
                      {"device_loops", b.caps.device_loops},
                      {"max_device_loop_Hz", b.caps.max_device_loop_Hz}};
+    // What the host that claims a night needs to queue this bench's health check (docs/track.md, "In a lab"):
+    // the check's block, and for an emulated bench its model and driver (the run's spec carries them).
+    if (b.config.has_health()) {
+      std::string health, model, driver;
+      (void)google::protobuf::util::MessageToJsonString(b.config.health(), &health, opt);
+      entry["health"] = nlohmann::json::parse(health);
+      if (b.kind == BenchKind::kEmulated) {
+        (void)google::protobuf::util::MessageToJsonString(b.model, &model, opt);
+        (void)google::protobuf::util::MessageToJsonString(b.config.driver(), &driver, opt);
+        entry["model_spec"] = nlohmann::json::parse(model);
+        entry["driver_spec"] = nlohmann::json::parse(driver);
+      }
+    }
     a.push_back(std::move(entry));
   }
   return a.dump();
@@ -99,6 +112,18 @@ std::vector<BenchSetup> OtherHostsBenches(const std::vector<db::HostRecord>& hos
         for (const auto& l : c["device_loops"])
           if (l.is_string()) s.caps.device_loops.push_back(l.get<std::string>());
       s.caps.max_device_loop_Hz = c.value("max_device_loop_Hz", 0.0);
+      // Its health check, as its host configured it: an entry that does not parse has none here.
+      google::protobuf::util::JsonParseOptions in;
+      in.ignore_unknown_fields = true;  // a newer host's fields
+      if (b.contains("health") && b["health"].is_object() &&
+          google::protobuf::util::JsonStringToMessage(b["health"].dump(), s.config.mutable_health(), in).ok()) {
+        if (b.contains("model_spec") && b["model_spec"].is_object())
+          (void)google::protobuf::util::JsonStringToMessage(b["model_spec"].dump(), &s.model, in);
+        if (b.contains("driver_spec") && b["driver_spec"].is_object())
+          (void)google::protobuf::util::JsonStringToMessage(b["driver_spec"].dump(), s.config.mutable_driver(), in);
+      } else {
+        s.config.clear_health();
+      }
       if (!s.name.empty() && !s.bench_class.empty()) out.push_back(std::move(s));
     }
   }

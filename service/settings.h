@@ -25,6 +25,7 @@ struct NightsSetup {
   std::string baseline_path;
   bool utc = true;              // the only time zone supported
   std::string lab_host;         // in a lab: this host's name; a night runs only where ClaimNight wins it
+  double lab_lease_ttl_s = 0.0; // in a lab: a host whose heartbeat is 3 of these behind this host's is gone
 };
 
 // The lab (config "lab"; docs/lab.md). Disabled: one machine, no host name, no leases.

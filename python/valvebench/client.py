@@ -755,7 +755,7 @@ class Client:
                     raise InvalidArgument("model: %s: %s" % (os.fspath(model), e)) from None
         elif model:
             req.model = model
-        resp = self._call(self._api.DiagnoseRuns, req, "diagnose", timeout_s=max(self.timeout_s or 0, 300.0))
+        resp = self._call(self._api.DiagnoseRuns, req, "diagnose", timeout_s=max(self.timeout_s or 0, 3600.0))
         return Diagnosis(json.loads(resp.report_json), report=resp.report,
                          improved_model_json=resp.improved_model_json)
 

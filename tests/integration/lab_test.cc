@@ -343,6 +343,60 @@ TEST(LabNights, TwoHostsRunTonightsNightOnce) {
   EXPECT_EQ(runs->runs_size(), 9);  // one batch of the ci suite, not two
 }
 
+// A lab's night checks every live host's benches (docs/track.md, "In a lab"): host-b has a checked bench and no
+// nights; host-a claims tonight and queues b1's health check beside a1's; b1's runs execute on host-b, and the
+// night identifies both (GetBenchHealth lists both benches, each with tonight's check).
+TEST(LabNights, TheClaimingHostChecksEveryLiveHostsBenches) {
+  const std::string suites = std::string(VB_SOURCE_DIR) + "/examples/suites/";
+  const std::string nights = R"("nights": {"cron": "0 2 * * *", "suite_file": ")" + suites +
+                             R"(ci.json", "baseline_file": ")" + suites + R"(ci-baseline.json"}, )";
+  const std::string health =
+      R"("health": {"supply_V": [24], "supply_pressure_Pa": [100000, 400000]}, "current_noise_A": 0.002)";
+  const std::string root = ::testing::TempDir() + "/vb-lab-health-" + std::to_string(::getpid());
+  std::filesystem::remove_all(root);
+  std::filesystem::create_directories(root + "/a");
+  std::filesystem::create_directories(root + "/b");
+  std::filesystem::create_symlink(root + "/a/runs.db", root + "/b/runs.db");
+  auto bench = [&](const char* name) {
+    return std::string(R"([{"name": ")") + name + R"(", "kind": "emulated", "model": {"preset": "taghizadeh2009"}, )" +
+           health + "}]";
+  };
+  // host-b first, so that it is registered (with its benches' health blocks) when host-a claims the night.
+  ServerProcess b(root + "/b", R"("lab": {"host": "host-b", "lease_ttl_s": 2})", bench("b1"));
+  ASSERT_FALSE(b.Start().empty()) << b.Log();
+  ServerProcess a(root + "/a", nights + R"("lab": {"host": "host-a", "lease_ttl_s": 2})", bench("a1"));
+  a.AddArg("--run-night-now");
+  const std::string addr = a.Start();
+  ASSERT_FALSE(addr.empty()) << a.Log();
+  auto viewer = MakeClient(addr, testing::kViewerToken);
+  const auto until = Clock::now() + std::chrono::seconds(180);
+  int listed = 0;
+  while (Clock::now() < until && listed == 0) {
+    auto n = viewer.ListNights(10);
+    ASSERT_TRUE(n.ok()) << n.status().message();
+    listed = n->nights_size();
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  }
+  ASSERT_EQ(listed, 1) << a.Log() << b.Log();
+  EXPECT_NE(a.Log().find("health check of b1: batch"), std::string::npos) << a.Log();
+  v1::ListRunsRequest req;
+  req.set_tag("health:b1");
+  auto runs = viewer.ListRuns(req);
+  ASSERT_TRUE(runs.ok()) << runs.status().message();
+  ASSERT_EQ(runs->runs_size(), 2);
+  for (const auto& r : runs->runs()) {
+    EXPECT_EQ(r.status(), v1::DONE) << r.reason();
+    EXPECT_EQ(r.host(), "host-b");
+    EXPECT_EQ(r.bench(), "b1");
+  }
+  auto served = viewer.GetBenchHealth("");
+  ASSERT_TRUE(served.ok()) << served.status().message();
+  std::vector<std::string> checked;
+  for (const auto& bh : served->benches()) checked.push_back(bh.bench());
+  EXPECT_EQ(checked, (std::vector<std::string>{"a1", "b1"})) << served->DebugString().substr(0, 2000);
+  for (const auto& bh : served->benches()) EXPECT_EQ(bh.nights_size(), 1) << bh.bench();
+}
+
 std::string ErrorOf(const v1::ServerConfig& c) {
   auto s = server::SettingsFromConfig(c, "");
   return s.ok() ? std::string("(accepted)") : s.status().message();
