@@ -124,16 +124,28 @@ def main():
             if proc.poll() is not None:
                 sys.exit("valvebench-server exited: see " + log_path)
         elapsed = time.time() - t0
-        out = lambda *args: json.loads(subprocess.run([benchctl] + list(args) + ["--json", "--server", addr, "--token", TOKEN],
-                                                      capture_output=True, text=True, timeout=600).stdout)
-        nights = list(reversed(out("nights", "--limit", "1000")))
-        health_j = out("health")
+        nights, health_j = read_lab(benchctl, addr)
     finally:
         proc.terminate()
         proc.wait(timeout=60)
-    report = evaluate(nights, health_j, dates, elapsed)
-    if a.json:
-        with open(a.json, "w") as f:
+    return report_out(evaluate(nights, health_j, dates, elapsed), a.json)
+
+
+def read_lab(benchctl, addr):
+    """The lab's nights (oldest first) and every bench's tracking, as the server keeps them."""
+    def out(*args):
+        r = subprocess.run([benchctl] + list(args) + ["--json", "--server", addr, "--token", TOKEN],
+                           capture_output=True, text=True, timeout=600)
+        try:
+            return json.loads(r.stdout)
+        except json.JSONDecodeError:
+            sys.exit("benchctl %s: %s" % (" ".join(args), (r.stderr or r.stdout)[:500]))
+    return list(reversed(out("nights", "--limit", "1000"))), out("health")
+
+
+def report_out(report, path):
+    if path:
+        with open(path, "w") as f:
             json.dump(report, f, indent=1)
     return 0
 
@@ -161,30 +173,23 @@ def evaluate_again(a):
             time.sleep(0.1)
         if addr is None:
             sys.exit("valvebench-server did not start: see " + log_path)
-        out = lambda *args: json.loads(subprocess.run([benchctl] + list(args) + ["--json", "--server", addr, "--token", TOKEN],
-                                                      capture_output=True, text=True, timeout=600).stdout)
-        nights = list(reversed(out("nights", "--limit", "1000")))
-        health_j = out("health")
+        nights, health_j = read_lab(benchctl, addr)
     finally:
         proc.terminate()
         proc.wait(timeout=60)
-    dates = [n["date"] for n in nights]
-    report = evaluate(nights, health_j, dates, float("nan"))
-    if a.json:
-        with open(a.json, "w") as f:
-            json.dump(report, f, indent=1)
-    return 0
+    return report_out(evaluate(nights, health_j, [n["date"] for n in nights], float("nan")), a.json)
 
 
 def evaluate(nights, health_j, dates, elapsed):
     by_bench = {b["bench"]: b for b in health_j.get("benches", [])}
-    print("\n%d nights lived in %.0f s (%.1f s a night)" % (len(nights), elapsed, elapsed / max(1, len(nights))))
+    if elapsed == elapsed:  # not NaN: lived now (--evaluate-only reads a lab lived before)
+        print("\n%d nights lived in %.0f s (%.1f s a night)" % (len(nights), elapsed, elapsed / max(1, len(nights))))
     report = {"nights": len(nights), "elapsed_s": elapsed, "drifts": [], "clean": [], "regressed_nights": []}
     print("\nDrifts (3 sigma: the night the true change first exceeds 3 sigma of the parameter's reference):")
     for d in DRIFTS:
         b = by_bench.get(d["bench"], {})
         params = {p["parameter"]: p for p in b.get("parameters", [])}
-        flags = [f for f in b.get("flags", []) if True]
+        flags = b.get("flags", [])
         row = {"bench": d["bench"], "drift": "%s %+g step %+g/night from night %d" % (d["parameter"], d["step"], d["per_night"], d["from_night"])}
         # The night the true relative change passes 3 sigma (relative) of each moved parameter's reference, the
         # first of them; the relative size a parameter moves by per relative change of the model parameter is
