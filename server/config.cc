@@ -334,6 +334,17 @@ StatusOr<Settings> SettingsFromConfig(const valvebench::v1::ServerConfig& c, con
       if (!(o.rfind("http://", 0) == 0 || o.rfind("https://", 0) == 0) || o.back() == '/')
         return Status::InvalidArgument("web.allowed_origins: '" + o + "' is not scheme://host[:port]");
     s.web = w;
+    // The sessions' file, like the spool one per host process (the defaults follow the instance lock's identity).
+    if (w.sessions_file() == "none") {
+      s.web_sessions_file.clear();
+    } else if (!w.sessions_file().empty()) {
+      s.web_sessions_file = Resolve(base_dir, w.sessions_file());
+    } else if (!db::IsPostgresLocation(s.database_path)) {
+      s.web_sessions_file = s.database_path + ".web-sessions" + (s.lab.enabled ? "-" + s.lab.host : std::string());
+    } else if (const char* state = std::getenv("STATE_DIRECTORY"); state != nullptr && *state != '\0') {
+      std::string first = state;
+      s.web_sessions_file = first.substr(0, first.find(':')) + "/web-sessions";
+    }
   }
   return s;
 }

@@ -32,6 +32,8 @@ struct Settings : ServiceSettings {
   // The web dashboard's "host:port" (config "web"; docs/web.md); empty = no dashboard.
   std::string web_listen_address;
   valvebench::v1::WebConfig web;  // the whole block, limits checked (0 = default)
+  // Where the dashboard keeps its sessions over a restart (web.sessions_file and its defaults); empty: in memory.
+  std::string web_sessions_file;
   // The host's spool (config spool_dir, spool_max_mb; runs/spool.h): "" = none.
   std::string spool_dir;
   std::uint64_t spool_max_bytes = std::uint64_t{1} << 30;

@@ -255,6 +255,9 @@ int main(int argc, char** argv) {
     if (w.max_streams() > 0) wo.max_streams = w.max_streams();
     if (w.max_streams_per_session() > 0) wo.max_streams_per_session = w.max_streams_per_session();
     wo.allowed_origins.assign(w.allowed_origins().begin(), w.allowed_origins().end());
+    wo.sessions_file = settings->web_sessions_file;
+    if (wo.sessions_file.empty())
+      spdlog::warn("web: no sessions_file: the dashboard's sessions end with this process (pages log in again)");
     wo.identify = [&settings](std::string_view authorization) -> vb::StatusOr<vb::web::GatewayOptions::Identity> {
       auto p = settings->auth.Authenticate(authorization);
       if (!p.ok()) return p.status();

@@ -47,6 +47,7 @@
 #include "valvebench/v1/api.grpc.pb.h"
 #include "web/assets.h"
 #include "web/door.h"
+#include "web/session_store.h"
 
 namespace vb::web {
 
@@ -391,73 +392,6 @@ grpc::Status ReadTraceRows(v1::BenchService::Stub* stub, const httplib::Request&
   return grpc::Status::OK;
 }
 
-constexpr double kSessionLife_s = 12 * 3600;
-
-// Server-side sessions: a random id in the cookie, the token here. Revoked by logout, by a 401 from the service
-// (the token was removed), by age; lost with a restart (log in again).
-class Sessions {
- public:
-  std::string Create(const std::string& token) {
-    unsigned char raw[32];
-    if (RAND_bytes(raw, sizeof(raw)) != 1) throw std::runtime_error("no random bytes for a session id");
-    std::string id;
-    for (unsigned char b : raw) id += fmt::format("{:02x}", b);
-    std::lock_guard<std::mutex> lock(mu_);
-    Prune();
-    // A token's own oldest session goes when it has kMaxPerToken (issue 34: 24,000 logins of one user evicted
-    // everyone's sessions). Only a token the service accepted logs in, so the total is bounded by the
-    // configured tokens times kMaxPerToken.
-    auto& mine = by_token_[token];
-    while (mine.size() >= kMaxPerToken) {
-      by_id_.erase(mine.front());
-      mine.pop_front();
-    }
-    mine.push_back(id);
-    by_id_[id] = {token, Clock::now() + std::chrono::seconds(static_cast<long long>(kSessionLife_s))};
-    return id;
-  }
-  std::string TokenOf(const std::string& id) {
-    std::lock_guard<std::mutex> lock(mu_);
-    auto it = by_id_.find(id);
-    if (it == by_id_.end()) return "";
-    if (Clock::now() > it->second.expires) {
-      Forget(it);
-      return "";
-    }
-    return it->second.token;
-  }
-  void Revoke(const std::string& id) {
-    std::lock_guard<std::mutex> lock(mu_);
-    if (auto it = by_id_.find(id); it != by_id_.end()) Forget(it);
-  }
-  static constexpr size_t kMaxPerToken = 32;
-
- private:
-  using Clock = std::chrono::steady_clock;
-  struct Session {
-    std::string token;
-    Clock::time_point expires;
-  };
-  void Forget(std::map<std::string, Session>::iterator it) {
-    auto t = by_token_.find(it->second.token);
-    if (t != by_token_.end()) {
-      t->second.erase(std::remove(t->second.begin(), t->second.end(), it->first), t->second.end());
-      if (t->second.empty()) by_token_.erase(t);
-    }
-    by_id_.erase(it);
-  }
-  void Prune() {
-    const auto now = Clock::now();
-    for (auto it = by_id_.begin(); it != by_id_.end();) {
-      auto next = std::next(it);
-      if (now > it->second.expires) Forget(it);
-      it = next;
-    }
-  }
-  std::mutex mu_;
-  std::map<std::string, Session> by_id_;
-  std::map<std::string, std::deque<std::string>> by_token_;  // a token's sessions, oldest first
-};
 
 
 }  // namespace
@@ -546,6 +480,7 @@ class Routes {
  public:
   Routes(std::shared_ptr<grpc::Channel> channel, const GatewayOptions& options, bool tls)
       : stub_(v1::BenchService::NewStub(channel)),
+        sessions_(options.sessions_file),
         options_(options),
         tls_(tls),
         max_body_bytes_(options.limits.max_body_bytes) {}
@@ -573,6 +508,7 @@ class Routes {
     }
     s.Post("/api/login", [this](const auto& q, auto& r) { Login(q, r); });
     s.Post("/api/logout", [this](const auto& q, auto& r) { Logout(q, r); });
+    s.Get("/api/login", [this](const auto& q, auto& r) { SessionState(q, r); });
     s.set_post_routing_handler([this](const auto& q, auto& r) {
       try {
         AfterRoute(q, r);
@@ -821,15 +757,49 @@ class Routes {
       }
       return SendError(res, st);
     }
-    res.set_header("Set-Cookie", CookieHeader(sessions_.Create(token), static_cast<int>(kSessionLife_s)));
+    std::string user;
+    if (options_.identify)
+      if (auto who = options_.identify("Bearer " + token); who.ok()) user = who->user;
+    res.set_header("Set-Cookie", CookieHeader(sessions_.Create(token, user), static_cast<int>(sessions_.life_s())));
     res.set_content("{}", kJson);
   }
 
+  // Logout: this session; with {"everywhere": true} every session of its token (other browsers, other tabs'
+  // logins), e.g. after a laptop was lost.
   void Logout(const httplib::Request& req, httplib::Response& res) {
     const std::string session = CookieToken(req);
-    if (!session.empty()) sessions_.Revoke(session);
+    bool everywhere = false;
+    if (!req.body.empty()) {
+      Json body;
+      if (!BodyJson(req, res, &body)) return;
+      if (body.contains("everywhere")) {
+        if (!body["everywhere"].is_boolean()) return BadRequest(res, "everywhere: must be true or false");
+        everywhere = body["everywhere"].get<bool>();
+      }
+    }
+    std::size_t ended = 0;
+    if (!session.empty()) ended = everywhere ? sessions_.RevokeAllOf(session) : (sessions_.Revoke(session) ? 1 : 0);
     res.set_header("Set-Cookie", CookieHeader("", 0));
-    res.set_content("{}", kJson);
+    res.set_content(Json{{"sessions_ended", ended}}.dump(), kJson);
+  }
+
+  // GET /api/login: whether this browser's session cookie stands for a token the service still knows, and whose.
+  // The page asks after the server was away: sessions are kept over a restart (web/session_store.h), so it logs
+  // in again only when the answer is no. Says nothing about any other session.
+  void SessionState(const httplib::Request& req, httplib::Response& res) {
+    const std::string session = CookieToken(req);
+    const std::string token = session.empty() ? "" : sessions_.TokenOf(session);
+    Json out{{"session", false}};
+    if (!token.empty()) {
+      if (!options_.identify) {
+        out["session"] = true;
+      } else if (auto who = options_.identify("Bearer " + token); who.ok()) {
+        out = Json{{"session", true}, {"user", who->user}, {"role", who->role}};
+      } else {
+        sessions_.Revoke(session);  // its token was removed from the configuration
+      }
+    }
+    res.set_content(out.dump(), kJson);
   }
 
   void Benches(const httplib::Request& req, httplib::Response& res) {
@@ -1739,7 +1709,7 @@ class Routes {
   }
 
   std::unique_ptr<v1::BenchService::Stub> stub_;
-  Sessions sessions_;
+  SessionStore sessions_;
   FailedAttempts logins_;  // common/failed_attempts.h
   std::mutex streams_mu_;
   int streams_ = 0;

@@ -8,7 +8,8 @@
 //   GET  /, /app.js, /app.css, /dygraph.min.js, /dygraph.min.css   the page (embedded)
 //   POST /api/login {"token"}        checks the token (ListBenches), sets the vb_session cookie (a server-side
 //                                    session id, for SSE and the CSV link)
-//   POST /api/logout                 revokes the session
+//   POST /api/logout {"everywhere"}  revokes the session (with everywhere: every session of its token)
+//   GET  /api/login                  whether the cookie's session is live: {session, user, role}
 //   GET  /api/benches                ListBenches
 //   GET  /api/queue                  running and queued runs, queue positions, ETA of running runs
 //   GET  /api/session                who the token is: {user, role} (GatewayOptions::identify)
@@ -62,6 +63,8 @@ struct GatewayOptions {
   // limits.workers: the page's other requests always find one. Beyond: 429.
   int max_streams = 48;
   int max_streams_per_session = 8;
+  // Where the sessions are kept over a restart (web/session_store.h); empty: in memory only.
+  std::string sessions_file;
   // Origins besides the dashboard's own accepted on login and on cookie-authorised costly calls.
   std::vector<std::string> allowed_origins;
   // Who a bearer token is, for the page's header and its role-aware controls (GET /api/session): the server's

@@ -135,6 +135,12 @@ def text_of(by, selector, timeout=10):
             time.sleep(0.1)
 
 
+def session_cookie():
+    """The browser's vb_session value (Path=/api: WebDriver's own cookie call sees only the page's path)."""
+    cookies = driver.execute_cdp_cmd("Network.getAllCookies", {}).get("cookies", [])
+    return next((c.get("value") for c in cookies if c.get("name") == "vb_session"), None)
+
+
 def console_errors(allowed=()):
     """SEVERE console entries since the last call, minus the allowed patterns."""
     out = []
@@ -1001,6 +1007,7 @@ try:
     wait(lambda: driver.find_elements(By.CSS_SELECTOR, "#benches tr") or None, what="lab before the outage")
     api("POST", "/api/runs/%s/cancel" % running, OPERATOR, {})
     web_port = int(base.rsplit(":", 1)[1])
+    cookie_before = session_cookie()
     proc.terminate()
     proc.wait(timeout=20)
     banner = wait(lambda: driver.find_element(By.ID, "disconnected").is_displayed() and
@@ -1019,8 +1026,9 @@ try:
     check("the banner clears when the server is back", bool(gone))
     console_errors()  # the outage's failed requests are expected
 
-    # 10. After the restart the page works without a reload (issue 37, point 4): its in-memory session died with
-    # the old server, so the page logs in again by itself; a live view (cookie-authorised) and a download work.
+    # 10. After the restart the page works without a reload (issue 37, point 4), in the same session (issue 39,
+    # point 4: sessions are kept in the server's sessions file): the browser's cookie is the one it had, the page
+    # did not log in again, and a live view (cookie-authorised) and a download work.
     after = api("POST", "/api/runs", OPERATOR, {"spec": dict(spec, name="web-after-restart", duration_s=20.0)})["run_ids"][0]
     go("#/run/%s" % after)
     live = wait(lambda: int(driver.find_element(By.CSS_SELECTOR, "#traces .live-count").get_attribute("data-samples")
@@ -1030,7 +1038,10 @@ try:
     status = driver.execute_async_script(
         "const done = arguments[arguments.length - 1];"
         "fetch('/api/runs/%s/trace.csv', {credentials: 'same-origin'}).then((r) => done(r.status), () => done(0));" % start_id)
-    check("a download works after the restart without a reload (the cookie is new)", status == 200, status)
+    check("a download works after the restart without a reload", status == 200, status)
+    cookie_after = session_cookie()
+    check("the browser's session survived the restart (the same cookie, no new login)",
+          bool(cookie_before) and cookie_after == cookie_before, (cookie_before, cookie_after))
     flash_now = text_of(By.ID, "flash")
     check("no gRPC words on the page after the restart", "UNAVAILABLE" not in flash_now and
           "authorization metadata" not in text_of(By.ID, "main"), flash_now)

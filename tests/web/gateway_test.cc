@@ -56,6 +56,12 @@ class WebGatewayTest : public ::testing::Test {
     server_ = std::make_unique<vb::testing::ServerProcess>(dir, R"("web": {"listen_address": "127.0.0.1:0"})");
     grpc_address_ = server_->Start();
     ASSERT_FALSE(grpc_address_.empty()) << server_->Log();
+    ConnectToDashboard();
+  }
+
+  // The dashboard's port from the server's log (port 0: a new one at every start).
+  void ConnectToDashboard() {
+    port_ = 0;
     const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(10);
     while (std::chrono::steady_clock::now() < until) {
       const std::string log = server_->Log();
@@ -69,6 +75,15 @@ class WebGatewayTest : public ::testing::Test {
     ASSERT_GT(port_, 0) << server_->Log();
     http_ = std::make_unique<httplib::Client>("127.0.0.1", port_);
     http_->set_read_timeout(30, 0);
+  }
+
+  // Logs in with the token; the session id from the cookie.
+  std::string Login(const char* token) {
+    auto login = http_->Post("/api/login", std::string(R"({"token": ")") + token + "\"}", "application/json");
+    EXPECT_TRUE(login && login->status == 200);
+    if (!login) return "";
+    const std::string cookie = login->get_header_value("Set-Cookie");
+    return cookie.substr(11, cookie.find(';') - 11);
   }
 
   Json Submit(const std::string& spec_json, const char* token = kOperatorToken) {
@@ -535,6 +550,61 @@ TEST_F(WebGatewayTest, TheSessionCookieAuthorisesTheStreamAndTheDownloadOnlyAndL
   auto raw = http_->Get("/api/runs/" + id + "/trace.csv", {{"Cookie", std::string("vb_token=") + kOperatorToken}});
   ASSERT_TRUE(raw);
   EXPECT_EQ(raw->status, 401);
+}
+
+// Issue 39, point 4: the dashboard's sessions survive a restart of the server (kept in <database>.web-sessions,
+// the token sealed under the session id, so the file alone opens nothing); logout ends one, "everywhere" all of a
+// token's, and that too survives the restart.
+TEST_F(WebGatewayTest, SessionsSurviveARestartAndLogoutEverywhereEndsAllOfAToken) {
+  Json spec = Json::parse(SpecFile("standard/e3.json"));
+  spec["duration_s"] = 0.05;
+  const std::string id = Submit(spec.dump())["run_ids"][0];
+  WaitEnded(id);
+  const std::string first = Login(kOperatorToken), second = Login(kOperatorToken), viewer = Login(kViewerToken);
+  ASSERT_EQ(first.size(), 64u);
+  auto cookie = [](const std::string& session) { return httplib::Headers{{"Cookie", "vb_session=" + session}}; };
+  const std::string file = server_->dir() + "/runs.db.web-sessions";
+  const std::string stored = ReadFile(file);
+  ASSERT_FALSE(stored.empty()) << "no " << file << "\n" << server_->Log();
+  EXPECT_EQ(stored.find(kOperatorToken), std::string::npos) << "the token is in the file";
+  EXPECT_EQ(stored.find(first), std::string::npos) << "the session id is in the file";
+  EXPECT_EQ(std::filesystem::status(file).permissions() & std::filesystem::perms::group_read,
+            std::filesystem::perms::none);
+
+  ASSERT_EQ(server_->Kill(SIGTERM), 0) << server_->Log();
+  ASSERT_FALSE(server_->Start().empty()) << server_->Log();
+  ConnectToDashboard();
+  EXPECT_NE(server_->Log().find("web sessions: 3 kept from"), std::string::npos) << server_->Log();
+  auto csv = http_->Get("/api/runs/" + id + "/trace.csv", cookie(first));
+  ASSERT_TRUE(csv);
+  EXPECT_EQ(csv->status, 200) << csv->body.substr(0, 300);
+  auto state = http_->Get("/api/login", cookie(second));
+  ASSERT_TRUE(state);
+  EXPECT_EQ(Json::parse(state->body), (Json{{"session", true}, {"user", "olga"}, {"role", "operator"}})) << state->body;
+  auto unknown = http_->Get("/api/login", cookie(std::string(64, 'a')));
+  ASSERT_TRUE(unknown);
+  EXPECT_EQ(Json::parse(unknown->body), (Json{{"session", false}}));
+
+  // Logout everywhere from the first: the second goes too, the viewer's stays.
+  auto out = http_->Post("/api/logout", cookie(first), R"({"everywhere": true})", "application/json");
+  ASSERT_TRUE(out);
+  EXPECT_EQ(out->status, 200);
+  EXPECT_EQ(Json::parse(out->body)["sessions_ended"], 2) << out->body;
+  auto bad = http_->Post("/api/logout", cookie(viewer), R"({"everywhere": "yes"})", "application/json");
+  ASSERT_TRUE(bad);
+  EXPECT_EQ(bad->status, 400);
+  EXPECT_NE(bad->body.find("everywhere: must be true or false"), std::string::npos) << bad->body;
+  ASSERT_EQ(server_->Kill(SIGTERM), 0);
+  ASSERT_FALSE(server_->Start().empty()) << server_->Log();
+  ConnectToDashboard();
+  for (const std::string& gone : {first, second}) {
+    auto after = http_->Get("/api/runs/" + id + "/trace.csv", cookie(gone));
+    ASSERT_TRUE(after);
+    EXPECT_EQ(after->status, 401);
+  }
+  auto kept = http_->Get("/api/runs/" + id + "/trace.csv", cookie(viewer));
+  ASSERT_TRUE(kept);
+  EXPECT_EQ(kept->status, 200);
 }
 
 // Login CSRF: a cross-site form can post text/plain, and a page of another origin sends its Origin; both are

@@ -28,6 +28,13 @@ function duration(s) {
   return (s / 3600).toFixed(1) + ' h';
 }
 function statusCell(s) { return el('span', {class: 'status-' + s, text: s}); }
+// A run's status, and while its result waits in its host's spool for the store (issue 39: the run is not stuck,
+// its result lands when the store takes it) since when.
+function runStatusCell(r) {
+  const cell = statusCell(r.status);
+  if (!r.result_waiting_since_unix_s || r.status !== 'RUNNING') return cell;
+  return el('span', {class: 'result-waiting'}, cell, ', result waiting for the store since ', when(r.result_waiting_since_unix_s));
+}
 function runLink(id, text) { return el('a', {href: '#/run/' + id, text: text || ('#' + id)}); }
 
 // ---- session: the token in sessionStorage, sent as a bearer header; /api/login sets the cookie SSE needs.
@@ -90,6 +97,14 @@ async function login(t) {
   showLoggedIn();
   flash('');
   return true;
+}
+// Whether the browser's session cookie is live on the server and stands for this tab's token (another tab may
+// have logged in as someone else since: the cookie is the browser's, the token the tab's).
+async function cookieSessionLive() {
+  try {
+    const [cookie, tab] = await Promise.all([api('GET', '/api/login'), api('GET', '/api/session')]);
+    return cookie.session === true && cookie.user === tab.user;
+  } catch (e) { return false; }
 }
 function showLoggedIn() { $('#login').hidden = true; $('#session').hidden = false; }
 function showLoggedOut() { $('#login').hidden = false; $('#session').hidden = true; me = null; document.body.dataset.role = ''; }
@@ -276,7 +291,7 @@ async function pageRun(main, m) {
     el('a', {href: '#/runs?batch=' + r.batch_id, text: 'batch ' + r.batch_id}));
   const c = (r.spec && r.spec.conditions) || {};
   const kv = el('div', {class: 'kv'});
-  for (const [k, v] of [['name', r.name], ['status', statusCell(r.status)], ['reason', r.reason || '–'],
+  for (const [k, v] of [['name', r.name], ['status', runStatusCell(r)], ['reason', r.reason || '–'],
     ['controller', r.controller], ['bench', r.bench || 'any'], ['submitter', r.submitter],
     ['priority', String(r.priority || 0)], ['tags', (r.tags || []).join(', ') || '–'],
     ['conditions.supply_V', fmt(c.supply_V) + ' V'], ['conditions.supply_pressure_Pa', fmt(c.supply_pressure_Pa || 0) + ' Pa'],
@@ -375,6 +390,14 @@ document.addEventListener('DOMContentLoaded', async () => {
   });
   window.addEventListener('hashchange', route);
   startConnectionProbe();
-  if (token() && !(await login(token()))) return;
+  // A reload keeps the tab's session when the server still has it (GET /api/login), else logs in again.
+  if (token()) {
+    if (await cookieSessionLive()) {
+      await loadSession();
+      showLoggedIn();
+    } else if (!(await login(token()))) {
+      return;
+    }
+  }
   route();
 });

@@ -85,20 +85,23 @@ function setConnected(ok, why) {
     afterReconnect();
   }
 }
-// The server is back after an outage. It may have restarted, and its sessions live in its memory: the cookie that
-// live views and downloads use is then unknown to it ("missing authorization metadata", 401). So the page logs in
-// again with the token this tab holds (a bearer call, which a restart does not affect) and redraws the current
-// view, whose live streams reopen with the new cookie: no reload needed (issue 37, point 4). Views holding the
-// user's unsent input (Submit, Import) are not redrawn; their next action goes out with the new session.
+// The server is back after an outage. It keeps its sessions over a restart (web/session_store.h), so the cookie
+// that live views and downloads use usually still works: GET /api/login says whether it does. When it does not
+// (a server without a sessions file, a session that expired or was ended elsewhere), the page logs in again with
+// the token this tab holds (a bearer call) and redraws the current view, whose live streams reopen with the new
+// cookie: no reload needed (issue 37, point 4; issue 39, point 4). Views holding the user's unsent input
+// (Submit, Import) are not redrawn; their next action goes out with the session.
 async function afterReconnect() {
   if (token()) {
-    try { await api('POST', '/api/login', {token: token()}); } catch (e) {
-      if (e instanceof ApiError && e.status === 401) {  // the token itself is no longer configured
-        sessionStorage.removeItem(TOKEN_KEY);
-        showLoggedOut();
-        flash('The server is back but no longer knows your token: log in again.');
+    if (!(await cookieSessionLive())) {
+      try { await api('POST', '/api/login', {token: token()}); } catch (e) {
+        if (e instanceof ApiError && e.status === 401) {  // the token itself is no longer configured
+          sessionStorage.removeItem(TOKEN_KEY);
+          showLoggedOut();
+          flash('The server is back but no longer knows your token: log in again.');
+        }
+        return;
       }
-      return;
     }
   }
   if (!/^#\/(submit|import)/.test(location.hash)) route();
@@ -177,7 +180,7 @@ function pageLab(main) {
         el('tr', {}, ['position', 'run', 'name', 'status', 'progress', 'ETA', 'bench', 'priority', 'submitter', 'submitted', '']
           .map((h) => el('th', {text: h}))),
         rows.map(([p, r, eta]) => el('tr', {'data-run': r.id},
-          el('td', {text: p}), el('td', {}, runLink(r.id)), el('td', {}, breakable(r.name)), el('td', {}, statusCell(r.status)),
+          el('td', {text: p}), el('td', {}, runLink(r.id)), el('td', {}, breakable(r.name)), el('td', {}, runStatusCell(r)),
           el('td', {class: 'num', text: Math.round(100 * (r.progress || 0)) + ' %'}), el('td', {text: eta}),
           el('td', {text: r.bench || 'any'}), el('td', {class: 'num', text: String(r.priority || 0)}),
           el('td', {text: r.submitter}), el('td', {}, timeCell(r.submitted_unix_s)),
@@ -220,7 +223,7 @@ const RUN_COLUMNS = [
   ['batch', null, (r) => el('a', {href: '#/runs?batch=' + r.batch_id, text: r.batch_id})],
   ['name', 'name', (r) => breakable(r.name)],
   ['controller', 'controller', (r) => breakable(r.controller)],
-  ['status', 'status', (r) => statusCell(r.status)],
+  ['status', 'status', (r) => runStatusCell(r)],
   ['bench', 'bench', (r) => r.bench || '–'],
   ['submitter', 'submitter', (r) => r.submitter],
   ['submitted', 'submitted', (r) => timeCell(r.submitted_unix_s)],
