@@ -34,6 +34,10 @@ struct FreeParam {
   // The value at which the effect vanishes (an effect's own parameter); NaN for nominal parameters. A
   // candidate whose effect parameters all end there has found no effect in the data and cannot win.
   double absent = std::numeric_limits<double>::quiet_NaN();
+  // > 1: a discrete choice among `levels` values evenly spaced over [lower, upper] (a form, e.g. the saturation's
+  // knee: magnetic_saturation.tanh 0, 1, 2), fitted by fitting the others at each level and keeping the level
+  // whose fit runs end lowest; it counts as one parameter and has no uncertainty. At most one per candidate.
+  int levels = 0;
 };
 
 // A parameter's value at normalised coordinate u in [0, 1] of its box (log-scaled where log_scale), and back.
