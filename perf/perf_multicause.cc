@@ -26,7 +26,7 @@
 // rates the level trades.
 //
 // Usage: perf_multicause [--draws N] [--seed S] [--only K] [--budget-scale X] [--level L] [--rule evidence|issue26]
-//                        [--calibrate]
+//                        [--calibrate] [--report]
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -459,11 +459,12 @@ int main(int argc, char** argv) {
   unsigned seed = kDefaultSeed;
   double budget_scale = 1.0, level = vb::gap::kAdditionEvidence;
   int only = 0;
+  bool report = false;  // --report: each draw's whole diagnosis report (with --only, to see why)
   bool issue26 = false, calibrate = false;
   for (int k = 1; k < argc; ++k) {
     const std::string a = argv[k];
-    if (a == "--calibrate") {
-      calibrate = true;
+    if (a == "--calibrate" || a == "--report") {
+      (a == "--calibrate" ? calibrate : report) = true;
       continue;
     }
     if (k + 1 >= argc) {
@@ -489,7 +490,7 @@ int main(int argc, char** argv) {
       issue26 = v == "issue26";
     } else {
       std::fprintf(stderr, "unknown option %s (--draws N, --seed S, --only K, --budget-scale X, --level L, "
-                           "--rule evidence|issue26, --calibrate)\n", a.c_str());
+                           "--rule evidence|issue26, --calibrate, --report)\n", a.c_str());
       return 2;
     }
   }
@@ -533,6 +534,7 @@ int main(int argc, char** argv) {
       std::printf("       add %s -> %s: %.2f -> %.2f mA, n_eff %.0f, evidence %.1f%s\n", a.from.c_str(), a.to.c_str(),
                   1e3 * a.before_A, 1e3 * a.after_A, a.effective_samples, a.evidence, a.taken ? " (taken)" : "");
     if (!d->form_error.empty()) std::printf("       %s\n", d->form_error.c_str());
+    if (report) std::printf("%s\n", vb::gap::DiagnosisReport(*d).c_str());
     std::fflush(stdout);
     outcomes.push_back(std::move(o));
   }
