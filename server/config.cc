@@ -199,6 +199,22 @@ StatusOr<LabSetup> LabFromConfig(const valvebench::v1::ServerConfig& c) {
 
 
 
+// A host process's own state (the spool, the web sessions): "none" nothing; a path relative to the config; by
+// default beside an SQLite database (`database_path + suffix`, "-<lab.host>" appended in a lab) or in systemd's
+// $STATE_DIRECTORY (the first, when it lists several) for PostgreSQL, else nothing. One per process: the instance
+// lock holds the store or the host identity these defaults derive from.
+static std::string HostStatePath(const std::string& configured, const std::string& base_dir, const Settings& s,
+                          const char* suffix, const char* state_name) {
+  if (configured == "none") return "";
+  if (!configured.empty()) return Resolve(base_dir, configured);
+  if (!db::IsPostgresLocation(s.database_path))
+    return s.database_path + suffix + (s.lab.enabled ? "-" + s.lab.host : std::string());
+  const char* state = std::getenv("STATE_DIRECTORY");
+  if (state == nullptr || *state == '\0') return "";
+  const std::string first = state;
+  return first.substr(0, first.find(':')) + "/" + state_name;
+}
+
 StatusOr<Settings> SettingsFromConfig(const valvebench::v1::ServerConfig& c, const std::string& base_dir) {
   Settings s;
   if (!c.listen_address().empty()) s.listen_address = c.listen_address();
@@ -293,17 +309,7 @@ StatusOr<Settings> SettingsFromConfig(const valvebench::v1::ServerConfig& c, con
   if (s.lab.enabled) s.nights.lab_host = s.lab.host, s.nights.lab_lease_ttl_s = s.lab.lease_ttl_s;
   // The spool: one directory per host process (the instance lock holds the store or the host identity, so a
   // default derived from them is never shared by two processes).
-  if (c.spool_dir() == "none") {
-    s.spool_dir.clear();
-  } else if (!c.spool_dir().empty()) {
-    s.spool_dir = Resolve(base_dir, c.spool_dir());
-  } else if (!db::IsPostgresLocation(s.database_path)) {
-    s.spool_dir = s.database_path + ".spool" + (s.lab.enabled ? "-" + s.lab.host : std::string());
-  } else if (const char* state = std::getenv("STATE_DIRECTORY"); state != nullptr && *state != '\0') {
-    std::string first = state;  // systemd may list several, separated by ':'
-    first = first.substr(0, first.find(':'));
-    s.spool_dir = first + "/spool";
-  }
+  s.spool_dir = HostStatePath(c.spool_dir(), base_dir, s, ".spool", "spool");
   if (c.spool_max_mb() != 0.0) {
     if (!(c.spool_max_mb() >= 1.0) || !std::isfinite(c.spool_max_mb()) || c.spool_max_mb() > 1e9)
       return Status::InvalidArgument("spool_max_mb: must be 1 to 1e9 MB (0 = the default, 1024), got " +
@@ -335,16 +341,7 @@ StatusOr<Settings> SettingsFromConfig(const valvebench::v1::ServerConfig& c, con
         return Status::InvalidArgument("web.allowed_origins: '" + o + "' is not scheme://host[:port]");
     s.web = w;
     // The sessions' file, like the spool one per host process (the defaults follow the instance lock's identity).
-    if (w.sessions_file() == "none") {
-      s.web_sessions_file.clear();
-    } else if (!w.sessions_file().empty()) {
-      s.web_sessions_file = Resolve(base_dir, w.sessions_file());
-    } else if (!db::IsPostgresLocation(s.database_path)) {
-      s.web_sessions_file = s.database_path + ".web-sessions" + (s.lab.enabled ? "-" + s.lab.host : std::string());
-    } else if (const char* state = std::getenv("STATE_DIRECTORY"); state != nullptr && *state != '\0') {
-      std::string first = state;
-      s.web_sessions_file = first.substr(0, first.find(':')) + "/web-sessions";
-    }
+    s.web_sessions_file = HostStatePath(w.sessions_file(), base_dir, s, ".web-sessions", "web-sessions");
   }
   return s;
 }
