@@ -25,7 +25,7 @@
 // levels of the rule from the evidence every draw recorded (Diagnosis::additions), so one run gives the error
 // rates the level trades.
 //
-// Usage: perf_multicause [--draws N] [--seed S] [--only K] [--budget-scale X] [--level L] [--rule evidence|issue26]
+// Usage: perf_multicause [--draws N] [--seed S] [--only K] [--budget-scale X] [--level L] [--rule evidence|issue26|issue26-gated]
 //                        [--calibrate] [--report]
 #include <algorithm>
 #include <chrono>
@@ -461,6 +461,7 @@ int main(int argc, char** argv) {
   int only = 0;
   bool report = false;  // --report: each draw's whole diagnosis report (with --only, to see why)
   bool issue26 = false, calibrate = false;
+  bool gated = false;  // --rule issue26-gated: no search below issue 26's gate (DiagnoseOptions::evidence_below_gate)
   for (int k = 1; k < argc; ++k) {
     const std::string a = argv[k];
     if (a == "--calibrate" || a == "--report") {
@@ -483,14 +484,15 @@ int main(int argc, char** argv) {
     } else if (a == "--level") {
       level = std::atof(v.c_str());
     } else if (a == "--rule") {
-      if (v != "evidence" && v != "issue26") {
-        std::fprintf(stderr, "--rule: evidence or issue26, not %s\n", v.c_str());
+      if (v != "evidence" && v != "issue26" && v != "issue26-gated") {
+        std::fprintf(stderr, "--rule: evidence, issue26 or issue26-gated, not %s\n", v.c_str());
         return 2;
       }
-      issue26 = v == "issue26";
+      issue26 = v != "evidence";
+      gated = v == "issue26-gated";
     } else {
       std::fprintf(stderr, "unknown option %s (--draws N, --seed S, --only K, --budget-scale X, --level L, "
-                           "--rule evidence|issue26, --calibrate, --report)\n", a.c_str());
+                           "--rule evidence|issue26|issue26-gated, --calibrate, --report)\n", a.c_str());
       return 2;
     }
   }
@@ -502,7 +504,7 @@ int main(int argc, char** argv) {
   Scores scores;
   std::vector<Outcome> outcomes;
   double worst_cpu = 0.0, worst_wall = 0.0, total_cpu = 0.0;
-  std::printf("rule %s, level %g, seed %u\n", issue26 ? "issue26" : "evidence", level, seed);
+  std::printf("rule %s, level %g, seed %u\n", issue26 ? (gated ? "issue26-gated" : "issue26") : "evidence", level, seed);
   std::printf("%-4s %-7s %-80s %-50s %6s\n", "draw", "kind", "truth", "verdict", "cpu_s");
   for (int s = 0; s < draws; ++s) {
     if (only > 0 && s + 1 != only) continue;
@@ -515,6 +517,7 @@ int main(int argc, char** argv) {
     opt.detection_limits = false;
     opt.addition_evidence = level;
     opt.issue26_rules = issue26;
+    opt.evidence_below_gate = !gated;
     const auto t0 = std::chrono::steady_clock::now();
     const std::clock_t c0 = std::clock();
     auto d = vb::gap::Diagnose(ds, nominal, opt);
