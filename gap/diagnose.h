@@ -113,6 +113,10 @@ struct DiagnoseOptions {
   // the evidence rule (AddsACause at addition_evidence) decides, with the parsimony test (docs/gap.md, "Below the
   // gate"). false: issue 26's gate as it was (perf_multicause --rule issue26-gated, for before/after figures).
   bool evidence_below_gate = true;
+  // A verdict's fitted R named as a cause beside its effect when the runs would show the change by themselves and
+  // the effect does not dominate it (ResistanceBesideAnEffect in gap/diagnose.cc; waveforms without a reference).
+  // false: before/after figures (perf_multicause --no-resistance-beside).
+  bool resistance_beside_effect = true;
   // The parsimony F-test's familywise level (ParsimonyTest), beside either rule; 1: off (for before/after figures).
   double parsimony_level = kParsimonyLevel;
   bool fit_nuisance = true;              // re-fit drifted nominal parameters beside a structural verdict

@@ -26,7 +26,7 @@
 // rates the level trades.
 //
 // Usage: perf_multicause [--draws N] [--seed S] [--only K] [--budget-scale X] [--level L] [--rule evidence|issue26|issue26-gated]
-//                        [--calibrate] [--report]
+//                        [--calibrate] [--report] [--no-resistance-beside]
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -461,11 +461,16 @@ int main(int argc, char** argv) {
   int only = 0;
   bool report = false;  // --report: each draw's whole diagnosis report (with --only, to see why)
   bool issue26 = false, calibrate = false;
-  bool gated = false;  // --rule issue26-gated: no search below issue 26's gate (DiagnoseOptions::evidence_below_gate)
+  bool gated = false;
+  bool resistance_beside = true;  // --rule issue26-gated: no search below issue 26's gate (DiagnoseOptions::evidence_below_gate)
   for (int k = 1; k < argc; ++k) {
     const std::string a = argv[k];
     if (a == "--calibrate" || a == "--report") {
       (a == "--calibrate" ? calibrate : report) = true;
+      continue;
+    }
+    if (a == "--no-resistance-beside") {  // DiagnoseOptions::resistance_beside_effect off (before/after figures)
+      resistance_beside = false;
       continue;
     }
     if (k + 1 >= argc) {
@@ -492,7 +497,7 @@ int main(int argc, char** argv) {
       gated = v == "issue26-gated";
     } else {
       std::fprintf(stderr, "unknown option %s (--draws N, --seed S, --only K, --budget-scale X, --level L, "
-                           "--rule evidence|issue26|issue26-gated, --calibrate, --report)\n", a.c_str());
+                           "--rule evidence|issue26|issue26-gated, --calibrate, --report, --no-resistance-beside)\n", a.c_str());
       return 2;
     }
   }
@@ -518,6 +523,7 @@ int main(int argc, char** argv) {
     opt.addition_evidence = level;
     opt.issue26_rules = issue26;
     opt.evidence_below_gate = !gated;
+    opt.resistance_beside_effect = resistance_beside;
     const auto t0 = std::chrono::steady_clock::now();
     const std::clock_t c0 = std::clock();
     auto d = vb::gap::Diagnose(ds, nominal, opt);

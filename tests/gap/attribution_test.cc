@@ -284,6 +284,37 @@ TEST(Attribution, AWeakSecondCauseBelowTheGateIsFoundAndADriftIsNot) {
   EXPECT_TRUE(considered) << DiagnosisReport(*d2);
 }
 
+// A resistance change beside an effect (ResistanceBesideAnEffect): every structural candidate frees R, so the
+// change is fitted inside the effect's own R. A 6 % colder-reading coil beside eddy currents is named beside them;
+// a 2 % one beside strong eddy currents is dominated by them (the gapbench README's labelling rule) and is
+// reported as drift, not named. Switched off, the 6 % change is the effect alone.
+TEST(Attribution, AResistanceChangeBesideAnEffectIsNamedWhenTheEffectDoesNotDominateIt) {
+  const std::vector<std::string> names = {"param:R", "param:k", "eddy_currents", "supply_resistance", "sensor_gain"};
+  DiagnoseOptions o = Options(names, true);
+  o.detection_limits = false;
+  o.max_effects = 2;
+  model::PlantParams truth = With("eddy_currents", {{"R_p", 600.0}});
+  truth.R_ohm *= 1.06;
+  const auto ds = Session(truth);
+  auto d = Diagnose(ds, *model::Preset("taghizadeh2009"), o);
+  ASSERT_TRUE(d.ok()) << d.status().message();
+  EXPECT_EQ(VerdictMembers(d->verdict), (std::vector<std::string>{"eddy_currents", "param:R"})) << DiagnosisReport(*d);
+  o.resistance_beside_effect = false;
+  auto off = Diagnose(ds, *model::Preset("taghizadeh2009"), o);
+  ASSERT_TRUE(off.ok()) << off.status().message();
+  EXPECT_EQ(off->verdict, "eddy_currents") << DiagnosisReport(*off);
+
+  o.resistance_beside_effect = true;
+  model::PlantParams slight = With("eddy_currents", {{"R_p", 150.0}});
+  slight.R_ohm *= 1.02;
+  auto d2 = Diagnose(Session(slight), *model::Preset("taghizadeh2009"), o);
+  ASSERT_TRUE(d2.ok()) << d2.status().message();
+  EXPECT_EQ(d2->verdict, "eddy_currents") << DiagnosisReport(*d2);
+  bool reported = false;
+  for (const auto& drift : d2->nuisance) reported = reported || drift.param == "R";
+  EXPECT_TRUE(reported) << DiagnosisReport(*d2);
+}
+
 // A drifted parameter that the holdout runs show by itself (a 10 % soft spring beside eddy currents) is a cause
 // in the verdict; one below what the runs could show alone is reported as drift.
 TEST(Attribution, ADriftTheRunsShowByItselfIsACause) {
