@@ -25,8 +25,8 @@
 // levels of the rule from the evidence every draw recorded (Diagnosis::additions), so one run gives the error
 // rates the level trades.
 //
-// Usage: perf_multicause [--draws N] [--seed S] [--only K] [--budget-scale X] [--level L] [--rule evidence|issue26|issue26-gated]
-//                        [--calibrate] [--report] [--no-resistance-beside]
+// Usage: perf_multicause [--draws N] [--seed S] [--only K] [--budget-scale X] [--level L]
+//                        [--rule evidence|issue26|issue26-gated] [--calibrate] [--report] [--no-resistance-beside]
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -461,15 +461,15 @@ int main(int argc, char** argv) {
   int only = 0;
   bool report = false;  // --report: each draw's whole diagnosis report (with --only, to see why)
   bool issue26 = false, calibrate = false;
-  bool gated = false;
-  bool resistance_beside = true;  // --rule issue26-gated: no search below issue 26's gate (DiagnoseOptions::evidence_below_gate)
+  bool gated = false;  // --rule issue26-gated: no search below issue 26's gate (DiagnoseOptions::evidence_below_gate)
+  bool resistance_beside = true;  // --no-resistance-beside: DiagnoseOptions::resistance_beside_effect off
   for (int k = 1; k < argc; ++k) {
     const std::string a = argv[k];
     if (a == "--calibrate" || a == "--report") {
       (a == "--calibrate" ? calibrate : report) = true;
       continue;
     }
-    if (a == "--no-resistance-beside") {  // DiagnoseOptions::resistance_beside_effect off (before/after figures)
+    if (a == "--no-resistance-beside") {
       resistance_beside = false;
       continue;
     }
