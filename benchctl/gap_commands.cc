@@ -398,6 +398,9 @@ GapCli::GapCli(CLI::App* app, SharedOptions shared) : shared_(shared) {
   track_->add_option("--arl0", track_arl0_, "the detector's in-control run length per parameter, in sessions "
                                             "(sets the CUSUM's interval)")
       ->capture_default_str();
+  track_->add_option("--reference", track_reference_, "sessions that form the reference before monitoring starts "
+                                                      "(fewer: earlier flags, more false ones; docs/track.md)")
+      ->capture_default_str();
   track_->add_flag("--json", *shared_.json, "machine-readable output on stdout");
 
   health_ = app->add_subcommand("health", "each bench's valve tracked from its nightly health checks (the server's "
@@ -650,6 +653,10 @@ StatusOr<gap::Tracking> GapCli::TrackValve(std::vector<gap::TrackSession>* sessi
     return Status::InvalidArgument("--arl0: the in-control run length must be a number of sessions above 1 (got " +
                                    std::to_string(track_arl0_) + ")");
   o.target_arl0_sessions = track_arl0_;
+  if (track_reference_ < 2)
+    return Status::InvalidArgument("--reference: at least 2 sessions form a reference (got " +
+                                   std::to_string(track_reference_) + ")");
+  o.min_reference = track_reference_;
   for (const auto& l : track_limits_) {
     auto v = gap::ParseFixed(l, "--limit");
     if (!v.ok()) return v.status();

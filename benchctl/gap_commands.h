@@ -6,7 +6,7 @@
 //            [--json]
 //   convert READINGS.csv OUTDIR [--shunt-ohm R] [--amp-ref-ohm R] [--adc-lsb-V V] [--averaged N] [--model M]
 //   import DATASET                         (store a dataset's waveform runs on a server)
-//   track SESSION_DIR... [--model M] [--limit NAME=VALUE,...] [--arl0 SESSIONS] [--json]
+//   track SESSION_DIR... [--model M] [--limit NAME=VALUE,...] [--arl0 SESSIONS] [--reference N] [--json]
 //                                          (a valve tracked night by night, gap/track.h; exit 1 when flagged)
 //   health [BENCH] [--model M] [--limit ...] [--arl0 NIGHTS] [--recompute] [--json]
 //                                          (each bench's nightly health checks tracked, server/health_check.h)
@@ -56,6 +56,7 @@ class GapCli {
   bool health_recompute_ = false;
   std::vector<std::string> track_dirs_, track_limits_;
   double track_arl0_ = 20000.0;
+  int track_reference_ = gap::TrackOptions{}.min_reference;
   std::string dataset_dir_, model_, json_path_, json_out_, model_out_, suggest_out_, emit_model_, reference_dir_, out_path_,
       csv_path_, out_dir_;
   bool local_ = false;

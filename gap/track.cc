@@ -128,6 +128,8 @@ void TrackParameter(TrackedParameter* p, const TrackOptions& o) {
     if (estimated != nullptr) *estimated = s2 >= std::max(own, cur);
   };
   std::vector<int> pending;  // sessions in control, waiting out the guard band
+  double held_excess = 0.0;  // the part of the last session's z the clip held back (0: none held)
+  double beyond_before = 0.0;  // the last session's z beyond the clip (signed; 0: within it)
   for (int j = 0; j < static_cast<int>(p->sessions.size()); ++j) {
     TrackedValue& v = p->sessions[j];
     while (!pending.empty() && j - pending.front() >= o.guard_sessions) {
@@ -145,8 +147,17 @@ void TrackParameter(TrackedParameter* p, const TrackOptions& o) {
     stats(&mean, &spread, v.sigma, &estimated);
     v.z = SelfStartingZ(v.value - mean, spread, static_cast<int>(ref.size()), estimated);
     if (!std::isfinite(v.z)) continue;
-    up = std::max(0.0, up + v.z - o.k_sigma);
-    down = std::max(0.0, down - v.z - o.k_sigma);
+    // Clipped (TrackOptions::winsor_z), unless the session before was beyond the clip on the same side: then
+    // both count in full (the excess held back from that one is added now), so a large step is flagged on its
+    // second session while one outlying session is not.
+    double zc = std::clamp(v.z, -o.winsor_z, o.winsor_z);
+    const double excess = v.z - zc;
+    if (o.two_in_a_row && excess != 0.0 && held_excess * excess > 0.0) zc = v.z + held_excess, held_excess = 0.0;
+    else if (o.two_in_a_row && excess != 0.0 && beyond_before * excess > 0.0) zc = v.z;
+    else held_excess = excess;
+    beyond_before = excess;
+    up = std::max(0.0, up + zc - o.k_sigma);
+    down = std::max(0.0, down - zc - o.k_sigma);
     v.cusum_up = up, v.cusum_down = down;
     if (up == 0.0) up_zero = j;
     if (down == 0.0) down_zero = j;
@@ -164,12 +175,14 @@ void TrackParameter(TrackedParameter* p, const TrackOptions& o) {
     p->lower_limit = p->center - 3.0 * p->spread;
     p->upper_limit = p->center + 3.0 * p->spread;
     // The smallest step the CUSUM flags within 5 sessions on average (its one-sided run length at that shift).
+    // A step's z enters clipped at winsor_z, so a step beyond it is flagged no sooner than one of winsor_z.
+    auto arl = [&](double m) { return CusumArl(std::min(m, o.winsor_z), o.k_sigma, h); };
     double lo = o.k_sigma, hi = 50.0;
     for (int i = 0; i < 100; ++i) {
       const double m = 0.5 * (lo + hi);
-      (CusumArl(m, o.k_sigma, h) > 5.0 ? lo : hi) = m;
+      (arl(m) > 5.0 ? lo : hi) = m;
     }
-    p->smallest_step = hi * p->spread;
+    if (arl(hi) <= 5.0) p->smallest_step = hi * p->spread;
   }
   const int last = static_cast<int>(p->sessions.size()) - 1;
   Slope(p->sessions, 0, last, &p->trend_per_session, &p->trend_sigma);
@@ -202,6 +215,8 @@ namespace {
 Status CheckTrackOptions(const TrackOptions& options) {
   if (!(options.k_sigma > 0.0) || !(options.target_arl0_sessions > 1.0))
     return Status::InvalidArgument("track: k must be > 0 and the target run length > 1 session");
+  if (!(options.winsor_z > options.k_sigma))
+    return Status::InvalidArgument("track: the clip on z (winsor_z) must be above k");
   if (options.min_reference < 2 || options.baseline_max < options.min_reference)
     return Status::InvalidArgument("track: the reference needs at least 2 sessions and baseline_max >= min_reference");
   return Status::Ok();
@@ -302,6 +317,7 @@ StatusOr<Tracking> TrackValues(const std::vector<SessionValues>& sessions, const
   VB_RETURN_IF_ERROR(CheckTrackOptions(options));
   Tracking t;
   t.k_sigma = options.k_sigma;
+  t.winsor_z = options.winsor_z;
   t.target_arl0_sessions = options.target_arl0_sessions;
   t.h_sigma = CusumInterval(options.k_sigma, options.target_arl0_sessions);
   const SessionValues* first = nullptr;
@@ -383,8 +399,8 @@ StatusOr<Tracking> TrackValues(const std::vector<SessionValues>& sessions, const
   return t;
 }
 
-StatusOr<Tracking> TrackSessions(const std::vector<TrackSession>& sessions, const model::PlantParams& family,
-                                 const TrackOptions& options) {
+StatusOr<std::vector<SessionValues>> IdentifySessions(const std::vector<TrackSession>& sessions,
+                                                      const model::PlantParams& family, const TrackOptions& options) {
   if (sessions.size() < 2) return Status::InvalidArgument("track: give at least two sessions (in time order)");
   VB_RETURN_IF_ERROR(CheckTrackOptions(options));
   // Every later session starts from the first one identified (the anchor), not from the session before: a
@@ -401,15 +417,22 @@ StatusOr<Tracking> TrackSessions(const std::vector<TrackSession>& sessions, cons
     values.push_back(ValuesOfSession(s.name, s.dataset, id));
     if (id.ok() && !anchor) anchor = std::move(*id);
   }
+  return values;
+}
+
+StatusOr<Tracking> TrackSessions(const std::vector<TrackSession>& sessions, const model::PlantParams& family,
+                                 const TrackOptions& options) {
+  VB_ASSIGN_OR_RETURN(std::vector<SessionValues> values, IdentifySessions(sessions, family, options));
   return TrackValues(values, options);
 }
 
 std::string TrackingJson(const Tracking& t) {
   nlohmann::ordered_json j;
   j["sessions"] = t.sessions;
-  j["detector"] = {{"kind", "self-starting two-sided CUSUM (Hawkins 1987)"},
+  j["detector"] = {{"kind", "self-starting two-sided CUSUM (Hawkins 1987), z clipped (Lucas & Crosier 1982)"},
                    {"k_sigma", t.k_sigma},
                    {"h_sigma", t.h_sigma},
+                   {"winsor_z", NumJ(t.winsor_z)},
                    {"target_arl0_sessions", t.target_arl0_sessions}};
   nlohmann::ordered_json fits = nlohmann::ordered_json::array();
   for (std::size_t i = 0; i < t.sessions.size(); ++i)
@@ -455,9 +478,9 @@ std::string TrackingReport(const Tracking& t) {
   std::ostringstream o;
   char buf[400];
   std::snprintf(buf, sizeof buf,
-                "%zu sessions; a self-starting two-sided CUSUM per parameter, k %.2g, h %.3g sigma "
-                "(in control: %.0f sessions)\n\n",
-                t.sessions.size(), t.k_sigma, t.h_sigma, t.target_arl0_sessions);
+                "%zu sessions; a self-starting two-sided CUSUM per parameter, k %.2g, h %.3g sigma, z clipped at "
+                "%.3g (in control: %.0f sessions)\n\n",
+                t.sessions.size(), t.k_sigma, t.h_sigma, t.winsor_z, t.target_arl0_sessions);
   o << buf;
   // The table in blocks of 5 parameters: 28 + 5 x 18 = 118 columns, within a 120-column terminal.
   constexpr std::size_t kPerBlock = 5;

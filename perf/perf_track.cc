@@ -8,11 +8,28 @@
 // Each bench's series goes through gap::TrackSessions; printed per bench: the first flag (night, parameter), the
 // night the change reaches 3 sigma of the tracked parameter it should show in, the delay; and for the lab: false
 // flags per clean bench-night and changes flagged in time, with Wilson intervals.
-//   perf_track [--benches 6] [--nights 60] [--seed 38] [--only BENCH] [--report] [--verbose]
+//   perf_track [--benches 6] [--nights 60] [--seed 38] [--only BENCH] [--clean] [--report] [--verbose]
+//              [--previous-detector] [--values-out FILE | --values-in FILE [--resample N [--length L]]]
+// --clean: every bench keeps its valve (the in-control draws the detector's false-alarm rate is measured on).
+// --values-out FILE: each session's identified values, one line per session ("bench kind from JSON"), so the
+// detector can be run again on them without identifying (--values-in FILE: the benches, kinds and change nights
+// are read from the file; --benches, --nights, --seed and --clean are then the file's).
+// --previous-detector: the detector before issue 38's outlier round (no clip, a reference of 3), for comparison.
+// --resample N (with --values-in): the detector alone, calibrated on draws. Every tracked parameter of every clean
+// bench in the file is a pool of (value, sigma) pairs as the identification gave them night after night, with its
+// outliers; N series of --length sessions are drawn from each pool (with replacement, seeded by --seed) and run
+// through the detector in several variants (the clip on z, the reference's first length). Printed per variant:
+// in-control series flagged (against the target's expected rate), and a step of 3 pool sigma at session 20 and
+// a drift of 0.25 pool sigma per session from session 15 (3 sigma at 27) flagged within 5 sessions of 3 sigma,
+// and before the change.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <fstream>
+#include <limits>
+#include <map>
+#include <sstream>
 #include <random>
 #include <set>
 #include <string>
@@ -70,6 +87,111 @@ vb::gap::Dataset Session(const vb::perf::IndependentValve& v, int night, std::mt
   return ds;
 }
 
+// One tracked parameter of one clean bench: its (value, sigma) night after night.
+struct Pool {
+  std::string name;
+  std::vector<std::pair<double, double>> draws;
+  double sd = 0.0;  // the values' standard deviation (outliers included: what the tracker's spread estimates)
+};
+
+void Pools(const std::vector<vb::gap::SessionValues>& sessions, std::vector<Pool>* out) {
+  std::map<std::string, Pool> by;
+  for (const auto& s : sessions)
+    for (const auto& d : s.determined)
+      if (d.determined && std::isfinite(d.value)) {
+        by[d.name].name = d.name;
+        by[d.name].draws.push_back({d.value, d.sigma_white});
+      }
+  for (auto& [name, p] : by) {
+    if (p.draws.size() < 20) continue;  // fewer values than that say little about the tails
+    double m = 0.0, s2 = 0.0;
+    for (const auto& d : p.draws) m += d.first / p.draws.size();
+    for (const auto& d : p.draws) s2 += (d.first - m) * (d.first - m) / (p.draws.size() - 1.0);
+    p.sd = std::sqrt(s2);
+    if (p.sd > 0.0) out->push_back(std::move(p));
+  }
+}
+
+int Resample(const std::vector<Pool>& pools, int n, int length, unsigned seed, bool verbose) {
+  struct Variant {
+    const char* name;
+    double winsor;
+    int min_reference;
+    double arl0;
+    bool two_in_a_row = false;
+  };
+  const double inf = std::numeric_limits<double>::infinity();
+  const Variant variants[] = {{"plain, ref 3", inf, 3, 2e4},        {"plain, ref 5", inf, 5, 2e4},
+                              {"clip 3, ref 3", 3.0, 3, 2e4},       {"clip 3, ref 5", 3.0, 5, 2e4},
+                              {"clip 3, ref 5, 2e5", 3.0, 5, 2e5},  {"clip 3, ref 5, 2e6", 3.0, 5, 2e6},
+                              {"clip 3, ref 8", 3.0, 8, 2e4},       {"clip 3, ref 8, 2e5", 3.0, 8, 2e5},
+                              {"clip 4, ref 5, 2e5", 4.0, 5, 2e5},  {"clip 4, ref 8, 2e5", 4.0, 8, 2e5},
+                              {"clip 3 + 2 in a row, ref 3", 3.0, 3, 2e4, true},
+                              {"clip 3 + 2 in a row, ref 5", 3.0, 5, 2e4, true}};
+  const int step_at = 19, drift_from = 14;  // 0-based: sessions 20 and 15
+  const double expected = 1.0 - std::exp(-(length - 3) / vb::gap::TrackOptions{}.target_arl0_sessions);
+  std::printf("%zu pools (tracked parameters of clean benches), %d series of %d sessions each, seed %u\n",
+              pools.size(), n, length, seed);
+  std::printf("%-28s %22s %22s %22s\n", "variant", "in-control flagged", "3-sigma step in time",
+              "drift in time");
+  for (const Variant& var : variants) {
+    vb::gap::TrackOptions o;
+    o.winsor_z = var.winsor;
+    o.min_reference = var.min_reference;
+    o.target_arl0_sessions = var.arl0;
+    o.two_in_a_row = var.two_in_a_row;
+    std::mt19937 rng(seed);
+    std::map<std::string, std::pair<long, long>> by_name;  // in-control: flagged, series
+    long series = 0, false_flags = 0, step_ok = 0, step_early = 0, drift_ok = 0, drift_early = 0;
+    for (const Pool& pool : pools) {
+      std::uniform_int_distribution<std::size_t> pick(0, pool.draws.size() - 1);
+      for (int k = 0; k < n; ++k) {
+        // The first sessions without replacement: a reference of repeated draws would be tighter than any real
+        // bench's first nights, and the false-alarm rate would be the resampling's.
+        std::vector<std::pair<double, double>> draw = pool.draws;
+        std::shuffle(draw.begin(), draw.end(), rng);
+        draw.resize(std::min<std::size_t>(draw.size(), 8));
+        while (static_cast<int>(draw.size()) < length) draw.push_back(pool.draws[pick(rng)]);
+        for (int mode = 0; mode < 3; ++mode) {
+          vb::gap::TrackedParameter p;
+          p.name = pool.name;
+          for (int j = 0; j < length; ++j) {
+            double v = draw[j].first;
+            if (mode == 1 && j >= step_at) v += 3.0 * pool.sd;
+            if (mode == 2 && j >= drift_from) v += 0.25 * pool.sd * (j - drift_from + 1);
+            vb::gap::TrackedValue tv;
+            tv.value = v, tv.sigma = draw[j].second;
+            p.sessions.push_back(tv);
+          }
+          vb::gap::TrackParameter(&p, o);
+          if (mode == 0) false_flags += p.flagged >= 0, by_name[pool.name].first += p.flagged >= 0;
+          if (mode == 0) by_name[pool.name].second += 1;
+          if (mode == 1) step_early += p.flagged >= 0 && p.flagged < step_at,
+                         step_ok += p.flagged >= step_at && p.flagged <= step_at + 5;
+          if (mode == 2) drift_early += p.flagged >= 0 && p.flagged < drift_from,
+                         drift_ok += p.flagged >= drift_from && p.flagged <= drift_from + 12 + 5;
+        }
+        ++series;
+      }
+    }
+    auto cell = [&](long k, const char* extra) {
+      const Wilson w = Interval(static_cast<int>(k), static_cast<int>(series));
+      char b[64];
+      std::snprintf(b, sizeof b, "%.4f [%.4f,%.4f]%s", static_cast<double>(k) / series, w.lo, w.hi, extra);
+      return std::string(b);
+    };
+    std::printf("%-28s %22s %22s %22s   (early: step %ld, drift %ld)\n", var.name, cell(false_flags, "").c_str(),
+                cell(step_ok, "").c_str(), cell(drift_ok, "").c_str(), step_early, drift_early);
+    if (verbose) {
+      std::printf("   in control, by parameter:");
+      for (const auto& [name, c] : by_name) std::printf(" %s %.3f", name.c_str(), static_cast<double>(c.first) / c.second);
+      std::printf("\n");
+    }
+  }
+  std::printf("expected in-control rate at the target run length (normal values): %.4f per series\n", expected);
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -77,6 +199,9 @@ int main(int argc, char** argv) {
   unsigned seed = 38;
   bool verbose = false, report = false;
   int only = -1;
+  bool all_clean = false, previous = false;
+  std::string values_out, values_in;
+  int resample = 0, length = 60;
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--benches") && i + 1 < argc) benches = std::atoi(argv[++i]);
     else if (!std::strcmp(argv[i], "--nights") && i + 1 < argc) nights = std::atoi(argv[++i]);
@@ -84,40 +209,115 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[i], "--verbose")) verbose = true;
     else if (!std::strcmp(argv[i], "--report")) report = true;
     else if (!std::strcmp(argv[i], "--only") && i + 1 < argc) only = std::atoi(argv[++i]);
+    else if (!std::strcmp(argv[i], "--clean")) all_clean = true;
+    else if (!std::strcmp(argv[i], "--previous-detector")) previous = true;
+    else if (!std::strcmp(argv[i], "--values-out") && i + 1 < argc) values_out = argv[++i];
+    else if (!std::strcmp(argv[i], "--values-in") && i + 1 < argc) values_in = argv[++i];
+    else if (!std::strcmp(argv[i], "--resample") && i + 1 < argc) resample = std::atoi(argv[++i]);
+    else if (!std::strcmp(argv[i], "--length") && i + 1 < argc) length = std::atoi(argv[++i]);
     else {
-      std::fprintf(stderr, "usage: perf_track [--benches N] [--nights N] [--seed S] [--only BENCH] [--report] [--verbose]\n");
+      std::fprintf(stderr,
+                   "usage: perf_track [--benches N] [--nights N] [--seed S] [--only BENCH] [--clean] [--report]\n"
+                   "                  [--verbose] [--previous-detector]\n"
+                   "                  [--values-out FILE | --values-in FILE [--resample N [--length L]]]\n");
       return 2;
     }
   }
   auto family = vb::model::Preset("taghizadeh2009");
   if (!family.ok()) return 3;
   const char* const kinds[] = {"clean", "resistance", "clean", "spring", "clean", "turns"};
+  // Each bench's identified sessions, its kind of change and the night it starts: identified here, or read back.
+  struct Bench {
+    std::string kind;
+    int from = 0;
+    std::vector<vb::gap::SessionValues> values;
+  };
+  std::map<int, Bench> read;
+  if (!values_in.empty()) {
+    std::ifstream in(values_in);
+    if (!in) {
+      std::fprintf(stderr, "perf_track: cannot read %s\n", values_in.c_str());
+      return 2;
+    }
+    std::string line;
+    for (int n = 1; std::getline(in, line); ++n) {
+      std::istringstream ls(line);
+      int b = -1, from = 0;
+      std::string kind, json;
+      ls >> b >> kind >> from;
+      std::getline(ls >> std::ws, json);
+      auto v = vb::gap::SessionValuesFromJson(json);
+      if (b < 0 || !v.ok()) {
+        std::fprintf(stderr, "perf_track: %s line %d: not \"bench kind from JSON\"\n", values_in.c_str(), n);
+        return 2;
+      }
+      read[b].kind = kind, read[b].from = from;
+      read[b].values.push_back(std::move(*v));
+    }
+    benches = read.empty() ? 0 : read.rbegin()->first + 1;
+  }
+  if (resample > 0) {
+    if (read.empty()) {
+      std::fprintf(stderr, "perf_track: --resample needs --values-in FILE\n");
+      return 2;
+    }
+    std::vector<Pool> pools;
+    for (const auto& [b, bench] : read)
+      if (bench.kind == "clean") Pools(bench.values, &pools);
+    return Resample(pools, resample, length, seed, verbose);
+  }
+  std::FILE* dump = values_out.empty() ? nullptr : std::fopen(values_out.c_str(), "w");
+  if (!values_out.empty() && dump == nullptr) {
+    std::fprintf(stderr, "perf_track: cannot write %s\n", values_out.c_str());
+    return 2;
+  }
   int clean_nights = 0, false_flags = 0, changes = 0, in_time = 0, named = 0, early = 0;
   std::printf("%-6s %-10s %5s %-34s %8s %6s %s\n", "bench", "change", "from", "first flag", "3-sigma", "delay", "ok");
   for (int b = 0; b < benches; ++b) {
-    std::mt19937 rng(seed * 1000u + static_cast<unsigned>(b));
-    const vb::perf::IndependentValve base = vb::perf::DrawValve(rng);
-    const std::string kind = kinds[b % 6];
-    const int from = std::uniform_int_distribution<int>(15, std::max(15, nights - 20))(rng);
-    if (only >= 0 && b != only) continue;
-    std::vector<vb::gap::TrackSession> sessions;
-    for (int night = 1; night <= nights; ++night) {
-      vb::perf::IndependentValve v = base;
-      const int after = night - from + 1;  // nights into the change (<= 0: before)
-      if (after > 0) {
-        if (kind == "resistance") v.R_ohm *= 1.0 + 0.0025 * after;
-        if (kind == "spring") {
-          const double f = std::pow(0.99, after);
-          v.k_N_per_m *= f;
-          v.F0_N *= f;
-        }
-        if (kind == "turns") v.N *= 0.98;
-      }
-      sessions.push_back({"night" + std::to_string(night), Session(v, night, rng)});
-    }
+    std::string kind;
+    int from = 0;
+    std::vector<vb::gap::SessionValues> values;
     vb::gap::TrackOptions o;
+    if (previous) o.winsor_z = std::numeric_limits<double>::infinity(), o.two_in_a_row = false, o.min_reference = 3;
     if (verbose) o.progress = o.identify.progress = [](const std::string& l) { std::fprintf(stderr, "  %s\n", l.c_str()); };
-    auto t = vb::gap::TrackSessions(sessions, *family, o);
+    if (!values_in.empty()) {
+      if (!read.count(b) || (only >= 0 && b != only)) continue;
+      kind = read[b].kind, from = read[b].from, values = read[b].values;
+    } else {
+      std::mt19937 rng(seed * 1000u + static_cast<unsigned>(b));
+      const vb::perf::IndependentValve base = vb::perf::DrawValve(rng);
+      kind = all_clean ? "clean" : kinds[b % 6];
+      from = std::uniform_int_distribution<int>(15, std::max(15, nights - 20))(rng);
+      if (only >= 0 && b != only) continue;
+      std::vector<vb::gap::TrackSession> sessions;
+      for (int night = 1; night <= nights; ++night) {
+        vb::perf::IndependentValve v = base;
+        const int after = night - from + 1;  // nights into the change (<= 0: before)
+        if (after > 0) {
+          if (kind == "resistance") v.R_ohm *= 1.0 + 0.0025 * after;
+          if (kind == "spring") {
+            const double f = std::pow(0.99, after);
+            v.k_N_per_m *= f;
+            v.F0_N *= f;
+          }
+          if (kind == "turns") v.N *= 0.98;
+        }
+        sessions.push_back({"night" + std::to_string(night), Session(v, night, rng)});
+      }
+      auto identified = vb::gap::IdentifySessions(sessions, *family, o);
+      if (!identified.ok()) {
+        std::printf("%-6d %-10s %5d refused: %s\n", b, kind.c_str(), from, identified.status().message().c_str());
+        continue;
+      }
+      values = std::move(*identified);
+      if (dump != nullptr) {
+        for (const auto& v : values)
+          std::fprintf(dump, "%d %s %d %s\n", b, kind.c_str(), from, vb::gap::SessionValuesJson(v).c_str());
+        std::fflush(dump);
+      }
+    }
+    nights = static_cast<int>(values.size());
+    auto t = vb::gap::TrackValues(values, o);
     if (!t.ok()) {
       std::printf("%-6d %-10s %5d refused: %s\n", b, kind.c_str(), from, t.status().message().c_str());
       continue;
@@ -172,5 +372,6 @@ int main(int argc, char** argv) {
   std::printf("changes: %d of %d flagged with the right parameter within 5 nights of 3 sigma (95 %% CI %.2f-%.2f); "
               "%d named right at any time; %d flagged before the change\n",
               in_time, changes, it.lo, it.hi, named, early);
+  if (dump != nullptr) std::fclose(dump);
   return 0;
 }
