@@ -43,8 +43,9 @@ struct TrackOptions {
   // Sessions before monitoring starts. 3 (2 degrees of freedom) is the fewest the t's transform stays usable
   // with, and enough for normal values; an identification's values have heavier tails, and a short reference
   // of the core's scatter then judges the tails: on draws from the independent plant's clean benches (docs/
-  // track.md, "Outliers") 3, 5 and 8 sessions flag 6 %, 3 % and 1 % of in-control parameter series over 60
-  // sessions, with the same steps and drifts flagged in time. 5 is the compromise: a lab's first week.
+  // track.md, "Outliers"; z clipped) 3, 5 and 8 sessions flag 2.9 %, 1.8 % and 1.1 % of in-control parameter
+  // series over 60 sessions, with the same steps and drifts flagged in time. 5 is the compromise: a lab's first
+  // week.
   // At most baseline_max sessions form the reference (a cap freezes an estimated mean whose error then acts on
   // every later session as a shift: at 10, 12 of 500 in-control series were flagged where 1.4 are expected:
   // tests/gap/track_test.cc's draws).
@@ -56,14 +57,15 @@ struct TrackOptions {
   int guard_sessions = 5;
   // Each session's z enters the CUSUM clipped to +-winsor_z (Lucas & Crosier 1982, "Robust CUSUM"): an
   // identification's values are not normal night to night but have outliers (a fit landing in a neighbouring
-  // optimum: on the independent plant's clean benches 1.2 % of the values lie beyond 8 robust sigma), and one or
+  // optimum: on the independent plant's clean benches 0.8 % of the values lie beyond 8 robust sigma), and one or
   // two such sessions must not carry the sum past h. Infinity: the plain CUSUM. At 3 a step of 3 sigma or more
   // is flagged after ceil(h / (3 - k)) = 4 sessions at most (h = 8.74); measured on draws from the clean benches'
   // own values (docs/track.md, "Outliers"), it halves the in-control flags at no cost in steps or drifts flagged.
   double winsor_z = 3.0;
   // Lucas & Crosier's rule beside the clip: a session beyond it is clipped unless the one before was beyond it on
-  // the same side; then both count in full. A gross change is then flagged on its second session (two outliers
-  // of one sign in a row are rare: at 1.2 % beyond the clip, 0.7e-4 a session), a single outlier never alone.
+  // the same side; then both count in full. A gross change is then flagged on its second or third session, a
+  // single outlier never alone; two of one sign in a row (at 4.8 % of sessions beyond the clip, 1.2e-3 a
+  // session) cost 0.4 % more in-control series flagged over 60 sessions on the same draws.
   bool two_in_a_row = true;
   // Declared limits (name -> value, e.g. "R" -> 70): the drift's projected crossing is reported.
   std::map<std::string, double> limits;

@@ -184,7 +184,8 @@ int Resample(const std::vector<Pool>& pools, int n, int length, unsigned seed, b
                 cell(step_ok, "").c_str(), cell(drift_ok, "").c_str(), step_early, drift_early);
     if (verbose) {
       std::printf("   in control, by parameter:");
-      for (const auto& [name, c] : by_name) std::printf(" %s %.3f", name.c_str(), static_cast<double>(c.first) / c.second);
+      for (const auto& [name, c] : by_name)
+        std::printf(" %s %.3f", name.c_str(), static_cast<double>(c.first) / c.second);
       std::printf("\n");
     }
   }
@@ -279,7 +280,8 @@ int main(int argc, char** argv) {
     std::vector<vb::gap::SessionValues> values;
     vb::gap::TrackOptions o;
     if (previous) o.winsor_z = std::numeric_limits<double>::infinity(), o.two_in_a_row = false, o.min_reference = 3;
-    if (verbose) o.progress = o.identify.progress = [](const std::string& l) { std::fprintf(stderr, "  %s\n", l.c_str()); };
+    if (verbose)
+      o.progress = o.identify.progress = [](const std::string& l) { std::fprintf(stderr, "  %s\n", l.c_str()); };
     if (!values_in.empty()) {
       if (!read.count(b) || (only >= 0 && b != only)) continue;
       kind = read[b].kind, from = read[b].from, values = read[b].values;
