@@ -771,8 +771,10 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
                     std::min(0.98 * r_max * s.value[kL0] / 1.5, s.value[kL1] * 1.5), true};
       // A warm start's box holds its start: the bound above keeps L1 < r_max L0 for every L0 of L0's box, and an
       // anchor whose L1 / L0 is above 0.65 r_max was moved off its own optimum by it (measured on the independent
-      // plant: an anchor refitted to 6.4 mA started every night's fit at 7.9 mA). A point outside the ratio is
-      // a plant PlantOf refuses, so the search cannot end there.
+      // plant: a first session's polish from its own end at 10.5 mA where it holds 5.4 mA with this; an anchor
+      // refitted to 6.4 mA started every night's fit at 7.9 mA). A point outside the ratio is a plant PlantOf
+      // refuses, so the search cannot end there. From scratch the stages keep their boxes (holding the start
+      // there too left the independent population at 1 of 17 valves: docs/real-data.md).
       if (contain_start) s.box[kL1].hi = std::max(s.box[kL1].hi, s.value[kL1]);
       if (!(s.box[kL1].hi > s.box[kL1].lo)) s.box[kL1] = {s.value[kL1] * 0.99, s.value[kL1] * 1.01, true};
       s.value[kL1] = std::clamp(s.value[kL1], s.box[kL1].lo, s.box[kL1].hi);

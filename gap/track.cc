@@ -149,7 +149,7 @@ void TrackParameter(TrackedParameter* p, const TrackOptions& o) {
     if (!std::isfinite(v.z)) continue;
     // Clipped (TrackOptions::winsor_z), unless the session before was beyond the clip on the same side: then
     // both count in full (the excess held back from that one is added now), so a large step is flagged on its
-    // second session while one outlying session is not.
+    // second or third session while one outlying session is not.
     double zc = std::clamp(v.z, -o.winsor_z, o.winsor_z);
     const double excess = v.z - zc;
     if (o.two_in_a_row && excess != 0.0 && held_excess * excess > 0.0) zc = v.z + held_excess, held_excess = 0.0;
@@ -421,9 +421,11 @@ StatusOr<std::vector<SessionValues>> IdentifySessions(const std::vector<TrackSes
   pass(nullptr, &ids);
   // The anchor's basin, checked against the others' (docs/track.md, "Outliers"). A warm start from the anchor is
   // a local fit: where the sessions' optimum has two basins it mostly stays in the anchor's, and now and then a
-  // session escapes to the other. On the independent plant one clean bench's first session ended at 10.5 mA in
-  // a saturating basin (R 143 ohm) while a third of its later sessions ended at 5.6 mA in another (R 151 ohm):
-  // R then jumped 5 % between nights with nothing changed. So the first session is fitted again from the end of
+  // session escapes to the other. On the independent plant one bench's first session ended at 10.5 mA in a
+  // saturating basin (R 143 ohm) while a third of its later sessions ended at 5.6 mA in another (R 151 ohm):
+  // R then jumped 5 % between nights with nothing changed. (That one came from L1's box, which now holds a warm
+  // start's start: gap/moving_valve.cc; this check is for basins a local fit cannot leave by itself.) So the
+  // first session is fitted again from the end of
   // the session that fits best relative to its own noise floor; when that lowers its own fit by more than 10 %
   // (a fifth of its squared error: far beyond what a re-fit in the same basin gains, which stops at 0.5 % a pass),
   // that end is the better basin, and every session is identified again from the first session refitted there.
