@@ -60,7 +60,9 @@ nlohmann::ordered_json NumJ(double v) { return std::isfinite(v) ? nlohmann::orde
 // The physical changes that move a tracked quantity (what a flag on it reads as; the current alone does not
 // tell them apart further).
 std::string Reading(const std::string& name) {
-  if (name == "R") return "a warmer or aging winding, a corroding connector or a series resistance in the leads";
+  if (name == "R")
+    return "a warmer or aging winding, a corroding connector or a series resistance in the leads; down: a cooler "
+           "winding, or shorted turns (R falls with the turns, L0 and L1 with their square)";
   if (name == "L0" || name == "L1")
     return "the magnetic circuit: shorted turns move L0 and L1 by the same fraction, a core or gap change moves them "
            "apart";
