@@ -927,17 +927,6 @@ StatusOr<PruneResult> SqliteStore::Prune(const PruneRequest& request) {
 
 }  // namespace
 
-WriteFault ClassifyWrite(const Status& st) {
-  switch (st.code()) {
-    case StatusCode::kOk: return WriteFault::kNone;
-    case StatusCode::kUnavailable:
-    case StatusCode::kAborted: return WriteFault::kTransient;
-    case StatusCode::kFailedPrecondition:
-    case StatusCode::kNotFound: return WriteFault::kFenced;
-    default: return WriteFault::kPermanent;
-  }
-}
-
 StatusOr<std::unique_ptr<Store>> Store::Open(const std::string& path) {
   if (path.empty()) {
     return Status::InvalidArgument("path: must not be empty (\":memory:\" opens a private in-memory database)");
