@@ -1,5 +1,5 @@
 // What every store engine checks before it touches its database, with the field-named messages callers see
-// (db/store.h). One copy for SQLite (db/store.cc) and PostgreSQL (db/pg_store.cc), so the engines cannot drift
+// (db/store.h). One copy for SQLite (db/sqlite_store.cc) and PostgreSQL (db/pg_store.cc), so the engines cannot drift
 // apart in what they accept or in what they say. Internal to db/.
 #pragma once
 

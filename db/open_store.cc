@@ -2,6 +2,7 @@
 
 #include "db/pg_conn.h"
 #include "db/pg_store.h"
+#include "db/sqlite_store.h"
 
 namespace vb::db {
 
@@ -13,7 +14,7 @@ std::string DisplayLocation(const std::string& location) {
 
 StatusOr<std::unique_ptr<Store>> OpenStore(const std::string& location) {
   if (pg::IsPostgresLocation(location)) return OpenPgStore(location);
-  return Store::Open(location);
+  return OpenSqliteStore(location);
 }
 
 }  // namespace vb::db

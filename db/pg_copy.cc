@@ -14,6 +14,7 @@
 #include "db/pg_store.h"
 #include "db/schema.h"
 #include "db/sqlite_conn.h"
+#include "db/sqlite_store.h"
 #include "db/store.h"
 #include "db/text.h"
 
@@ -185,7 +186,7 @@ StatusOr<CopySummary> CopySqliteToPostgres(const std::string& sqlite_path, const
   CopySummary summary;
   {
     // Opening brings an older file to the current schema (what any valvebench command does to it).
-    auto source = Store::Open(sqlite_path);
+    auto source = OpenSqliteStore(sqlite_path);
     if (!source.ok()) return source.status();
     summary.source_version = (*source)->schema_version();
   }

@@ -1,5 +1,5 @@
 // The PostgreSQL implementation of db/store.h (docs/store.md, "PostgreSQL"). It mirrors the SQLite store
-// (db/store.cc) method by method: the same checks in the same order with the same field-named messages, the
+// (db/sqlite_store.cc) method by method: the same checks in the same order with the same field-named messages, the
 // same rows. What differs is how concurrency is had: SQLite serialises writers with one lock, here many hosts
 // write at once, so the queue is claimed with FOR UPDATE SKIP LOCKED and every write for a claimed run locks the
 // run's row and checks its lease's fence in the same transaction. Times come from the database's clock.

@@ -1,7 +1,7 @@
 // Retention as a pure plan (docs/store.md, "Retention"): from the facts an engine reads in its transaction (every
 // run's id, batch, name, status and finish time; what references batches) and the request, which runs go and
 // which stay, and why. No database here: the rules are unit-tested on facts alone (tests/db/prune_plan_test.cc),
-// and both engines (db/store.cc, db/pg_store.cc) read the facts, call PlanPrune and execute the plan.
+// and both engines (db/sqlite_store.cc, db/pg_store.cc) read the facts, call PlanPrune and execute the plan.
 #pragma once
 
 #include <cstdint>

@@ -1,6 +1,6 @@
 // Listing runs (docs/store.md, "Listing runs"): the order (AIP-132 order_by), the keyset cursor that pages through
 // any order, the opaque page token that carries it, and the one SQL text of a RunFilter that both engines run
-// (SQLite db/store.cc, PostgreSQL db/pg_store.cc differ only in placeholders and collation).
+// (SQLite db/sqlite_store.cc, PostgreSQL db/pg_store.cc differ only in placeholders and collation).
 #pragma once
 
 #include <cstdint>

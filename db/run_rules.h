@@ -1,4 +1,4 @@
-// The run lifecycle's rules that both store engines apply (db/store.cc, db/pg_store.cc): what an interrupted run
+// The run lifecycle's rules that both store engines apply (db/sqlite_store.cc, db/pg_store.cc): what an interrupted run
 // becomes, when a write under a lease is stale and what the refusal says, how a stored status is read back, and
 // a run row's columns mapped to a RunRecord. One copy, so the engines cannot drift apart in what they decide or
 // say (they did: the lapsed-lease reason and the stale-write text differed). Internal to db/.

@@ -1,17 +1,16 @@
 // The results store's interface (docs/store.md): runs with their exact spec, status history, metrics as rows,
 // traces as chunks, batches, tags, baselines and regression results, the lab's hosts and leases, and the run queue
 // itself (a server that dies loses no queued run). The values it reads and writes are db/records.h's. Its
-// engines: SQLite for one machine (db/store.cc, opened by Store::Open), PostgreSQL for a lab of hosts
-// (db/pg_store.h); db/open_store.h opens either by location.
+// engines, SQLite for one machine (db/sqlite_store.h) and PostgreSQL for a lab of hosts (db/pg_store.h), depend
+// on it, never the reverse; db/open_store.h opens either by location.
 //
 // Thread-safety: a Store is used by one thread at a time per connection; the server opens one Store per
-// thread that needs it (SQLite WAL lets readers and one writer proceed concurrently). Every method is a
+// thread that needs it (both engines let connections read while another writes). Every method is a
 // transaction: it either fully happens or not at all (nothing already stored is lost on error).
 #pragma once
 
 #include <cstdint>
 #include <functional>
-#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -23,9 +22,6 @@ namespace vb::db {
 
 class Store {
  public:
-  // Opens (creating if needed) the database at path, with WAL, foreign keys and busy timeout on, and migrates
-  // the schema to the current version. ":memory:" works for tests.
-  static StatusOr<std::unique_ptr<Store>> Open(const std::string& path);
   virtual ~Store() = default;
 
   virtual int schema_version() const = 0;

@@ -13,6 +13,7 @@
 #include <unistd.h>
 #include <vector>
 
+#include "db/sqlite_store.h"
 #include "db/store.h"
 #include "experiment/spec.h"
 #include "runs/admit.h"
@@ -42,7 +43,7 @@ vb::experiment::ExperimentSpec Load(const std::string& rel, int variant) {
 double CancelOnce(const vb::experiment::ExperimentSpec& spec, bool interlocks, bool through_store,
                   const std::string& path) {
   for (const char* suffix : {"", "-wal", "-shm"}) std::remove((path + suffix).c_str());
-  auto store = vb::db::Store::Open(path);
+  auto store = vb::db::OpenSqliteStore(path);
   if (!store.ok()) std::exit(3);
   vb::runs::BenchSetup bench = vb::runs::LocalEmulatorSetup();
   bench.interlocks = interlocks;
@@ -67,7 +68,7 @@ double CancelOnce(const vb::experiment::ExperimentSpec& spec, bool interlocks, b
     asked = Clock::now();
     if (through_store) {
       // Another process's request, seen by the executing side's 20 ms poll of the store (benchctl's relay).
-      auto other = vb::db::Store::Open(path);
+      auto other = vb::db::OpenSqliteStore(path);
       if (other.ok()) (void)(*other)->RequestCancel(id, "perf");
       while (true) {
         auto c = (*other)->CancelRequested(id);

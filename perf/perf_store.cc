@@ -1,4 +1,4 @@
-// Trace ingest and read-back speed of the SQLite store (db/store.h) on a real file: 1 M-sample traces of
+// Trace ingest and read-back speed of the SQLite store (db/sqlite_store.h) on a real file: 1 M-sample traces of
 // 12 float64 channels appended in chunks (one transaction per chunk, as a worker does), then read back whole,
 // and how much smaller the compressed chunks are than the raw values (docs/store.md, "Trace encoding").
 // Prints figures; targets (docs/store.md): ingest >= 5 M samples/s, read back of 1 M samples < 100 ms, stored
@@ -28,6 +28,7 @@
 #include <unistd.h>
 
 #include "db/run_query.h"
+#include "db/sqlite_store.h"
 #include "db/store.h"
 #include "db/text.h"
 #include "experiment/runner.h"
@@ -162,7 +163,7 @@ vb::db::Lease NewRunningRun(vb::db::Store& store) {
 
 std::unique_ptr<vb::db::Store> OpenFresh(const std::string& path) {
   for (const char* suffix : {"", "-wal", "-shm"}) std::remove((path + suffix).c_str());
-  auto opened = vb::db::Store::Open(path);
+  auto opened = vb::db::OpenSqliteStore(path);
   if (!opened.ok()) Die(opened.status(), "open");
   return std::move(opened).value();
 }

@@ -9,6 +9,7 @@
 
 #include "db/schema.h"
 #include "db/sqlite_conn.h"
+#include "db/sqlite_store.h"
 #include "db/store.h"
 #include "db/text.h"
 #include "tests/db/store_engines.h"
@@ -152,7 +153,7 @@ TEST(BaselineSchemaTest, AVersion1FileMigratesKeepingItsData) {
     ASSERT_TRUE(conn->Exec("INSERT INTO batches (submitter, name, spec_json, created) VALUES ('u', 'old', '{}', 1)").ok());
   }
   {
-    auto store = Store::Open(path);
+    auto store = OpenSqliteStore(path);
     ASSERT_TRUE(store.ok()) << store.status().ToString();
     EXPECT_EQ((*store)->schema_version(), schema::CurrentVersion());
     ASSERT_TRUE((*store)->SaveBaseline("main", "", "", Entries(1.0)).ok());

@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "db/open_store.h"
+#include "db/sqlite_store.h"
 #include "db/store.h"
 #include "db/text.h"
 #include "tests/db/store_engines.h"
@@ -58,7 +59,7 @@ std::string& PgSkipReason() {
 std::vector<Engine> LabStoreEngines() {
   return {{"sqlite",
            [](const std::string& db_name) {
-             auto s = Store::Open(SqlitePath(db_name));
+             auto s = OpenSqliteStore(SqlitePath(db_name));
              EXPECT_TRUE(s.ok()) << s.status().ToString();
              return s.ok() ? std::move(s).value() : nullptr;
            },

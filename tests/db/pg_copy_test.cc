@@ -18,6 +18,7 @@
 #include <nlohmann/json.hpp>
 
 #include "db/open_store.h"
+#include "db/sqlite_store.h"
 #include "db/store.h"
 #include "db/testing.h"
 #include "db/text.h"
@@ -155,7 +156,7 @@ class PgCopyTest : public ::testing::Test {
 TEST_F(PgCopyTest, EverythingReadsBackIdenticalWithItsIds) {
   std::vector<std::int64_t> ids;
   {
-    auto s = Store::Open(source_);
+    auto s = OpenSqliteStore(source_);
     ASSERT_TRUE(s.ok());
     ids = Populate(**s);
     auto c = (*s)->ClaimNext(BenchClaim("emulated", "bench-c"));  // nothing left for it but "waiting"
@@ -188,7 +189,7 @@ TEST_F(PgCopyTest, EverythingReadsBackIdenticalWithItsIds) {
   EXPECT_EQ(rows["run_sweep"], 2);
   EXPECT_GT(summary->trace_bytes, 0);
 
-  auto a = Store::Open(source_);
+  auto a = OpenSqliteStore(source_);
   auto b = OpenStore(target_);
   ASSERT_TRUE(a.ok() && b.ok());
   Store& src = **a;
@@ -287,7 +288,7 @@ TEST_F(PgCopyTest, EverythingReadsBackIdenticalWithItsIds) {
 
 TEST_F(PgCopyTest, ANonEmptyTargetOrARunningSourceIsRefusedAndNothingIsCopied) {
   {
-    auto s = Store::Open(source_);
+    auto s = OpenSqliteStore(source_);
     ASSERT_TRUE(s.ok());
     Populate(**s);
   }
@@ -310,7 +311,7 @@ TEST_F(PgCopyTest, ANonEmptyTargetOrARunningSourceIsRefusedAndNothingIsCopied) {
   // A source with a running run: refused (its server is still using it).
   const std::string busy = TempFile("busy");
   {
-    auto s = Store::Open(busy);
+    auto s = OpenSqliteStore(busy);
     ASSERT_TRUE(s.ok());
     Populate(**s);
     ASSERT_TRUE((*s)->ClaimNext(BenchClaim("emulated", "bench-x")).ok());
@@ -347,7 +348,7 @@ Ran Benchctl(const std::string& args) {
 
 TEST_F(PgCopyTest, BenchctlDbCopyAndInfoWithExitCodes) {
   {
-    auto s = Store::Open(source_);
+    auto s = OpenSqliteStore(source_);
     ASSERT_TRUE(s.ok());
     Populate(**s);
   }

@@ -26,6 +26,7 @@
 #include "db/checkpointer.h"
 #include "db/open_store.h"
 #include "db/schema.h"
+#include "db/sqlite_store.h"
 #include "db/store.h"
 #include "db/testing.h"
 #include "db/text.h"
@@ -69,7 +70,7 @@ std::string ReadFileBytes(const std::string& path) {
 bool FileExists(const std::string& path) { return access(path.c_str(), F_OK) == 0; }
 
 std::unique_ptr<Store> OpenOrDie(const std::string& path) {
-  auto s = Store::Open(path);
+  auto s = OpenSqliteStore(path);
   EXPECT_TRUE(s.ok()) << s.status().ToString();
   return s.ok() ? std::move(s).value() : nullptr;
 }
@@ -382,7 +383,7 @@ void ExpectNewerSchemaRefused(const std::string& path, const char* journal_mode)
   ASSERT_FALSE(FileExists(path + "-wal"));  // the last connection closed: checkpointed and removed
   const std::string before = ReadFileBytes(path);
   ASSERT_FALSE(before.empty());
-  auto store = Store::Open(path);
+  auto store = OpenSqliteStore(path);
   ASSERT_FALSE(store.ok());
   EXPECT_EQ(store.status().code(), StatusCode::kFailedPrecondition);
   EXPECT_NE(store.status().message().find("schema version 7"), std::string::npos) << store.status().message();
@@ -405,7 +406,7 @@ TEST(StoreSchemaTest, RefusesSomebodyElsesDatabase) {
     raw.Exec("CREATE TABLE recipes (name TEXT); INSERT INTO recipes VALUES ('soup')");
   }
   const std::string before = ReadFileBytes(path);
-  auto store = Store::Open(path);
+  auto store = OpenSqliteStore(path);
   ASSERT_FALSE(store.ok());
   EXPECT_EQ(store.status().code(), StatusCode::kFailedPrecondition);
   EXPECT_NE(store.status().message().find("not a valvebench database"), std::string::npos) << store.status().message();
@@ -418,17 +419,17 @@ TEST(StoreSchemaTest, NotADatabaseIsDataLoss) {
     std::ofstream out(path, std::ios::binary);
     out << std::string(8192, 'x');
   }
-  auto store = Store::Open(path);
+  auto store = OpenSqliteStore(path);
   ASSERT_FALSE(store.ok());
   EXPECT_EQ(store.status().code(), StatusCode::kDataLoss) << store.status().ToString();
   EXPECT_NE(store.status().message().find(path), std::string::npos);
 }
 
 TEST(StoreSchemaTest, UnopenablePathIsUnavailable) {
-  auto store = Store::Open("/nonexistent-dir-for-vb-test/x.db");
+  auto store = OpenSqliteStore("/nonexistent-dir-for-vb-test/x.db");
   ASSERT_FALSE(store.ok());
   EXPECT_EQ(store.status().code(), StatusCode::kUnavailable) << store.status().ToString();
-  auto empty = Store::Open("");
+  auto empty = OpenSqliteStore("");
   ASSERT_FALSE(empty.ok());
   EXPECT_EQ(empty.status().code(), StatusCode::kInvalidArgument);
 }
@@ -907,7 +908,7 @@ TEST(StoreCrashTest, ProcessExitingWithoutCleanupLosesNothingCommitted) {
   { ASSERT_NE(OpenOrDie(path), nullptr); }  // create the schema first
   constexpr int kRuns = 20;
   const pid_t pid = Fork([&] {
-    auto opened = Store::Open(path);
+    auto opened = OpenSqliteStore(path);
     if (!opened.ok()) _exit(10);
     for (int k = 0; k < kRuns; ++k) {
       std::vector<std::int64_t> ids;
@@ -946,7 +947,7 @@ TEST(StoreCrashTest, SigkilledWriterLosesNothingCommitted) {
   // fifth run it claims right away (reported as -id). It never stops by itself: the parent SIGKILLs it mid-write.
   const pid_t pid = Fork([&] {
     close(fds[0]);
-    auto opened = Store::Open(path);
+    auto opened = OpenSqliteStore(path);
     if (!opened.ok()) _exit(10);
     Store& store = **opened;
     for (int k = 0;; ++k) {

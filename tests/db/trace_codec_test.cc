@@ -18,6 +18,7 @@
 
 #include "db/schema.h"
 #include "db/sqlite_conn.h"
+#include "db/sqlite_store.h"
 #include "db/store.h"
 #include "db/testing.h"
 #include "db/text.h"
@@ -226,7 +227,7 @@ TEST(TraceCodecTest, StoreWritesCodec1AndReadsItBackBitExact) {
   c.channels = names;
   std::int64_t id = 0;
   {
-    auto store = std::move(Store::Open(path)).value();
+    auto store = std::move(OpenSqliteStore(path)).value();
     id = SubmitAndClaim(*store);
     ASSERT_TRUE(store->AppendTraceChunk(vb::db::testing::CurrentLease(store, id), c).ok());
     auto back = store->ReadTrace(id);
@@ -248,7 +249,7 @@ TEST(TraceCodecTest, StoreWritesCodec1AndReadsItBackBitExact) {
             SQLITE_OK);
   ASSERT_EQ(sqlite3_exec(db, "UPDATE trace_chunks SET codec = 1", nullptr, nullptr, nullptr), SQLITE_OK);
   sqlite3_close(db);
-  auto store = std::move(Store::Open(path)).value();
+  auto store = std::move(OpenSqliteStore(path)).value();
   auto back = store->ReadTrace(id);
   ASSERT_FALSE(back.ok());
   EXPECT_EQ(back.status().code(), StatusCode::kDataLoss);
@@ -295,7 +296,7 @@ TEST(TraceCodecTest, Version3RawTracesStayReadableAfterTheMigrationBesideNewComp
     sqlite3_finalize(st);
     sqlite3_close(db);
   }
-  auto opened = Store::Open(path);
+  auto opened = OpenSqliteStore(path);
   ASSERT_TRUE(opened.ok()) << opened.status().ToString();
   auto& store = *opened;
   EXPECT_EQ(store->schema_version(), 5);

@@ -11,6 +11,7 @@
 #include <thread>
 
 #include "client/client.h"
+#include "db/sqlite_store.h"
 #include "db/store.h"
 #include "experiment/spec.h"
 #include "server/config.h"
@@ -213,7 +214,7 @@ TEST_F(LabTest, AStoppedHostLosesItsRunAndItsLateWritesAreRefused) {
   EXPECT_EQ(r.host(), other_host);
   EXPECT_EQ(Count(r, v1::DONE), 1);
   // The stopped host, continued, wrote for its attempt (progress, trace or result): refused and recorded.
-  auto store = db::Store::Open(db_path_);
+  auto store = db::OpenSqliteStore(db_path_);
   ASSERT_TRUE(store.ok()) << store.status().message();
   std::int64_t total = 0;
   std::vector<db::StaleWrite> stale;
@@ -244,7 +245,7 @@ TEST(LabWatch, ARunOnAnotherHostIsFollowedFromTheStore) {
   ServerProcess server(dir, R"("lab": {"host": "host-a", "lease_ttl_s": 5})");
   const std::string addr = server.Start();
   ASSERT_FALSE(addr.empty()) << server.Log();
-  auto store = db::Store::Open(server.db_path());
+  auto store = db::OpenSqliteStore(server.db_path());
   ASSERT_TRUE(store.ok()) << store.status().message();
   db::RunRecord rec;
   rec.key = NamedRun("far");

@@ -14,6 +14,7 @@
 
 #include "benchctl/prune_command.h"
 #include "client/client.h"
+#include "db/sqlite_store.h"
 #include "db/store.h"
 #include "experiment/spec.h"
 #include "server_process.h"
@@ -82,7 +83,7 @@ TEST(PruneCommand, LocalStoreDryRunThenDeleteKeepingTheNewestAndExitCodes) {
   EXPECT_EQ(d["kept"][0]["run_id"], 3);
   EXPECT_NE(d["kept"][0]["why"].get<std::string>().find("--keep-last"), std::string::npos);
   {
-    auto store = db::Store::Open(db);
+    auto store = db::OpenSqliteStore(db);
     ASSERT_TRUE(store.ok());
     for (std::int64_t id : {1, 2, 3}) EXPECT_TRUE((*store)->GetRun(id).ok()) << "a dry run deleted run " << id;
   }
@@ -91,7 +92,7 @@ TEST(PruneCommand, LocalStoreDryRunThenDeleteKeepingTheNewestAndExitCodes) {
   ASSERT_EQ(text.exit_code, 0) << text.out;
   EXPECT_NE(text.out.find("deleted 2 run(s)"), std::string::npos) << text.out;
   EXPECT_NE(text.out.find("one of the newest 1 finished runs"), std::string::npos) << text.out;
-  auto store = db::Store::Open(db);
+  auto store = db::OpenSqliteStore(db);
   ASSERT_TRUE(store.ok());
   EXPECT_EQ((*store)->GetRun(1).status().code(), StatusCode::kNotFound);
   EXPECT_EQ((*store)->GetRun(2).status().code(), StatusCode::kNotFound);

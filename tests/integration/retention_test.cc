@@ -13,6 +13,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "db/sqlite_store.h"
 #include "db/store.h"
 #include "db/testing.h"
 #include "regress/cron.h"
@@ -93,7 +94,7 @@ class RetentionSchedulerTest : public ::testing::Test {
     std::filesystem::remove_all(dir_);
     std::filesystem::create_directories(dir_);
     db_path_ = dir_ + "/store.db";
-    auto s = db::Store::Open(db_path_);
+    auto s = db::OpenSqliteStore(db_path_);
     ASSERT_TRUE(s.ok()) << s.status().message();
     store_ = std::move(s).value();
   }

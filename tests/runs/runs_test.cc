@@ -15,6 +15,7 @@
 #include <spdlog/spdlog.h>
 
 #include "common/format.h"
+#include "db/sqlite_store.h"
 #include "db/store.h"
 #include "db/testing.h"
 #include "hw/emulated_bench.h"
@@ -135,7 +136,7 @@ TEST(Admit, TheLocalEmulatorTakesAnySpecWithoutLimits) {
 }
 
 TEST(Execute, AWorkerRunsTheQueueAndRecordsEveryRun) {
-  auto store = db::Store::Open(":memory:");
+  auto store = db::OpenSqliteStore(":memory:");
   ASSERT_TRUE(store.ok());
   Policy local;
   local.benches = {LocalEmulatorSetup()};
@@ -179,7 +180,7 @@ TEST(Execute, AWorkerRunsTheQueueAndRecordsEveryRun) {
 }
 
 TEST(Execute, AStoredSpecThatNoLongerParsesFailsTheRunWithTheReason) {
-  auto store = db::Store::Open(":memory:");
+  auto store = db::OpenSqliteStore(":memory:");
   ASSERT_TRUE(store.ok());
   db::RunRecord r;
   r.key = NamedRun("broken");
@@ -202,7 +203,7 @@ TEST(Execute, AStoredSpecThatNoLongerParsesFailsTheRunWithTheReason) {
 // A run that fails at the bench marks the bench faulted (Outcome::bench_fault, set where the bench failed, not
 // read back from the reason's text); a run that fails for any other reason does not.
 TEST(Execute, ABenchThatCannotBeOpenedIsAFaultABadSpecIsNot) {
-  auto store = db::Store::Open(":memory:");
+  auto store = db::OpenSqliteStore(":memory:");
   ASSERT_TRUE(store.ok());
   db::RunRecord r;
   r.key = NamedRun("on-hid");
@@ -424,7 +425,7 @@ TEST(SampleThinner, KeepsAtMostTheRequestedRateAndNoneForZero) {
 
 // A run cancelled half-way keeps the progress it reached (issue 14: every cancelled run read 0 %).
 TEST(Execute, ACancelledRunKeepsTheProgressItReached) {
-  auto store = db::Store::Open(":memory:");
+  auto store = db::OpenSqliteStore(":memory:");
   ASSERT_TRUE(store.ok());
   Policy local;
   local.benches = {LocalEmulatorSetup()};
@@ -460,7 +461,7 @@ TEST(Execute, ACancelledRunKeepsTheProgressItReached) {
 // Per-user disk budget (issue 14 item 1): what the user's traces take, plus the new runs' traces counted
 // uncompressed, must fit; the refusal names the limit and what to do.
 TEST(Enqueue, APerUserDiskBudgetCountsStoredTracesAndTheNewRunsUncompressed) {
-  auto store = db::Store::Open(":memory:");
+  auto store = db::OpenSqliteStore(":memory:");
   ASSERT_TRUE(store.ok());
   Policy p = ServerPolicy();
   auto spec = E3();  // 0.1 s at 50 kHz: 5 002 samples x 12 x 8 B = 480 kB uncompressed
@@ -513,7 +514,7 @@ TEST(Enqueue, APerUserDiskBudgetCountsStoredTracesAndTheNewRunsUncompressed) {
 TEST(Execute, TheTraceIsInTheStoreWhileTheRunExecutes) {
   const std::string path = ::testing::TempDir() + "/streaming_" + std::to_string(::getpid()) + ".db";
   for (const char* suffix : {"", "-wal", "-shm"}) std::remove((path + suffix).c_str());
-  auto store = db::Store::Open(path);
+  auto store = db::OpenSqliteStore(path);
   ASSERT_TRUE(store.ok());
   // Paced to the wall clock, so the run lasts its 2 s however loaded the machine is and the watcher (polling
   // every 2 ms) cannot miss it: unpaced, a 3 M-sample run takes 0.6 s and a starved watcher saw only its end.
@@ -534,7 +535,7 @@ TEST(Execute, TheTraceIsInTheStoreWhileTheRunExecutes) {
   // largest is the whole trace, seen between its last chunk and the run's end).
   std::int64_t seen_while_running = 0;
   std::thread watcher([&] {
-    auto other = db::Store::Open(path);  // another connection, as another host would have
+    auto other = db::OpenSqliteStore(path);  // another connection, as another host would have
     watching.store(true);  // the run starts only now: opening a connection on a loaded machine can outlast it
     if (!other.ok()) return;
     while (!finished.load()) {
@@ -567,7 +568,7 @@ TEST(Execute, TheTraceIsInTheStoreWhileTheRunExecutes) {
 // benchctl run --local has no interlocks: the bare emulator itself stops a ten-minute PWM segment (one Runner
 // step) at the next edge once the flag is set, so the cancel lands inside the run, not at its end.
 TEST(Execute, ACancelLandsInsideALongStepOnTheBareEmulator) {
-  auto store = db::Store::Open(":memory:");
+  auto store = db::OpenSqliteStore(":memory:");
   ASSERT_TRUE(store.ok());
   BenchSetup bench = LocalEmulatorSetup();
   ASSERT_FALSE(bench.interlocks);
@@ -599,7 +600,7 @@ TEST(Execute, ACancelLandsInsideALongStepOnTheBareEmulator) {
 }
 
 TEST(Execute, ACancelInsideALongStepStatesTheTimeTheBenchReached) {
-  auto store = db::Store::Open(":memory:");
+  auto store = db::OpenSqliteStore(":memory:");
   ASSERT_TRUE(store.ok());
   BenchSetup bench = LocalEmulatorSetup();
   bench.interlocks = true;  // as on a server bench
@@ -654,7 +655,7 @@ struct Queued {
 };
 Queued QueueAndClaim() {
   Queued q;
-  auto store = db::Store::Open(":memory:");
+  auto store = db::OpenSqliteStore(":memory:");
   EXPECT_TRUE(store.ok());
   q.store = std::move(*store);
   Policy local;

@@ -12,6 +12,7 @@
 #include <fstream>
 #include <thread>
 
+#include "db/sqlite_store.h"
 #include "db/store.h"
 #include "runs/admit.h"
 #include "runs/execute.h"
@@ -97,7 +98,7 @@ class SpoolRig {
   SpoolRig(const std::string& name, const experiment::ExperimentSpec& spec, bool paced) {
     dir_ = FreshDir(name);
     path_ = dir_ + "/runs.db";
-    auto s = db::Store::Open(path_);
+    auto s = db::OpenSqliteStore(path_);
     EXPECT_TRUE(s.ok()) << s.status().ToString();
     store = std::move(*s);
     bench = LocalEmulatorSetup();
@@ -125,7 +126,7 @@ class SpoolRig {
     o.max_wait_s = 0.05;
     const std::string path = path_;
     auto spool = std::make_unique<Spool>(o, [this, path]() -> StatusOr<std::unique_ptr<db::Store>> {
-      auto s = db::Store::Open(path);
+      auto s = db::OpenSqliteStore(path);
       if (!s.ok()) return s.status();
       auto f = std::make_unique<FlakyStore>(std::move(*s));
       f->hang_ms = initial_hang_ms;

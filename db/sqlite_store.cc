@@ -1,7 +1,6 @@
-// The SQLite implementation of db/store.h. Schema and migrations: db/schema.cc; trace BLOB layout:
+// The SQLite engine of db/store.h (db/sqlite_store.h). Schema and migrations: db/schema.cc; trace BLOB layout:
 // db/trace_codec.h; the why of both: docs/store.md.
-#include "common/format.h"
-#include "db/store.h"
+#include "db/sqlite_store.h"
 
 #include <algorithm>
 #include <chrono>
@@ -16,6 +15,7 @@
 #include <utility>
 #include <variant>
 
+#include "common/format.h"
 #include "db/checks.h"
 #include "db/checkpointer.h"
 #include "db/prune_plan.h"
@@ -927,7 +927,7 @@ StatusOr<PruneResult> SqliteStore::Prune(const PruneRequest& request) {
 
 }  // namespace
 
-StatusOr<std::unique_ptr<Store>> Store::Open(const std::string& path) {
+StatusOr<std::unique_ptr<Store>> OpenSqliteStore(const std::string& path) {
   if (path.empty()) {
     return Status::InvalidArgument("path: must not be empty (\":memory:\" opens a private in-memory database)");
   }
