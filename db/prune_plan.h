@@ -9,7 +9,7 @@
 #include <string>
 #include <vector>
 
-#include "db/store.h"
+#include "db/records.h"
 
 namespace vb::db {
 

@@ -8,8 +8,8 @@
 #include <vector>
 
 #include "common/status.h"
+#include "db/records.h"
 #include "db/sqlite_conn.h"
-#include "db/store.h"
 
 namespace vb::db::regress_tables {
 

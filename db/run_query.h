@@ -10,7 +10,7 @@
 #include <vector>
 
 #include "common/status.h"
-#include "db/store.h"
+#include "db/records.h"
 
 namespace vb::db {
 

@@ -10,7 +10,7 @@
 #include <string_view>
 
 #include "common/status.h"
-#include "db/store.h"
+#include "db/records.h"
 #include "db/text.h"
 
 namespace vb::db::rules {

@@ -5,7 +5,7 @@
 
 #include <cstdint>
 
-#include "db/store.h"
+#include "db/records.h"
 
 namespace vb::db::testing {
 

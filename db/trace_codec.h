@@ -27,7 +27,7 @@
 #include <vector>
 
 #include "common/status.h"
-#include "db/store.h"
+#include "db/records.h"
 
 struct ZSTD_CCtx_s;
 struct ZSTD_DCtx_s;

@@ -13,7 +13,7 @@
 #include <string>
 
 #include "common/status.h"
-#include "db/store.h"
+#include "db/records.h"
 
 namespace vb::runs {
 

@@ -13,7 +13,6 @@
 #include <vector>
 
 #include "common/status.h"
-#include "db/store.h"
 #include "experiment/spec.h"
 #include "gap/track.h"
 #include "regress/compare.h"

@@ -8,7 +8,7 @@
 #include <thread>
 
 #include "common/status.h"
-#include "db/store.h"
+#include "db/records.h"
 #include "server/config.h"
 #include "server/stop_signal.h"
 #include "service/prune_rules.h"

@@ -7,7 +7,7 @@
 #include <vector>
 
 #include "common/status.h"
-#include "db/store.h"
+#include "db/records.h"
 #include "runs/bench_setup.h"
 #include "valvebench/v1/api.pb.h"
 

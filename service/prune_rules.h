@@ -5,7 +5,7 @@
 #include <string>
 
 #include "common/status.h"
-#include "db/store.h"
+#include "db/records.h"
 #include "regress/compare.h"
 #include "service/service.h"
 #include "service/settings.h"
