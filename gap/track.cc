@@ -1,5 +1,7 @@
 #include "gap/track.h"
 
+#include "gap/text_wrap.h"
+
 #include <boost/math/distributions/normal.hpp>
 #include <boost/math/distributions/students_t.hpp>
 #include <nlohmann/json.hpp>
@@ -517,7 +519,7 @@ std::string TrackingReport(const Tracking& t) {
   char buf[400];
   std::snprintf(buf, sizeof buf,
                 "%zu sessions; a self-starting two-sided CUSUM per parameter, k %.2g, h %.3g sigma, z clipped at "
-                "%.3g (in control: %.0f sessions)\n\n",
+                "%.3g\n(in control: %.0f sessions)\n\n",
                 t.sessions.size(), t.k_sigma, t.h_sigma, t.winsor_z, t.target_arl0_sessions);
   o << buf;
   // The table in blocks of 5 parameters: 28 + 5 x 18 = 118 columns, within a 120-column terminal.
@@ -574,7 +576,7 @@ std::string TrackingReport(const Tracking& t) {
       std::snprintf(buf, sizeof buf, "; reaches its limit at session %.1f", f.projected_crossing);
       o << buf;
     }
-    o << "\n    " << f.meaning << "\n";
+    o << "\n" << Wrap({f.meaning}, 4);  // within 120 columns, as every report
   }
   for (const auto& p : t.parameters)
     if (p.flagged < 0 && std::isfinite(p.smallest_step)) {

@@ -252,6 +252,14 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "perf_track: %s line %d: not \"bench kind from JSON\"\n", values_in.c_str(), n);
         return 2;
       }
+      // A session name seen twice for one bench: files of several draws concatenated without renumbering their
+      // benches would otherwise make one series of several valves (and a detector measured on it).
+      for (const auto& seen : read[b].values)
+        if (seen.name == v->name) {
+          std::fprintf(stderr, "perf_track: %s line %d: bench %d has session %s twice (renumber the benches of "
+                               "each file before concatenating)\n", values_in.c_str(), n, b, v->name.c_str());
+          return 2;
+        }
       read[b].kind = kind, read[b].from = from;
       read[b].values.push_back(std::move(*v));
     }
@@ -371,8 +379,8 @@ int main(int argc, char** argv) {
   std::printf("\nclean benches: %d false flags in %d bench-nights (rate %.4f per night, 95 %% CI %.4f-%.4f)\n",
               false_flags, clean_nights, clean_nights ? static_cast<double>(false_flags) / clean_nights : 0.0, ff.lo,
               ff.hi);
-  std::printf("changes: %d of %d flagged with the right parameter within 5 nights of 3 sigma (95 %% CI %.2f-%.2f); "
-              "%d named right at any time; %d flagged before the change\n",
+  std::printf("changes: %d of %d flagged with the right parameter within 5 nights of 3 sigma (95 %% CI %.2f-%.2f);\n"
+              "         %d named right at any time; %d flagged before the change\n",
               in_time, changes, it.lo, it.hi, named, early);
   if (dump != nullptr) std::fclose(dump);
   return 0;

@@ -302,6 +302,12 @@ TEST(TrackSessions, AResistanceStepIsFlaggedAsRAndNothingBefore) {
       EXPECT_EQ(p["limit"], 70.0);
       EXPECT_TRUE(p["projected_crossing_session"].is_null()) << p.dump();
     }
+  EXPECT_EQ(j["detector"]["winsor_z"], 3.0) << j["detector"].dump();
+  // A reference of fewer than 2 sessions: refused before anything is identified, naming the option.
+  int bad_rc = -1;
+  const std::string bad = Shell(std::string(VB_BENCHCTL) + " track --reference 1" + dirs + " 2>&1", &bad_rc);
+  EXPECT_EQ(bad_rc, 2) << bad;
+  EXPECT_NE(bad.find("--reference: at least 2 sessions form a reference (got 1)"), std::string::npos) << bad;
   if (std::getenv("VB_KEEP_SYNTHETIC") == nullptr) fs::remove_all(root);
 }
 
