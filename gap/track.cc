@@ -403,21 +403,19 @@ StatusOr<Tracking> TrackValues(const std::vector<SessionValues>& sessions, const
   return t;
 }
 
-StatusOr<std::vector<SessionValues>> IdentifySessions(const std::vector<TrackSession>& sessions,
-                                                      const model::PlantParams& family, const TrackOptions& options) {
-  if (sessions.size() < 2) return Status::InvalidArgument("track: give at least two sessions (in time order)");
-  VB_RETURN_IF_ERROR(CheckTrackOptions(options));
+std::vector<StatusOr<MovingIdentification>> IdentifyAnchored(const std::vector<std::string>& names,
+                                                             const SessionIdentifier& identify,
+                                                             const std::function<void(const std::string&)>& progress) {
   // Every later session starts from the first one identified (the anchor), not from the session before: a
   // chain of warm starts walks along the directions the runs barely determine (measured on the independent
   // plant: R wandered 1.3 % and back on a clean valve as L1, B_sat and R_p traded off), while starts from one
   // point make each session's end a function of its own data.
   auto pass = [&](const MovingIdentification* anchor, std::vector<StatusOr<MovingIdentification>>* ids) {
     std::optional<MovingIdentification> first;
-    for (const auto& s : sessions) {
-      if (options.progress)
-        options.progress("session " + s.name + ": " +
-                         (anchor || first ? "warm start from the anchor" : "identifying from scratch"));
-      ids->push_back(IdentifyForTracking(s.dataset, family, anchor ? anchor : first ? &*first : nullptr, options));
+    for (std::size_t i = 0; i < names.size(); ++i) {
+      if (progress)
+        progress("session " + names[i] + ": " + (anchor || first ? "warm start from the anchor" : "identifying from scratch"));
+      ids->push_back(identify(i, anchor ? anchor : first ? &*first : nullptr));
       if (ids->back().ok() && !anchor && !first) first = *ids->back();
     }
   };
@@ -429,10 +427,10 @@ StatusOr<std::vector<SessionValues>> IdentifySessions(const std::vector<TrackSes
   // saturating basin (R 143 ohm) while a third of its later sessions ended at 5.6 mA in another (R 151 ohm):
   // R then jumped 5 % between nights with nothing changed. (That one came from L1's box, which now holds a warm
   // start's start: gap/moving_valve.cc; this check is for basins a local fit cannot leave by itself.) So the
-  // first session is fitted again from the end of
-  // the session that fits best relative to its own noise floor; when that lowers its own fit by more than 10 %
-  // (a fifth of its squared error: far beyond what a re-fit in the same basin gains, which stops at 0.5 % a pass),
-  // that end is the better basin, and every session is identified again from the first session refitted there.
+  // first session is fitted again from the end of the session that fits best relative to its own noise floor;
+  // when that lowers its own fit by more than 10 % (a fifth of its squared error: far beyond what a re-fit in the
+  // same basin gains, which stops at 0.5 % a pass), that end is the better basin, and every session is identified
+  // again from the first session refitted there.
   const auto ratio = [](const StatusOr<MovingIdentification>& id) {
     return id.ok() && id->noise_floor_A > 0.0 ? id->fit_rmse_A / id->noise_floor_A : HUGE_VAL;
   };
@@ -444,16 +442,31 @@ StatusOr<std::vector<SessionValues>> IdentifySessions(const std::vector<TrackSes
     for (std::size_t i = first; i < ids.size(); ++i)
       if (ratio(ids[i]) < ratio(ids[best])) best = i;
     if (best == first) break;
-    auto refit = IdentifyForTracking(sessions[first].dataset, family, &*ids[best], options);
+    auto refit = identify(first, &*ids[best]);
     if (!refit.ok() || !(refit->fit_rmse_A < 0.9 * ids[first]->fit_rmse_A)) break;
-    if (options.progress)
-      options.progress("anchor: " + sessions[first].name + " refitted from " + sessions[best].name + "'s end, " +
-                       Num(1e3 * ids[first]->fit_rmse_A) + " -> " + Num(1e3 * refit->fit_rmse_A) +
-                       " mA: every session again from there");
+    if (progress)
+      progress("anchor: " + names[first] + " refitted from " + names[best] + "'s end, " +
+               Num(1e3 * ids[first]->fit_rmse_A) + " -> " + Num(1e3 * refit->fit_rmse_A) +
+               " mA: every session again from there");
     const MovingIdentification anchor = std::move(*refit);
     ids.clear();
     pass(&anchor, &ids);
   }
+  return ids;
+}
+
+StatusOr<std::vector<SessionValues>> IdentifySessions(const std::vector<TrackSession>& sessions,
+                                                      const model::PlantParams& family, const TrackOptions& options) {
+  if (sessions.size() < 2) return Status::InvalidArgument("track: give at least two sessions (in time order)");
+  VB_RETURN_IF_ERROR(CheckTrackOptions(options));
+  std::vector<std::string> names;
+  for (const auto& s : sessions) names.push_back(s.name);
+  const auto ids = IdentifyAnchored(
+      names,
+      [&](std::size_t i, const MovingIdentification* anchor) {
+        return IdentifyForTracking(sessions[i].dataset, family, anchor, options);
+      },
+      options.progress);
   std::vector<SessionValues> values;
   for (std::size_t i = 0; i < sessions.size(); ++i)
     values.push_back(ValuesOfSession(sessions[i].name, sessions[i].dataset, ids[i]));

@@ -1,6 +1,7 @@
 // A bench's valve tracked session by session (issue 38, docs/track.md): every session (a valve-runs/2 switch-on
 // dataset, one night of a bench) is identified, the first from scratch and each later one warm-started from the
-// one before (gap/moving_valve.h: the same basin, so a change between nights is the valve's, not the search's);
+// first (the anchor; gap/moving_valve.h: the same basin, so a change between nights is the valve's, not the
+// search's; IdentifyAnchored checks the anchor's basin against the sessions');
 // each determined parameter (or product) then goes through a self-starting two-sided CUSUM:
 //   - the reference is the sessions before (at most the first kBaselineMax, none after a flag): their mean, and a
 //     variance that is the larger of their scatter and the identifications' own (Gauss-Newton) variances;
@@ -150,8 +151,20 @@ StatusOr<SessionValues> SessionValuesFromJson(const std::string& json);
 // Tracks sessions already identified: every parameter the first identified session determines.
 StatusOr<Tracking> TrackValues(const std::vector<SessionValues>& sessions, const TrackOptions& options);
 
-// Identifies every session (the first from scratch, every later one warm-started from it) into the values
-// TrackValues takes.
+// One session's identification from an anchor (nullptr: from scratch): IdentifyForTracking in IdentifySessions.
+using SessionIdentifier =
+    std::function<StatusOr<MovingIdentification>(std::size_t session, const MovingIdentification* anchor)>;
+
+// The sessions 0..n-1 identified around one anchor (docs/track.md, step 1): the first session that identifies
+// from scratch is the anchor and every session is warm-started from it; then the anchor's basin is checked, at
+// most twice: the first identified session is fitted again from the end of the session that fits best relative
+// to its own noise floor, and when that lowers the first session's fit by more than 10 %, the refit is the anchor
+// and every session is identified again from it. `names` (one per session) and `progress` only word the progress.
+std::vector<StatusOr<MovingIdentification>> IdentifyAnchored(const std::vector<std::string>& names,
+                                                             const SessionIdentifier& identify,
+                                                             const std::function<void(const std::string&)>& progress);
+
+// Identifies every session (IdentifyAnchored with IdentifyForTracking) into the values TrackValues takes.
 StatusOr<std::vector<SessionValues>> IdentifySessions(const std::vector<TrackSession>& sessions,
                                                       const model::PlantParams& family, const TrackOptions& options);
 

@@ -246,6 +246,55 @@ TEST(TrackSessions, AWarmStartFromAnIdentificationKeepsItsFit) {
   fs::remove_all(dir);
 }
 
+// The anchor's basin check (IdentifyAnchored, docs/track.md step 1) on a scripted identifier: two basins, "A" (a
+// fit of 10 mA, where the first session lands from scratch) and "B" (5 mA). Sessions warm-started from an A
+// anchor stay in A except sessions 3 and 5, which escape to B; any session started from a B end lands in B. The
+// check refits session 0 from the best session's end (3: the first of the best), finds 10 -> 5 mA (over the
+// 10 % it asks), and identifies every session again from that B anchor: all of them end in B, in one round.
+// Where the refit gains less than 10 % (a second basin that is not better), nothing is identified again.
+TEST(TrackSessions, TheAnchorMovesToABetterBasinAndEverySessionFollows) {
+  auto basin = [](char b, double fit_A) {
+    MovingIdentification id;
+    id.device = std::string(1, b);
+    id.fit_rmse_A = fit_A;
+    id.noise_floor_A = 1e-3;
+    return id;
+  };
+  const std::vector<std::string> names = {"n1", "n2", "n3", "n4", "n5", "n6"};
+  for (double b_fit_A : {5e-3, 9.5e-3}) {
+    std::vector<std::pair<std::size_t, std::string>> calls;  // (session, anchor's basin or "scratch")
+    const SessionIdentifier identify = [&](std::size_t i, const MovingIdentification* anchor) {
+      calls.emplace_back(i, anchor ? anchor->device : "scratch");
+      if (!anchor) return StatusOr<MovingIdentification>(basin('A', 10e-3));
+      if (anchor->device == "B" || i == 3 || i == 5) return StatusOr<MovingIdentification>(basin('B', b_fit_A));
+      return StatusOr<MovingIdentification>(basin('A', 10e-3));
+    };
+    std::vector<std::string> progress;
+    const auto ids = IdentifyAnchored(names, identify, [&](const std::string& s) { progress.push_back(s); });
+    ASSERT_EQ(ids.size(), names.size());
+    std::string ends;
+    for (const auto& id : ids) {
+      ASSERT_TRUE(id.ok());
+      ends += id->device;
+    }
+    if (b_fit_A < 0.9 * 10e-3) {
+      EXPECT_EQ(ends, "BBBBBB") << "every session again from the refitted anchor";
+      // the first pass (6), the refit of session 0 from session 3's end, the second pass (6) from a B anchor, and
+      // the second round's refit check finds the first session already the best: no more calls.
+      ASSERT_EQ(calls.size(), 13u);
+      EXPECT_EQ(calls[0], std::make_pair(std::size_t{0}, std::string("scratch")));
+      EXPECT_EQ(calls[6], std::make_pair(std::size_t{0}, std::string("B")));
+      for (std::size_t k = 7; k < 13; ++k) EXPECT_EQ(calls[k].second, "B") << k;
+      bool said = false;
+      for (const auto& s : progress) said = said || s.find("anchor: n1 refitted from n4's end, 10") == 0;
+      EXPECT_TRUE(said) << "the progress says the anchor moved and from where";
+    } else {
+      EXPECT_EQ(ends, "AAABAB") << "a refit that gains under 10 % keeps the first pass";
+      EXPECT_EQ(calls.size(), 7u) << "the first pass and one refit";
+    }
+  }
+}
+
 // Eight nights of one valve, each recorded at declared supplies and pressures a little off the nominal ones (as
 // a bench's are night to night), with the coil's resistance 4 % higher from night 6 (a corroded connector): R is
 // flagged within 3 nights (the reference is nights 1-5, a t with 4 degrees of freedom, and z enters clipped at 3
