@@ -68,7 +68,7 @@ v1::BenchHealth BenchHealthOf(const std::string& bench, const gap::Tracking& t) 
 grpc::Status BenchServiceImpl::GetBenchHealth(grpc::ServerContext* ctx, const v1::GetBenchHealthRequest* req,
                                               v1::GetBenchHealthResponse* resp) {
   Principal who;
-  if (auto st = Authorize(ctx, Role::kViewer, &who); !st.ok()) return st;
+  if (auto st = gate_.Caller(ctx, &who); !st.ok()) return st;
   // A bench name is echoed in the NOT_FOUND message: a huge one would not fit the status's metadata.
   constexpr std::size_t kMaxBenchName = 256;
   if (req->bench().size() > kMaxBenchName)

@@ -65,7 +65,7 @@ StatusOr<gap::StoredRun> LoadStoredRun(db::Store* store, std::int64_t id) {
 grpc::Status BenchServiceImpl::DiagnoseRuns(grpc::ServerContext* ctx, const v1::DiagnoseRunsRequest* req,
                                             v1::DiagnoseRunsResponse* resp) {
   Principal who;
-  if (auto st = Authorize(ctx, Role::kViewer, &who); !st.ok()) return st;
+  if (auto st = gate_.Caller(ctx, &who); !st.ok()) return st;
   if (req->run_ids_size() == 0) return ToGrpcStatus(Status::InvalidArgument("run_ids: at least one run is needed"));
   if (req->run_ids_size() > kMaxRuns)
     return ToGrpcStatus(Status::InvalidArgument("run_ids: " + std::to_string(req->run_ids_size()) +

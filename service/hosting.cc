@@ -13,6 +13,7 @@ void HostService(grpc::ServerBuilder* builder, BenchServiceImpl* service) {
   builder->SetMaxSendMessageSize(kMaxMessageBytes);
   std::vector<std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface>> interceptors;
   interceptors.push_back(std::make_unique<BadRequestInterceptorFactory>());
+  interceptors.push_back(service->gate()->InterceptorFactory());  // who may call what (service/authorization.h)
   builder->experimental().SetInterceptorCreators(std::move(interceptors));
 }
 

@@ -12,8 +12,9 @@ namespace vb::server {
 // The largest message either way: a trace page or an import of measured runs.
 inline constexpr int kMaxMessageBytes = 64 << 20;
 
-// Registers `service` on `builder` with the message limits and the status interceptor
-// (service/status_interceptor.h).
+// Registers `service` on `builder` with the message limits, the status interceptor
+// (service/status_interceptor.h) and the service's call gate, which authorises every call from one
+// method-to-role table (service/authorization.h). The builder must not outlive `service`.
 void HostService(grpc::ServerBuilder* builder, BenchServiceImpl* service);
 
 // Channel arguments for an in-process channel to a hosted service (the web door, benchctl --local).

@@ -253,7 +253,7 @@ void FailFrom(db::Store* store, const std::vector<db::RunRecord>& runs, std::siz
 grpc::Status BenchServiceImpl::ImportRuns(grpc::ServerContext* ctx, const v1::ImportRunsRequest* req,
                                           v1::SubmitRunResponse* resp) {
   Principal who;
-  if (auto st = Authorize(ctx, Role::kOperator, &who); !st.ok()) return st;
+  if (auto st = gate_.Caller(ctx, &who); !st.ok()) return st;
   auto records = ImportRecords(*req, false, settings_->limits.max_runs_per_submission());
   if (!records.ok()) return ToGrpcStatus(records.status());
   // Every sample is checked before anything is stored.
@@ -293,7 +293,7 @@ grpc::Status BenchServiceImpl::ImportRuns(grpc::ServerContext* ctx, const v1::Im
 grpc::Status BenchServiceImpl::ImportRunsStream(grpc::ServerContext* ctx, grpc::ServerReader<v1::ImportRunsPart>* reader,
                                                 v1::SubmitRunResponse* resp) {
   Principal who;
-  if (auto st = Authorize(ctx, Role::kOperator, &who); !st.ok()) return st;
+  if (auto st = gate_.Caller(ctx, &who); !st.ok()) return st;
   v1::ImportRunsPart part;
   if (!reader->Read(&part)) return ToGrpcStatus(Status::InvalidArgument("header: the stream is empty"));
   if (!part.has_header())

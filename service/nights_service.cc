@@ -36,7 +36,7 @@ std::string Summary(const regress::Json& j, const std::string& verdict) {
 grpc::Status BenchServiceImpl::ListNights(grpc::ServerContext* ctx, const v1::ListNightsRequest* req,
                                           v1::ListNightsResponse* resp) {
   Principal who;
-  if (auto st = Authorize(ctx, Role::kViewer, &who); !st.ok()) return st;
+  if (auto st = gate_.Caller(ctx, &who); !st.ok()) return st;
   if (req->limit() < 0 || req->limit() > 1000)
     return ToGrpcStatus(Status::InvalidArgument("limit: " + std::to_string(req->limit()) + " is outside 0-1000"));
   const int limit = req->limit() == 0 ? 30 : req->limit();

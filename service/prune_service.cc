@@ -31,7 +31,7 @@ void ToProto(const db::PruneDecision& d, v1::PruneDecision* out) {
 grpc::Status BenchServiceImpl::PruneRuns(grpc::ServerContext* ctx, const v1::PruneRunsRequest* req,
                                          v1::PruneRunsResponse* resp) {
   Principal who;
-  if (auto st = Authorize(ctx, Role::kAdmin, &who); !st.ok()) return st;
+  if (auto st = gate_.Caller(ctx, &who); !st.ok()) return st;
   if (!std::isfinite(req->older_than_s()) || req->older_than_s() <= 0)
     return ToGrpcStatus(Status::InvalidArgument("older_than_s: must be a finite number of seconds > 0, got " +
                                                 FormatExact(req->older_than_s())));

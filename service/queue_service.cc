@@ -44,7 +44,7 @@ QueueBench ClaimerOf(const v1::BenchInfo& b, bool live, const std::vector<std::u
 grpc::Status BenchServiceImpl::GetQueue(grpc::ServerContext* ctx, const v1::GetQueueRequest* /*req*/,
                                         v1::GetQueueResponse* resp) {
   Principal who;
-  if (auto st = Authorize(ctx, Role::kViewer, &who); !st.ok()) return st;
+  if (auto st = gate_.Caller(ctx, &who); !st.ok()) return st;
   // The benches first: a run that starts between the two reads is then counted running, not missed.
   const v1::ListBenchesRequest benches_req;
   v1::ListBenchesResponse benches;

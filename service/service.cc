@@ -132,39 +132,10 @@ int StreamGate::open() const {
   return total_;
 }
 
-grpc::Status BenchServiceImpl::Authorize(grpc::ServerContext* ctx, Role need, Principal* who) const {
-  const auto& md = ctx->client_metadata();
-  // An address past the failure limit is refused whatever it sends (a good token too: a scanner must not learn
-  // which of its guesses was right by the answer changing). In-process peers (the web door, which limits by the
-  // real client's address, and benchctl --local) have no address here and are not limited.
-  const std::string client = ClientAddressOfPeer(ctx->peer());
-  if (!client.empty()) {
-    if (const double wait_s = auth_failures_.Blocked_s(client); wait_s > 0)
-      return grpc::Status(grpc::StatusCode::RESOURCE_EXHAUSTED,
-                          "too many failed authentications from " + client + "; try again in " +
-                              std::to_string(static_cast<int>(std::ceil(wait_s))) + " s");
-  }
-  auto it = md.find("authorization");
-  if (it == md.end()) return Unauthenticated(Status::FailedPrecondition("missing authorization metadata"));
-  auto p = settings_->auth.Authenticate(std::string_view(it->second.data(), it->second.size()));
-  if (!p.ok()) {
-    if (!client.empty()) {
-      auth_failures_.Failed(client);
-      spdlog::warn("grpc: failed authentication from {}: {}", client, p.status().message());
-    }
-    return Unauthenticated(p.status());
-  }
-  if (!p->AtLeast(need))
-    return PermissionDenied("user " + p->user + " (" + RoleName(p->role) + ") needs the " + RoleName(need) +
-                            " role for this call");
-  *who = *p;
-  return grpc::Status::OK;
-}
-
 grpc::Status BenchServiceImpl::SubmitRun(grpc::ServerContext* ctx, const v1::SubmitRunRequest* req,
                                          v1::SubmitRunResponse* resp) {
   Principal who;
-  if (auto st = Authorize(ctx, Role::kOperator, &who); !st.ok()) return st;
+  if (auto st = gate_.Caller(ctx, &who); !st.ok()) return st;
   return Submit({who.user, req->batch_name().empty() ? req->spec().name() : req->batch_name(), {req->spec()}, {}, ""},
                 resp);
 }
@@ -172,7 +143,7 @@ grpc::Status BenchServiceImpl::SubmitRun(grpc::ServerContext* ctx, const v1::Sub
 grpc::Status BenchServiceImpl::SubmitBatch(grpc::ServerContext* ctx, const v1::SubmitBatchRequest* req,
                                            v1::SubmitRunResponse* resp) {
   Principal who;
-  if (auto st = Authorize(ctx, Role::kOperator, &who); !st.ok()) return st;
+  if (auto st = gate_.Caller(ctx, &who); !st.ok()) return st;
   if (req->specs_size() == 0) return ToGrpcStatus(Status::InvalidArgument("specs: at least one spec is needed"));
   runs::Submission sub{who.user, req->batch_name(), {req->specs().begin(), req->specs().end()}, {}, ""};
   for (const auto& k : req->keys()) sub.keys.push_back(api::FromProto(k));
@@ -252,7 +223,7 @@ grpc::Status BenchServiceImpl::FillRun(db::Store* store, const db::RunRecord& r,
 
 grpc::Status BenchServiceImpl::GetRun(grpc::ServerContext* ctx, const v1::GetRunRequest* req, v1::Run* resp) {
   Principal who;
-  if (auto st = Authorize(ctx, Role::kViewer, &who); !st.ok()) return st;
+  if (auto st = gate_.Caller(ctx, &who); !st.ok()) return st;
   auto store = pool_->Acquire();
   if (!store.ok()) return ToGrpcStatus(store.status());
   auto r = (*store)->GetRun(req->run_id());
@@ -263,7 +234,7 @@ grpc::Status BenchServiceImpl::GetRun(grpc::ServerContext* ctx, const v1::GetRun
 grpc::Status BenchServiceImpl::ListRuns(grpc::ServerContext* ctx, const v1::ListRunsRequest* req,
                                         v1::ListRunsResponse* resp) {
   Principal who;
-  if (auto st = Authorize(ctx, Role::kViewer, &who); !st.ok()) return st;
+  if (auto st = gate_.Caller(ctx, &who); !st.ok()) return st;
   db::RunFilter f;
   f.status = api::FromProto(req->status());
   // An unknown value (a newer client, a typo through a raw API) must not read as "any status" (issue 14).
@@ -301,7 +272,7 @@ grpc::Status BenchServiceImpl::ListRuns(grpc::ServerContext* ctx, const v1::List
 
 grpc::Status BenchServiceImpl::CancelRun(grpc::ServerContext* ctx, const v1::CancelRunRequest* req, v1::Run* resp) {
   Principal who;
-  if (auto st = Authorize(ctx, Role::kOperator, &who); !st.ok()) return st;
+  if (auto st = gate_.Caller(ctx, &who); !st.ok()) return st;
   auto store = pool_->Acquire();
   if (!store.ok()) return ToGrpcStatus(store.status());
   auto r = (*store)->GetRun(req->run_id());
@@ -376,7 +347,7 @@ Status StoredSamples(db::Store* store, std::int64_t run_id, std::int32_t* next_c
 grpc::Status BenchServiceImpl::WatchRun(grpc::ServerContext* ctx, const v1::WatchRunRequest* req,
                                         grpc::ServerWriter<v1::RunEvent>* writer) {
   Principal who;
-  if (auto st = Authorize(ctx, Role::kViewer, &who); !st.ok()) return st;
+  if (auto st = gate_.Caller(ctx, &who); !st.ok()) return st;
   std::string full;
   const auto slot = streams_.Take(who.user, "WatchRun", &full);
   if (!slot) return grpc::Status(grpc::StatusCode::RESOURCE_EXHAUSTED, full);
@@ -477,7 +448,7 @@ grpc::Status BenchServiceImpl::WatchRun(grpc::ServerContext* ctx, const v1::Watc
 grpc::Status BenchServiceImpl::GetTrace(grpc::ServerContext* ctx, const v1::GetTraceRequest* req,
                                         grpc::ServerWriter<v1::TraceChunk>* writer) {
   Principal who;
-  if (auto st = Authorize(ctx, Role::kViewer, &who); !st.ok()) return st;
+  if (auto st = gate_.Caller(ctx, &who); !st.ok()) return st;
   std::string full;
   const auto slot = streams_.Take(who.user, "GetTrace", &full);
   if (!slot) return grpc::Status(grpc::StatusCode::RESOURCE_EXHAUSTED, full);
@@ -620,7 +591,7 @@ grpc::Status BenchServiceImpl::GetTrace(grpc::ServerContext* ctx, const v1::GetT
 grpc::Status BenchServiceImpl::CompareRuns(grpc::ServerContext* ctx, const v1::CompareRunsRequest* req,
                                            v1::CompareRunsResponse* resp) {
   Principal who;
-  if (auto st = Authorize(ctx, Role::kViewer, &who); !st.ok()) return st;
+  if (auto st = gate_.Caller(ctx, &who); !st.ok()) return st;
   if ((req->batch_id() == 0) == (req->run_ids_size() == 0))
     return ToGrpcStatus(Status::InvalidArgument("batch_id, run_ids: give a batch or a list of runs"));
   // A comparison is a table for people; 100 k ids cost the server ~1 s and 125 MB (issue 14). A batch is
@@ -709,7 +680,7 @@ grpc::Status BenchServiceImpl::LabBenches(v1::ListBenchesResponse* resp) {
 grpc::Status BenchServiceImpl::ListBenches(grpc::ServerContext* ctx, const v1::ListBenchesRequest* /*req*/,
                                            v1::ListBenchesResponse* resp) {
   Principal who;
-  if (auto st = Authorize(ctx, Role::kViewer, &who); !st.ok()) return st;
+  if (auto st = gate_.Caller(ctx, &who); !st.ok()) return st;
   if (settings_->lab.enabled) {
     if (auto st = LabBenches(resp); !st.ok()) return st;
   }

@@ -1,5 +1,6 @@
 // The BenchService implementation: a thin layer over the store, the workers and the experiment core.
-// Every handler authenticates first, maps core errors through ToGrpcStatus, and never lets an exception out.
+// Every handler asks the call gate for its caller first (service/authorization.h), maps core errors through
+// ToGrpcStatus, and never lets an exception out.
 #pragma once
 
 #include <chrono>
@@ -10,8 +11,8 @@
 #include <string>
 #include <vector>
 
-#include "common/failed_attempts.h"
 #include "db/store.h"
+#include "service/authorization.h"
 #include "service/settings.h"
 #include "runs/admit.h"
 #include "runs/monitor.h"
@@ -87,7 +88,12 @@ class BenchServiceImpl final : public valvebench::v1::BenchService::Service {
  public:
   BenchServiceImpl(const ServiceSettings* settings, StorePool* pool, runs::Registry* registry,
                    const std::vector<std::unique_ptr<runs::Worker>>* workers)
-      : settings_(settings), policy_(settings->AdmitPolicy()), pool_(pool), registry_(registry), workers_(workers) {}
+      : settings_(settings),
+        policy_(settings->AdmitPolicy()),
+        pool_(pool),
+        registry_(registry),
+        workers_(workers),
+        gate_(&settings->auth) {}
 
   grpc::Status SubmitRun(grpc::ServerContext* ctx, const valvebench::v1::SubmitRunRequest* req,
                          valvebench::v1::SubmitRunResponse* resp) override;
@@ -132,8 +138,11 @@ class BenchServiceImpl final : public valvebench::v1::BenchService::Service {
   // SubmitBatch do after authorising, and what the nights scheduler calls directly.
   StatusOr<runs::Queued> Queue(const runs::Submission& submission);
 
+  // Who may call what (service/authorization.h): HostService installs its interceptor; each handler's first step
+  // is gate_.Caller(ctx, &who).
+  CallGate* gate() { return &gate_; }
+
  private:
-  grpc::Status Authorize(grpc::ServerContext* ctx, Role need, Principal* who) const;
   grpc::Status Submit(const runs::Submission& submission, valvebench::v1::SubmitRunResponse* resp);
   grpc::Status FillRun(db::Store* store, const db::RunRecord& r, bool full, valvebench::v1::Run* out);
   grpc::Status LabBenches(valvebench::v1::ListBenchesResponse* resp);
@@ -144,9 +153,7 @@ class BenchServiceImpl final : public valvebench::v1::BenchService::Service {
   runs::Registry* registry_;
   const std::vector<std::unique_ptr<runs::Worker>>* workers_;
   StreamGate streams_;
-  // Failed authentications per client address (common/failed_attempts.h): the same limit as the web's, so
-  // that gRPC is no unlimited, unlogged oracle for guessing tokens (issue 34).
-  mutable FailedAttempts auth_failures_;
+  CallGate gate_;
 };
 
 
