@@ -44,4 +44,22 @@ std::optional<RunStatus> FromProto(valvebench::v1::RunStatus s) {
   }
 }
 
+valvebench::v1::BenchKind ToProto(BenchKind kind) {
+  switch (kind) {
+    case BenchKind::kEmulated: return valvebench::v1::BENCH_KIND_EMULATED;
+    case BenchKind::kHid: return valvebench::v1::BENCH_KIND_HID;
+    case BenchKind::kU3: return valvebench::v1::BENCH_KIND_U3;
+  }
+  return valvebench::v1::BENCH_KIND_UNSPECIFIED;
+}
+
+std::optional<BenchKind> FromProto(valvebench::v1::BenchKind kind) {
+  switch (kind) {
+    case valvebench::v1::BENCH_KIND_EMULATED: return BenchKind::kEmulated;
+    case valvebench::v1::BENCH_KIND_HID: return BenchKind::kHid;
+    case valvebench::v1::BENCH_KIND_U3: return BenchKind::kU3;
+    default: return std::nullopt;
+  }
+}
+
 }  // namespace vb::api
