@@ -99,11 +99,21 @@ void Worker::Stop() {
   if (thread_.joinable()) thread_.join();
 }
 
+void Worker::StopCancelling() {
+  closing_.store(true);
+  {
+    std::lock_guard<std::mutex> lock(monitor_mu_);
+    if (auto* m = monitor_.load()) m->cancel.store(true);
+  }
+  if (registry_ != nullptr) registry_->NotifyWork();
+  if (thread_.joinable()) thread_.join();
+}
+
 void Worker::Loop(const std::string& db_path) {
   // The store may be unavailable at start or at any time: opening and claiming are retried (every 0.2 s, or
   // when work is signalled), the fault logged once when it begins and once when it ends.
   std::unique_ptr<db::Store> store;
-  while (!stop_.load()) {
+  while (!stop_.load() && !closing_.load()) {
     if (store == nullptr) {
       const auto call_began = FaultLog::Clock::now();
       auto opened = db::OpenStore(db_path);
@@ -129,6 +139,8 @@ void Worker::Loop(const std::string& db_path) {
       }
     } else if (!done->has_value()) {
       faults_.Recovered();
+    } else if (on_outcome_) {
+      on_outcome_(**done);
     }
     if (!done.ok() || !done->has_value()) registry_->WaitForWork(200);
   }

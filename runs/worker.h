@@ -47,11 +47,19 @@ class Worker {
   // One step on the calling thread: nullopt when no run is waiting for this bench.
   StatusOr<std::optional<Outcome>> ClaimAndExecute(db::Store* store);
 
-  // A thread that opens the store at db_path and loops on ClaimAndExecute until Stop().
+  // A thread that opens the store at db_path and loops on ClaimAndExecute until Stop(): a store that cannot be
+  // opened or claimed from is retried (every 0.2 s, or when work is signalled), the fault logged once when it
+  // begins and once when it ends.
   void Start(std::string db_path);
+  // Before Start(): called on the worker's thread with the outcome of each run it executed (its summary, and
+  // with keep_traces its trace).
+  void set_on_outcome(std::function<void(Outcome&)> on_outcome) { on_outcome_ = std::move(on_outcome); }
   // Stops claiming, stops a running experiment (safe state), joins. A run stopped this way stays marked
   // running in the store, so the next start marks it interrupted and re-queues it.
   void Stop();
+  // Stops claiming and cancels the running experiment (safe state), which is recorded as cancelled, then joins:
+  // for a process whose runs nobody would resume (a local service).
+  void StopCancelling();
 
   const BenchSetup& setup() const { return setup_; }
   // Before Start(): the host's spool (runs/spool.h); nullptr (the default): the trace goes to the store directly.
@@ -85,6 +93,8 @@ class Worker {
   Registry* registry_;
   std::thread thread_;
   std::atomic<bool> stop_{false};
+  std::atomic<bool> closing_{false};  // StopCancelling: no more claims, the current run ends as a cancel
+  std::function<void(Outcome&)> on_outcome_;
   std::atomic<std::int64_t> current_fence_{0};  // written before current_run_
   std::atomic<std::int64_t> current_run_{0};
   std::atomic<experiment::RunMonitor*> monitor_{nullptr};

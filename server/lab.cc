@@ -8,6 +8,7 @@
 
 #include "db/open_store.h"
 #include "runs/execute.h"
+#include "runs/watch.h"
 
 namespace vb::server {
 
@@ -93,44 +94,7 @@ void LabHost::Stop() {
 }
 
 void LabHost::WatchRuns(db::Store* store, bool write_progress) {
-  for (const auto& w : *workers_) {
-    const db::Lease lease = w->executing_lease();
-    if (lease.run_id == 0) continue;
-    const auto asked = runs::FaultLog::Clock::now();
-    auto cancel = store->CancelRequested(lease.run_id);
-    if (db::ClassifyWrite(cancel.status()) == db::WriteFault::kTransient) {
-      faults_.Failed(cancel.status(), asked);
-      return;  // the store is unavailable: the next watch tries again
-    }
-    if (cancel.ok() && *cancel && w->CancelIfCurrent(lease))
-      spdlog::info("run {}: cancel requested through the store: stopping it", static_cast<long long>(lease.run_id));
-    if (!write_progress) continue;
-    double progress = 0.0;
-    if (!registry_->Progress(lease.run_id, &progress)) continue;
-    // Under the worker's lock: the run cannot end (and write its result) while its progress is being written.
-    db::Lease written;
-    const auto writing = runs::FaultLog::Clock::now();
-    Status st = w->WithExecutingLease([&](const db::Lease& current) {
-      if (current.run_id != lease.run_id || current.fence != lease.fence) return Status::Ok();  // another run now
-      written = current;
-      return store->SetProgress(current, std::min(1.0, std::max(0.0, progress)));
-    });
-    switch (db::ClassifyWrite(st)) {
-      case db::WriteFault::kNone:
-        break;
-      case db::WriteFault::kTransient:  // progress is only for watchers: the next one is 0.5 s away
-        faults_.Failed(st, writing);
-        return;
-      case db::WriteFault::kFenced:
-        spdlog::warn("run {} (fence {}): {}; stopping this attempt", static_cast<long long>(written.run_id),
-                     static_cast<long long>(written.fence), st.message());
-        w->CancelIfCurrent(written);
-        break;
-      case db::WriteFault::kPermanent:
-        spdlog::error("run {}: cannot write its progress: {}", static_cast<long long>(written.run_id), st.message());
-        break;
-    }
-  }
+  runs::WatchRuns(store, *workers_, registry_, write_progress, &faults_);
 }
 
 void LabHost::Loop() {

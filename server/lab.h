@@ -5,9 +5,10 @@
 //     stopped heartbeating; after the store was unavailable, only one lease TTL after it is back);
 //   - the store unavailable: logged once when it begins and once, with its duration, when it ends; the thread
 //     goes on trying (timeouts bound every call: db/pg_conn.h);
-//   - every 100 ms, for each bench's run in progress: a cancel requested through the store (CancelRun on another
-//     host) stops it; its progress is written to the store every 0.5 s so watchers on other hosts follow it; a
-//     progress write refused as stale (the lease lapsed, the run is someone else's now) stops it too.
+//   - every 100 ms, for each bench's run in progress (runs::WatchRuns, runs/watch.h, as a local service's relay):
+//     a cancel requested through the store (CancelRun on another host) stops it; its progress is written to the
+//     store every 0.5 s so watchers on other hosts follow it; a progress write refused as stale (the lease lapsed,
+//     the run is someone else's now) stops it too.
 // Nothing here touches the control loop: it sets the run's cancel flag, as CancelRun does.
 #pragma once
 

@@ -30,10 +30,9 @@
 #include "server/grpc_listener.h"
 #include "server/instance_lock.h"
 #include "server/lab.h"
-#include "server/recovery.h"
 #include "server/nights.h"
 #include "server/retention.h"
-#include "service/service.h"
+#include "service/host.h"
 #include "service/hosting.h"
 #include "regress/cron.h"
 #include "db/open_store.h"
@@ -111,36 +110,7 @@ int main(int argc, char** argv) {
     return 3;
   }
   spdlog::info("this server holds {}", (*instance)->description());
-  auto store = vb::db::OpenStore(settings->database_path);
-  if (!store.ok()) {
-    spdlog::error("{}: {}", vb::db::DisplayLocation(settings->database_path).c_str(),
-                 store.status().message().c_str());
-    return 3;
-  }
-  // In a lab only this host's runs: the others' are running on their hosts (docs/lab.md).
-  const std::string host = settings->lab.enabled ? settings->lab.host : std::string();
-  vb::runs::Registry registry;  // before the spool, which outlives nothing that uses it
-  // The spool's leftovers uploaded, then this host's running runs interrupted (server/recovery.h).
-  auto recovered = vb::server::RecoverAtStart(*settings, host, store->get());
-  if (!recovered.ok()) {
-    spdlog::error("{}", recovered.status().message().c_str());
-    return 3;
-  }
-  if (recovered->interrupted > 0)
-    spdlog::warn("{} run(s) were running when the server stopped: marked interrupted",
-                 recovered->interrupted);
-  std::unique_ptr<vb::runs::Spool> spool = std::move(recovered->spool);
-  if (spool) spool->set_registry(&registry);
-
-  std::vector<std::unique_ptr<vb::runs::Worker>> workers;
-  for (const auto& b : settings->benches) {
-    workers.push_back(std::make_unique<vb::runs::Worker>(b, &registry));
-    workers.back()->set_spool(spool.get());
-    if (settings->lab.enabled)
-      workers.back()->set_claim_policy({settings->lab.host, settings->lab.lease_ttl_s, settings->lab.aging_s});
-  }
-  vb::server::StorePool pool(settings->database_path);
-  vb::server::BenchServiceImpl service(&settings.value(), &pool, &registry, &workers);
+  const std::string host_name = settings->lab.enabled ? settings->lab.host : std::string();
 
   grpc::EnableDefaultHealthCheckService(true);
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
@@ -186,9 +156,25 @@ int main(int argc, char** argv) {
     acceptor = builder.experimental().AddExternalConnectionAcceptor(
         grpc::ServerBuilder::experimental_type::ExternalConnectionType::FROM_FD, creds);
   }
-  vb::server::HostService(&builder, &service);  // as a local service hosts it (service/hosting.h), plus the port
-  std::unique_ptr<grpc::Server> server = builder.BuildAndStart();
-  if (server == nullptr || port == 0) {
+  // The one host of the service (service/host.h), as a local service is: the store opened, the spool's leftovers
+  // uploaded and this host's running runs interrupted and re-queued, the workers, and the service on this builder.
+  vb::server::HostOptions host_options;
+  host_options.store = settings->database_path;
+  host_options.settings = &settings.value();
+  host_options.recovery = vb::server::HostOptions::Recovery::kInterruptRunning;
+  host_options.spool_dir = settings->spool_dir;
+  host_options.spool_max_bytes = settings->spool_max_bytes;
+  auto started = vb::server::Host::Start(std::move(host_options), &builder);
+  if (!started.ok()) {
+    spdlog::error("{}: {}", vb::db::DisplayLocation(settings->database_path).c_str(),
+                  started.status().message().c_str());
+    return 3;
+  }
+  std::unique_ptr<vb::server::Host> host = std::move(*started);
+  if (host->interrupted_at_start() > 0)
+    spdlog::warn("{} run(s) were running when the server stopped: marked interrupted", host->interrupted_at_start());
+  grpc::Server* server = host->server();
+  if (port == 0) {
     spdlog::error("cannot listen on {} (is the port in use by another server?)", settings->listen_address.c_str());
     return 3;
   }
@@ -206,30 +192,30 @@ int main(int argc, char** argv) {
     vb::server::LabSetup lab_setup = settings->lab;
     if (lab_setup.advertised_address.empty()) lab_setup.advertised_address = bound;
     lab = std::make_unique<vb::server::LabHost>(lab_setup, settings->database_path,
-                                                vb::server::BenchesJson(settings->benches), &registry, &workers);
-    lab->set_spool(spool.get());
+                                                vb::server::BenchesJson(settings->benches), host->registry(),
+                                                &host->workers());
+    lab->set_spool(host->spool());
     if (auto st = lab->Start(); !st.ok()) {
       spdlog::error("{}", st.message());
       server->Shutdown();
       return 3;
     }
   }
-  if (spool) spool->Start();
-  for (auto& w : workers) w->Start(settings->database_path);
+  host->Run();  // the spool's uploader and the workers
   std::unique_ptr<vb::server::NightScheduler> nights;
   if (settings->nights.enabled) {
     nights = std::make_unique<vb::server::NightScheduler>(
-        settings->nights, settings->benches, &pool,
-        [&service](const vb::runs::Submission& s) { return service.Queue(s); });
+        settings->nights, settings->benches, host->pool(),
+        [&host](const vb::runs::Submission& s) { return host->service()->Queue(s); });
     nights->Start(simulate_nights > 0 ? simulate_nights : (run_night_now ? 1 : 0));
   }
   std::unique_ptr<vb::server::RetentionScheduler> retention;
   if (settings->retention.enabled) {
-    retention = std::make_unique<vb::server::RetentionScheduler>(settings->retention, settings->nights, &pool);
+    retention = std::make_unique<vb::server::RetentionScheduler>(settings->retention, settings->nights, host->pool());
     retention->Start();
   }
   spdlog::info("listening on {} ({}), {} bench(es), database {}", bound.c_str(),
-               settings->tls_cert_pem.empty() ? "insecure" : "TLS", workers.size(),
+               settings->tls_cert_pem.empty() ? "insecure" : "TLS", host->workers().size(),
                vb::db::DisplayLocation(settings->database_path).c_str());
   if (lab)
     spdlog::info("lab: host {} (lease {} s, heartbeat {} s, aging {} s)", settings->lab.host, settings->lab.lease_ttl_s,
@@ -274,13 +260,13 @@ int main(int argc, char** argv) {
       spdlog::error("{}", started.status().message().c_str());
       if (nights) nights->Stop();
       if (retention) retention->Stop();
+      host->StopBenches(vb::server::Host::StopMode::kLeaveRunning);
       server->Shutdown(std::chrono::system_clock::now());
-      for (auto& w : workers) w->Stop();
       return 3;
     }
     web = std::move(*started);
-    std::string host = wo.listen_address.substr(0, wo.listen_address.rfind(':'));
-    spdlog::info("web dashboard on {}://{}:{}/", web->tls() ? "https" : "http", host.c_str(), web->port());
+    std::string web_host = wo.listen_address.substr(0, wo.listen_address.rfind(':'));
+    spdlog::info("web dashboard on {}://{}:{}/", web->tls() ? "https" : "http", web_host.c_str(), web->port());
   }
 
   int sig = 0;
@@ -289,7 +275,7 @@ int main(int argc, char** argv) {
   // The benches first: whatever the doors are doing (a slow upload, a thousand live views), the experiments stop
   // and the benches go to their safe state before anything waits on a client.
   const auto t_signal = std::chrono::steady_clock::now();
-  for (auto& w : workers) w->Stop();
+  host->StopBenches(vb::server::Host::StopMode::kLeaveRunning);
   spdlog::info("benches stopped (safe state) {:.2f} s after the signal",
                std::chrono::duration<double>(std::chrono::steady_clock::now() - t_signal).count());
   // Then the doors, within a bound: gRPC calls get 2 s, web requests 1 s more, then their sockets are shut down.
@@ -310,12 +296,13 @@ int main(int argc, char** argv) {
   if (web) web->Stop();  // after Shutdown: that ends the live streams (SSE) the page's threads wait on
   spdlog::info("doors closed {:.2f} s after the signal",
                std::chrono::duration<double>(std::chrono::steady_clock::now() - t_signal).count());
-  if (spool) spool->Stop();  // after the workers: what it has not uploaded stays on disk for the next start
+  host->StopRest();  // the spool, after the workers: what it has not uploaded stays on disk for the next start
   if (lab) {
     // The runs this host stopped go back to the lab's queue now rather than when their leases lapse.
     lab->Stop();
-    if (auto again = (*store)->RecoverAfterCrash(host); again.ok() && *again > 0)
-      spdlog::info("lab: {} run(s) stopped by the shutdown re-queued for the lab", *again);
+    if (auto store = host->pool()->Acquire(); store.ok())
+      if (auto again = (*store)->RecoverAfterCrash(host_name); again.ok() && *again > 0)
+        spdlog::info("lab: {} run(s) stopped by the shutdown re-queued for the lab", *again);
   }
   server->Wait();
   return 0;

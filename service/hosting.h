@@ -1,6 +1,7 @@
-// How the service goes on a grpc::Server, the one way for every host of it: valvebench-server (server/main.cc,
-// which adds its listening port, TLS, health and reflection) and a local service (service/local_service.cc,
-// no port). Same message limits, same interceptor, so a call behaves the same whichever host answers it.
+// How the service goes on a grpc::Server, the one way for every host of it (service/host.h): valvebench-server
+// (server/main.cc, which adds its listening port, TLS, health and reflection) and a local service
+// (service/local_service.cc, no port). Same message limits, same interceptors, so a call behaves the same
+// whichever host answers it.
 #pragma once
 
 #include <grpcpp/grpcpp.h>

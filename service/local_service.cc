@@ -19,9 +19,8 @@ namespace vb::server {
 
 namespace {
 
-constexpr const char* kLeftOverReason = "left over from an interrupted local run";
-constexpr auto kRelayPeriod = std::chrono::milliseconds(20);  // a cancel through the store lands within this
-constexpr int kProgressEveryRelays = 10;                      // progress into the store every 200 ms
+constexpr double kRelayPeriod_s = 0.02;  // a cancel through the store lands within this
+constexpr int kProgressEveryRelays = 10;  // progress into the store every 200 ms
 
 std::string RandomHex(int bytes) {
   std::random_device rd;
@@ -47,25 +46,6 @@ std::string DefaultUser() {
     return found->pw_name;
   }
   return "local";
-}
-
-// Runs of these benches still queued from an invocation that was interrupted before it ran them.
-Status CancelLeftOvers(db::Store* store, const std::vector<runs::BenchSetup>& benches) {
-  db::RunFilter f;
-  f.status = db::RunStatus::kQueued;
-  f.limit = 1000;
-  for (;;) {
-    auto page = store->ListRuns(f);
-    if (!page.ok()) return page.status();
-    for (const auto& r : *page)
-      for (const auto& b : benches)
-        if (r.bench_kind == b.bench_class) {
-          VB_RETURN_IF_ERROR(store->RequestCancel(r.id, kLeftOverReason).status());
-          break;
-        }
-    if (static_cast<int>(page->size()) < f.limit) return Status::Ok();
-    f.after_id = page->back().id;
-  }
 }
 
 }  // namespace
@@ -113,15 +93,9 @@ Status LocalService::Init() {
         std::filesystem::create_directories(parent, ec);
       }
   }
-  pool_ = std::make_unique<StorePool>(store_path_);
-  {
-    auto store = pool_->Acquire();  // opens (and migrates) the store: its errors come out here, once
-    if (!store.ok()) return store.status();
-    // 2. Nobody will claim what an interrupted invocation left queued on these benches.
-    if (options_.execute) VB_RETURN_IF_ERROR(CancelLeftOvers(store->get(), options_.benches));
-  }
 
-  // 3. The service: this process's user as admin, by a token only this process knows.
+  // 2-4. The host (service/host.h): the store, its left-overs cancelled, the service with this process's user
+  // as admin (by a token only this process knows), and with execute the workers and the relay.
   token_ = RandomHex(32);
   google::protobuf::RepeatedPtrField<valvebench::v1::TokenConfig> tokens;
   auto* t = tokens.Add();
@@ -136,34 +110,30 @@ Status LocalService::Init() {
   limits.max_trace_bytes_per_run = runs::LocalTraceBudgetBytes();
   settings_.admit_limits = limits;
   settings_.limits.set_max_runs_per_submission(static_cast<std::int32_t>(limits.max_runs_per_submission));
-  for (const auto& b : options_.benches) {
-    workers_.push_back(std::make_unique<runs::Worker>(b, &registry_));
-    workers_.back()->set_keep_traces(options_.keep_traces);
-  }
-  service_ = std::make_unique<BenchServiceImpl>(&settings_, pool_.get(), &registry_, &workers_);
+  HostOptions h;
+  h.store = store_path_;
+  h.settings = &settings_;
+  h.recovery = options_.execute ? HostOptions::Recovery::kCancelLeftOvers : HostOptions::Recovery::kNone;
+  h.keep_traces = options_.keep_traces;
+  h.watch_period_s = kRelayPeriod_s;
+  h.progress_every = kProgressEveryRelays;
+  h.on_outcome = [this](runs::Outcome& o) {
+    std::lock_guard<std::mutex> lock(executed_mu_);
+    executed_[o.run_id] = {std::move(o.summary), std::move(o.trace)};
+  };
   grpc::ServerBuilder builder;  // no listening port: InProcessChannel() only
-  HostService(&builder, service_.get());
-  server_ = builder.BuildAndStart();
-  if (server_ == nullptr) return Status::Internal("the local service did not start");
-
-  // 4. The benches' workers, and the relay to other processes on the same store.
-  if (options_.execute) {
-    for (auto& w : workers_) threads_.emplace_back([this, w = w.get()] { WorkerLoop(w); });
-    threads_.emplace_back([this] { RelayLoop(); });
-  }
+  auto host = Host::Start(std::move(h), &builder);
+  if (!host.ok()) return host.status();
+  host_ = std::move(*host);
+  if (options_.execute) host_->Run();
   return Status::Ok();
 }
 
 LocalService::~LocalService() {
-  stop_.store(true);
-  for (auto& w : workers_)
-    if (const std::int64_t id = w->current_run(); id != 0) registry_.Cancel(id);
-  registry_.NotifyWork();
-  for (auto& t : threads_) t.join();
-  if (server_) server_->Shutdown(std::chrono::system_clock::now());
-  server_.reset();
-  service_.reset();
-  pool_.reset();  // its connections close before the private file goes
+  // A run still executing is cancelled (nobody would resume it), then the service stops; the private file goes
+  // after the host's connections are closed.
+  if (host_) host_->StopBenches(Host::StopMode::kCancel);
+  host_.reset();
   if (!private_dir_.empty()) {
     std::error_code ec;
     std::filesystem::remove_all(private_dir_, ec);
@@ -172,7 +142,7 @@ LocalService::~LocalService() {
 
 std::shared_ptr<grpc::Channel> LocalService::InProcessChannel() {
   grpc::ChannelArguments args = InProcessChannelArguments();
-  return server_->InProcessChannel(args);
+  return host_->server()->InProcessChannel(args);
 }
 
 std::optional<ExecutedRun> LocalService::Executed(std::int64_t run_id) const {
@@ -180,58 +150,6 @@ std::optional<ExecutedRun> LocalService::Executed(std::int64_t run_id) const {
   auto it = executed_.find(run_id);
   if (it == executed_.end()) return std::nullopt;
   return it->second;
-}
-
-// Claims and executes runs for one bench until the service stops (what runs::Worker::Start does, with each
-// outcome's summary and trace kept for Executed()).
-void LocalService::WorkerLoop(runs::Worker* worker) {
-  std::unique_ptr<db::Store> store;
-  while (!stop_.load()) {
-    if (store == nullptr) {
-      auto opened = db::OpenStore(store_path_);
-      if (!opened.ok()) {
-        spdlog::error("{}: {}", Where(), opened.status().message());
-        registry_.WaitForWork(200);
-        continue;
-      }
-      store = std::move(opened).value();
-    }
-    auto done = worker->ClaimAndExecute(store.get());
-    if (!done.ok()) {
-      spdlog::error("{}: bench {}: {}", Where(), worker->setup().name, done.status().message());
-      registry_.WaitForWork(200);
-      continue;
-    }
-    if (!done->has_value()) {
-      registry_.WaitForWork(200);
-      continue;
-    }
-    runs::Outcome& o = **done;
-    std::lock_guard<std::mutex> lock(executed_mu_);
-    executed_[o.run_id] = {std::move(o.summary), std::move(o.trace)};
-  }
-}
-
-// Another process on the same store (benchctl watch, cancel) sees this process's runs only through the store:
-// a cancel requested there stops the run here, and the run's progress is written there.
-void LocalService::RelayLoop() {
-  std::unique_ptr<db::Store> store;
-  for (std::uint64_t tick = 0; !stop_.load(); ++tick) {
-    std::this_thread::sleep_for(kRelayPeriod);
-    if (store == nullptr) {
-      auto opened = db::OpenStore(store_path_);
-      if (!opened.ok()) continue;  // nobody else can watch then; the runs themselves are unaffected
-      store = std::move(opened).value();
-    }
-    for (auto& w : workers_) {
-      const std::int64_t id = w->current_run();
-      if (id == 0) continue;
-      if (auto c = store->CancelRequested(id); c.ok() && *c) registry_.Cancel(id);
-      double progress = 0.0;
-      if (tick % kProgressEveryRelays == 0 && registry_.Progress(id, &progress))
-        (void)w->WithExecutingLease([&](const db::Lease& lease) { return store->SetProgress(lease, progress); });
-    }
-  }
 }
 
 }  // namespace vb::server

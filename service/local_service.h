@@ -3,14 +3,14 @@
 // to it through InProcessChannel() with client::Client, exactly as to a valvebench-server: one implementation
 // of every behaviour, whichever door a request comes through (docs/decisions.md, "One service").
 //
-//   1. open the store (a SQLite file, a PostgreSQL URL, or none: a private temporary SQLite file that lives as
+//   1. choose the store (a SQLite file, a PostgreSQL URL, or none: a private temporary SQLite file that lives as
 //      long as the service, for --no-store);
-//   2. cancel the runs of these benches left queued by an interrupted invocation (nobody will claim them);
-//   3. build the BenchService (an admin token of its own: the channel's calls carry it) on a grpc::Server
-//      with no port;
-//   4. if asked to execute: one thread per bench claims and executes runs (runs::Worker::ClaimAndExecute), and
-//      a relay thread carries cancel requests and progress between the store and the runs executing here, so
-//      another process on the same store (benchctl watch/cancel in another shell) sees and stops them.
+//   2. start the one host of the service (service/host.h, as valvebench-server does) on a grpc::Server with no
+//      port, with an admin token of its own (the channel's calls carry it): the store opened, the runs of these
+//      benches left queued by an interrupted invocation cancelled (nobody will claim them);
+//   3. if asked to execute: the host's workers (runs::Worker: claim and execute, the store's faults retried),
+//      and its relay (runs::WatchRuns) between the store and the runs executing here, so another process on the
+//      same store (benchctl watch/cancel in another shell) sees and stops them.
 // The destructor stops claiming, stops a run still executing (it is cancelled: nobody would resume it), shuts
 // the server down and removes the private store.
 #pragma once
@@ -32,6 +32,7 @@
 #include "runs/bench_setup.h"
 #include "runs/monitor.h"
 #include "runs/worker.h"
+#include "service/host.h"
 #include "service/service.h"
 #include "service/settings.h"
 
@@ -87,23 +88,15 @@ class LocalService {
  private:
   explicit LocalService(LocalServiceOptions options) : options_(std::move(options)) {}
   Status Init();
-  void WorkerLoop(runs::Worker* worker);
-  void RelayLoop();
 
   LocalServiceOptions options_;
   std::string store_path_;   // what the pool and workers open: options_.store or the private file
   std::string private_dir_;  // the private store's directory ("" if none)
   std::string token_;
-  ServiceSettings settings_;
-  std::unique_ptr<StorePool> pool_;
-  runs::Registry registry_;
-  std::vector<std::unique_ptr<runs::Worker>> workers_;
-  std::unique_ptr<BenchServiceImpl> service_;
-  std::unique_ptr<grpc::Server> server_;
-  std::atomic<bool> stop_{false};
-  std::vector<std::thread> threads_;
+  ServiceSettings settings_;  // the host's: declared before it, outlives it
   mutable std::mutex executed_mu_;
   std::map<std::int64_t, ExecutedRun> executed_;
+  std::unique_ptr<Host> host_;
 };
 
 }  // namespace vb::server

@@ -134,6 +134,75 @@ TEST(LocalService, AReadingServiceQueuesAndAnExecutingOneCancelsLeftOvers) {
   }
 }
 
+// A paced run of 20 s: long enough to be cancelled or stopped while it executes.
+const char* kLongPacedSpec = R"({"name": "long", "duration_s": 20, "recording": {"rate_Hz": 1000},
+  "controller": {"open_loop_pwm": {"segments": [{"start_s": 0, "frequency_Hz": 100, "duty": 0.5}]}}})";
+
+std::int64_t SubmitAndWaitRunning(client::Client& c, const char* spec) {
+  auto sub = c.Submit(Spec(spec));
+  EXPECT_TRUE(sub.ok()) << sub.status().message();
+  if (!sub.ok()) return 0;
+  const std::int64_t id = sub->run_ids(0);
+  for (int k = 0; k < 200; ++k) {
+    auto r = c.GetRun(id);
+    if (r.ok() && r->status() == v1::RUNNING) return id;
+    std::this_thread::sleep_for(std::chrono::milliseconds(25));
+  }
+  ADD_FAILURE() << "run " << id << " did not start";
+  return id;
+}
+
+// The host's relay (runs::WatchRuns, service/host.h): a cancel asked of another service on the same store (benchctl
+// cancel in another shell) reaches the run executing in this one through the store, and it ends cancelled.
+TEST(LocalService, ACancelThroughTheStoreStopsARunExecutingInAnotherService) {
+  const std::string dir = TempDir("relay");
+  std::filesystem::create_directories(dir);
+  server::LocalServiceOptions o;
+  o.store = dir + "/runs.db";
+  o.realtime = true;
+  auto executing = server::LocalService::Start(o);
+  ASSERT_TRUE(executing.ok()) << executing.status().message();
+  auto c = ClientOf(**executing);
+  const std::int64_t id = SubmitAndWaitRunning(c, kLongPacedSpec);
+  server::LocalServiceOptions r = o;
+  r.execute = false;
+  auto reading = server::LocalService::Start(r);
+  ASSERT_TRUE(reading.ok()) << reading.status().message();
+  auto other = ClientOf(**reading);
+  const auto asked = std::chrono::steady_clock::now();
+  auto cancelled = other.Cancel(id, "from another shell");
+  ASSERT_TRUE(cancelled.ok()) << cancelled.status().message();
+  WaitEnded(c, id);
+  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - asked).count(), 5.0);
+  auto run = c.GetRun(id);
+  ASSERT_TRUE(run.ok());
+  EXPECT_EQ(run->status(), v1::CANCELLED) << run->reason();
+}
+
+// A local service that ends while its run executes records the run cancelled (runs::Worker::StopCancelling):
+// nobody would resume it, unlike a server's, which leaves it running for the next start's recovery.
+TEST(LocalService, ARunExecutingWhenTheServiceEndsIsRecordedCancelled) {
+  const std::string dir = TempDir("ends");
+  std::filesystem::create_directories(dir);
+  server::LocalServiceOptions o;
+  o.store = dir + "/runs.db";
+  o.realtime = true;
+  std::int64_t id = 0;
+  {
+    auto s = server::LocalService::Start(o);
+    ASSERT_TRUE(s.ok()) << s.status().message();
+    auto c = ClientOf(**s);
+    id = SubmitAndWaitRunning(c, kLongPacedSpec);
+  }
+  o.execute = false;
+  auto s = server::LocalService::Start(o);
+  ASSERT_TRUE(s.ok()) << s.status().message();
+  auto c = ClientOf(**s);
+  auto run = c.GetRun(id);
+  ASSERT_TRUE(run.ok()) << run.status().message();
+  EXPECT_EQ(run->status(), v1::CANCELLED) << run->reason();
+}
+
 // --no-store: a private store that works like any other while the service lives and is gone after it.
 TEST(LocalService, NoStoreIsAPrivateStoreRemovedWithTheService) {
   std::filesystem::path private_dir;
