@@ -34,8 +34,9 @@ constexpr const char* kAdmin = "admin-secret";
 
 Authenticator ThreeRoles() {
   google::protobuf::RepeatedPtrField<v1::TokenConfig> tokens;
-  for (const auto& [user, role, token] : {std::tuple{"vera", "viewer", kViewer}, std::tuple{"olga", "operator", kOperator},
-                                          std::tuple{"ada", "admin", kAdmin}}) {
+  for (const auto& [user, role, token] :
+       {std::tuple{"vera", "viewer", kViewer}, std::tuple{"olga", "operator", kOperator},
+        std::tuple{"ada", "admin", kAdmin}}) {
     auto* t = tokens.Add();
     t->set_user(user);
     t->set_role(role);
