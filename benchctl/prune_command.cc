@@ -1,6 +1,5 @@
 #include "benchctl/prune_command.h"
 
-#include <grpcpp/grpcpp.h>
 #include <unistd.h>
 
 #include <chrono>
@@ -17,7 +16,7 @@
 #include "client/client.h"
 #include "service/local_service.h"
 #include "proto/api_convert.h"
-#include "valvebench/v1/api.grpc.pb.h"
+#include "valvebench/v1/api.pb.h"
 #include "common/format.h"
 
 namespace vb::benchctl {
@@ -37,21 +36,16 @@ std::string Bytes(std::int64_t b) {
   return buf;
 }
 
-// PruneRuns (admin) on a service: a server's, or the local service's over the local store (its own admin token):
-// one path, the service's prune rules either way.
-StatusOr<v1::PruneRunsResponse> Prune(const std::shared_ptr<grpc::Channel>& channel, const std::string& token,
-                                      const std::string& where, double age_s, std::int32_t keep_last, bool dry_run) {
-  auto stub = v1::BenchService::NewStub(channel);
-  grpc::ClientContext ctx;
-  ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::minutes(10));  // a large delete takes a while
-  if (!token.empty()) ctx.AddMetadata("authorization", "Bearer " + token);
+// PruneRuns (admin) through the one client (client/client.h) of a service: a server's, or the local service's
+// over the local store (its own admin token): one path, the service's prune rules either way.
+StatusOr<v1::PruneRunsResponse> Prune(client::Client& c, const std::string& where, double age_s,
+                                      std::int32_t keep_last, bool dry_run) {
   v1::PruneRunsRequest req;
   req.set_older_than_s(age_s);
   req.set_keep_last(keep_last);
   req.set_dry_run(dry_run);
-  v1::PruneRunsResponse resp;
-  const grpc::Status st = stub->PruneRuns(&ctx, req, &resp);
-  if (!st.ok()) return client::FromGrpc(st).WithContext(where);
+  auto resp = c.PruneRuns(req);
+  if (!resp.ok()) return resp.status().WithContext(where);
   return resp;
 }
 
@@ -63,21 +57,26 @@ StatusOr<v1::PruneRunsResponse> PruneLocal(const std::string& path, double age_s
   o.must_exist = true;  // pruning a store that is not there would create an empty one: say so instead
   auto local = server::LocalService::Start(o);
   if (!local.ok()) return local.status();
-  return Prune((*local)->InProcessChannel(), (*local)->token(), (*local)->Where(), age_s, keep_last, dry_run);
+  client::ClientOptions co;
+  co.address = (*local)->Where();
+  co.token = (*local)->token();
+  client::Client c((*local)->InProcessChannel(), co);
+  return Prune(c, (*local)->Where(), age_s, keep_last, dry_run);
 }
 
 StatusOr<v1::PruneRunsResponse> PruneRemote(const SharedOptions& o, double age_s, std::int32_t keep_last, bool dry_run) {
-  std::shared_ptr<grpc::ChannelCredentials> creds = grpc::InsecureChannelCredentials();
-  if (!o.tls_ca_file->empty()) {
+  client::ClientOptions co;
+  co.address = *o.server;
+  co.token = *o.token;
+  if (!o.tls_ca_file->empty()) {  // the client reads no files: the PEM's contents
     std::ifstream in(*o.tls_ca_file);
     if (!in) return Status::InvalidArgument("--tls-ca: cannot read " + *o.tls_ca_file);
     std::stringstream ss;
     ss << in.rdbuf();
-    grpc::SslCredentialsOptions ssl;
-    ssl.pem_root_certs = ss.str();
-    creds = grpc::SslCredentials(ssl);
+    co.tls_ca_pem = ss.str();
   }
-  return Prune(grpc::CreateChannel(*o.server, creds), *o.token, "server " + *o.server, age_s, keep_last, dry_run);
+  client::Client c(co);
+  return Prune(c, "server " + *o.server, age_s, keep_last, dry_run);
 }
 
 Json ToJson(const v1::PruneDecision& d) {

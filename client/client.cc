@@ -313,4 +313,13 @@ StatusOr<v1::SubmitRunResponse> Client::ImportRuns(const v1::ImportRunsRequest& 
   return resp;
 }
 
+StatusOr<v1::PruneRunsResponse> Client::PruneRuns(const v1::PruneRunsRequest& request, double deadline_s) {
+  grpc::ClientContext ctx;
+  Prepare(&ctx, deadline_s);
+  v1::PruneRunsResponse resp;
+  auto st = stub_->PruneRuns(&ctx, request, &resp);
+  if (!st.ok()) return Error(st);
+  return resp;
+}
+
 }  // namespace vb::client

@@ -72,6 +72,12 @@ class Client {
   ClientOptions opt_;
   std::shared_ptr<grpc::Channel> channel_;
   std::unique_ptr<valvebench::v1::BenchService::Stub> stub_;
+
+ public:
+  // PruneRuns (admin): old finished runs deleted by the service's rules (docs/store.md, "Retention"); a large
+  // delete takes a while, hence its own deadline.
+  StatusOr<valvebench::v1::PruneRunsResponse> PruneRuns(const valvebench::v1::PruneRunsRequest& request,
+                                                        double deadline_s = 600.0);
 };
 
 // gRPC status -> vb::Status: INVALID_ARGUMENT, NOT_FOUND, FAILED_PRECONDITION, RESOURCE_EXHAUSTED keep their
