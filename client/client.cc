@@ -4,9 +4,7 @@
 
 #include <grpcpp/grpcpp.h>
 
-#include <cstring>
-
-#include "proto/trace_chunk.h"
+#include "client/trace_stream.h"
 
 namespace vb::client {
 
@@ -43,7 +41,7 @@ Status Client::Error(const grpc::Status& st) const {
                                    " (is it running? the address comes from --server or VALVEBENCH_SERVER)");
       break;
     case grpc::StatusCode::UNAUTHENTICATED:
-      if (opt_.token.empty())
+      if (call_.authorization ? call_.authorization->empty() : opt_.token.empty())
         return Status::FailedPrecondition("not authenticated: no token given; the server at " + opt_.address +
                                           " needs one: set VALVEBENCH_TOKEN or pass --token TOKEN");
       return Status::FailedPrecondition("not authenticated: " + st.error_message() +
@@ -73,10 +71,31 @@ Client::Client(const ClientOptions& options) : opt_(options) {
 Client::Client(std::shared_ptr<grpc::Channel> channel, const ClientOptions& options)
     : opt_(options), channel_(std::move(channel)), stub_(v1::BenchService::NewStub(channel_)) {}
 
+Client Client::With(const CallOptions& call) const {
+  Client view(*this);
+  view.call_ = call;
+  return view;
+}
+
 void Client::Prepare(grpc::ClientContext* ctx, double deadline_s) const {
+  if (call_.deadline_s > 0.0) deadline_s = call_.deadline_s;
   ctx->set_deadline(std::chrono::system_clock::now() +
                     std::chrono::microseconds(static_cast<std::int64_t>(deadline_s * 1e6)));
-  if (!opt_.token.empty()) ctx->AddMetadata("authorization", "Bearer " + opt_.token);
+  if (call_.authorization) {
+    if (!call_.authorization->empty()) ctx->AddMetadata("authorization", *call_.authorization);
+  } else if (!opt_.token.empty()) {
+    ctx->AddMetadata("authorization", "Bearer " + opt_.token);
+  }
+  Keep(grpc::Status::OK);  // a call starts with nothing to report
+}
+
+void Client::Keep(const grpc::Status& st) const {
+  if (call_.rpc_status != nullptr) *call_.rpc_status = st;
+}
+
+Status Client::Fail(const grpc::Status& st) const {
+  Keep(st);
+  return Error(st);
 }
 
 StatusOr<v1::SubmitRunResponse> Client::Submit(const v1::ExperimentSpec& spec, const std::string& batch_name) {
@@ -87,7 +106,7 @@ StatusOr<v1::SubmitRunResponse> Client::Submit(const v1::ExperimentSpec& spec, c
   req.set_batch_name(batch_name);
   v1::SubmitRunResponse resp;
   auto st = stub_->SubmitRun(&ctx, req, &resp);
-  if (!st.ok()) return Error(st);
+  if (!st.ok()) return Fail(st);
   return resp;
 }
 
@@ -102,7 +121,7 @@ StatusOr<v1::SubmitRunResponse> Client::SubmitBatch(const std::vector<v1::Experi
   req.set_batch_name(batch_name);
   v1::SubmitRunResponse resp;
   auto st = stub_->SubmitBatch(&ctx, req, &resp);
-  if (!st.ok()) return Error(st);
+  if (!st.ok()) return Fail(st);
   return resp;
 }
 
@@ -113,7 +132,7 @@ StatusOr<v1::Run> Client::GetRun(std::int64_t run_id) {
   req.set_run_id(run_id);
   v1::Run resp;
   auto st = stub_->GetRun(&ctx, req, &resp);
-  if (!st.ok()) return Error(st);
+  if (!st.ok()) return Fail(st);
   return resp;
 }
 
@@ -122,7 +141,7 @@ StatusOr<v1::ListRunsResponse> Client::ListRuns(const v1::ListRunsRequest& reque
   Prepare(&ctx, opt_.deadline_s);
   v1::ListRunsResponse resp;
   auto st = stub_->ListRuns(&ctx, request, &resp);
-  if (!st.ok()) return Error(st);
+  if (!st.ok()) return Fail(st);
   return resp;
 }
 
@@ -134,7 +153,7 @@ StatusOr<v1::Run> Client::Cancel(std::int64_t run_id, const std::string& reason)
   req.set_reason(reason);
   v1::Run resp;
   auto st = stub_->CancelRun(&ctx, req, &resp);
-  if (!st.ok()) return Error(st);
+  if (!st.ok()) return Fail(st);
   return resp;
 }
 
@@ -154,8 +173,8 @@ Status Client::Watch(std::int64_t run_id, double deadline_s, double sample_rate_
     }
   }
   auto st = reader->Finish();
-  if (st.error_code() == grpc::StatusCode::CANCELLED) return Status::Ok();
-  return Error(st);
+  if (st.error_code() == grpc::StatusCode::CANCELLED) return Status::Ok();  // ours: on_event said enough
+  return Fail(st);
 }
 
 StatusOr<FetchedTrace> Client::GetTrace(std::int64_t run_id, double deadline_s) {
@@ -165,24 +184,20 @@ StatusOr<FetchedTrace> Client::GetTrace(std::int64_t run_id, double deadline_s) 
 }
 
 StatusOr<FetchedTrace> Client::GetTrace(const v1::GetTraceRequest& request, double deadline_s) {
-  grpc::ClientContext ctx;
-  Prepare(&ctx, deadline_s);
-  auto reader = stub_->GetTrace(&ctx, request);
-  TraceDecoder decoder;
-  v1::TraceChunk chunk;
-  Status bad;
-  while (reader->Read(&chunk)) {
-    if (bad = api::DecodeChunk(chunk, &decoder); !bad.ok()) {
-      ctx.TryCancel();
-      while (reader->Read(&chunk)) {
-      }
-      break;
-    }
+  auto stream = OpenTrace(request, deadline_s);
+  if (!stream.ok()) return stream.status();
+  while ((*stream)->Next()) {
   }
-  auto st = reader->Finish();
-  if (!bad.ok()) return bad;
-  if (!st.ok()) return Error(st);
-  return decoder.Take();
+  if (!(*stream)->status().ok()) return (*stream)->status();
+  return (*stream)->TakeAll();
+}
+
+StatusOr<std::unique_ptr<TraceStream>> Client::OpenTrace(const v1::GetTraceRequest& request, double deadline_s) {
+  std::unique_ptr<TraceStream> stream(new TraceStream(*this));
+  Prepare(&stream->ctx_, deadline_s);
+  stream->reader_ = stub_->GetTrace(&stream->ctx_, request);
+  if (Status st = stream->ReadChunk(); !st.ok()) return st;
+  return stream;
 }
 
 StatusOr<v1::CompareRunsResponse> Client::Compare(std::int64_t batch_id, const std::vector<std::int64_t>& run_ids) {
@@ -193,7 +208,7 @@ StatusOr<v1::CompareRunsResponse> Client::Compare(std::int64_t batch_id, const s
   for (auto id : run_ids) req.add_run_ids(id);
   v1::CompareRunsResponse resp;
   auto st = stub_->CompareRuns(&ctx, req, &resp);
-  if (!st.ok()) return Error(st);
+  if (!st.ok()) return Fail(st);
   return resp;
 }
 
@@ -204,7 +219,7 @@ StatusOr<v1::ListNightsResponse> Client::ListNights(int limit) {
   req.set_limit(limit);
   v1::ListNightsResponse resp;
   auto st = stub_->ListNights(&ctx, req, &resp);
-  if (!st.ok()) return Error(st);
+  if (!st.ok()) return Fail(st);
   return resp;
 }
 
@@ -215,7 +230,7 @@ StatusOr<v1::GetBenchHealthResponse> Client::GetBenchHealth(const std::string& b
   req.set_bench(bench);
   v1::GetBenchHealthResponse resp;
   auto st = stub_->GetBenchHealth(&ctx, req, &resp);
-  if (!st.ok()) return Error(st);
+  if (!st.ok()) return Fail(st);
   return resp;
 }
 
@@ -224,7 +239,7 @@ StatusOr<v1::ListBenchesResponse> Client::Benches() {
   Prepare(&ctx, opt_.deadline_s);
   v1::ListBenchesResponse resp;
   auto st = stub_->ListBenches(&ctx, v1::ListBenchesRequest{}, &resp);
-  if (!st.ok()) return Error(st);
+  if (!st.ok()) return Fail(st);
   return resp;
 }
 
@@ -233,7 +248,7 @@ StatusOr<v1::GetQueueResponse> Client::GetQueue() {
   Prepare(&ctx, opt_.deadline_s);
   v1::GetQueueResponse resp;
   auto st = stub_->GetQueue(&ctx, v1::GetQueueRequest{}, &resp);
-  if (!st.ok()) return Error(st);
+  if (!st.ok()) return Fail(st);
   return resp;
 }
 
@@ -250,7 +265,7 @@ StatusOr<v1::DiagnoseRunsResponse> Client::DiagnoseRuns(const v1::DiagnoseRunsRe
   Prepare(&ctx, deadline_s);
   v1::DiagnoseRunsResponse resp;
   auto st = stub_->DiagnoseRuns(&ctx, request, &resp);
-  if (!st.ok()) return Error(st);
+  if (!st.ok()) return Fail(st);
   return resp;
 }
 
@@ -266,7 +281,7 @@ StatusOr<v1::SubmitRunResponse> Client::ImportRuns(const v1::ImportRunsRequest& 
   v1::SubmitRunResponse resp;
   if (request.ByteSizeLong() < kOneMessageBytes) {
     auto st = stub_->ImportRuns(&ctx, request, &resp);
-    if (!st.ok()) return Error(st);
+    if (!st.ok()) return Fail(st);
     return resp;
   }
   auto writer = stub_->ImportRunsStream(&ctx, &resp);
@@ -309,7 +324,7 @@ StatusOr<v1::SubmitRunResponse> Client::ImportRuns(const v1::ImportRunsRequest& 
   }
   if (open) writer->WritesDone();
   auto st = writer->Finish();
-  if (!st.ok()) return Error(st);
+  if (!st.ok()) return Fail(st);
   return resp;
 }
 
@@ -318,7 +333,7 @@ StatusOr<v1::PruneRunsResponse> Client::PruneRuns(const v1::PruneRunsRequest& re
   Prepare(&ctx, deadline_s);
   v1::PruneRunsResponse resp;
   auto st = stub_->PruneRuns(&ctx, request, &resp);
-  if (!st.ok()) return Error(st);
+  if (!st.ok()) return Fail(st);
   return resp;
 }
 

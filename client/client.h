@@ -7,6 +7,7 @@
 #include <functional>
 #include <map>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -26,12 +27,31 @@ struct ClientOptions {
 // A trace fetched back: columns by channel name, decoded by the one decoder (common/trace_columns.h).
 using FetchedTrace = vb::TraceColumns;
 
+// Whose credentials and how long, per call: a door that serves many callers over one channel (the web gateway)
+// takes a view of its Client per request (Client::With), so every caller's own token goes with its calls.
+struct CallOptions {
+  // The "authorization" metadata as the caller sent it ("Bearer <token>"); "" = none at all (the service then
+  // answers UNAUTHENTICATED); unset = the Client's ClientOptions::token.
+  std::optional<std::string> authorization;
+  double deadline_s = 0.0;  // > 0: every call of the view; 0: each method's own (ClientOptions::deadline_s or its argument)
+  // Where each call of the view leaves its status as the service answered it, code and message untouched, for a
+  // door that maps gRPC codes onto its own (HTTP statuses) where vb::Status has none (UNAUTHENTICATED,
+  // PERMISSION_DENIED). OK when the call succeeded or the error is the client's own (a trace that does not
+  // decode: the returned vb::Status says it). nullptr: not kept.
+  grpc::Status* rpc_status = nullptr;
+};
+
+class TraceStream;
+
 class Client {
  public:
   explicit Client(const ClientOptions& options);
   // Over a channel made elsewhere: a local service's in-process channel (service/local_service.h). The options'
   // address only names it in messages; tls_ca_pem is not used.
   Client(std::shared_ptr<grpc::Channel> channel, const ClientOptions& options);
+  // A view over the same channel and stub with per-call credentials and deadline (cheap: two shared pointers
+  // and the options). Thread-safe to take from a shared const Client; use each view from one thread.
+  Client With(const CallOptions& call) const;
 
   StatusOr<valvebench::v1::SubmitRunResponse> Submit(const valvebench::v1::ExperimentSpec& spec,
                                                      const std::string& batch_name = "");
@@ -48,6 +68,10 @@ class Client {
   StatusOr<FetchedTrace> GetTrace(std::int64_t run_id, double deadline_s = 60.0);
   // A window and/or a min/max decimation done by the server (request.max_points, from_s, to_s: api.proto).
   StatusOr<FetchedTrace> GetTrace(const valvebench::v1::GetTraceRequest& request, double deadline_s = 60.0);
+  // The same read chunk by chunk, for a trace too long to hold (client/trace_stream.h): the first chunk is read
+  // here, so a refusal (token, role, no such run) is this call's error.
+  StatusOr<std::unique_ptr<TraceStream>> OpenTrace(const valvebench::v1::GetTraceRequest& request,
+                                                   double deadline_s = 3600.0);
   StatusOr<valvebench::v1::CompareRunsResponse> Compare(std::int64_t batch_id, const std::vector<std::int64_t>& run_ids);
   StatusOr<valvebench::v1::ListBenchesResponse> Benches();
   // The running runs and the queue with positions and ETAs, and the benches the estimate is over.
@@ -64,20 +88,24 @@ class Client {
   StatusOr<valvebench::v1::SubmitRunResponse> ImportRuns(const valvebench::v1::ImportRunsRequest& request,
                                                          double deadline_s = 300.0);
 
- private:
-  void Prepare(grpc::ClientContext* ctx, double deadline_s) const;
-  // FromGrpc, plus what to do next where the client knows better than the server: a server that cannot be
-  // reached (the address, --server/VALVEBENCH_SERVER) and a missing token (--token/VALVEBENCH_TOKEN).
-  Status Error(const grpc::Status& st) const;
-  ClientOptions opt_;
-  std::shared_ptr<grpc::Channel> channel_;
-  std::unique_ptr<valvebench::v1::BenchService::Stub> stub_;
-
- public:
   // PruneRuns (admin): old finished runs deleted by the service's rules (docs/store.md, "Retention"); a large
   // delete takes a while, hence its own deadline.
   StatusOr<valvebench::v1::PruneRunsResponse> PruneRuns(const valvebench::v1::PruneRunsRequest& request,
                                                         double deadline_s = 600.0);
+
+ private:
+  friend class TraceStream;
+  void Prepare(grpc::ClientContext* ctx, double deadline_s) const;
+  // Error(st), with st kept in call_.rpc_status (Keep).
+  Status Fail(const grpc::Status& st) const;
+  void Keep(const grpc::Status& st) const;
+  // FromGrpc, plus what to do next where the client knows better than the server: a server that cannot be
+  // reached (the address, --server/VALVEBENCH_SERVER) and a missing token (--token/VALVEBENCH_TOKEN).
+  Status Error(const grpc::Status& st) const;
+  ClientOptions opt_;
+  CallOptions call_;
+  std::shared_ptr<grpc::Channel> channel_;
+  std::shared_ptr<valvebench::v1::BenchService::Stub> stub_;
 };
 
 // gRPC status -> vb::Status: INVALID_ARGUMENT, NOT_FOUND, FAILED_PRECONDITION, RESOURCE_EXHAUSTED keep their

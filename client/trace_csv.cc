@@ -1,0 +1,62 @@
+#include "client/trace_csv.h"
+
+#include <vector>
+
+#include "common/csv.h"
+
+namespace vb::client {
+
+std::string TraceCsvHeader(const TraceColumns& trace) {
+  std::string out = "t_s";
+  for (const auto& name : trace.channels)
+    if (name != "t_s") out.append(",").append(name);
+  out += '\n';
+  return out;
+}
+
+void AppendTraceCsvRows(const TraceColumns& rows, std::int64_t first_row, std::string* out) {
+  const std::vector<double>* time = rows.Find("t_s");
+  std::vector<const std::vector<double>*> cols;
+  for (const auto& name : rows.channels)
+    if (name != "t_s") cols.push_back(rows.Find(name));
+  const std::size_t n = rows.samples();
+  out->reserve(out->size() + n * (cols.size() + 1) * 14);
+  for (std::size_t i = 0; i < n; ++i) {
+    const double t = time != nullptr  ? (*time)[i]
+                     : rows.t_s.empty() ? rows.t0_s + static_cast<double>(first_row + static_cast<std::int64_t>(i)) *
+                                                          rows.sample_period_s
+                                        : rows.t_s[i];
+    AppendCsvNumber(out, t);
+    for (const auto* col : cols) {
+      *out += ',';
+      AppendCsvNumber(out, (*col)[i]);
+    }
+    *out += '\n';
+  }
+}
+
+std::string TraceCsv(const TraceColumns& trace) {
+  std::string out = TraceCsvHeader(trace);
+  AppendTraceCsvRows(trace, 0, &out);
+  return out;
+}
+
+Status WriteTraceCsv(TraceStream& stream, std::FILE* f, const std::string& what) {
+  std::string out = TraceCsvHeader(stream.rows());
+  bool more = true;
+  while (more) {
+    AppendTraceCsvRows(stream.rows(), stream.first_row(), &out);
+    stream.DropRows();
+    if (std::fwrite(out.data(), 1, out.size(), f) != out.size()) {
+      stream.Abandon();
+      return Status::DataLoss(what + ": write failed");
+    }
+    out.clear();
+    more = stream.Next();
+  }
+  if (!stream.status().ok()) return stream.status();
+  if (std::fflush(f) != 0 || std::ferror(f)) return Status::DataLoss(what + ": write failed");
+  return Status::Ok();
+}
+
+}  // namespace vb::client
