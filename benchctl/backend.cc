@@ -3,6 +3,7 @@
 #include <cstdio>
 #include <cstdlib>
 
+#include "client/batch_wait.h"
 #include "proto/api_convert.h"
 
 namespace vb::benchctl {
@@ -75,17 +76,34 @@ StatusOr<std::int64_t> Backend::RunBatch(const std::vector<experiment::Experimen
   if (!resp.ok()) return Named(resp.status());
   std::fprintf(stderr, "%s: batch %lld, %d runs on %s\n", batch_name.c_str(), static_cast<long long>(resp->batch_id()),
                resp->run_ids_size(), where_.c_str());
-  for (auto id : resp->run_ids()) {
-    auto st = c_->Watch(id, kRunDeadline_s, 0.0, [](const v1::RunEvent& ev) {
-      const auto status = api::FromProto(ev.status());
-      return !(status && Ended(*status));
-    });
-    if (!st.ok()) return Named(st).WithContext("waiting for run " + std::to_string(id));
+  auto st = WaitForRuns({resp->run_ids().begin(), resp->run_ids().end()}, [&](std::int64_t id) {
     if (auto e = Executed(id))
       if (auto r = c_->GetRun(id); r.ok())
         std::fprintf(stderr, "  %s: %s\n", api::FromProto(r->key()).DisplayName().c_str(), e->summary.BriefReport().c_str());
-  }
+  });
+  if (!st.ok()) return st;
   return resp->batch_id();
+}
+
+Status Backend::WaitForRuns(const std::vector<std::int64_t>& run_ids,
+                            const std::function<void(std::int64_t)>& on_ended) {
+  VB_BACKEND_READY();
+  return Named(client::WaitForRuns(*c_, run_ids, kRunDeadline_s, on_ended));
+}
+
+StatusOr<v1::Run> Backend::ApiRun(std::int64_t run_id) {
+  VB_BACKEND_READY();
+  auto r = c_->GetRun(run_id);
+  if (!r.ok()) return Named(r.status());
+  return r;
+}
+
+StatusOr<client::ReportRuns> Backend::ReportRuns(std::int64_t batch, const std::vector<std::int64_t>& run_ids,
+                                                 const client::ReportLimits& limits) {
+  VB_BACKEND_READY();
+  auto r = client::FetchReportRuns(*c_, batch, run_ids, limits);
+  if (!r.ok()) return Named(r.status());
+  return r;
 }
 
 StatusOr<std::vector<RunView>> Backend::Runs(std::int64_t batch, const std::vector<std::int64_t>& run_ids) {

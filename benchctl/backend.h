@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "client/client.h"
+#include "client/report_runs.h"
 #include "valvebench/v1/api.pb.h"
 #include "common/run_key.h"
 #include "common/run_status.h"
@@ -78,6 +79,13 @@ class Backend final {
   // The comparison of those runs (repeats grouped by case).
   StatusOr<experiment::Comparison> Compare(std::int64_t batch, const std::vector<std::int64_t>& run_ids);
   StatusOr<Trace> GetTrace(std::int64_t run_id);
+  // A run as the API gives it, with its spec: what its export file holds besides the trace (client/run_file.h).
+  StatusOr<valvebench::v1::Run> ApiRun(std::int64_t run_id);
+  // The runs of a report with their traces (client/report_runs.h, as the web's batch report gathers them).
+  StatusOr<client::ReportRuns> ReportRuns(std::int64_t batch, const std::vector<std::int64_t>& run_ids,
+                                          const client::ReportLimits& limits);
+  // Waits until each run has ended, in order, calling on_ended(id) after each (client/batch_wait.h).
+  Status WaitForRuns(const std::vector<std::int64_t>& run_ids, const std::function<void(std::int64_t)>& on_ended);
   // The benches runs go to here, and the USB devices the service's machine sees.
   StatusOr<valvebench::v1::ListBenchesResponse> Benches();
   // The bench twin's tracking kept by the service's nights (GetBenchHealth; "" = every checked bench).

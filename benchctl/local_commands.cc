@@ -53,15 +53,19 @@ int CmdCompareSpec(Backend& backend, const std::string& spec_path, bool json, bo
   if (!spec.ok()) return Fail(spec.status());
   auto sub = backend.Submit(*spec, false);
   if (!sub.ok()) return Fail(sub.status().WithContext(spec_path));
-  for (std::int64_t id : sub->run_ids) {
-    auto st = backend.Watch(id, [](const RunView&) { return true; });
-    if (!st.ok()) return Fail(st.WithContext("waiting for run " + std::to_string(id)));
+  Status shown;  // the first run that could not be read back
+  auto st = backend.WaitForRuns(sub->run_ids, [&](std::int64_t id) {
     auto r = backend.GetRun(id);
-    if (!r.ok()) return Fail(r.status());
+    if (!r.ok()) {
+      if (shown.ok()) shown = r.status();
+      return;
+    }
     const auto e = backend.Executed(id);
     std::fprintf(stderr, "%s [%s]: %s\n", r->key.DisplayName().c_str(), r->controller.c_str(),
                  e ? e->summary.BriefReport().c_str() : RunStatusName(r->status));
-  }
+  });
+  if (!st.ok()) return Fail(st);
+  if (!shown.ok()) return Fail(shown);
   auto c = backend.Compare(sub->batch_id, {});
   if (!c.ok()) return Fail(c.status());
   return PrintComparison(*c, json, csv, table);

@@ -21,16 +21,6 @@ namespace {
 namespace v1 = valvebench::v1;
 using report::Json;
 
-report::TraceData FromFetched(const std::string& label, const std::string& controlled, const client::FetchedTrace& f) {
-  report::TraceData t;
-  t.label = label;
-  t.controlled = controlled;
-  t.t0_s = f.t0_s;
-  t.sample_period_s = f.sample_period_s;
-  t.channels = f.columns;
-  return t;
-}
-
 StatusOr<Json> ReadJsonFile(const std::string& path, const std::string& flag) {
   std::ifstream in(path);
   if (!in) return Status::NotFound(flag + ": cannot open '" + path + "'");
@@ -93,27 +83,17 @@ int ReportCli::Run(const ClientFactory& make_client) {
     if (server.empty() && store_path.empty())
       return Fail(Status::InvalidArgument("--batch/--run locally need the local store (--db)"));
     auto backend = ChooseBackend(server, store_path, make_client);
-    auto fetched = run_ != 0 ? backend->Runs(0, {run_}) : backend->Runs(batch_, {});
+    // Gathered as the web's batch report gathers them (client/report_runs.h): no trace before a run ends.
+    auto fetched = run_ != 0 ? backend->ReportRuns(0, {run_}, {max_traces_, 0})
+                             : backend->ReportRuns(batch_, {}, {max_traces_, 0});
     if (!fetched.ok()) return Fail(fetched.status());
-    std::vector<report::RunInfo> runs;
-    for (const RunView& v : *fetched) {
-      report::RunInfo r{v.id, v.key, v.controller, v.status, v.metrics,
-                        v.spec ? experiment::SpecToJson(*v.spec, false) : std::string(),
-                        v.submitted_unix_s, v.started_unix_s, v.finished_unix_s, {}};
-      // No trace is stored before a run ends.
-      if (v.ended() && static_cast<int>(runs.size()) < max_traces_) {
-        auto t = backend->GetTrace(v.id);
-        if (!t.ok()) return Fail(t.status());
-        r.trace = FromFetched("run " + std::to_string(v.id) + ": " + v.key.DisplayName(), "", *t);
-      }
-      runs.push_back(std::move(r));
-    }
+    const std::vector<report::RunInfo>& runs = fetched->runs;
     const std::string where = backend->Where();
     if (run_ != 0) {
       title = "Run " + std::to_string(run_) + ": " + runs.front().key.DisplayName();
       sections = report::RunSections(where, runs.front());
     } else {
-      title = "Batch " + std::to_string(batch_) + ": " + runs.front().key.name.substr(0, runs.front().key.name.find('/'));
+      title = client::BatchReportTitle(batch_, runs);
       sections = report::BatchSections(where, batch_, runs);
     }
   }

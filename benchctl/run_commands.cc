@@ -3,8 +3,6 @@
 #include "common/csv.h"
 #include "common/queue_estimate.h"
 
-#include <google/protobuf/util/json_util.h>
-
 #include <fmt/format.h>
 
 #include <algorithm>
@@ -19,6 +17,8 @@
 #include <unistd.h>
 
 #include "benchctl/cli_common.h"
+#include "client/run_file.h"
+#include "client/trace_csv.h"
 #include "export/run_file.h"
 
 namespace vb::benchctl {
@@ -69,22 +69,11 @@ std::string Eta(const RunView& r, double now) {
   return left_s < 0 ? "?" : Duration(left_s);
 }
 
+// A stored trace as CSV: client/trace_csv.h's rows, the web's trace.csv.
 Status WriteTraceCsv(const Trace& t, std::FILE* f, const std::string& what) {
-  for (size_t ch = 0; ch < t.channels.size(); ++ch) std::fprintf(f, "%s%s", ch ? "," : "", t.channels[ch].c_str());
-  std::fputc('\n', f);
-  std::vector<const std::vector<double>*> cols;
-  for (const auto& name : t.channels) cols.push_back(&t.columns.at(name));
-  std::string line;
-  for (size_t k = 0; k < t.samples(); ++k) {
-    line.clear();
-    for (size_t ch = 0; ch < cols.size(); ++ch) {
-      if (ch) line += ',';
-      AppendCsvNumber(&line, (*cols[ch])[k]);  // NaN: an empty field, as the web's CSV (common/csv.h)
-    }
-    line += '\n';
-    std::fputs(line.c_str(), f);
-  }
-  if (std::ferror(f)) return Status::DataLoss(what + ": write failed");
+  const std::string text = client::TraceCsv(t);
+  if (std::fwrite(text.data(), 1, text.size(), f) != text.size() || std::fflush(f) != 0 || std::ferror(f))
+    return Status::DataLoss(what + ": write failed");
   return Status::Ok();
 }
 
@@ -363,7 +352,7 @@ int CmdExport(Backend& backend, std::int64_t run_id, const ExportOptions& o, boo
   if (json && o.csv_stdout) return Fail(Status::InvalidArgument("export: --json and --csv both want stdout; pick one"));
   if (!o.csv_stdout && o.trace_csv.empty() && o.hdf5.empty() && o.mat.empty())
     return Fail(Status::InvalidArgument("export: give --csv (stdout), --trace-csv FILE, --hdf5 FILE or --mat FILE"));
-  auto run = backend.GetRun(run_id);
+  auto run = backend.ApiRun(run_id);
   if (!run.ok()) return Fail(run.status());
   auto trace = backend.GetTrace(run_id);
   if (!trace.ok()) return Fail(trace.status());
@@ -397,25 +386,8 @@ int CmdExport(Backend& backend, std::int64_t run_id, const ExportOptions& o, boo
   };
   if (o.hdf5.empty() && o.mat.empty()) return written();
 
-  exportfile::RunFile f;
-  f.run_id = run->id;
-  f.name = run->key.DisplayName();
-  f.controller = run->controller;
-  f.bench = run->bench;
-  f.status = RunStatusName(run->status);
-  f.reason = run->reason;
-  f.t0_s = trace->t0_s;
-  f.sample_period_s = trace->sample_period_s;
-  const valvebench::v1::ExperimentSpec spec = run->spec.value_or(valvebench::v1::ExperimentSpec{});
-  google::protobuf::util::JsonPrintOptions opts;
-  opts.preserve_proto_field_names = true;
-  (void)google::protobuf::util::MessageToJsonString(spec, &f.spec_json, opts);
-  f.conditions = {{"supply_V", spec.conditions().supply_v(), "V"},
-                  {"supply_pressure_Pa", spec.conditions().supply_pressure_pa(), "Pa"}};
-  for (const auto& [name, value] : run->metrics)  // std::map: sorted, a stable file
-    f.metrics.push_back({name, value, exportfile::MetricUnit(name, f.controller)});
-  for (const auto& name : trace->channels)
-    f.channels.push_back({name, exportfile::ChannelUnit(name, f.controller), std::move(trace->columns.at(name))});
+  // The file the web's trace.h5/.mat serves too (client/run_file.h).
+  const exportfile::RunFile f = client::RunFileOf(*run, std::move(*trace));
   if (!o.hdf5.empty())
     if (auto st = exportfile::WriteHdf5(f, o.hdf5); !st.ok()) return Fail(st);
   if (!o.mat.empty())

@@ -9,6 +9,7 @@
 
 #include <fmt/format.h>
 
+#include "client/run_key_json.h"
 #include "common/csv.h"
 #include "common/format.h"
 #include "experiment/compare.h"
@@ -19,12 +20,6 @@ namespace vb::benchctl {
 namespace {
 
 Json Number(double v) { return std::isfinite(v) ? Json(v) : Json(nullptr); }
-
-Json KeyJson(const RunKey& key) {
-  Json sweep = Json::array();
-  for (const auto& c : key.sweep) sweep.push_back({{"field", c.field}, {"value", c.value}});
-  return {{"name", key.name}, {"sweep", sweep}, {"repeat", key.repeat}};
-}
 
 Json SummaryJson(const experiment::RunSummary& s) {
   Json j = {{"termination", experiment::TerminationName(s.termination)},
@@ -131,7 +126,7 @@ Json RunJson(const RunView& r, const experiment::RunSummary* summary) {
     j["batch_id"] = r.batch_id;
   }
   j["name"] = r.key.DisplayName();
-  j["key"] = KeyJson(r.key);
+  j["key"] = client::RunKeyJson(r.key);
   j["controller"] = r.controller;
   j["status"] = RunStatusName(r.status);
   j["reason"] = r.reason;
