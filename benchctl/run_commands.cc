@@ -69,14 +69,6 @@ std::string Eta(const RunView& r, double now) {
   return left_s < 0 ? "?" : Duration(left_s);
 }
 
-// A stored trace as CSV: client/trace_csv.h's rows, the web's trace.csv.
-Status WriteTraceCsv(const Trace& t, std::FILE* f, const std::string& what) {
-  const std::string text = client::TraceCsv(t);
-  if (std::fwrite(text.data(), 1, text.size(), f) != text.size() || std::fflush(f) != 0 || std::ferror(f))
-    return Status::DataLoss(what + ": write failed");
-  return Status::Ok();
-}
-
 // The loop's own trace, every channel (run --trace-csv on a run executed here).
 Status WriteTraceCsv(const experiment::Trace& trace, const std::string& path) {
   std::unique_ptr<FILE, int (*)(FILE*)> f(std::fopen(path.c_str(), "w"), &std::fclose);
@@ -143,7 +135,7 @@ int CmdRun(Backend& backend, const RunOptions& o, const Output& out) {
         if (!trace.ok()) return Fail(trace.status());
         std::unique_ptr<std::FILE, int (*)(std::FILE*)> f(std::fopen(path.c_str(), "w"), &std::fclose);
         if (!f) return Fail(Status::Unavailable(path + ": cannot open for writing"));
-        st = WriteTraceCsv(*trace, f.get(), path);
+        st = client::WriteTraceCsv(*trace, f.get(), path);  // the web's trace.csv rows
       }
       if (!st.ok()) return Fail(st);
     }
@@ -359,11 +351,11 @@ int CmdExport(Backend& backend, std::int64_t run_id, const ExportOptions& o, boo
   const std::size_t n_samples = trace->columns.empty() ? 0 : trace->columns.begin()->second.size();
   const std::size_t n_channels = trace->channels.size();
   if (o.csv_stdout)
-    if (auto st = WriteTraceCsv(*trace, stdout, "stdout"); !st.ok()) return Fail(st);
+    if (auto st = client::WriteTraceCsv(*trace, stdout, "stdout"); !st.ok()) return Fail(st);
   if (!o.trace_csv.empty()) {
     std::unique_ptr<std::FILE, int (*)(std::FILE*)> f(std::fopen(o.trace_csv.c_str(), "w"), &std::fclose);
     if (!f) return Fail(Status::Unavailable(o.trace_csv + ": cannot open for writing"));
-    if (auto st = WriteTraceCsv(*trace, f.get(), o.trace_csv); !st.ok()) return Fail(st);
+    if (auto st = client::WriteTraceCsv(*trace, f.get(), o.trace_csv); !st.ok()) return Fail(st);
   }
   auto written = [&]() {
     if (!json) {

@@ -1,5 +1,6 @@
 #include "client/trace_csv.h"
 
+#include <algorithm>
 #include <vector>
 
 #include "common/csv.h"
@@ -14,14 +15,16 @@ std::string TraceCsvHeader(const TraceColumns& trace) {
   return out;
 }
 
-void AppendTraceCsvRows(const TraceColumns& rows, std::int64_t first_row, std::string* out) {
+namespace {
+
+// Rows [from, to) of `rows`.
+void AppendRows(const TraceColumns& rows, std::int64_t first_row, std::size_t from, std::size_t to, std::string* out) {
   const std::vector<double>* time = rows.Find("t_s");
   std::vector<const std::vector<double>*> cols;
   for (const auto& name : rows.channels)
     if (name != "t_s") cols.push_back(rows.Find(name));
-  const std::size_t n = rows.samples();
-  out->reserve(out->size() + n * (cols.size() + 1) * 14);
-  for (std::size_t i = 0; i < n; ++i) {
+  out->reserve(out->size() + (to - from) * (cols.size() + 1) * 14);
+  for (std::size_t i = from; i < to; ++i) {
     const double t = time != nullptr  ? (*time)[i]
                      : rows.t_s.empty() ? rows.t0_s + static_cast<double>(first_row + static_cast<std::int64_t>(i)) *
                                                           rows.sample_period_s
@@ -35,10 +38,31 @@ void AppendTraceCsvRows(const TraceColumns& rows, std::int64_t first_row, std::s
   }
 }
 
+bool Write(const std::string& text, std::FILE* f) { return std::fwrite(text.data(), 1, text.size(), f) == text.size(); }
+
+}  // namespace
+
+void AppendTraceCsvRows(const TraceColumns& rows, std::int64_t first_row, std::string* out) {
+  AppendRows(rows, first_row, 0, rows.samples(), out);
+}
+
 std::string TraceCsv(const TraceColumns& trace) {
   std::string out = TraceCsvHeader(trace);
   AppendTraceCsvRows(trace, 0, &out);
   return out;
+}
+
+Status WriteTraceCsv(const TraceColumns& trace, std::FILE* f, const std::string& what) {
+  constexpr std::size_t kBlockRows = 65536;
+  std::string out = TraceCsvHeader(trace);
+  const std::size_t n = trace.samples();
+  for (std::size_t from = 0; from < n || !out.empty(); from += kBlockRows) {
+    if (from < n) AppendRows(trace, 0, from, std::min(n, from + kBlockRows), &out);
+    if (!Write(out, f)) return Status::DataLoss(what + ": write failed");
+    out.clear();
+  }
+  if (std::fflush(f) != 0 || std::ferror(f)) return Status::DataLoss(what + ": write failed");
+  return Status::Ok();
 }
 
 Status WriteTraceCsv(TraceStream& stream, std::FILE* f, const std::string& what) {
@@ -47,7 +71,7 @@ Status WriteTraceCsv(TraceStream& stream, std::FILE* f, const std::string& what)
   while (more) {
     AppendTraceCsvRows(stream.rows(), stream.first_row(), &out);
     stream.DropRows();
-    if (std::fwrite(out.data(), 1, out.size(), f) != out.size()) {
+    if (!Write(out, f)) {
       stream.Abandon();
       return Status::DataLoss(what + ": write failed");
     }

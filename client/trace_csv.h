@@ -20,6 +20,8 @@ std::string TraceCsvHeader(const TraceColumns& trace);
 void AppendTraceCsvRows(const TraceColumns& rows, std::int64_t first_row, std::string* out);
 // The whole trace (header and rows).
 std::string TraceCsv(const TraceColumns& trace);
+// The whole trace to `f`, a block of rows in memory at a time; `what` names `f` in errors.
+Status WriteTraceCsv(const TraceColumns& trace, std::FILE* f, const std::string& what);
 // The rest of `stream` (its current rows first) to `f`, a chunk in memory at a time; `what` names `f` in errors.
 Status WriteTraceCsv(TraceStream& stream, std::FILE* f, const std::string& what);
 

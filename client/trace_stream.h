@@ -15,6 +15,8 @@
 
 namespace vb::client {
 
+// The stream's calls report through the view it was opened with: that view's CallOptions::rpc_status must live
+// as long as the stream.
 class TraceStream {
  public:
   TraceStream(const TraceStream&) = delete;

@@ -16,8 +16,19 @@
 
 namespace vb::web {
 
+namespace {
+
+// No token of its own: every call goes with its request's credentials (Routes::As).
+client::ClientOptions GatewayClientOptions() {
+  client::ClientOptions o;
+  o.address = "the server's in-process channel";
+  return o;
+}
+
+}  // namespace
+
 Routes::Routes(std::shared_ptr<grpc::Channel> channel, const GatewayOptions& options, bool tls)
-    : client_(std::move(channel), client::ClientOptions{"the web gateway's channel", "", "", 30.0}),
+    : client_(std::move(channel), GatewayClientOptions()),
       sessions_(options.sessions_file),
       options_(options),
       tls_(tls),

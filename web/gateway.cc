@@ -366,16 +366,17 @@ void Routes::TraceCsv(const httplib::Request& req, httplib::Response& res) {
   const std::int64_t id = PathId(req);
   v1::GetTraceRequest r;
   r.set_run_id(id);
-  grpc::Status rpc;
-  auto opened = As(req, 3600.0, &rpc).OpenTrace(r);
-  if (!opened.ok()) return SendClientError(res, rpc, opened.status());
+  // The stream's calls keep their status in *rpc after this handler has returned: it lives as long as the stream.
+  auto rpc = std::make_shared<grpc::Status>();
+  auto opened = As(req, 3600.0, rpc.get()).OpenTrace(r);
+  if (!opened.ok()) return SendClientError(res, *rpc, opened.status());
   std::shared_ptr<client::TraceStream> stream = std::move(*opened);
   res.set_header("Content-Disposition", fmt::format("attachment; filename=\"run{}.csv\"", id));
   res.set_header("Cache-Control", "no-store");
   auto header_sent = std::make_shared<bool>(false);
   res.set_chunked_content_provider(
       "text/csv; charset=utf-8",
-      [stream, header_sent](size_t, httplib::DataSink& sink) {
+      [rpc, stream, header_sent](size_t, httplib::DataSink& sink) {
         try {
           std::string out;
           if (!*header_sent) {

@@ -1,6 +1,7 @@
 // The web dashboard's HTTP server (docs/web.md): the embedded pages and a JSON/SSE gateway in front of a
-// BenchService channel. Every /api request becomes the matching BenchService RPC with the caller's token
-// forwarded as "authorization: Bearer <token>" metadata, so authentication, roles, validation (field-named
+// BenchService channel, reached through client::Client as benchctl reaches it (docs/client.md). Every /api
+// request becomes the matching BenchService RPC with the caller's token forwarded as "authorization: Bearer
+// <token>" metadata (a per-request Client::With view), so authentication, roles, validation (field-named
 // errors), admission and limits are the gRPC API's own: the gateway holds no rule of its own beyond the queue
 // view's ordering (docs/web.md "Queue").
 //

@@ -117,6 +117,15 @@ TEST_F(ClientViews, TheTraceStreamedAsCsvIsTheWholeTracesCsv) {
   std::ifstream in(path);
   const std::string streamed((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   EXPECT_EQ(streamed, csv);
+  // The whole trace written in blocks: the same text again.
+  const std::string whole_path = dir_ + "/whole.csv";
+  std::FILE* w = std::fopen(whole_path.c_str(), "w");
+  ASSERT_NE(w, nullptr);
+  const Status wst = client::WriteTraceCsv(*whole, w, whole_path);
+  std::fclose(w);
+  ASSERT_TRUE(wst.ok()) << wst.message();
+  std::ifstream win(whole_path);
+  EXPECT_EQ(std::string((std::istreambuf_iterator<char>(win)), std::istreambuf_iterator<char>()), csv);
 
   v1::GetTraceRequest none;
   none.set_run_id(999999);
