@@ -79,7 +79,8 @@ StatusOr<std::int64_t> Backend::RunBatch(const std::vector<experiment::Experimen
   auto st = WaitForRuns({resp->run_ids().begin(), resp->run_ids().end()}, [&](std::int64_t id) {
     if (auto e = Executed(id))
       if (auto r = c_->GetRun(id); r.ok())
-        std::fprintf(stderr, "  %s: %s\n", api::FromProto(r->key()).DisplayName().c_str(), e->summary.BriefReport().c_str());
+        std::fprintf(stderr, "  %s: %s\n", api::FromProto(r->key()).DisplayName().c_str(),
+                     e->summary.BriefReport().c_str());
   });
   if (!st.ok()) return st;
   return resp->batch_id();

@@ -33,7 +33,8 @@ struct CallOptions {
   // The "authorization" metadata as the caller sent it ("Bearer <token>"); "" = none at all (the service then
   // answers UNAUTHENTICATED); unset = the Client's ClientOptions::token.
   std::optional<std::string> authorization;
-  double deadline_s = 0.0;  // > 0: every call of the view; 0: each method's own (ClientOptions::deadline_s or its argument)
+  // > 0: every call of the view; 0: each method's own (ClientOptions::deadline_s or its deadline_s argument).
+  double deadline_s = 0.0;
   // Where each call of the view leaves its status as the service answered it, code and message untouched, for a
   // door that maps gRPC codes onto its own (HTTP statuses) where vb::Status has none (UNAUTHENTICATED,
   // PERMISSION_DENIED). OK when the call succeeded or the error is the client's own (a trace that does not

@@ -25,10 +25,15 @@ void AppendRows(const TraceColumns& rows, std::int64_t first_row, std::size_t fr
     if (name != "t_s") cols.push_back(rows.Find(name));
   out->reserve(out->size() + (to - from) * (cols.size() + 1) * 14);
   for (std::size_t i = from; i < to; ++i) {
-    const double t = time != nullptr  ? (*time)[i]
-                     : rows.t_s.empty() ? rows.t0_s + static_cast<double>(first_row + static_cast<std::int64_t>(i)) *
-                                                          rows.sample_period_s
-                                        : rows.t_s[i];
+    // The stored time column, else each row's own time (decimated rows), else the time base.
+    double t = 0.0;
+    if (time != nullptr) {
+      t = (*time)[i];
+    } else if (!rows.t_s.empty()) {
+      t = rows.t_s[i];
+    } else {
+      t = rows.t0_s + static_cast<double>(first_row + static_cast<std::int64_t>(i)) * rows.sample_period_s;
+    }
     AppendCsvNumber(out, t);
     for (const auto* col : cols) {
       *out += ',';

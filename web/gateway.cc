@@ -632,7 +632,8 @@ void Routes::BatchReport(const httplib::Request& req, httplib::Response& res) {
   if (!got.ok()) return SendClientError(res, rpc, got.status());
   std::string where = "web dashboard (" + req.get_header_value("Host") + ")";
   if (got->traces_left_out > 0)
-    where += fmt::format("; traces of {} runs left out (size): benchctl report --batch {}", got->traces_left_out, batch);
+    where += fmt::format("; traces of {} runs left out (size): benchctl report --batch {}", got->traces_left_out,
+                         batch);
   const std::string html =
       report::RenderHtml(client::BatchReportTitle(batch, got->runs), report::BatchSections(where, batch, got->runs));
   // The report draws its charts with inline scripts (it is one self-contained file): the dashboard's CSP

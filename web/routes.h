@@ -62,8 +62,8 @@ class Routes {
   void TraceCsv(const httplib::Request& req, httplib::Response& res);
   void Events(const httplib::Request& req, httplib::Response& res);
   void Diagnose(const httplib::Request& req, httplib::Response& res);
-  bool FetchComparison(const httplib::Request& req, httplib::Response& res,
-                       valvebench::v1::CompareRunsResponse* out, long long* batch);
+  bool FetchComparison(const httplib::Request& req, httplib::Response& res, valvebench::v1::CompareRunsResponse* out,
+                       long long* batch);
   void Compare(const httplib::Request& req, httplib::Response& res);
   void Units(const httplib::Request& req, httplib::Response& res);
   void TraceFile(const httplib::Request& req, httplib::Response& res);
