@@ -11,6 +11,7 @@
 #include <sstream>
 
 #include "benchctl/cli_common.h"
+#include "client/run_key_json.h"
 #include "common/csv.h"
 #include "experiment/compare.h"
 #include "experiment/spec.h"
@@ -92,13 +93,10 @@ int CmdCompare(const std::string& input, bool json, bool csv, const vb::experime
     vb::experiment::RunRecord rec;
     // Repeats group on the run's key (written by `run --json`); a summary without one is its own case.
     rec.key = vb::NamedRun(r["name"].get<std::string>());
-    if (r.contains("key") && r["key"].is_object()) {
-      const Json& k = r["key"];
-      RunKey key{k.value("name", rec.key.name), {}, k.value("repeat", -1)};
-      if (k.contains("sweep") && k["sweep"].is_array())
-        for (const auto& c : k["sweep"])
-          if (c.is_object()) key.sweep.push_back({c.value("field", ""), c.value("value", 0.0)});
-      rec.key = std::move(key);
+    if (r.contains("key")) {
+      auto key = vb::client::RunKeyFromJson(r["key"], where + ".key", rec.key.name);
+      if (!key.ok()) return Fail(key.status());
+      rec.key = std::move(*key);
     }
     rec.controller = r.value("controller", "");
     auto status = vb::ParseRunStatus(r.value("status", std::string(vb::RunStatusName(vb::RunStatus::kDone))));

@@ -196,5 +196,30 @@ TEST(RunKeyJson, OneShapeWithSweepAndRepeat) {
   EXPECT_EQ(client::RunKeyJson(NamedRun("e1")).dump(), R"({"name":"e1","sweep":[],"repeat":-1})");
 }
 
+// Read back (benchctl compare RESULTS.json): what RunKeyJson wrote is the same key; a member left out keeps its
+// default; a malformed one is refused with its path.
+TEST(RunKeyJson, ReadBackAndMalformedMembersNamed) {
+  const RunKey key{"compare/pi", {{"conditions.supply_V", 12.5}, {"controller.pi.kp", 3.0}}, 2};
+  auto back = client::RunKeyFromJson(nlohmann::json::parse(client::RunKeyJson(key).dump()), "r.json: [0].key", "x");
+  ASSERT_TRUE(back.ok()) << back.status().message();
+  EXPECT_EQ(*back, key);
+  auto named = client::RunKeyFromJson(nlohmann::json::object(), "r.json: [0].key", "e1");
+  ASSERT_TRUE(named.ok());
+  EXPECT_EQ(*named, NamedRun("e1"));
+  const std::pair<const char*, const char*> bad[] = {
+      {R"([1])", "r.json: [0].key: not an object"},
+      {R"({"name": 3})", "r.json: [0].key.name: not a string"},
+      {R"({"repeat": 1.5})", "r.json: [0].key.repeat: not a repeat index"},
+      {R"({"sweep": {"field": "a"}})", "r.json: [0].key.sweep: not an array"},
+      {R"({"sweep": [{"field": "a", "value": 1}, {"field": "b"}]})", "r.json: [0].key.sweep[1].value: missing"},
+      {R"({"sweep": [{"value": 1}]})", "r.json: [0].key.sweep[0].field: missing"},
+  };
+  for (const auto& [text, message] : bad) {
+    auto k = client::RunKeyFromJson(nlohmann::json::parse(text), "r.json: [0].key", "e1");
+    ASSERT_FALSE(k.ok()) << text;
+    EXPECT_EQ(k.status().message().rfind(message, 0), 0u) << text << ": " << k.status().message();
+  }
+}
+
 }  // namespace
 }  // namespace vb
