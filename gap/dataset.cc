@@ -115,6 +115,58 @@ std::string DatasetName(const std::string& directory) {
   return name.empty() ? directory : name;
 }
 
+// Where a dataset's files come from: a directory (LoadDataset) or files in memory (LoadDatasetFromFiles, the
+// web's upload). Paths have been checked to stay inside the dataset (CheckRunFile) before either is asked.
+class FileSource {
+ public:
+  virtual ~FileSource() = default;
+  // "" for a regular file; else why it cannot be read ("does not exist", "is not a regular file").
+  virtual std::string Problem(const std::string& file) const = 0;
+  virtual Status Read(const std::string& file, const std::string& display, std::string* out) const = 0;
+  // What Dataset::model_file holds for a model file: its path, or (in memory) its name.
+  virtual std::string Where(const std::string& file) const = 0;
+};
+
+class DirectorySource final : public FileSource {
+ public:
+  explicit DirectorySource(fs::path dir) : dir_(std::move(dir)) {}
+  std::string Problem(const std::string& file) const override {
+    std::error_code ec;
+    const fs::file_status st = fs::status(dir_ / file, ec);
+    if (!fs::exists(st)) return "does not exist";
+    if (!fs::is_regular_file(st)) return "is not a regular file";
+    return "";
+  }
+  Status Read(const std::string& file, const std::string& display, std::string* out) const override {
+    return ReadFile(dir_ / file, display, out);
+  }
+  std::string Where(const std::string& file) const override { return (dir_ / file).string(); }
+
+ private:
+  fs::path dir_;
+};
+
+class MemorySource final : public FileSource {
+ public:
+  explicit MemorySource(const std::map<std::string, std::string>& files) : files_(files) {}
+  std::string Problem(const std::string& file) const override {
+    return files_.count(fs::path(file).lexically_normal().string()) ? "" : "does not exist";
+  }
+  Status Read(const std::string& file, const std::string& display, std::string* out) const override {
+    const auto f = files_.find(fs::path(file).lexically_normal().string());
+    if (f == files_.end()) return Status::InvalidArgument(display + ": does not exist");
+    if (f->second.size() > kMaxFileBytes)
+      return Status::InvalidArgument(display + ": " + std::to_string(f->second.size() >> 20) + " MiB exceeds the " +
+                                     std::to_string(kMaxFileBytes >> 20) + " MiB a dataset file may have");
+    *out = f->second;
+    return Status::Ok();
+  }
+  std::string Where(const std::string& file) const override { return file; }
+
+ private:
+  const std::map<std::string, std::string>& files_;
+};
+
 // ---- CSV -------------------------------------------------------------------------------------------------
 
 enum class Column { kT, kGate, kI, kX, kVCoil, kSd, kUnknown };
@@ -400,7 +452,7 @@ Status WarnUnknownKeys(const ManifestContext& m, const json& j, const std::strin
   return Status::Ok();
 }
 
-Status CheckRunFile(const ManifestContext& m, const fs::path& dir, const std::string& file,
+Status CheckRunFile(const ManifestContext& m, const FileSource& dir, const std::string& file,
                     const std::string& path) {
   if (file.empty()) return m.Error(path, "must not be empty");
   const fs::path p(file);
@@ -411,14 +463,11 @@ Status CheckRunFile(const ManifestContext& m, const fs::path& dir, const std::st
   if (norm.empty() || *norm.begin() == "..") {
     return m.Error(path, Quote(file) + " is outside the dataset directory");
   }
-  std::error_code ec;
-  const fs::file_status st = fs::status(dir / p, ec);
-  if (!fs::exists(st)) return m.Error(path, Quote(file) + " does not exist");
-  if (!fs::is_regular_file(st)) return m.Error(path, Quote(file) + " is not a regular file");
+  if (const std::string problem = dir.Problem(file); !problem.empty()) return m.Error(path, Quote(file) + " " + problem);
   return Status::Ok();
 }
 
-Status ParseRun(const ManifestContext& m, const fs::path& dir, const json& j, const std::string& path,
+Status ParseRun(const ManifestContext& m, const FileSource& dir, const json& j, const std::string& path,
                 RunData* run, std::vector<std::string>* warnings) {
   if (!j.is_object()) return m.Error(path, "must be an object, found " + JsonTypeName(j));
   static constexpr std::array<std::string_view, 6> kKeys = {"id",        "file",  "supply_V", "supply_pressure_Pa",
@@ -462,7 +511,7 @@ Status ParseRun(const ManifestContext& m, const fs::path& dir, const json& j, co
 }
 
 // valve-runs/2: a run of any kind, with its covariates.
-Status ParseRunV2(const ManifestContext& m, const fs::path& dir, const json& j, const std::string& path,
+Status ParseRunV2(const ManifestContext& m, const FileSource& dir, const json& j, const std::string& path,
                   RunData* run, std::vector<std::string>* warnings) {
   if (!j.is_object()) return m.Error(path, "must be an object, found " + JsonTypeName(j));
   VB_RETURN_IF_ERROR(WarnUnknownKeys(m, j, path,
@@ -632,7 +681,7 @@ Status ParseDriver(const ManifestContext& m, const json& root, model::DriverPara
   return Status::Ok();
 }
 
-Status ParseManifest(const ManifestContext& m, const fs::path& dir, std::string_view text,
+Status ParseManifest(const ManifestContext& m, const FileSource& dir, std::string_view text,
                      const std::vector<std::string>& known_models, Dataset* ds) {
   json root;
   try {
@@ -670,7 +719,7 @@ Status ParseManifest(const ManifestContext& m, const fs::path& dir, std::string_
                           std::find(known_models.begin(), known_models.end(), *s) == known_models.end();
   if (model_file) {
     VB_RETURN_IF_ERROR(CheckRunFile(m, dir, *s, "model"));
-    ds->model_file = (dir / *s).string();
+    ds->model_file = dir.Where(*s);
   } else if (std::find(known_models.begin(), known_models.end(), *s) == known_models.end()) {
     std::string known;
     for (const auto& k : known_models) known += (known.empty() ? "" : ", ") + k;
@@ -724,31 +773,22 @@ double StartCurrent(const RunData& run, std::size_t n) {
 
 std::vector<std::string> DefaultKnownModels() { return {model::kDefaultPreset}; }
 
-StatusOr<Dataset> LoadDataset(const std::string& directory, const std::vector<std::string>& known_models) {
-  const std::string name = DatasetName(directory);
-  const fs::path dir(directory);
-  std::error_code ec;
-  if (!fs::is_directory(dir, ec)) {
-    return Status::InvalidArgument(directory + ": " +
-                                   (fs::exists(dir, ec) ? "is not a directory" : "dataset directory does not exist"));
-  }
+namespace {
 
-  Dataset ds;
-  ds.directory = directory;
+// The dataset named `name` (errors start with it) from `dir`'s files: the manifest, then every run's file.
+StatusOr<Dataset> LoadFrom(const std::string& name, const FileSource& dir, const std::vector<std::string>& known_models,
+                           Dataset ds) {
   const ManifestContext m{name + "/manifest.json"};
-  const fs::path manifest_path = dir / "manifest.json";
-  if (!fs::is_regular_file(manifest_path, ec)) {
-    return m.Error("", fs::exists(manifest_path, ec) ? "is not a regular file" : "does not exist");
-  }
+  if (const std::string problem = dir.Problem("manifest.json"); !problem.empty()) return m.Error("", problem);
   std::string text;
-  VB_RETURN_IF_ERROR(ReadFile(manifest_path, m.display, &text));
+  VB_RETURN_IF_ERROR(dir.Read("manifest.json", m.display, &text));
   VB_RETURN_IF_ERROR(ParseManifest(m, dir, text, known_models, &ds));
 
   for (std::size_t k = 0; k < ds.runs.size(); ++k) {
     RunData& run = ds.runs[k];
     if (run.kind == RunKind::kPeriodic) continue;
     const std::string display = name + "/" + run.file;
-    VB_RETURN_IF_ERROR(ReadFile(dir / run.file, display, &text));
+    VB_RETURN_IF_ERROR(dir.Read(run.file, display, &text));
     VB_RETURN_IF_ERROR(ParseCsv(text, display, &run, &ds.warnings));
     if (run.kind == RunKind::kWaveform && run.from_rest) {
       // A waveform is replayed from rest unless it says otherwise: one that plainly does not start there
@@ -775,6 +815,26 @@ StatusOr<Dataset> LoadDataset(const std::string& directory, const std::vector<st
     }
   }
   return ds;
+}
+
+}  // namespace
+
+StatusOr<Dataset> LoadDataset(const std::string& directory, const std::vector<std::string>& known_models) {
+  const fs::path dir(directory);
+  std::error_code ec;
+  if (!fs::is_directory(dir, ec)) {
+    return Status::InvalidArgument(directory + ": " +
+                                   (fs::exists(dir, ec) ? "is not a directory" : "dataset directory does not exist"));
+  }
+  Dataset ds;
+  ds.directory = directory;
+  return LoadFrom(DatasetName(directory), DirectorySource(dir), known_models, std::move(ds));
+}
+
+StatusOr<Dataset> LoadDatasetFromFiles(const std::string& name, const std::map<std::string, std::string>& files,
+                                       const std::vector<std::string>& known_models) {
+  if (name.empty()) return Status::InvalidArgument("dataset: the name must not be empty");
+  return LoadFrom(name, MemorySource(files), known_models, Dataset{});
 }
 
 double SecondDifferenceSigma(const std::vector<double>& i) {

@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <map>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -114,5 +115,11 @@ std::vector<double> DeclaredStandardErrors(const Dataset& ds, const RunData& run
 // <dataset> is the last component of `directory`.
 StatusOr<Dataset> LoadDataset(const std::string& directory,
                               const std::vector<std::string>& known_models = DefaultKnownModels());
+
+// The same from files held in memory (file name -> contents: "manifest.json" and the files it names), for a
+// dataset that arrives over the network (the web's upload): the same checks and messages, "<name>/..." in
+// them; no file is written. Dataset::directory stays empty and model_file holds the model file's name.
+StatusOr<Dataset> LoadDatasetFromFiles(const std::string& name, const std::map<std::string, std::string>& files,
+                                       const std::vector<std::string>& known_models = DefaultKnownModels());
 
 }  // namespace vb::gap

@@ -165,13 +165,6 @@ std::string ReportCsp(std::string_view html) {
          "; style-src 'unsafe-inline'; img-src data:; frame-ancestors 'none'; base-uri 'none'; form-action 'none'";
 }
 
-std::string ImportTempPrefix() {
-  std::error_code ec;
-  std::filesystem::path dir = std::filesystem::temp_directory_path(ec);
-  if (ec) dir = "/tmp";
-  return (dir / ("valvebench-import-" + std::to_string(::getpid()) + "-")).string();
-}
-
 int RemoveStaleImports() {
   std::error_code ec;
   std::filesystem::path dir = std::filesystem::temp_directory_path(ec);

@@ -10,8 +10,6 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <filesystem>
-#include <fstream>
 #include <map>
 #include <memory>
 #include <optional>
@@ -646,10 +644,10 @@ void Routes::BatchReport(const httplib::Request& req, httplib::Response& res) {
 
 
 // A measured dataset uploaded from the page: {"dataset": NAME, "files": {"manifest.json": TEXT, "a.csv": TEXT,
-// ...}} (within the 8 MiB body limit). The files are written to a temporary directory named after the dataset
-// and read by gap::LoadDataset, the reader of `benchctl import DIR`, so a bad file gets the same error naming
-// the file, the line and the field; the runs then go to the service's ImportRuns (operator role) as
-// benchctl sends them (gap::FillImportRequest). The directory is removed before the answer.
+// ...}} (within the 8 MiB body limit). The files are read in memory by gap::LoadDatasetFromFiles, the reader of
+// `benchctl import DIR` (gap::LoadDataset) without the directory, so a bad file gets the same error naming the
+// file, the line and the field, and nothing is written to disk; the runs then go to the service's ImportRuns
+// (operator role) as benchctl sends them (gap::FillImportRequest).
 void Routes::Import(const httplib::Request& req, httplib::Response& res) {
   Json body;
   if (!BodyJson(req, res, &body)) return;
@@ -680,28 +678,9 @@ void Routes::Import(const httplib::Request& req, httplib::Response& res) {
     const std::string why = CsvHeaderProblem(text.get_ref<const std::string&>());
     if (!why.empty()) return BadRequest(res, dataset + "/" + fname + ":1: " + why);
   }
-  std::string tmpl_text = ImportTempPrefix() + "XXXXXX";
-  std::vector<char> tmpl(tmpl_text.begin(), tmpl_text.end());
-  tmpl.push_back('\0');
-  if (mkdtemp(tmpl.data()) == nullptr)
-    return SendError(res, grpc::StatusCode::UNAVAILABLE, "import: cannot create a temporary directory");
-  struct Cleanup {
-    std::string dir;
-    ~Cleanup() {
-      std::error_code ec;
-      std::filesystem::remove_all(dir, ec);
-    }
-  } cleanup{tmpl.data()};
-  const std::string dir = std::string(tmpl.data()) + "/" + dataset;
-  std::error_code ec;
-  std::filesystem::create_directory(dir, ec);
-  for (const auto& [fname, text] : body["files"].items()) {
-    std::ofstream out(dir + "/" + fname, std::ios::binary);
-    const std::string& t = text.get_ref<const std::string&>();
-    out.write(t.data(), static_cast<std::streamsize>(t.size()));
-    if (!out) return SendError(res, grpc::StatusCode::UNAVAILABLE, "import: cannot write " + fname);
-  }
-  auto ds = gap::LoadDataset(dir, model::PresetNames());
+  std::map<std::string, std::string> files;
+  for (const auto& [fname, text] : body["files"].items()) files[fname] = text.get<std::string>();
+  auto ds = gap::LoadDatasetFromFiles(dataset, files, model::PresetNames());
   if (!ds.ok()) return BadRequest(res, ds.status().message());
   v1::ImportRunsRequest r;
   if (auto st = gap::FillImportRequest(*ds, dataset, &r); !st.ok()) return BadRequest(res, st.message());

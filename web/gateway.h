@@ -90,13 +90,12 @@ std::string BearerTokenOf(std::string_view header, std::string* problem);
 // name twice, else why not. Linear in the row (a set of names).
 inline constexpr size_t kMaxCsvColumns = 256;
 std::string CsvHeaderProblem(std::string_view text);
-// Where an import's temporary directory goes: <temp>/valvebench-import-<pid>-, and the removal at start of
-// those whose server process is gone (killed mid-import); returns how many were removed.
-std::string ImportTempPrefix();
 // The Content-Security-Policy of a served batch report (GET /api/batches/ID/report.html): the report is one
 // self-contained file whose charts are drawn by inline scripts, allowed here by their SHA-256 hashes and
 // nothing else (no other script, no fetch, no form).
 std::string ReportCsp(std::string_view html);
+// Uploads are read in memory now; earlier builds wrote each to <temp>/valvebench-import-<pid>-XXXXXX and one
+// killed mid-import left it behind. At start, those whose server process is gone are removed; returns how many.
 int RemoveStaleImports();
 
 // The gateway's request handling without sockets, for the fuzz target (fuzz/gateway_fuzz.cc): `raw` is read as

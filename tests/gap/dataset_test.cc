@@ -145,6 +145,46 @@ TEST_F(DatasetTest, LoadsEveryField) {
   EXPECT_EQ(b.gate, (std::vector<int8_t>{1, 0, 0}));
 }
 
+// The same dataset from files in memory (the web's upload): the same runs, and the same messages with the
+// given name, for a missing manifest, a file the manifest names that is not there, an escape and a bad CSV.
+TEST_F(DatasetTest, FilesInMemoryLoadAsTheDirectoryDoes) {
+  WriteValid();
+  auto disk = Load();
+  ASSERT_TRUE(disk.ok()) << disk.status().ToString();
+  std::map<std::string, std::string> files = {
+      {"manifest.json", ValidManifest().dump(1)}, {"a.csv", kCsvA}, {"b.csv", kCsvB}};
+  auto mem = LoadDatasetFromFiles("ds", files);
+  ASSERT_TRUE(mem.ok()) << mem.status().ToString();
+  EXPECT_TRUE(mem->directory.empty());
+  ASSERT_EQ(mem->runs.size(), disk->runs.size());
+  for (std::size_t k = 0; k < mem->runs.size(); ++k) {
+    EXPECT_EQ(mem->runs[k].id, disk->runs[k].id);
+    EXPECT_EQ(mem->runs[k].t_s, disk->runs[k].t_s);
+    EXPECT_EQ(mem->runs[k].i_A, disk->runs[k].i_A);
+    EXPECT_EQ(mem->runs[k].gate, disk->runs[k].gate);
+    EXPECT_EQ(mem->runs[k].supply_V, disk->runs[k].supply_V);
+  }
+  auto without = files;
+  without.erase("manifest.json");
+  EXPECT_EQ(LoadDatasetFromFiles("ds", without).status().message(), "ds/manifest.json: does not exist");
+  without = files;
+  without.erase("b.csv");
+  EXPECT_EQ(LoadDatasetFromFiles("ds", without).status().message(),
+            "ds/manifest.json: runs[1].file: 'b.csv' does not exist");
+  json m = ValidManifest();
+  m["runs"][1]["file"] = "../ds/b.csv";
+  auto escape = files;
+  escape["manifest.json"] = m.dump();
+  EXPECT_EQ(LoadDatasetFromFiles("ds", escape).status().message(),
+            "ds/manifest.json: runs[1].file: '../ds/b.csv' is outside the dataset directory");
+  auto bad_csv = files;
+  bad_csv["b.csv"] = "t_s,gate,i_A\n0,1,0.5\n0.25,0,x\n";
+  Write("b.csv", bad_csv["b.csv"]);
+  auto disk_bad = Load();
+  ASSERT_FALSE(disk_bad.ok());
+  EXPECT_EQ(LoadDatasetFromFiles("ds", bad_csv).status().message(), disk_bad.status().message());
+}
+
 // valve-runs/1 bounds its conditions like valve-runs/2: no absurd supply, pressure or start time.
 TEST_F(DatasetTest, ConditionsBeyondAnyBenchAreRefusedNamingTheField) {
   ExpectManifestError([](json& m) { m["runs"][1]["supply_V"] = 1e308; },
