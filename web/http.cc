@@ -1,5 +1,7 @@
 #include "web/http.h"
 
+#include "proto/grpc_status.h"
+
 #include <fmt/format.h>
 #include <google/protobuf/util/json_util.h>
 
@@ -156,21 +158,7 @@ void AppendNumber(std::string* out, double v) {
 
 void SendClientError(httplib::Response& res, const grpc::Status& rpc, const Status& st) {
   if (!rpc.ok()) return SendError(res, rpc);
-  grpc::StatusCode code = grpc::StatusCode::INTERNAL;
-  switch (st.code()) {
-    case StatusCode::kOk: code = grpc::StatusCode::OK; break;
-    case StatusCode::kInvalidArgument: code = grpc::StatusCode::INVALID_ARGUMENT; break;
-    case StatusCode::kNotFound: code = grpc::StatusCode::NOT_FOUND; break;
-    case StatusCode::kAlreadyExists: code = grpc::StatusCode::ALREADY_EXISTS; break;
-    case StatusCode::kFailedPrecondition: code = grpc::StatusCode::FAILED_PRECONDITION; break;
-    case StatusCode::kOutOfRange: code = grpc::StatusCode::OUT_OF_RANGE; break;
-    case StatusCode::kResourceExhausted: code = grpc::StatusCode::RESOURCE_EXHAUSTED; break;
-    case StatusCode::kUnavailable: code = grpc::StatusCode::UNAVAILABLE; break;
-    case StatusCode::kDataLoss: code = grpc::StatusCode::DATA_LOSS; break;
-    case StatusCode::kAborted: code = grpc::StatusCode::ABORTED; break;
-    case StatusCode::kInternal: code = grpc::StatusCode::INTERNAL; break;
-  }
-  SendError(res, code, st.message());
+  SendError(res, ToGrpcStatus(st));
 }
 
 }  // namespace vb::web
