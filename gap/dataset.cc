@@ -463,7 +463,8 @@ Status CheckRunFile(const ManifestContext& m, const FileSource& dir, const std::
   if (norm.empty() || *norm.begin() == "..") {
     return m.Error(path, Quote(file) + " is outside the dataset directory");
   }
-  if (const std::string problem = dir.Problem(file); !problem.empty()) return m.Error(path, Quote(file) + " " + problem);
+  if (const std::string problem = dir.Problem(file); !problem.empty())
+    return m.Error(path, Quote(file) + " " + problem);
   return Status::Ok();
 }
 

@@ -414,7 +414,8 @@ std::vector<StatusOr<MovingIdentification>> IdentifyAnchored(const std::vector<s
     std::optional<MovingIdentification> first;
     for (std::size_t i = 0; i < names.size(); ++i) {
       if (progress)
-        progress("session " + names[i] + ": " + (anchor || first ? "warm start from the anchor" : "identifying from scratch"));
+        progress("session " + names[i] + ": " +
+                 (anchor || first ? "warm start from the anchor" : "identifying from scratch"));
       ids->push_back(identify(i, anchor ? anchor : first ? &*first : nullptr));
       if (ids->back().ok() && !anchor && !first) first = *ids->back();
     }
