@@ -9,6 +9,10 @@ const std::vector<EffectInfo>& EffectCatalog() {
   static const std::vector<EffectInfo> catalog = {
       {"supply_resistance", "source impedance: the coil voltage sags by R_s i while the switch is on", true,
        {{"R_s", "ohm", &Effects::supply_R_ohm, 0.0, 100.0}}},
+      {"supply_voltage", "the supply delivers a voltage other than declared (gain x the declared)", true,
+       {{"gain", "1", &Effects::supply_gain, 0.2, 2.0}}},
+      {"driver_delay", "the driver switches the coil a delay after its gate command", true,
+       {{"delay_s", "s", &Effects::driver_delay_s, 0.0, 0.01}}},
       {"coil_heating", "R rises with coil temperature from I^2 R losses (one thermal node)", true,
        {{"alpha", "1/K", &Effects::heating_alpha_per_K, 0.0, 0.02},
         {"R_th", "K/W", &Effects::heating_R_th_K_per_W, 1e-3, 1e3},
@@ -63,6 +67,8 @@ Status AddEffect(Effects* effects, std::string_view name, const std::vector<std:
   if (name == "coil_heating") e.heating = true;
   if (name == "eddy_currents" && e.eddy_R_p_ohm == 0.0) e.eddy_R_p_ohm = 400.0;
   if (name == "supply_resistance" && e.supply_R_ohm == 0.0) e.supply_R_ohm = 0.5;
+  if (name == "supply_voltage" && e.supply_gain == 1.0) e.supply_gain = 0.9;
+  if (name == "driver_delay" && e.driver_delay_s == 0.0) e.driver_delay_s = 50e-6;
   if (name == "sensor_lag" && e.sensor_tau_s == 0.0 && e.sensor_delay_s == 0.0) e.sensor_tau_s = 50e-6;
   if (name == "magnetic_saturation" && e.saturation_B_T == 0.0) e.saturation_B_T = 2.0;
   if (name == "end_stop_bounce" && e.bounce_e == 0.0) e.bounce_e = 0.5;

@@ -5,6 +5,13 @@
 // Simulated:
 //   supply_resistance  R_s [ohm]: the source impedance; while the switch connects the supply, the coil sees
 //                      V - R_s i. The freewheel loop does not include it.
+//   supply_voltage     the supply delivers gain x its declared voltage (a sagging, mis-set or mislabelled supply):
+//                      every segment the supply drives has V = gain x supply_V. Unlike sensor_gain it changes
+//                      the current itself, so the force (i^2) and the plunger's timing follow it.
+//   driver_delay       the driver switches delay_s after its gate command (a slower gate drive, an opto-isolator,
+//                      a switch's turn-on delay): the coil sees each gate edge delay_s late; the recorded gate is
+//                      the command. On a switch-on it is a shift of the whole current, which a sense chain's
+//                      latency (sensor_lag.delay_s) would make too.
 //   coil_heating       R(T) = R (1 + alpha dT), one thermal node: C_th d(dT)/dt = i^2 R(T) - dT / R_th
 //                      (copper alpha = 3.93e-3 1/K). dT0_K is the coil's temperature rise when the run starts.
 //   eddy_currents      a loss resistance R_p across the magnetising inductance (one eddy branch): the flux and
@@ -47,6 +54,8 @@ namespace vb::model {
 
 struct Effects {
   double supply_R_ohm = 0.0;          // supply_resistance.R_s
+  double supply_gain = 1.0;           // supply_voltage.gain; 1 = the declared voltage
+  double driver_delay_s = 0.0;        // driver_delay.delay_s; 0 = none
   bool heating = false;               // coil_heating
   double heating_alpha_per_K = 3.93e-3;
   double heating_R_th_K_per_W = 2.0;
@@ -77,7 +86,8 @@ struct Effects {
            residual_w_A > 0.0;
   }
   bool any() const {
-    return supply_R_ohm > 0.0 || NeedsGeneralPath() || sensor_delay_s > 0.0 || bounce_e > 0.0 || sensor_chain();
+    return supply_R_ohm > 0.0 || supply_gain != 1.0 || driver_delay_s > 0.0 || NeedsGeneralPath() ||
+           sensor_delay_s > 0.0 || bounce_e > 0.0 || sensor_chain();
   }
   // The static part of the sense chain (offset, gain) is not the identity.
   bool sensor_chain() const { return sensor_offset_A != 0.0 || sensor_gain != 1.0; }

@@ -79,6 +79,8 @@ void Simulator::Reset() {
   v_ = 0.0;
   v2_int_ = vi_int_ = 0.0;
   switches_ = 0;
+  gate_ = 0;
+  pending_head_ = pending_n_ = 0;
   gate_on_before_s_ = gate_on_since_s_ = 0.0;
   const Effects& fx = plant_.params().effects;
   dT_ = fx.heating ? fx.heating_dT0_K : 0.0;
@@ -134,11 +136,32 @@ void Simulator::SetSamplePeriod(double period_s) {
 }
 
 void Simulator::SetGate(int gate) {
-  if (!driver_.SetGate(gate, t_)) return;
+  if (gate == gate_) return;
+  gate_ = gate;
   ++switches_;
-  if (driver_.gate() != 0) gate_on_since_s_ = t_;
+  if (gate_ != 0) gate_on_since_s_ = t_;
   else gate_on_before_s_ += t_ - gate_on_since_s_;
-  stepper_valid_ = false;
+  const double delay_s = plant_.params().effects.driver_delay_s;
+  if (delay_s <= 0.0) {
+    driver_.SetGate(gate, t_);
+    stepper_valid_ = false;
+    return;
+  }
+  if (pending_n_ == pending_.size()) {
+    Fail("driver_delay: more gate edges within the delay than the driver can hold (64)");
+    return;
+  }
+  pending_[(pending_head_ + pending_n_) % pending_.size()] = {t_ + delay_s, gate};
+  ++pending_n_;
+}
+
+// driver_delay: the driver takes each commanded edge whose time has come.
+void Simulator::ApplyDueEdges() {
+  while (pending_n_ > 0 && pending_[pending_head_].t_s <= t_ + kSameInstant_s) {
+    if (driver_.SetGate(pending_[pending_head_].gate, t_)) stepper_valid_ = false;
+    pending_head_ = (pending_head_ + 1) % pending_.size();
+    --pending_n_;
+  }
 }
 
 void Simulator::SetConditions(const Conditions& conditions) {
@@ -195,7 +218,7 @@ double Simulator::measured_current_A() const {
   if (sensor_.has_reading()) return sensor_.LastReading_A();
   if (plant_.params().effects.eddy_R_p_ohm > 0.0) {
     // The terminal current now: the driver's segment as it stands (PeekSegment changes nothing).
-    const Segment seg = driver_.PeekSegment(cond_.supply_V, t_, i_);
+    const Segment seg = driver_.PeekSegment(SupplyV(), t_, i_);
     return sensor_.Static(TerminalAt(seg, t_, i_, dT_).i_A);
   }
   return sensor_.Static(i_);
@@ -223,7 +246,7 @@ double Simulator::DisturbanceForce(double t) const {
 }
 
 Simulator::Segment Simulator::CurrentSegment() {
-  const Segment s = driver_.Segment(cond_.supply_V, t_, i_);
+  const Segment s = driver_.Segment(SupplyV(), t_, i_);
   if (s.blocked && plant_.params().effects.eddy_R_p_ohm <= 0.0) i_ = 0.0;
   return s;
 }
@@ -232,7 +255,7 @@ void Simulator::EmitSample(double t, double i_meas, double v_term, double x, dou
                            double vi_int, SimObserver* obs) {
   PlantSample s;
   s.t_s = t;
-  s.gate = static_cast<std::int8_t>(driver_.gate());
+  s.gate = static_cast<std::int8_t>(gate_);
   s.v_coil_V = v_term;
   s.i_A = sensor_.Sample(t, i_meas);
   s.x_m = x;
@@ -240,7 +263,7 @@ void Simulator::EmitSample(double t, double i_meas, double v_term, double x, dou
   s.v2_integral_V2s = v2_int;
   s.energy_J = vi_int;
   s.switches = switches_;
-  s.gate_on_s = gate_on_before_s_ + (driver_.gate() != 0 ? std::max(0.0, t - gate_on_since_s_) : 0.0);
+  s.gate_on_s = gate_on_before_s_ + (gate_ != 0 ? std::max(0.0, t - gate_on_since_s_) : 0.0);
   obs->OnSample(s);
 }
 
@@ -277,9 +300,11 @@ void Simulator::CheckStopRelease(SimObserver* obs) {
 void Simulator::AdvanceTo(double t_end_s, SimObserver* observer) {
   while (t_ < t_end_s && failure_ == nullptr) {
     const double t_before = t_;
+    ApplyDueEdges();
     CheckStopRelease(observer);
     const Segment seg = CurrentSegment();
-    const double t_stop = std::min(t_end_s, seg.t_end_s);
+    double t_stop = std::min(t_end_s, seg.t_end_s);
+    if (pending_n_ > 0) t_stop = std::min(t_stop, pending_[pending_head_].t_s);
     if (contact_ != Contact::kFree && seg.tau_s == 0.0 && !general_) {
       AdvanceClosedForm(seg, t_stop, observer);
     } else {

@@ -157,7 +157,8 @@ class Simulator {
   double NetForceAtRest_N(double j, double x, double t) const;
   double x_m() const { return x_; }
   double v_mps() const { return v_; }
-  int gate() const { return driver_.gate(); }
+  // The gate as commanded (driver_delay: the driver follows it delay_s later).
+  int gate() const { return gate_; }
   Contact contact() const { return contact_; }
   const Plant& plant() const { return plant_; }
   const Conditions& conditions() const { return cond_; }
@@ -190,6 +191,8 @@ class Simulator {
   // The coil's terminal quantities at t (the driver's voltage plus the disturbance; model/coil.h).
   Terminal TerminalAt(const Segment& seg, double t, double i_mag, double dT) const;
 
+  // The supply's voltage as delivered (supply_voltage: gain x the declared).
+  double SupplyV() const { return cond_.supply_V * plant_.params().effects.supply_gain; }
   // The driver's segment now; a blocked segment holds the current at 0 (unless an eddy branch carries it).
   Segment CurrentSegment();
   void AdvanceClosedForm(const Segment& seg, double t_stop, SimObserver* obs);
@@ -231,6 +234,16 @@ class Simulator {
   Play play_ = Play::kInside;
   bool frozen_ = false;                   // the current integrated piece holds the spool
   std::uint64_t switches_ = 0;
+  int gate_ = 0;                   // the command (SetGate); the driver's own gate lags it by driver_delay
+  // driver_delay: commanded edges the driver has not seen yet, oldest first (a fixed ring: SetGate runs in the
+  // control loop, which does not allocate).
+  struct PendingEdge {
+    double t_s;
+    int gate;
+  };
+  std::array<PendingEdge, 64> pending_{};
+  std::size_t pending_head_ = 0, pending_n_ = 0;
+  void ApplyDueEdges();
   double gate_on_before_s_ = 0.0;  // the gate's on-time up to its last falling edge
   double gate_on_since_s_ = 0.0;   // its last rising edge
   double ode_piece_v2_ = 0.0, ode_piece_vi_ = 0.0;  // integrals at the ODE stepper's restart time

@@ -70,6 +70,70 @@ TEST(Effects, SupplyResistanceSagsTheOnStateOnly) {
   EXPECT_NEAR(StepCurrent(p, tau), 24.0 / 30.0 * (1.0 - std::exp(-1.0)), 1e-9);
 }
 
+// Supply voltage: the coil is driven by gain x the declared supply: the current of a step is that of the declared
+// supply scaled by the gain (a linear coil), and on a moving valve the pull (i^2) follows the current, so the
+// plunger lifts later at a lower gain: a sensor gain would scale the reading and leave the lift where it was.
+TEST(Effects, SupplyVoltageScalesTheCurrentItself) {
+  const PlantParams p = WithEffect("ts98_coil", "supply_voltage", {{"gain", 0.8}});
+  const double tau = 0.33 / 28.5;
+  EXPECT_NEAR(StepCurrent(p, tau), 0.8 * 24.0 / 28.5 * (1.0 - std::exp(-1.0)), 1e-9);
+  EXPECT_NEAR(StepCurrent(p, 0.5), 0.8 * 24.0 / 28.5, 1e-9);
+  auto lift_s = [](const PlantParams& pp) -> double {
+    Plant plant(pp);
+    Simulator sim(plant, DriverParams{}, Conditions{24.0, 0.0});
+    vb::testing::Recording rec;
+    sim.SetGate(1);
+    sim.AdvanceTo(0.05, &rec);
+    for (const auto& e : rec.events)
+      if (e.kind == EventKind::kLift) return e.t_s;
+    return INFINITY;
+  };
+  const PlantParams moving = *Preset(kDefaultPreset);
+  PlantParams low = moving;
+  ASSERT_TRUE(AddEffect(&low.effects, "supply_voltage", {{"gain", 0.85}}).ok());
+  const double nominal = lift_s(moving), later = lift_s(low);
+  ASSERT_TRUE(std::isfinite(nominal));
+  EXPECT_GT(later, nominal * 1.05) << "a lower supply lifts the plunger later";
+}
+
+// Driver delay: the coil sees each gate edge delay_s late, so a switch-on's current is the nominal one shifted by
+// the delay; the recorded gate and its statistics are the command's.
+TEST(Effects, DriverDelayShiftsTheCoilsEdgesNotTheCommand) {
+  const PlantParams late = WithEffect("ts98_coil", "driver_delay", {{"delay_s", 200e-6}});
+  auto run = [](const PlantParams& pp, vb::testing::Recording* rec) {
+    Plant plant(pp);
+    Simulator sim(plant, DriverParams{}, Conditions{24.0, 0.0});
+    sim.SetSamplePeriod(1e-5);
+    sim.SetGate(1);
+    sim.AdvanceTo(2e-3, rec);
+    sim.SetGate(0);
+    EXPECT_EQ(sim.gate(), 0) << "gate() is the command";
+    sim.AdvanceTo(6e-3, rec);
+    sim.EmitPendingSample(rec);
+  };
+  vb::testing::Recording nominal, delayed;
+  run(*Preset("ts98_coil"), &nominal);
+  run(late, &delayed);
+  ASSERT_EQ(nominal.samples.size(), delayed.samples.size());
+  // 200 us = 20 samples: sample k of the delayed run is sample k - 20 of the nominal one.
+  for (std::size_t k = 0; k < delayed.samples.size(); ++k) {
+    const double expect = k < 20 ? 0.0 : nominal.samples[k - 20].i_A;
+    ASSERT_NEAR(delayed.samples[k].i_A, expect, 1e-9) << "sample " << k;
+    EXPECT_EQ(delayed.samples[k].gate, nominal.samples[k].gate) << "the recorded gate is the command";
+  }
+  EXPECT_GT(nominal.samples[20].i_A, 0.01);
+  // More edges within the delay than the driver holds: a clear failure, not a lost edge.
+  PlantParams slow = WithEffect("ts98_coil", "driver_delay", {{"delay_s", 5e-3}});
+  Plant plant(slow);
+  Simulator sim(plant, DriverParams{}, Conditions{24.0, 0.0});
+  for (int n = 0; n < 70; ++n) {
+    sim.AdvanceTo(n * 2e-5, nullptr);
+    sim.SetGate(n % 2 == 0 ? 1 : 0);
+  }
+  ASSERT_NE(sim.failure(), nullptr);
+  EXPECT_NE(std::string(sim.failure()).find("driver_delay"), std::string::npos) << sim.failure();
+}
+
 // Coil heating: R rises with temperature, so the steady current falls below V/R and keeps falling; the
 // temperature rise tends to the thermal equilibrium of the I^2 R losses.
 TEST(Effects, CoilHeatingLowersTheCurrentAsTheCoilWarms) {
