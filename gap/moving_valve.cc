@@ -1522,6 +1522,17 @@ std::vector<Candidate> MovingValveCandidates(const model::PlantParams& ref, cons
   const double Ff = std::clamp(std::abs(F0), 1e-3, 100.0);
   out.push_back({"coulomb_friction", {"coulomb_friction"},
                  {R, {"coulomb_friction.F_c", 0.0, Ff, 0.1 * Ff, false, 0.0}, {"coulomb_friction.F_s", 0.0, Ff, 0.15 * Ff, false, 0.0}}, {}});
+  // The changes of the supply and the driver that valves in service see (issue 35, point 4):
+  // - a series resistance in the supply (a corroded connector, a long thin lead) is not fitted apart from R:
+  //   while the supply drives, the coil sees R + R_s (model/coil.h), and a switch-on is all drive, so its fit
+  //   would be param:R's to the last digit (a tie that fitted twice, and, as an effect, drew a drift partner:
+  //   FitNuisance). ChooseAmongConfusable names it beside R when R rose;
+  // - a supply voltage other than declared (gain x the declared), R free as beside the sense chain: it changes the
+  //   current itself, so the pull (i^2) and the plunger's timing follow; the sense gain scales the reading only, and
+  //   R moves the time constant L/R, which the gain does not;
+  // - a slower driver: the coil sees the gate's edge delay_s late (0 to 1 ms, a tenth of the window), R free.
+  out.push_back({"supply_voltage", {"supply_voltage"}, {R, {"supply_voltage.gain", 0.6, 1.4, 1.0, false, 1.0}}, {}});
+  out.push_back({"driver_delay", {"driver_delay"}, {R, {"driver_delay.delay_s", 0.0, 1e-3, 2e-5, false, 0.0}}, {}});
   // The sense chain.
   double peak = 0.0;
   for (const auto& r : target.runs)
@@ -1602,6 +1613,32 @@ std::string PreferDeterminedChange(Diagnosis* d, const Dataset& target) {
     return "";
   }
   auto confusable = [&](const std::string& name) { return Confusable(*d, name); };
+  // The fitted value of a row's parameter against the reference's (NaN when either is missing).
+  auto moved = [&](const std::string& row_name, const std::string& param) {
+    for (const auto& row : d->ranking) {
+      if (row.name != row_name || !row.status.ok()) continue;
+      const auto now = row.params.find(param);
+      const auto ref = d->reference.params.find(param);
+      if (now == row.params.end() || ref == d->reference.params.end()) break;
+      return now->second - ref->second;
+    }
+    return static_cast<double>(NAN);
+  };
+  // The winding's resistance and a series resistance in the supply: on a switch-on the supply drives throughout,
+  // and the coil sees their sum (model/coil.h), so a rise of either is the same curve. Which one rose, the data
+  // cannot tell. (A fall is the winding's: a series resistance only adds. A declared winding temperature other
+  // than the reference's names the winding: PreferDeclaredTemperature, resistance_temperature.)
+  if (chosen == "param:R" && moved("param:R", "R") > 0.0) {
+    d->verdict_reason += "; the resistance in the coil's circuit rose, and a switch-on cannot tell the winding's (a "
+                         "warmer coil, shorted turns) from one in series with the supply (a corroded connector, a "
+                         "lead): the supply drives throughout and the coil sees their sum. The coil's terminal "
+                         "voltage, a declared winding temperature or a switch-off (the freewheel loop does not "
+                         "include the supply) tells them apart";
+    return "param:R or supply_resistance";
+  }
+  if (chosen == "driver_delay")
+    d->verdict_reason += "; the current starts later after the gate: a slower driver, or a sense chain with latency "
+                         "(the same shift on a switch-on); the coil's voltage recorded beside the gate tells which";
   // A stiffness confusable with a constant force on the plunger (the preload, or a supply pressure other than
   // declared: (A2 - A1) P adds to k delta, seed 000 eq. 9-10) becomes that force: the data determine the force on
   // the closed plunger, which all of them change; the stiffness also changes it along the stroke, which the runs
@@ -1616,8 +1653,6 @@ std::string PreferDeterminedChange(Diagnosis* d, const Dataset& target) {
         break;
       }
   const std::string now = d->ranking.front().name;
-  const bool force = now == "param:delta" || now == "supply_pressure";
-  const std::string other = now == "param:delta" ? "supply_pressure" : "param:delta";
   double pmin = INFINITY, pmax = -INFINITY;
   for (const auto& r : target.runs) pmin = std::min(pmin, r.supply_pressure_Pa), pmax = std::max(pmax, r.supply_pressure_Pa);
   // The pressure the fitted area implies: (A2 - A1) P is the force; the declared P with the fitted area is the
@@ -1638,16 +1673,49 @@ std::string PreferDeterminedChange(Diagnosis* d, const Dataset& target) {
       std::snprintf(buf, sizeof buf, " (as supply_pressure: %.2fx the declared pressures)", f);
     implied = buf;
   }
-  if (!force || !confusable(other)) {
+  // The constant forces on the plunger the data cannot tell apart:
+  // - a supply pressure other than declared and the spring's preload, when every run declares one pressure: both
+  //   are one constant force (seed 000 eq. 9-10: k delta and (A2 - A1) P add); at several declared pressures a
+  //   pressure error scales with them and a preload does not, so the data separate them;
+  // - dry friction (wear in the guide) and a stronger preload, where the fitted preload force rose: on a switch-on
+  //   the plunger moves one way only, and friction opposes it with a constant force (F_s to break away, F_c in
+  //   flight) as a preload raised by that much does (seed 000 eq. 9; at rest the stop holds the preload). A
+  //   preload that fell is not friction (friction only resists). A switch-off separates them (friction holds
+  //   the plunger back, the preload pushes it home).
+  const bool one_pressure = pmax == pmin;
+  const bool force_rose = moved("param:delta", "delta") > 0.0;
+  std::vector<std::string> either;
+  if (now == "param:delta" || now == "supply_pressure") {
+    const std::string other = now == "param:delta" ? "supply_pressure" : "param:delta";
+    if (confusable(other) && one_pressure) either = {"supply_pressure", "param:delta"};
+    if (force_rose && (now == "param:delta" || !either.empty()) && confusable("coulomb_friction")) {
+      if (either.empty()) either = {"param:delta"};
+      either.push_back("coulomb_friction");
+    }
+  } else if (now == "coulomb_friction" && force_rose && confusable("param:delta")) {
+    if (one_pressure && confusable("supply_pressure")) either.push_back("supply_pressure");
+    either.push_back("param:delta");
+    either.push_back("coulomb_friction");
+  }
+  if (either.empty()) {
     if (now == "supply_pressure") d->verdict_reason += implied;
     return "";
   }
-  if (pmax > pmin) return "";  // several declared pressures: a pressure error scales with them, a preload does not
-  d->verdict_reason += "; every run declares one pressure, so a supply pressure other than declared and a changed "
-                       "spring preload are the same constant force on the plunger (seed 000 eq. 9-10): runs at "
-                       "another declared pressure would tell them apart" + implied;
-  d->confusable.erase(std::remove(d->confusable.begin(), d->confusable.end(), other), d->confusable.end());
-  return "supply_pressure or param:delta";
+  auto in_either = [&](const std::string& n) { return std::find(either.begin(), either.end(), n) != either.end(); };
+  if (in_either("supply_pressure"))
+    d->verdict_reason += "; every run declares one pressure, so a supply pressure other than declared and a changed "
+                         "spring preload are the same constant force on the plunger (seed 000 eq. 9-10): runs at "
+                         "another declared pressure would tell them apart" + implied;
+  if (in_either("coulomb_friction"))
+    d->verdict_reason += "; the force against the lift rose: wear in the guide (dry friction) fits as well as a "
+                         "stronger preload, and a switch-on cannot tell them apart (the plunger moves one way only, "
+                         "and both oppose it with a constant force); a switch-off run tells them apart";
+  std::string text;
+  for (const auto& n : either) {
+    d->confusable.erase(std::remove(d->confusable.begin(), d->confusable.end(), n), d->confusable.end());
+    text += (text.empty() ? "" : " or ") + n;
+  }
+  return text;
 }
 
 }  // namespace

@@ -142,7 +142,8 @@ std::string MovingIdentificationReport(const MovingIdentification& id);
 
 // The candidates for "what changed" on a moving valve identified from scratch (gap/diagnose.h, reference
 // path): the coil resistance, the supply pressure (the declared one scaled: the pressure area), the spring
-// preload, stiffness, mass and damping, a plunger that no longer moves (`stuck`), dry friction, and the sense
+// preload, stiffness, mass and damping, a plunger that no longer moves (`stuck`), dry friction, a series
+// resistance in the supply, a supply voltage other than declared, a slower driver (driver_delay), and the sense
 // chain's offset and gain; resistance_temperature where runs declare temperatures.
 std::vector<Candidate> MovingValveCandidates(const model::PlantParams& reference, const Dataset& target,
                                              const std::vector<bool>& fit_mask, double reference_C);
@@ -162,6 +163,10 @@ std::vector<Candidate> MovingValveCandidates(const model::PlantParams& reference
 //    along the stroke, which the runs did not resolve, or k would not be confusable. A preload confusable with a supply pressure other than declared, on runs that all
 //    declare one pressure, is "either of": one constant force either way (seed 000 eq. 9-10: k delta and
 //    (A2 - A1) P add).
+//  - A reference identified from scratch: a rise of the winding's resistance (param:R) is "param:R or
+//    supply_resistance": a switch-on is all drive, and the coil sees R + R_s; a stronger preload confusable with
+//    dry friction is "either of" too (with the supply pressure when one pressure is declared): on a switch-on the
+//    plunger moves one way only, and friction opposes it with a constant force as the preload does.
 std::string ChooseAmongConfusable(Diagnosis* d, const Dataset& target);
 
 }  // namespace vb::gap

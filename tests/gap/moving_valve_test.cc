@@ -262,7 +262,34 @@ const Change kChanges[] = {
      "pressure"},
     {"gain", [](model::PlantParams* p, std::vector<SwitchOnRunPlan>*) { p->effects.sensor_gain = 0.96; }, "sensor_gain"},
     {"smaller_R", [](model::PlantParams* p, std::vector<SwitchOnRunPlan>*) { p->R_ohm *= 0.975; }, "R"},
+    // The changes of a valve in service (issue 35, point 4). Wear: dry friction at a sixth of the 2 N preload.
+    {"wear",
+     [](model::PlantParams* p, std::vector<SwitchOnRunPlan>*) {
+       p->effects.friction_F_c_N = 0.3;
+       p->effects.friction_F_s_N = 0.4;
+     },
+     "friction|param:b"},
+    // Spring fatigue: the stiffness 30 % lower, and with it the preload force k (x_min + delta).
+    {"fatigue", [](model::PlantParams* p, std::vector<SwitchOnRunPlan>*) { p->k_N_per_m *= 0.7; }, "param:k|param:delta"},
+    // A corroded connector: 4 % of the winding in series with the supply. A switch-on cannot tell it from R.
+    {"connector", [](model::PlantParams* p, std::vector<SwitchOnRunPlan>*) { p->effects.supply_R_ohm = 2.5; },
+     "supply_resistance"},
+    {"low_supply", [](model::PlantParams* p, std::vector<SwitchOnRunPlan>*) { p->effects.supply_gain = 0.93; },
+     "supply_voltage"},
+    {"slow_driver", [](model::PlantParams* p, std::vector<SwitchOnRunPlan>*) { p->effects.driver_delay_s = 60e-6; },
+     "driver_delay"},
 };
+
+// Whether the verdict contains one of the '|'-separated words.
+bool Accepts(const std::string& verdict, const std::string& accept) {
+  std::size_t a = 0;
+  while (a <= accept.size()) {
+    const std::size_t b = std::min(accept.find('|', a), accept.size());
+    if (verdict.find(accept.substr(a, b - a)) != std::string::npos) return true;
+    a = b + 1;
+  }
+  return false;
+}
 
 class MovingValveSyntheticChange : public ::testing::TestWithParam<int> {};
 
@@ -279,13 +306,12 @@ TEST_P(MovingValveSyntheticChange, NamedAgainstAReferenceIdentifiedFromScratch) 
   scope.seed = 12;
   ASSERT_TRUE(WriteSwitchOnSession(tgt.string(), later, runs, scope, "other", "taghizadeh2009", 100.0).ok());
   const Diagnosis d = DiagnoseAgainst(tgt.string(), ref.string());
-  EXPECT_NE(d.verdict.find(c.accept), std::string::npos) << c.name << ": verdict " << d.verdict << " ("
-                                                          << d.verdict_reason << ")";
+  EXPECT_TRUE(Accepts(d.verdict, c.accept)) << c.name << ": verdict " << d.verdict << " (" << d.verdict_reason << ")";
   Cleanup(ref);
   Cleanup(tgt);
 }
 
-INSTANTIATE_TEST_SUITE_P(OtherValve, MovingValveSyntheticChange, ::testing::Range(0, 7),
+INSTANTIATE_TEST_SUITE_P(OtherValve, MovingValveSyntheticChange, ::testing::Range(0, static_cast<int>(std::size(kChanges))),
                          [](const ::testing::TestParamInfo<int>& i) { return std::string(kChanges[i.param].name); });
 
 TEST(MovingValve, OneRunSaysNothingCanBeHeldOut) {
