@@ -48,6 +48,10 @@ struct IndependentValve {
   int averaged = 4;
   double lsb_A = 1.0 / 480.0;
   double offset_A = 0.0, spike_A = 0.0;
+  // The supply and the driver as they are, against what a session declares (perf_changes): the supply delivers
+  // supply_gain x the declared voltage, and the driver switches delay_s after the gate (rounded to samples).
+  double supply_gain = 1.0;
+  double delay_s = 0.0;
   // For ablation studies (perf_identify --ablate core): a linear core of this relative permeability instead of
   // the steel's table (0 = the table).
   double linear_core_mu_r = 0.0;
@@ -109,6 +113,8 @@ inline std::vector<double> SimulateSwitchOn(const IndependentValve& v, double su
     return d;
   };
   std::vector<double> out(n, 0.0);
+  supply_V *= v.supply_gain;
+  on += static_cast<std::size_t>(std::llround(v.delay_s / v.dt_s));
   const int sub = 20;
   const double h = v.dt_s / sub;
   for (std::size_t k = 0; k < n; ++k) {

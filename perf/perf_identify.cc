@@ -40,6 +40,7 @@
 #include "gap/diagnose.h"
 #include "gap/moving_valve.h"
 #include "model/params.h"
+#include "perf/independent_session.h"
 #include "perf/independent_valve.h"
 
 namespace {
@@ -223,38 +224,9 @@ int main(int argc, char** argv) {
     if (has("eddy")) v.Re1_ohm = 1e12;
     if (has("core")) v.linear_core_mu_r = 3000.0;
     if (has("scope")) v.offset_A = v.spike_A = 0.0;
-    const std::size_t on = static_cast<std::size_t>(std::llround(1e-4 / v.dt_s));
-    const std::size_t n = on + static_cast<std::size_t>(std::llround(0.01 / v.dt_s)) + 1;
-    vb::gap::Dataset ds;
-    ds.format = vb::gap::kFormatValveRuns2;
-    ds.model = "taghizadeh2009";
-    ds.device = "independent-" + std::to_string(j);
-    ds.sensor.noise_A = v.noise_A;
-    ds.sensor.averaged = v.averaged;
-    ds.sensor.adc_lsb_A = v.lsb_A;
-    struct Plan {
-      double V, bar;
-      bool holdout;
-    };
-    const Plan plans[] = {{v.supply_V, 1, false}, {v.supply_V, 2, false}, {v.supply_V, 4, false},
-                          {v.supply_V, 6, true}, {0.75 * v.supply_V, 4, true}};
-    int r = 0;
-    for (const Plan& p : plans) {
-      vb::gap::RunData run;
-      run.id = "on" + std::to_string(r) + "_" + std::to_string(static_cast<int>(p.bar)) + "bar";
-      run.supply_V = p.V;
-      run.supply_pressure_Pa = p.bar * 1e5;
-      run.t_start_s = 2.0 * r++;
-      run.split = p.holdout ? vb::Split::kHoldout : vb::Split::kFit;
-      run.sample_period_s = v.dt_s;
-      const auto truth = vb::perf::SimulateSwitchOn(v, p.V, p.bar * 1e5, n, on);
-      run.i_A = vb::perf::Capture(v, truth, on, rng);
-      for (std::size_t k = 0; k < n; ++k) {
-        run.t_s.push_back(static_cast<double>(k) * v.dt_s);
-        run.gate.push_back(k >= on ? 1 : 0);
-      }
-      ds.runs.push_back(std::move(run));
-    }
+    const vb::gap::Dataset ds = vb::perf::IndependentSession(
+        v, {{v.supply_V, 1}, {v.supply_V, 2}, {v.supply_V, 4}, {v.supply_V, 6, true}, {0.75 * v.supply_V, 4, true}}, rng,
+        "independent-" + std::to_string(j), true);
     const auto t0 = Clock::now();
     const double c0 = CpuSeconds();
     vb::gap::MovingIdentifyOptions mo;
