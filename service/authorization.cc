@@ -15,7 +15,7 @@ using grpc::experimental::InterceptionHookPoints;
 constexpr std::string_view kServicePrefix = "/valvebench.v1.BenchService/";
 
 // viewer: reads everything; operator: submits, imports, cancels its own runs (CancelRun checks ownership: that
-// is the run's data, not the method's); admin: prunes the store.
+// is the run's data, not the method's), saves baselines and regression results; admin: prunes the store.
 constexpr std::array kTable = {
     MethodRole{"SubmitRun", Role::kOperator},      MethodRole{"SubmitBatch", Role::kOperator},
     MethodRole{"GetRun", Role::kViewer},           MethodRole{"ListRuns", Role::kViewer},
@@ -25,6 +25,14 @@ constexpr std::array kTable = {
     MethodRole{"ImportRuns", Role::kOperator},     MethodRole{"ImportRunsStream", Role::kOperator},
     MethodRole{"ListNights", Role::kViewer},       MethodRole{"GetBenchHealth", Role::kViewer},
     MethodRole{"DiagnoseRuns", Role::kViewer},     MethodRole{"PruneRuns", Role::kAdmin},
+    // Records besides runs (service/records_service.cc). Reads are the viewer's, as every read above.
+    // Saving a baseline or a regression result adds to the store's shared history the way a submission adds
+    // runs, and it is what `benchctl baseline set`/`regress` do right after submitting a suite: the operator's
+    // role, not the admin's (who prunes). Nothing here deletes or overwrites (a baseline only gains versions).
+    // DescribeStore only counts: the viewer's.
+    MethodRole{"SaveBaseline", Role::kOperator},   MethodRole{"GetBaseline", Role::kViewer},
+    MethodRole{"ListBaselines", Role::kViewer},    MethodRole{"SaveRegression", Role::kOperator},
+    MethodRole{"GetRegression", Role::kViewer},    MethodRole{"DescribeStore", Role::kViewer},
 };
 
 class AuthInterceptor final : public grpc::experimental::Interceptor {

@@ -49,6 +49,8 @@ class StorePool {
   // Connections open now (in use and idle), and idle ones, for the tests and the log.
   int open() const;
   int idle() const;
+  // What its connections open: a SQLite file or a PostgreSQL connection string (DescribeStore).
+  const std::string& location() const { return path_; }
 
  private:
   friend class Handle;
@@ -133,6 +135,19 @@ class BenchServiceImpl final : public valvebench::v1::BenchService::Service {
   // service/queue_service.cc
   grpc::Status GetQueue(grpc::ServerContext* ctx, const valvebench::v1::GetQueueRequest* req,
                         valvebench::v1::GetQueueResponse* resp) override;
+  // service/records_service.cc: baselines, regression results, the store as a whole
+  grpc::Status SaveBaseline(grpc::ServerContext* ctx, const valvebench::v1::SaveBaselineRequest* req,
+                            valvebench::v1::Baseline* resp) override;
+  grpc::Status GetBaseline(grpc::ServerContext* ctx, const valvebench::v1::GetBaselineRequest* req,
+                           valvebench::v1::Baseline* resp) override;
+  grpc::Status ListBaselines(grpc::ServerContext* ctx, const valvebench::v1::ListBaselinesRequest* req,
+                             valvebench::v1::ListBaselinesResponse* resp) override;
+  grpc::Status SaveRegression(grpc::ServerContext* ctx, const valvebench::v1::SaveRegressionRequest* req,
+                              valvebench::v1::SaveRegressionResponse* resp) override;
+  grpc::Status GetRegression(grpc::ServerContext* ctx, const valvebench::v1::GetRegressionRequest* req,
+                             valvebench::v1::Regression* resp) override;
+  grpc::Status DescribeStore(grpc::ServerContext* ctx, const valvebench::v1::DescribeStoreRequest* req,
+                             valvebench::v1::DescribeStoreResponse* resp) override;
 
   // Admits and queues a submission (runs::Admit, runs::Enqueue) and wakes the workers: what SubmitRun and
   // SubmitBatch do after authorising, and what the nights scheduler calls directly.
