@@ -337,4 +337,98 @@ StatusOr<v1::PruneRunsResponse> Client::PruneRuns(const v1::PruneRunsRequest& re
   return resp;
 }
 
+namespace {
+
+regress::Baseline FromProto(const v1::Baseline& p) {
+  regress::Baseline b;
+  b.name = p.name();
+  b.version = p.version();
+  b.created_unix_s = p.created_unix_s();
+  b.source = p.source();
+  b.note = p.note();
+  for (const v1::BaselineEntry& e : p.entries()) b.cases[e.case_name()][e.metric()] = {e.mean(), e.spread(), e.n()};
+  return b;
+}
+
+}  // namespace
+
+StatusOr<regress::Baseline> Client::SaveBaseline(const regress::Baseline& b) {
+  v1::SaveBaselineRequest req;
+  v1::Baseline* p = req.mutable_baseline();
+  p->set_name(b.name);
+  p->set_source(b.source);
+  p->set_note(b.note);
+  for (const auto& [c, metrics] : b.cases)
+    for (const auto& [metric, s] : metrics) {
+      if (s.n <= 0) continue;  // no finite value in any repeat: nothing to hold a later run against
+      v1::BaselineEntry* e = p->add_entries();
+      e->set_case_name(c);
+      e->set_metric(metric);
+      e->set_mean(s.mean);
+      e->set_spread(s.spread);
+      e->set_n(s.n);
+    }
+  grpc::ClientContext ctx;
+  Prepare(&ctx, opt_.deadline_s);
+  v1::Baseline resp;
+  auto st = stub_->SaveBaseline(&ctx, req, &resp);
+  if (!st.ok()) return Fail(st);
+  return FromProto(resp);
+}
+
+StatusOr<regress::Baseline> Client::GetBaseline(const std::string& name, int version) {
+  v1::GetBaselineRequest req;
+  req.set_name(name);
+  req.set_version(version);
+  grpc::ClientContext ctx;
+  Prepare(&ctx, opt_.deadline_s);
+  v1::Baseline resp;
+  auto st = stub_->GetBaseline(&ctx, req, &resp);
+  if (!st.ok()) return Fail(st);
+  return FromProto(resp);
+}
+
+StatusOr<std::vector<regress::Baseline>> Client::ListBaselines() {
+  grpc::ClientContext ctx;
+  Prepare(&ctx, opt_.deadline_s);
+  v1::ListBaselinesResponse resp;
+  auto st = stub_->ListBaselines(&ctx, v1::ListBaselinesRequest{}, &resp);
+  if (!st.ok()) return Fail(st);
+  std::vector<regress::Baseline> out;
+  out.reserve(resp.baselines_size());
+  for (const v1::Baseline& b : resp.baselines()) out.push_back(FromProto(b));
+  return out;
+}
+
+StatusOr<std::int64_t> Client::SaveRegression(const regress::RegressResult& result) {
+  v1::SaveRegressionRequest req;
+  req.set_result_json(regress::ResultToJson(result).dump());
+  grpc::ClientContext ctx;
+  Prepare(&ctx, opt_.deadline_s);
+  v1::SaveRegressionResponse resp;
+  auto st = stub_->SaveRegression(&ctx, req, &resp);
+  if (!st.ok()) return Fail(st);
+  return resp.id();
+}
+
+StatusOr<v1::Regression> Client::GetRegression(std::int64_t id) {
+  v1::GetRegressionRequest req;
+  req.set_id(id);
+  grpc::ClientContext ctx;
+  Prepare(&ctx, opt_.deadline_s);
+  v1::Regression resp;
+  auto st = stub_->GetRegression(&ctx, req, &resp);
+  if (!st.ok()) return Fail(st);
+  return resp;
+}
+
+StatusOr<v1::DescribeStoreResponse> Client::DescribeStore() {
+  grpc::ClientContext ctx;
+  Prepare(&ctx, opt_.deadline_s);
+  v1::DescribeStoreResponse resp;
+  auto st = stub_->DescribeStore(&ctx, v1::DescribeStoreRequest{}, &resp);
+  if (!st.ok()) return Fail(st);
+  return resp;
+}
+
 }  // namespace vb::client

@@ -13,6 +13,7 @@
 
 #include "common/status.h"
 #include "common/trace_columns.h"
+#include "regress/compare.h"
 #include "valvebench/v1/api.grpc.pb.h"
 
 namespace vb::client {
@@ -93,6 +94,24 @@ class Client {
   // delete takes a while, hence its own deadline.
   StatusOr<valvebench::v1::PruneRunsResponse> PruneRuns(const valvebench::v1::PruneRunsRequest& request,
                                                         double deadline_s = 600.0);
+
+  // Baselines and regression results in the service's store (docs/regress.md): a server's for the lab's shared
+  // history, the local service's for benchctl --local. Errors are the service's, naming the field or the record
+  // ("baseline.entries[2].spread: ...", "baseline 'main' has no version 9", "regression 7 not found").
+  //
+  // Stores the cases' statistics with n > 0 under b.name as its next version (b.version is ignored); returns
+  // the baseline as stored (its version and time).
+  StatusOr<regress::Baseline> SaveBaseline(const regress::Baseline& b);
+  // version 0 = the newest.
+  StatusOr<regress::Baseline> GetBaseline(const std::string& name, int version = 0);
+  // Every version of every baseline, without their cases.
+  StatusOr<std::vector<regress::Baseline>> ListBaselines();
+  // Keeps a regression result (its batch_id: a batch of the service's store, or 0); returns its id.
+  StatusOr<std::int64_t> SaveRegression(const regress::RegressResult& result);
+  // A stored result (a client's or a scheduled night's) with its whole JSON.
+  StatusOr<valvebench::v1::Regression> GetRegression(std::int64_t id);
+  // The service's store as a whole: engine, location, schema version, counts (benchctl db info).
+  StatusOr<valvebench::v1::DescribeStoreResponse> DescribeStore();
 
  private:
   friend class TraceStream;
