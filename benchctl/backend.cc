@@ -57,8 +57,9 @@ Backend::Backend(Status why, std::string where) : broken_(std::move(why)), where
 
 Backend::~Backend() = default;
 
-Status Backend::Named(Status st) const {
-  if (local_ != nullptr && st.code() == StatusCode::kNotFound && st.message().find(where_) == std::string::npos)
+Status Backend::Named(Status st, bool always) const {
+  if ((always || (local_ != nullptr && st.code() == StatusCode::kNotFound)) &&
+      st.message().find(where_) == std::string::npos)
     return st.WithContext(where_);
   return st;
 }
@@ -243,6 +244,60 @@ StatusOr<v1::SubmitRunResponse> Backend::Import(const v1::ImportRunsRequest& req
   auto r = c_->ImportRuns(request);
   if (!r.ok()) return Named(r.status());
   return r;
+}
+
+Status Backend::RecordsKept() const {
+  if (!keeps_runs())
+    return Status::InvalidArgument("--no-store: baselines and regression results need a store that is kept "
+                                   "(--db FILE, or --server ADDR)");
+  return Status::Ok();
+}
+
+StatusOr<regress::Baseline> Backend::SaveBaseline(const regress::Baseline& baseline) {
+  VB_BACKEND_READY();
+  VB_RETURN_IF_ERROR(RecordsKept());
+  auto b = c_->SaveBaseline(baseline);
+  if (!b.ok()) return Named(b.status(), /*always=*/true);
+  return b;
+}
+
+StatusOr<regress::Baseline> Backend::GetBaseline(const std::string& name, int version) {
+  VB_BACKEND_READY();
+  VB_RETURN_IF_ERROR(RecordsKept());
+  auto b = c_->GetBaseline(name, version);
+  if (!b.ok()) return Named(b.status(), /*always=*/true);
+  return b;
+}
+
+StatusOr<std::vector<regress::Baseline>> Backend::ListBaselines() {
+  VB_BACKEND_READY();
+  VB_RETURN_IF_ERROR(RecordsKept());
+  auto list = c_->ListBaselines();
+  if (!list.ok()) return Named(list.status(), /*always=*/true);
+  return list;
+}
+
+StatusOr<std::int64_t> Backend::SaveRegression(const regress::RegressResult& result) {
+  VB_BACKEND_READY();
+  VB_RETURN_IF_ERROR(RecordsKept());
+  auto id = c_->SaveRegression(result);
+  if (!id.ok()) return Named(id.status(), /*always=*/true);
+  return id;
+}
+
+StatusOr<v1::Regression> Backend::GetRegression(std::int64_t id) {
+  VB_BACKEND_READY();
+  VB_RETURN_IF_ERROR(RecordsKept());
+  auto r = c_->GetRegression(id);
+  if (!r.ok()) return Named(r.status(), /*always=*/true);
+  return r;
+}
+
+StatusOr<v1::DescribeStoreResponse> Backend::DescribeStore() {
+  VB_BACKEND_READY();
+  auto d = c_->DescribeStore();
+  if (!d.ok()) return Named(d.status(), /*always=*/true);
+  return d;
 }
 
 #undef VB_BACKEND_READY

@@ -22,6 +22,7 @@
 #include "common/status.h"
 #include "experiment/compare.h"
 #include "experiment/spec.h"
+#include "regress/compare.h"
 #include "service/local_service.h"
 #include "benchctl/run_view.h"
 
@@ -112,9 +113,23 @@ class Backend final {
   // Stores a measured dataset's runs (benchctl import).
   StatusOr<valvebench::v1::SubmitRunResponse> Import(const valvebench::v1::ImportRunsRequest& request);
 
+  // Baselines and regression results, kept in this service's store beside its runs (docs/regress.md): the
+  // server's with --server, the local store's otherwise. Not with --no-store (keeps_runs() false): a record
+  // nobody can read back is refused, naming --db.
+  StatusOr<regress::Baseline> SaveBaseline(const regress::Baseline& baseline);
+  StatusOr<regress::Baseline> GetBaseline(const std::string& name, int version);  // 0 = the newest
+  StatusOr<std::vector<regress::Baseline>> ListBaselines();
+  StatusOr<std::int64_t> SaveRegression(const regress::RegressResult& result);
+  StatusOr<valvebench::v1::Regression> GetRegression(std::int64_t id);
+  // The service's store as a whole (benchctl db info).
+  StatusOr<valvebench::v1::DescribeStoreResponse> DescribeStore();
+  // Whether records can be kept here: InvalidArgument naming --db for a local service with --no-store.
+  Status RecordsKept() const;
+
  private:
-  // A local service's errors that name nothing of where (a run not found) name its store.
-  Status Named(Status st) const;
+  // A local service's errors that name nothing of where (a run not found) name its store; with `always`,
+  // any error of either service does (records: which store refused the baseline or has none of that name).
+  Status Named(Status st, bool always = false) const;
 
   Status broken_;
   std::string where_;

@@ -12,7 +12,6 @@
 #include "benchctl/backend.h"
 #include "benchctl/cli_common.h"
 #include "proto/api_convert.h"
-#include "service/local_records.h"
 #include "experiment/spec.h"
 #include "gap/text_wrap.h"
 #include "regress/compare.h"
@@ -79,7 +78,9 @@ bool LooksLikeFile(const std::string& arg) {
   return arg.find('/') != std::string::npos || (arg.size() > 5 && arg.compare(arg.size() - 5, 5, ".json") == 0);
 }
 
-StatusOr<regress::Baseline> LoadBaselineArg(const std::string& arg, int version, const std::string& store_path) {
+// --baseline NAME|FILE: a baseline file wherever the suite runs (CI keeps its baseline in the repository), or
+// a name in the store of the service that runs the suite (the server's with --server, else the local store).
+StatusOr<regress::Baseline> LoadBaselineArg(const std::string& arg, int version, Backend& backend) {
   if (LooksLikeFile(arg)) {
     std::ifstream in(arg);
     if (!in) return Status::NotFound("--baseline: cannot open the baseline file '" + arg + "'");
@@ -93,13 +94,11 @@ StatusOr<regress::Baseline> LoadBaselineArg(const std::string& arg, int version,
     if (!b.ok()) return b.status().WithContext("--baseline " + arg);
     return b;
   }
-  auto records = server::LocalRecords::Open(store_path);
-  if (!records.ok()) return records.status();
-  auto rec = (*records)->GetBaseline(arg, version);
+  auto rec = backend.GetBaseline(arg, version);
   if (!rec.ok()) {
     if (rec.status().code() == StatusCode::kNotFound)
-      return Status::NotFound("--baseline: " + rec.status().message() + " in " + store_path +
-                              " (create it: benchctl baseline set " + arg + " --suite SUITE, or --batch B)");
+      return Status::NotFound("--baseline: " + rec.status().message() + " (create it: benchctl baseline set " + arg +
+                              " --suite SUITE, or --batch B)");
     return rec.status();
   }
   return rec;
@@ -128,7 +127,9 @@ RegressCli::RegressCli(CLI::App* app, SharedOptions shared) : shared_(shared) {
   auto common = [this](CLI::App* sub, bool with_db = true) {
     sub->add_flag("--json", *shared_.json, "machine-readable output on stdout");
     AddServerOptions(sub, shared_);
-    if (with_db) sub->add_option("--db", *shared_.store_path, "local store holding baselines and regression results");
+    if (with_db)
+      sub->add_option("--db", *shared_.store_path,
+                      "local store holding baselines and regression results (without --server)");
   };
   baseline_ = app->add_subcommand("baseline", "named, versioned metric baselines for regress");
   baseline_->require_subcommand(1);
@@ -140,17 +141,20 @@ RegressCli::RegressCli(CLI::App* app, SharedOptions shared) : shared_(shared) {
   baseline_set_->add_option("--note", note_, "stored with the baseline");
   baseline_set_->add_flag("--local", local_, "batch/suite on the embedded emulator and local store");
   common(baseline_set_);
-  baseline_list_ = baseline_->add_subcommand("list", "every baseline and version");
+  baseline_list_ = baseline_->add_subcommand("list", "every baseline and version (the server's, or the local store's)");
+  baseline_list_->add_flag("--local", local_, "the local store's, even if a server is configured");
   common(baseline_list_);
   baseline_show_ = baseline_->add_subcommand("show", "one baseline's values (--json: the baseline file format)");
   baseline_show_->add_option("name", name_, "baseline name")->required();
   baseline_show_->add_option("--version", version_, "an older version (default: the newest)");
+  baseline_show_->add_flag("--local", local_, "the local store's, even if a server is configured");
   common(baseline_show_);
 
   regress_ = app->add_subcommand("regress", "run a suite and compare it with a baseline (exit 1 on a regression)");
   regress_->add_option("suite", suite_path_, "suite file (protobuf JSON, proto/valvebench/v1/suite.proto)")
       ->required();
-  regress_->add_option("--baseline", baseline_arg_, "baseline name in the local store, or a baseline JSON file")
+  regress_->add_option("--baseline", baseline_arg_,
+                       "baseline JSON file, or a name in the store the suite runs on (the server's with --server)")
       ->required();
   regress_->add_option("--baseline-version", version_, "compare with this version (default: the newest)");
   regress_->add_flag("--local", local_, "run on the embedded emulator");
@@ -177,25 +181,27 @@ int RegressCli::Run(const ClientFactory& make_client) {
   if (baseline_set_->parsed()) {
     if ((batch_ != 0) == !suite_path_.empty())
       return Fail(Status::InvalidArgument("baseline set: give exactly one of --batch B and --suite SUITE"));
+    // The baseline is kept by the service that has its runs: the server's store with --server, else the
+    // local one (docs/regress.md, "Where baselines live").
+    auto backend = ChooseBackend(server, store_path, make_client,
+                                 {/*execute=*/!suite_path_.empty(), /*keep_traces=*/false});
+    if (auto st = backend->RecordsKept(); !st.ok()) return Fail(st);
     std::vector<regress::RunMetrics> runs;
     std::string source;
     if (!suite_path_.empty()) {
       auto suite = regress::LoadSuite(suite_path_);
       if (!suite.ok()) return Fail(suite.status());
       const std::uint64_t seed = seed_ != 0 ? seed_ : (suite->suite.seed() != 0 ? suite->suite.seed() : 1);
-      auto backend = ChooseBackend(server, store_path, make_client, {/*execute=*/true, /*keep_traces=*/false});
       auto out = RunSuite(*suite, seed, *backend);
       if (!out.ok()) return Fail(out.status());
       runs = std::move(out->runs);
       source = "suite " + suite->suite.name() + " (" + Where(server) + " batch " + std::to_string(out->batch_id) +
                ", seed " + std::to_string(seed) + ")";
     } else {
-      if (server.empty() && store_path.empty()) return Fail(server::LocalRecords::Open(store_path).status());
-      auto backend = ChooseBackend(server, store_path, make_client);
       auto r = backend->Runs(batch_, {});
       if (!r.ok()) return Fail(r.status().WithContext("--batch"));
       runs = ToRunMetrics(*r);
-      source = (server.empty() ? "local" : "server " + server) + " batch " + std::to_string(batch_);
+      source = Where(server) + " batch " + std::to_string(batch_);
     }
     const regress::Measured m = regress::Summarise(runs);
     if (!m.failures.empty()) {
@@ -204,9 +210,12 @@ int RegressCli::Run(const ClientFactory& make_client) {
       return Fail(Status::FailedPrecondition("baseline set: runs did not succeed; a baseline must come from good "
                                              "runs:" + list));
     }
-    auto records = server::LocalRecords::Open(store_path);
-    if (!records.ok()) return Fail(records.status());
-    auto rec = (*records)->SaveBaseline(name_, source, note_, m.stats);
+    regress::Baseline wanted;
+    wanted.name = name_;
+    wanted.source = source;
+    wanted.note = note_;
+    wanted.cases = m.stats;
+    auto rec = backend->SaveBaseline(wanted);
     if (!rec.ok()) return Fail(rec.status());
     const int v = rec->version;
     std::size_t values = 0;
@@ -214,8 +223,8 @@ int RegressCli::Run(const ClientFactory& make_client) {
     if (json) {
       std::cout << regress::BaselineToJson(*rec).dump(2) << "\n";
     } else {
-      std::printf("baseline %s version %d stored (%zu values from %s)%s\n", name_.c_str(), v, values,
-                  source.c_str(),
+      std::printf("baseline %s version %d stored in %s (%zu values from %s)%s\n", name_.c_str(), v,
+                  backend->Where().c_str(), values, source.c_str(),
                   v > 1 ? ("; versions 1-" + std::to_string(v - 1) + " are kept (baseline show " + name_ +
                            " --version N)").c_str()
                         : "");
@@ -224,9 +233,8 @@ int RegressCli::Run(const ClientFactory& make_client) {
   }
 
   if (baseline_list_->parsed()) {
-    auto records = server::LocalRecords::Open(store_path);
-    if (!records.ok()) return Fail(records.status());
-    auto list = (*records)->ListBaselines();
+    auto backend = ChooseBackend(server, store_path, make_client);
+    auto list = backend->ListBaselines();
     if (!list.ok()) return Fail(list.status());
     if (json) {
       Json a = Json::array();
@@ -235,7 +243,7 @@ int RegressCli::Run(const ClientFactory& make_client) {
                      {"source", b.source}, {"note", b.note}});
       std::cout << a.dump(2) << "\n";
     } else {
-      if (list->empty()) std::printf("no baselines in %s\n", store_path.c_str());
+      if (list->empty()) std::printf("no baselines in %s\n", backend->Where().c_str());
       for (const auto& b : *list)
         std::printf("%-20s v%-3d %s  %s%s%s\n", b.name.c_str(), b.version, Time(b.created_unix_s).c_str(),
                     b.source.c_str(), b.note.empty() ? "" : "  -- ", b.note.c_str());
@@ -244,9 +252,8 @@ int RegressCli::Run(const ClientFactory& make_client) {
   }
 
   if (baseline_show_->parsed()) {
-    auto records = server::LocalRecords::Open(store_path);
-    if (!records.ok()) return Fail(records.status());
-    auto rec = (*records)->GetBaseline(name_, version_);
+    auto backend = ChooseBackend(server, store_path, make_client);
+    auto rec = backend->GetBaseline(name_, version_);
     if (!rec.ok()) return Fail(rec.status());
     const regress::Baseline& b = *rec;
     if (json) {
@@ -265,28 +272,26 @@ int RegressCli::Run(const ClientFactory& make_client) {
     if (version_ < 0) return Fail(Status::InvalidArgument("--baseline-version: must be >= 1"));
     auto suite = regress::LoadSuite(suite_path_);
     if (!suite.ok()) return Fail(suite.status());
-    auto baseline = LoadBaselineArg(baseline_arg_, version_, store_path);
+    // One service for the whole command: it runs the suite, holds a named baseline and keeps the result.
+    auto backend = ChooseBackend(server, store_path, make_client, {/*execute=*/true, /*keep_traces=*/false});
+    auto baseline = LoadBaselineArg(baseline_arg_, version_, *backend);
     if (!baseline.ok()) return Fail(baseline.status());
     const std::uint64_t seed = seed_ != 0 ? seed_ : (suite->suite.seed() != 0 ? suite->suite.seed() : 1);
     if (!json)
       std::fprintf(stderr, "regress: suite %s (%d entries) on %s vs baseline %s v%d, seed %llu\n",
                    suite->suite.name().c_str(), suite->suite.experiments_size(), Where(server).c_str(),
                    baseline->name.c_str(), baseline->version, static_cast<unsigned long long>(seed));
-    auto backend = ChooseBackend(server, store_path, make_client, {/*execute=*/true, /*keep_traces=*/false});
     auto out = RunSuite(*suite, seed, *backend);
     if (!out.ok()) return Fail(out.status());
     regress::RegressResult r = regress::Compare(suite->suite, *baseline, regress::Summarise(out->runs));
     r.batch_id = out->batch_id;
     r.where = server.empty() ? "local" : server;
     r.seed = seed;
-    if (!store_path.empty()) {
-      auto records = server::LocalRecords::Open(store_path);
-      if (records.ok()) {
-        // A server batch is not in this store.
-        auto id = (*records)->SaveRegression(r, server.empty() ? r.batch_id : 0);
-        if (id.ok()) r.id = *id;
-        else std::fprintf(stderr, "benchctl: warning: the result was not stored: %s\n", id.status().message().c_str());
-      }
+    if (backend->RecordsKept().ok()) {  // --no-store keeps nothing, the result included
+      // Beside its batch, in the same store (the server's history with --server).
+      auto id = backend->SaveRegression(r);
+      if (id.ok()) r.id = *id;
+      else std::fprintf(stderr, "benchctl: warning: the result was not stored: %s\n", id.status().message().c_str());
     }
     if (!junit_path_.empty()) {
       auto st = WriteFile(junit_path_, regress::JUnitXml(r));
@@ -296,8 +301,10 @@ int RegressCli::Run(const ClientFactory& make_client) {
       std::cout << regress::ResultToJson(r).dump(2) << "\n";
     } else {
       std::cout << regress::ResultTable(r);
-      if (r.id != 0) std::printf("regression %lld stored (benchctl report --regress %lld --html FILE)\n",
-                                 static_cast<long long>(r.id), static_cast<long long>(r.id));
+      if (r.id != 0)
+        std::printf("regression %lld stored in %s (benchctl report --regress %lld%s --html FILE)\n",
+                    static_cast<long long>(r.id), backend->Where().c_str(), static_cast<long long>(r.id),
+                    server.empty() ? "" : (" --server " + server).c_str());
     }
     return r.regressed() ? kExitRunFailed : kExitOk;
   }

@@ -1,8 +1,10 @@
 // benchctl's regression commands (docs/regress.md):
 //   baseline set NAME (--batch B | --suite SUITE) [--local | --server ADDR] [--note TEXT]
-//   baseline list | baseline show NAME [--version N]     (--json of show is the baseline file format)
+//   baseline list | baseline show NAME [--version N] [--local | --server ADDR]  (show --json: the baseline file)
 //   regress SUITE --baseline NAME|FILE.json [--local | --server ADDR] [--junit FILE] [--json] [--seed N]
-// Baselines and regression results live in the local store (--db); a baseline can also be a JSON file (CI).
+// Baselines and regression results live in the store of the service that runs the suite: the server's with
+// --server (the lab's shared history, beside its nights), else the local store (--db); a baseline can also be a
+// JSON file, wherever the suite runs (CI). benchctl reaches them through the service's RPCs (client::Client).
 // Exit codes: 0 nothing regressed; 1 a regression or a failed run; 2 bad input or refused; 3 environment.
 #pragma once
 

@@ -9,7 +9,6 @@
 
 #include "benchctl/backend.h"
 #include "benchctl/cli_common.h"
-#include "service/local_records.h"
 #include "experiment/compare.h"
 #include "experiment/metrics.h"
 #include "experiment/spec.h"
@@ -37,7 +36,8 @@ ReportCli::ReportCli(CLI::App* app, SharedOptions shared) : shared_(shared) {
   report_ = app->add_subcommand("report", "a self-contained HTML report: traces, comparison, maps, regressions");
   report_->add_option("--batch", batch_, "the runs of this batch: comparison, Pareto scatter, static map, traces");
   report_->add_option("--run", run_, "one run: its traces and metrics");
-  report_->add_option("--regress", regress_, "a regression result stored by benchctl regress (local store)");
+  report_->add_option("--regress", regress_,
+                      "a stored regression result (benchctl regress, or a night): the server's, or the local store's");
   report_->add_option("--diagnosis", diagnosis_, "a gap diagnosis JSON file (benchctl diagnose --json-out FILE, or --json > FILE)");
   report_->add_option("--html", html_, "output HTML file")->required();
   report_->add_option("--max-traces", max_traces_, "traces of at most this many runs (default 100)")
@@ -65,19 +65,21 @@ int ReportCli::Run(const ClientFactory& make_client) {
     title = "Gap diagnosis: " + diagnosis_;
     sections = report::DiagnosisSections(*j);
   } else if (regress_ != 0) {
-    if (store_path.empty()) return Fail(Status::InvalidArgument("--regress needs the local store (--db)"));
-    auto records = server::LocalRecords::Open(store_path);
-    if (!records.ok()) return Fail(records.status());
-    auto rec = (*records)->GetRegression(regress_);
+    // A result kept by benchctl regress or a night: the server's with --server, else the local store's.
+    if (server.empty() && store_path.empty())
+      return Fail(Status::InvalidArgument("--regress with --no-store: no regression result is kept there (--db)"));
+    auto backend = ChooseBackend(server, store_path, make_client);
+    auto rec = backend->GetRegression(regress_);
     if (!rec.ok()) return Fail(rec.status());
     Json r;
     try {
-      r = Json::parse(rec->result_json);
+      r = Json::parse(rec->result_json());
     } catch (const Json::exception& e) {
-      return Fail(Status::DataLoss("regression " + std::to_string(regress_) + ": stored result is not JSON"));
+      return Fail(Status::DataLoss("regression " + std::to_string(regress_) + " in " + backend->Where() +
+                                   ": stored result is not JSON"));
     }
-    title = "Regression " + std::to_string(regress_) + ": suite " + rec->suite +
-            (rec->night.empty() ? "" : ", night " + rec->night);
+    title = "Regression " + std::to_string(regress_) + ": suite " + rec->suite() +
+            (rec->night().empty() ? "" : ", night " + rec->night());
     sections = report::RegressionSections(r);
   } else {
     if (server.empty() && store_path.empty())

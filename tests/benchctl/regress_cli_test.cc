@@ -65,6 +65,14 @@ TEST_F(RegressCli, UnchangedPassesWorsenedGainFailsWithNamesAndNumbers) {
   const std::string ok = Read(ok_xml);
   EXPECT_NE(ok.find("failures=\"0\""), std::string::npos) << ok;
   EXPECT_NE(ok.find("<testcase classname=\"ci.hold/pi\" name=\"rmse\">"), std::string::npos) << ok;
+  // Kept by the local service beside its batch, and read back through it (GetRegression).
+  EXPECT_NE(same.out.find("regression 1 stored in local store " + db_), std::string::npos) << same.out;
+  Result page = Benchctl("report --regress 1 --html " + dir_ + "/r1.html");
+  EXPECT_EQ(page.exit_code, 0) << page.out;
+  EXPECT_NE(page.out.find("Regression 1: suite ci"), std::string::npos) << page.out;
+  Result none = Benchctl("report --regress 99 --html " + dir_ + "/r99.html");
+  EXPECT_EQ(none.exit_code, 2) << none.out;
+  EXPECT_NE(none.out.find("regression 99 not found"), std::string::npos) << none.out;
 
   // A tenth of the default proportional gain: RMSE 0.83 -> 4.2 mA. (A tenth of the integral gain worsened the
   // RMSE sampled at one phase of the ripple, 0.31 -> 1.1 mA, but from the trajectory it improves it, 0.83 ->

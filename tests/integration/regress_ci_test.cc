@@ -6,6 +6,7 @@
 //   benchctl baseline show ci --json > examples/suites/ci-baseline.json
 #include <gtest/gtest.h>
 
+#include <filesystem>
 #include <fstream>
 #include <sstream>
 
@@ -42,6 +43,14 @@ TEST(CiRegression, SmallSuiteAgainstTheEmulatedBenchServerPasses) {
   EXPECT_NE(xml.find("<testsuite name=\"ci\""), std::string::npos) << xml;
   EXPECT_NE(xml.find("failures=\"0\""), std::string::npos) << xml;
   EXPECT_NE(xml.find("name=\"mean_position_pct\""), std::string::npos) << xml;
+  // The result is kept by the server that ran the suite, beside its batch (docs/regress.md, "Where baselines
+  // live"); the client's --db is not touched.
+  EXPECT_NE(r.out.find("regression 1 stored in server " + addr), std::string::npos) << r.out;
+  EXPECT_FALSE(std::filesystem::exists(dir + "/client.db")) << "a --server regress keeps nothing locally";
+  auto stored = testing::RunCommand(std::string(VB_BENCHCTL) + " report --regress 1 --server " + addr + " --token " +
+                                    testing::kViewerToken + " --html " + dir + "/regress.html");
+  EXPECT_EQ(stored.exit_code, 0) << stored.out;
+  EXPECT_NE(stored.out.find("Regression 1: suite ci"), std::string::npos) << stored.out;
 
   // A report of the server's batch: comparison, static map and traces fetched over gRPC.
   const std::string html = dir + "/batch.html";
@@ -67,6 +76,55 @@ TEST(CiRegression, SmallSuiteAgainstTheEmulatedBenchServerPasses) {
                                    " --junit " + dir + "/worse.xml --db " + dir + "/client.db");
   EXPECT_EQ(worse.exit_code, 1) << worse.out;
   EXPECT_NE(ReadAll(dir + "/worse.xml").find("rmse regressed: baseline "), std::string::npos);
+}
+
+// With --server, named baselines live on the server (the lab's shared history): set, listed and read there, by
+// name, from any client; the operator role saves, a viewer only reads; the local store holds none of it.
+TEST(CiRegression, NamedBaselinesLiveOnTheServer) {
+  const std::string dir = ::testing::TempDir() + "/vb-regress-named-" + std::to_string(::getpid());
+  std::filesystem::remove_all(dir);
+  testing::ServerProcess server(dir);
+  const std::string addr = server.Start();
+  ASSERT_FALSE(addr.empty()) << server.Log();
+  const std::string suite = std::string(VB_SOURCE_DIR) + "/examples/suites/ci.json";
+  const std::string local_db = " --db " + dir + "/client.db";
+  auto on = [&](const char* token) { return std::string(" --server ") + addr + " --token " + token + local_db; };
+  const std::string benchctl = std::string(VB_BENCHCTL) + " ";
+
+  auto set = testing::RunCommand(benchctl + "baseline set lab --suite " + suite + on(testing::kOperatorToken));
+  ASSERT_EQ(set.exit_code, 0) << set.out;
+  EXPECT_NE(set.out.find("baseline lab version 1 stored in server " + addr), std::string::npos) << set.out;
+  EXPECT_NE(set.out.find("(server " + addr + " batch 1, seed "), std::string::npos) << set.out;
+
+  auto viewer_set = testing::RunCommand(benchctl + "baseline set lab --batch 1" + on(testing::kViewerToken));
+  EXPECT_EQ(viewer_set.exit_code, 2) << viewer_set.out;
+  EXPECT_NE(viewer_set.out.find("needs the operator role"), std::string::npos) << viewer_set.out;
+
+  auto list = testing::RunCommand(benchctl + "baseline list --json" + on(testing::kViewerToken));
+  ASSERT_EQ(list.exit_code, 0) << list.out;
+  EXPECT_NE(list.out.find("\"name\": \"lab\""), std::string::npos) << list.out;
+  EXPECT_EQ(list.out.find("\"version\": 2"), std::string::npos) << "the viewer's refused set stored nothing: "
+                                                                  << list.out;
+  EXPECT_FALSE(std::filesystem::exists(dir + "/client.db")) << "no command above wrote the local store";
+  auto local_list = testing::RunCommand(benchctl + "baseline list --local --json" + local_db);
+  ASSERT_EQ(local_list.exit_code, 0) << local_list.out;
+  EXPECT_EQ(local_list.out.find("lab"), std::string::npos) << "the local store has no server baseline: "
+                                                            << local_list.out;
+
+  // regress by name on the server: the same suite and seed against the baseline it just took.
+  auto same = testing::RunCommand(benchctl + "regress " + suite + " --baseline lab" + on(testing::kOperatorToken));
+  EXPECT_EQ(same.exit_code, 0) << same.out;
+  EXPECT_NE(same.out.find("PASSED"), std::string::npos) << same.out;
+  EXPECT_NE(same.out.find("regression 1 stored in server " + addr), std::string::npos) << same.out;
+  auto missing = testing::RunCommand(benchctl + "regress " + suite + " --baseline nope" + on(testing::kOperatorToken));
+  EXPECT_EQ(missing.exit_code, 2) << missing.out;
+  EXPECT_NE(missing.out.find("server " + addr + ": baseline 'nope' not found"), std::string::npos) << missing.out;
+
+  // db info of the server's store, as a viewer: the baseline and the result are counted there.
+  auto info = testing::RunCommand(benchctl + "db info --json --server " + addr + " --token " + testing::kViewerToken);
+  ASSERT_EQ(info.exit_code, 0) << info.out;
+  EXPECT_NE(info.out.find("\"baselines\": 1"), std::string::npos) << info.out;
+  EXPECT_NE(info.out.find("\"regressions\": 1"), std::string::npos) << info.out;
 }
 
 }  // namespace
