@@ -4,6 +4,7 @@
 #include <cstdio>
 #include <nlohmann/json.hpp>
 
+#include "benchctl/backend.h"
 #include "benchctl/cli_common.h"
 #include "service/store_admin.h"
 
@@ -27,48 +28,59 @@ std::string Bytes(std::int64_t b) {
 
 }  // namespace
 
-DbCli::DbCli(CLI::App* app, bool* json, std::string* store_path) : json_(json), store_path_(store_path) {
+DbCli::DbCli(CLI::App* app, SharedOptions shared) : shared_(shared) {
   cmd_ = app->add_subcommand("db", "the store itself: info, copy a SQLite store into PostgreSQL");
   cmd_->require_subcommand(1);
   info_ = cmd_->add_subcommand("info", "engine, schema version, runs by status, rows, trace bytes");
-  info_->add_option("--db", *store_path_,
+  info_->add_option("--db", *shared_.store_path,
                     "the store: a SQLite file or a PostgreSQL connection string "
-                    "(default $VALVEBENCH_DB or ~/.local/share/valvebench/local.db)");
-  info_->add_flag("--json", *json_, "machine-readable output on stdout");
+                    "(default $VALVEBENCH_DB or ~/.local/share/valvebench/local.db); given, it wins over a server");
+  info_->add_flag("--local", local_, "the local store, even if a server is configured");
+  AddServerOptions(info_, shared_);
+  info_->add_flag("--json", *shared_.json, "machine-readable output on stdout");
   copy_ = cmd_->add_subcommand("copy", "copy a SQLite store's history into PostgreSQL, keeping ids");
   copy_->add_option("--from", from_, "the SQLite store file")->required();
   copy_->add_option("--to", to_, "the PostgreSQL database: postgresql://... or \"host=... dbname=...\"")->required();
   copy_->add_flag("--into-non-empty", into_non_empty_, "copy even if the target holds runs (no id may collide)");
-  copy_->add_flag("--json", *json_, "machine-readable output on stdout");
+  copy_->add_flag("--json", *shared_.json, "machine-readable output on stdout");
 }
 
-int DbCli::Run() {
+int DbCli::Run(const ClientFactory& make_client) {
+  const bool json = *shared_.json;
   if (info_->parsed()) {
-    if (store_path_->empty()) return Fail(Status::InvalidArgument("--db: give the store (a file or postgresql://...)"));
-    auto info = server::DescribeStore(*store_path_);
+    const std::string& store_path = *shared_.store_path;
+    // A store named with --db is that store, whatever server is configured: db info is about a store.
+    const bool named = info_->count("--db") > 0;
+    const std::string server = (local_ || named) ? "" : *shared_.server;
+    if (server.empty() && store_path.empty())
+      return Fail(Status::InvalidArgument("--db: give the store (a file or postgresql://...)"));
+    auto backend = ChooseBackend(server, store_path, make_client);  // reads only: executes nothing
+    auto info = backend->DescribeStore();
     if (!info.ok()) return Fail(info.status());
-    if (*json_) {
+    if (json) {
       Json j;
-      j["engine"] = info->engine;
-      j["location"] = info->location;
-      j["schema_version"] = info->schema_version;
+      j["engine"] = info->engine();
+      j["location"] = info->location();
+      j["schema_version"] = info->schema_version();
       Json by_status = Json::object();
-      for (const auto& [s, n] : info->runs_by_status) by_status[s] = n;
+      for (const auto& c : info->runs_by_status()) by_status[c.name()] = c.count();
       j["runs_by_status"] = by_status;
       Json rows = Json::object();
-      for (const auto& [t, n] : info->rows) rows[t] = n;
+      for (const auto& c : info->rows()) rows[c.name()] = c.count();
       j["rows"] = rows;
-      j["trace_bytes"] = info->trace_bytes;
+      j["trace_bytes"] = info->trace_bytes();
       std::printf("%s\n", j.dump(2).c_str());
       return kExitOk;
     }
-    std::printf("engine          %s\nlocation        %s\nschema version  %d\n", info->engine.c_str(),
-                info->location.c_str(), info->schema_version);
+    std::printf("engine          %s\nlocation        %s\nschema version  %d\n", info->engine().c_str(),
+                info->location().c_str(), info->schema_version());
     std::printf("runs           ");
-    for (const auto& [s, n] : info->runs_by_status) std::printf(" %s %lld", s.c_str(), static_cast<long long>(n));
+    for (const auto& c : info->runs_by_status())
+      std::printf(" %s %lld", c.name().c_str(), static_cast<long long>(c.count()));
     std::printf("\n");
-    for (const auto& [t, n] : info->rows) std::printf("%-15s %lld rows\n", t.c_str(), static_cast<long long>(n));
-    std::printf("trace data      %s (as stored, compressed)\n", Bytes(info->trace_bytes).c_str());
+    for (const auto& c : info->rows())
+      std::printf("%-15s %lld rows\n", c.name().c_str(), static_cast<long long>(c.count()));
+    std::printf("trace data      %s (as stored, compressed)\n", Bytes(info->trace_bytes()).c_str());
     return kExitOk;
   }
   if (copy_->parsed()) {
@@ -76,7 +88,7 @@ int DbCli::Run() {
     auto summary = server::CopyStoreToPostgres(from_, to_, into_non_empty_);
     if (!summary.ok()) return Fail(summary.status());
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    if (*json_) {
+    if (json) {
       Json j;
       j["from"] = from_;
       j["source_schema_version"] = summary->source_version;

@@ -1,7 +1,9 @@
 // benchctl db: the store itself (docs/store.md, "PostgreSQL"; docs/cli.md).
-//   db info [--db LOCATION] [--json]
-//       engine, where, schema version, runs by status, rows per table, trace bytes. LOCATION: a SQLite file or a
-//       PostgreSQL connection string (postgresql://..., "host=... dbname=...").
+//   db info [--db LOCATION | --server ADDR | --local] [--json]
+//       engine, where, schema version, runs by status, rows per table, trace bytes, as the service's DescribeStore
+//       RPC counts them. LOCATION: a SQLite file or a PostgreSQL connection string (postgresql://..., "host=...
+//       dbname=..."), read by a local service started over it; --db given wins, else the server if one is given
+//       (--server or VALVEBENCH_SERVER) and not --local, else the default local store.
 //   db copy --from FILE.db --to postgresql://... [--into-non-empty] [--json]
 //       moves a SQLite store's history into PostgreSQL, keeping ids: runs, status history, metrics, tags, sweep
 //       points, traces as stored, batches, baselines, regression results. One transaction: all or nothing.
@@ -12,18 +14,20 @@
 #include <CLI/CLI.hpp>
 #include <string>
 
+#include "benchctl/regress_commands.h"
+
 namespace vb::benchctl {
 
 class DbCli {
  public:
-  // json: the global --json flag; store_path: the global local store (--db's default).
-  DbCli(CLI::App* app, bool* json, std::string* store_path);
+  // shared: the global --json, server options and local store (--db's default).
+  DbCli(CLI::App* app, SharedOptions shared);
   bool parsed() const { return cmd_->parsed(); }
-  int Run();
+  int Run(const ClientFactory& make_client);
 
  private:
-  bool* json_;
-  std::string* store_path_;
+  SharedOptions shared_;
+  bool local_ = false;
   CLI::App* cmd_ = nullptr;
   CLI::App* info_ = nullptr;
   CLI::App* copy_ = nullptr;

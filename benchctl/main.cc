@@ -176,7 +176,7 @@ int main(int argc, char** argv) {
   // diagnose, identify, convert, import (benchctl/gap_commands.cc).
   vb::benchctl::GapCli gap_cli(&app, {&json, &server, &token, &tls_ca_file, &store_path});
   vb::benchctl::PruneCli prune_cli(&app, {&json, &server, &token, &tls_ca_file, &store_path});  // prune_command.cc
-  vb::benchctl::DbCli db_cli(&app, &json, &store_path);  // db info, db copy (db_commands.cc)
+  vb::benchctl::DbCli db_cli(&app, {&json, &server, &token, &tls_ca_file, &store_path});  // db_commands.cc
 
   try {
     app.parse(argc, argv);
@@ -214,7 +214,7 @@ int main(int argc, char** argv) {
     return vb::benchctl::ChooseBackend(local ? "" : server, store_path, make_client, use);
   };
   if (prune_cli.parsed()) return prune_cli.Run();
-  if (db_cli.parsed()) return db_cli.Run();
+  if (db_cli.parsed()) return db_cli.Run(make_client);
   if (run->parsed()) {
     if (!local && server.empty())
       return Fail(Status::FailedPrecondition(

@@ -1,34 +1,20 @@
-// Administering a store as a whole, below any service (benchctl db info, db copy; docs/store.md): these open a
-// store file or database themselves, so they work with no server running and on a store nobody serves. They
-// are here, not in benchctl, so that benchctl holds no store code (issue 27); the types are the service's, the
-// work is db/pg_copy.h's.
+// Copying a store as a whole, below any service (benchctl db copy; docs/store.md, "Moving a store"): it opens a
+// SQLite file and a PostgreSQL database itself, so it works with no server running and on stores nobody serves.
+// It is here, not in benchctl, so that benchctl holds no store code (issue 27). What a store holds (db info) is
+// the service's DescribeStore RPC (service/records_service.cc), asked of the server or of the local service.
 #pragma once
 
-#include <cstdint>
 #include <string>
-#include <utility>
-#include <vector>
 
 #include "common/status.h"
+#include "db/pg_copy.h"
 
 namespace vb::server {
 
-struct StoreSummary {
-  std::string engine;    // "sqlite" | "postgresql"
-  std::string location;  // the file, or the PostgreSQL database without its password
-  int schema_version = 0;
-  std::vector<std::pair<std::string, std::int64_t>> runs_by_status;  // every status, in lifecycle order
-  std::vector<std::pair<std::string, std::int64_t>> rows;            // batches, runs, trace_chunks, baselines, ...
-  std::int64_t trace_bytes = 0;                                      // as stored (compressed)
-};
-// Opens the store at `location` (migrating an older schema, as every open does) and counts.
-StatusOr<StoreSummary> DescribeStore(const std::string& location);
+// db/'s own summary (rows per table, trace bytes, schema versions), not a copy of it field by field: a plain
+// value with no database behind it, which benchctl only prints.
+using StoreCopy = db::CopySummary;
 
-struct StoreCopy {
-  std::vector<std::pair<std::string, std::int64_t>> rows;  // per table, in copy order
-  std::int64_t trace_bytes = 0;
-  int source_version = 0, target_version = 0;
-};
 // Every row of the SQLite store at sqlite_path into the PostgreSQL store at pg_location, ids kept, in one
 // transaction; a target holding runs is refused unless into_non_empty (db::CopySqliteToPostgres).
 StatusOr<StoreCopy> CopyStoreToPostgres(const std::string& sqlite_path, const std::string& pg_location,
