@@ -124,6 +124,27 @@ Status CheckFinish(RunStatus final_status, const std::vector<Metric>& metrics) {
   return Status::Ok();
 }
 
+Status CheckExecution(const ExecutionRecord& e) {
+  auto at_least_0 = [](const char* field, double v) -> Status {
+    if (!std::isfinite(v) || v < 0.0)
+      return Status::InvalidArgument(Cat("execution.", field, ": must be finite and >= 0, got ", v));
+    return Status::Ok();
+  };
+  VB_RETURN_IF_ERROR(at_least_0("wall_s", e.wall_s));
+  VB_RETURN_IF_ERROR(at_least_0("simulated_s", e.simulated_s));
+  VB_RETURN_IF_ERROR(at_least_0("samples", static_cast<double>(e.samples)));
+  VB_RETURN_IF_ERROR(at_least_0("control_ticks", static_cast<double>(e.control_ticks)));
+  if (e.loop) {
+    VB_RETURN_IF_ERROR(at_least_0("loop.ticks", static_cast<double>(e.loop->ticks)));
+    VB_RETURN_IF_ERROR(at_least_0("loop.overruns", static_cast<double>(e.loop->overruns)));
+    for (const auto& [field, v] : {std::pair{"loop.jitter_p50_s", e.loop->jitter_p50_s},
+                                   std::pair{"loop.jitter_p99_s", e.loop->jitter_p99_s},
+                                   std::pair{"loop.jitter_max_s", e.loop->jitter_max_s}})
+      if (!std::isfinite(v)) return Status::InvalidArgument(Cat("execution.", field, ": must be finite, got ", v));
+  }
+  return Status::Ok();
+}
+
 Status CheckListLimit(std::int32_t limit) {
   if (limit < 1 || limit > kMaxListLimit)
     return Status::InvalidArgument(Cat("limit: must be in 1..", kMaxListLimit, ", got ", limit));

@@ -21,6 +21,8 @@ Status ValidateBaseline(const std::string& name, const std::vector<BaselineEntry
 Status CheckClaim(const ClaimRequest& request);
 Status CheckProgress(double progress);
 Status CheckFinish(RunStatus final_status, const std::vector<Metric>& metrics);
+// An execution record's numbers: finite, none negative (jitter may be negative: a wake-up before the deadline).
+Status CheckExecution(const ExecutionRecord& execution);
 Status CheckListLimit(std::int32_t limit);
 Status CheckPrune(const PruneRequest& request);
 Status CheckRegression(const RegressionRecord& record);

@@ -104,6 +104,16 @@ Params& Params::DoubleOrNull(double v) {
   return *this;
 }
 
+Params& Params::IntOrNull(std::optional<std::int64_t> v) {
+  if (v) return Int(*v);
+  types_.push_back(kInt8Oid);
+  lengths_.push_back(0);
+  owned_at_.push_back(-1);
+  ext_.push_back(nullptr);
+  null_.push_back(true);
+  return *this;
+}
+
 Params& Params::Bool(bool v) {
   Owned(kBoolOid, std::string(1, v ? '\1' : '\0'));
   return *this;

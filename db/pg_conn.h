@@ -12,6 +12,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <unordered_map>
@@ -37,6 +38,7 @@ class Params {
   Params& Int(std::int64_t v);
   Params& Double(double v);        // NaN and infinities stay what they are (binary float8)
   Params& DoubleOrNull(double v);  // NaN becomes NULL (SQLite's rule for metric values and t_start_s)
+  Params& IntOrNull(std::optional<std::int64_t> v);  // nullopt becomes NULL
   Params& Bool(bool v);
   Params& Text(std::string_view v);
   Params& Bytes(const void* data, std::size_t size);

@@ -22,7 +22,7 @@ namespace vb::db {
 namespace {
 
 // How a column travels: its SQLite value as the PostgreSQL parameter of the column's type.
-enum class Kind { kInt, kBool, kDouble, kDoubleOrNull, kText, kBlob };
+enum class Kind { kInt, kIntOrNull, kBool, kDouble, kDoubleOrNull, kText, kBlob };
 struct Column {
   const char* name;
   Kind kind;
@@ -34,7 +34,7 @@ struct Table {
   const char* identity = nullptr;  // id column whose sequence moves past the copied ids
 };
 
-// Every table of the SQLite schema (db/schema.cc, versions 1..4) with history worth moving, parents first. The
+// Every table of the SQLite schema (db/schema.cc, versions 1..6) with history worth moving, parents first. The
 // lab's runtime tables (hosts, stale_writes, nights_claimed) are not copied: they describe a lab's live hosts.
 std::vector<Table> Tables() {
   using K = Kind;
@@ -66,7 +66,17 @@ std::vector<Table> Tables() {
         {"key_name", K::kText},
         {"repeat_index", K::kInt},
         {"split", K::kText},
-        {"t_start_s", K::kDoubleOrNull}},
+        {"t_start_s", K::kDoubleOrNull},
+        {"exec_wall_s", K::kDoubleOrNull},
+        {"exec_simulated_s", K::kDoubleOrNull},
+        {"exec_samples", K::kIntOrNull},
+        {"exec_control_ticks", K::kIntOrNull},
+        {"exec_metrics_from_trajectory", K::kIntOrNull},
+        {"loop_ticks", K::kIntOrNull},
+        {"loop_overruns", K::kIntOrNull},
+        {"loop_jitter_p50_s", K::kDoubleOrNull},
+        {"loop_jitter_p99_s", K::kDoubleOrNull},
+        {"loop_jitter_max_s", K::kDoubleOrNull}},
        "id"},
       {"run_tags", "rowid", {{"run_id", K::kInt}, {"tag", K::kText}}},
       {"run_sweep",
@@ -238,6 +248,12 @@ StatusOr<CopySummary> CopySqliteToPostgres(const std::string& sqlite_path, const
         switch (t.columns[k].kind) {
           case Kind::kInt:
             p.Int(sqlite3_column_int64(row, c));
+            break;
+          case Kind::kIntOrNull:
+            if (null)
+              p.IntOrNull(std::nullopt);
+            else
+              p.IntOrNull(sqlite3_column_int64(row, c));
             break;
           case Kind::kBool:
             p.Bool(sqlite3_column_int64(row, c) != 0);

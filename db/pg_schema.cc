@@ -161,6 +161,22 @@ CREATE TABLE nights_claimed (
 );
 )sql";
 
+// Version 6, as SQLite's version 6 (db/schema.cc): what executing a run measured, and a paced run's loop
+// statistics, as nullable columns of runs (NULL: not measured).
+constexpr const char* kV6 = R"sql(
+ALTER TABLE runs
+  ADD COLUMN exec_wall_s double precision CHECK (exec_wall_s >= 0),
+  ADD COLUMN exec_simulated_s double precision CHECK (exec_simulated_s >= 0),
+  ADD COLUMN exec_samples bigint CHECK (exec_samples >= 0),
+  ADD COLUMN exec_control_ticks bigint CHECK (exec_control_ticks >= 0),
+  ADD COLUMN exec_metrics_from_trajectory bigint CHECK (exec_metrics_from_trajectory IN (0, 1)),
+  ADD COLUMN loop_ticks bigint CHECK (loop_ticks >= 0),
+  ADD COLUMN loop_overruns bigint CHECK (loop_overruns >= 0),
+  ADD COLUMN loop_jitter_p50_s double precision,
+  ADD COLUMN loop_jitter_p99_s double precision,
+  ADD COLUMN loop_jitter_max_s double precision;
+)sql";
+
 constexpr Migration kMigrations[] = {
     {1, "(SQLite's initial schema; on PostgreSQL part of version 5)", ""},
     {2, "(SQLite's baselines and regressions; on PostgreSQL part of version 5)", ""},
@@ -170,6 +186,7 @@ constexpr Migration kMigrations[] = {
      "the whole schema as of SQLite version 5: runs with fence, host and lease; hosts, stale_writes, "
      "nights_claimed",
      kV5},
+    {6, "runs: exec_* and loop_* (what executing a run measured, its loop statistics)", kV6},
 };
 
 // pg_advisory_xact_lock's key for migrations: any constant that no other application on the database uses

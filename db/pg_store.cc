@@ -83,8 +83,9 @@ class PgStore final : public Store {
                                      std::vector<std::int64_t>* run_ids) override;
   StatusOr<std::optional<RunRecord>> ClaimNext(const ClaimRequest& request) override;
   Status SetProgress(const Lease& lease, double progress) override;
+  using Store::Finish;
   Status Finish(const Lease& lease, RunStatus final_status, const std::string& reason,
-                const std::vector<Metric>& metrics) override;
+                const std::vector<Metric>& metrics, const std::optional<ExecutionRecord>& execution) override;
   StatusOr<RunStatus> RequestCancel(std::int64_t run_id, const std::string& reason) override;
   StatusOr<bool> CancelRequested(std::int64_t run_id) override;
   StatusOr<int> RecoverAfterCrash(const std::string& host) override { return RecoverAfterCrashAt(host, 0.0); }
@@ -161,10 +162,12 @@ struct PgRow {
 StatusOr<RunRecord> PgStore::ReadRun(const Result& row, int k) {
   VB_ASSIGN_OR_RETURN(RunRecord r, rules::RunFromRow(PgRow{row, k}));
   std::vector<std::pair<std::string, std::string>> items;
-  if (!SplitPrefixed(row.Text(k, 23), 0, &items)) return Status::DataLoss(Cat("run ", r.id, ": unreadable tags"));
+  if (!SplitPrefixed(row.Text(k, rules::kRunColumnCount), 0, &items))
+    return Status::DataLoss(Cat("run ", r.id, ": unreadable tags"));
   for (auto& [tag, _] : items) r.tags.push_back(std::move(tag));
   items.clear();
-  if (!SplitPrefixed(row.Text(k, 24), ';', &items)) return Status::DataLoss(Cat("run ", r.id, ": unreadable sweep"));
+  if (!SplitPrefixed(row.Text(k, rules::kRunColumnCount + 1), ';', &items))
+    return Status::DataLoss(Cat("run ", r.id, ": unreadable sweep"));
   for (auto& [field, value] : items) r.key.sweep.push_back({std::move(field), std::strtod(value.c_str(), nullptr)});
   return r;
 }
@@ -302,9 +305,10 @@ Status PgStore::SetProgress(const Lease& lease, double progress) {
 }
 
 Status PgStore::Finish(const Lease& lease, RunStatus final_status, const std::string& reason,
-                       const std::vector<Metric>& metrics) {
+                       const std::vector<Metric>& metrics, const std::optional<ExecutionRecord>& execution) {
   const std::int64_t run_id = lease.run_id;
   VB_RETURN_IF_ERROR(checks::CheckFinish(final_status, metrics));
+  if (execution) VB_RETURN_IF_ERROR(checks::CheckExecution(*execution));
   pg::Transaction txn(conn_.get());
   VB_RETURN_IF_ERROR(txn.Begin());
   {
@@ -325,6 +329,34 @@ Status PgStore::Finish(const Lease& lease, RunStatus final_status, const std::st
                                 "WHERE id = $1",
                                 Params().Int(run_id).Text(RunStatusName(final_status)).Text(reason))
                          .status());
+  if (execution) {
+    // What executing it measured (schema v6); the loop_* columns stay NULL for a loop that was not paced.
+    const ExecutionRecord& e = *execution;
+    VB_RETURN_IF_ERROR(conn_
+                           ->Exec("UPDATE runs SET exec_wall_s = $2, exec_simulated_s = $3, exec_samples = $4, "
+                                  "exec_control_ticks = $5, exec_metrics_from_trajectory = $6 WHERE id = $1",
+                                  Params()
+                                      .Int(run_id)
+                                      .Double(e.wall_s)
+                                      .Double(e.simulated_s)
+                                      .Int(e.samples)
+                                      .Int(e.control_ticks)
+                                      .Int(e.metrics_from_trajectory ? 1 : 0))
+                           .status());
+    if (e.loop) {
+      VB_RETURN_IF_ERROR(conn_
+                             ->Exec("UPDATE runs SET loop_ticks = $2, loop_overruns = $3, loop_jitter_p50_s = $4, "
+                                    "loop_jitter_p99_s = $5, loop_jitter_max_s = $6 WHERE id = $1",
+                                    Params()
+                                        .Int(run_id)
+                                        .Int(e.loop->ticks)
+                                        .Int(e.loop->overruns)
+                                        .Double(e.loop->jitter_p50_s)
+                                        .Double(e.loop->jitter_p99_s)
+                                        .Double(e.loop->jitter_max_s))
+                             .status());
+    }
+  }
   VB_RETURN_IF_ERROR(AddHistory(run_id, final_status, reason));
   for (const Metric& m : metrics) {
     // NaN is stored as NULL, as SQLite does, and GetMetrics() turns NULL back into NaN.

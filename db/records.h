@@ -23,6 +23,26 @@ using vb::ParseRunStatus;
 using vb::RunStatus;
 using vb::RunStatusName;
 
+// How a paced (realtime) run's loop kept its deadlines: hw::LoopStats as stored (schema v6).
+struct LoopRecord {
+  std::int64_t ticks = 0;           // paced ticks
+  std::int64_t overruns = 0;        // ticks whose work ended after their deadline
+  double jitter_p50_s = 0.0;        // wake-up lateness after the deadline
+  double jitter_p99_s = 0.0;
+  double jitter_max_s = 0.0;
+};
+
+// What executing a run measured on its host (experiment::RunSummary's numbers), written by Finish in the same
+// transaction as the final state (schema v6), so whoever reads the run later, from any door or host, has them.
+struct ExecutionRecord {
+  double wall_s = 0.0;                  // wall-clock time the experiment took
+  double simulated_s = 0.0;             // experiment time covered (where a stopped run got to)
+  std::int64_t samples = 0;             // samples recorded
+  std::int64_t control_ticks = 0;       // ticks of the control loop
+  bool metrics_from_trajectory = false; // the metrics' source: the exact trajectory (emulator) or the samples
+  std::optional<LoopRecord> loop;       // paced runs only: nullopt when the loop was not paced
+};
+
 struct RunRecord {
   std::int64_t id = 0;
   std::int64_t batch_id = 0;
@@ -48,6 +68,9 @@ struct RunRecord {
   std::int64_t fence = 0;
   std::string host;
   double lease_expires_unix_s = 0.0;
+  // Schema v6: what executing it measured; nullopt for a run that did not execute (queued, imported, a spec that
+  // failed before the bench ran) or that finished before v6.
+  std::optional<ExecutionRecord> execution;
 };
 
 // A claimed run's lease (docs/lab.md, "Leases and fencing"): the run and the attempt that holds it. Every write

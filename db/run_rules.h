@@ -45,14 +45,18 @@ StatusOr<RunStatus> StoredStatus(const std::string& text, std::string_view what)
 
 // The columns of a run row (every engine selects them in this order: "id, batch_id, name, controller,
 // bench_kind, bench_name, spec_json, submitter, priority, status, reason, requeue_on_interrupt, submitted,
-// started, finished, progress, key_name, repeat_index, split, t_start_s, fence, host, lease_expires") into a
-// RunRecord, sweep point and tags left to the engine. Row: Int(col), Text(col), Double(col), IsNull(col).
+// started, finished, progress, key_name, repeat_index, split, t_start_s, fence, host, lease_expires", then the
+// execution's columns of schema v6) into a RunRecord, sweep point and tags left to the engine. Row: Int(col),
+// Text(col), Double(col), IsNull(col).
 #define VB_DB_RUN_COLUMNS                                                                                     \
   "id, batch_id, name, controller, bench_kind, bench_name, spec_json, submitter, priority, status, reason, "  \
   "requeue_on_interrupt, submitted, started, finished, progress, key_name, repeat_index, split, t_start_s, " \
-  "fence, host, lease_expires"
+  "fence, host, lease_expires, exec_wall_s, exec_simulated_s, exec_samples, exec_control_ticks, "            \
+  "exec_metrics_from_trajectory, loop_ticks, loop_overruns, loop_jitter_p50_s, loop_jitter_p99_s, "          \
+  "loop_jitter_max_s"
 inline constexpr const char* kRunColumns = VB_DB_RUN_COLUMNS;
-inline constexpr int kRunColumnCount = 23;
+inline constexpr int kRunColumnCount = 33;
+
 
 template <typename Row>
 StatusOr<RunRecord> RunFromRow(const Row& row) {
@@ -81,6 +85,24 @@ StatusOr<RunRecord> RunFromRow(const Row& row) {
   r.fence = row.Int(20);
   r.host = row.Text(21);
   r.lease_expires_unix_s = row.Double(22);
+  if (!row.IsNull(23)) {
+    ExecutionRecord e;
+    e.wall_s = row.Double(23);
+    e.simulated_s = row.Double(24);
+    e.samples = row.Int(25);
+    e.control_ticks = row.Int(26);
+    e.metrics_from_trajectory = row.Int(27) != 0;
+    if (!row.IsNull(28)) {
+      LoopRecord l;
+      l.ticks = row.Int(28);
+      l.overruns = row.Int(29);
+      l.jitter_p50_s = row.Double(30);
+      l.jitter_p99_s = row.Double(31);
+      l.jitter_max_s = row.Double(32);
+      e.loop = l;
+    }
+    r.execution = e;
+  }
   return r;
 }
 

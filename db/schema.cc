@@ -200,6 +200,24 @@ CREATE TABLE nights_claimed (
 ) WITHOUT ROWID;
 )sql";
 
+// Version 6. What executing a run measured travels with the run (docs/store.md, "Schema version 6"): its wall
+// time, experiment time covered, samples, control ticks and the metrics' source (exec_*), and for a paced
+// (realtime) run its loop statistics (loop_*: ticks, overruns, wake-up lateness p50/p99/max). Finish writes them
+// in the transaction that ends the run. NULL means "not measured": every run finished before this version, runs
+// that never executed, and the loop_* columns of a run whose loop was not paced. Nothing is backfilled.
+constexpr const char* kV6 = R"sql(
+ALTER TABLE runs ADD COLUMN exec_wall_s REAL CHECK (exec_wall_s >= 0);
+ALTER TABLE runs ADD COLUMN exec_simulated_s REAL CHECK (exec_simulated_s >= 0);
+ALTER TABLE runs ADD COLUMN exec_samples INTEGER CHECK (exec_samples >= 0);
+ALTER TABLE runs ADD COLUMN exec_control_ticks INTEGER CHECK (exec_control_ticks >= 0);
+ALTER TABLE runs ADD COLUMN exec_metrics_from_trajectory INTEGER CHECK (exec_metrics_from_trajectory IN (0, 1));
+ALTER TABLE runs ADD COLUMN loop_ticks INTEGER CHECK (loop_ticks >= 0);
+ALTER TABLE runs ADD COLUMN loop_overruns INTEGER CHECK (loop_overruns >= 0);
+ALTER TABLE runs ADD COLUMN loop_jitter_p50_s REAL;
+ALTER TABLE runs ADD COLUMN loop_jitter_p99_s REAL;
+ALTER TABLE runs ADD COLUMN loop_jitter_max_s REAL;
+)sql";
+
 constexpr Migration kMigrations[] = {
     {1, "initial schema: batches, runs, run_tags, status_history, metrics, trace_chunks", kV1},
     {2, "baselines, baseline_metrics, regressions (benchctl baseline / regress / nights)",
@@ -207,6 +225,7 @@ constexpr Migration kMigrations[] = {
     {3, "runs: key_name, repeat_index, split, t_start_s; run_sweep (a run's identity as fields)", kV3},
     {4, "trace_chunks: codec (compressed traces; older chunks stay raw float64)", kV4},
     {5, "runs: fence, host, lease_expires; hosts, stale_writes, nights_claimed (the lab)", kV5},
+    {6, "runs: exec_* and loop_* (what executing a run measured, its loop statistics)", kV6},
 };
 
 }  // namespace

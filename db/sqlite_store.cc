@@ -75,8 +75,9 @@ class SqliteStore final : public Store {
                                      std::vector<std::int64_t>* run_ids) override;
   StatusOr<std::optional<RunRecord>> ClaimNext(const ClaimRequest& request) override;
   Status SetProgress(const Lease& lease, double progress) override;
+  using Store::Finish;
   Status Finish(const Lease& lease, RunStatus final_status, const std::string& reason,
-                const std::vector<Metric>& metrics) override;
+                const std::vector<Metric>& metrics, const std::optional<ExecutionRecord>& execution) override;
   StatusOr<RunStatus> RequestCancel(std::int64_t run_id, const std::string& reason) override;
   StatusOr<bool> CancelRequested(std::int64_t run_id) override;
   StatusOr<int> RecoverAfterCrash(const std::string& host) override { return RecoverAfterCrashAt(host, 0.0); }
@@ -317,9 +318,10 @@ Status SqliteStore::SetProgress(const Lease& lease, double progress) {
 }
 
 Status SqliteStore::Finish(const Lease& lease, RunStatus final_status, const std::string& reason,
-                           const std::vector<Metric>& metrics) {
+                           const std::vector<Metric>& metrics, const std::optional<ExecutionRecord>& execution) {
   const std::int64_t run_id = lease.run_id;
   VB_RETURN_IF_ERROR(checks::CheckFinish(final_status, metrics));
+  if (execution) VB_RETURN_IF_ERROR(checks::CheckExecution(*execution));
 
   Transaction txn(&conn_);
   VB_RETURN_IF_ERROR(txn.Begin(TxnKind::kWrite));
@@ -342,6 +344,32 @@ Status SqliteStore::Finish(const Lease& lease, RunStatus final_status, const std
   st.Bind(3, reason);
   st.Bind(4, now);
   VB_RETURN_IF_ERROR(st.Run());
+  if (execution) {
+    // What executing it measured (schema v6); the loop_* columns stay NULL for a loop that was not paced.
+    const ExecutionRecord& e = *execution;
+    VB_ASSIGN_OR_RETURN(Stmt ex, conn_.Prepare("UPDATE runs SET exec_wall_s = ?2, exec_simulated_s = ?3, "
+                                                "exec_samples = ?4, exec_control_ticks = ?5, "
+                                                "exec_metrics_from_trajectory = ?6 WHERE id = ?1"));
+    ex.Bind(1, run_id);
+    ex.Bind(2, e.wall_s);
+    ex.Bind(3, e.simulated_s);
+    ex.Bind(4, e.samples);
+    ex.Bind(5, e.control_ticks);
+    ex.Bind(6, e.metrics_from_trajectory);
+    VB_RETURN_IF_ERROR(ex.Run());
+    if (e.loop) {
+      VB_ASSIGN_OR_RETURN(Stmt lp, conn_.Prepare("UPDATE runs SET loop_ticks = ?2, loop_overruns = ?3, "
+                                                  "loop_jitter_p50_s = ?4, loop_jitter_p99_s = ?5, "
+                                                  "loop_jitter_max_s = ?6 WHERE id = ?1"));
+      lp.Bind(1, run_id);
+      lp.Bind(2, e.loop->ticks);
+      lp.Bind(3, e.loop->overruns);
+      lp.Bind(4, e.loop->jitter_p50_s);
+      lp.Bind(5, e.loop->jitter_p99_s);
+      lp.Bind(6, e.loop->jitter_max_s);
+      VB_RETURN_IF_ERROR(lp.Run());
+    }
+  }
   VB_RETURN_IF_ERROR(AddHistory(run_id, final_status, now, reason));
   for (const Metric& m : metrics) {
     // NaN binds as NULL (SQLite's rule) and GetMetrics() turns NULL back into NaN.

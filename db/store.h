@@ -39,9 +39,15 @@ class Store {
   virtual StatusOr<std::optional<RunRecord>> ClaimNext(const ClaimRequest& request) = 0;
   // Writes for a claimed run: each refused as a stale write when `lease` no longer holds the run (see Lease).
   virtual Status SetProgress(const Lease& lease, double progress) = 0;
-  // Final state with metrics (written in the same transaction). FailedPrecondition if the run is not running.
+  // Final state with metrics and, for a run that executed, what executing it measured (all written in the same
+  // transaction). FailedPrecondition if the run is not running.
   virtual Status Finish(const Lease& lease, RunStatus final_status, const std::string& reason,
-                        const std::vector<Metric>& metrics) = 0;
+                        const std::vector<Metric>& metrics, const std::optional<ExecutionRecord>& execution) = 0;
+  // A run that did not execute (or whose execution is not known): no execution record.
+  Status Finish(const Lease& lease, RunStatus final_status, const std::string& reason,
+                const std::vector<Metric>& metrics) {
+    return Finish(lease, final_status, reason, metrics, std::nullopt);
+  }
   // Cancels a queued run at once (returns kCancelled); for a running run records the request and returns
   // kRunning (the worker stops it and calls Finish(kCancelled)); FailedPrecondition for finished runs.
   virtual StatusOr<RunStatus> RequestCancel(std::int64_t run_id, const std::string& reason) = 0;

@@ -85,12 +85,28 @@ std::vector<std::int64_t> Populate(Store& s) {
   EXPECT_TRUE(c0.ok() && c0->has_value() && (*c0)->id == ids[0]);
   for (int k = 0; k < 3; ++k) EXPECT_TRUE(s.AppendTraceChunk(LeaseOf(**c0), Chunk(k, 500, k)).ok());
   EXPECT_TRUE(s.SetProgress(LeaseOf(**c0), 0.5).ok());
+  ExecutionRecord paced;  // a paced run's execution with its loop statistics (schema v6)
+  paced.wall_s = 1.5;
+  paced.simulated_s = 1.5;
+  paced.samples = 1500;
+  paced.control_ticks = 1501;
+  paced.metrics_from_trajectory = true;
+  paced.loop.emplace();
+  paced.loop->ticks = 1501;
+  paced.loop->overruns = 4;
+  paced.loop->jitter_p50_s = 9.5e-6;
+  paced.loop->jitter_p99_s = 7.25e-5;
+  paced.loop->jitter_max_s = 2.5e-4;
   EXPECT_TRUE(s.Finish(LeaseOf(**c0), RunStatus::kDone, "",
-                       {{"rmse_A", 1.25e-3}, {"nan_metric", std::nan("")}, {"effort", -0.0}})
+                       {{"rmse_A", 1.25e-3}, {"nan_metric", std::nan("")}, {"effort", -0.0}}, paced)
                   .ok());
   auto c1 = s.ClaimNext(BenchClaim("emulated", "bench-b"));
   EXPECT_TRUE(c1.ok() && c1->has_value());
-  EXPECT_TRUE(s.Finish(LeaseOf(**c1), RunStatus::kFailed, "bench tripped: over-current", {}).ok());
+  ExecutionRecord unpaced;  // executed, not paced: no loop statistics
+  unpaced.wall_s = 0.125;
+  unpaced.simulated_s = 0.25;
+  unpaced.samples = 250;
+  EXPECT_TRUE(s.Finish(LeaseOf(**c1), RunStatus::kFailed, "bench tripped: over-current", {}, unpaced).ok());
   auto c2 = s.ClaimNext(BenchClaim("emulated", "bench-c"));
   EXPECT_TRUE(c2.ok() && c2->has_value());
   EXPECT_TRUE(s.AppendTraceChunk(LeaseOf(**c2), Chunk(0, 10, 9)).ok());
@@ -134,6 +150,20 @@ void ExpectSameRun(const RunRecord& a, const RunRecord& b) {
   EXPECT_EQ(a.tags, b.tags);
   EXPECT_EQ(a.split, b.split);
   EXPECT_TRUE(SameDouble(a.t_start_s, b.t_start_s));
+  ASSERT_EQ(a.execution.has_value(), b.execution.has_value());
+  if (!a.execution) return;
+  EXPECT_TRUE(SameDouble(a.execution->wall_s, b.execution->wall_s));
+  EXPECT_TRUE(SameDouble(a.execution->simulated_s, b.execution->simulated_s));
+  EXPECT_EQ(a.execution->samples, b.execution->samples);
+  EXPECT_EQ(a.execution->control_ticks, b.execution->control_ticks);
+  EXPECT_EQ(a.execution->metrics_from_trajectory, b.execution->metrics_from_trajectory);
+  ASSERT_EQ(a.execution->loop.has_value(), b.execution->loop.has_value());
+  if (!a.execution->loop) return;
+  EXPECT_EQ(a.execution->loop->ticks, b.execution->loop->ticks);
+  EXPECT_EQ(a.execution->loop->overruns, b.execution->loop->overruns);
+  EXPECT_TRUE(SameDouble(a.execution->loop->jitter_p50_s, b.execution->loop->jitter_p50_s));
+  EXPECT_TRUE(SameDouble(a.execution->loop->jitter_p99_s, b.execution->loop->jitter_p99_s));
+  EXPECT_TRUE(SameDouble(a.execution->loop->jitter_max_s, b.execution->loop->jitter_max_s));
 }
 
 class PgCopyTest : public ::testing::Test {
@@ -236,6 +266,12 @@ TEST_F(PgCopyTest, EverythingReadsBackIdenticalWithItsIds) {
   // The statuses the source had: done, failed, interrupted, queued (re-queued), cancelled.
   EXPECT_EQ((*rb)[0].status, RunStatus::kDone);
   EXPECT_EQ((*rb)[2].status, RunStatus::kInterrupted);
+  // The execution columns travelled: the paced run's loop statistics, the unpaced run's none, the rest nothing.
+  ASSERT_TRUE((*rb)[0].execution && (*rb)[0].execution->loop);
+  EXPECT_EQ((*rb)[0].execution->loop->overruns, 4);
+  ASSERT_TRUE((*rb)[1].execution.has_value());
+  EXPECT_FALSE((*rb)[1].execution->loop.has_value());
+  EXPECT_FALSE((*rb)[2].execution.has_value());
   EXPECT_EQ(dst.ReadTrace(ids[1])->at(0).data, std::vector<double>{1.0});  // codec 0, as stored
   auto stored_a = src.StoredTraceBytes("alice");
   auto stored_b = dst.StoredTraceBytes("alice");
@@ -306,7 +342,7 @@ TEST_F(PgCopyTest, ANonEmptyTargetOrARunningSourceIsRefusedAndNothingIsCopied) {
   std::map<std::string, std::int64_t> rows(info->rows.begin(), info->rows.end());
   EXPECT_EQ(rows["runs"], 5);  // the first copy's, nothing more
   EXPECT_EQ(info->engine, "postgresql");
-  EXPECT_EQ(info->schema_version, 5);
+  EXPECT_EQ(info->schema_version, 6);
 
   // A source with a running run: refused (its server is still using it).
   const std::string busy = TempFile("busy");
@@ -359,7 +395,7 @@ TEST_F(PgCopyTest, BenchctlDbCopyAndInfoWithExitCodes) {
   ASSERT_FALSE(j.is_discarded()) << copied.out;
   EXPECT_EQ(j["rows"]["runs"], 5);
   EXPECT_EQ(j["rows"]["trace_chunks"], 4);
-  EXPECT_EQ(j["target_schema_version"], 5);
+  EXPECT_EQ(j["target_schema_version"], 6);
 
   Ran again = Benchctl(Cat("db copy --from ", source_, " --to ", to));
   EXPECT_EQ(again.code, 2) << again.out;  // refused: the target is not empty
@@ -370,7 +406,7 @@ TEST_F(PgCopyTest, BenchctlDbCopyAndInfoWithExitCodes) {
   auto ij = nlohmann::json::parse(info.out, nullptr, false);
   ASSERT_FALSE(ij.is_discarded()) << info.out;
   EXPECT_EQ(ij["engine"], "postgresql");
-  EXPECT_EQ(ij["schema_version"], 5);
+  EXPECT_EQ(ij["schema_version"], 6);
   EXPECT_EQ(ij["runs_by_status"]["done"], 1);
   EXPECT_EQ(ij["rows"]["baselines"], 2);
 

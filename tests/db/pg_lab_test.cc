@@ -449,11 +449,11 @@ TEST_P(PgLabTest, HostsSavingABaselineUnderOneNameAtOnceGetSuccessiveVersions) {
 
 TEST_P(PgLabTest, SchemaIsAtTheCurrentVersionAndReopeningKeepsIt) {
   EXPECT_EQ(store().schema_version(), pg_schema::CurrentVersion());
-  EXPECT_EQ(pg_schema::CurrentVersion(), 5);
+  EXPECT_EQ(pg_schema::CurrentVersion(), 6);
   Submit(store(), {MakeRun("kept")});
   auto again = OpenAnother();
   ASSERT_NE(again, nullptr);
-  EXPECT_EQ(again->schema_version(), 5);
+  EXPECT_EQ(again->schema_version(), 6);
   auto runs = again->ListRuns(RunFilter{});
   ASSERT_TRUE(runs.ok());
   EXPECT_EQ(runs->size(), 1u);
@@ -482,7 +482,7 @@ TEST_P(PgLabTest, ConcurrentFirstOpensMigrateOnceAndAFailingMigrationChangesNoth
   for (int t = 0; t < 4; ++t) {
     threads.emplace_back([&] {
       auto s = OpenStore(*fresh);
-      if (s.ok() && (*s)->schema_version() == 5)
+      if (s.ok() && (*s)->schema_version() == pg_schema::CurrentVersion())
         ++ok;
       else if (!s.ok())
         ADD_FAILURE() << s.status().ToString();
@@ -491,21 +491,72 @@ TEST_P(PgLabTest, ConcurrentFirstOpensMigrateOnceAndAFailingMigrationChangesNoth
   for (auto& th : threads) th.join();
   EXPECT_EQ(ok.load(), 4);
 
-  // A migration list whose last step fails: the database stays as it was (version 5, no new table).
+  // A migration list whose last step fails: the database stays as it was (the current version, no new table).
+  const int now = pg_schema::CurrentVersion();
   auto conn = pg::Connection::Open(*fresh);
   ASSERT_TRUE(conn.ok());
   std::vector<pg_schema::Migration> more(pg_schema::Migrations().begin(), pg_schema::Migrations().end());
-  more.push_back({6, "a good step", "CREATE TABLE extra (x int)"});
-  more.push_back({7, "a bad step", "CREATE TABLE broken (x no_such_type)"});
+  more.push_back({now + 1, "a good step", "CREATE TABLE extra (x int)"});
+  more.push_back({now + 2, "a bad step", "CREATE TABLE broken (x no_such_type)"});
   auto migrated = pg_schema::Migrate(conn->get(), more);
   ASSERT_FALSE(migrated.ok());
-  EXPECT_NE(migrated.status().message().find("version 7"), std::string::npos) << migrated.status().message();
+  EXPECT_NE(migrated.status().message().find(Cat("version ", now + 2)), std::string::npos)
+      << migrated.status().message();
   auto v = pg_schema::ReadVersion(conn->get());
   ASSERT_TRUE(v.ok());
-  EXPECT_EQ(*v, 5);
+  EXPECT_EQ(*v, now);
   auto extra = (*conn)->QueryInt("SELECT (to_regclass('extra') IS NULL)::int::int8");
   ASSERT_TRUE(extra.ok());
   EXPECT_EQ(*extra, 1);
+}
+
+// A lab database at version 5 (before runs kept what executing them measured) migrates to version 6 with its
+// runs as they were: no execution record is made up for them, and a run finished after the upgrade keeps its own.
+TEST_P(PgLabTest, AVersion5DatabaseMigratesKeepingItsRuns) {
+  testing::PgServer* server = testing::PgServer::Get();
+  ASSERT_NE(server, nullptr);
+  auto fresh = server->CreateDatabase();
+  ASSERT_TRUE(fresh.ok());
+  {
+    auto conn = pg::Connection::Open(*fresh);
+    ASSERT_TRUE(conn.ok());
+    std::vector<pg_schema::Migration> v5(pg_schema::Migrations().begin(), pg_schema::Migrations().begin() + 5);
+    auto v = pg_schema::Migrate(conn->get(), v5);
+    ASSERT_TRUE(v.ok()) << v.status().ToString();
+    ASSERT_EQ(*v, 5);
+    const char* rows =
+        "INSERT INTO batches (id, submitter, name, spec_json, created) VALUES (1, 'u', 'b', '{}', 0);"
+        "INSERT INTO runs (id, batch_id, name, controller, bench_kind, requested_bench, bench_name, spec_json, "
+        "submitter, priority, status, requeue_on_interrupt, submitted, key_name) VALUES "
+        "(1, 1, 'old', 'pi_current', 'emulated', '', 'bench-1', '{}', 'u', 0, 'done', true, 0, 'old'),"
+        "(2, 1, 'new', 'pi_current', 'emulated', '', '', '{}', 'u', 0, 'queued', true, 0, 'new');"
+        "SELECT setval(pg_get_serial_sequence('runs', 'id'), 2);"
+        "SELECT setval(pg_get_serial_sequence('batches', 'id'), 1);";
+    ASSERT_TRUE((*conn)->Script(rows).ok());
+  }
+  auto s = OpenStore(*fresh);
+  ASSERT_TRUE(s.ok()) << s.status().ToString();
+  EXPECT_EQ((*s)->schema_version(), 6);
+  auto old = (*s)->GetRun(1);
+  ASSERT_TRUE(old.ok()) << old.status().ToString();
+  EXPECT_EQ(old->status, RunStatus::kDone);
+  EXPECT_EQ(old->key.name, "old");
+  EXPECT_FALSE(old->execution.has_value());
+  auto claimed = (*s)->ClaimNext(BenchClaim("emulated", "bench-1"));
+  ASSERT_TRUE(claimed.ok() && claimed->has_value());
+  ASSERT_EQ((*claimed)->id, 2);
+  ExecutionRecord e;
+  e.wall_s = 2.0;
+  e.loop.emplace();
+  e.loop->ticks = 4;
+  e.loop->jitter_max_s = 3e-4;
+  ASSERT_TRUE((*s)->Finish(LeaseOf(**claimed), RunStatus::kDone, "", {}, e).ok());
+  auto reopened = OpenStore(*fresh);
+  ASSERT_TRUE(reopened.ok());
+  auto fresh_run = (*reopened)->GetRun(2);
+  ASSERT_TRUE(fresh_run.ok() && fresh_run->execution && fresh_run->execution->loop);
+  EXPECT_EQ(fresh_run->execution->wall_s, 2.0);
+  EXPECT_EQ(fresh_run->execution->loop->jitter_max_s, 3e-4);
 }
 
 TEST_P(PgLabTest, RefusesSomebodyElsesDatabase) {

@@ -205,8 +205,8 @@ TEST(StoreSchemaTest, NewDatabaseIsAtTheCurrentVersionInWalMode) {
     auto store = OpenOrDie(path);
     ASSERT_NE(store, nullptr);
     EXPECT_EQ(store->schema_version(), schema::CurrentVersion());
-    EXPECT_EQ(schema::CurrentVersion(), 5);  // v2: baselines and regressions; v3: run keys as fields; v4: codecs;
-    // v5: the lab (fences, hosts, stale writes, nights claimed)
+    EXPECT_EQ(schema::CurrentVersion(), 6);  // v2: baselines and regressions; v3: run keys as fields; v4: codecs;
+    // v5: the lab (fences, hosts, stale writes, nights claimed); v6: what executing a run measured
   }
   RawDb raw(path);
   EXPECT_EQ(raw.Int("PRAGMA user_version"), schema::CurrentVersion());
@@ -341,6 +341,52 @@ TEST(StoreSchemaTest, Version3FillsRunKeysOfOlderDatabasesFromTheirTags) {
   ASSERT_TRUE(c.ok());
   EXPECT_EQ(c->key, NamedRun("plain"));
   EXPECT_TRUE(std::isnan(c->t_start_s));
+}
+
+// A store written at version 5 (before runs kept what executing them measured) opens at the current version with
+// its runs as they were: a finished run has no execution record (nothing is made up), and a run finished after
+// the upgrade stores its own.
+TEST(StoreSchemaTest, Version6KeepsOlderRunsAndStoresExecutionsFromThenOn) {
+  const std::string path = TempDb("v5_to_v6");
+  {
+    auto conn = sql::Connection::Open(path);
+    ASSERT_TRUE(conn.ok());
+    std::vector<schema::Migration> v5(schema::Migrations().begin(), schema::Migrations().begin() + 5);
+    auto v = schema::Migrate(&*conn, v5, path);
+    ASSERT_TRUE(v.ok()) << v.status().ToString();
+    ASSERT_EQ(*v, 5);
+  }
+  {
+    RawDb raw(path);
+    raw.Exec("INSERT INTO batches (id, submitter, name, spec_json, created) VALUES (1, 'u', 'b', '{}', 0)");
+    const char* insert =
+        "INSERT INTO runs (id, batch_id, name, controller, bench_kind, requested_bench, bench_name, spec_json, "
+        "submitter, priority, status, requeue_on_interrupt, submitted, key_name) VALUES ";
+    raw.Exec(Cat(insert, "(1, 1, 'old', 'pi_current', 'emulated', '', 'bench-1', '{}', 'u', 0, 'done', 1, 0, 'old')"));
+    raw.Exec(Cat(insert, "(2, 1, 'new', 'pi_current', 'emulated', '', '', '{}', 'u', 0, 'queued', 1, 0, 'new')"));
+    raw.Exec("INSERT INTO metrics (run_id, name, value) VALUES (1, 'rmse_A', 0.25)");
+  }
+  auto store = OpenOrDie(path);
+  ASSERT_NE(store, nullptr);
+  EXPECT_EQ(store->schema_version(), 6);
+  auto old = store->GetRun(1);
+  ASSERT_TRUE(old.ok()) << old.status().ToString();
+  EXPECT_EQ(old->status, RunStatus::kDone);
+  EXPECT_EQ(old->key.name, "old");
+  EXPECT_FALSE(old->execution.has_value()) << "a run finished before v6 has no execution record";
+  EXPECT_EQ((*store->GetMetrics(1))[0].value, 0.25);
+  ASSERT_EQ(ClaimId(*store), 2);
+  ExecutionRecord e;
+  e.wall_s = 0.75;
+  e.samples = 10;
+  e.loop.emplace();
+  e.loop->overruns = 3;
+  ASSERT_TRUE(store->Finish(vb::db::testing::CurrentLease(store.get(), 2), RunStatus::kDone, "", {}, e).ok());
+  auto fresh = store->GetRun(2);
+  ASSERT_TRUE(fresh.ok() && fresh->execution.has_value());
+  EXPECT_EQ(fresh->execution->wall_s, 0.75);
+  ASSERT_TRUE(fresh->execution->loop.has_value());
+  EXPECT_EQ(fresh->execution->loop->overruns, 3);
 }
 
 TEST(StoreSchemaTest, AFailingMigrationChangesNothing) {
@@ -745,6 +791,82 @@ TEST_P(StoreRunTest, FinishWithMetricsAndHistory) {
   EXPECT_EQ(store->SetProgress(vb::db::testing::CurrentLease(store, ids[0]), 0.5).code(), StatusCode::kFailedPrecondition);
   EXPECT_EQ(store->RequestCancel(ids[0], "late").status().code(), StatusCode::kFailedPrecondition);
   EXPECT_EQ(store->GetMetrics(ids[0])->size(), 4u);
+}
+
+// What executing a run measured is written by the Finish that ends it and read back with the run, on both
+// engines and through another connection (a reopened store): a paced run's loop statistics, a run not paced
+// without them (absent, not zeros), a run that never executed without any. Bad numbers name the field and
+// change nothing.
+TEST_P(StoreRunTest, ExecutionAndLoopStatisticsAreStoredWithTheRun) {
+  Store* store = &this->store();
+  auto ids = Submit(*store, {MakeRun("paced"), MakeRun("unpaced"), MakeRun("never")});
+  ExecutionRecord paced;
+  paced.wall_s = 1.25;
+  paced.simulated_s = 1.0;
+  paced.samples = 50001;
+  paced.control_ticks = 20001;
+  paced.metrics_from_trajectory = true;
+  paced.loop.emplace();
+  paced.loop->ticks = 20001;
+  paced.loop->overruns = 17;
+  paced.loop->jitter_p50_s = 12.5e-6;
+  paced.loop->jitter_p99_s = 81.25e-6;
+  paced.loop->jitter_max_s = 1.5e-3;
+  ExecutionRecord unpaced = paced;
+  unpaced.loop.reset();
+  unpaced.wall_s = 0.01;
+
+  ASSERT_EQ(ClaimId(*store), ids[0]);
+  ExecutionRecord bad = paced;
+  bad.wall_s = -1.0;
+  Status refused = store->Finish(vb::db::testing::CurrentLease(store, ids[0]), RunStatus::kDone, "", {}, bad);
+  EXPECT_EQ(refused.code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(refused.message().find("execution.wall_s"), std::string::npos) << refused.message();
+  EXPECT_EQ(store->GetRun(ids[0])->status, RunStatus::kRunning);
+  ASSERT_TRUE(store->Finish(vb::db::testing::CurrentLease(store, ids[0]), RunStatus::kDone, "", {{"rmse_A", 0.5}},
+                            paced).ok());
+  ASSERT_EQ(ClaimId(*store), ids[1]);
+  ASSERT_TRUE(store->Finish(vb::db::testing::CurrentLease(store, ids[1]), RunStatus::kCancelled, "stop", {},
+                            unpaced).ok());
+  ASSERT_EQ(ClaimId(*store), ids[2]);
+  ASSERT_TRUE(store->Finish(vb::db::testing::CurrentLease(store, ids[2]), RunStatus::kFailed, "bad spec", {}).ok());
+
+  auto check = [&](Store& s, const char* where) {
+    SCOPED_TRACE(where);
+    auto a = s.GetRun(ids[0]);
+    ASSERT_TRUE(a.ok()) << a.status().ToString();
+    ASSERT_TRUE(a->execution.has_value());
+    EXPECT_EQ(a->execution->wall_s, 1.25);
+    EXPECT_EQ(a->execution->simulated_s, 1.0);
+    EXPECT_EQ(a->execution->samples, 50001);
+    EXPECT_EQ(a->execution->control_ticks, 20001);
+    EXPECT_TRUE(a->execution->metrics_from_trajectory);
+    ASSERT_TRUE(a->execution->loop.has_value());
+    EXPECT_EQ(a->execution->loop->ticks, 20001);
+    EXPECT_EQ(a->execution->loop->overruns, 17);
+    EXPECT_EQ(a->execution->loop->jitter_p50_s, 12.5e-6);  // exact: stored as doubles
+    EXPECT_EQ(a->execution->loop->jitter_p99_s, 81.25e-6);
+    EXPECT_EQ(a->execution->loop->jitter_max_s, 1.5e-3);
+    auto b = s.GetRun(ids[1]);
+    ASSERT_TRUE(b.ok() && b->execution.has_value());
+    EXPECT_EQ(b->execution->wall_s, 0.01);
+    EXPECT_FALSE(b->execution->loop.has_value()) << "a loop that was not paced has no statistics";
+    auto c = s.GetRun(ids[2]);
+    ASSERT_TRUE(c.ok());
+    EXPECT_FALSE(c->execution.has_value());
+    auto listed = s.ListRuns(RunFilter{});  // listings carry it too
+    ASSERT_TRUE(listed.ok());
+    ASSERT_EQ(listed->size(), 3u);
+    for (const auto& r : *listed)
+      if (r.id == ids[0]) {
+        ASSERT_TRUE(r.execution && r.execution->loop);
+        EXPECT_EQ(r.execution->loop->overruns, 17);
+      }
+  };
+  check(*store, "the writing connection");
+  auto again = OpenAnother();
+  ASSERT_NE(again, nullptr);
+  check(*again, "the store reopened");
 }
 
 TEST_P(StoreRunTest, FinishOfAQueuedRunIsAPreconditionFailure) {

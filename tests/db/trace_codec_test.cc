@@ -299,7 +299,7 @@ TEST(TraceCodecTest, Version3RawTracesStayReadableAfterTheMigrationBesideNewComp
   auto opened = OpenSqliteStore(path);
   ASSERT_TRUE(opened.ok()) << opened.status().ToString();
   auto& store = *opened;
-  EXPECT_EQ(store->schema_version(), 5);
+  EXPECT_EQ(store->schema_version(), schema::CurrentVersion());
   // The same run goes on with a new chunk: compressed, and the trace reads back whole, both codecs in one.
   TraceChunk next;
   next.index = 1;

@@ -49,8 +49,10 @@ class FlakyStore final : public db::Store {
     if (down) return Down();
     return inner_->SetProgress(lease, progress);
   }
+  using db::Store::Finish;
   Status Finish(const db::Lease& lease, db::RunStatus final_status, const std::string& reason,
-                const std::vector<db::Metric>& metrics) override {
+                const std::vector<db::Metric>& metrics,
+                const std::optional<db::ExecutionRecord>& execution) override {
     ++finish_calls;
     Hang();
     if (down) return Down();
@@ -58,7 +60,7 @@ class FlakyStore final : public db::Store {
       --fail_finishes;
       return Down();
     }
-    Status st = inner_->Finish(lease, final_status, reason, metrics);
+    Status st = inner_->Finish(lease, final_status, reason, metrics, execution);
     if (st.ok() && lose_finish_answers.load() > 0) {
       --lose_finish_answers;
       return Down();
