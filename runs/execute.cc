@@ -22,6 +22,25 @@ std::vector<db::Metric> RecordedMetrics(const experiment::Metrics& metrics) {
   return out;
 }
 
+db::ExecutionRecord RecordedExecution(const experiment::RunSummary& summary) {
+  db::ExecutionRecord e;
+  e.wall_s = summary.wall_s;
+  e.simulated_s = summary.duration_s;
+  e.samples = static_cast<std::int64_t>(summary.samples);
+  e.control_ticks = static_cast<std::int64_t>(summary.ticks);
+  e.metrics_from_trajectory = summary.metrics_from_trajectory;
+  if (summary.loop.ticks > 0) {
+    db::LoopRecord l;
+    l.ticks = static_cast<std::int64_t>(summary.loop.ticks);
+    l.overruns = static_cast<std::int64_t>(summary.loop.overruns);
+    l.jitter_p50_s = summary.loop.jitter_p50_s;
+    l.jitter_p99_s = summary.loop.jitter_p99_s;
+    l.jitter_max_s = summary.loop.jitter_max_s;
+    e.loop = l;
+  }
+  return e;
+}
+
 bool IsStaleWrite(const Status& st) { return db::ClassifyWrite(st) == db::WriteFault::kFenced; }
 
 namespace {
@@ -190,6 +209,7 @@ Outcome SpoolResult(Outcome out, const db::RunRecord& run, const experiment::Exp
     if (auto row = store->GetRun(run.id); row.ok() && !row->reason.empty()) res.reason = row->reason + "; " + res.reason;
   }
   res.metrics = RecordedMetrics(out.summary.metrics);
+  res.execution = RecordedExecution(out.summary);
   out.status = res.status;
   out.reason = res.reason;
   if (Status st = journal->AppendResult(res); !st.ok())
@@ -223,7 +243,8 @@ Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& se
   RetryPolicy policy = ctx.retry;
   policy.stop = ctx.stop;
   bool ended_called = false;
-  auto finish = [&](db::RunStatus status, std::string reason, const std::vector<db::Metric>& metrics) {
+  auto finish = [&](db::RunStatus status, std::string reason, const std::vector<db::Metric>& metrics,
+                    const std::optional<db::ExecutionRecord>& execution = std::nullopt) {
     out.status = status;
     out.reason = std::move(reason);
     // A run that never started still reads as failed, with the reason, to whoever looks at the summary.
@@ -236,8 +257,8 @@ Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& se
       ended_called = true;
       if (ctx.ended) ctx.ended();
     }
-    auto st = RetryWrite([&] { return store->Finish(db::LeaseOf(run), status, out.reason, metrics); }, policy,
-                         ctx.faults);
+    auto st = RetryWrite([&] { return store->Finish(db::LeaseOf(run), status, out.reason, metrics, execution); },
+                         policy, ctx.faults);
     out.recorded = st.ok();
     switch (db::ClassifyWrite(st)) {
       case db::WriteFault::kNone:
@@ -253,7 +274,7 @@ Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& se
         // Bad data or a bug (not the transport): the run fails with the reason rather than staying running.
         spdlog::error("run {}: cannot record the result: {}", static_cast<long long>(run.id), st.message().c_str());
         const std::string why = "cannot record the result: " + st.message();
-        if (status != db::RunStatus::kFailed || !metrics.empty()) {
+        if (status != db::RunStatus::kFailed || !metrics.empty() || execution) {
           auto failed = RetryWrite([&] { return store->Finish(db::LeaseOf(run), db::RunStatus::kFailed, why, {}); },
                                    policy, ctx.faults);
           if (failed.ok()) {
@@ -398,7 +419,7 @@ Outcome Execute(db::Store* store, const db::RunRecord& run, const BenchSetup& se
     // Keep why it was cancelled (the request's reason, stored by RequestCancel), not only when.
     if (auto row = store->GetRun(run.id); row.ok() && !row->reason.empty()) reason = row->reason + "; " + reason;
   }
-  return finish(status, std::move(reason), RecordedMetrics(out.summary.metrics));
+  return finish(status, std::move(reason), RecordedMetrics(out.summary.metrics), RecordedExecution(out.summary));
 }
 
 }  // namespace vb::runs

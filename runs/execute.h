@@ -7,7 +7,8 @@
 //   3. run it (Runner), with cancel and progress through a RunMonitor registered for watchers; the trace
 //      streams to the store in chunks while it runs (docs/store.md, "Traces while the run executes"), so a
 //      run's memory does not grow with its length and a watcher elsewhere sees the chunks as they land;
-//   4. finish the run with its status, reason and finite metrics.
+//   4. finish the run with its status, reason, finite metrics and what executing it measured (wall time, samples,
+//      a paced loop's ticks, overruns and jitter), in the one write that ends the run: after the loop, never in it.
 // Every store write on the way survives a store that is unavailable for a while (ExecuteContext::retry): a
 // chunk that cannot be written is kept and written later; the result is retried until written, or, past the
 // policy's bound, dropped: the run is then left running under a lease nobody renews, so it lapses and the lab
@@ -81,5 +82,8 @@ bool IsStaleWrite(const Status& st);
 
 // The metrics a run records: the finite ones of experiment::MetricList, in its order.
 std::vector<db::Metric> RecordedMetrics(const experiment::Metrics& metrics);
+// What a run records of its execution (wall time, samples, ticks, and the loop statistics of a paced loop: the
+// loop is taken as paced when it counted paced ticks), written with its final state.
+db::ExecutionRecord RecordedExecution(const experiment::RunSummary& summary);
 
 }  // namespace vb::runs

@@ -267,6 +267,23 @@ std::string ResultPayload(const SpooledResult& res) {
     PutString(&p, m.name);
     Put<double>(&p, m.value);
   }
+  // The execution record after the metrics: a journal written before it ends at the metrics and still reads.
+  if (res.execution) {
+    const db::ExecutionRecord& e = *res.execution;
+    Put<std::uint8_t>(&p, e.loop ? 2 : 1);
+    Put<double>(&p, e.wall_s);
+    Put<double>(&p, e.simulated_s);
+    Put<std::int64_t>(&p, e.samples);
+    Put<std::int64_t>(&p, e.control_ticks);
+    Put<std::uint8_t>(&p, e.metrics_from_trajectory ? 1 : 0);
+    if (e.loop) {
+      Put<std::int64_t>(&p, e.loop->ticks);
+      Put<std::int64_t>(&p, e.loop->overruns);
+      Put<double>(&p, e.loop->jitter_p50_s);
+      Put<double>(&p, e.loop->jitter_p99_s);
+      Put<double>(&p, e.loop->jitter_max_s);
+    }
+  }
   return p;
 }
 
@@ -279,6 +296,22 @@ bool DecodeResult(std::string_view payload, SpooledResult* res) {
   res->metrics.resize(n);
   for (auto& m : res->metrics)
     if (!r.GetString(&m.name) || !r.Get(&m.value)) return false;
+  res->execution.reset();
+  if (r.rest().empty()) return true;  // no execution record (or a journal written before there was one)
+  std::uint8_t kind = 0, from_trajectory = 0;
+  db::ExecutionRecord e;
+  if (!r.Get(&kind) || (kind != 1 && kind != 2) || !r.Get(&e.wall_s) || !r.Get(&e.simulated_s) ||
+      !r.Get(&e.samples) || !r.Get(&e.control_ticks) || !r.Get(&from_trajectory))
+    return false;
+  e.metrics_from_trajectory = from_trajectory != 0;
+  if (kind == 2) {
+    db::LoopRecord l;
+    if (!r.Get(&l.ticks) || !r.Get(&l.overruns) || !r.Get(&l.jitter_p50_s) || !r.Get(&l.jitter_p99_s) ||
+        !r.Get(&l.jitter_max_s))
+      return false;
+    e.loop = l;
+  }
+  res->execution = e;
   return r.rest().empty();
 }
 
@@ -325,12 +358,13 @@ Status UploadResult(db::Store* store, const db::Lease& lease, SpooledResult* res
     if (fault == db::WriteFault::kTransient || fault == db::WriteFault::kFenced) return st;
     if (!st.ok()) spdlog::warn("run {}: cannot record its progress: {}", lease.run_id, st.message());
   }
-  Status st = store->Finish(lease, res->status, res->reason, res->metrics);
+  Status st = store->Finish(lease, res->status, res->reason, res->metrics, res->execution);
   if (UploadFault(st) == db::WriteFault::kPermanent) {
     spdlog::error("run {}: cannot record the result: {}", lease.run_id, st.message());
     res->status = db::RunStatus::kFailed;
     res->reason = "cannot record the result: " + st.message();
     res->metrics.clear();
+    res->execution.reset();  // it may be what the store refused
     st = store->Finish(lease, res->status, res->reason, {});
   }
   return st;

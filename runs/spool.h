@@ -84,6 +84,7 @@ struct SpooledResult {
   std::string reason;
   std::vector<db::Metric> metrics;
   double progress = -1.0;
+  std::optional<db::ExecutionRecord> execution;  // written by the same Finish (journals before it have none)
 };
 
 struct SpoolOptions {

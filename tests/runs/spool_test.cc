@@ -351,7 +351,19 @@ TEST(Spool, AfterACrashTheLeftoversAreUploadedOnceAndTheStopIsDated) {
         ASSERT_TRUE(rig.store->AppendTraceChunk(db::LeaseOf(rig.run), chunk).ok());  // uploaded before the crash
       }
     }
-    ASSERT_TRUE((*j)->AppendResult({db::RunStatus::kDone, "", {{"rise_time_s", 0.01}}, -1.0}).ok());
+    // The result carries what executing the run measured, a paced loop's statistics included (written by the
+    // same Finish when it is uploaded).
+    db::ExecutionRecord executed;
+    executed.wall_s = 0.5;
+    executed.simulated_s = 0.009;
+    executed.samples = executed.control_ticks = 9;
+    executed.loop.emplace();
+    executed.loop->ticks = 9;
+    executed.loop->overruns = 2;
+    executed.loop->jitter_p50_s = 1e-5;
+    executed.loop->jitter_p99_s = 4e-5;
+    executed.loop->jitter_max_s = 6e-5;
+    ASSERT_TRUE((*j)->AppendResult({db::RunStatus::kDone, "", {{"rise_time_s", 0.01}}, -1.0, executed}).ok());
     auto j2 = spool->Begin(db::LeaseOf(second));
     ASSERT_TRUE(j2.ok());
     chunk.index = 0;
@@ -380,6 +392,12 @@ TEST(Spool, AfterACrashTheLeftoversAreUploadedOnceAndTheStopIsDated) {
   EXPECT_EQ(rig.StoredSamples(rig.run.id), 9);
   EXPECT_EQ(rig.HistoryCount(rig.run.id, db::RunStatus::kDone), 1);
   ASSERT_EQ(rig.store->GetMetrics(rig.run.id)->size(), 1u);
+  ASSERT_TRUE(r->execution.has_value()) << "the journal's execution record was uploaded with the result";
+  EXPECT_EQ(r->execution->samples, 9);
+  EXPECT_EQ(r->execution->wall_s, 0.5);
+  ASSERT_TRUE(r->execution->loop.has_value());
+  EXPECT_EQ(r->execution->loop->overruns, 2);
+  EXPECT_EQ(r->execution->loop->jitter_p99_s, 4e-5);
 
   ASSERT_EQ(*rig.store->RecoverAfterCrashAt("h", left->stopped_unix_s), 1);
   auto h = rig.store->History(second.id);
@@ -421,7 +439,7 @@ TEST(Spool, ACorruptRecordFailsTheRunWithTheReason) {
     f.seekp(static_cast<std::streamoff>(std::filesystem::file_size(path) - 3));
     f.put('\x55');
   }
-  ASSERT_TRUE((*j)->AppendResult({db::RunStatus::kDone, "", {}, -1.0}).ok());
+  ASSERT_TRUE((*j)->AppendResult({db::RunStatus::kDone, "", {}, -1.0, std::nullopt}).ok());
   rig.initial_down = false;
   spool->Start();
   EXPECT_EQ((*j)->WaitForResult(10, nullptr), Journal::State::kLanded);
