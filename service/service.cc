@@ -204,6 +204,23 @@ grpc::Status BenchServiceImpl::FillRun(db::Store* store, const db::RunRecord& r,
   }
   out->set_progress(progress);
   for (const auto& t : r.tags) out->add_tags(t);
+  if (r.execution) {
+    const db::ExecutionRecord& e = *r.execution;
+    auto* x = out->mutable_execution();
+    x->set_wall_s(e.wall_s);
+    x->set_simulated_s(e.simulated_s);
+    x->set_samples(e.samples);
+    x->set_control_ticks(e.control_ticks);
+    x->set_metrics_from_trajectory(e.metrics_from_trajectory);
+    if (e.loop) {
+      auto* l = x->mutable_loop();
+      l->set_ticks(e.loop->ticks);
+      l->set_overruns(e.loop->overruns);
+      l->set_jitter_p50_s(e.loop->jitter_p50_s);
+      l->set_jitter_p99_s(e.loop->jitter_p99_s);
+      l->set_jitter_max_s(e.loop->jitter_max_s);
+    }
+  }
   auto metrics = store->GetMetrics(r.id);
   if (!metrics.ok()) return ToGrpcStatus(metrics.status());
   for (const auto& m : *metrics) (*out->mutable_metrics())[m.name] = m.value;

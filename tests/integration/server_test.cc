@@ -417,6 +417,58 @@ TEST(Server, SigtermStopsCleanlyAndTheRunResumesAfterRestart) {
   EXPECT_EQ(runs[0].status(), v1::DONE);
 }
 
+// Issue 40: loop statistics travel on the run. A paced run executed by the server returns its ticks, overruns and
+// jitter through GetRun (and ListRuns), with its wall time; a run not paced has an execution record but no loop
+// statistics; both stay after the server restarts on its store (nothing is kept in the server's memory).
+TEST(Server, APacedRunsLoopStatisticsComeBackWithTheRun) {
+  ServerProcess server(TempDir("loopstats"));
+  std::string addr = server.Start();
+  ASSERT_FALSE(addr.empty()) << server.Log();
+  auto olga = MakeClient(addr, testing::kOperatorToken);
+  auto paced = olga.Submit(ShortRun("paced", 0.2, true));
+  auto unpaced = olga.Submit(ShortRun("unpaced", 0.2, false));
+  ASSERT_TRUE(paced.ok() && unpaced.ok()) << paced.status().message() << unpaced.status().message();
+  const std::int64_t paced_id = paced->run_ids(0), unpaced_id = unpaced->run_ids(0);
+  const auto runs = WaitAll(olga, {paced_id, unpaced_id}, 30.0);
+  ASSERT_EQ(runs.size(), 2u);
+  auto check = [&](client::Client& c, const char* when) {
+    SCOPED_TRACE(when);
+    auto p = c.GetRun(paced_id);
+    ASSERT_TRUE(p.ok()) << p.status().message();
+    ASSERT_EQ(p->status(), v1::DONE) << p->reason();
+    ASSERT_TRUE(p->has_execution());
+    EXPECT_GE(p->execution().wall_s(), 0.15) << "paced: about its duration in wall time";
+    EXPECT_NEAR(p->execution().simulated_s(), 0.2, 1e-9);
+    EXPECT_EQ(p->execution().samples(), 2001);
+    ASSERT_TRUE(p->execution().has_loop()) << p->DebugString();
+    const auto& loop = p->execution().loop();
+    EXPECT_GT(loop.ticks(), 0);
+    EXPECT_GE(loop.overruns(), 0);
+    EXPECT_LE(loop.overruns(), loop.ticks());
+    EXPECT_GE(loop.jitter_max_s(), loop.jitter_p99_s());
+    EXPECT_GE(loop.jitter_p99_s(), loop.jitter_p50_s());
+    auto u = c.GetRun(unpaced_id);
+    ASSERT_TRUE(u.ok());
+    ASSERT_TRUE(u->has_execution());
+    EXPECT_EQ(u->execution().samples(), 2001);
+    EXPECT_FALSE(u->execution().has_loop()) << "a run not paced has no loop statistics";
+    v1::ListRunsRequest req;
+    req.set_batch_id(paced->batch_id());
+    auto listed = c.ListRuns(req);
+    ASSERT_TRUE(listed.ok());
+    ASSERT_EQ(listed->runs_size(), 1);
+    ASSERT_TRUE(listed->runs(0).execution().has_loop());
+    EXPECT_EQ(listed->runs(0).execution().loop().ticks(), loop.ticks());
+  };
+  check(olga, "as executed");
+  const int status = server.Kill(SIGTERM);
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << server.Log();
+  addr = server.Start();
+  ASSERT_FALSE(addr.empty()) << server.Log();
+  auto again = MakeClient(addr, testing::kViewerToken);
+  check(again, "after a restart");
+}
+
 // Issue 39: a server killed mid-run dates the run's `interrupted` with the time it stopped (its spool's last sign
 // of life), not the restart's; the spool (beside the SQLite file by default) holds nothing once the run is done.
 double UnixNow() {
