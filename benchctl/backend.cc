@@ -45,6 +45,7 @@ RunView FromProto(const v1::Run& r) {
   v.split = r.split();
   if (r.has_t_start_s()) v.t_start_s = r.t_start_s();
   if (r.has_spec()) v.spec = r.spec();
+  if (r.has_execution()) v.execution = r.execution();
   for (const auto& c : r.history())
     v.history.push_back({api::FromProto(c.status()).value_or(RunStatus::kQueued), c.at_unix_s(), c.reason()});
   return v;
@@ -78,10 +79,10 @@ StatusOr<std::int64_t> Backend::RunBatch(const std::vector<experiment::Experimen
   std::fprintf(stderr, "%s: batch %lld, %d runs on %s\n", batch_name.c_str(), static_cast<long long>(resp->batch_id()),
                resp->run_ids_size(), where_.c_str());
   auto st = WaitForRuns({resp->run_ids().begin(), resp->run_ids().end()}, [&](std::int64_t id) {
-    if (auto e = Executed(id))
-      if (auto r = c_->GetRun(id); r.ok())
-        std::fprintf(stderr, "  %s: %s\n", api::FromProto(r->key()).DisplayName().c_str(),
-                     e->summary.BriefReport().c_str());
+    if (!executes_here()) return;  // a server's runs: the caller reports them
+    if (auto r = c_->GetRun(id); r.ok() && r->has_execution())
+      std::fprintf(stderr, "  %s: %s\n", api::FromProto(r->key()).DisplayName().c_str(),
+                   ExecutionBrief(FromProto(*r)).c_str());
   });
   if (!st.ok()) return st;
   return resp->batch_id();
@@ -184,9 +185,9 @@ StatusOr<Submitted> Backend::Submit(const experiment::ExperimentSpec& spec, bool
   return out;
 }
 
-std::optional<server::ExecutedRun> Backend::Executed(std::int64_t run_id) const {
+std::optional<experiment::Trace> Backend::KeptTrace(std::int64_t run_id) const {
   if (local_ == nullptr) return std::nullopt;
-  return local_->Executed(run_id);
+  return local_->KeptTrace(run_id);
 }
 
 StatusOr<RunView> Backend::GetRun(std::int64_t run_id) {

@@ -95,8 +95,9 @@ class Backend final {
   StatusOr<valvebench::v1::DiagnoseRunsResponse> DiagnoseRuns(const valvebench::v1::DiagnoseRunsRequest& request);
   // Queues a spec's runs as one batch (realtime: paced to the wall clock).
   StatusOr<Submitted> Submit(const experiment::ExperimentSpec& spec, bool realtime);
-  // What a local service executed of a run (summary with loop jitter, and the trace if kept); nullopt remotely.
-  std::optional<server::ExecutedRun> Executed(std::int64_t run_id) const;
+  // The whole trace, every channel, of a run the local service executed with keep_traces (--trace-csv); nullopt
+  // remotely or when not kept. Everything else about a run, its loop statistics included, is on the stored run.
+  std::optional<experiment::Trace> KeptTrace(std::int64_t run_id) const;
   // One run with its spec and status history.
   StatusOr<RunView> GetRun(std::int64_t run_id);
   // Runs matching the filter, at most filter.limit, in the service's order (newest first); *more: more matched.

@@ -61,9 +61,8 @@ int CmdCompareSpec(Backend& backend, const std::string& spec_path, bool json, bo
       if (shown.ok()) shown = r.status();
       return;
     }
-    const auto e = backend.Executed(id);
     std::fprintf(stderr, "%s [%s]: %s\n", r->key.DisplayName().c_str(), r->controller.c_str(),
-                 e ? e->summary.BriefReport().c_str() : RunStatusName(r->status));
+                 ExecutionBrief(*r).c_str());
   });
   if (!st.ok()) return Fail(st);
   if (!shown.ok()) return Fail(shown);

@@ -108,7 +108,7 @@ int CmdRun(Backend& backend, const RunOptions& o, const Output& out) {
 
   int code = kExitOk;
   std::vector<RunView> runs;
-  std::vector<std::optional<server::ExecutedRun>> executed;
+  std::vector<std::optional<experiment::Trace>> kept;  // the loop's whole traces, with --trace-csv
   for (size_t k = 0; k < sub->run_ids.size(); ++k) {
     const std::int64_t id = sub->run_ids[k];
     // The bar: for people; a local run that ran in this process before draws it only on a terminal, so its
@@ -122,14 +122,14 @@ int CmdRun(Backend& backend, const RunOptions& o, const Output& out) {
     r->history.clear();
     if (!r->ok()) code = kExitRunFailed;
     runs.push_back(std::move(*r));
-    executed.push_back(backend.Executed(id));
+    kept.push_back(o.trace_csv.empty() ? std::nullopt : backend.KeptTrace(id));
   }
   if (!o.trace_csv.empty())
     for (size_t k = 0; k < runs.size(); ++k) {
       const std::string path = IndexedPath(o.trace_csv, k, runs.size());
       Status st;
-      if (executed[k]) {  // the whole trace as the loop recorded it, every channel
-        st = WriteTraceCsv(executed[k]->trace, path);
+      if (kept[k]) {  // the whole trace as the loop recorded it, every channel
+        st = WriteTraceCsv(*kept[k], path);
       } else {  // what the service stored
         auto trace = backend.GetTrace(sub->run_ids[k]);
         if (!trace.ok()) return Fail(trace.status());
@@ -142,17 +142,15 @@ int CmdRun(Backend& backend, const RunOptions& o, const Output& out) {
   const std::int64_t batch_id = sub->batch_id;
   if (!backend.keeps_runs())
     for (auto& r : runs) r.id = r.batch_id = 0;
-  std::vector<const experiment::RunSummary*> summaries;
-  for (const auto& e : executed) summaries.push_back(e ? &e->summary : nullptr);
   if (out.json) {
     Json all = Json::array();
-    for (size_t k = 0; k < runs.size(); ++k) all.push_back(RunJson(runs[k], summaries[k]));
+    for (size_t k = 0; k < runs.size(); ++k) all.push_back(RunJson(runs[k]));
     std::cout << all.dump(2) << "\n";
   } else if (out.csv) {
-    std::cout << RunsCsv(runs, summaries);
+    std::cout << RunsCsv(runs);
   } else {
     if (runs.size() == 1) {
-      std::cout << RunText(runs[0], summaries[0], false);
+      std::cout << RunText(runs[0], false);
     } else {  // a batch: one line per run, the metrics are in the comparison below (docs/comparison.md)
       for (const auto& r : runs) std::cout << RunLine(r);
       auto cmp = backend.Compare(batch_id, {});
@@ -219,7 +217,7 @@ int CmdQueue(Backend& backend, const QueueOptions& o, const Output& out) {
   if (out.json) {
     Json a = Json::array();
     for (const auto& q : rows) {
-      Json j = RunJson(q.run, nullptr);
+      Json j = RunJson(q.run);
       AddEstimate(&j, q);
       a.push_back(std::move(j));
     }
@@ -231,7 +229,7 @@ int CmdQueue(Backend& backend, const QueueOptions& o, const Output& out) {
   if (out.csv) {
     std::vector<RunView> runs;
     for (const auto& q : rows) runs.push_back(q.run);
-    std::cout << RunsCsv(runs, {});
+    std::cout << RunsCsv(runs);
     return kExitOk;
   }
   if (rows.empty()) {
@@ -280,11 +278,11 @@ int CmdShow(Backend& backend, std::int64_t run_id, const Output& out) {
   auto r = backend.GetRun(run_id);
   if (!r.ok()) return Fail(r.status());
   if (out.json) {
-    std::cout << RunJson(*r, nullptr).dump(2) << "\n";
+    std::cout << RunJson(*r).dump(2) << "\n";
   } else if (out.csv) {
-    std::cout << RunsCsv({*r}, {});
+    std::cout << RunsCsv({*r});
   } else {
-    std::cout << RunText(*r, nullptr, true);
+    std::cout << RunText(*r, true);
   }
   return kExitOk;
 }
@@ -304,7 +302,7 @@ int CmdWatch(Backend& backend, std::int64_t run_id, const Output& out) {
   if (!st.ok()) return Fail(st);
   auto r = backend.GetRun(run_id);
   if (!r.ok()) return Fail(r.status());
-  if (!out.json) std::cout << RunText(*r, nullptr, false);
+  if (!out.json) std::cout << RunText(*r, false);
   return r->ok() ? kExitOk : kExitRunFailed;
 }
 
@@ -321,7 +319,7 @@ int CmdCancel(Backend& backend, std::int64_t run_id, const std::string& reason, 
     r = std::move(now);
   }
   if (out.json) {
-    Json j = RunJson(*r, nullptr);
+    Json j = RunJson(*r);
     j["cancel"] = r->status == RunStatus::kCancelled ? "done" : r->ended() ? "too late" : "pending";
     std::cout << j.dump(2) << "\n";
     return kExitOk;
@@ -330,7 +328,7 @@ int CmdCancel(Backend& backend, std::int64_t run_id, const std::string& reason, 
     if (r->status != RunStatus::kCancelled)
       std::printf("run %lld had already ended (%s) when the cancel arrived\n", static_cast<long long>(run_id),
                   RunStatusName(r->status));
-    std::cout << RunText(*r, nullptr, false);
+    std::cout << RunText(*r, false);
   } else {
     std::printf("run %lld: cancel requested, still %s at %.0f %% after %.0f s; it stops at its loop's next check "
                 "(benchctl watch %lld follows it)\n",

@@ -21,21 +21,24 @@ namespace {
 
 Json Number(double v) { return std::isfinite(v) ? Json(v) : Json(nullptr); }
 
-Json SummaryJson(const experiment::RunSummary& s) {
-  Json j = {{"termination", experiment::TerminationName(s.termination)},
-            {"duration_s", s.duration_s},
-            {"samples", s.samples},
-            {"ticks", s.ticks},
-            {"wall_s", s.wall_s},
-            {"realtime_factor", s.realtime_factor},
-            {"metrics_from", s.metrics_from_trajectory ? "trajectory" : "samples"},
-            {"warnings", s.warnings}};
-  if (s.loop.ticks > 0) {
-    j["loop"] = {{"paced_ticks", s.loop.ticks},
-                 {"overruns", s.loop.overruns},
-                 {"jitter_p50_s", s.loop.jitter_p50_s},
-                 {"jitter_p99_s", s.loop.jitter_p99_s},
-                 {"jitter_max_s", s.loop.jitter_max_s}};
+// A stored run's execution under the JSON names `run --json` has always used (docs/cli.md).
+Json SummaryJson(const RunView& r) {
+  const auto& x = *r.execution;
+  const double factor = x.wall_s() > 0.0 ? x.simulated_s() / x.wall_s() : 0.0;
+  Json j = {{"termination", RunStatusName(r.status)},
+            {"duration_s", x.simulated_s()},
+            {"samples", x.samples()},
+            {"ticks", x.control_ticks()},
+            {"wall_s", x.wall_s()},
+            {"realtime_factor", factor},
+            {"metrics_from", x.metrics_from_trajectory() ? "trajectory" : "samples"}};
+  if (x.has_loop()) {
+    const auto& l = x.loop();
+    j["loop"] = {{"paced_ticks", l.ticks()},
+                 {"overruns", l.overruns()},
+                 {"jitter_p50_s", l.jitter_p50_s()},
+                 {"jitter_p99_s", l.jitter_p99_s()},
+                 {"jitter_max_s", l.jitter_max_s()}};
   }
   return j;
 }
@@ -73,7 +76,7 @@ std::string IsoLocalTime(double unix_s) {
   return fmt::format("{}{}{:02}:{:02}", buf, off_min < 0 ? '-' : '+', a / 60, a % 60);
 }
 
-std::string RunText(const RunView& r, const experiment::RunSummary* summary, bool history) {
+std::string RunText(const RunView& r, bool history) {
   std::string out;
   if (r.id != 0) {
     out += fmt::format("run {} {} [{}] (batch {}): {}", r.id, r.key.DisplayName(), r.controller, r.batch_id,
@@ -99,14 +102,15 @@ std::string RunText(const RunView& r, const experiment::RunSummary* summary, boo
     }
     out += "\n";
   }
-  if (summary != nullptr) {
-    const auto& s = *summary;
+  if (r.execution) {
+    const auto& x = *r.execution;
+    const double factor = x.wall_s() > 0.0 ? x.simulated_s() / x.wall_s() : 0.0;
     out += fmt::format("  {:.6g} s simulated, {} samples, {} control ticks, {:.3g} s wall, {:.0f}x real time\n",
-                       s.duration_s, s.samples, s.ticks, s.wall_s, s.realtime_factor);
-    if (s.loop.ticks > 0)
+                       x.simulated_s(), x.samples(), x.control_ticks(), x.wall_s(), factor);
+    if (x.has_loop())
       out += fmt::format("  loop: {} paced ticks, {} overruns, jitter p50 {:.1f} us, p99 {:.1f} us, max {:.1f} us\n",
-                         s.loop.ticks, s.loop.overruns, s.loop.jitter_p50_s * 1e6, s.loop.jitter_p99_s * 1e6,
-                         s.loop.jitter_max_s * 1e6);
+                         x.loop().ticks(), x.loop().overruns(), x.loop().jitter_p50_s() * 1e6,
+                         x.loop().jitter_p99_s() * 1e6, x.loop().jitter_max_s() * 1e6);
   }
   // With its unit and SI prefix, as the web's run page writes it (common/units.h): "rmse  953.3 µA".
   for (const auto& [name, value] : OrderedMetrics(r.metrics))
@@ -119,7 +123,7 @@ std::string RunText(const RunView& r, const experiment::RunSummary* summary, boo
   return out;
 }
 
-Json RunJson(const RunView& r, const experiment::RunSummary* summary) {
+Json RunJson(const RunView& r) {
   Json j;
   if (r.id != 0) {
     j["id"] = r.id;
@@ -147,7 +151,7 @@ Json RunJson(const RunView& r, const experiment::RunSummary* summary) {
   }
   if (!r.split.empty()) j["split"] = r.split;
   if (r.t_start_s) j["t_start_s"] = *r.t_start_s;
-  if (summary != nullptr) j["summary"] = SummaryJson(*summary);
+  if (r.execution) j["summary"] = SummaryJson(r);
   Json m = Json::object();
   for (const auto& [name, value] : OrderedMetrics(r.metrics)) m[name] = Number(value);
   j["metrics"] = m;
@@ -168,7 +172,7 @@ Json RunJson(const RunView& r, const experiment::RunSummary* summary) {
   return j;
 }
 
-std::string RunsCsv(const std::vector<RunView>& runs, const std::vector<const experiment::RunSummary*>& summaries) {
+std::string RunsCsv(const std::vector<RunView>& runs) {
   // Metric columns: experiment::MetricList's, then any other name a run has, so rows of one list line up.
   std::map<std::string, double> all;
   for (const auto& [name, unused] : experiment::MetricList(experiment::Metrics{})) all[name] = 0.0;
@@ -193,7 +197,6 @@ std::string RunsCsv(const std::vector<RunView>& runs, const std::vector<const ex
   out += "\n";
   for (std::size_t k = 0; k < runs.size(); ++k) {
     const RunView& r = runs[k];
-    const experiment::RunSummary* s = k < summaries.size() ? summaries[k] : nullptr;
     out += r.id != 0 ? fmt::format("{},{}", r.id, r.batch_id) : std::string(",");
     out += fmt::format(",{},{}", CsvQuoted(r.key.DisplayName()), r.controller);
     for (const auto& a : axes) {
@@ -202,7 +205,9 @@ std::string RunsCsv(const std::vector<RunView>& runs, const std::vector<const ex
         if (c.field == a) out += fmt::format("{:.10g}", c.value);
     }
     out += fmt::format(",{},{},{:.3f}", RunStatusName(r.status), CsvQuoted(r.bench), r.progress);
-    out += s != nullptr ? fmt::format(",{:.9g},{},{:.6g}", s->duration_s, s->samples, s->wall_s) : std::string(",,,");
+    out += r.execution ? fmt::format(",{:.9g},{},{:.6g}", r.execution->simulated_s(), r.execution->samples(),
+                                     r.execution->wall_s())
+                       : std::string(",,,");
     for (const auto& c : columns) {
       auto it = r.metrics.find(c);
       out += it != r.metrics.end() && std::isfinite(it->second) ? fmt::format(",{:.10g}", it->second) : ",";
@@ -225,6 +230,16 @@ std::string RunLine(const RunView& r) {
   if (!r.reason.empty()) out.append(" (").append(r.reason).append(")");
   out.append("\n");
   return out;
+}
+
+std::string ExecutionBrief(const RunView& r) {
+  if (!r.execution) return RunStatusName(r.status);
+  const auto& x = *r.execution;
+  const double factor = x.wall_s() > 0.0 ? x.simulated_s() / x.wall_s() : 0.0;
+  std::string s = fmt::format("{}: {:g} s, {} samples, {} ticks, {:g}x real time", RunStatusName(r.status),
+                              x.simulated_s(), x.samples(), x.control_ticks(), factor);
+  if (!r.reason.empty()) s.append(" (").append(r.reason).append(")");
+  return s;
 }
 
 std::string EventText(const RunView& r) {

@@ -15,7 +15,7 @@
 
 #include "common/run_key.h"
 #include "common/run_status.h"
-#include "experiment/runner.h"
+#include "valvebench/v1/api.pb.h"
 #include "valvebench/v1/spec.pb.h"
 
 namespace vb::benchctl {
@@ -47,6 +47,8 @@ struct RunView {
   std::optional<double> t_start_s;     // imported runs: start within the dataset's session
   std::optional<valvebench::v1::ExperimentSpec> spec;  // single runs (show, GetRun); not in listings
   std::vector<RunChange> history;      // single runs only
+  // What executing it measured, stored with the run (absent: it did not execute); `loop` for paced runs only.
+  std::optional<valvebench::v1::RunExecution> execution;
 
   bool ok() const { return status == RunStatus::kDone; }
   bool ended() const { return Ended(status); }
@@ -60,16 +62,19 @@ std::vector<std::pair<std::string, double>> OrderedMetrics(const std::map<std::s
 // ISO 8601 in the local time zone with its offset, e.g. "2026-11-25T13:16:42+01:00"; "-" for 0 (not yet).
 std::string IsoLocalTime(double unix_s);
 
-// Text: identity and status, bench and times, the run's summary when it executed in this process
-// (summary != nullptr), metrics with their SI units, and with `history` every status change.
-std::string RunText(const RunView& run, const experiment::RunSummary* summary, bool history);
+// Text: identity and status, bench and times, what executing it measured (when it executed: wall time, samples,
+// a paced loop's ticks, overruns and jitter), metrics with their SI units, and with `history` every status change.
+std::string RunText(const RunView& run, bool history);
 // JSON: numeric ids, the lower-case status words of common/run_status.h, times as ISO 8601 and Unix seconds,
-// metrics in OrderedMetrics order; "summary" only for a run executed in this process; "id"/"batch_id" absent
-// for a run that was not stored.
-Json RunJson(const RunView& run, const experiment::RunSummary* summary);
+// metrics in OrderedMetrics order; "summary" for a run that executed (with "loop" when it was paced);
+// "id"/"batch_id" absent for a run that was not stored.
+Json RunJson(const RunView& run);
 // CSV: one header for a list of runs (a column per swept field any of them has, then status and times, then
 // metric columns: every name any of them has), one row per run.
-std::string RunsCsv(const std::vector<RunView>& runs, const std::vector<const experiment::RunSummary*>& summaries);
+std::string RunsCsv(const std::vector<RunView>& runs);
+// One line on an executed run, as experiment::RunSummary::BriefReport words it ("done: 0.5 s, 5001 samples,
+// 5001 ticks, 180x real time"), from the stored run; its status word alone when it did not execute.
+std::string ExecutionBrief(const RunView& run);
 
 // One line for a run of a batch (run prints these, then the comparison carries the metrics):
 // "run 12 static-map/fig8 duty=0.35 supply_pressure_Pa=200000: done", the sweep fields' last component.

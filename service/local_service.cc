@@ -117,10 +117,12 @@ Status LocalService::Init() {
   h.keep_traces = options_.keep_traces;
   h.watch_period_s = kRelayPeriod_s;
   h.progress_every = kProgressEveryRelays;
-  h.on_outcome = [this](runs::Outcome& o) {
-    std::lock_guard<std::mutex> lock(executed_mu_);
-    executed_[o.run_id] = {std::move(o.summary), std::move(o.trace)};
-  };
+  if (options_.keep_traces) {
+    h.on_outcome = [this](runs::Outcome& o) {
+      std::lock_guard<std::mutex> lock(kept_mu_);
+      kept_[o.run_id] = std::move(o.trace);
+    };
+  }
   grpc::ServerBuilder builder;  // no listening port: InProcessChannel() only
   auto host = Host::Start(std::move(h), &builder);
   if (!host.ok()) return host.status();
@@ -145,10 +147,10 @@ std::shared_ptr<grpc::Channel> LocalService::InProcessChannel() {
   return host_->server()->InProcessChannel(args);
 }
 
-std::optional<ExecutedRun> LocalService::Executed(std::int64_t run_id) const {
-  std::lock_guard<std::mutex> lock(executed_mu_);
-  auto it = executed_.find(run_id);
-  if (it == executed_.end()) return std::nullopt;
+std::optional<experiment::Trace> LocalService::KeptTrace(std::int64_t run_id) const {
+  std::lock_guard<std::mutex> lock(kept_mu_);
+  auto it = kept_.find(run_id);
+  if (it == kept_.end()) return std::nullopt;
   return it->second;
 }
 

@@ -28,7 +28,7 @@
 #include <vector>
 
 #include "common/status.h"
-#include "experiment/runner.h"
+#include "experiment/trace.h"
 #include "runs/bench_setup.h"
 #include "runs/monitor.h"
 #include "runs/worker.h"
@@ -50,19 +50,14 @@ struct LocalServiceOptions {
   // Start the benches' workers. false: a service that reads, cancels and imports only (benchctl show, queue,
   // cancel --local): runs queued into it wait for a service that executes.
   bool execute = true;
-  // Keep every executed run's whole trace in memory (Executed()::trace), for --trace-csv/--plot.
+  // Keep every executed run's whole trace in memory (KeptTrace()), for --trace-csv/--plot: the store keeps what
+  // the service records, this is the loop's own trace with every channel.
   bool keep_traces = false;
   // A SQLite store must exist already (an administrative command, e.g. prune, would otherwise create an empty
   // one): FailedPrecondition "no local store at PATH" if it does not.
   bool must_exist = false;
   // The user runs are submitted as (default $USER, else the account name, else "local").
   std::string user;
-};
-
-// What this service executed of a run: its summary (loop jitter, wall time) and, with keep_traces, its trace.
-struct ExecutedRun {
-  experiment::RunSummary summary;
-  experiment::Trace trace;
 };
 
 class LocalService {
@@ -82,8 +77,9 @@ class LocalService {
   const std::string& store_path() const { return store_path_; }
   // Whether runs outlive the service (false: the private temporary store).
   bool keeps_runs() const { return !options_.store.empty(); }
-  // The summary (and trace, with keep_traces) of a run this service executed; nullopt otherwise.
-  std::optional<ExecutedRun> Executed(std::int64_t run_id) const;
+  // With keep_traces, the whole trace of a run this service executed; nullopt otherwise. What executing a run
+  // measured (wall time, loop statistics) is not here: it is stored with the run (Run.execution).
+  std::optional<experiment::Trace> KeptTrace(std::int64_t run_id) const;
 
  private:
   explicit LocalService(LocalServiceOptions options) : options_(std::move(options)) {}
@@ -94,8 +90,8 @@ class LocalService {
   std::string private_dir_;  // the private store's directory ("" if none)
   std::string token_;
   ServiceSettings settings_;  // the host's: declared before it, outlives it
-  mutable std::mutex executed_mu_;
-  std::map<std::int64_t, ExecutedRun> executed_;
+  mutable std::mutex kept_mu_;
+  std::map<std::int64_t, experiment::Trace> kept_;
   std::unique_ptr<Host> host_;
 };
 

@@ -252,6 +252,49 @@ TEST(BenchctlCli, StoredRunCommandsWorkOnTheLocalStore) {
   EXPECT_NE(missing.out.find("local store"), std::string::npos) << missing.out;
 }
 
+// A paced local run's loop statistics are stored with the run (issue 40): `run --local --realtime` prints them,
+// and so does `show` from another process, text and JSON; a run not paced shows its execution without a loop.
+TEST(BenchctlCli, LoopStatisticsOfAPacedRunAreShownFromTheStore) {
+  const std::string dir = ::testing::TempDir() + "/benchctl-loop-" + std::to_string(::getpid());
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  const std::string env = "VALVEBENCH_DB=" + dir + "/local.db ";
+  auto cli = [&](const std::string& args) { return vb::testing::RunCommand(env + VB_BENCHCTL + " " + args); };
+  const std::string spec = dir + "/short.json";
+  std::ofstream(spec) << R"({"name": "short", "duration_s": 0.1, "recording": {"rate_Hz": 10000},
+      "controller": {"open_loop_pwm": {"segments": [{"start_s": 0, "frequency_Hz": 100, "duty": 0.5}]}}})";
+  Result paced = cli("run --local " + spec + " --realtime");
+  ASSERT_EQ(paced.exit_code, 0) << paced.out;
+  EXPECT_NE(paced.out.find("  loop: "), std::string::npos) << paced.out;
+  EXPECT_NE(paced.out.find(" paced ticks, "), std::string::npos) << paced.out;
+  const std::regex id_re("run ([0-9]+) ");
+  std::smatch m;
+  ASSERT_TRUE(std::regex_search(paced.out, m, id_re)) << paced.out;
+  const std::string id = m[1].str();
+
+  Result shown = cli("show " + id);
+  ASSERT_EQ(shown.exit_code, 0) << shown.out;
+  EXPECT_NE(shown.out.find(" paced ticks, "), std::string::npos) << "show reads them from the store\n" << shown.out;
+  EXPECT_NE(shown.out.find(" s wall, "), std::string::npos) << shown.out;
+  Result json = cli("show " + id + " --json");
+  ASSERT_EQ(json.exit_code, 0) << json.out;
+  const auto j = nlohmann::json::parse(json.out, nullptr, false);
+  ASSERT_TRUE(j.is_object()) << json.out;
+  ASSERT_TRUE(j["summary"].contains("loop")) << json.out;
+  EXPECT_GT(j["summary"]["loop"]["paced_ticks"].get<std::int64_t>(), 0);
+  EXPECT_GE(j["summary"]["loop"]["jitter_max_s"].get<double>(), j["summary"]["loop"]["jitter_p50_s"].get<double>());
+  EXPECT_EQ(j["summary"]["samples"], 1001);
+
+  Result plain = cli("run --local " + spec + " --json");
+  ASSERT_EQ(plain.exit_code, 0) << plain.out;
+  const auto p = nlohmann::json::parse(plain.out, nullptr, false);
+  ASSERT_TRUE(p.is_array() && p.size() == 1u) << plain.out;
+  ASSERT_TRUE(p[0].contains("summary")) << plain.out;
+  EXPECT_FALSE(p[0]["summary"].contains("loop")) << "not paced: no loop statistics\n" << plain.out;
+  Result plain_shown = cli("show " + std::to_string(p[0]["id"].get<std::int64_t>()));
+  EXPECT_EQ(plain_shown.out.find("paced ticks"), std::string::npos) << plain_shown.out;
+}
+
 // A local run executing in one benchctl is seen by another through the store: queue lists it running with
 // its progress, cancel stops it and reports the state it reached; the running benchctl exits 1.
 TEST(BenchctlCli, LocalRunIsFollowedAndCancelledFromAnotherProcess) {

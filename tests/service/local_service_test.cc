@@ -47,7 +47,7 @@ void WaitEnded(client::Client& c, std::int64_t id) {
 }
 
 // A run submitted through the channel is executed by the service's worker and is then what ListRuns, GetRun,
-// GetQueue and GetTrace of the same service say; what it executed has its summary kept.
+// GetQueue and GetTrace of the same service say; with keep_traces its whole trace is kept too.
 TEST(LocalService, RunsGoThroughTheServiceAndAreVisibleToItsViews) {
   const std::string dir = TempDir("views");
   server::LocalServiceOptions o;
@@ -80,11 +80,17 @@ TEST(LocalService, RunsGoThroughTheServiceAndAreVisibleToItsViews) {
   auto trace = c.GetTrace(id);
   ASSERT_TRUE(trace.ok()) << trace.status().message();
   EXPECT_GT(trace->samples(), 100u);
-  auto executed = (*s)->Executed(id);
-  ASSERT_TRUE(executed.has_value());
-  EXPECT_EQ(executed->summary.samples, executed->trace.size());
-  EXPECT_GT(executed->trace.size(), 100u);
-  EXPECT_FALSE((*s)->Executed(id + 1).has_value());
+  auto kept = (*s)->KeptTrace(id);
+  ASSERT_TRUE(kept.has_value());
+  EXPECT_GT(kept->size(), 100u);
+  EXPECT_FALSE((*s)->KeptTrace(id + 1).has_value());
+  // What executing it measured is on the run itself; a run not paced has no loop statistics.
+  auto got = c.GetRun(id);
+  ASSERT_TRUE(got.ok()) << got.status().message();
+  ASSERT_TRUE(got->has_execution());
+  EXPECT_EQ(static_cast<std::size_t>(got->execution().samples()), kept->size());
+  EXPECT_GT(got->execution().wall_s(), 0.0);
+  EXPECT_FALSE(got->execution().has_loop());
   EXPECT_NE((*s)->Where().find("local store "), std::string::npos);
   EXPECT_TRUE((*s)->keeps_runs());
   s->reset();
