@@ -1158,6 +1158,43 @@ void NoneOrUndetermined(Diagnosis* out, const std::string& none_reason) {
   if (!record.empty()) d.verdict_reason += "; to do better: " + record;
 }
 
+// A name against a reference identified from scratch that is not identified (its fit error above
+// kReferenceIdentified x its noise: a wrong basin or a form error). A candidate re-fits the reference's
+// parameters, and how each moves the current is the reference's: where those sensitivities are not the valve's,
+// the row that closes the target's gap best need not be the change that happened. Measured (perf_changes, the
+// independent plant, docs/real-data.md "Fifth round"): every confident wrong name came from such a reference
+// (a warmer coil named a supply voltage or a sense offset, a weaker preload a mass), none from an identified one.
+// So the name becomes `undetermined`, saying that something changed (the best row and what it closes), why it
+// cannot be trusted, and what to record. `stuck` stays: no motion in any run is read from the current's shape
+// (no dip), not from the reference's sensitivities. The trade: the names that were right against such references
+// are withheld too (measured beside it).
+void UntrustedName(Diagnosis* out) {
+  Diagnosis& d = *out;
+  if (d.chosen < 0 || !d.has_reference || !d.reference.from_scratch || d.reference.identified()) return;
+  if (d.ranking.empty() || d.ranking.front().name == "stuck") return;
+  const std::string named = d.verdict;
+  const CandidateResult& best = d.ranking.front();
+  d.chosen = -1;
+  d.confusable.clear();
+  d.untrusted_name = named;
+  d.verdict = "undetermined";
+  d.verdict_kind = VerdictKind::kUndetermined;
+  const double floor = std::max({d.noise_floor_A, d.reference.fit_rmse_A, d.measurement_noise_A});
+  d.smallest_visible_A = std::sqrt(kSignificance * kSignificance - 1.0) * floor;
+  d.verdict_reason = fmt::format(
+      "cannot tell which change: something changed ({} closes {:.0f} % of the holdout gap, {:.2f} -> {:.2f} mA RMS), "
+      "but the reference is identified at {:.2f} mA RMS against its noise floor of {:.2f} mA ({:.1f}x; a name needs "
+      "at most {:.0f}x): in a wrong basin or with a form error its parameters do not move the current as the "
+      "valve's do, so the change it names is not trusted",
+      named, 100.0 * best.closed, best.holdout_rmse_before_A * 1e3, best.holdout_rmse_after_A * 1e3,
+      d.reference.fit_rmse_A * 1e3, d.reference.noise_floor_A * 1e3,
+      d.reference.noise_floor_A > 0.0 ? d.reference.fit_rmse_A / d.reference.noise_floor_A : INFINITY,
+      kReferenceIdentified);
+  std::string record;
+  for (const auto& r : d.reference.to_record) record += (record.empty() ? "" : "; ") + r;
+  if (!record.empty()) d.verdict_reason += "; to do better: " + record;
+}
+
 // Step 5's verdict, decided here and only here: the best row when it may be the verdict and closes kExplained of
 // the gap (among rows the data cannot separate from it, the one the declared conditions or a from-scratch
 // moving valve's data determine: ChooseAmongConfusable, gap/moving_valve.h), "none" when against a reference
@@ -1218,6 +1255,7 @@ void Decide(Diagnosis* out, const Dataset& target) {
     const std::string either = ChooseAmongConfusable(&d, target);
     d.verdict = either.empty() ? d.ranking.front().name : either;
     d.verdict_kind = either.empty() ? VerdictKindOf(d.ranking.front().kind) : VerdictKind::kEitherOf;
+    UntrustedName(&d);
   }
 }
 

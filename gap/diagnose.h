@@ -194,6 +194,9 @@ struct Diagnosis {
   // With an `undetermined` verdict: the smallest change (its own RMS signature on the current) the runs could
   // have shown against this reference, sqrt(kSignificance^2 - 1) x max(noise, the reference's fit error).
   double smallest_visible_A = NAN;
+  // With an `undetermined` verdict against a reference that is not identified: the name the data pointed to,
+  // withheld because such a reference's sensitivities are not the valve's ("" otherwise; UntrustedName).
+  std::string untrusted_name;
   std::vector<std::string> warnings;
   // Nuisance drift (docs/gap.md, "Nuisance drift"): nominal parameters re-fitted beside the verdict's effect
   // because that was decisive on the holdout runs. They are not part of the verdict (the effect is the cause);

@@ -91,6 +91,7 @@ std::string DiagnosisJson(const Diagnosis& d) {
   if (d.verdict_kind == VerdictKind::kUndetermined) {
     j["smallest_visible_A"] = NumOrNull(d.smallest_visible_A);
     j["to_record"] = d.reference.to_record;
+    if (!d.untrusted_name.empty()) j["untrusted_name"] = d.untrusted_name;
   }
   if (!d.nuisance.empty()) {
     nlohmann::ordered_json drift = nlohmann::ordered_json::array();
