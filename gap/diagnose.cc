@@ -1127,6 +1127,24 @@ void LandmarksAndTrends(const Dataset& ds, const std::vector<std::vector<double>
   }
 }
 
+// The verdict `undetermined` against a reference that is not identified, and the smallest change it could have
+// shown: the target's gap becomes significant at kSignificance x max(noise, the reference's error); a change adds
+// its own signature in quadrature to what the reference leaves, so the smallest it could be seen at is
+// sqrt(kSignificance^2 - 1) x that floor. The reason is the caller's.
+void Undetermined(Diagnosis* d) {
+  d->verdict = "undetermined";
+  d->verdict_kind = VerdictKind::kUndetermined;
+  const double floor = std::max({d->noise_floor_A, d->reference.fit_rmse_A, d->measurement_noise_A});
+  d->smallest_visible_A = std::sqrt(kSignificance * kSignificance - 1.0) * floor;
+}
+
+// "; to do better: ..." from the reference's to_record ("" when it has none).
+std::string ToRecordText(const Diagnosis& d) {
+  std::string record;
+  for (const auto& r : d.reference.to_record) record += (record.empty() ? "" : "; ") + r;
+  return record.empty() ? "" : "; to do better: " + record;
+}
+
 // "Nothing changed", when the evidence can carry it: against a reference only when the reference was identified to
 // within kReferenceIdentified x its noise floor (diagnose.h); otherwise `undetermined`, with the reference's fit
 // error against its noise, the smallest change these runs could have shown and what to record to do better.
@@ -1139,13 +1157,7 @@ void NoneOrUndetermined(Diagnosis* out, const std::string& none_reason) {
     d.verdict_reason = none_reason;
     return;
   }
-  d.verdict = "undetermined";
-  d.verdict_kind = VerdictKind::kUndetermined;
-  // The target's gap becomes significant at kSignificance x max(noise, the reference's error); a change adds its
-  // own signature in quadrature to what the reference leaves, so the smallest it could be seen at is
-  // sqrt(kSignificance^2 - 1) x that floor.
-  const double floor = std::max({d.noise_floor_A, d.reference.fit_rmse_A, d.measurement_noise_A});
-  d.smallest_visible_A = std::sqrt(kSignificance * kSignificance - 1.0) * floor;
+  Undetermined(&d);
   d.verdict_reason = fmt::format(
       "cannot tell: the reference is identified at {:.2f} mA RMS against its noise floor of {:.2f} mA ({:.1f}x; "
       "`none` needs at most {:.0f}x), so a change whose own signature on the current is below {:.2f} mA RMS "
@@ -1153,9 +1165,7 @@ void NoneOrUndetermined(Diagnosis* out, const std::string& none_reason) {
       d.reference.fit_rmse_A * 1e3, d.reference.noise_floor_A * 1e3,
       d.reference.noise_floor_A > 0.0 ? d.reference.fit_rmse_A / d.reference.noise_floor_A : INFINITY,
       kReferenceIdentified, d.smallest_visible_A * 1e3, none_reason);
-  std::string record;
-  for (const auto& r : d.reference.to_record) record += (record.empty() ? "" : "; ") + r;
-  if (!record.empty()) d.verdict_reason += "; to do better: " + record;
+  d.verdict_reason += ToRecordText(d);
 }
 
 // A name against a reference identified from scratch that is not identified (its fit error above
@@ -1177,10 +1187,7 @@ void UntrustedName(Diagnosis* out) {
   d.chosen = -1;
   d.confusable.clear();
   d.untrusted_name = named;
-  d.verdict = "undetermined";
-  d.verdict_kind = VerdictKind::kUndetermined;
-  const double floor = std::max({d.noise_floor_A, d.reference.fit_rmse_A, d.measurement_noise_A});
-  d.smallest_visible_A = std::sqrt(kSignificance * kSignificance - 1.0) * floor;
+  Undetermined(&d);
   d.verdict_reason = fmt::format(
       "cannot tell which change: something changed ({} closes {:.0f} % of the holdout gap, {:.2f} -> {:.2f} mA RMS), "
       "but the reference is identified at {:.2f} mA RMS against its noise floor of {:.2f} mA ({:.1f}x; a name needs "
@@ -1190,9 +1197,7 @@ void UntrustedName(Diagnosis* out) {
       d.reference.fit_rmse_A * 1e3, d.reference.noise_floor_A * 1e3,
       d.reference.noise_floor_A > 0.0 ? d.reference.fit_rmse_A / d.reference.noise_floor_A : INFINITY,
       kReferenceIdentified);
-  std::string record;
-  for (const auto& r : d.reference.to_record) record += (record.empty() ? "" : "; ") + r;
-  if (!record.empty()) d.verdict_reason += "; to do better: " + record;
+  d.verdict_reason += ToRecordText(d);
 }
 
 // Step 5's verdict, decided here and only here: the best row when it may be the verdict and closes kExplained of

@@ -41,9 +41,14 @@
 #include "gap/moving_valve.h"
 #include "model/params.h"
 #include "perf/independent_session.h"
+#include "perf/perf_stats.h"
 #include "perf/independent_valve.h"
 
 namespace {
+
+using vb::perf::CpuSeconds;
+using vb::perf::LoadAverage;
+using vb::perf::Wilson;
 
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
@@ -53,30 +58,10 @@ std::string Lower(std::string s) {
   return s;
 }
 
-// Wilson score interval for k successes in n trials at 95 % (z = 1.96): valid at small n and near 0 or 1,
-// where the normal approximation is not.
-std::pair<double, double> Wilson(int k, int n) {
-  if (n == 0) return {0.0, 1.0};
-  const double z = 1.96, p = static_cast<double>(k) / n, z2 = z * z / n;
-  const double c = (p + z2 / 2.0) / (1.0 + z2);
-  const double h = z * std::sqrt(p * (1.0 - p) / n + z * z / (4.0 * n * n)) / (1.0 + z2);
-  return {std::max(0.0, c - h), std::min(1.0, c + h)};
-}
-
 struct Tally {
   int ok = 0, n = 0;
   double seconds = 0.0, worst_s = 0.0, cpu_s = 0.0, worst_cpu_s = 0.0;
 };
-
-// Process CPU time over all threads.
-double CpuSeconds() { return static_cast<double>(std::clock()) / CLOCKS_PER_SEC; }
-
-std::string LoadAverage() {
-  std::ifstream f("/proc/loadavg");
-  std::string a, b, c;
-  f >> a >> b >> c;
-  return a.empty() ? "unknown" : a + " " + b + " " + c;
-}
 
 }  // namespace
 
