@@ -268,6 +268,20 @@ async function rerun(id) {
 }
 
 // ---- Run page: spec, conditions, history, metrics with units, traces with zoom, export links, live view
+// What executing the run measured, as stored with it (Run.execution; docs/decisions.md): its wall and simulated time,
+// and, for a paced run, how the loop kept its deadlines. Absent fields (a run that never executed, a loop that was
+// not paced) add no row. int64 fields arrive as strings in protobuf JSON.
+function executionRows(x) {
+  if (!x) return [];
+  const rows = [['execution', VBFormat.value(x.simulated_s || 0, 's') + ' simulated, ' + Number(x.samples || 0) +
+    ' samples, ' + VBFormat.value(x.wall_s || 0, 's') + ' wall']];
+  const l = x.loop;
+  if (l) rows.push(['loop', Number(l.ticks || 0) + ' paced ticks, ' + Number(l.overruns || 0) + ' overruns, jitter p50 ' +
+    VBFormat.value(l.jitter_p50_s || 0, 's') + ', p99 ' + VBFormat.value(l.jitter_p99_s || 0, 's') + ', max ' +
+    VBFormat.value(l.jitter_max_s || 0, 's')]);
+  return rows;
+}
+
 async function pageRun(main, m) {
   const id = m[1];
   main.replaceChildren(el('h1', {text: 'Run ' + id}), el('p', {class: 'muted', text: 'loading…'}));
@@ -296,7 +310,8 @@ async function pageRun(main, m) {
     ['priority', String(r.priority || 0)], ['tags', (r.tags || []).join(', ') || '–'],
     ['conditions.supply_V', fmt(c.supply_V) + ' V'], ['conditions.supply_pressure_Pa', fmt(c.supply_pressure_Pa || 0) + ' Pa'],
     ['duration_s', fmt(r.spec && r.spec.duration_s) + ' s'], ['submitted', when(r.submitted_unix_s)],
-    ['started', when(r.started_unix_s)], ['finished', when(r.finished_unix_s)]]) kv.append(el('div', {text: k}), el('div', {}, v));
+    ['started', when(r.started_unix_s)], ['finished', when(r.finished_unix_s)], ...executionRows(r.execution)])
+    kv.append(el('div', {text: k}), el('div', {}, v));
   const history = el('table', {class: 'wide'}, el('tr', {}, ['time', 'status', 'reason'].map((h) => el('th', {text: h}))),
     (r.history || []).map((h) => el('tr', {}, el('td', {}, when(h.at_unix_s)), el('td', {}, statusCell(h.status)),
       el('td', {text: h.reason || ''}))));
