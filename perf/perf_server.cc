@@ -6,6 +6,7 @@
 #include <atomic>
 #include <chrono>
 #include <cstdio>
+#include <filesystem>
 #include <thread>
 #include <vector>
 
@@ -40,8 +41,20 @@ bool WaitDone(vb::client::Client& c, std::int64_t id) {
 
 }  // namespace
 
+// The server's folder (its store, about 270 MB after these runs) is removed when the program ends; declared
+// before the server, so the server has stopped by then.
+struct RemovedAtExit {
+  std::string dir;
+  ~RemovedAtExit() {
+    std::error_code ec;
+    std::filesystem::remove_all(dir, ec);
+  }
+};
+
 int main() {
-  vb::testing::ServerProcess server("/tmp/vb-perf-server-" + std::to_string(::getpid()));
+  std::error_code ec;
+  const RemovedAtExit scratch{(std::filesystem::temp_directory_path(ec) / ("vb-perf-server-" + std::to_string(::getpid()))).string()};
+  vb::testing::ServerProcess server(scratch.dir);
   const std::string addr = server.Start();
   if (addr.empty()) {
     std::fprintf(stderr, "server did not start:\n%s\n", server.Log().c_str());
