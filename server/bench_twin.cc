@@ -40,7 +40,7 @@ StatusOr<gap::Dataset> BenchTwins::LoadCheck(std::int64_t batch_id, model::Plant
 }
 
 gap::SessionValues BenchTwins::Identify(const std::string& bench, const std::string& date, std::int64_t batch_id,
-                                        std::int64_t first_batch_id) {
+                                        const std::string& first_date, std::int64_t first_batch_id) {
   Twin& twin = twins_[bench];
   twin.tonight.reset();
   gap::TrackOptions options;
@@ -53,8 +53,10 @@ gap::SessionValues BenchTwins::Identify(const std::string& bench, const std::str
     auto first = LoadCheck(first_batch_id, &first_family);
     if (first.ok()) {
       auto id = gap::IdentifyForTracking(*first, first_family, nullptr, options);
-      if (id.ok()) twin.anchor = std::move(*id);
-      else spdlog::warn("bench {}: its first health check (batch {}) not identified: {}", bench, first_batch_id,
+      if (id.ok()) {
+        twin.anchor = std::move(*id);
+        twin.anchor_date = first_date;
+      } else spdlog::warn("bench {}: its first health check (batch {}) not identified: {}", bench, first_batch_id,
                         id.status().message());
     }
   }
@@ -69,6 +71,32 @@ gap::SessionValues BenchTwins::Identify(const std::string& bench, const std::str
     twin.tonight_date = date;
   }
   return values;
+}
+
+void BenchTwins::UseBaselineNight(const std::string& bench, const std::string& night, std::int64_t batch_id) {
+  Twin& twin = twins_[bench];
+  if (night.empty() || batch_id == 0 || night == twin.anchor_date || !twin.anchor) {
+    twin.baseline.reset();
+    twin.baseline_batch = 0;
+    twin.baseline_note.clear();
+    return;
+  }
+  if (twin.baseline_batch == batch_id) return;  // identified on an earlier night: the same baseline
+  twin.baseline.reset();
+  twin.baseline_batch = batch_id;
+  twin.baseline_date = night;
+  twin.baseline_note.clear();
+  model::PlantParams family;
+  auto ds = LoadCheck(batch_id, &family);
+  auto id = ds.ok() ? gap::IdentifyForTracking(*ds, family, &*twin.anchor, gap::TrackOptions{})
+                    : StatusOr<gap::MovingIdentification>(ds.status());
+  if (id.ok()) {
+    twin.baseline = std::move(*id);
+    return;
+  }
+  twin.baseline_note = fmt::format("the check of the baseline's night {} was not identified ({}); the first night's "
+                                   "valve stands for it", night, id.status().message());
+  spdlog::warn("bench {}: {}", bench, twin.baseline_note);
 }
 
 StatusOr<gap::Tracking> BenchTwins::Track(const std::vector<gap::SessionValues>& history,
@@ -101,6 +129,7 @@ regress::Json BenchTwins::Attribute(const regress::RegressResult& result,
                                     const std::map<std::string, experiment::ExperimentSpec>& specs,
                                     const std::map<std::string, std::vector<std::string>>& benches) const {
   regress::Json cases = regress::Json::array();
+  regress::Json baseline_valves = regress::Json::object();
   int valve = 0, code = 0, undetermined = 0;
   std::string first_undetermined;
   for (const auto& f : result.findings) {
@@ -119,11 +148,13 @@ regress::Json BenchTwins::Attribute(const regress::RegressResult& result,
     } else {
       for (const auto& b : ran->second) {
         const auto t = twins_.find(b);
-        if (t == twins_.end() || !t->second.anchor || !t->second.tonight) {
+        if (t == twins_.end() || t->second.Reference() == nullptr || !t->second.tonight) {
           why = "bench " + b + " ran it and has no identified health check tonight (a \"health\" block)";
           break;
         }
-        auto a = ReplayMetric(spec->second, t->second.anchor->plant, f.metric);
+        baseline_valves[b] = t->second.ReferenceDate() +
+                             (t->second.baseline_note.empty() ? "" : " (" + t->second.baseline_note + ")");
+        auto a = ReplayMetric(spec->second, t->second.Reference()->plant, f.metric);
         auto now = ReplayMetric(spec->second, t->second.tonight->plant, f.metric);
         if (!a.ok() || !now.ok()) {
           why = "the replay on bench " + b + "'s valve: " + (a.ok() ? now.status() : a.status()).message();
@@ -134,9 +165,9 @@ regress::Json BenchTwins::Attribute(const regress::RegressResult& result,
     }
     std::string verdict;
     if (why.empty() && n > 0) {
-      // The valve's share of the change: the same code on tonight's valve against the bench's first-night valve.
+      // The valve's share of the change: the same code on tonight's valve against the baseline's valve.
       const double valve_change = (tonight_sum - anchor_sum) / n;
-      c["replay_first_night_valve"] = anchor_sum / n;
+      c["replay_baseline_valve"] = anchor_sum / n;
       c["replay_tonight_valve"] = tonight_sum / n;
       c["valve_change"] = valve_change;
       const double share = valve_change / f.delta;
@@ -161,6 +192,7 @@ regress::Json BenchTwins::Attribute(const regress::RegressResult& result,
     cases.push_back(std::move(c));
   }
   regress::Json out = {{"cases", cases}};
+  if (!baseline_valves.empty()) out["baseline_valves"] = baseline_valves;
   if (cases.empty()) {
     out["verdict"] = "undetermined";
     out["reason"] = "no metric regressed (runs failed): the replay compares metrics";
@@ -172,12 +204,12 @@ regress::Json BenchTwins::Attribute(const regress::RegressResult& result,
     out["reason"] = fmt::format("tonight's valve reproduces {} regressed metric(s) and not {}: both changed", valve, code);
   } else if (valve > 0) {
     out["verdict"] = "valve";
-    out["reason"] = "the same code on tonight's identified valve reproduces every regressed metric (the bench's "
-                    "first-night valve does not)";
+    out["reason"] = "the same code on tonight's identified valve reproduces every regressed metric (the valve of "
+                    "the baseline's night does not)";
   } else {
     out["verdict"] = "code";
-    out["reason"] = "tonight's identified valve, under the same code, stays within the suite's allowance on every "
-                    "regressed metric: the code changed";
+    out["reason"] = "tonight's identified valve, under the same code, stays within the suite's allowance of the "
+                    "baseline's night's valve on every regressed metric: the code changed";
   }
   return out;
 }

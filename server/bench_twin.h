@@ -1,9 +1,10 @@
 // The bench twin on the server (issue 38, docs/track.md "On the server"): each night, each checked bench's health
 // check identified (the bench's first night from scratch, every later one warm-started from it), its values kept
 // in the night's record, the bench's nights tracked from those records (gap::TrackValues: no night identified
-// twice); and a regressed night's failing comparison replayed on the emulator with the bench's first-night valve
-// and tonight's valve under the same code: when tonight's valve alone reproduces the change, the valve changed;
-// when it does not, the code did.
+// twice); and a regressed night's failing comparison replayed on the emulator with the valve the baseline was
+// measured on (the bench's check of the baseline's night; its first night when the baseline is older) and
+// tonight's valve under the same code: when tonight's valve alone reproduces the change, the valve changed; when
+// it does not, the code did.
 #pragma once
 
 #include <cstdint>
@@ -28,23 +29,35 @@ class BenchTwins {
   // The first night of a bench (or the first after a restart) identifies the bench's first stored check from
   // scratch as the anchor (`first_batch_id`: its batch; 0 = tonight is the first).
   gap::SessionValues Identify(const std::string& bench, const std::string& date, std::int64_t batch_id,
-                              std::int64_t first_batch_id);
+                              const std::string& first_date, std::int64_t first_batch_id);
+
+  // The valve the night's baseline was measured on, for Attribute: the bench's check of `night` (its batch),
+  // identified as the tracking identified it (warm-started from the anchor) and kept while the baseline stays;
+  // "" or the anchor's night: the anchor. A check that cannot be identified leaves the anchor, with the reason
+  // in Attribute's output.
+  void UseBaselineNight(const std::string& bench, const std::string& night, std::int64_t batch_id);
 
   // The bench's nights tracked: the values stored in earlier nights' records (`history`, in date order) and
   // tonight's.
   StatusOr<gap::Tracking> Track(const std::vector<gap::SessionValues>& history, const gap::SessionValues& tonight) const;
 
   // Why a regressed night regressed: every regressed finding's case replayed on the emulator with each bench's
-  // anchor valve and tonight's valve (`specs`: the case's spec; `benches`: which benches ran the case tonight).
-  // {"verdict": "valve" | "code" | "undetermined", "reason", "cases": [...]}.
+  // baseline valve (UseBaselineNight; else its anchor) and tonight's valve (`specs`: the case's spec; `benches`:
+  // which benches ran the case tonight).
+  // {"verdict": "valve" | "code" | "undetermined", "reason", "cases": [...], "baseline_valves": {bench: night}}.
   regress::Json Attribute(const regress::RegressResult& result,
                           const std::map<std::string, experiment::ExperimentSpec>& specs,
                           const std::map<std::string, std::vector<std::string>>& benches) const;
 
  private:
   struct Twin {
-    std::optional<gap::MovingIdentification> anchor, tonight;
-    std::string anchor_date, tonight_date;
+    std::optional<gap::MovingIdentification> anchor, tonight, baseline;
+    std::string anchor_date, tonight_date, baseline_date;
+    std::int64_t baseline_batch = 0;
+    std::string baseline_note;  // why the anchor stands for the baseline's night
+    // The valve the replay compares tonight's with: the baseline's night's, else the anchor.
+    const gap::MovingIdentification* Reference() const { return baseline ? &*baseline : anchor ? &*anchor : nullptr; }
+    const std::string& ReferenceDate() const { return baseline ? baseline_date : anchor_date; }
   };
   StatusOr<gap::Dataset> LoadCheck(std::int64_t batch_id, model::PlantParams* family) const;
 

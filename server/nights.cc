@@ -278,7 +278,7 @@ StatusOr<std::int64_t> NightScheduler::RunNight(double fire_unix_s) {
   regress::Json j = regress::ResultToJson(r);
   j["started_unix_s"] = started_unix_s;
   j["night_number"] = night_number;
-  TwinNight(date, r, case_specs, case_benches, &health, &j);
+  TwinNight(date, r, case_specs, case_benches, baseline->created_unix_s, &health, &j);
   j["health"] = health;
   return SaveNight(date, batch_id, r.verdict(), j.dump(), clock_());
 }
@@ -286,7 +286,7 @@ StatusOr<std::int64_t> NightScheduler::RunNight(double fire_unix_s) {
 void NightScheduler::TwinNight(const std::string& date, const regress::RegressResult& r,
                                const std::map<std::string, experiment::ExperimentSpec>& case_specs,
                                const std::map<std::string, std::vector<std::string>>& case_benches,
-                               regress::Json* health, regress::Json* j) {
+                               double baseline_created_unix_s, regress::Json* health, regress::Json* j) {
   bool checked = false;
   for (const auto& h : *health) checked = checked || h.contains("batch_id");
   if (!checked) return;
@@ -310,7 +310,9 @@ void NightScheduler::TwinNight(const std::string& date, const regress::RegressRe
     const std::string bench = h["bench"].get<std::string>();
     const auto f = first.find(bench);
     const gap::SessionValues tonight =
-        twins_.Identify(bench, date, h["batch_id"].get<std::int64_t>(), f == first.end() ? 0 : f->second.second);
+        f == first.end() ? twins_.Identify(bench, date, h["batch_id"].get<std::int64_t>(), "", 0)
+                         : twins_.Identify(bench, date, h["batch_id"].get<std::int64_t>(), f->second.first,
+                                           f->second.second);
     h["values"] = regress::Json::parse(gap::SessionValuesJson(tonight));
     if (!tonight.error.empty()) spdlog::warn("night {}: health check of {} not identified: {}", date, bench, tonight.error);
     std::vector<gap::SessionValues> past;
@@ -332,6 +334,13 @@ void NightScheduler::TwinNight(const std::string& date, const regress::RegressRe
                    flag.direction, 100.0 * flag.change_relative, flag.since, flag.session);
   }
   if (r.regressed()) {
+    // Each bench's valve when the baseline was measured (service/bench_health.h, BaselineNight).
+    for (const auto& h : *health) {
+      if (!h.contains("batch_id")) continue;
+      const std::string bench = h["bench"].get<std::string>();
+      const auto night = BaselineNight(stored.checks[bench], baseline_created_unix_s);
+      twins_.UseBaselineNight(bench, night ? night->first : "", night ? night->second.batch_id : 0);
+    }
     (*j)["cause"] = twins_.Attribute(r, case_specs, case_benches);
     spdlog::info("night {}: cause {}: {}", date, (*j)["cause"].value("verdict", ""),
                  (*j)["cause"].value("reason", ""));

@@ -55,11 +55,12 @@ class NightScheduler {
   // The lab's number for the night `date`: 1 + the distinct other nights stored (the newest 1000).
   StatusOr<int> NightNumber(const std::string& date);
   // The bench twin's part of a night (server/bench_twin.h): each checked bench's values and flags into its
-  // `health` entry, and a regressed night's cause into j["cause"].
+  // `health` entry, and a regressed night's cause into j["cause"] (against the valve of the night the baseline,
+  // made at `baseline_created_unix_s`, was measured on).
   void TwinNight(const std::string& date, const regress::RegressResult& r,
                  const std::map<std::string, experiment::ExperimentSpec>& case_specs,
-                 const std::map<std::string, std::vector<std::string>>& case_benches, regress::Json* health,
-                 regress::Json* j);
+                 const std::map<std::string, std::vector<std::string>>& case_benches, double baseline_created_unix_s,
+                 regress::Json* health, regress::Json* j);
   StatusOr<std::int64_t> SaveNight(const std::string& date, std::int64_t batch_id, const std::string& verdict,
                                    const std::string& result_json, double finished_unix_s);
 

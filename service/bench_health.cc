@@ -22,8 +22,13 @@ StatusOr<StoredHealth> LoadStoredHealth(db::Store* store, const std::string& bef
     const auto j = regress::Json::parse(rec->result_json, nullptr, false);
     if (!j.is_object() || !j.contains("health") || !j["health"].is_array()) continue;
     for (const auto& h : j["health"]) {
-      if (!h.is_object() || !h.contains("bench") || !h["bench"].is_string() || !h.contains("batch_id")) continue;
+      if (!h.is_object() || !h.contains("bench") || !h["bench"].is_string() || !h.contains("batch_id") ||
+          !h["batch_id"].is_number_integer())
+        continue;
       const std::string bench = h["bench"].get<std::string>();
+      double started = 0.0;
+      if (j.contains("started_unix_s") && j["started_unix_s"].is_number()) started = j["started_unix_s"].get<double>();
+      out.checks[bench][brief.night] = {std::isfinite(started) ? started : 0.0, h["batch_id"].get<std::int64_t>()};
       auto f = out.first_check.find(bench);
       if (f == out.first_check.end() || brief.night < f->second.first)
         out.first_check[bench] = {brief.night, h["batch_id"].get<std::int64_t>()};
@@ -33,6 +38,15 @@ StatusOr<StoredHealth> LoadStoredHealth(db::Store* store, const std::string& bef
     }
   }
   return out;
+}
+
+std::optional<std::pair<std::string, StoredCheck>> BaselineNight(const std::map<std::string, StoredCheck>& checks,
+                                                                 double baseline_created_unix_s) {
+  if (!(baseline_created_unix_s > 0.0)) return std::nullopt;
+  std::optional<std::pair<std::string, StoredCheck>> last;
+  for (const auto& [night, check] : checks)  // in date order
+    if (check.night_started_unix_s > 0.0 && check.night_started_unix_s < baseline_created_unix_s) last = {night, check};
+  return last;
 }
 
 v1::BenchHealth BenchHealthOf(const std::string& bench, const gap::Tracking& t) {

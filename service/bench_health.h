@@ -5,6 +5,7 @@
 
 #include <cstdint>
 #include <map>
+#include <optional>
 #include <string>
 #include <utility>
 
@@ -15,10 +16,26 @@
 
 namespace vb::server {
 
+// A bench's checked night as stored: when the night started and its health check's batch.
+struct StoredCheck {
+  double night_started_unix_s = 0.0;  // 0: not recorded
+  std::int64_t batch_id = 0;
+};
+
 struct StoredHealth {
   std::map<std::string, std::map<std::string, gap::SessionValues>> values;  // bench -> night -> values
   std::map<std::string, std::pair<std::string, std::int64_t>> first_check;  // bench -> (night, batch)
+  std::map<std::string, std::map<std::string, StoredCheck>> checks;        // bench -> night -> its check
 };
+
+// The night whose valve a baseline was measured on, among one bench's stored checks (night -> check): the last
+// night that started before the baseline was made. A baseline summarises runs that had ended when it was saved,
+// so a baseline set from a night's batch (`benchctl baseline set --batch`) on the morning after is that night's.
+// One set later from an older batch is given the night before it was made: the time is all a baseline records
+// of where its runs came from. nullopt when the baseline is older than every stored check or its time is not
+// known (0): the bench's first checked night stands for it.
+std::optional<std::pair<std::string, StoredCheck>> BaselineNight(const std::map<std::string, StoredCheck>& checks,
+                                                                 double baseline_created_unix_s);
 
 // The nights stored before `before_date` ("" = all), the newest 1000.
 StatusOr<StoredHealth> LoadStoredHealth(db::Store* store, const std::string& before_date = "");

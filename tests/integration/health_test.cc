@@ -20,6 +20,7 @@
 #include "runs/bench_setup.h"
 #include "server/config.h"
 #include "server/health_check.h"
+#include "service/bench_health.h"
 #include "server_process.h"
 
 namespace vb {
@@ -168,6 +169,26 @@ TEST(HealthCheck, OneSwitchOnRunPerSupplyAndPressure) {
   auto none = server::SettingsFromConfig(c, "");
   ASSERT_TRUE(none.ok());
   EXPECT_TRUE(server::HealthCheckSpecs(none->benches[0], "2026-11-29", 1).empty());
+}
+
+// The valve a baseline was measured on: the bench's last checked night that started before the baseline was
+// made; none (the first night stands for it) when the baseline is older than every check or has no time.
+TEST(BaselineNight, TheLastCheckedNightThatStartedBeforeTheBaselineWasMade) {
+  const std::map<std::string, server::StoredCheck> checks = {
+      {"2026-11-01", {1000.0, 11}}, {"2026-11-02", {2000.0, 12}}, {"2026-11-03", {0.0, 13}}, {"2026-11-04", {4000.0, 14}}};
+  EXPECT_FALSE(server::BaselineNight(checks, 500.0));  // older than every check
+  EXPECT_FALSE(server::BaselineNight(checks, 0.0));    // time not known
+  EXPECT_FALSE(server::BaselineNight({}, 3000.0));
+  auto b = server::BaselineNight(checks, 2500.0);  // set from night 2's batch the morning after
+  ASSERT_TRUE(b);
+  EXPECT_EQ(b->first, "2026-11-02");
+  EXPECT_EQ(b->second.batch_id, 12);
+  b = server::BaselineNight(checks, 3999.0);  // night 3 recorded no start: night 2 stays the last known before
+  ASSERT_TRUE(b);
+  EXPECT_EQ(b->first, "2026-11-02");
+  b = server::BaselineNight(checks, 9000.0);
+  ASSERT_TRUE(b);
+  EXPECT_EQ(b->first, "2026-11-04");
 }
 
 // Waits until the server has stored `n` nights; returns them newest first (an empty array on timeout).
@@ -335,6 +356,66 @@ TEST(BenchTwin, ACodeRegressionOnAnUnchangedValveIsNamedAsTheCode) {
   ASSERT_EQ(k["benches"].size(), 1u) << k.dump(1);
   EXPECT_EQ(k["benches"][0]["sessions"].size(), 3u) << k.dump(1);
   EXPECT_TRUE(k["flags"].empty()) << k.dump(1);
+}
+
+// A lab re-baselines after its valve changed: the failure after that is the code's, not the valve's. The bench's
+// R is 15 % higher from night 2 (the map at duty 0.3 opens 58 % where it opened 97 %: those nights say `valve`);
+// once night 3 is stored the lab sets a baseline from night 3's suite batch on the server and points the nights
+// at it, and the same change cuts the PI law's proportional gain tenfold (code). Every night judged against the
+// new baseline regresses on the PI hold's RMSE (0.76 mA on this valve with the good law, 3.23 mA with the cut
+// one, by `benchctl run --local` with R x 1.15) and says `code`: the replay compares tonight's valve with the
+// valve of the baseline's night (both 15 % up). Against the first night's valve, as before, the valve's part of
+// the change would be 3.23 - 4.20 = -0.97 mA, 40 % of the change against it and far beyond the suite's allowance
+// (5 % of 0.76 mA): `undetermined`, "both changed".
+TEST(BenchTwin, AfterARebaselineTheReplayComparesWithTheBaselinesNightsValve) {
+  constexpr int kNights = 6;
+  const std::string dir = ::testing::TempDir() + "/vb-twin-rebaseline-" + std::to_string(::getpid());
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  for (const char* f : {"ci.json", "ci-current-hold.json"})
+    std::filesystem::copy_file(kSuites + f, dir + "/" + f);
+  std::filesystem::copy_file(kSuites + "ci-baseline.json", dir + "/baseline.json");
+  const std::string benches = R"([{"name": "emu-a", "kind": "emulated", "model": {"preset": "taghizadeh2009"}, )" +
+                              std::string(kHealth) +
+                              R"(, "drift": [{"parameter": "R", "step": 0.15, "from_night": 2}]}])";
+  testing::ServerProcess server(
+      dir, R"("nights": {"cron": "0 2 * * *", "suite_file": "ci.json", "baseline_file": "baseline.json"})", benches);
+  server.AddArg("--simulate-nights");
+  server.AddArg(std::to_string(kNights));
+  const std::string addr = server.Start();
+  ASSERT_FALSE(addr.empty()) << server.Log();
+
+  nlohmann::json first = WaitForNights(addr, 3, 200);
+  ASSERT_GE(first.size(), 3u) << server.Log();
+  std::reverse(first.begin(), first.end());
+  const std::int64_t night3_batch = first[2]["batch_id"].get<std::int64_t>();
+  // The code change first (nights_test's worse PI law, written beside and renamed into place: a night never
+  // reads half a file), then the baseline that the nights read each night.
+  ASSERT_EQ(testing::WriteWorseCiSuite(kSuites, dir + "/worse"), "");
+  std::filesystem::rename(dir + "/worse/ci-current-hold.json", dir + "/ci-current-hold.json");
+  const auto set = testing::RunCommand(std::string(VB_BENCHCTL) + " baseline set rebased --batch " +
+                                       std::to_string(night3_batch) + " --json --server " + addr + " --token " +
+                                       testing::kOperatorToken);
+  ASSERT_EQ(set.exit_code, 0) << set.out;
+  {
+    std::ofstream(dir + "/baseline.json.new") << set.out.substr(set.out.find('{'));
+    std::filesystem::rename(dir + "/baseline.json.new", dir + "/baseline.json");
+  }
+
+  nlohmann::json list = WaitForNights(addr, kNights, 280);
+  ASSERT_EQ(list.size(), static_cast<std::size_t>(kNights)) << server.Log();
+  std::reverse(list.begin(), list.end());
+  EXPECT_EQ(list[1]["cause"], "valve") << list[1].dump(1) << server.Log();  // night 2 against the old baseline
+  int judged = 0;
+  for (int k = 3; k < kNights; ++k) {
+    if (list[k]["baseline"].get<std::string>().rfind("rebased", 0) != 0) continue;  // read before the change
+    ++judged;
+    EXPECT_EQ(list[k]["verdict"], "regressed") << list[k].dump(1);
+    EXPECT_EQ(list[k]["cause"], "code") << list[k].dump(1) << "\n" << server.Log();
+    EXPECT_NE(list[k]["cause_reason"].get<std::string>().find("baseline's night"), std::string::npos)
+        << list[k].dump(1);
+  }
+  EXPECT_GE(judged, 2) << list.dump(1);  // nights 5 and 6 at least read the new baseline
 }
 
 }  // namespace
