@@ -396,6 +396,20 @@ namespace {
 // what it catches and what it does not.
 // `factor` is a square root of the identified values' covariance over the parameters `free` (IdentifyMovingValve's
 // coordinates: log for all but A_net); fills each holdout run's band in id->landmarks and adds notes.
+// The identified values moved by z (IdentifyMovingValve's coordinates over `free`: log for all but A_net, each
+// clamped to 5 of them).
+std::array<double, kCount> Moved(const std::array<double, kCount>& v, const Eigen::VectorXd& z,
+                                 const std::vector<int>& free) {
+  auto x = v;
+  for (std::size_t j = 0; j < free.size(); ++j) {
+    const int p = free[j];
+    const double zj = std::clamp(z(static_cast<Eigen::Index>(j)), -5.0, 5.0);
+    if (p == kAnet) x[p] += zj * std::max(std::abs(v[p]), 1e-9);
+    else x[p] *= std::exp(zj);
+  }
+  return x;
+}
+
 void PredictionBand(const Dataset& ds, const model::PlantParams& family, const std::array<double, kCount>& v,
                     const Eigen::MatrixXd& factor, const std::vector<int>& free, const std::vector<bool>& hold,
                     double threshold, const MovingIdentifyOptions& options, MovingIdentification* id) {
@@ -409,15 +423,7 @@ void PredictionBand(const Dataset& ds, const model::PlantParams& family, const s
   for (int k = 0; k < kBandDraws; ++k) {
     Eigen::VectorXd u(factor.cols());
     for (Eigen::Index j = 0; j < u.size(); ++j) u(j) = unit(rng);
-    const Eigen::VectorXd z = factor * u;
-    auto x = v;
-    for (std::size_t j = 0; j < free.size(); ++j) {
-      const int p = free[j];
-      const double zj = std::clamp(z(static_cast<Eigen::Index>(j)), -5.0, 5.0);
-      if (p == kAnet) x[p] += zj * std::max(std::abs(v[p]), 1e-9);
-      else x[p] *= std::exp(zj);
-    }
-    auto drawn = PlantOf(family, x);
+    auto drawn = PlantOf(family, Moved(v, factor * u, free));
     auto dp = drawn.ok() ? PredictRuns(ds, *drawn, hold, options.solver, options.threads)
                          : StatusOr<std::vector<std::vector<double>>>(drawn.status());
     if (!dp.ok()) {
@@ -1135,6 +1141,7 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
   // Kept for the prediction band below: a square root of the covariance in the same coordinates (zero along the
   // directions the fit runs do not see) and the parameters it is over.
   Eigen::MatrixXd draw_factor;
+  double white_scale = 1.0;  // draw_factor x this: the covariance as if the residuals were white
   std::vector<int> draw_free;
   {
     say("uncertainty: Gauss-Newton on the fit runs");
@@ -1224,6 +1231,7 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
         }
         const Eigen::MatrixXd C = d.asDiagonal() * (V * inv.asDiagonal() * V.transpose()) * d.asDiagonal() * s2;
         draw_factor = d.asDiagonal() * V * inv.cwiseSqrt().asDiagonal() * std::sqrt(s2);  // C = F F^T
+        white_scale = 1.0 / std::sqrt(correlation_factor);
         draw_free = free;
         for (std::size_t j = 0; j < q; ++j)
           rel_sigma[free[j]] = blind[j] ? INFINITY : std::sqrt(std::max(0.0, C(static_cast<Eigen::Index>(j), static_cast<Eigen::Index>(j))));
@@ -1325,6 +1333,17 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
     id.landmarks.push_back(rm);
   }
   // ---- the prediction band of the holdout runs, and the verdict on the prediction ----------------------------
+  // ---- valves as another recording of the same valve could have identified it (MovingIdentification) -----------
+  if (draw_factor.size() > 0) {
+    std::mt19937 rng(35036u);
+    std::normal_distribution<double> unit(0.0, 1.0);
+    for (int k = 0; k < kRepeatabilityDraws; ++k) {
+      Eigen::VectorXd u(draw_factor.cols());
+      for (Eigen::Index j = 0; j < u.size(); ++j) u(j) = unit(rng);
+      auto drawn = PlantOf(family, Moved(v, white_scale * (draw_factor * u), draw_free));
+      if (drawn.ok()) id.repeatability_draws.push_back(std::move(*drawn));
+    }
+  }
   if (id.holdout_runs > 0) {
     if (draw_factor.size() > 0) PredictionBand(ds, family, v, draw_factor, draw_free, hold, threshold, options, &id);
     id.prediction_undetermined = PredictionVerdict(id, draw_factor.size() > 0);

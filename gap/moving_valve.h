@@ -90,6 +90,8 @@ struct MovingIdentifyOptions {
   const MovingIdentification* warm_start = nullptr;
 };
 
+inline constexpr int kRepeatabilityDraws = 16;
+
 struct MovingIdentification {
   std::string model, device;
   double noise_floor_A = 0.0;
@@ -119,6 +121,12 @@ struct MovingIdentification {
   // lacks), or a holdout run without a band (its draws do not simulate), with draws that disagree on pull-in,
   // or with a band over 3x the noise floor. Empty too when there is no holdout run.
   std::string prediction_undetermined;
+  // Valves drawn from the identified values' covariance as if the residuals were white (the sigma_white of
+  // `determined`): how far another recording of the same valve would move the identification, its
+  // repeatability. A use of the valve that depends on the identification (a replay, server/bench_twin.h) gets its
+  // own spread from them. Empty when no covariance was computed; draws that are not a valve the family simulates
+  // are left out.
+  std::vector<model::PlantParams> repeatability_draws;
   int evaluations = 0;
   double seconds = 0.0;
 };

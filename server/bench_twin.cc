@@ -123,6 +123,22 @@ StatusOr<double> ReplayMetric(const experiment::ExperimentSpec& spec, const mode
   return Status::NotFound("the replay has no metric " + metric);
 }
 
+// The replayed metric's spread over the valves another recording of the same valve could have given
+// (gap::MovingIdentification::repeatability_draws): 0 when fewer than half of them replay (not known).
+double ReplaySpread(const experiment::ExperimentSpec& spec, const gap::MovingIdentification& id,
+                    const std::string& metric) {
+  double sum = 0.0, sum2 = 0.0;
+  int n = 0;
+  for (const auto& plant : id.repeatability_draws) {
+    auto v = ReplayMetric(spec, plant, metric);
+    if (!v.ok() || !std::isfinite(*v)) continue;
+    sum += *v, sum2 += *v * *v, ++n;
+  }
+  if (n < gap::kRepeatabilityDraws / 2) return 0.0;
+  const double mean = sum / n;
+  return std::sqrt(std::max(0.0, (sum2 - n * mean * mean) / (n - 1)));
+}
+
 }  // namespace
 
 regress::Json BenchTwins::Attribute(const regress::RegressResult& result,
@@ -137,7 +153,7 @@ regress::Json BenchTwins::Attribute(const regress::RegressResult& result,
     regress::Json c = {{"case", f.case_name}, {"metric", f.metric}, {"observed_change", f.delta},
                        {"allowed", f.allowed}};
     std::string why;
-    double anchor_sum = 0.0, tonight_sum = 0.0;
+    double anchor_sum = 0.0, tonight_sum = 0.0, var_sum = 0.0;
     int n = 0;
     const auto spec = specs.find(f.case_name);
     const auto ran = benches.find(f.case_name);
@@ -161,6 +177,9 @@ regress::Json BenchTwins::Attribute(const regress::RegressResult& result,
           break;
         }
         anchor_sum += *a, tonight_sum += *now, ++n;
+        const double sa = ReplaySpread(spec->second, *t->second.Reference(), f.metric);
+        const double st = ReplaySpread(spec->second, *t->second.tonight, f.metric);
+        var_sum += sa * sa + st * st;
       }
     }
     std::string verdict;
@@ -170,17 +189,29 @@ regress::Json BenchTwins::Attribute(const regress::RegressResult& result,
       c["replay_baseline_valve"] = anchor_sum / n;
       c["replay_tonight_valve"] = tonight_sum / n;
       c["valve_change"] = valve_change;
+      // What two identifications of one valve replay apart: each valve's replays over its repeatability draws.
+      const double sigma = std::sqrt(var_sum) / n;
+      c["valve_change_sigma"] = sigma;
       const double share = valve_change / f.delta;
       c["valve_share"] = share;
       if (share >= 0.5) {
         verdict = "valve";  // tonight's valve alone makes at least half the change, in its direction
-      } else if (std::abs(valve_change) <= f.allowed) {
-        verdict = "code";   // the valve's change alone stays within what the suite allows
+      } else if (std::abs(valve_change) + 2.0 * sigma <= f.allowed) {
+        // The valve's change alone stays within what the suite allows, even where two identifications of one
+        // valve would replay it twice their repeatability further (two-sided 95 % for a normal spread): a valve
+        // change the replay cannot resolve is never taken for none.
+        verdict = "code";
       } else {
         verdict = "undetermined";
-        why = fmt::format("the valve makes {:.0f} % of the change and more than the suite allows: both changed, or "
-                          "the identification misses what moved",
-                          100.0 * share);
+        why = std::abs(valve_change) <= std::max(f.allowed, 2.0 * sigma)
+                  ? fmt::format("the replay cannot resolve the valve's part here: identifications of one valve "
+                                "replay this metric {:.2g} apart (1 sigma) against {:.4g} allowed, and the valve's "
+                                "part, {:.4g}, is within that (an operating point near the valve's edge)",
+                                sigma, f.allowed, valve_change)
+                  : fmt::format("the valve makes {:.0f} % of the change and more than the suite allows ({:.4g} "
+                                "against {:.4g} allowed; the replay repeatable to {:.2g}): both changed, or the "
+                                "identification misses what moved",
+                                100.0 * share, valve_change, f.allowed, sigma);
       }
     } else {
       verdict = "undetermined";
