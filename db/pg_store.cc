@@ -891,10 +891,12 @@ StatusOr<PruneResult> PgStore::Prune(const PruneRequest& request) {
   VB_RETURN_IF_ERROR(txn.Begin(request.dry_run ? TxnKind::kRead : TxnKind::kWrite));
   PruneFacts facts;
   {
-    VB_ASSIGN_OR_RETURN(Result r, conn_->Exec("SELECT id, batch_id, night, suite FROM regressions "
-                                                 "WHERE batch_id != 0"));
+    VB_ASSIGN_OR_RETURN(Result r, conn_->Exec("SELECT id, batch_id, night, suite, "
+                                                 "CASE WHEN night <> '' THEN result_json ELSE '' END "
+                                                 "FROM regressions WHERE batch_id != 0"));
     for (int k = 0; k < r.rows(); ++k)
-      facts.regressions.push_back({r.Int(k, 0), r.Int(k, 1), r.Text(k, 2), r.Text(k, 3)});
+      facts.regressions.push_back(
+          {r.Int(k, 0), r.Int(k, 1), r.Text(k, 2), r.Text(k, 3), HealthBatchesOfNight(r.Text(k, 4))});
   }
   {
     VB_ASSIGN_OR_RETURN(Result r, conn_->Exec("SELECT name, version, source FROM baselines ORDER BY id"));

@@ -5,6 +5,8 @@
 #include <set>
 #include <string_view>
 
+#include <nlohmann/json.hpp>
+
 #include "common/format.h"
 #include "db/text.h"
 
@@ -42,6 +44,17 @@ std::int64_t ServerBatchOfBaselineSource(const std::string& source) {
   return BatchNumberAt(source, at + kMarker.size());
 }
 
+std::vector<std::int64_t> HealthBatchesOfNight(const std::string& result_json) {
+  std::vector<std::int64_t> out;
+  const auto j = nlohmann::json::parse(result_json, nullptr, /*allow_exceptions=*/false);
+  if (!j.is_object() || !j.contains("health") || !j["health"].is_array()) return out;
+  for (const auto& h : j["health"])
+    if (h.is_object() && h.contains("batch_id") && h["batch_id"].is_number_integer() &&
+        h["batch_id"].get<std::int64_t>() > 0)
+      out.push_back(h["batch_id"].get<std::int64_t>());
+  return out;
+}
+
 PrunePlan PlanPrune(const PruneFacts& facts, const PruneRequest& request) {
   // What references batches: the caller's (first: its reason wins), regression results and nights, baselines
   // taken from local batches.
@@ -55,6 +68,8 @@ PrunePlan PlanPrune(const PruneFacts& facts, const PruneRequest& request) {
     if (r->batch_id == 0) continue;
     protected_batches.emplace(r->batch_id, r->night.empty() ? Cat("regression result ", r->id, " (suite ", r->suite, ")")
                                                             : Cat("regression night ", r->night, " (result ", r->id, ")"));
+    for (std::int64_t h : r->health_batches)
+      protected_batches.emplace(h, Cat("the health check of regression night ", r->night, " (result ", r->id, ")"));
   }
   for (const auto& b : facts.baselines) {
     const std::int64_t batch = LocalBatchOfBaselineSource(b.source);

@@ -27,6 +27,7 @@ struct PruneFacts {
     std::int64_t batch_id = 0;
     std::string night;   // "" = not a night
     std::string suite;
+    std::vector<std::int64_t> health_batches;  // a night's health checks (HealthBatchesOfNight)
   };
   struct Baseline {
     std::string name;
@@ -43,6 +44,12 @@ struct PrunePlan {
   std::vector<std::int64_t> doomed;       // the runs to delete, newest first
   std::vector<std::int64_t> empty_batches;  // batches all of whose runs are doomed, ascending
 };
+
+// The health-check batches a night's stored result references (server/nights.cc writes them as
+// result_json's "health": [{"bench", "batch_id", ...}]): the bench twin identifies its anchor and a baseline's
+// night again from those runs after a restart, and `benchctl health --recompute` reads them. Anything else
+// (not JSON, no such array, a batch that is not a positive integer) gives none.
+std::vector<std::int64_t> HealthBatchesOfNight(const std::string& result_json);
 
 // The rules, in the order they are applied to each finished run (newest first by id): newer than the cutoff
 // (kept, counted), in a referenced batch (kept), one of the newest keep_last finished runs (kept), else deleted.

@@ -893,12 +893,13 @@ StatusOr<PruneResult> SqliteStore::Prune(const PruneRequest& request) {
 
   PruneFacts facts;
   {
-    VB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT id, batch_id, night, suite FROM regressions "
-                                                  "WHERE batch_id != 0"));
+    VB_ASSIGN_OR_RETURN(Stmt st, conn_.Prepare("SELECT id, batch_id, night, suite, "
+                                                  "CASE WHEN night != '' THEN result_json ELSE '' END "
+                                                  "FROM regressions WHERE batch_id != 0"));
     while (true) {
       VB_ASSIGN_OR_RETURN(const bool row, st.Step());
       if (!row) break;
-      facts.regressions.push_back({st.Int(0), st.Int(1), st.Text(2), st.Text(3)});
+      facts.regressions.push_back({st.Int(0), st.Int(1), st.Text(2), st.Text(3), HealthBatchesOfNight(st.Text(4))});
     }
   }
   {

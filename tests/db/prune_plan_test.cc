@@ -81,7 +81,7 @@ TEST(PrunePlanTest, NewerRunsCountTowardsKeepLast) {
 TEST(PrunePlanTest, ReferencedBatchesAreKeptSayingWhatReferencesThem) {
   PruneFacts f;
   f.runs = {Old(1, 1), Old(2, 2), Old(3, 3), Old(4, 4), Old(5, 5)};
-  f.regressions = {{7, 1, "", "ci"}, {8, 2, "2026-11-20", "nightly"}, {9, 0, "", "remote"}};
+  f.regressions = {{7, 1, "", "ci", {}}, {8, 2, "2026-11-20", "nightly", {}}, {9, 0, "", "remote", {}}};
   f.baselines = {{"main", 3, "local batch 3"}, {"other", 1, "server lab:50051 batch 4"}};
   PruneRequest req = Request();
   req.protected_batches = {5};
@@ -94,10 +94,34 @@ TEST(PrunePlanTest, ReferencedBatchesAreKeptSayingWhatReferencesThem) {
   EXPECT_NE(Find(p.result.kept, 5)->why.find("the server's baseline 'night' v2"), std::string::npos);
 }
 
+// A night's health checks are kept with it: after a restart the bench twin identifies its anchor (the first
+// check) and the baseline's night again from their runs, and `benchctl health --recompute` reads them all.
+TEST(PrunePlanTest, ANightsHealthChecksAreKeptWithIt) {
+  EXPECT_EQ(HealthBatchesOfNight(R"({"health": [{"bench": "a", "batch_id": 12}, {"bench": "b", "error": "x"},
+                                              {"bench": "c", "batch_id": 14}]})"),
+            (std::vector<std::int64_t>{12, 14}));
+  EXPECT_TRUE(HealthBatchesOfNight("").empty());
+  EXPECT_TRUE(HealthBatchesOfNight("not json").empty());
+  EXPECT_TRUE(HealthBatchesOfNight(R"({"health": {"batch_id": 3}})").empty());
+  EXPECT_TRUE(HealthBatchesOfNight(R"({"health": [{"batch_id": "3"}, {"batch_id": -2}, {"batch_id": 1.5}]})").empty());
+
+  PruneFacts f;
+  f.runs = {Old(1, 11), Old(2, 12), Old(3, 13), Old(4, 14)};
+  f.regressions = {{8, 13, "2026-11-20", "nightly", HealthBatchesOfNight(R"({"health": [{"batch_id": 12}]})")}};
+  const PrunePlan p = PlanPrune(f, Request());
+  EXPECT_EQ(p.doomed, (std::vector<std::int64_t>{4, 1})) << "batches 11 and 14 are nobody's";
+  ASSERT_NE(Find(p.result.kept, 2), nullptr);
+  EXPECT_NE(Find(p.result.kept, 2)->why.find("the health check of regression night 2026-11-20 (result 8) references "
+                                             "batch 12"),
+            std::string::npos)
+      << Find(p.result.kept, 2)->why;
+  EXPECT_NE(Find(p.result.kept, 3)->why.find("regression night 2026-11-20"), std::string::npos);
+}
+
 TEST(PrunePlanTest, TheRulesApplyInOrderNewerThenReferencedThenKeepLast) {
   PruneFacts f;
   f.runs = {Old(1, 1), Old(2, 2)};
-  f.regressions = {{1, 2, "", "ci"}};
+  f.regressions = {{1, 2, "", "ci", {}}};
   const PrunePlan p = PlanPrune(f, Request(1));
   // Run 2 is both the newest finished run and referenced: the reference is the reason given.
   EXPECT_NE(Find(p.result.kept, 2)->why.find("regression result 1"), std::string::npos);

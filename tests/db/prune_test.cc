@@ -155,11 +155,12 @@ TEST_P(PruneTest, KeepsRunsOfBatchesABaselineTookFromTheLocalStore) {
 }
 
 TEST_P(PruneTest, KeepsRunsOfBatchesARegressionNightOrResultReferences) {
-  std::int64_t night_batch = 0, manual_batch = 0, free_batch = 0;
+  std::int64_t night_batch = 0, manual_batch = 0, free_batch = 0, health_batch = 0;
   auto n = Batch(2, &night_batch);
   auto m = Batch(1, &manual_batch);
   auto f = Batch(1, &free_batch);
-  for (std::int64_t id : {n[0], n[1], m[0], f[0]}) FinishAged(id, 60);
+  auto h = Batch(1, &health_batch);
+  for (std::int64_t id : {n[0], n[1], m[0], f[0], h[0]}) FinishAged(id, 60);
   RegressionRecord night;
   night.suite = "nightly";
   night.baseline_name = "main";
@@ -167,14 +168,19 @@ TEST_P(PruneTest, KeepsRunsOfBatchesARegressionNightOrResultReferences) {
   night.batch_id = night_batch;
   night.night = "2026-09-01";
   night.verdict = "passed";
-  night.result_json = "{}";
+  // The night's health check is kept with it (server/nights.cc writes its batch into the result).
+  night.result_json = R"({"health": [{"bench": "emu", "batch_id": )" + std::to_string(health_batch) + "}]}";
   ASSERT_TRUE(store_->SaveRegression(night).ok());
   RegressionRecord manual = night;
   manual.night = "";
   manual.batch_id = manual_batch;
+  manual.result_json = R"({"health": [{"bench": "emu", "batch_id": )" + std::to_string(free_batch) + "}]}";  // not a night's
   ASSERT_TRUE(store_->SaveRegression(manual).ok());
   const PruneResult r = Prune(30);
   EXPECT_EQ(Ids(r.deleted), (std::set<std::int64_t>{f[0]}));
+  ASSERT_NE(Find(r.kept, h[0]), nullptr);
+  EXPECT_NE(Find(r.kept, h[0])->why.find("the health check of regression night 2026-09-01"), std::string::npos)
+      << Find(r.kept, h[0])->why;
   EXPECT_NE(Find(r.kept, n[0])->why.find("regression night 2026-09-01"), std::string::npos) << Find(r.kept, n[0])->why;
   EXPECT_NE(Find(r.kept, m[0])->why.find("regression result"), std::string::npos);
   EXPECT_TRUE(store_->GetRun(n[1]).ok());
