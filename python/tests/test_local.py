@@ -89,6 +89,17 @@ def test_spec_as_dict_and_as_message(local_client, repo):
     run = local_client.run(spec)[0]
     assert run.ok and run.name == "py-dict"
     assert len(run.trace()) == 101
+    # What executing it measured, stored with the run: 10 ms of valve time, 101 samples; not paced, so no loop.
+    assert run.execution is not None, run.proto
+    assert run.execution["simulated_s"] == pytest.approx(0.01)
+    assert run.execution["samples"] == 101
+    assert run.execution["wall_s"] > 0
+    assert "loop" not in run.execution
+    assert local_client.get_run(run.id).execution == run.execution
+    paced = local_client.run(dict(spec, name="py-paced", realtime=True))[0]  # 10 ms paced on the embedded bench
+    assert paced.ok, paced.reason
+    assert paced.execution["loop"]["ticks"] > 0, paced.execution
+    assert 0 <= paced.execution["loop"]["jitter_p50_s"] <= paced.execution["loop"]["jitter_max_s"]
     msg = valvebench.load_spec(os.path.join(repo, "examples", "standard", "e1.json"))
     assert isinstance(msg, spec_pb2.ExperimentSpec)
     assert local_client.run(msg).ok

@@ -100,7 +100,8 @@ class Progress:
 class Run:
     """A stored run: id, batch_id, name, label (name without the batch's common prefix), controller, bench,
     status, reason, progress, tags, metrics (dict, SI units as in docs/metrics.md), spec (dict),
-    conditions (supply_V, supply_pressure_Pa) and the history of status changes."""
+    conditions (supply_V, supply_pressure_Pa), the history of status changes and execution (what executing it
+    measured; None for a run that did not execute)."""
 
     def __init__(self, client, proto):
         self._client = client
@@ -124,6 +125,19 @@ class Run:
         self.submitted_unix_s = proto.submitted_unix_s
         self.started_unix_s = proto.started_unix_s
         self.finished_unix_s = proto.finished_unix_s
+        # What executing it measured, stored with the run (None: it did not execute): wall_s, simulated_s,
+        # samples, control_ticks, metrics_from_trajectory, and for a paced run "loop" (ticks, overruns,
+        # jitter_p50_s, jitter_p99_s, jitter_max_s), as benchctl show prints them.
+        self.execution = None
+        if proto.HasField("execution"):
+            e = proto.execution
+            self.execution = {"wall_s": e.wall_s, "simulated_s": e.simulated_s, "samples": e.samples,
+                              "control_ticks": e.control_ticks,
+                              "metrics_from_trajectory": e.metrics_from_trajectory}
+            if e.HasField("loop"):
+                self.execution["loop"] = {"ticks": e.loop.ticks, "overruns": e.loop.overruns,
+                                          "jitter_p50_s": e.loop.jitter_p50_s, "jitter_p99_s": e.loop.jitter_p99_s,
+                                          "jitter_max_s": e.loop.jitter_max_s}
 
     @property
     def ok(self):
