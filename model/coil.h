@@ -27,6 +27,54 @@ struct Magnetics {
 // G' = f (Frohlich: G = |u| - ln(1 + |u|); tanh: G = ln cosh u), so at constant i
 //   F = dW'/dx = (dLc/dx) (ls i f(u) / Lc - ls^2 / Lc^2 G(u)) + (dLa/dx) i^2 / 2.
 // The air path keeps the incremental inductance >= La: deep saturation stays physical and non-stiff.
+//
+// Form 3, the core in series with the gap (the reluctance law only): the magnetic circuit of seed 000 eq. 4
+// with the core's permeability falling with its flux density. The core's field H and the gap share the
+// magnetomotive force, N i = l_c H + phi R_g(x), phi = A_e B(H), with the steel's curve Frohlich's knee plus
+// the vacuum's slope, B(H) = B_sat u / (1 + |u|) + mu0 H, u = H / H_k, H_k = B_sat / (mu0 (mu_r - 1)) (so
+// B'(0) = mu0 mu_r). R_g(x) = N^2 / L(x) - l_c / (mu0 mu_r A_e) is the gaps' reluctance. Solved for H at
+// each (i, x) (monotone: Newton from the unsaturated solution, which lies below the root); then
+//   lambda = N phi,  dlambda/di = N^2 A_e B' / (l_c + A_e B' R_g),
+//   dlambda/dx = -N A_e^2 B' B R_g' / (l_c + A_e B' R_g),  F = -phi^2 R_g' / 2 = lambda^2 L' / (2 L^2)
+// (the energy stored in the gaps at constant flux; the core's does not depend on x). Unlike the parallel
+// forms, where the saturated share of the inductance is 1/mu_r at every gap, here a wide gap takes most of the
+// magnetomotive force and the core barely saturates, and a closed one saturates it hard: a plunger's
+// saturation depends on where it is.
+inline Magnetics SeriesCoreMagnetics(const PlantParams& pp, double L, double dLdx, double i, double x) {
+  constexpr double kMu0 = 4e-7 * M_PI;
+  const double N = pp.N_turns, A = pp.A_e_m2, lc = pp.l_c_m, mu_r = pp.mu_r, B_s = pp.effects.saturation_B_T;
+  const double Rg = std::max(N * N / L - lc / (kMu0 * mu_r * A), 0.0);
+  const double dRg = -N * N * dLdx / (L * L);
+  const double Hk = B_s / (kMu0 * std::max(mu_r - 1.0, 1e-9));
+  const double mmf = N * std::abs(i);
+  auto B_of = [&](double H, double* dB) {
+    const double u = H / Hk;
+    *dB = B_s / Hk / ((1.0 + u) * (1.0 + u)) + kMu0;
+    return B_s * u / (1.0 + u) + kMu0 * H;
+  };
+  // The unsaturated solution, B = mu0 mu_r H, is at or below the root (B(H) <= mu0 mu_r H); g is concave and
+  // increasing for H >= 0, so Newton's steps from there rise monotonically to it.
+  double H = mmf / (lc + kMu0 * mu_r * A * Rg);
+  double dB = 0.0, B = 0.0;
+  for (int k = 0; k < 60; ++k) {
+    B = B_of(H, &dB);
+    const double g = lc * H + A * B * Rg - mmf;
+    const double step = g / (lc + A * dB * Rg);
+    H -= step;
+    if (std::abs(step) <= 1e-13 * std::max(H, 1e-30)) break;
+  }
+  B = B_of(H, &dB);
+  const double sign = i < 0.0 ? -1.0 : 1.0;
+  const double den = lc + A * dB * Rg;
+  Magnetics m;
+  m.dlambda_di = N * N * A * dB / den;
+  m.dlambda_dx = -sign * N * A * A * dB * B * dRg / den;
+  const double phi = A * B;
+  m.force_N = -0.5 * phi * phi * dRg;
+  (void)x;
+  return m;
+}
+
 inline Magnetics MagneticsAt(const Plant& plant, double i, double x) {
   double L, dLdx;
   plant.InductanceAndSlope(x, &L, &dLdx);
@@ -39,13 +87,15 @@ inline Magnetics MagneticsAt(const Plant& plant, double i, double x) {
     m.force_N = 0.5 * i * i * dLdx;
     return m;
   }
+  if (pp.effects.saturation_tanh >= 2.5 && pp.law == InductanceLaw::kReluctance)
+    return SeriesCoreMagnetics(pp, L, dLdx, i, x);
   const double air = pp.law == InductanceLaw::kReluctance ? 1.0 / std::max(pp.mu_r, 1.0) : 0.01;
   const double La = air * L, Lc = L - La, dLa = air * dLdx, dLc = dLdx - dLa;
   const double ls = pp.N_turns * pp.A_e_m2 * B_sat;
   const double u = Lc * i / ls;
   const double au = std::abs(u);
   double f, df, G;
-  if (pp.effects.saturation_tanh >= 1.5) {
+  if (pp.effects.saturation_tanh >= 1.5) {  // arctan (and form 3 under a law without a core: see above)
     // arctan (a knee between Frohlich's and tanh's): f = (2/pi) atan(pi u / 2), slope 1 at 0;
     // G = (2/pi) (|u| atan(pi |u| / 2) - ln(1 + (pi u / 2)^2) / pi).
     const double a = 0.5 * M_PI * au;

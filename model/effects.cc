@@ -24,7 +24,7 @@ const std::vector<EffectInfo>& EffectCatalog() {
        {{"tau_s", "s", &Effects::sensor_tau_s, 0.0, 0.1}, {"delay_s", "s", &Effects::sensor_delay_s, 0.0, 0.1}}},
       {"magnetic_saturation", "core flux saturates at high magnetomotive force", true,
        {{"B_sat", "T", &Effects::saturation_B_T, 0.05, 1000.0},
-        {"tanh", "1", &Effects::saturation_tanh, 0.0, 2.0}}},
+        {"tanh", "1", &Effects::saturation_tanh, 0.0, 3.0}}},
       {"residual_magnetism", "remanent flux holds the spool after de-energising", true,
        {{"w", "A", &Effects::residual_w_A, 1e-4, 10.0},
         {"alpha", "1", &Effects::residual_alpha, 0.01, 1.0},

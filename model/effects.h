@@ -65,7 +65,8 @@ struct Effects {
   double sensor_tau_s = 0.0;          // sensor_lag.tau_s; 0 = none
   double sensor_delay_s = 0.0;        // sensor_lag.delay_s
   double saturation_B_T = 0.0;        // magnetic_saturation.B_sat; 0 = none
-  double saturation_tanh = 0.0;       // magnetic_saturation.tanh: 0 = Frohlich's knee (default), 1 = tanh, 2 = arctan
+  double saturation_tanh = 0.0;       // magnetic_saturation.tanh: 0 = Frohlich's knee (default), 1 = tanh, 2 = arctan,
+                                      // 3 = the core in series with the gap (model/coil.h)
   double bounce_e = 0.0;              // end_stop_bounce.e; 0 = inelastic (nominal)
   double bounce_v_stick_mps = 1e-3;   // end_stop_bounce.v_stick
   double friction_F_c_N = 0.0;        // coulomb_friction.F_c (kinetic)
