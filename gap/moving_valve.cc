@@ -1143,6 +1143,7 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
   Eigen::MatrixXd draw_factor;
   double white_scale = 1.0;  // draw_factor x this: the covariance as if the residuals were white
   std::vector<int> draw_free;
+  std::vector<bool> draw_determined;  // per draw_free: its 1-sigma below half its value (as `determined` says)
   {
     say("uncertainty: Gauss-Newton on the fit runs");
     std::vector<int> free = st.free;
@@ -1235,6 +1236,8 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
         draw_free = free;
         for (std::size_t j = 0; j < q; ++j)
           rel_sigma[free[j]] = blind[j] ? INFINITY : std::sqrt(std::max(0.0, C(static_cast<Eigen::Index>(j), static_cast<Eigen::Index>(j))));
+        draw_determined.assign(q, false);
+        for (std::size_t j = 0; j < q; ++j) draw_determined[j] = rel_sigma[free[j]] < 0.5;
       }
     }
     struct Row {
@@ -1332,18 +1335,24 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
     rm.rmse_A = RmsOver(ds, *pred, one);
     id.landmarks.push_back(rm);
   }
-  // ---- the prediction band of the holdout runs, and the verdict on the prediction ----------------------------
   // ---- valves as another recording of the same valve could have identified it (MovingIdentification) -----------
-  if (draw_factor.size() > 0) {
+  // Only the determined parameters vary: one the runs do not determine is held where the start put it (a warm
+  // start from another night holds it, gap/track.h), and drawn with its own near-infinite sigma it would make
+  // valves no recording of this one would give.
+  if (draw_factor.size() > 0 && draw_determined.size() == draw_free.size()) {
     std::mt19937 rng(35036u);
     std::normal_distribution<double> unit(0.0, 1.0);
     for (int k = 0; k < kRepeatabilityDraws; ++k) {
       Eigen::VectorXd u(draw_factor.cols());
       for (Eigen::Index j = 0; j < u.size(); ++j) u(j) = unit(rng);
-      auto drawn = PlantOf(family, Moved(v, white_scale * (draw_factor * u), draw_free));
+      Eigen::VectorXd z = white_scale * (draw_factor * u);
+      for (std::size_t j = 0; j < draw_free.size(); ++j)
+        if (!draw_determined[j]) z(static_cast<Eigen::Index>(j)) = 0.0;
+      auto drawn = PlantOf(family, Moved(v, z, draw_free));
       if (drawn.ok()) id.repeatability_draws.push_back(std::move(*drawn));
     }
   }
+  // ---- the prediction band of the holdout runs, and the verdict on the prediction ----------------------------
   if (id.holdout_runs > 0) {
     if (draw_factor.size() > 0) PredictionBand(ds, family, v, draw_factor, draw_free, hold, threshold, options, &id);
     id.prediction_undetermined = PredictionVerdict(id, draw_factor.size() > 0);

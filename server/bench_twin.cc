@@ -1,5 +1,6 @@
 #include "server/bench_twin.h"
 
+#include <algorithm>
 #include <cmath>
 
 #include <fmt/format.h>
@@ -124,19 +125,25 @@ StatusOr<double> ReplayMetric(const experiment::ExperimentSpec& spec, const mode
 }
 
 // The replayed metric's spread over the valves another recording of the same valve could have given
-// (gap::MovingIdentification::repeatability_draws): 0 when fewer than half of them replay (not known).
+// (gap::MovingIdentification::repeatability_draws): 1.4826 x the median absolute deviation, a standard deviation
+// for normal values that one draw in an odd corner (a hold that no longer pulls the plunger in) does not set; 0
+// when fewer than half of them replay (not known).
 double ReplaySpread(const experiment::ExperimentSpec& spec, const gap::MovingIdentification& id,
                     const std::string& metric) {
-  double sum = 0.0, sum2 = 0.0;
-  int n = 0;
+  std::vector<double> v;
   for (const auto& plant : id.repeatability_draws) {
-    auto v = ReplayMetric(spec, plant, metric);
-    if (!v.ok() || !std::isfinite(*v)) continue;
-    sum += *v, sum2 += *v * *v, ++n;
+    auto m = ReplayMetric(spec, plant, metric);
+    if (m.ok() && std::isfinite(*m)) v.push_back(*m);
   }
-  if (n < gap::kRepeatabilityDraws / 2) return 0.0;
-  const double mean = sum / n;
-  return std::sqrt(std::max(0.0, (sum2 - n * mean * mean) / (n - 1)));
+  if (static_cast<int>(v.size()) < gap::kRepeatabilityDraws / 2) return 0.0;
+  auto median = [](std::vector<double> x) {
+    std::sort(x.begin(), x.end());
+    const std::size_t n = x.size();
+    return n % 2 ? x[n / 2] : 0.5 * (x[n / 2 - 1] + x[n / 2]);
+  };
+  const double mid = median(v);
+  for (double& x : v) x = std::abs(x - mid);
+  return 1.4826 * median(v);
 }
 
 }  // namespace

@@ -556,6 +556,16 @@ try:
           stored.get("reason", "").startswith("cancelled by olga: valve chatter seen"), stored.get("reason"))
     flash_text = text_of(By.ID, "flash")
     check("the page says the result of the cancel", "cancelled" in flash_text.lower(), flash_text)
+    # The cancelled run was paced (realtime): what its loop measured is stored with it once its result lands,
+    # and its page shows how the loop kept time (ticks, overruns, jitter), as benchctl show does.
+    ran = wait(lambda: api("GET", "/api/runs/" + live_id, VIEWER)["run"].get("execution", {}).get("loop"),
+               what="the cancelled paced run's stored loop statistics")
+    go("#/run/" + live_id)
+    wait(lambda: "loop" in driver.find_element(By.CSS_SELECTOR, ".kv").text or None, what="the run's loop row")
+    kv = driver.find_element(By.CSS_SELECTOR, ".kv").text
+    check("a paced run's page shows how its loop kept time (Run.execution.loop)",
+          ran and re.search(r"loop\s+\d+ paced ticks, \d+ overruns, jitter p50 [0-9.]+ [mµ]?s, p99 [0-9.]+ [mµ]?s, "
+                            r"max [0-9.]+ [mµ]?s", kv), (ran, kv[-300:]))
 
     # 4b. A run watched from its start (issue 24, M3): its first sample is at t_s = 0, which proto3 JSON would
     # leave out; the charts must draw it and every later one, without a console error.
