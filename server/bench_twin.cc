@@ -160,7 +160,7 @@ regress::Json BenchTwins::Attribute(const regress::RegressResult& result,
     regress::Json c = {{"case", f.case_name}, {"metric", f.metric}, {"observed_change", f.delta},
                        {"allowed", f.allowed}};
     std::string why;
-    double anchor_sum = 0.0, tonight_sum = 0.0, var_sum = 0.0;
+    double reference_sum = 0.0, tonight_sum = 0.0, var_sum = 0.0;
     int n = 0;
     const auto spec = specs.find(f.case_name);
     const auto ran = benches.find(f.case_name);
@@ -183,7 +183,7 @@ regress::Json BenchTwins::Attribute(const regress::RegressResult& result,
           why = "the replay on bench " + b + "'s valve: " + (a.ok() ? now.status() : a.status()).message();
           break;
         }
-        anchor_sum += *a, tonight_sum += *now, ++n;
+        reference_sum += *a, tonight_sum += *now, ++n;
         const double sa = ReplaySpread(spec->second, *t->second.Reference(), f.metric);
         const double st = ReplaySpread(spec->second, *t->second.tonight, f.metric);
         var_sum += sa * sa + st * st;
@@ -192,8 +192,8 @@ regress::Json BenchTwins::Attribute(const regress::RegressResult& result,
     std::string verdict;
     if (why.empty() && n > 0) {
       // The valve's share of the change: the same code on tonight's valve against the baseline's valve.
-      const double valve_change = (tonight_sum - anchor_sum) / n;
-      c["replay_baseline_valve"] = anchor_sum / n;
+      const double valve_change = (tonight_sum - reference_sum) / n;
+      c["replay_baseline_valve"] = reference_sum / n;
       c["replay_tonight_valve"] = tonight_sum / n;
       c["valve_change"] = valve_change;
       // What two identifications of one valve replay apart: each valve's replays over its repeatability draws.
