@@ -21,6 +21,17 @@
 
 namespace vb::server {
 
+// One regressed metric's cause from its replay: `observed_change` (tonight minus the baseline, measured),
+// `allowed` (the suite's tolerance plus noise), `valve_change` (tonight's valve minus the baseline's valve, replayed
+// under tonight's code), `sigma` (the replay's repeatability) and, when the tracking saw the valve change since
+// the baseline's night, what changed. "valve": the valve makes at least half the change; "code": its part is within
+// the allowance by 2 sigma and the tracking saw no change; else "undetermined" with why.
+struct CaseVerdict {
+  std::string verdict, why;
+};
+CaseVerdict DecideCase(double observed_change, double allowed, double valve_change, double sigma,
+                       const std::string& changed_since_baseline);
+
 class BenchTwins {
  public:
   explicit BenchTwins(StorePool* pool) : pool_(pool) {}
@@ -36,6 +47,10 @@ class BenchTwins {
   // "" or the anchor's night: the anchor. A check that cannot be identified leaves the anchor, with the reason
   // in Attribute's output.
   void UseBaselineNight(const std::string& bench, const std::string& night, std::int64_t batch_id);
+
+  // Tonight's tracking flags of `bench` (Track's), for Attribute: a valve the tracking saw change since the
+  // baseline's night is never cleared by its replay alone.
+  void SetFlags(const std::string& bench, std::vector<gap::TrackFlag> flags);
 
   // The bench's nights tracked: the values stored in earlier nights' records (`history`, in date order) and
   // tonight's.
@@ -55,6 +70,7 @@ class BenchTwins {
     std::string anchor_date, tonight_date, baseline_date;
     std::int64_t baseline_batch = 0;
     std::string baseline_note;  // why the anchor stands for the baseline's night
+    std::vector<gap::TrackFlag> flags;  // tonight's tracking flags
     // The valve the replay compares tonight's with: the baseline's night's, else the anchor.
     const gap::MovingIdentification* Reference() const { return baseline ? &*baseline : anchor ? &*anchor : nullptr; }
     const std::string& ReferenceDate() const { return baseline ? baseline_date : anchor_date; }

@@ -326,6 +326,7 @@ void NightScheduler::TwinNight(const std::string& date, const regress::RegressRe
       h["tracking"] = t.status().message();
       continue;
     }
+    twins_.SetFlags(bench, t->flags);
     const auto tj = regress::Json::parse(gap::TrackingJson(*t));
     h["tracked_nights"] = t->sessions.size();
     h["flags"] = tj["flags"];

@@ -19,6 +19,7 @@
 #include "model/params.h"
 #include "runs/bench_setup.h"
 #include "server/config.h"
+#include "server/bench_twin.h"
 #include "server/health_check.h"
 #include "service/bench_health.h"
 #include "server_process.h"
@@ -189,6 +190,28 @@ TEST(BaselineNight, TheLastCheckedNightThatStartedBeforeTheBaselineWasMade) {
   b = server::BaselineNight(checks, 9000.0);
   ASSERT_TRUE(b);
   EXPECT_EQ(b->first, "2026-11-04");
+}
+
+// A regressed metric's cause from its replay (server::DecideCase), each rule on values: the valve when it makes
+// half the change; the code when its part is within the allowance by twice the replay's repeatability and the
+// tracking saw no change; otherwise "undetermined", saying which of the three reasons holds.
+TEST(DecideCase, ValveCodeOrWhyItCannotTell) {
+  EXPECT_EQ(server::DecideCase(-39.0, 0.5, -33.0, 0.3, "").verdict, "valve");
+  EXPECT_EQ(server::DecideCase(-39.0, 0.5, -33.0, 0.3, "bench a's R up since x").verdict, "valve");
+  EXPECT_EQ(server::DecideCase(2.5e-3, 2.9e-4, 3e-6, 1.5e-5, "").verdict, "code");
+  // The lab's relaxing spring: the replay near full opening barely moves, the bench's valve did.
+  const auto flagged = server::DecideCase(1.73, 0.5, 0.106, 0.019, "bench emu-2's F0*x_max down since 2026-11-01");
+  EXPECT_EQ(flagged.verdict, "undetermined");
+  EXPECT_NE(flagged.why.find("the valve changed since the baseline (bench emu-2's F0*x_max down"), std::string::npos)
+      << flagged.why;
+  // An operating edge: the part is small, the repeatability is not.
+  const auto edge = server::DecideCase(-28.5, 0.5, 0.44, 18.6, "");
+  EXPECT_EQ(edge.verdict, "undetermined");
+  EXPECT_NE(edge.why.find("the replay cannot resolve the valve's part here"), std::string::npos) << edge.why;
+  // Beyond the allowance and under half the change: both.
+  const auto both = server::DecideCase(-10.0, 0.5, -3.0, 0.1, "");
+  EXPECT_EQ(both.verdict, "undetermined");
+  EXPECT_NE(both.why.find("both changed"), std::string::npos) << both.why;
 }
 
 // Waits until the server has stored `n` nights; returns them newest first (an empty array on timeout).
