@@ -561,8 +561,9 @@ try:
     ran = wait(lambda: api("GET", "/api/runs/" + live_id, VIEWER)["run"].get("execution", {}).get("loop"),
                what="the cancelled paced run's stored loop statistics")
     go("#/run/" + live_id)
-    wait(lambda: "loop" in driver.find_element(By.CSS_SELECTOR, ".kv").text or None, what="the run's loop row")
-    kv = driver.find_element(By.CSS_SELECTOR, ".kv").text
+    # Read inside the wait: the page re-renders as its traces arrive, and an element found a moment ago goes stale.
+    kv = wait(lambda: (lambda t: t if "loop" in t else None)(driver.find_element(By.CSS_SELECTOR, ".kv").text),
+              what="the run's loop row") or ""
     check("a paced run's page shows how its loop kept time (Run.execution.loop)",
           ran and re.search(r"loop\s+\d+ paced ticks, \d+ overruns, jitter p50 [0-9.]+ [mµ]?s, p99 [0-9.]+ [mµ]?s, "
                             r"max [0-9.]+ [mµ]?s", kv), (ran, kv[-300:]))
