@@ -239,6 +239,18 @@ TEST(TrackSessions, AWarmStartFromAnIdentificationKeepsItsFit) {
   std::printf("anchor: fit %.3f mA, noise floor %.3f mA, L1/L0 %.2f (r_max %.2f)\n", 1e3 * first->fit_rmse_A,
               1e3 * first->noise_floor_A, ratio, r_max);
   ASSERT_GT(ratio, 0.98 * r_max / 1.5) << "the case this test is about: L1 / L0 above L1's box bound";
+  // The valves another recording could have given (the replay's repeatability, server/bench_twin.cc): drawn from
+  // the white-noise covariance, so R's spread over them is its sigma_white (16 draws: within a factor 2).
+  ASSERT_GE(first->repeatability_draws.size(), static_cast<std::size_t>(kRepeatabilityDraws / 2));
+  double sum2 = 0.0;
+  for (const auto& d : first->repeatability_draws) sum2 += std::pow(std::log(d.R_ohm / first->plant.R_ohm), 2);
+  const double r_spread = std::sqrt(sum2 / first->repeatability_draws.size());
+  double r_white = NAN;
+  for (const auto& d : first->determined)
+    if (d.name == "R") r_white = d.sigma_white / d.value;
+  std::printf("R over the repeatability draws: %.3g relative, sigma_white %.3g\n", r_spread, r_white);
+  EXPECT_GT(r_spread, r_white / 2.0);
+  EXPECT_LT(r_spread, r_white * 2.0);
   auto again = IdentifyForTracking(*ds, family, &*first, o);
   ASSERT_TRUE(again.ok()) << again.status().message();
   std::printf("warm start from it: fit %.3f mA\n", 1e3 * again->fit_rmse_A);
