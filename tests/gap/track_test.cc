@@ -209,12 +209,13 @@ std::string Shell(const std::string& cmd, int* rc) {
   return out;
 }
 
-// A warm start holds its anchor: a valve whose closed-to-open inductance ratio L1 / L0 is above two thirds of
-// what the family's held gap allows (a high-permeability core, mu_r 4000: about 4 of at most 5.7) is identified
-// from scratch, then identified again from that end on the same session (what every later night does): the fit
-// does not get worse. Before the warm start's boxes held their start, L1's box (which keeps L1 < r_max L0 for
-// every L0 in L0's box) moved such an anchor off its own optimum on every night (docs/track.md, step 1).
-TEST(TrackSessions, AWarmStartFromAnIdentificationKeepsItsFit) {
+// A valve whose closed-to-open inductance ratio L1 / L0 is above two thirds of what the family's held gap allows
+// (a high-permeability core, mu_r 4000: about 4.9 of at most 5.7) is identified from scratch at its noise floor,
+// then identified again from that end on the same session (what every later night does): the fit does not get
+// worse. L1's box (which kept L1 < r_max L0 for every L0 in L0's box) moved such a point off its own optimum:
+// first on every warm start (docs/track.md, step 1: 25.6 mA), then, with the warm start fixed, still in stage 3
+// and the polish from scratch (19.4 mA; L1 is now searched as its ratio to L0, docs/real-data.md "Seventh round").
+TEST(TrackSessions, AValveNearTheHeldGapsRatioIsIdentifiedAtItsNoiseAndAWarmStartKeepsIt) {
   const fs::path dir = fs::temp_directory_path() / ("vb_track_warm_" + std::to_string(::getpid()));
   fs::remove_all(dir);
   model::PlantParams truth = Valve();
@@ -239,6 +240,8 @@ TEST(TrackSessions, AWarmStartFromAnIdentificationKeepsItsFit) {
   std::printf("anchor: fit %.3f mA, noise floor %.3f mA, L1/L0 %.2f (r_max %.2f)\n", 1e3 * first->fit_rmse_A,
               1e3 * first->noise_floor_A, ratio, r_max);
   ASSERT_GT(ratio, 0.98 * r_max / 1.5) << "the case this test is about: L1 / L0 above L1's box bound";
+  // In the family, from scratch: within kReferenceIdentified (3x) of the noise floor, where the diagnosis trusts it.
+  EXPECT_LE(first->fit_rmse_A, kReferenceIdentified * first->noise_floor_A);
   // The valves another recording could have given (the replay's repeatability, server/bench_twin.cc): drawn from
   // the white-noise covariance, so R's spread over them is its sigma_white (16 draws: within a factor 2).
   ASSERT_GE(first->repeatability_draws.size(), static_cast<std::size_t>(kRepeatabilityDraws / 2));
