@@ -1656,6 +1656,22 @@ void PreferDeclaredTemperature(Diagnosis* d, const Dataset& target) {
     }
 }
 
+// Every run with a measured landmark dips in the reference's model (the nominal) and none dips as measured.
+bool NoRunMoves(const Diagnosis& d) {
+  if (d.landmarks.empty()) return false;
+  for (const auto& lm : d.landmarks)
+    if (std::isfinite(lm.dip_t_s[0]) || !std::isfinite(lm.dip_t_s[1])) return false;
+  return true;
+}
+
+// A row whose change acts on the coil's circuit or its reading, not on the plunger.
+bool IsElectricalRow(const std::string& name) {
+  for (const char* e : {"param:R", "supply_voltage", "supply_resistance", "resistance_temperature", "driver_delay",
+                        "sensor_gain", "sensor_offset"})
+    if (name == e) return true;
+  return false;
+}
+
 // A moving valve identified from scratch: the change the switch-on determines (see the header).
 std::string PreferDeterminedChange(Diagnosis* d, const Dataset& target) {
   if (d->chosen < 0 || d->ranking.empty() || !d->reference.from_scratch) return "";
@@ -1669,6 +1685,30 @@ std::string PreferDeterminedChange(Diagnosis* d, const Dataset& target) {
         break;
       }
     return "";
+  }
+  // No run moves (practice4's p41_3_stuck): where the reference's valve dips in every run's conditions (the
+  // plunger's arrival, seed 000) and no measured run dips, the plunger no longer moves; that is read from the
+  // current's shape. What holds it, the current of a plunger at rest cannot tell: friction or a blockage, a
+  // spring or a force far above the pull each leave the coil at L0. So a row that names a force (a stiffer
+  // spring, a preload, a pressure), or a combination that adds the supply or the sense chain to match the current
+  // at rest with the reference's parameters, is not a determination, and the verdict is `stuck` with that row
+  // said. A single electrical row (the winding, the supply, the driver, the sense chain) stays: it changes the
+  // current itself (its final value and its rate), which a plunger at rest shows. The trade is measured in
+  // docs/real-data.md ("Seventh round"): a supply so low that no run pulls in, fitted best by a combination with a
+  // force, would be named stuck.
+  if (NoRunMoves(*d) && !IsElectricalRow(chosen)) {
+    for (const auto& row : d->ranking) {
+      if (row.name != "stuck" || !row.status.ok() || !row.disqualified.empty()) continue;
+      char why[420];
+      std::snprintf(why, sizeof why,
+                    "the plunger no longer moves: no run dips where the reference's valve dips in each run's "
+                    "conditions; %s fits the current at rest better (%.2f against %.2f mA RMS on the holdout runs), "
+                    "but what holds a plunger (friction, a blockage, a spring or a force above the pull) leaves the "
+                    "same current at rest, so the current cannot name it",
+                    chosen.c_str(), 1e3 * d->ranking.front().holdout_rmse_after_A, 1e3 * row.holdout_rmse_after_A);
+      ChooseRow(d, "stuck", why);
+      return "";
+    }
   }
   auto confusable = [&](const std::string& name) { return Confusable(*d, name); };
   // The fitted value of a row's parameter against the reference's (NaN when either is missing).

@@ -74,5 +74,29 @@ TEST(Practice4, NoneNeverStandsOnAReferenceThatIsNotIdentified) {
   }
 }
 
+// A plunger that no longer moves is named `stuck`, not the force that could hold it. No run of p41_3's target dips
+// where its reference's valve dips; the best row against that reference (identified at 1.4x its noise) was
+// `param:k+supply_voltage+sensor_gain`: a stiffer spring, with the supply and the sense gain matching the current
+// at rest through the reference's parameters. What holds a plunger leaves the same current at rest, so the
+// current cannot name it (gap/moving_valve.cc, PreferDeterminedChange).
+TEST(Practice4, AValveWhoseRunsNoLongerDipIsNamedStuck) {
+  const fs::path dir = kPractice4 / "p41_3_stuck";
+  if (!fs::is_directory(dir)) GTEST_SKIP() << dir << " is missing";
+  auto target = LoadDataset((dir / "target").string(), model::PresetNames());
+  auto reference = LoadDataset((dir / "reference").string(), model::PresetNames());
+  ASSERT_TRUE(target.ok() && reference.ok());
+  DiagnoseOptions o;
+  o.reference = &*reference;
+  auto d = Diagnose(*target, Family(), o);
+  ASSERT_TRUE(d.ok()) << d.status().message();
+  ASSERT_TRUE(d->has_reference);
+  for (const auto& lm : d->landmarks) {
+    EXPECT_FALSE(std::isfinite(lm.dip_t_s[0])) << lm.run << ": the target's runs do not dip";
+    EXPECT_TRUE(std::isfinite(lm.dip_t_s[1])) << lm.run << ": the reference's valve dips";
+  }
+  EXPECT_EQ(d->verdict, "stuck") << d->verdict_reason;
+  EXPECT_NE(d->verdict_reason.find("the current cannot name it"), std::string::npos) << d->verdict_reason;
+}
+
 }  // namespace
 }  // namespace vb::gap
