@@ -175,6 +175,9 @@ std::vector<Candidate> MovingValveCandidates(const model::PlantParams& reference
 //    supply_resistance": a switch-on is all drive, and the coil sees R + R_s; a stronger preload confusable with
 //    dry friction is "either of" too (with the supply pressure when one pressure is declared): on a switch-on the
 //    plunger moves one way only, and friction opposes it with a constant force as the preload does.
+//  - A reference identified from scratch: when no run dips where the reference's valve dips in each run's
+//    conditions and the best row names a force or a combination (not a single electrical row), the verdict is
+//    `stuck`: the plunger no longer moves, and what holds it leaves the same current at rest.
 std::string ChooseAmongConfusable(Diagnosis* d, const Dataset& target);
 
 }  // namespace vb::gap
