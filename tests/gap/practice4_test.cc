@@ -7,7 +7,9 @@
 #include <cmath>
 #include <filesystem>
 #include <string>
+#include <utility>
 
+#include "common/status.h"
 #include "gap/dataset.h"
 #include "gap/diagnose.h"
 #include "gap/moving_valve.h"
@@ -21,6 +23,18 @@ namespace fs = std::filesystem;
 const fs::path kPractice4 = fs::path(VB_SHARED_DIR) / "gapbench" / "practice4";
 
 model::PlantParams Family() { return *model::Preset("taghizadeh2009"); }
+
+// A withheld case's two sessions.
+struct Sessions {
+  Dataset reference, target;
+};
+StatusOr<Sessions> LoadWithheld(const fs::path& dir) {
+  auto target = LoadDataset((dir / "target").string(), model::PresetNames());
+  if (!target.ok()) return target.status();
+  auto reference = LoadDataset((dir / "reference").string(), model::PresetNames());
+  if (!reference.ok()) return reference.status();
+  return Sessions{std::move(*reference), std::move(*target)};
+}
 
 // The issue's criterion: the holdout runs (6 bar, 0.75x supply) within max(5 mA, 3x the noise floor). Before issue
 // 35 this valve was identified at 38 mA RMS on its fit runs (a wrong basin: the edge's eddy transient read as the
@@ -49,14 +63,13 @@ TEST(Practice4, P41_0IdentifiedFromScratchPredictsItsHoldoutRuns) {
 TEST(Practice4, NoneNeverStandsOnAReferenceThatIsNotIdentified) {
   const fs::path dir = kPractice4 / "p41_4_none";
   if (!fs::is_directory(dir)) GTEST_SKIP() << dir << " is missing";
-  auto target = LoadDataset((dir / "target").string(), model::PresetNames());
-  auto reference = LoadDataset((dir / "reference").string(), model::PresetNames());
-  ASSERT_TRUE(target.ok() && reference.ok());
+  auto s = LoadWithheld(dir);
+  ASSERT_TRUE(s.ok()) << s.status().message();
   DiagnoseOptions o;
-  o.reference = &*reference;
+  o.reference = &s->reference;
   o.reference_fit.scratch_max_evaluations = 600;
   o.budget_s = 15.0;
-  auto d = Diagnose(*target, Family(), o);
+  auto d = Diagnose(s->target, Family(), o);
   ASSERT_TRUE(d.ok()) << d.status().message();
   ASSERT_TRUE(d->has_reference);
   EXPECT_GT(d->reference.noise_floor_A, 0.0);
@@ -82,12 +95,11 @@ TEST(Practice4, NoneNeverStandsOnAReferenceThatIsNotIdentified) {
 TEST(Practice4, AValveWhoseRunsNoLongerDipIsNamedStuck) {
   const fs::path dir = kPractice4 / "p41_3_stuck";
   if (!fs::is_directory(dir)) GTEST_SKIP() << dir << " is missing";
-  auto target = LoadDataset((dir / "target").string(), model::PresetNames());
-  auto reference = LoadDataset((dir / "reference").string(), model::PresetNames());
-  ASSERT_TRUE(target.ok() && reference.ok());
+  auto s = LoadWithheld(dir);
+  ASSERT_TRUE(s.ok()) << s.status().message();
   DiagnoseOptions o;
-  o.reference = &*reference;
-  auto d = Diagnose(*target, Family(), o);
+  o.reference = &s->reference;
+  auto d = Diagnose(s->target, Family(), o);
   ASSERT_TRUE(d.ok()) << d.status().message();
   ASSERT_TRUE(d->has_reference);
   for (const auto& lm : d->landmarks) {
