@@ -1693,9 +1693,9 @@ std::string PreferDeterminedChange(Diagnosis* d, const Dataset& target) {
   // spring, a preload, a pressure), or a combination that adds the supply or the sense chain to match the current
   // at rest with the reference's parameters, is not a determination, and the verdict is `stuck` with that row
   // said. A single electrical row (the winding, the supply, the driver, the sense chain) stays: it changes the
-  // current itself (its final value and its rate), which a plunger at rest shows. The trade is measured in
-  // docs/real-data.md ("Seventh round"): a supply so low that no run pulls in, fitted best by a combination with a
-  // force, would be named stuck.
+  // current itself (its final value and its rate), which a plunger at rest shows. What it can get wrong
+  // (docs/real-data.md, "Seventh round"): a supply so low that no run pulls in, fitted best by a combination with
+  // a force, would be named stuck; the draws it was checked on do not contain that case.
   if (NoRunMoves(*d) && !IsElectricalRow(chosen)) {
     for (const auto& row : d->ranking) {
       if (row.name != "stuck" || !row.status.ok() || !row.disqualified.empty()) continue;
