@@ -104,8 +104,14 @@ int main(int argc, char** argv) {
     } else if (arg == "--valves" && a + 1 < argc) {
       std::stringstream list(argv[++a]);
       for (std::string j; std::getline(list, j, ',');) {
-        valves.insert(std::atoi(j.c_str()));
-        population = std::max(population, std::atoi(j.c_str()) + 1);
+        char* end = nullptr;
+        const long n = std::strtol(j.c_str(), &end, 10);
+        if (j.empty() || *end != '\0' || n < 0 || n > 100000) {
+          std::fprintf(stderr, "--valves: '%s' is not a draw's number (0-100000, comma-separated)\n", j.c_str());
+          return 2;
+        }
+        valves.insert(static_cast<int>(n));
+        population = std::max(population, static_cast<int>(n) + 1);
       }
     } else if (arg == "--seed" && a + 1 < argc) {
       seed = static_cast<unsigned>(std::atoi(argv[++a]));
