@@ -373,6 +373,23 @@ SwitchOnMarks FindSwitchOnMarks(const std::vector<double>& i_A, const std::vecto
   return m;
 }
 
+double PullInEdgeLogSupply(const std::function<bool(double ratio)>& pulls_in, bool* outside) {
+  const double span = std::log(2.0);
+  const bool at_run = pulls_in(1.0);
+  // The other outcome lies below the run's supply when it pulls in, above when it does not.
+  double lo = at_run ? -span : 0.0, hi = at_run ? 0.0 : span;
+  if (pulls_in(std::exp(at_run ? lo : hi)) == at_run) {
+    *outside = true;
+    return at_run ? -span : span;
+  }
+  *outside = false;
+  for (int k = 0; k < 9; ++k) {
+    const double mid = 0.5 * (lo + hi);
+    (pulls_in(std::exp(mid)) ? hi : lo) = mid;
+  }
+  return 0.5 * (lo + hi);
+}
+
 bool IsSwitchOnSession(const Dataset& ds, const model::PlantParams& family) {
   if (!family.has_moving_part || family.law != model::InductanceLaw::kReluctance || ds.runs.empty()) return false;
   for (const auto& r : ds.runs) {
@@ -488,6 +505,35 @@ void PredictionBand(const Dataset& ds, const model::PlantParams& family, const s
                          " pull in, " + std::to_string(good[r] - pulls[r]) + " do not): its prediction is not "
                          "a property of what the fit runs determine; a fit run at this pressure or supply would "
                          "decide it");
+  }
+}
+
+// Each holdout run's distance to the identified valve's pull-in edge along the supply (RunMarks::edge_log_supply).
+void PullInEdges(const Dataset& ds, const model::PlantParams& plant, const std::vector<bool>& hold, double threshold,
+                 const model::SolverOptions& solver, MovingIdentification* id) {
+  for (std::size_t r = 0; r < ds.runs.size(); ++r) {
+    if (!hold[r]) continue;
+    Dataset one = ds;
+    one.runs = {ds.runs[r]};
+    RunData& run = one.runs[0];
+    const double supply_V = run.supply_V;
+    bool failed = false;
+    PredictOptions po;
+    po.solver = solver;
+    auto pulls = [&](double ratio) {
+      run.supply_V = ratio * supply_V;
+      auto p = Predict(one, plant, po, {true});
+      if (!p.ok() || p->i_A.empty()) {
+        failed = true;
+        return false;
+      }
+      return FindSwitchOnMarks(p->i_A[0], run.gate, run.sample_period_s, threshold).pulls_in;
+    };
+    bool outside = false;
+    const double e = PullInEdgeLogSupply(pulls, &outside);
+    RunMarks& rm = id->landmarks[r];
+    rm.edge_log_supply = failed ? NAN : e;
+    rm.edge_outside = !failed && outside;
   }
 }
 
@@ -1385,6 +1431,7 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
   // ---- the prediction band of the holdout runs, and the verdict on the prediction ----------------------------
   if (id.holdout_runs > 0) {
     if (draw_factor.size() > 0) PredictionBand(ds, family, v, draw_factor, draw_free, hold, threshold, options, &id);
+    PullInEdges(ds, id.plant, hold, threshold, options.solver, &id);
     id.prediction_undetermined = PredictionVerdict(id, draw_factor.size() > 0);
   }
   id.evaluations = st.evaluations;
@@ -1446,6 +1493,9 @@ std::string MovingIdentificationJson(const MovingIdentification& id) {
       one["band"] = {{"draws", r.band_draws}, {"failed_draws", r.band_failed_draws},
                      {"pull_in_draws", r.band_pull_in_draws},
                      {"spread_A", num(r.band_spread_A)}, {"pull_in_undetermined", r.pull_in_undetermined}};
+    if (std::isfinite(r.edge_log_supply))
+      one["pull_in_edge"] = {{"supply_V", r.supply_V * std::exp(r.edge_log_supply)}, {"log_ratio", r.edge_log_supply},
+                             {"beyond_range", r.edge_outside}};
     lm.push_back(std::move(one));
   }
   j["landmarks"] = lm;

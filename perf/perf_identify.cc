@@ -18,10 +18,14 @@
 // each is identified on 1, 2 and 4 bar and predicts 6 bar and 0.75x supply. Success as for the predict cases;
 // "strict" when fit and holdout are both within 3x the noise floor.
 //
-// Usage: perf_identify [--sets practice3,practice4 | --sets none] [--only SUBSTRING] [--evaluations N] [--verbose]
+// Usage: perf_identify [--sets practice3,practice4 | --sets none] [--only SUBSTRING] [--evaluations N] [--verbose] [--edges]
 //                      [--population N] [--valves J,K,...] [--seed SEED] [--ablate flow,stribeck,ladder,eddy,core,scope]
 // --valves J,K,...: only these draws of the population (indep_J; each draw has its own seed, so a subset is the
 // same valves as in the whole run).
+// --edges: for each holdout run of a draw, one line "edge" with the identified valve's distance to its pull-in
+// edge along the supply (RunMarks::edge_log_supply) and the same for the drawn valve itself (noise-free, the
+// same dip threshold), the fit's multiple of the noise floor and whether the prediction was trusted: the data
+// the pull-in-edge rule is calibrated on (docs/real-data.md, "Eighth round").
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
@@ -75,7 +79,7 @@ int main(int argc, char** argv) {
   // --ablate flow,stribeck,ladder,eddy,core,scope: the same draws with forms of the independent plant taken out,
   // to see which of them the identification's family misses (the draws are made first, so the valves are the same).
   std::string ablate;
-  bool verbose = false;
+  bool verbose = false, edges = false;
   unsigned seed = 35;
   std::set<int> valves;  // --valves: empty = every draw
   for (int a = 1; a < argc; ++a) {
@@ -88,6 +92,8 @@ int main(int argc, char** argv) {
       evaluations = std::atoi(argv[++a]);
     } else if (arg == "--verbose") {
       verbose = true;
+    } else if (arg == "--edges") {
+      edges = true;
     } else if (arg == "--ablate" && a + 1 < argc) {
       ablate = argv[++a];
       std::stringstream forms(ablate);
@@ -118,7 +124,7 @@ int main(int argc, char** argv) {
     } else {
       std::fprintf(stderr, "usage: perf_identify [--sets practice3,practice4|none] [--only SUBSTRING] [--evaluations N] "
                            "[--population N] [--valves J,K,...] [--seed SEED] [--ablate flow,stribeck,ladder,eddy,core,scope] "
-                           "[--verbose]\n");
+                           "[--verbose] [--edges]\n");
       return 2;
     }
   }
@@ -268,6 +274,28 @@ int main(int argc, char** argv) {
       (ok ? band.flagged_pass : band.flagged_miss) += warned;
       if (!ok && !warned) std::printf("    a miss the identification trusted: %s\n", name);
       (ok ? band.pass : band.miss) += 1;
+    }
+    if (edges && id.ok()) {
+      for (std::size_t r = 0; r < ds.runs.size(); ++r) {
+        const auto& m = id->landmarks[r];
+        if (m.split != vb::Split::kHoldout) continue;
+        const auto& run = ds.runs[r];
+        std::size_t on = 0;
+        while (on < run.gate.size() && run.gate[on] == 0) ++on;
+        auto truth_pulls = [&](double ratio) {
+          const auto i = vb::perf::SimulateSwitchOn(v, ratio * run.supply_V, run.supply_pressure_Pa, run.i_A.size(), on);
+          return vb::gap::FindSwitchOnMarks(i, run.gate, run.sample_period_s, 4.0 * id->noise_floor_A).pulls_in;
+        };
+        bool outside = false;
+        const double e_true = vb::gap::PullInEdgeLogSupply(truth_pulls, &outside);
+        std::printf("    edge %s %s run %-12s id %+.4f%s true %+.4f%s fit/noise %.2f trusted %s rmse %.2f limit %.2f "
+                    "measured %s predicted %s\n",
+                    name, ablate.empty() ? "full" : "ablated", m.run.c_str(), m.edge_log_supply,
+                    m.edge_outside ? "*" : "", e_true, outside ? "*" : "", id->fit_rmse_A / id->noise_floor_A,
+                    id->prediction_undetermined.empty() ? "yes" : "no", m.rmse_A * 1e3,
+                    std::max(5e-3, 3.0 * id->noise_floor_A) * 1e3, m.measured.pulls_in ? "pull" : "none",
+                    m.predicted.pulls_in ? "pull" : "none");
+      }
     }
     if (verbose && id.ok() && !id->prediction_undetermined.empty())
       std::printf("    prediction undetermined: %s\n", id->prediction_undetermined.c_str());

@@ -20,6 +20,7 @@
 #include "gap/dataset.h"
 #include "gap/diagnose.h"
 #include "gap/moving_valve.h"
+#include "gap/predict.h"
 #include "gap/scope_csv.h"
 #include "gap/switch_on_synth.h"
 #include "model/params.h"
@@ -204,7 +205,43 @@ TEST(MovingValveSynthetic, OtherValveIdentifiedAndPredictedAtAnotherPressureAndS
   std::istringstream lines(report);
   for (std::string line; std::getline(lines, line);) EXPECT_LE(line.size(), 120u) << line;
   EXPECT_NE(MovingIdentificationJson(*id).find("\"pull_in_undetermined\": false"), std::string::npos);
+  // Each holdout's distance to its pull-in edge along the supply is the true valve's: a valve of the family
+  // fitted at the noise carries no bias there (the independent population's is docs/real-data.md, "Eighth round").
+  for (std::size_t r = 0; r < ds->runs.size(); ++r) {
+    const RunMarks& m = id->landmarks[r];
+    if (m.split != Split::kHoldout) continue;
+    Dataset one = *ds;
+    one.runs = {ds->runs[r]};
+    auto truth_pulls = [&](double ratio) {
+      one.runs[0].supply_V = ratio * ds->runs[r].supply_V;
+      auto p = Predict(one, OtherValve(), PredictOptions{}, {true});
+      return p.ok() && FindSwitchOnMarks(p->i_A[0], one.runs[0].gate, one.runs[0].sample_period_s,
+                                         4.0 * id->noise_floor_A).pulls_in;
+    };
+    bool outside = true;
+    const double truth = PullInEdgeLogSupply(truth_pulls, &outside);
+    ASSERT_FALSE(outside) << m.run << ": the valve's edge lies within half to twice its supply";
+    EXPECT_LT(truth, 0.0) << m.run << " pulls in";
+    ASSERT_TRUE(std::isfinite(m.edge_log_supply)) << m.run;
+    EXPECT_FALSE(m.edge_outside) << m.run;
+    EXPECT_NEAR(m.edge_log_supply, truth, 0.02) << m.run;
+  }
+  EXPECT_NE(MovingIdentificationJson(*id).find("\"pull_in_edge\""), std::string::npos);
   Cleanup(dir);
+}
+
+// The edge along the supply: where the outcome changes, to 0.3 % of the supply, and said to lie beyond the range
+// when it does not change between half and twice the supply.
+TEST(PullInEdge, FoundWhereTheOutcomeChangesAndSaidBeyondTheRangeOtherwise) {
+  bool outside = true;
+  EXPECT_NEAR(PullInEdgeLogSupply([](double r) { return r >= 1.3; }, &outside), std::log(1.3), 0.003);
+  EXPECT_FALSE(outside);
+  EXPECT_NEAR(PullInEdgeLogSupply([](double r) { return r >= 0.8; }, &outside), std::log(0.8), 0.003);
+  EXPECT_FALSE(outside);
+  EXPECT_DOUBLE_EQ(PullInEdgeLogSupply([](double) { return true; }, &outside), -std::log(2.0));
+  EXPECT_TRUE(outside);
+  EXPECT_DOUBLE_EQ(PullInEdgeLogSupply([](double r) { return r > 2.5; }, &outside), std::log(2.0));
+  EXPECT_TRUE(outside);
 }
 
 
