@@ -534,13 +534,22 @@ void PullInEdges(const Dataset& ds, const model::PlantParams& plant, const std::
     RunMarks& rm = id->landmarks[r];
     rm.edge_log_supply = failed ? NAN : e;
     rm.edge_outside = !failed && outside;
+    rm.near_pull_in_edge = !failed && !outside && std::abs(e) < kPullInEdgeBiasLogSupply;
+    if (!rm.near_pull_in_edge) continue;
+    const double bias_pct = 100.0 * (std::exp(kPullInEdgeBiasLogSupply) - 1.0);
+    id->notes.push_back("holdout run " + rm.run + ": the identified valve " +
+                        (e < 0.0 ? "pulls in down to " : "would pull in from ") + Fmt(supply_V * std::exp(e)) +
+                        " V, " + Fmt(100.0 * std::abs(std::exp(e) - 1.0)) + " % from the run's supply, inside the "
+                        "bias an identification carries at a pull-in edge (" + Fmt(bias_pct) + " %): whether and "
+                        "when it pulls in is undetermined; a fit run at this supply and pressure would decide it");
   }
 }
 
 // The prediction's verdict: trusted only when the fit runs are reproduced to within 3x the noise floor (the
-// multiple the identification's own goal uses: below it the residual is the chain's noise, not a missing form)
-// and every holdout run has a band that agrees on pull-in and spreads less than that. Measured (perf_identify,
-// practice4 and the independent population): it withheld trust from all 25 misses and from all 5 passes.
+// multiple the identification's own goal uses: below it the residual is the chain's noise, not a missing form),
+// every holdout run has a band that agrees on pull-in and spreads less than that, and no holdout run lies nearer
+// its identified pull-in edge than the bias an identification carries there (kPullInEdgeBiasLogSupply). Measured
+// (perf_identify, docs/real-data.md "Seventh round" and "Eighth round").
 std::string PredictionVerdict(const MovingIdentification& id, bool have_covariance) {
   const double floor3 = 3.0 * id.noise_floor_A;
   std::string why;
@@ -559,6 +568,10 @@ std::string PredictionVerdict(const MovingIdentification& id, bool have_covarian
     else if (m.band_spread_A > floor3)
       why = "holdout run " + m.run + ": predicted to +-" + Fmt(m.band_spread_A * 1e3) +
             " mA RMS, over 3x the noise floor";
+    else if (m.near_pull_in_edge)
+      why = "holdout run " + m.run + ": " + Fmt(100.0 * std::abs(std::exp(m.edge_log_supply) - 1.0)) +
+            " % of its supply from the identified valve's pull-in edge, inside the bias an identification carries "
+            "there: whether and when it pulls in is undetermined";
   }
   return why;
 }
@@ -1588,6 +1601,13 @@ std::string MovingIdentificationReport(const MovingIdentification& id) {
                       : "",
                   r.pull_in_undetermined ? ": pull-in UNDETERMINED at these conditions" : "");
     os << buf;
+    if (std::isfinite(r.edge_log_supply)) {
+      std::snprintf(buf, sizeof buf, "  %-16s pull-in edge %s %.1f V (%+.1f %% of its supply)%s\n", r.run.c_str(),
+                    r.edge_outside ? (r.edge_log_supply < 0.0 ? "below" : "above") : "at",
+                    r.supply_V * std::exp(r.edge_log_supply), 100.0 * (std::exp(r.edge_log_supply) - 1.0),
+                    r.near_pull_in_edge ? ": inside the identification's bias, UNDETERMINED" : "");
+      os << buf;
+    }
   }
   return os.str();
 }
