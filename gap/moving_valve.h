@@ -41,7 +41,7 @@ SwitchOnMarks FindSwitchOnMarks(const std::vector<double>& i_A, const std::vecto
 
 // The pull-in edge of a switch-on run along its supply: log(V_edge / V_run), where `pulls_in(ratio)` says whether
 // the valve pulls in within the run's window at `ratio` x the run's supply (a pull that grows as i^2 makes it
-// monotone in the supply). Bisection on the log of the ratio in [1/2, 2], nine halvings (0.3 % in the supply).
+// monotone in the supply). Bisection on the log of the ratio in [1/2, 2], nine halvings (to 0.1 % of the supply).
 // When the outcome does not change within that range the result is +-log 2 and *outside is set.
 double PullInEdgeLogSupply(const std::function<bool(double ratio)>& pulls_in, bool* outside);
 
@@ -69,10 +69,11 @@ struct RunMarks {
   int band_failed_draws = 0;          // draws that were not a valve the family simulates
   // Two of the sixteen draws on the other side of the identified valve's outcome, or not simulating.
   bool pull_in_undetermined = false;
-  // Holdout runs: how far the run's supply is from the identified valve's pull-in edge, log(V_edge / V_run) at the
-  // run's pressure, where V_edge is the supply at which the identified valve starts to pull in within the run's
-  // window (PullInEdge): > 0 the run is below the edge (no pull-in), < 0 above it. NaN for fit runs or when the
-  // valve does not simulate; clipped to +-log 2 (edge_outside) when the edge is beyond half or twice the supply.
+  // Holdout runs: how far the run's supply is from the identified valve's pull-in edge, log(V_edge / V_run) at
+  // the run's pressure, where V_edge is the supply at which the identified valve starts to pull in within the
+  // run's window (PullInEdgeLogSupply): > 0 the run is below the edge (no pull-in), < 0 above it. NaN for fit
+  // runs or when the valve does not simulate; +-log 2 (edge_outside) when the edge is beyond half or twice the
+  // supply.
   double edge_log_supply = NAN;
   bool edge_outside = false;
   // |edge_log_supply| below the bias an identification carries at a pull-in edge (kPullInEdgeBiasLogSupply,

@@ -18,8 +18,8 @@
 // each is identified on 1, 2 and 4 bar and predicts 6 bar and 0.75x supply. Success as for the predict cases;
 // "strict" when fit and holdout are both within 3x the noise floor.
 //
-// Usage: perf_identify [--sets practice3,practice4 | --sets none] [--only SUBSTRING] [--evaluations N] [--verbose] [--edges]
-//                      [--population N] [--valves J,K,...] [--seed SEED] [--ablate flow,stribeck,ladder,eddy,core,scope]
+// Usage: perf_identify [--sets practice3,practice4 | --sets none] [--only SUBSTRING] [--evaluations N] [--verbose]
+//                      [--edges] [--population N] [--valves J,K,...] [--seed SEED] [--ablate flow,stribeck,ladder,eddy,core,scope]
 // --valves J,K,...: only these draws of the population (indep_J; each draw has its own seed, so a subset is the
 // same valves as in the whole run).
 // --edges: for each holdout run of a draw, one line "edge" with the identified valve's distance to its pull-in
@@ -283,7 +283,8 @@ int main(int argc, char** argv) {
         std::size_t on = 0;
         while (on < run.gate.size() && run.gate[on] == 0) ++on;
         auto truth_pulls = [&](double ratio) {
-          const auto i = vb::perf::SimulateSwitchOn(v, ratio * run.supply_V, run.supply_pressure_Pa, run.i_A.size(), on);
+          const auto i =
+              vb::perf::SimulateSwitchOn(v, ratio * run.supply_V, run.supply_pressure_Pa, run.i_A.size(), on);
           return vb::gap::FindSwitchOnMarks(i, run.gate, run.sample_period_s, 4.0 * id->noise_floor_A).pulls_in;
         };
         bool outside = false;

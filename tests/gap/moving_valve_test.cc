@@ -163,18 +163,24 @@ TEST(MovingValveSynthetic, GeneratorWritesWhatTheScopeRecords) {
   Cleanup(dir);
 }
 
+// OtherValve() at 24 V and 1, 2.5 and 4 bar and at 20 V and 3 bar (fit runs) and at `holdouts`, recorded through
+// practice3's scope chain (noise seed `seed`) into `dir` and loaded.
+StatusOr<Dataset> OtherValveSession(const fs::path& dir, const std::vector<SwitchOnRunPlan>& holdouts, unsigned seed) {
+  auto runs = Pressures(24.0, {1, 2.5, 4}, "fit");
+  runs.push_back({"on_20V_3bar", 20.0, 3e5, -1.0, "fit"});
+  runs.insert(runs.end(), holdouts.begin(), holdouts.end());
+  ScopeChain scope;
+  scope.seed = seed;
+  if (auto st = WriteSwitchOnSession(dir.string(), OtherValve(), runs, scope, "other"); !st.ok()) return st;
+  return LoadDataset(dir.string(), model::PresetNames());
+}
+
 TEST(MovingValveSynthetic, OtherValveIdentifiedAndPredictedAtAnotherPressureAndSupply) {
   const fs::path dir = TempDir("id");
   // Fit runs at two supplies: at one supply the lift force and the mass trade off (a later lift, a faster
   // flight), and the report says the mass is not determined.
-  auto runs = Pressures(24.0, {1, 2.5, 4}, "fit");
-  runs.push_back({"on_20V_3bar", 20.0, 3e5, -1.0, "fit"});
-  runs.push_back({"on_hold_7bar", 24.0, 7e5, -1.0, "holdout"});
-  runs.push_back({"on_hold_18V", 18.0, 2e5, -1.0, "holdout"});
-  ScopeChain scope;
-  scope.seed = 5;
-  ASSERT_TRUE(WriteSwitchOnSession(dir.string(), OtherValve(), runs, scope, "other").ok());
-  auto ds = LoadDataset(dir.string(), model::PresetNames());
+  auto ds = OtherValveSession(
+      dir, {{"on_hold_7bar", 24.0, 7e5, -1.0, "holdout"}, {"on_hold_18V", 18.0, 2e5, -1.0, "holdout"}}, 5);
   ASSERT_TRUE(ds.ok()) << ds.status().message();
   auto id = IdentifyMovingValve(*ds, Family());
   ASSERT_TRUE(id.ok()) << id.status().message();
@@ -239,14 +245,8 @@ TEST(MovingValveSynthetic, OtherValveIdentifiedAndPredictedAtAnotherPressureAndS
 // prediction is a property of what the fit runs determine, and trusted.
 TEST(MovingValveSynthetic, APredictionFarFromItsPullInEdgeIsTrusted) {
   const fs::path dir = TempDir("far");
-  auto runs = Pressures(24.0, {1, 2.5, 4}, "fit");
-  runs.push_back({"on_20V_3bar", 20.0, 3e5, -1.0, "fit"});
-  runs.push_back({"on_hold_2bar", 24.0, 2e5, -1.0, "holdout"});
-  runs.push_back({"on_hold_22V", 22.0, 1.5e5, -1.0, "holdout"});
-  ScopeChain scope;
-  scope.seed = 6;
-  ASSERT_TRUE(WriteSwitchOnSession(dir.string(), OtherValve(), runs, scope, "other").ok());
-  auto ds = LoadDataset(dir.string(), model::PresetNames());
+  auto ds = OtherValveSession(
+      dir, {{"on_hold_2bar", 24.0, 2e5, -1.0, "holdout"}, {"on_hold_22V", 22.0, 1.5e5, -1.0, "holdout"}}, 6);
   ASSERT_TRUE(ds.ok()) << ds.status().message();
   auto id = IdentifyMovingValve(*ds, Family());
   ASSERT_TRUE(id.ok()) << id.status().message();
