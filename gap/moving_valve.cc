@@ -534,7 +534,15 @@ void PullInEdges(const Dataset& ds, const model::PlantParams& plant, const std::
     RunMarks& rm = id->landmarks[r];
     rm.edge_log_supply = failed ? NAN : e;
     rm.edge_outside = !failed && outside;
-    rm.near_pull_in_edge = !failed && !outside && std::abs(e) < kPullInEdgeBiasLogSupply;
+    // An edge that could not be found (the identified valve does not simulate at another supply) is not a
+    // distance the prediction can be trusted at: it counts as near, and the note says why.
+    rm.near_pull_in_edge = failed || (!outside && std::abs(e) < kPullInEdgeBiasLogSupply);
+    if (failed) {
+      id->notes.push_back("holdout run " + rm.run + ": its pull-in edge was not found (the identified valve does "
+                          "not simulate between half and twice the run's supply): whether and when it pulls in is "
+                          "undetermined");
+      continue;
+    }
     if (!rm.near_pull_in_edge) continue;
     const double bias_pct = 100.0 * (std::exp(kPullInEdgeBiasLogSupply) - 1.0);
     id->notes.push_back("holdout run " + rm.run + ": the identified valve " +
@@ -568,6 +576,9 @@ std::string PredictionVerdict(const MovingIdentification& id, bool have_covarian
     else if (m.band_spread_A > floor3)
       why = "holdout run " + m.run + ": predicted to +-" + Fmt(m.band_spread_A * 1e3) +
             " mA RMS, over 3x the noise floor";
+    else if (m.near_pull_in_edge && !std::isfinite(m.edge_log_supply))
+      why = "holdout run " + m.run + ": its pull-in edge was not found (the identified valve does not simulate at "
+            "another supply)";
     else if (m.near_pull_in_edge)
       why = "holdout run " + m.run + ": " + Fmt(100.0 * std::abs(std::exp(m.edge_log_supply) - 1.0)) +
             " % of its supply from the identified valve's pull-in edge, inside the bias an identification carries "

@@ -50,9 +50,10 @@ double PullInEdgeLogSupply(const std::function<bool(double ratio)>& pulls_in, bo
 // runs of the 64 draws of the independent plant (perf/independent_valve.h: forms the family lacks) whose fit
 // runs were reproduced within 3x the noise floor, the only ones whose prediction could otherwise be trusted;
 // 200 draws, seeds 35200-35399 fixed before the run (perf_identify --edges, docs/real-data.md "Eighth round").
-// The trade, measured there: of the runs nearer their identified edge than this, 19 of 108 were predicted on the
-// wrong side of it and 62 missed the limit; of the 20 beyond it none was on the wrong side, and 4 still missed
-// (the time of a pull-in the supply was extrapolated to). The data cannot tell a valve of the family (no bias)
+// The trade, measured there: of the runs nearer their identified edge than this, 19 of 108 had the wrong outcome
+// predicted (a pull-in where the measured run shows none, or the reverse) and 62 missed the limit; of the 20
+// beyond it none had the wrong outcome, and 4 still missed (the time of a pull-in the supply was extrapolated
+// to). perf_identify --edges prints these counts and the percentiles. The data cannot tell a valve of the family (no bias)
 // from one outside it whose fit is as good, so the bias of the second applies to both.
 inline constexpr double kPullInEdgeBiasLogSupply = 0.28;
 
@@ -77,8 +78,8 @@ struct RunMarks {
   double edge_log_supply = NAN;
   bool edge_outside = false;
   // |edge_log_supply| below the bias an identification carries at a pull-in edge (kPullInEdgeBiasLogSupply,
-  // measured on draws of an independent plant): whether and when the run pulls in is not a property of what the
-  // fit runs determine.
+  // measured on draws of an independent plant), or no edge found (edge_log_supply NaN on a holdout run): whether
+  // and when the run pulls in is not a property of what the fit runs determine.
   bool near_pull_in_edge = false;
 };
 
