@@ -221,6 +221,14 @@ int main(int argc, char** argv) {
     }
   }
   Tally pop, strict;
+  // --edges: each holdout run of a draw whose fit runs are within 3x the noise floor (the only predictions the
+  // verdict could otherwise trust), for the edge's bias and the rule's trade printed at the end.
+  struct EdgeRun {
+    double bias;             // |identified - true| edge, log supply
+    double e_id;             // the identified edge's distance (+-log 2 when beyond the range)
+    bool wrong_outcome, miss;
+  };
+  std::vector<EdgeRun> edge_runs;
   for (int j = 0; j < population; ++j) {
     if (!valves.empty() && !valves.count(j)) continue;
     std::mt19937 rng(seed * 1000u + static_cast<unsigned>(j));
@@ -289,6 +297,12 @@ int main(int argc, char** argv) {
         };
         bool outside = false;
         const double e_true = vb::gap::PullInEdgeLogSupply(truth_pulls, &outside);
+        const double limit = std::max(5e-3, 3.0 * id->noise_floor_A);
+        // Both beyond the range on one side: the bias is not known, and neither run is near an edge.
+        const bool both_beyond = outside && m.edge_outside && e_true * m.edge_log_supply > 0.0;
+        if (id->fit_rmse_A <= 3.0 * id->noise_floor_A && std::isfinite(m.edge_log_supply) && !both_beyond)
+          edge_runs.push_back({std::abs(m.edge_log_supply - e_true), m.edge_log_supply,
+                               m.measured.pulls_in != m.predicted.pulls_in, m.rmse_A > limit});
         std::printf("    edge %s %s run %-12s id %+.4f%s true %+.4f%s fit/noise %.2f trusted %s rmse %.2f limit %.2f "
                     "measured %s predicted %s\n",
                     name, ablate.empty() ? "full" : "ablated", m.run.c_str(), m.edge_log_supply,
@@ -350,6 +364,45 @@ int main(int argc, char** argv) {
     std::printf("band     holdout runs within 3x hypot(noise, band spread): %d of %d (%.0f-%.0f %%); measured pull-in "
                 "among the draws' outcomes: %d of %d\n",
                 band.covered, band.runs, 100.0 * clo, 100.0 * chi, band.outcome_seen, band.runs);
+  }
+  if (edges && !edge_runs.empty()) {
+    // The bias's percentiles, each with a 95 % interval from the order statistics (the ranks a binomial(n, q)
+    // count of samples below the percentile reaches with 2.5 % and 97.5 %).
+    std::vector<double> b;
+    for (const auto& r : edge_runs) b.push_back(r.bias);
+    std::sort(b.begin(), b.end());
+    const int n = static_cast<int>(b.size());
+    auto rank = [&](double q, double p) {  // smallest k with P(Binomial(n, q) <= k) >= p
+      double acc = 0.0;
+      for (int k = 0; k <= n; ++k) {
+        acc += std::exp(std::lgamma(n + 1.0) - std::lgamma(k + 1.0) - std::lgamma(n - k + 1.0) + k * std::log(q) +
+                        (n - k) * std::log1p(-q));
+        if (acc >= p) return k;
+      }
+      return n;
+    };
+    std::printf("edges    bias |log(V_edge,identified / V_edge,true)| over %d holdout runs of valves fitted within "
+                "3x the noise:\n", n);
+    for (double q : {0.5, 0.9, 0.95}) {
+      const int k = std::clamp(static_cast<int>(std::ceil(q * n)) - 1, 0, n - 1);
+      const int lo = std::clamp(rank(q, 0.025) - 1, 0, n - 1), hi = std::clamp(rank(q, 0.975), 0, n - 1);
+      std::printf("edges      %2.0fth percentile %.3f (95 %% interval %.3f-%.3f)\n", 100.0 * q, b[k], b[lo], b[hi]);
+    }
+    const double c = vb::gap::kPullInEdgeBiasLogSupply;
+    std::printf("edges    the rule's trade (kPullInEdgeBiasLogSupply %.2f): runs by the identified edge's distance\n", c);
+    const std::pair<double, double> bins[] = {{0.0, 0.1}, {0.1, c}, {c, INFINITY}};
+    for (const auto& [lo, hi] : bins) {
+      int runs = 0, wrong = 0, miss = 0;
+      for (const auto& r : edge_runs)
+        if (std::abs(r.e_id) >= lo && std::abs(r.e_id) < hi) {
+          ++runs;
+          wrong += r.wrong_outcome;
+          miss += r.miss;
+        }
+      const auto [mlo, mhi] = Wilson(miss, runs);
+      std::printf("edges      [%.2f, %.2f): %3d runs, wrong outcome %3d, over the limit %3d (%.0f-%.0f %%)\n", lo, hi,
+                  runs, wrong, miss, 100.0 * mlo, 100.0 * mhi);
+    }
   }
   std::printf("load average at the end: %s\n", LoadAverage().c_str());
   return 0;
