@@ -403,6 +403,18 @@ StatusOr<Tracking> TrackValues(const std::vector<SessionValues>& sessions, const
   return t;
 }
 
+std::optional<MovingIdentification> BetterAnchor(
+    const MovingIdentification& anchor, const MovingIdentification& other, double min_ratio_gain,
+    const std::function<StatusOr<MovingIdentification>(const MovingIdentification* start)>& refit_anchor) {
+  const auto ratio = [](const MovingIdentification& id) {
+    return id.noise_floor_A > 0.0 ? id.fit_rmse_A / id.noise_floor_A : HUGE_VAL;
+  };
+  if (!(ratio(other) * min_ratio_gain < ratio(anchor))) return std::nullopt;
+  auto refit = refit_anchor(&other);
+  if (!refit.ok() || !(refit->fit_rmse_A < 0.9 * anchor.fit_rmse_A)) return std::nullopt;
+  return std::move(*refit);
+}
+
 std::vector<StatusOr<MovingIdentification>> IdentifyAnchored(const std::vector<std::string>& names,
                                                              const SessionIdentifier& identify,
                                                              const std::function<void(const std::string&)>& progress) {
@@ -443,8 +455,9 @@ std::vector<StatusOr<MovingIdentification>> IdentifyAnchored(const std::vector<s
     for (std::size_t i = first; i < ids.size(); ++i)
       if (ratio(ids[i]) < ratio(ids[best])) best = i;
     if (best == first) break;
-    auto refit = identify(first, &*ids[best]);
-    if (!refit.ok() || !(refit->fit_rmse_A < 0.9 * ids[first]->fit_rmse_A)) break;
+    auto refit = BetterAnchor(*ids[first], *ids[best], 1.0,
+                              [&](const MovingIdentification* start) { return identify(first, start); });
+    if (!refit) break;
     if (progress)
       progress("anchor: " + names[first] + " refitted from " + names[best] + "'s end, " +
                Num(1e3 * ids[first]->fit_rmse_A) + " -> " + Num(1e3 * refit->fit_rmse_A) +

@@ -18,6 +18,7 @@
 
 #include <functional>
 #include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -163,6 +164,16 @@ using SessionIdentifier =
 std::vector<StatusOr<MovingIdentification>> IdentifyAnchored(const std::vector<std::string>& names,
                                                              const SessionIdentifier& identify,
                                                              const std::function<void(const std::string&)>& progress);
+
+// The anchor's basin checked against another session's end (IdentifyAnchored's check, and the server's each
+// night): when `other` fits its own runs better relative to its noise floor than the anchor fits its own, by a
+// factor of at least `min_ratio_gain`, the anchor's session is fitted again from other's end
+// (`refit_anchor(&other)`), and the refit is returned when it lowers the anchor's fit by more than 10 % (a fifth of
+// its squared error: far beyond what a re-fit in the same basin gains, which stops at 0.5 % a pass). nullopt
+// otherwise: the anchor's basin stands.
+std::optional<MovingIdentification> BetterAnchor(
+    const MovingIdentification& anchor, const MovingIdentification& other, double min_ratio_gain,
+    const std::function<StatusOr<MovingIdentification>(const MovingIdentification* start)>& refit_anchor);
 
 // Identifies every session (IdentifyAnchored with IdentifyForTracking) into the values TrackValues takes.
 StatusOr<std::vector<SessionValues>> IdentifySessions(const std::vector<TrackSession>& sessions,

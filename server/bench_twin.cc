@@ -41,38 +41,104 @@ StatusOr<gap::Dataset> BenchTwins::LoadCheck(std::int64_t batch_id, model::Plant
 }
 
 gap::SessionValues BenchTwins::Identify(const std::string& bench, const std::string& date, std::int64_t batch_id,
-                                        const std::string& first_date, std::int64_t first_batch_id) {
+                                        const std::string& first_date, std::int64_t first_batch_id,
+                                        const StoredAnchor* stored_anchor) {
   Twin& twin = twins_[bench];
   twin.tonight.reset();
+  twin.anchor_moved_tonight = false;
   twin.flags.clear();  // tonight's tracking sets them again (SetFlags)
   gap::TrackOptions options;
   model::PlantParams family;
   auto ds = LoadCheck(batch_id, &family);
   if (!ds.ok()) return gap::ValuesOfSession(date, gap::Dataset{}, StatusOr<gap::MovingIdentification>(ds.status()));
   if (!twin.anchor && first_batch_id != 0 && first_batch_id != batch_id) {
-    // The anchor is the bench's first check (docs/track.md, step 1), identified again after a restart.
+    // The anchor is the bench's first check (docs/track.md, step 1), identified again after a restart: from
+    // scratch, or from where the anchor had moved (its stored values as a warm start, in that basin).
     model::PlantParams first_family;
     auto first = LoadCheck(first_batch_id, &first_family);
     if (first.ok()) {
-      auto id = gap::IdentifyForTracking(*first, first_family, nullptr, options);
+      gap::MovingIdentification moved;
+      if (stored_anchor != nullptr) {
+        moved.fitted = stored_anchor->fitted;
+        moved.effects = stored_anchor->effects;
+      }
+      auto id = gap::IdentifyForTracking(*first, first_family, stored_anchor ? &moved : nullptr, options);
       if (id.ok()) {
         twin.anchor = std::move(*id);
         twin.anchor_date = first_date;
+        twin.anchor_batch = first_batch_id;
+        twin.anchor_moves = stored_anchor ? stored_anchor->moves : 0;
       } else spdlog::warn("bench {}: its first health check (batch {}) not identified: {}", bench, first_batch_id,
                         id.status().message());
     }
   }
   auto id = gap::IdentifyForTracking(*ds, family, twin.anchor ? &*twin.anchor : nullptr, options);
+  if (id.ok() && twin.anchor && twin.anchor_batch != 0 && twin.anchor_batch != batch_id &&
+      twin.anchor_moves < kMaxAnchorMoves) {
+    const double before_A = twin.anchor->fit_rmse_A;
+    auto better = gap::BetterAnchor(
+        *twin.anchor, *id, kAnchorRatioGain,
+        [&](const gap::MovingIdentification* start) -> StatusOr<gap::MovingIdentification> {
+          model::PlantParams first_family;
+          auto first = LoadCheck(twin.anchor_batch, &first_family);
+          if (!first.ok()) return first.status();
+          return gap::IdentifyForTracking(*first, first_family, start, options);
+        });
+    if (better) {
+      spdlog::info("bench {}: night {}: the anchor ({}) refitted from tonight's end, {:.3f} -> {:.3f} mA: tonight "
+                   "and every earlier night identified again from there",
+                   bench, date, twin.anchor_date, 1e3 * before_A, 1e3 * better->fit_rmse_A);
+      twin.anchor = std::move(*better);
+      ++twin.anchor_moves;
+      twin.anchor_moved_tonight = true;
+      twin.baseline.reset();  // identified from the old anchor
+      twin.baseline_batch = 0;
+      id = gap::IdentifyForTracking(*ds, family, &*twin.anchor, options);
+    }
+  }
   gap::SessionValues values = gap::ValuesOfSession(date, *ds, id);
   if (id.ok()) {
     if (!twin.anchor) {
       twin.anchor = *id;
       twin.anchor_date = date;
+      twin.anchor_batch = batch_id;
     }
     twin.tonight = std::move(*id);
     twin.tonight_date = date;
   }
   return values;
+}
+
+bool BenchTwins::AnchorMovedTonight(const std::string& bench) const {
+  const auto t = twins_.find(bench);
+  return t != twins_.end() && t->second.anchor_moved_tonight;
+}
+
+StoredAnchor BenchTwins::AnchorOf(const std::string& bench) const {
+  StoredAnchor a;
+  const auto t = twins_.find(bench);
+  if (t == twins_.end() || !t->second.anchor) return a;
+  a.anchor_night = t->second.anchor_date;
+  a.fitted = t->second.anchor->fitted;
+  a.effects = t->second.anchor->effects;
+  a.moves = t->second.anchor_moves;
+  return a;
+}
+
+std::vector<gap::SessionValues> BenchTwins::Reidentify(const std::string& bench, const std::string& date,
+                                                       const std::map<std::string, StoredCheck>& checks) const {
+  std::vector<gap::SessionValues> out;
+  const auto t = twins_.find(bench);
+  if (t == twins_.end() || !t->second.anchor) return out;
+  for (const auto& [night, check] : checks) {
+    if (night >= date || check.batch_id == 0) continue;
+    model::PlantParams family;
+    auto ds = LoadCheck(check.batch_id, &family);
+    auto id = ds.ok() ? gap::IdentifyForTracking(*ds, family, &*t->second.anchor, gap::TrackOptions{})
+                      : StatusOr<gap::MovingIdentification>(ds.status());
+    out.push_back(gap::ValuesOfSession(night, ds.ok() ? *ds : gap::Dataset{}, id));
+  }
+  return out;
 }
 
 void BenchTwins::UseBaselineNight(const std::string& bench, const std::string& night, std::int64_t batch_id) {

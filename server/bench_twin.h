@@ -17,6 +17,7 @@
 #include "experiment/spec.h"
 #include "gap/track.h"
 #include "regress/compare.h"
+#include "service/bench_health.h"
 #include "service/service.h"
 
 namespace vb::server {
@@ -39,8 +40,29 @@ class BenchTwins {
   // Tonight's health check of `bench` (the runs of its batch) identified; keeps the identification for Attribute.
   // The first night of a bench (or the first after a restart) identifies the bench's first stored check from
   // scratch as the anchor (`first_batch_id`: its batch; 0 = tonight is the first).
+  // `stored_anchor`: where the anchor had moved before a restart (the store's newest "anchor_refit"; nullptr: never):
+  // the first check is then identified warm-started from it, in that basin.
+  // Then the anchor's basin is checked against tonight's (gap::BetterAnchor, as `benchctl track` checks it): when
+  // tonight fits its runs at least kAnchorRatioGain better relative to its noise floor than the anchor fits its
+  // own, the anchor's check is fitted again from tonight's end; when that lowers its fit by more than 10 %, it is
+  // the anchor (at most kMaxAnchorMoves times a bench), tonight is identified again from it, and AnchorMovedTonight
+  // says so: the earlier nights must then be identified again (Reidentify), or their values and tonight's would
+  // come from two basins and differ by the basins' distance, not the valve's change.
   gap::SessionValues Identify(const std::string& bench, const std::string& date, std::int64_t batch_id,
-                              const std::string& first_date, std::int64_t first_batch_id);
+                              const std::string& first_date, std::int64_t first_batch_id,
+                              const StoredAnchor* stored_anchor = nullptr);
+  // A tenth: the refit must gain a tenth of the fit anyway (gap::BetterAnchor), and nights of one valve whose
+  // fits are within a tenth of each other relative to their noise are in one basin as far as the fit can tell;
+  // without the margin every other night (half of them fit better than the anchor by chance) would cost a refit.
+  static constexpr double kAnchorRatioGain = 1.1;
+  static constexpr int kMaxAnchorMoves = 2;  // as `benchctl track`'s two rounds
+
+  // Whether tonight's Identify moved the bench's anchor, and where to (a night's "anchor_refit" block).
+  bool AnchorMovedTonight(const std::string& bench) const;
+  StoredAnchor AnchorOf(const std::string& bench) const;
+  // The bench's earlier nights (`checks`: night -> its check, before `date`) identified again from its anchor.
+  std::vector<gap::SessionValues> Reidentify(const std::string& bench, const std::string& date,
+                                             const std::map<std::string, StoredCheck>& checks) const;
 
   // The valve the night's baseline was measured on, for Attribute: the bench's check of `night` (its batch),
   // identified as the tracking identified it (warm-started from the anchor) and kept while the baseline stays;
@@ -68,6 +90,9 @@ class BenchTwins {
   struct Twin {
     std::optional<gap::MovingIdentification> anchor, tonight, baseline;
     std::string anchor_date, tonight_date, baseline_date;
+    std::int64_t anchor_batch = 0;  // the anchor's check (its session is what a basin check refits)
+    int anchor_moves = 0;
+    bool anchor_moved_tonight = false;
     std::int64_t baseline_batch = 0;
     std::string baseline_note;  // why the anchor stands for the baseline's night
     std::vector<gap::TrackFlag> flags;  // tonight's tracking flags

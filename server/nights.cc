@@ -309,11 +309,24 @@ void NightScheduler::TwinNight(const std::string& date, const regress::RegressRe
     if (!h.contains("batch_id")) continue;
     const std::string bench = h["bench"].get<std::string>();
     const auto f = first.find(bench);
+    const auto moved = stored.anchor.find(bench);
+    const StoredAnchor* stored_anchor = moved == stored.anchor.end() ? nullptr : &moved->second;
     const gap::SessionValues tonight =
         f == first.end() ? twins_.Identify(bench, date, h["batch_id"].get<std::int64_t>(), "", 0)
                          : twins_.Identify(bench, date, h["batch_id"].get<std::int64_t>(), f->second.first,
-                                           f->second.second);
+                                           f->second.second, stored_anchor);
     h["values"] = regress::Json::parse(gap::SessionValuesJson(tonight));
+    if (twins_.AnchorMovedTonight(bench)) {
+      // The anchor moved to a better basin tonight: every earlier night identified again from it, kept in this
+      // night's record (the store's older records stay as they were; LoadStoredHealth reads these in their place).
+      regress::Json again = regress::Json::array();
+      for (auto& v : twins_.Reidentify(bench, date, stored.checks[bench])) {
+        again.push_back(regress::Json::parse(gap::SessionValuesJson(v)));
+        if (v.error.empty()) history[bench][v.name] = std::move(v);
+      }
+      h["reidentified"] = std::move(again);
+      h["anchor_refit"] = StoredAnchorJson(twins_.AnchorOf(bench));
+    }
     if (!tonight.error.empty()) spdlog::warn("night {}: health check of {} not identified: {}", date, bench, tonight.error);
     std::vector<gap::SessionValues> past;
     for (const auto& [d, v] : history[bench]) past.push_back(v);

@@ -11,8 +11,38 @@ namespace vb::server {
 
 namespace v1 = valvebench::v1;
 
+regress::Json StoredAnchorJson(const StoredAnchor& a) {
+  regress::Json f = regress::Json::object();
+  for (const auto& [k, v] : a.fitted) f[k] = v;
+  return {{"anchor_night", a.anchor_night}, {"fitted", f}, {"effects", a.effects}, {"moves", a.moves}};
+}
+
+StatusOr<StoredAnchor> StoredAnchorFromJson(const regress::Json& j) {
+  StoredAnchor a;
+  if (!j.is_object()) return Status::InvalidArgument("anchor_refit: not an object");
+  if (!j.contains("anchor_night") || !j["anchor_night"].is_string())
+    return Status::InvalidArgument("anchor_refit.anchor_night: not a string");
+  a.anchor_night = j["anchor_night"].get<std::string>();
+  if (!j.contains("fitted") || !j["fitted"].is_object()) return Status::InvalidArgument("anchor_refit.fitted: not an object");
+  for (const auto& [k, v] : j["fitted"].items()) {
+    if (!v.is_number()) return Status::InvalidArgument("anchor_refit.fitted." + k + ": not a number");
+    a.fitted[k] = v.get<double>();
+  }
+  if (j.contains("effects")) {
+    if (!j["effects"].is_array()) return Status::InvalidArgument("anchor_refit.effects: not an array");
+    for (const auto& e : j["effects"]) {
+      if (!e.is_string()) return Status::InvalidArgument("anchor_refit.effects: not a string");
+      a.effects.push_back(e.get<std::string>());
+    }
+  }
+  if (j.contains("moves") && j["moves"].is_number_integer()) a.moves = j["moves"].get<int>();
+  return a;
+}
+
 StatusOr<StoredHealth> LoadStoredHealth(db::Store* store, const std::string& before_date) {
   StoredHealth out;
+  // bench -> (the night the anchor moved, the earlier nights' values identified again then)
+  std::map<std::string, std::pair<std::string, std::map<std::string, gap::SessionValues>>> again;
   auto nights = store->ListRegressions(/*nights_only=*/true, 1000);
   if (!nights.ok()) return nights.status();
   for (const auto& brief : *nights) {
@@ -32,11 +62,28 @@ StatusOr<StoredHealth> LoadStoredHealth(db::Store* store, const std::string& bef
       auto f = out.first_check.find(bench);
       if (f == out.first_check.end() || brief.night < f->second.first)
         out.first_check[bench] = {brief.night, h["batch_id"].get<std::int64_t>()};
+      if (h.contains("anchor_refit") && h.contains("reidentified") && h["reidentified"].is_array()) {
+        auto a = StoredAnchorFromJson(h["anchor_refit"]);
+        auto& [night, values] = again[bench];
+        if (a.ok() && brief.night > night) {
+          a->night = brief.night;
+          out.anchor[bench] = std::move(*a);
+          night = brief.night;
+          values.clear();
+          for (const auto& e : h["reidentified"]) {
+            auto v = gap::SessionValuesFromJson(e.dump());
+            if (v.ok() && v->name < brief.night && v->error.empty()) values[v->name] = std::move(*v);
+          }
+        }
+      }
       if (!h.contains("values")) continue;
       auto v = gap::SessionValuesFromJson(h["values"].dump());
       if (v.ok()) out.values[bench][brief.night] = std::move(*v);
     }
   }
+  for (auto& [bench, moved] : again)
+    for (auto& [night, v] : moved.second)
+      if (out.checks[bench].count(night)) out.values[bench][night] = std::move(v);
   return out;
 }
 

@@ -8,10 +8,12 @@
 #include <optional>
 #include <string>
 #include <utility>
+#include <vector>
 
 #include "common/status.h"
 #include "db/store.h"
 #include "gap/track.h"
+#include "regress/compare.h"
 #include "valvebench/v1/api.pb.h"
 
 namespace vb::server {
@@ -22,11 +24,28 @@ struct StoredCheck {
   std::int64_t batch_id = 0;
 };
 
+// Where a bench's anchor moved to (the server's basin check, server/bench_twin.h): the anchor's internal values and
+// effects as a warm start reads them (gap::MovingIdentification::fitted, effects), stored in the night it moved.
+struct StoredAnchor {
+  std::string night;  // the night it moved
+  std::string anchor_night;
+  std::map<std::string, double> fitted;
+  std::vector<std::string> effects;
+  int moves = 0;  // how often it has moved
+};
+
 struct StoredHealth {
-  std::map<std::string, std::map<std::string, gap::SessionValues>> values;  // bench -> night -> values
+  // bench -> night -> values; a night whose record holds "reidentified" (the anchor moved that night) gives the
+  // values of every earlier night as identified again from the moved anchor: the newest such night's stand.
+  std::map<std::string, std::map<std::string, gap::SessionValues>> values;
   std::map<std::string, std::pair<std::string, std::int64_t>> first_check;  // bench -> (night, batch)
   std::map<std::string, std::map<std::string, StoredCheck>> checks;        // bench -> night -> its check
+  std::map<std::string, StoredAnchor> anchor;                              // bench -> its newest moved anchor
 };
+
+// A night's "anchor_refit" block (StoredAnchor without its night) and back; errors name the field.
+regress::Json StoredAnchorJson(const StoredAnchor& a);
+StatusOr<StoredAnchor> StoredAnchorFromJson(const regress::Json& j);
 
 // The night whose valve a baseline was measured on, among one bench's stored checks (night -> check): the last
 // night that started before the baseline was made. A baseline summarises runs that had ended when it was saved,

@@ -310,6 +310,47 @@ TEST(TrackSessions, TheAnchorMovesToABetterBasinAndEverySessionFollows) {
   }
 }
 
+// The server's basin check each night (server/bench_twin.h): tonight's end is tried on the anchor's session only
+// when tonight fits its own runs better relative to its noise by the margin asked, and the refit replaces the
+// anchor only when it lowers the anchor's fit by more than 10 %.
+TEST(TrackSessions, BetterAnchorRefitsOnlyWhenAnotherNightFitsBetterAndTheRefitGainsATenth) {
+  auto fit = [](double fit_A, double noise_A) {
+    MovingIdentification id;
+    id.fit_rmse_A = fit_A;
+    id.noise_floor_A = noise_A;
+    return id;
+  };
+  const MovingIdentification anchor = fit(10e-3, 1e-3);  // 10x its noise
+  int refits = 0;
+  auto refit_to = [&](double fit_A) {
+    return [&refits, fit_A](const MovingIdentification* start) -> StatusOr<MovingIdentification> {
+      ++refits;
+      MovingIdentification r;
+      r.fit_rmse_A = fit_A;
+      r.noise_floor_A = 1e-3;
+      r.device = start != nullptr ? "from tonight" : "scratch";
+      return r;
+    };
+  };
+  // Tonight at 5x its noise: tried, and a refit to 6 mA (40 % better) is the new anchor, from tonight's end.
+  auto moved = BetterAnchor(anchor, fit(10e-3, 2e-3), 1.1, refit_to(6e-3));
+  ASSERT_TRUE(moved.has_value());
+  EXPECT_EQ(moved->fit_rmse_A, 6e-3);
+  EXPECT_EQ(moved->device, "from tonight");
+  EXPECT_EQ(refits, 1);
+  // A refit that gains under a tenth keeps the anchor.
+  EXPECT_FALSE(BetterAnchor(anchor, fit(10e-3, 2e-3), 1.1, refit_to(9.5e-3)).has_value());
+  EXPECT_EQ(refits, 2);
+  // Tonight within the margin (9.5x against 10x, a gain of 1.05 < 1.1), or worse: no refit tried at all.
+  EXPECT_FALSE(BetterAnchor(anchor, fit(9.5e-3, 1e-3), 1.1, refit_to(1e-3)).has_value());
+  EXPECT_FALSE(BetterAnchor(anchor, fit(20e-3, 1e-3), 1.1, refit_to(1e-3)).has_value());
+  EXPECT_EQ(refits, 2);
+  // A refit that fails keeps the anchor.
+  EXPECT_FALSE(BetterAnchor(anchor, fit(1e-3, 1e-3), 1.0, [](const MovingIdentification*) {
+                 return StatusOr<MovingIdentification>(Status::Internal("broke"));
+               }).has_value());
+}
+
 // Eight nights of one valve, each recorded at declared supplies and pressures a little off the nominal ones (as
 // a bench's are night to night), with the coil's resistance 4 % higher from night 6 (a corroded connector): R is
 // flagged within 3 nights (the reference is nights 1-5, a t with 4 degrees of freedom, and z enters clipped at 3

@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <filesystem>
 #include <fstream>
 #include <iterator>
 #include <sstream>
@@ -16,6 +17,7 @@
 
 #include "../common/run_command.h"
 #include "client/client.h"
+#include "db/sqlite_store.h"
 #include "model/params.h"
 #include "runs/bench_setup.h"
 #include "server/config.h"
@@ -170,6 +172,72 @@ TEST(HealthCheck, OneSwitchOnRunPerSupplyAndPressure) {
   auto none = server::SettingsFromConfig(c, "");
   ASSERT_TRUE(none.ok());
   EXPECT_TRUE(server::HealthCheckSpecs(none->benches[0], "2026-11-29", 1).empty());
+}
+
+// Where the anchor moved (a night's "anchor_refit" and "reidentified" blocks): the store's older records stay as
+// they were, and the history read back has the earlier nights' values identified again from the moved anchor,
+// from the newest night that moved it; the anchor itself comes back for a restart, and a block that is not an
+// anchor is refused naming the field.
+TEST(StoredHealth, TheNewestMovedAnchorsValuesStandForTheEarlierNights) {
+  const std::string dir = ::testing::TempDir() + "/vb-twin-anchor-" + std::to_string(::getpid());
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  auto store = db::OpenSqliteStore(dir + "/store.db");
+  ASSERT_TRUE(store.ok()) << store.status().message();
+  auto values = [](const std::string& night, double R) {
+    gap::SessionValues v;
+    v.name = night;
+    v.fit_rmse_A = 1e-3, v.noise_floor_A = 1e-3;
+    gap::DeterminedValue d;
+    d.name = "R", d.unit = "ohm", d.value = R, d.sigma = 0.1;
+    v.determined.push_back(d);
+    return nlohmann::json::parse(gap::SessionValuesJson(v));
+  };
+  server::StoredAnchor moved{"", "2026-11-01", {{"R", 61.0}, {"L0", 0.05}}, {"eddy_currents"}, 1};
+  auto night = [&](const std::string& date, std::int64_t batch, double R, const nlohmann::json& extra) {
+    nlohmann::json h = {{"bench", "emu"}, {"batch_id", batch}, {"values", values(date, R)}};
+    for (const auto& [k, v] : extra.items()) h[k] = v;
+    db::RegressionRecord rec;
+    rec.suite = "nightly", rec.night = date, rec.verdict = "passed", rec.created_unix_s = 1.0;
+    rec.result_json = nlohmann::json({{"health", nlohmann::json::array({h})}}).dump();
+    ASSERT_TRUE((*store)->SaveRegression(rec).ok());
+  };
+  night("2026-11-01", 11, 60.0, nlohmann::json::object());
+  night("2026-11-02", 12, 60.1, nlohmann::json::object());
+  // Night 3 moved the anchor: nights 1 and 2 again (night 2's identification failed this time: the old stays).
+  auto failed = values("2026-11-02", 0.0);
+  failed["error"] = "not identified";
+  night("2026-11-03", 13, 61.2,
+        {{"anchor_refit", server::StoredAnchorJson(moved)},
+         {"reidentified", nlohmann::json::array({values("2026-11-01", 61.0), failed})}});
+  night("2026-11-04", 14, 61.3, nlohmann::json::object());
+  auto h = server::LoadStoredHealth(store->get());
+  ASSERT_TRUE(h.ok()) << h.status().message();
+  const auto& emu = h->values.at("emu");
+  ASSERT_EQ(emu.size(), 4u);
+  EXPECT_EQ(emu.at("2026-11-01").determined.at(0).value, 61.0) << "identified again from the moved anchor";
+  EXPECT_EQ(emu.at("2026-11-02").determined.at(0).value, 60.1) << "a failed re-identification keeps the stored";
+  EXPECT_EQ(emu.at("2026-11-03").determined.at(0).value, 61.2);
+  ASSERT_TRUE(h->anchor.count("emu"));
+  EXPECT_EQ(h->anchor.at("emu").night, "2026-11-03");
+  EXPECT_EQ(h->anchor.at("emu").anchor_night, "2026-11-01");
+  EXPECT_EQ(h->anchor.at("emu").fitted.at("R"), 61.0);
+  EXPECT_EQ(h->anchor.at("emu").effects, std::vector<std::string>{"eddy_currents"});
+  EXPECT_EQ(h->anchor.at("emu").moves, 1);
+  EXPECT_EQ(h->first_check.at("emu").second, 11);
+  // Before night 3 (the server's view on night 3 itself), nothing had moved.
+  auto before = server::LoadStoredHealth(store->get(), "2026-11-03");
+  ASSERT_TRUE(before.ok());
+  EXPECT_EQ(before->values.at("emu").at("2026-11-01").determined.at(0).value, 60.0);
+  EXPECT_FALSE(before->anchor.count("emu"));
+
+  auto bad = server::StoredAnchorJson(moved);
+  bad["fitted"]["R"] = "sixty";
+  auto parsed = server::StoredAnchorFromJson(bad);
+  ASSERT_FALSE(parsed.ok());
+  EXPECT_NE(parsed.status().message().find("anchor_refit.fitted.R: not a number"), std::string::npos)
+      << parsed.status().message();
+  std::filesystem::remove_all(dir);
 }
 
 // The valve a baseline was measured on: the bench's last checked night that started before the baseline was
