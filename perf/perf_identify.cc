@@ -20,8 +20,12 @@
 //
 // Usage: perf_identify [--sets practice3,practice4 | --sets none] [--only SUBSTRING] [--evaluations N] [--verbose]
 //                      [--edges] [--population N] [--valves J,K,...] [--seed SEED] [--ablate flow,stribeck,ladder,eddy,core,scope]
+//                      [--design one-supply|two-supplies]
 // --valves J,K,...: only these draws of the population (indep_J; each draw has its own seed, so a subset is the
 // same valves as in the whole run).
+// --design two-supplies: each draw's session gets a fourth fit run, at 0.75x the supply and 1 bar (appended, so
+// the other runs' noise is the same as without it): whether a pulling-in run at a second supply pins what runs
+// at one supply leave open (the lift against the flight, docs/real-data.md "Ninth round"). Default one-supply.
 // --edges: for each holdout run of a draw, one line "edge" with the identified valve's distance to its pull-in
 // edge along the supply (RunMarks::edge_log_supply) and the same for the drawn valve itself (noise-free, the
 // same dip threshold), the fit's multiple of the noise floor and whether the prediction was trusted: the data
@@ -79,7 +83,7 @@ int main(int argc, char** argv) {
   // --ablate flow,stribeck,ladder,eddy,core,scope: the same draws with forms of the independent plant taken out,
   // to see which of them the identification's family misses (the draws are made first, so the valves are the same).
   std::string ablate;
-  bool verbose = false, edges = false;
+  bool verbose = false, edges = false, two_supplies = false;
   unsigned seed = 35;
   std::set<int> valves;  // --valves: empty = every draw
   for (int a = 1; a < argc; ++a) {
@@ -121,10 +125,17 @@ int main(int argc, char** argv) {
       }
     } else if (arg == "--seed" && a + 1 < argc) {
       seed = static_cast<unsigned>(std::atoi(argv[++a]));
+    } else if (arg == "--design" && a + 1 < argc) {
+      const std::string d = argv[++a];
+      if (d != "one-supply" && d != "two-supplies") {
+        std::fprintf(stderr, "--design: unknown design '%s' (one-supply, two-supplies)\n", d.c_str());
+        return 2;
+      }
+      two_supplies = d == "two-supplies";
     } else {
       std::fprintf(stderr, "usage: perf_identify [--sets practice3,practice4|none] [--only SUBSTRING] [--evaluations N] "
                            "[--population N] [--valves J,K,...] [--seed SEED] [--ablate flow,stribeck,ladder,eddy,core,scope] "
-                           "[--verbose] [--edges]\n");
+                           "[--design one-supply|two-supplies] [--verbose] [--edges]\n");
       return 2;
     }
   }
@@ -227,6 +238,7 @@ int main(int argc, char** argv) {
     double bias;             // |identified - true| edge, log supply
     double e_id;             // the identified edge's distance (+-log 2 when beyond the range)
     bool wrong_outcome, miss;
+    double applied;          // the bias the identification judged its edges with (its fit runs' design)
   };
   std::vector<EdgeRun> edge_runs;
   for (int j = 0; j < population; ++j) {
@@ -240,9 +252,10 @@ int main(int argc, char** argv) {
     if (has("eddy")) v.Re1_ohm = 1e12;
     if (has("core")) v.linear_core_mu_r = 3000.0;
     if (has("scope")) v.offset_A = v.spike_A = 0.0;
-    const vb::gap::Dataset ds = vb::perf::IndependentSession(
-        v, {{v.supply_V, 1}, {v.supply_V, 2}, {v.supply_V, 4}, {v.supply_V, 6, true}, {0.75 * v.supply_V, 4, true}}, rng,
-        "independent-" + std::to_string(j), true);
+    std::vector<vb::perf::SessionRun> runs = {
+        {v.supply_V, 1}, {v.supply_V, 2}, {v.supply_V, 4}, {v.supply_V, 6, true}, {0.75 * v.supply_V, 4, true}};
+    if (two_supplies) runs.push_back({0.75 * v.supply_V, 1});
+    const vb::gap::Dataset ds = vb::perf::IndependentSession(v, runs, rng, "independent-" + std::to_string(j), true);
     const auto t0 = Clock::now();
     const double c0 = CpuSeconds();
     vb::gap::MovingIdentifyOptions mo;
@@ -302,14 +315,15 @@ int main(int argc, char** argv) {
         const bool both_beyond = outside && m.edge_outside && e_true * m.edge_log_supply > 0.0;
         if (id->fit_rmse_A <= 3.0 * id->noise_floor_A && std::isfinite(m.edge_log_supply) && !both_beyond)
           edge_runs.push_back({std::abs(m.edge_log_supply - e_true), m.edge_log_supply,
-                               m.measured.pulls_in != m.predicted.pulls_in, m.rmse_A > limit});
+                               m.measured.pulls_in != m.predicted.pulls_in, m.rmse_A > limit,
+                               id->pull_in_edge_bias_log_supply});
         std::printf("    edge %s %s run %-12s id %+.4f%s true %+.4f%s fit/noise %.2f trusted %s rmse %.2f limit %.2f "
-                    "measured %s predicted %s\n",
+                    "measured %s predicted %s bias %.3f\n",
                     name, ablate.empty() ? "full" : "ablated", m.run.c_str(), m.edge_log_supply,
                     m.edge_outside ? "*" : "", e_true, outside ? "*" : "", id->fit_rmse_A / id->noise_floor_A,
                     id->prediction_undetermined.empty() ? "yes" : "no", m.rmse_A * 1e3,
                     std::max(5e-3, 3.0 * id->noise_floor_A) * 1e3, m.measured.pulls_in ? "pull" : "none",
-                    m.predicted.pulls_in ? "pull" : "none");
+                    m.predicted.pulls_in ? "pull" : "none", id->pull_in_edge_bias_log_supply);
       }
     }
     if (verbose && id.ok() && !id->prediction_undetermined.empty())
@@ -365,11 +379,17 @@ int main(int argc, char** argv) {
                 "among the draws' outcomes: %d of %d\n",
                 band.covered, band.runs, 100.0 * clo, 100.0 * chi, band.outcome_seen, band.runs);
   }
-  if (edges && !edge_runs.empty()) {
+  // One block per fit-run design the identifications judged their edges with (MovingIdentification::
+  // pull_in_edge_design: pulling-in fit runs at one supply or at two), each with the bias its rule applies: a
+  // rule is calibrated on the runs of its own design.
+  for (const double design_bias : {vb::gap::kPullInEdgeBiasLogSupply, vb::gap::kPullInEdgeBiasLogSupplyTwoSupplies}) {
+    if (!edges) break;
     // The bias's percentiles, each with a 95 % interval from the order statistics (the ranks a binomial(n, q)
     // count of samples below the percentile reaches with 2.5 % and 97.5 %).
     std::vector<double> b;
-    for (const auto& r : edge_runs) b.push_back(r.bias);
+    for (const auto& r : edge_runs)
+      if (r.applied == design_bias) b.push_back(r.bias);
+    if (b.empty()) continue;
     std::sort(b.begin(), b.end());
     const int n = static_cast<int>(b.size());
     auto rank = [&](double q, double p) {  // smallest k with P(Binomial(n, q) <= k) >= p
@@ -381,26 +401,28 @@ int main(int argc, char** argv) {
       }
       return n;
     };
-    std::printf("edges    bias |log(V_edge,identified / V_edge,true)| over %d holdout runs of valves fitted within "
-                "3x the noise:\n", n);
+    const bool two = design_bias == vb::gap::kPullInEdgeBiasLogSupplyTwoSupplies;
+    std::printf("edges    pulling-in fit runs at %s: bias |log(V_edge,identified / V_edge,true)| over %d holdout runs "
+                "of valves fitted within 3x the noise:\n", two ? "two supplies" : "one supply", n);
     for (double q : {0.5, 0.9, 0.95}) {
       const int k = std::clamp(static_cast<int>(std::ceil(q * n)) - 1, 0, n - 1);
       const int lo = std::clamp(rank(q, 0.025) - 1, 0, n - 1), hi = std::clamp(rank(q, 0.975), 0, n - 1);
       std::printf("edges      %2.0fth percentile %.3f (95 %% interval %.3f-%.3f)\n", 100.0 * q, b[k], b[lo], b[hi]);
     }
-    const double c = vb::gap::kPullInEdgeBiasLogSupply;
-    std::printf("edges    the rule's trade (kPullInEdgeBiasLogSupply %.2f): runs by the identified edge's distance\n", c);
-    const std::pair<double, double> bins[] = {{0.0, 0.1}, {0.1, c}, {c, INFINITY}};
+    const double c = design_bias;
+    std::printf("edges    the rule's trade (the bias applied, %.3f): runs by the identified edge's distance\n", c);
+    const std::pair<double, double> bins[] = {{0.0, std::min(0.1, c)}, {std::min(0.1, c), c}, {c, INFINITY}};
     for (const auto& [lo, hi] : bins) {
+      if (!(hi > lo)) continue;
       int runs = 0, wrong = 0, miss = 0;
       for (const auto& r : edge_runs)
-        if (std::abs(r.e_id) >= lo && std::abs(r.e_id) < hi) {
+        if (r.applied == design_bias && std::abs(r.e_id) >= lo && std::abs(r.e_id) < hi) {
           ++runs;
           wrong += r.wrong_outcome;
           miss += r.miss;
         }
       const auto [mlo, mhi] = Wilson(miss, runs);
-      std::printf("edges      [%.2f, %.2f): %3d runs, wrong outcome %3d, over the limit %3d (%.0f-%.0f %%)\n", lo, hi,
+      std::printf("edges      [%.3f, %.3f): %3d runs, wrong outcome %3d, over the limit %3d (%.0f-%.0f %%)\n", lo, hi,
                   runs, wrong, miss, 100.0 * mlo, 100.0 * mhi);
     }
   }
