@@ -536,7 +536,7 @@ void PullInEdges(const Dataset& ds, const model::PlantParams& plant, const std::
     rm.edge_outside = !failed && outside;
     // An edge that could not be found (the identified valve does not simulate at another supply) is not a
     // distance the prediction can be trusted at: it counts as near, and the note says why.
-    rm.near_pull_in_edge = failed || (!outside && std::abs(e) < kPullInEdgeBiasLogSupply);
+    rm.near_pull_in_edge = failed || (!outside && std::abs(e) < id->pull_in_edge_bias_log_supply);
     if (failed) {
       id->notes.push_back("holdout run " + rm.run + ": its pull-in edge was not found (the identified valve does "
                           "not simulate between half and twice the run's supply): whether and when it pulls in is "
@@ -544,12 +544,13 @@ void PullInEdges(const Dataset& ds, const model::PlantParams& plant, const std::
       continue;
     }
     if (!rm.near_pull_in_edge) continue;
-    const double bias_pct = 100.0 * (std::exp(kPullInEdgeBiasLogSupply) - 1.0);
+    const double bias_pct = 100.0 * (std::exp(id->pull_in_edge_bias_log_supply) - 1.0);
     id->notes.push_back("holdout run " + rm.run + ": the identified valve " +
                         (e < 0.0 ? "pulls in down to " : "would pull in from ") + Fmt(supply_V * std::exp(e)) +
                         " V, " + Fmt(100.0 * std::abs(std::exp(e) - 1.0)) + " % from the run's supply, inside the "
-                        "bias an identification carries at a pull-in edge (" + Fmt(bias_pct) + " %): whether and "
-                        "when it pulls in is undetermined; a fit run at this supply and pressure would decide it");
+                        "bias an identification carries at a pull-in edge with " + id->pull_in_edge_design + " (" +
+                        Fmt(bias_pct) + " %): whether and when it pulls in is undetermined; a fit run at this "
+                        "supply and pressure would decide it");
   }
 }
 
@@ -1454,9 +1455,29 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
   }
   // ---- the prediction band of the holdout runs, and the verdict on the prediction ----------------------------
   if (id.holdout_runs > 0) {
+    // The fit runs' design the pull-in edge's bias belongs to: pulling-in fit runs at supplies kSecondSupplyRatio
+    // or more apart, or not.
+    double vmin = INFINITY, vmax = 0.0;
+    for (std::size_t r = 0; r < ds.runs.size(); ++r)
+      if (fit[r] && marks[r].pulls_in) {
+        vmin = std::min(vmin, ds.runs[r].supply_V);
+        vmax = std::max(vmax, ds.runs[r].supply_V);
+      }
+    const bool two = vmin > 0.0 && vmax >= kSecondSupplyRatio * vmin;
+    id.pull_in_edge_bias_log_supply = two ? kPullInEdgeBiasLogSupplyTwoSupplies : kPullInEdgeBiasLogSupply;
+    id.pull_in_edge_design = two ? "pulling-in fit runs at " + Fmt(vmin) + " and " + Fmt(vmax) + " V"
+                                 : "pulling-in fit runs at one supply";
     if (draw_factor.size() > 0) PredictionBand(ds, family, v, draw_factor, draw_free, hold, threshold, options, &id);
     PullInEdges(ds, id.plant, hold, threshold, options.solver, &id);
     id.prediction_undetermined = PredictionVerdict(id, draw_factor.size() > 0);
+    // What would pin it: at one supply the dip's time trades the lift against the flight, and a holdout at less
+    // force extrapolates that trade. Measured on 20 draws of a valve inside the family (perf_identify --ablate all
+    // forms, docs/real-data.md "Ninth round"): 10 predicted within the limit with fit runs at one supply, 17 with
+    // a pulling-in fit run at 0.75x the supply added.
+    if (!id.prediction_undetermined.empty() && !two && vmax > 0.0)
+      id.notes.push_back("the pulling-in fit runs share one supply (" + Fmt(vmax) + " V): a pulling-in fit run at "
+                         "about 0.75x it (" + Fmt(0.75 * vmax) + " V) would separate the lift from the flight, which "
+                         "a prediction at another pressure or supply extrapolates");
   }
   id.evaluations = st.evaluations;
   id.seconds = Seconds(t0);
@@ -1524,6 +1545,7 @@ std::string MovingIdentificationJson(const MovingIdentification& id) {
   }
   j["landmarks"] = lm;
   if (id.holdout_runs > 0) {
+    j["pull_in_edge_bias"] = {{"log_supply", id.pull_in_edge_bias_log_supply}, {"design", id.pull_in_edge_design}};
     j["prediction"] = id.prediction_undetermined.empty() ? "determined" : "undetermined";
     if (!id.prediction_undetermined.empty()) j["prediction_reason"] = id.prediction_undetermined;
   }
@@ -1600,6 +1622,10 @@ std::string MovingIdentificationReport(const MovingIdentification& id) {
     os << Hanging("prediction of the holdout runs: ",
                   id.prediction_undetermined.empty() ? "determined by the fit runs"
                                                      : "UNDETERMINED (" + id.prediction_undetermined + ")");
+  if (id.holdout_runs > 0)
+    os << Hanging("pull-in edges judged with: ",
+                  "a bias of " + Fmt(100.0 * (std::exp(id.pull_in_edge_bias_log_supply) - 1.0)) + " % of the supply (" +
+                      id.pull_in_edge_design + ", measured on draws of an independent plant)");
   bool banded = false;
   for (const auto& r : id.landmarks) {
     if (r.band_draws == 0) continue;

@@ -56,6 +56,20 @@ double PullInEdgeLogSupply(const std::function<bool(double ratio)>& pulls_in, bo
 // to). perf_identify --edges prints these counts and the percentiles. The data cannot tell a valve of the family (no bias)
 // from one outside it whose fit is as good, so the bias of the second applies to both.
 inline constexpr double kPullInEdgeBiasLogSupply = 0.28;
+// That bias is for fit runs at one supply. With pulling-in fit runs at two supplies the edge is no longer an
+// extrapolation along the supply (the lift against the flight is separated), and its bias is calibrated on draws
+// of that design: fit runs at the supply (1, 2, 4 bar) and at 0.75x it (1 bar), holdouts as above; 200 draws,
+// seeds 35400-35599 fixed before the run (perf_identify --design two-supplies --edges, docs/real-data.md "Ninth
+// round"). Of the 47 valves fitted within 3x the noise, 30 pulled in at both supplies (the others are the
+// one-supply design). Over their 60 holdout runs: median 0.018, 90th percentile 0.032, 95th percentile 0.149
+// (95 % interval 0.028-0.219: four runs of two valves at 0.149-0.219, the rest at most 0.046).
+// The trade there: of the 28 runs nearer their identified edge than this, 6 had the wrong outcome predicted and
+// 11 missed the limit; of the 32 beyond it, none had the wrong outcome and 3 missed. It applies when the
+// pulling-in fit runs' supplies are at least kSecondSupplyRatio apart: the calibrated design's 4/3, less the few
+// percent by which a lab's supplies are set. A second supply nearer the first was not calibrated, and the
+// one-supply bias applies.
+inline constexpr double kPullInEdgeBiasLogSupplyTwoSupplies = 0.149;
+inline constexpr double kSecondSupplyRatio = 1.3;
 
 struct RunMarks {
   std::string run;
@@ -77,8 +91,9 @@ struct RunMarks {
   // supply.
   double edge_log_supply = NAN;
   bool edge_outside = false;
-  // |edge_log_supply| below the bias an identification carries at a pull-in edge (kPullInEdgeBiasLogSupply,
-  // measured on draws of an independent plant), or no edge found (edge_log_supply NaN on a holdout run): whether
+  // |edge_log_supply| below the bias an identification carries at a pull-in edge (kPullInEdgeBiasLogSupply or
+  // its two-supply value, MovingIdentification::pull_in_edge_bias_log_supply; measured on draws of an
+  // independent plant), or no edge found (edge_log_supply NaN on a holdout run): whether
   // and when the run pulls in is not a property of what the fit runs determine.
   bool near_pull_in_edge = false;
 };
@@ -151,6 +166,10 @@ struct MovingIdentification {
   // with a band over 3x the noise floor, or nearer its pull-in edge than kPullInEdgeBiasLogSupply. Empty too when
   // there is no holdout run.
   std::string prediction_undetermined;
+  // The bias at a pull-in edge the holdout runs were judged with (kPullInEdgeBiasLogSupply or, with pulling-in fit
+  // runs at two supplies, kPullInEdgeBiasLogSupplyTwoSupplies) and the fit runs' design it belongs to.
+  double pull_in_edge_bias_log_supply = kPullInEdgeBiasLogSupply;
+  std::string pull_in_edge_design;
   // Valves drawn from the identified values' covariance as if the residuals were white (the sigma_white of
   // `determined`): how far another recording of the same valve would move the identification, its
   // repeatability. A use of the valve that depends on the identification (a replay, server/bench_twin.h) gets its

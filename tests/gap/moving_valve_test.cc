@@ -163,11 +163,12 @@ TEST(MovingValveSynthetic, GeneratorWritesWhatTheScopeRecords) {
   Cleanup(dir);
 }
 
-// OtherValve() at 24 V and 1, 2.5 and 4 bar and at 20 V and 3 bar (fit runs) and at `holdouts`, recorded through
-// practice3's scope chain (noise seed `seed`) into `dir` and loaded.
-StatusOr<Dataset> OtherValveSession(const fs::path& dir, const std::vector<SwitchOnRunPlan>& holdouts, unsigned seed) {
+// OtherValve() at 24 V and 1, 2.5 and 4 bar and at `second_V` (20 V unless said) and 3 bar (fit runs) and at
+// `holdouts`, recorded through practice3's scope chain (noise seed `seed`) into `dir` and loaded.
+StatusOr<Dataset> OtherValveSession(const fs::path& dir, const std::vector<SwitchOnRunPlan>& holdouts, unsigned seed,
+                                    double second_V = 20.0) {
   auto runs = Pressures(24.0, {1, 2.5, 4}, "fit");
-  runs.push_back({"on_20V_3bar", 20.0, 3e5, -1.0, "fit"});
+  runs.push_back({"on_" + std::to_string(static_cast<int>(second_V)) + "V_3bar", second_V, 3e5, -1.0, "fit"});
   runs.insert(runs.end(), holdouts.begin(), holdouts.end());
   ScopeChain scope;
   scope.seed = seed;
@@ -238,6 +239,34 @@ TEST(MovingValveSynthetic, OtherValveIdentifiedAndPredictedAtAnotherPressureAndS
   EXPECT_NE(id->prediction_undetermined.find("pull-in edge"), std::string::npos) << id->prediction_undetermined;
   EXPECT_NE(report.find("pull-in edge at"), std::string::npos);
   EXPECT_NE(MovingIdentificationJson(*id).find("\"pull_in_edge\""), std::string::npos);
+  Cleanup(dir);
+}
+
+// The same valve, the fourth fit run at 18 V instead of 20 V: pulling-in fit runs 4/3 apart in supply, the design
+// whose edge bias was calibrated on its own draws (kPullInEdgeBiasLogSupplyTwoSupplies, 0.149 in log supply). The
+// holdouts (7 bar, and 19 V at 2 bar) lie between that bias and the one-supply bias (0.28) above their edges:
+// trusted, and predicted within 5 mA. The one-supply bias would have left them undetermined (the test above).
+TEST(MovingValveSynthetic, FitRunsAtTwoSuppliesJudgeTheEdgeWithTheirOwnBias) {
+  const fs::path dir = TempDir("two");
+  auto ds = OtherValveSession(
+      dir, {{"on_hold_7bar", 24.0, 7e5, -1.0, "holdout"}, {"on_hold_19V", 19.0, 2e5, -1.0, "holdout"}}, 5, 18.0);
+  ASSERT_TRUE(ds.ok()) << ds.status().message();
+  auto id = IdentifyMovingValve(*ds, Family());
+  ASSERT_TRUE(id.ok()) << id.status().message();
+  EXPECT_EQ(id->pull_in_edge_bias_log_supply, kPullInEdgeBiasLogSupplyTwoSupplies);
+  EXPECT_EQ(id->pull_in_edge_design, "pulling-in fit runs at 18 and 24 V");
+  for (const auto& m : id->landmarks) {
+    if (m.split != Split::kHoldout) continue;
+    EXPECT_LT(m.rmse_A, 5e-3) << m.run;
+    ASSERT_TRUE(std::isfinite(m.edge_log_supply)) << m.run;
+    EXPECT_LT(m.edge_log_supply, -kPullInEdgeBiasLogSupplyTwoSupplies) << m.run;
+    EXPECT_GT(m.edge_log_supply, -kPullInEdgeBiasLogSupply) << m.run << ": inside the one-supply bias";
+    EXPECT_FALSE(m.near_pull_in_edge) << m.run;
+  }
+  EXPECT_EQ(id->prediction_undetermined, "");
+  const std::string json = MovingIdentificationJson(*id);
+  EXPECT_NE(json.find("\"pull_in_edge_bias\""), std::string::npos);
+  EXPECT_NE(MovingIdentificationReport(*id).find("pull-in edges judged with"), std::string::npos);
   Cleanup(dir);
 }
 
