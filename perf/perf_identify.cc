@@ -328,6 +328,8 @@ int main(int argc, char** argv) {
     }
     if (verbose && id.ok() && !id->prediction_undetermined.empty())
       std::printf("    prediction undetermined: %s\n", id->prediction_undetermined.c_str());
+    if (verbose && id.ok())
+      for (const auto& n : id->notes) std::printf("    note: %s\n", n.c_str());
     if (verbose && id.ok()) {  // each run: measured and predicted pull-in (the dip), its RMSE and band
       for (const auto& m : id->landmarks) {
         std::printf("    %-12s %s %4.1f V %3.0f bar  pull-in measured %s %.2f ms, model %s %.2f ms  rmse %.2f mA\n",
