@@ -1465,8 +1465,11 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
       }
     const bool two = vmin > 0.0 && vmax >= kSecondSupplyRatio * vmin;
     id.pull_in_edge_bias_log_supply = two ? kPullInEdgeBiasLogSupplyTwoSupplies : kPullInEdgeBiasLogSupply;
-    id.pull_in_edge_design = two ? "pulling-in fit runs at " + Fmt(vmin) + " and " + Fmt(vmax) + " V"
-                                 : "pulling-in fit runs at one supply";
+    const bool several = vmin > 0.0 && vmax > vmin;
+    id.pull_in_edge_design = two       ? "pulling-in fit runs at " + Fmt(vmin) + " and " + Fmt(vmax) + " V"
+                             : several ? "pulling-in fit runs at " + Fmt(vmin) + " to " + Fmt(vmax) + " V, less than " +
+                                             Fmt(kSecondSupplyRatio) + "x apart: as at one supply"
+                                       : "pulling-in fit runs at one supply";
     if (draw_factor.size() > 0) PredictionBand(ds, family, v, draw_factor, draw_free, hold, threshold, options, &id);
     PullInEdges(ds, id.plant, hold, threshold, options.solver, &id);
     id.prediction_undetermined = PredictionVerdict(id, draw_factor.size() > 0);
@@ -1475,9 +1478,12 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
     // forms, docs/real-data.md "Ninth round"): 10 predicted within the limit with fit runs at one supply, 17 with
     // a pulling-in fit run at 0.75x the supply added.
     if (!id.prediction_undetermined.empty() && !two && vmax > 0.0)
-      id.notes.push_back("the pulling-in fit runs share one supply (" + Fmt(vmax) + " V): a pulling-in fit run at "
-                         "about 0.75x it (" + Fmt(0.75 * vmax) + " V) would separate the lift from the flight, which "
-                         "a prediction at another pressure or supply extrapolates");
+      id.notes.push_back((several ? "the pulling-in fit runs' supplies (" + Fmt(vmin) + " to " + Fmt(vmax) +
+                                        " V) are less than " + Fmt(kSecondSupplyRatio) + "x apart"
+                                  : "the pulling-in fit runs share one supply (" + Fmt(vmax) + " V)") +
+                         ": a pulling-in fit run at about 0.75x " + (several ? "the highest" : "it") + " (" +
+                         Fmt(0.75 * vmax) + " V) would separate the lift from the flight, which a prediction at "
+                         "another pressure or supply extrapolates");
   }
   id.evaluations = st.evaluations;
   id.seconds = Seconds(t0);

@@ -35,7 +35,11 @@ StatusOr<StoredAnchor> StoredAnchorFromJson(const regress::Json& j) {
       a.effects.push_back(e.get<std::string>());
     }
   }
-  if (j.contains("moves") && j["moves"].is_number_integer()) a.moves = j["moves"].get<int>();
+  if (j.contains("moves")) {
+    if (!j["moves"].is_number_integer() || j["moves"].get<std::int64_t>() < 0 || j["moves"].get<std::int64_t>() > 1000)
+      return Status::InvalidArgument("anchor_refit.moves: not a count from 0 to 1000");
+    a.moves = static_cast<int>(j["moves"].get<std::int64_t>());
+  }
   return a;
 }
 

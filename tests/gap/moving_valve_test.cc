@@ -237,6 +237,13 @@ TEST(MovingValveSynthetic, OtherValveIdentifiedAndPredictedAtAnotherPressureAndS
     EXPECT_TRUE(m.near_pull_in_edge) << m.run;
   }
   EXPECT_NE(id->prediction_undetermined.find("pull-in edge"), std::string::npos) << id->prediction_undetermined;
+  // Fit runs at 20 and 24 V, 1.2x apart: judged as at one supply, said so, and the report asks for a run at 0.75x.
+  EXPECT_EQ(id->pull_in_edge_bias_log_supply, kPullInEdgeBiasLogSupply);
+  EXPECT_EQ(id->pull_in_edge_design, "pulling-in fit runs at 20 to 24 V, less than 1.3x apart: as at one supply");
+  bool asks = false;
+  for (const auto& n : id->notes)
+    asks = asks || n.find("a pulling-in fit run at about 0.75x the highest (18 V)") != std::string::npos;
+  EXPECT_TRUE(asks) << "the report asks for a fit run at a second supply";
   EXPECT_NE(report.find("pull-in edge at"), std::string::npos);
   EXPECT_NE(MovingIdentificationJson(*id).find("\"pull_in_edge\""), std::string::npos);
   Cleanup(dir);
@@ -264,6 +271,7 @@ TEST(MovingValveSynthetic, FitRunsAtTwoSuppliesJudgeTheEdgeWithTheirOwnBias) {
     EXPECT_FALSE(m.near_pull_in_edge) << m.run;
   }
   EXPECT_EQ(id->prediction_undetermined, "");
+  for (const auto& n : id->notes) EXPECT_EQ(n.find("0.75x"), std::string::npos) << n;
   const std::string json = MovingIdentificationJson(*id);
   EXPECT_NE(json.find("\"pull_in_edge_bias\""), std::string::npos);
   EXPECT_NE(MovingIdentificationReport(*id).find("pull-in edges judged with"), std::string::npos);

@@ -237,6 +237,20 @@ TEST(StoredHealth, TheNewestMovedAnchorsValuesStandForTheEarlierNights) {
   ASSERT_FALSE(parsed.ok());
   EXPECT_NE(parsed.status().message().find("anchor_refit.fitted.R: not a number"), std::string::npos)
       << parsed.status().message();
+  bad = server::StoredAnchorJson(moved);
+  bad["moves"] = 1e12;
+  EXPECT_NE(server::StoredAnchorFromJson(bad).status().message().find("anchor_refit.moves"), std::string::npos);
+  EXPECT_NE(server::StoredAnchorFromJson("not an anchor").status().message().find("anchor_refit: not an object"),
+            std::string::npos);
+  // A night whose blocks are not what the server writes is read as if they were absent, and nothing is lost.
+  night("2026-11-05", 15, 61.4,
+        {{"anchor_refit", "garbage"}, {"reidentified", nlohmann::json::array({1, "x", nullptr})}});
+  night("2026-11-06", 16, 61.5, {{"anchor_refit", server::StoredAnchorJson(moved)}, {"reidentified", 7}});
+  auto odd = server::LoadStoredHealth(store->get());
+  ASSERT_TRUE(odd.ok()) << odd.status().message();
+  EXPECT_EQ(odd->values.at("emu").size(), 6u);
+  EXPECT_EQ(odd->values.at("emu").at("2026-11-01").determined.at(0).value, 61.0) << "night 3's still stand";
+  EXPECT_EQ(odd->anchor.at("emu").night, "2026-11-03");
   std::filesystem::remove_all(dir);
 }
 
