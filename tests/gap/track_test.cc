@@ -94,9 +94,58 @@ TEST(TrackStatistics, FalseAlarmRateMatchesTheTarget) {
   EXPECT_LE(strict, 8);
 }
 
+// The identification's sigma is an estimate, not a known sigma: on the independent plant's clean benches it is 0.1
+// to 10 times the nights' scatter (docs/track.md). Draws (seed fixed before looking) whose given sigma is 0.8 of
+// the values' true one: where it is above a short reference's scatter it sets the spread, and taken as known (a
+// normal deviate, the detector before 2026-11-30) it flagged 0.41 of the series at a target of 0.25 (a guard of
+// 5); as a t with the reference's degrees of freedom, 0.30 (0.36 with a guard of 5; the rest is the guard's,
+// TrackOptions::guard_sessions).
+TEST(TrackStatistics, AnUnderstatedOwnSigmaDoesNotRaiseTheFalseAlarmRate) {
+  std::mt19937 rng(38004);
+  TrackOptions o;
+  o.target_arl0_sessions = 200.0;
+  int flagged = 0;
+  const int series = 2000;
+  for (int i = 0; i < series; ++i) {
+    auto p = Series(rng, 60, 1e9, 0.0, 0.0);
+    for (auto& v : p.sessions) v.sigma *= 0.8;
+    TrackParameter(&p, o);
+    flagged += p.flagged >= 0;
+  }
+  const double rate = static_cast<double>(flagged) / series;
+  std::printf("false-alarm rate at ARL0 200 over 57 sessions, own sigma 0.8 of the true one: %.3f (expected about "
+              "0.25)\n", rate);
+  EXPECT_LT(rate, 0.33);
+}
+
+// A screen that keeps a session with a large z out of the reference feeds on itself: a short reference whose
+// scatter is small by chance makes the next sessions' z large, and screened out they cannot widen it. Normal
+// values with no own sigma, a guard of one session (Hawkins' chart, exact for normal values): at the default
+// target the CUSUM itself flags about 0.22 % of 57-session series (simulated; 22 of 10000). The screen at |z| 3
+// (before 2026-11-30) flagged about 0.8 %; at 4 (gap/track.cc, kJoin_z) it stays the CUSUM's own. Seed fixed
+// before looking; the bound is the expected count plus 5 Poisson sigma.
+TEST(TrackStatistics, TheReferencesScreenDoesNotTrapAShortReference) {
+  std::mt19937 rng(38005);
+  TrackOptions o;
+  o.guard_sessions = 1;
+  int flagged = 0;
+  const int series = 10000;
+  for (int i = 0; i < series; ++i) {
+    auto p = Series(rng, 60, 1e9, 0.0, 0.0);
+    for (auto& v : p.sessions) v.sigma = NAN;
+    TrackParameter(&p, o);
+    flagged += p.flagged >= 0;
+  }
+  std::printf("normal values, guard 1, default target: %d of %d series flagged (about 22 expected)\n", flagged,
+              series);
+  EXPECT_LE(flagged, 45);
+}
+
 // A step of 3 sigma at session 20 and a drift of 0.25 sigma per session from session 15 (it reaches 3 sigma at
-// session 26): flagged within 5 sessions of reaching 3 sigma in at least 90 % of 500 draws, never before the change
-// in more than 3 %.
+// session 26): flagged within 5 sessions of reaching 3 sigma in at least 80 % (the step; 85 % measured) and 90 %
+// (the drift) of 500 draws, never before the change in more than 3 %. The step's share is the guard band's
+// trade (TrackOptions::guard_sessions): a guard of 5 sessions flagged 92 % of these steps in time, at two to
+// four times the in-control rate on the independent plant's values.
 TEST(TrackStatistics, StepsAndDriftsAreFlaggedWithinFiveSessionsOfThreeSigma) {
   std::mt19937 rng(38002);
   TrackOptions o;
@@ -111,7 +160,7 @@ TEST(TrackStatistics, StepsAndDriftsAreFlaggedWithinFiveSessionsOfThreeSigma) {
     }
     std::printf("step %.2g drift %.2g: %d of %d flagged within 5 sessions of 3 sigma, %d before the change\n", step, drift,
                 in_time, series, early);
-    EXPECT_GE(in_time, 450) << "step " << step << " drift " << drift;
+    EXPECT_GE(in_time, step > 0.0 ? 400 : 450) << "step " << step << " drift " << drift;
     EXPECT_LE(early, 15);
   }
 }
@@ -122,7 +171,9 @@ TEST(TrackStatistics, StepsAndDriftsAreFlaggedWithinFiveSessionsOfThreeSigma) {
 // either way: the plain CUSUM is carried past h by such sessions, the clipped one (the default) only when four
 // come close together or two of one sign in a row (Lucas & Crosier's rule: 56 pairs x 0.03^2 / 2 = 2.5 % of the
 // series, about 13 of 500, plus about as many from the clip alone); a 3-sigma step is still flagged within 5
-// sessions (the clip is at 3 sigma), and a gross one (10 sigma) within three (the clip alone takes four).
+// sessions in more than half the draws (the clip is at 3 sigma; the outliers that join the first reference, before
+// it is long enough to screen them, widen its spread: 59 % measured, 73 % with the screen at 3 and a guard of 5,
+// at the price in docs/track.md), and a gross one (10 sigma) within three (the clip alone takes four).
 TEST(TrackStatistics, AnOutlyingSessionDoesNotFlagAndAStepStillDoes) {
   std::mt19937 rng(38003);
   std::uniform_real_distribution<double> u01;
@@ -153,7 +204,7 @@ TEST(TrackStatistics, AnOutlyingSessionDoesNotFlagAndAStepStillDoes) {
   EXPECT_LE(flagged_clipped, 40);
   // The outliers that enter the first reference widen its spread, clipped or not: the clip costs no step.
   EXPECT_GE(step_in_time, step_in_time_plain - 15);
-  EXPECT_GE(step_in_time, 0.7 * series);
+  EXPECT_GE(step_in_time, 0.5 * series);
   int second = 0;
   for (int i = 0; i < 200; ++i) {
     auto p = Series(rng, 40, 20, 10.0, 0.0);
