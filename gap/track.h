@@ -46,9 +46,10 @@ struct TrackOptions {
   // Sessions before monitoring starts. 3 (2 degrees of freedom) is the fewest the t's transform stays usable
   // with, and enough for normal values; an identification's values have heavier tails, and a short reference
   // of the core's scatter then judges the tails: on draws from the independent plant's clean benches (docs/
-  // track.md, "Outliers"; z clipped) 3, 5 and 8 sessions flag 2.9 %, 1.8 % and 1.1 % of in-control parameter
-  // series over 60 sessions, with the same steps and drifts flagged in time. 5 is the compromise: a lab's first
-  // week.
+  // track.md, "Outliers"; z clipped) 3, 5 and 8 sessions flagged 2.9 %, 1.8 % and 1.1 % of in-control parameter
+  // series over 60 sessions with the detector of 2026-11-29, with the same steps and drifts flagged in time. With
+  // today's screen and guard (below) 5 and 8 flag 0.43 and 0.41 %: most of what a longer reference bought was
+  // the screen's trap. 5 is the compromise: a lab's first week.
   // At most baseline_max sessions form the reference (a cap freezes an estimated mean whose error then acts on
   // every later session as a shift: at 10, 12 of 500 in-control series were flagged where 1.4 are expected:
   // tests/gap/track_test.cc's draws).
