@@ -14,7 +14,8 @@
 // --values-out FILE: each session's identified values, one line per session ("bench kind from JSON"), so the
 // detector can be run again on them without identifying (--values-in FILE: the benches, kinds and change nights
 // are read from the file; --benches, --nights, --seed and --clean are then the file's).
-// --previous-detector: the detector before issue 38's outlier round (no clip, a reference of 3), for comparison.
+// --previous-detector: the detector before issue 38's outlier round (no clip, a reference of 3, a guard of 5), for
+//   comparison; the own sigma and the reference's screen as today (docs/track.md, "What raised the in-control rate").
 // --resample N (with --values-in): the detector alone, calibrated on draws. Every tracked parameter of every clean
 // bench in the file is a pool of (value, sigma) pairs as the identification gave them night after night, with its
 // outliers; N series of --length sessions are drawn from each pool (with replacement, seeded by --seed) and run
@@ -320,7 +321,9 @@ int main(int argc, char** argv) {
     int from = 0;
     std::vector<vb::gap::SessionValues> values;
     vb::gap::TrackOptions o;
-    if (previous) o.winsor_z = std::numeric_limits<double>::infinity(), o.two_in_a_row = false, o.min_reference = 3;
+    if (previous)
+      o.winsor_z = std::numeric_limits<double>::infinity(), o.two_in_a_row = false, o.min_reference = 3,
+      o.guard_sessions = 5;
     if (verbose)
       o.progress = o.identify.progress = [](const std::string& l) { std::fprintf(stderr, "  %s\n", l.c_str()); };
     if (!values_in.empty()) {
