@@ -328,6 +328,9 @@ StatusOr<Tracking> TrackValues(const std::vector<SessionValues>& sessions, const
   Tracking t;
   t.k_sigma = options.k_sigma;
   t.winsor_z = options.winsor_z;
+  t.min_reference = options.min_reference;
+  t.guard_sessions = options.guard_sessions;
+  t.screen_z = kJoin_z;
   t.target_arl0_sessions = options.target_arl0_sessions;
   t.h_sigma = CusumInterval(options.k_sigma, options.target_arl0_sessions);
   const SessionValues* first = nullptr;
@@ -506,7 +509,10 @@ std::string TrackingJson(const Tracking& t) {
                    {"k_sigma", t.k_sigma},
                    {"h_sigma", t.h_sigma},
                    {"winsor_z", NumJ(t.winsor_z)},
-                   {"target_arl0_sessions", t.target_arl0_sessions}};
+                   {"target_arl0_sessions", t.target_arl0_sessions},
+                   {"reference_min_sessions", t.min_reference},
+                   {"guard_sessions", t.guard_sessions},
+                   {"reference_screen_z", NumJ(t.screen_z)}};
   nlohmann::ordered_json fits = nlohmann::ordered_json::array();
   for (std::size_t i = 0; i < t.sessions.size(); ++i)
     fits.push_back({{"session", t.sessions[i]}, {"fit_rmse_A", NumJ(t.fit_rmse_A[i])},
@@ -552,8 +558,10 @@ std::string TrackingReport(const Tracking& t) {
   char buf[400];
   std::snprintf(buf, sizeof buf,
                 "%zu sessions; a self-starting two-sided CUSUM per parameter, k %.2g, h %.3g sigma, z clipped at "
-                "%.3g\n(in control: %.0f sessions)\n\n",
-                t.sessions.size(), t.k_sigma, t.h_sigma, t.winsor_z, t.target_arl0_sessions);
+                "%.3g\n(in control: %.0f sessions; monitoring from session %d; a session joins the reference %d "
+                "later if its |z| <= %.3g)\n\n",
+                t.sessions.size(), t.k_sigma, t.h_sigma, t.winsor_z, t.target_arl0_sessions, t.min_reference + 1,
+                t.guard_sessions, t.screen_z);
   o << buf;
   // The table in blocks of 5 parameters: 28 + 5 x 18 = 118 columns, within a 120-column terminal.
   constexpr std::size_t kPerBlock = 5;

@@ -121,6 +121,8 @@ struct Tracking {
   std::vector<TrackedParameter> parameters;
   std::vector<TrackFlag> flags;             // in session order; within a session, the largest |z| first
   double h_sigma = NAN, k_sigma = NAN, winsor_z = NAN, target_arl0_sessions = NAN;
+  int min_reference = 0, guard_sessions = 0;  // the options the sessions were tracked with
+  double screen_z = NAN;                      // a session joins the reference only within it (gap/track.cc)
   std::vector<std::string> notes;
 };
 

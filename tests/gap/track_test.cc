@@ -459,6 +459,9 @@ TEST(TrackSessions, AResistanceStepIsFlaggedAsRAndNothingBefore) {
       EXPECT_TRUE(p["projected_crossing_session"].is_null()) << p.dump();
     }
   EXPECT_EQ(j["detector"]["winsor_z"], 3.0) << j["detector"].dump();
+  EXPECT_EQ(j["detector"]["reference_min_sessions"], 5) << j["detector"].dump();
+  EXPECT_EQ(j["detector"]["guard_sessions"], 3) << j["detector"].dump();
+  EXPECT_EQ(j["detector"]["reference_screen_z"], 4.0) << j["detector"].dump();
   // A reference of fewer than 2 sessions: refused before anything is identified, naming the option.
   int bad_rc = -1;
   const std::string bad = Shell(std::string(VB_BENCHCTL) + " track --reference 1" + dirs + " 2>&1", &bad_rc);
