@@ -122,9 +122,10 @@ void TrackParameter(TrackedParameter* p, const TrackOptions& o) {
   // The reference's mean and spread: the larger of the sessions' scatter and the identifications' own sigma. The
   // deviation over it is taken as a t with n - 1 degrees of freedom either way. The identification's sigma is an
   // estimate too, not a known sigma: on the independent plant's clean benches it is 0.1 to 10 times the nights'
-  // scatter (docs/track.md, "The identification's sigma is not a known sigma"). Taken as known where it was the
-  // larger (a normal deviate, as before 2026-11-30), it flagged 0.67 % of in-control 60-session series drawn from
-  // normal values whose sigma it understated by chance, where the target gives 0.28 %; as a t, 0.25 %.
+  // scatter (docs/track.md, "What raised the in-control rate"). Taken as known where it was the larger (a normal
+  // deviate, as before 2026-11-30), it flagged 0.67 % of in-control 60-session series drawn from normal values
+  // whose sigma it understated by chance, where the target gives 0.28 %; as a t, 0.25 % (the same guard and
+  // screen; 0.17 % with today's).
   auto stats = [&](double* mean, double* spread, double current_sigma) {
     const double n = static_cast<double>(ref.size());
     double m = 0.0, own = 0.0;
