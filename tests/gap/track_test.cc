@@ -63,6 +63,19 @@ TrackedParameter Series(std::mt19937& rng, int sessions, double shift_from, doub
   return p;
 }
 
+// How many of `series` in-control series of 60 sessions (Series) the detector flags, with the identification's
+// sigma given as `own_sigma_factor` times the values' (NaN: none given).
+int FlaggedInControl(std::mt19937& rng, int series, const TrackOptions& o, double own_sigma_factor = 1.0) {
+  int flagged = 0;
+  for (int i = 0; i < series; ++i) {
+    auto p = Series(rng, 60, 1e9, 0.0, 0.0);
+    for (auto& v : p.sessions) v.sigma *= own_sigma_factor;
+    TrackParameter(&p, o);
+    flagged += p.flagged >= 0;
+  }
+  return flagged;
+}
+
 // The false-alarm rate on draws (seed fixed before looking): with a target run length of 200 sessions per
 // parameter, 57 monitored sessions flag a series with probability about 1 - exp(-57/200) = 0.25 (the run length
 // is close to geometric); 2000 series give that to +-0.02 (1 sigma). The band is 4 sigma wide each way, plus the
@@ -71,25 +84,13 @@ TEST(TrackStatistics, FalseAlarmRateMatchesTheTarget) {
   std::mt19937 rng(38001);
   TrackOptions o;
   o.target_arl0_sessions = 200.0;
-  int flagged = 0;
   const int series = 2000;
-  for (int i = 0; i < series; ++i) {
-    auto p = Series(rng, 60, 1e9, 0.0, 0.0);
-    TrackParameter(&p, o);
-    flagged += p.flagged >= 0;
-  }
-  const double rate = static_cast<double>(flagged) / series;
+  const double rate = static_cast<double>(FlaggedInControl(rng, series, o)) / series;
   std::printf("false-alarm rate at ARL0 200 over 57 sessions: %.3f (expected about 0.25)\n", rate);
   EXPECT_GT(rate, 0.15);
   EXPECT_LT(rate, 0.36);
   // At the default target (20000) the same draws flag almost nothing: about 500 x 57 / 20000 = 1.4 expected.
-  TrackOptions d;
-  int strict = 0;
-  for (int i = 0; i < 500; ++i) {
-    auto p = Series(rng, 60, 1e9, 0.0, 0.0);
-    TrackParameter(&p, d);
-    strict += p.flagged >= 0;
-  }
+  const int strict = FlaggedInControl(rng, 500, TrackOptions{});
   std::printf("series flagged at ARL0 20000: %d of 500\n", strict);
   EXPECT_LE(strict, 8);
 }
@@ -104,15 +105,8 @@ TEST(TrackStatistics, AnUnderstatedOwnSigmaDoesNotRaiseTheFalseAlarmRate) {
   std::mt19937 rng(38004);
   TrackOptions o;
   o.target_arl0_sessions = 200.0;
-  int flagged = 0;
   const int series = 2000;
-  for (int i = 0; i < series; ++i) {
-    auto p = Series(rng, 60, 1e9, 0.0, 0.0);
-    for (auto& v : p.sessions) v.sigma *= 0.8;
-    TrackParameter(&p, o);
-    flagged += p.flagged >= 0;
-  }
-  const double rate = static_cast<double>(flagged) / series;
+  const double rate = static_cast<double>(FlaggedInControl(rng, series, o, 0.8)) / series;
   std::printf("false-alarm rate at ARL0 200 over 57 sessions, own sigma 0.8 of the true one: %.3f (expected about "
               "0.25)\n", rate);
   EXPECT_LT(rate, 0.33);
@@ -128,14 +122,8 @@ TEST(TrackStatistics, TheReferencesScreenDoesNotTrapAShortReference) {
   std::mt19937 rng(38005);
   TrackOptions o;
   o.guard_sessions = 1;
-  int flagged = 0;
   const int series = 10000;
-  for (int i = 0; i < series; ++i) {
-    auto p = Series(rng, 60, 1e9, 0.0, 0.0);
-    for (auto& v : p.sessions) v.sigma = NAN;
-    TrackParameter(&p, o);
-    flagged += p.flagged >= 0;
-  }
+  const int flagged = FlaggedInControl(rng, series, o, NAN);
   std::printf("normal values, guard 1, default target: %d of %d series flagged (about 22 expected)\n", flagged,
               series);
   EXPECT_LE(flagged, 45);
