@@ -176,7 +176,7 @@ int Resample(const std::vector<Pool>& pools, int n, int length, unsigned seed, b
     o.guard_sessions = var.guard;
     std::mt19937 rng(seed);
     std::map<std::string, std::pair<long, long>> by_name;  // in-control: flagged, series
-    long series = 0, false_flags = 0, step_ok = 0, step_early = 0, drift_ok = 0, drift_early = 0;
+    long series = 0, false_flags = 0, step_ok = 0, step_early = 0, step_late = 0, drift_ok = 0, drift_early = 0;
     for (const Pool& pool : pools) {
       std::uniform_int_distribution<std::size_t> pick(0, pool.draws.size() - 1);
       for (int k = 0; k < n; ++k) {
@@ -201,7 +201,8 @@ int Resample(const std::vector<Pool>& pools, int n, int length, unsigned seed, b
           if (mode == 0) false_flags += p.flagged >= 0, by_name[pool.name].first += p.flagged >= 0;
           if (mode == 0) by_name[pool.name].second += 1;
           if (mode == 1) step_early += p.flagged >= 0 && p.flagged < step_at,
-                         step_ok += p.flagged >= step_at && p.flagged <= step_at + 5;
+                         step_ok += p.flagged >= step_at && p.flagged <= step_at + 5,
+                         step_late += p.flagged > step_at + 5;
           if (mode == 2) drift_early += p.flagged >= 0 && p.flagged < drift_from,
                          drift_ok += p.flagged >= drift_from && p.flagged <= drift_from + 12 + 5;
         }
@@ -214,8 +215,9 @@ int Resample(const std::vector<Pool>& pools, int n, int length, unsigned seed, b
       std::snprintf(b, sizeof b, "%.4f [%.4f,%.4f]%s", static_cast<double>(k) / series, w.lo, w.hi, extra);
       return std::string(b);
     };
-    std::printf("%-38s %22s %22s %22s   (early: step %ld, drift %ld)\n", var.name, cell(false_flags, "").c_str(),
-                cell(step_ok, "").c_str(), cell(drift_ok, "").c_str(), step_early, drift_early);
+    std::printf("%-38s %22s %22s %22s   (early: step %ld, drift %ld; step later than in time %ld)\n", var.name,
+                cell(false_flags, "").c_str(), cell(step_ok, "").c_str(), cell(drift_ok, "").c_str(), step_early,
+                drift_early, step_late);
     if (verbose) {
       std::printf("   in control, by parameter:");
       for (const auto& [name, c] : by_name)
