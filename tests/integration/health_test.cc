@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
@@ -309,6 +310,11 @@ nlohmann::json WaitForNights(const std::string& addr, std::size_t n, int timeout
     if (list.is_array() && list.size() >= n) return list;
     std::this_thread::sleep_for(std::chrono::milliseconds(300));
   }
+  // Not done in time: what the queue holds (a run that never ends, or runs nobody took) for the failure's reader.
+  const auto queue = testing::RunCommand(std::string(VB_BENCHCTL) + " queue --server " + addr + " --token " +
+                                         testing::kViewerToken);
+  std::fprintf(stderr, "%zu of %zu nights after %d s; the queue:\n%s\n", list.is_array() ? list.size() : 0, n,
+               timeout_s, queue.out.c_str());
   return nlohmann::json::array();
 }
 
