@@ -1285,7 +1285,11 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
     }
     std::vector<double> rel_sigma(kCount, NAN);
     double correlation_factor = 1.0;  // (1 + rho) / (1 - rho): rel_sigma / sqrt of it is the white-noise sigma
-    if (ok && n > q) {
+    // No free parameter leaves an empty Jacobian: Eigen's eigensolver reads the first element of an empty matrix
+    // (a null pointer: two of this stop's server runs died there, SIGSEGV in SelfAdjointEigenSolver on a night's
+    // first identification; which path leaves no parameter free is not found yet).
+    if (ok && q == 0) id.notes.push_back("uncertainty: no parameter was free in the last stage: no sigma is given");
+    if (ok && n > q && q > 0) {
       double s2 = 0.0;
       for (double e : base) s2 += e * e;
       s2 /= static_cast<double>(n - q);
