@@ -903,8 +903,14 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
       st.best = INFINITY;
       st.Run(std::min(remaining, 1500));
       if (!(st.best <= before)) {
+        // The pass's free parameters stay (the uncertainty below is over them): a warm start's first pass starts
+        // from a stage that had none, and a pass undone there left the identification with no free parameter
+        // and an empty Jacobian (the server's SIGSEGV of 2026-11-30). A pass ends above its start only rarely
+        // (BOBYQA evaluates the start first; a budget cut short, or the start's RMS computed apart from it).
         const int evals = st.evaluations;
+        std::vector<int> free = std::move(st.free);
         st = start;
+        st.free = std::move(free);
         st.best = before;
         st.evaluations = evals;
         break;
@@ -1285,9 +1291,9 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
     }
     std::vector<double> rel_sigma(kCount, NAN);
     double correlation_factor = 1.0;  // (1 + rho) / (1 - rho): rel_sigma / sqrt of it is the white-noise sigma
-    // No free parameter leaves an empty Jacobian: Eigen's eigensolver reads the first element of an empty matrix
-    // (a null pointer: two of this stop's server runs died there, SIGSEGV in SelfAdjointEigenSolver on a night's
-    // first identification; which path leaves no parameter free is not found yet).
+    // No free parameter leaves an empty Jacobian, and Eigen's eigensolver reads the first element of an empty
+    // matrix (a null pointer: the server died there twice on 2026-11-30, a polish pass undone on a warm start's
+    // first pass; polish keeps the pass's free parameters since). Kept as the guard for any other such path.
     if (ok && q == 0) id.notes.push_back("uncertainty: no parameter was free in the last stage: no sigma is given");
     if (ok && n > q && q > 0) {
       double s2 = 0.0;
