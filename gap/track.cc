@@ -560,7 +560,7 @@ std::string TrackingReport(const Tracking& t) {
   std::snprintf(buf, sizeof buf,
                 "%zu sessions; a self-starting two-sided CUSUM per parameter, k %.2g, h %.3g sigma, z clipped at "
                 "%.3g\n(in control: %.0f sessions; monitoring from session %d; a session joins the reference %d "
-                "later if its |z| <= %.3g)\n\n",
+                "sessions later if its |z| <= %.3g)\n\n",
                 t.sessions.size(), t.k_sigma, t.h_sigma, t.winsor_z, t.target_arl0_sessions, t.min_reference + 1,
                 t.guard_sessions, t.screen_z);
   o << buf;
