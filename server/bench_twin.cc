@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include <fmt/format.h>
+#include <google/protobuf/util/message_differencer.h>
 #include <spdlog/spdlog.h>
 
 #include "experiment/runner.h"
@@ -217,6 +218,13 @@ double ReplaySpread(const experiment::ExperimentSpec& spec, const gap::MovingIde
   return 1.4826 * median(v);
 }
 
+// Whether two runs' specs are the same code: equal but for their tags (a night's tags name the night).
+bool SameCode(experiment::ExperimentSpec a, experiment::ExperimentSpec b) {
+  a.clear_tags();
+  b.clear_tags();
+  return google::protobuf::util::MessageDifferencer::Equals(a, b);
+}
+
 }  // namespace
 
 CaseVerdict DecideCase(double observed_change, double allowed, double valve_change, double sigma,
@@ -251,12 +259,73 @@ CaseVerdict DecideCase(double observed_change, double allowed, double valve_chan
                       100.0 * share, valve_change, allowed, sigma)};
 }
 
+CaseVerdict DecideCase(const CaseReplay& r) {
+  // A spec change whose replay on the baseline's valve stays within the allowance is no change this metric sees
+  // (another seed's jitter, a field the law does not read): DecideCase's rules, on tonight's code, decide.
+  if (!r.baseline_code_known || !(std::abs(r.code_change) > r.allowed))
+    return DecideCase(r.observed_change, r.allowed, r.valve_change, r.sigma, r.changed_since_baseline);
+  // Each factor changed alone, as a share of the failure (signed: a part against the change reproduces none of
+  // it). Half, as DecideCase's valve rule: a factor that alone makes at least half the failure is its cause.
+  const double code_share = r.code_change / r.observed_change;
+  const double valve_share = r.valve_change_baseline_code / r.observed_change;
+  // The valve's share twice its repeatability toward the failure: what another identification of the two valves
+  // could have replayed.
+  const double valve_share_high =
+      (r.valve_change_baseline_code + std::copysign(2.0 * r.sigma_baseline_code, r.observed_change)) /
+      r.observed_change;
+  if (code_share >= 0.5 && valve_share_high < 0.5) {
+    // The test: the failure replayed with tonight's valve and the baseline's code does not reproduce (not
+    // half of it, even 2 sigma toward it), and tonight's code on the baseline's valve does: the code changed. A
+    // valve the tracking flagged does not stand against this (DecideCase above keeps a flagged valve from being
+    // cleared by a replay that reads its part as none; here the code's part is read as present).
+    CaseVerdict v{"code", ""};
+    if (!r.changed_since_baseline.empty())
+      v.why = fmt::format("the valve changed since the baseline ({}), but under the baseline's code tonight's valve "
+                          "makes {:.0f} % of the change ({:.4g}), and tonight's code on the baseline's valve {:.0f} %",
+                          r.changed_since_baseline, 100.0 * valve_share, r.valve_change_baseline_code,
+                          100.0 * code_share);
+    return v;
+  }
+  if (code_share >= 0.5 && valve_share >= 0.5)
+    return {"undetermined",
+            fmt::format("both changed: tonight's code on the baseline's valve makes {:.0f} % of the change and "
+                        "tonight's valve under the baseline's code {:.0f} %",
+                        100.0 * code_share, 100.0 * valve_share)};
+  if (code_share >= 0.5)
+    return {"undetermined",
+            fmt::format("tonight's code on the baseline's valve makes {:.0f} % of the change, and tonight's valve "
+                        "under the baseline's code {:.0f} %, repeatable to {:.2g}: the replay cannot resolve whether "
+                        "the valve makes half of it too",
+                        100.0 * code_share, 100.0 * valve_share, r.sigma_baseline_code)};
+  if (valve_share >= 0.5) {
+    CaseVerdict v{"valve", ""};
+    v.why = fmt::format("tonight's valve under the baseline's code makes {:.0f} % of the change; tonight's code on "
+                        "the baseline's valve {:.0f} %",
+                        100.0 * valve_share, 100.0 * code_share);
+    return v;
+  }
+  if (r.changed_since_baseline.empty() && std::abs(r.valve_change_baseline_code) + 2.0 * r.sigma_baseline_code <= r.allowed)
+    // As DecideCase's code rule: the valve's part within the allowance by 2 sigma and no change tracked; the spec
+    // changed and moves the metric beyond the allowance, if not by half (the rest: code the spec does not show).
+    return {"code", fmt::format("tonight's code on the baseline's valve makes {:.0f} % of the change, tonight's "
+                                "valve under the baseline's code {:.4g} (allowed {:.4g})",
+                                100.0 * code_share, r.valve_change_baseline_code, r.allowed)};
+  return {"undetermined",
+          fmt::format("the code's change moves this metric by {:.4g} on the baseline's valve ({:.0f} % of the "
+                      "change, allowed {:.4g}) and tonight's valve under the baseline's code by {:.4g} ({:.0f} %): "
+                      "neither makes half the change alone",
+                      r.code_change, 100.0 * code_share, r.allowed, r.valve_change_baseline_code,
+                      100.0 * valve_share)};
+}
+
 regress::Json BenchTwins::Attribute(const regress::RegressResult& result,
                                     const std::map<std::string, experiment::ExperimentSpec>& specs,
-                                    const std::map<std::string, std::vector<std::string>>& benches) const {
+                                    const std::map<std::string, std::vector<std::string>>& benches,
+                                    const BaselineCode& baseline_code) const {
   regress::Json cases = regress::Json::array();
   regress::Json baseline_valves = regress::Json::object();
   int valve = 0, code = 0, undetermined = 0;
+  int code_replayed = 0;  // "code" cases whose code change the replay reproduced (DecideCase(CaseReplay))
   std::string first_undetermined;
   for (const auto& f : result.findings) {
     if (f.verdict != regress::Verdict::kRegressed) continue;
@@ -264,10 +333,15 @@ regress::Json BenchTwins::Attribute(const regress::RegressResult& result,
                        {"allowed", f.allowed}};
     std::string why;
     double reference_sum = 0.0, tonight_sum = 0.0, var_sum = 0.0;
+    // The same under the baseline's code, when its spec of this case differs from tonight's.
+    double reference_old_sum = 0.0, tonight_old_sum = 0.0, var_old_sum = 0.0;
     int n = 0;
     std::string changed;  // a bench that ran it whose valve the tracking saw change since the baseline's night
     const auto spec = specs.find(f.case_name);
     const auto ran = benches.find(f.case_name);
+    const auto old_spec = baseline_code.specs.find(f.case_name);
+    const bool code_known =
+        spec != specs.end() && old_spec != baseline_code.specs.end() && !SameCode(old_spec->second, spec->second);
     if (!std::isfinite(f.delta)) {
       why = "the metric has no value on one side";
     } else if (spec == specs.end() || ran == benches.end() || ran->second.empty()) {
@@ -295,6 +369,19 @@ regress::Json BenchTwins::Attribute(const regress::RegressResult& result,
         const double sa = ReplaySpread(spec->second, *t->second.Reference(), f.metric);
         const double st = ReplaySpread(spec->second, *t->second.tonight, f.metric);
         var_sum += sa * sa + st * st;
+        if (code_known) {
+          auto a_old = ReplayMetric(old_spec->second, t->second.Reference()->plant, f.metric);
+          auto now_old = ReplayMetric(old_spec->second, t->second.tonight->plant, f.metric);
+          if (!a_old.ok() || !now_old.ok()) {
+            why = "the replay of the baseline's code on bench " + b + "'s valve: " +
+                  (a_old.ok() ? now_old.status() : a_old.status()).message();
+            break;
+          }
+          reference_old_sum += *a_old, tonight_old_sum += *now_old;
+          const double sa_old = ReplaySpread(old_spec->second, *t->second.Reference(), f.metric);
+          const double st_old = ReplaySpread(old_spec->second, *t->second.tonight, f.metric);
+          var_old_sum += sa_old * sa_old + st_old * st_old;
+        }
       }
     }
     std::string verdict;
@@ -308,7 +395,22 @@ regress::Json BenchTwins::Attribute(const regress::RegressResult& result,
       const double sigma = std::sqrt(var_sum) / n;
       c["valve_change_sigma"] = sigma;
       c["valve_share"] = valve_change / f.delta;
-      const CaseVerdict d = DecideCase(f.delta, f.allowed, valve_change, sigma, changed);
+      CaseReplay replay{f.delta, f.allowed, valve_change, sigma, changed};
+      if (code_known) {
+        // Both codes on both valves: the code's change on the baseline's valve, the valve's under the baseline's
+        // code, each with its own repeatability.
+        replay.baseline_code_known = true;
+        replay.code_change = (reference_sum - reference_old_sum) / n;
+        replay.valve_change_baseline_code = (tonight_old_sum - reference_old_sum) / n;
+        replay.sigma_baseline_code = std::sqrt(var_old_sum) / n;
+        c["baseline_code"] = baseline_code.from;
+        c["replay_baseline_valve_baseline_code"] = reference_old_sum / n;
+        c["replay_tonight_valve_baseline_code"] = tonight_old_sum / n;
+        c["code_change"] = replay.code_change;
+        c["valve_change_baseline_code"] = replay.valve_change_baseline_code;
+        c["valve_change_baseline_code_sigma"] = replay.sigma_baseline_code;
+      }
+      const CaseVerdict d = DecideCase(replay);
       verdict = d.verdict;
       why = d.why;
     } else {
@@ -317,6 +419,8 @@ regress::Json BenchTwins::Attribute(const regress::RegressResult& result,
     c["verdict"] = verdict;
     if (!why.empty()) c["reason"] = why;
     (verdict == "valve" ? valve : verdict == "code" ? code : undetermined)++;
+    if (verdict == "code" && c.contains("code_change") && std::abs(c["code_change"].get<double>()) > f.allowed)
+      ++code_replayed;
     if (verdict == "undetermined" && first_undetermined.empty()) first_undetermined = f.case_name + " " + f.metric + ": " + why;
     cases.push_back(std::move(c));
   }
@@ -335,6 +439,11 @@ regress::Json BenchTwins::Attribute(const regress::RegressResult& result,
     out["verdict"] = "valve";
     out["reason"] = "the same code on tonight's identified valve reproduces every regressed metric (the valve of "
                     "the baseline's night does not)";
+  } else if (code_replayed == code) {
+    out["verdict"] = "code";
+    out["reason"] = "tonight's code on the baseline's night's valve makes at least half of every regressed metric's "
+                    "change, and tonight's identified valve under the baseline's code (" + baseline_code.from +
+                    ") stays within the suite's allowance: the code changed";
   } else {
     out["verdict"] = "code";
     out["reason"] = "tonight's identified valve, under the same code, stays within the suite's allowance of the "

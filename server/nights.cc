@@ -5,9 +5,12 @@
 #include <chrono>
 #include <set>
 
+#include <fmt/format.h>
 #include <spdlog/spdlog.h>
 #include <cstdio>
 
+#include "db/records.h"
+#include "experiment/spec.h"
 #include "regress/compare.h"
 #include "regress/cron.h"
 #include "regress/suite.h"
@@ -278,15 +281,47 @@ StatusOr<std::int64_t> NightScheduler::RunNight(double fire_unix_s) {
   regress::Json j = regress::ResultToJson(r);
   j["started_unix_s"] = started_unix_s;
   j["night_number"] = night_number;
-  TwinNight(date, r, case_specs, case_benches, baseline->created_unix_s, &health, &j);
+  TwinNight(date, r, case_specs, case_benches, *baseline, &health, &j);
   j["health"] = health;
   return SaveNight(date, batch_id, r.verdict(), j.dump(), clock_());
+}
+
+BaselineCode NightScheduler::BaselineCodeOf(const regress::Baseline& baseline,
+                                            const std::map<std::string, StoredCheck>& suites) {
+  // The baseline's own runs when its source names a batch of this server ("benchctl baseline set --batch"); else
+  // the suite's runs of the night whose valve stands for the baseline's (the last night that started before it was
+  // made; none: the first night stored, as the replay's valve then is the bench's first check).
+  BaselineCode out;
+  std::int64_t batch = db::ServerBatchOfBaselineSource(baseline.source);
+  if (batch > 0) {
+    out.from = fmt::format("the baseline's batch {}", batch);
+  } else {
+    auto night = BaselineNight(suites, baseline.created_unix_s);
+    if (!night && !suites.empty()) night = *suites.begin();
+    if (!night) return out;
+    batch = night->second.batch_id;
+    out.from = fmt::format("night {}'s suite, batch {}", night->first, batch);
+  }
+  auto store = pool_->Acquire();
+  auto listed = store.ok() ? runs::ListBatch(store->get(), batch) : StatusOr<std::vector<db::RunRecord>>(store.status());
+  if (!listed.ok()) {
+    spdlog::warn("the baseline's code ({}): {}", out.from, listed.status().message());
+    return BaselineCode{};
+  }
+  for (const auto& run : *listed) {
+    const std::string name = run.key.CaseName();
+    if (out.specs.count(name)) continue;  // each case's first run, as tonight's (RunNight's case_specs)
+    auto spec = experiment::ParseSpecJson(run.spec_json);
+    if (spec.ok()) out.specs.emplace(name, std::move(*spec));
+  }
+  return out;
 }
 
 void NightScheduler::TwinNight(const std::string& date, const regress::RegressResult& r,
                                const std::map<std::string, experiment::ExperimentSpec>& case_specs,
                                const std::map<std::string, std::vector<std::string>>& case_benches,
-                               double baseline_created_unix_s, regress::Json* health, regress::Json* j) {
+                               const regress::Baseline& baseline, regress::Json* health, regress::Json* j) {
+  const double baseline_created_unix_s = baseline.created_unix_s;
   bool checked = false;
   for (const auto& h : *health) checked = checked || h.contains("batch_id");
   if (!checked) return;
@@ -355,7 +390,7 @@ void NightScheduler::TwinNight(const std::string& date, const regress::RegressRe
       const auto night = BaselineNight(stored.checks[bench], baseline_created_unix_s);
       twins_.UseBaselineNight(bench, night ? night->first : "", night ? night->second.batch_id : 0);
     }
-    (*j)["cause"] = twins_.Attribute(r, case_specs, case_benches);
+    (*j)["cause"] = twins_.Attribute(r, case_specs, case_benches, BaselineCodeOf(baseline, stored.suites));
     spdlog::info("night {}: cause {}: {}", date, (*j)["cause"].value("verdict", ""),
                  (*j)["cause"].value("reason", ""));
   }

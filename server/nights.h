@@ -55,12 +55,15 @@ class NightScheduler {
   // The lab's number for the night `date`: 1 + the distinct other nights stored (the newest 1000).
   StatusOr<int> NightNumber(const std::string& date);
   // The bench twin's part of a night (server/bench_twin.h): each checked bench's values and flags into its
-  // `health` entry, and a regressed night's cause into j["cause"] (against the valve of the night the baseline,
-  // made at `baseline_created_unix_s`, was measured on).
+  // `health` entry, and a regressed night's cause into j["cause"] (against the valve of the night the baseline was
+  // measured on, and its code: the baseline's batch when its source names one here, else that night's suite).
   void TwinNight(const std::string& date, const regress::RegressResult& r,
                  const std::map<std::string, experiment::ExperimentSpec>& case_specs,
-                 const std::map<std::string, std::vector<std::string>>& case_benches, double baseline_created_unix_s,
+                 const std::map<std::string, std::vector<std::string>>& case_benches, const regress::Baseline& baseline,
                  regress::Json* health, regress::Json* j);
+  // The code the baseline was measured with (server/bench_twin.h BaselineCode); empty with the reason logged when
+  // its runs are not in the store.
+  BaselineCode BaselineCodeOf(const regress::Baseline& baseline, const std::map<std::string, StoredCheck>& suites);
   StatusOr<std::int64_t> SaveNight(const std::string& date, std::int64_t batch_id, const std::string& verdict,
                                    const std::string& result_json, double finished_unix_s);
 

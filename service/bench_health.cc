@@ -54,15 +54,18 @@ StatusOr<StoredHealth> LoadStoredHealth(db::Store* store, const std::string& bef
     auto rec = store->GetRegression(brief.id);  // listings carry no result JSON
     if (!rec.ok()) return rec.status();
     const auto j = regress::Json::parse(rec->result_json, nullptr, false);
-    if (!j.is_object() || !j.contains("health") || !j["health"].is_array()) continue;
+    if (!j.is_object()) continue;
+    double started = 0.0;
+    if (j.contains("started_unix_s") && j["started_unix_s"].is_number()) started = j["started_unix_s"].get<double>();
+    if (!std::isfinite(started)) started = 0.0;
+    if (brief.batch_id > 0) out.suites[brief.night] = {started, brief.batch_id};
+    if (!j.contains("health") || !j["health"].is_array()) continue;
     for (const auto& h : j["health"]) {
       if (!h.is_object() || !h.contains("bench") || !h["bench"].is_string() || !h.contains("batch_id") ||
           !h["batch_id"].is_number_integer())
         continue;
       const std::string bench = h["bench"].get<std::string>();
-      double started = 0.0;
-      if (j.contains("started_unix_s") && j["started_unix_s"].is_number()) started = j["started_unix_s"].get<double>();
-      out.checks[bench][brief.night] = {std::isfinite(started) ? started : 0.0, h["batch_id"].get<std::int64_t>()};
+      out.checks[bench][brief.night] = {started, h["batch_id"].get<std::int64_t>()};
       auto f = out.first_check.find(bench);
       if (f == out.first_check.end() || brief.night < f->second.first)
         out.first_check[bench] = {brief.night, h["batch_id"].get<std::int64_t>()};

@@ -41,6 +41,9 @@ struct StoredHealth {
   std::map<std::string, std::pair<std::string, std::int64_t>> first_check;  // bench -> (night, batch)
   std::map<std::string, std::map<std::string, StoredCheck>> checks;        // bench -> night -> its check
   std::map<std::string, StoredAnchor> anchor;                              // bench -> its newest moved anchor
+  // night -> its suite's batch and when the night started: the code each night ran (the replay's baseline code,
+  // server/bench_twin.h)
+  std::map<std::string, StoredCheck> suites;
 };
 
 // A night's "anchor_refit" block (StoredAnchor without its night) and back; errors name the field.

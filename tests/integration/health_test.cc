@@ -297,6 +297,50 @@ TEST(DecideCase, ValveCodeOrWhyItCannotTell) {
   EXPECT_NE(both.why.find("both changed"), std::string::npos) << both.why;
 }
 
+// The same with the baseline's code replayed (server::DecideCase(CaseReplay)): the 60-night lab's night 25 on
+// values (the PI law's gain cut on a bench whose R the tracking flagged): tonight's code on the baseline's valve
+// makes the change, tonight's valve under the baseline's code does not: "code", the flag said in the reason. A
+// spec change the metric does not see leaves the rules above; each undetermined outcome says which parts reach.
+TEST(DecideCase, TheBaselinesCodeOnBothValves) {
+  const std::string flag = "bench emu-1's R up since 2026-10-21";
+  server::CaseReplay r{2.4e-3, 1.0e-4, 1.2e-4, 2e-5, flag};
+  EXPECT_EQ(server::DecideCase(r).verdict, "undetermined");  // the baseline's code not known: as before
+  r.baseline_code_known = true;
+  r.code_change = 2.3e-3;
+  r.valve_change_baseline_code = 5e-6;
+  r.sigma_baseline_code = 2e-6;
+  const auto code = server::DecideCase(r);
+  EXPECT_EQ(code.verdict, "code");
+  EXPECT_NE(code.why.find("the valve changed since the baseline (" + flag), std::string::npos) << code.why;
+  EXPECT_NE(code.why.find("under the baseline's code tonight's valve makes 0 % of the change (5e-06)"),
+            std::string::npos) << code.why;
+  r.valve_change_baseline_code = -2e-4;  // against the failure (the good law on a warmer coil): none of it
+  EXPECT_EQ(server::DecideCase(r).verdict, "code");
+  r.valve_change_baseline_code = 5e-6;
+  r.sigma_baseline_code = 7e-4;  // the valve's part, 2 sigma toward the failure, could make half of it
+  EXPECT_NE(server::DecideCase(r).why.find("the replay cannot resolve whether the valve makes half"),
+            std::string::npos) << server::DecideCase(r).why;
+  r.sigma_baseline_code = 2e-6;
+  r.valve_change_baseline_code = 1.5e-3;  // each alone makes half
+  EXPECT_NE(server::DecideCase(r).why.find("both changed: tonight's code on the baseline's valve makes 96 %"),
+            std::string::npos) << server::DecideCase(r).why;
+  r.code_change = 3e-4;  // beyond the allowance, under half: the valve's
+  EXPECT_EQ(server::DecideCase(r).verdict, "valve");
+  r.valve_change_baseline_code = 5e-4;  // and neither makes half
+  EXPECT_NE(server::DecideCase(r).why.find("neither makes half the change alone"), std::string::npos);
+  r.valve_change_baseline_code = 5e-6;  // the valve's part none, the code's under half: the code, unless flagged
+  EXPECT_EQ(server::DecideCase(r).verdict, "undetermined");
+  r.changed_since_baseline.clear();
+  EXPECT_EQ(server::DecideCase(r).verdict, "code");
+  r.changed_since_baseline = flag;
+  r.code_change = 8e-5;  // within the allowance: another seed's jitter, not a change this metric sees
+  r.valve_change = 2e-5;
+  EXPECT_NE(server::DecideCase(r).why.find("the code changed too, or the replay misses"), std::string::npos)
+      << "flagged: the rules above";
+  r.changed_since_baseline.clear();
+  EXPECT_EQ(server::DecideCase(r).verdict, "code");
+}
+
 // Waits until the server has stored `n` nights; returns them newest first (an empty array on timeout).
 nlohmann::json WaitForNights(const std::string& addr, std::size_t n, int timeout_s) {
   const std::string cmd =
@@ -467,6 +511,57 @@ TEST(BenchTwin, ACodeRegressionOnAnUnchangedValveIsNamedAsTheCode) {
   ASSERT_EQ(k["benches"].size(), 1u) << k.dump(1);
   EXPECT_EQ(k["benches"][0]["sessions"].size(), 3u) << k.dump(1);
   EXPECT_TRUE(k["flags"].empty()) << k.dump(1);
+}
+
+// The 60-night lab's night 25 (docs/track.md): the PI law's gain cut tenfold on a bench whose coil's resistance
+// the tracking has flagged. The bench's R is 5 % higher from night 6; once night 9 is stored (R flagged by then,
+// as in AValveThatChangedIsNamedAsTheCauseOfTheRegressedNights) the suite's PI hold is swapped for the worse one.
+// Every night that ran it regresses on the PI hold's RMSE, and that metric's cause is `code`, the flag named in
+// its reason: the baseline's code (the first night's suite, the baseline file being older than every night) on
+// tonight's valve does not reproduce the failure, tonight's code on the first night's valve does. Before the
+// baseline's code was replayed this said `undetermined` (the flag was not overruled by the replay's small part).
+TEST(BenchTwin, ACodeRegressionOnAFlaggedValveIsTheCodesWhenTheBaselinesCodeDoesNotReproduceIt) {
+  constexpr int kNights = 12, kSwapAfter = 9;
+  const std::string dir = ::testing::TempDir() + "/vb-twin-flagged-code-" + std::to_string(::getpid());
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  for (const char* f : {"ci.json", "ci-current-hold.json"}) std::filesystem::copy_file(kSuites + f, dir + "/" + f);
+  const std::string benches = R"([{"name": "emu-a", "kind": "emulated", "model": {"preset": "taghizadeh2009"}, )" +
+                              std::string(kHealth) +
+                              R"(, "drift": [{"parameter": "R", "step": 0.05, "from_night": 6}]}])";
+  testing::ServerProcess server(dir, R"("nights": {"cron": "0 2 * * *", "suite_file": "ci.json", "baseline_file": ")" +
+                                         kSuites + R"(ci-baseline.json"})", benches);
+  server.AddArg("--simulate-nights");
+  server.AddArg(std::to_string(kNights));
+  const std::string addr = server.Start();
+  ASSERT_FALSE(addr.empty()) << server.Log();
+  ASSERT_EQ(WaitForNights(addr, kSwapAfter, 300).size(), static_cast<std::size_t>(kSwapAfter)) << server.Log();
+  ASSERT_EQ(testing::WriteWorseCiSuite(kSuites, dir + "/worse"), "");
+  std::filesystem::rename(dir + "/worse/ci-current-hold.json", dir + "/ci-current-hold.json");
+  ASSERT_EQ(WaitForNights(addr, kNights, 200).size(), static_cast<std::size_t>(kNights)) << server.Log();
+
+  // Each night's whole record (its cause per regressed metric), from the server's store.
+  auto store = db::OpenSqliteStore(server.db_path());
+  ASSERT_TRUE(store.ok()) << store.status().message();
+  auto briefs = (*store)->ListRegressions(/*nights_only=*/true, 100);
+  ASSERT_TRUE(briefs.ok()) << briefs.status().message();
+  int code_nights = 0, flagged_code_nights = 0;
+  for (const auto& b : *briefs) {
+    auto rec = (*store)->GetRegression(b.id);
+    ASSERT_TRUE(rec.ok()) << rec.status().message();
+    const auto j = nlohmann::json::parse(rec->result_json);
+    if (!j.contains("cause")) continue;
+    for (const auto& c : j["cause"]["cases"]) {
+      if (c["case"] != "hold/pi" || c["metric"] != "rmse" || c["observed_change"].get<double>() < 1e-3) continue;
+      ++code_nights;  // the cut gain's RMSE: 0.8 mA -> about 3 mA
+      EXPECT_EQ(c["verdict"], "code") << b.night << ": " << c.dump(1) << "\n" << server.Log();
+      EXPECT_NE(c.value("baseline_code", "").find("'s suite, batch"), std::string::npos) << c.dump(1);
+      if (c.value("reason", "").find("the valve changed since the baseline (bench emu-a's R up") != std::string::npos)
+        ++flagged_code_nights;
+    }
+  }
+  EXPECT_GE(code_nights, 2) << "nights 11 and 12 at least read the worse suite";
+  EXPECT_GE(flagged_code_nights, 2) << server.Log();
 }
 
 // A lab re-baselines after its valve changed: the failure after that is the code's, not the valve's. The bench's
