@@ -413,6 +413,20 @@ regress::Json BenchTwins::Attribute(const regress::RegressResult& result,
       const CaseVerdict d = DecideCase(replay);
       verdict = d.verdict;
       why = d.why;
+      // Where the replay leaves it undetermined, whether the replay is the bench at this operating point: the
+      // identified valves' replays (tonight's code) against what the bench measured on either side. Off by more
+      // than the allowance, the identification does not carry this case (a valve identified from its switch-on
+      // current replays a hold near its edge where the bench's valve is not: docs/track.md).
+      // (The baseline's side under the baseline's code where it is known: the bench measured it under that.)
+      const double base_replay = (code_known ? reference_old_sum : reference_sum) / n;
+      const double off_baseline = base_replay - f.baseline.mean, off_tonight = tonight_sum / n - f.now.mean;
+      c["replay_minus_measured_baseline"] = off_baseline;
+      c["replay_minus_measured_tonight"] = off_tonight;
+      if (verdict == "undetermined" && std::max(std::abs(off_baseline), std::abs(off_tonight)) > f.allowed)
+        why += fmt::format("; the identified valves replay this case at {:.4g} and {:.4g} where the bench measured "
+                           "{:.4g} and {:.4g}: the replay is not the bench here (a health run at this case's "
+                           "operating point would pin it)",
+                           base_replay, tonight_sum / n, f.baseline.mean, f.now.mean);
     } else {
       verdict = "undetermined";
     }

@@ -552,6 +552,12 @@ TEST(BenchTwin, ACodeRegressionOnAFlaggedValveIsTheCodesWhenTheBaselinesCodeDoes
     const auto j = nlohmann::json::parse(rec->result_json);
     if (!j.contains("cause")) continue;
     for (const auto& c : j["cause"]["cases"]) {
+      // The map at duty 0.3 on the warmer coil opens less (the valve's change), near the edge where the valve
+      // identified from its switch-on current is not the bench: where that leaves it undetermined, it says so.
+      const double replay_change = c.value("valve_change", 0.0), seen = c["observed_change"].get<double>();
+      if (c["verdict"] == "undetermined" && std::abs(seen - replay_change) > 2.0 * c["allowed"].get<double>()) {
+        EXPECT_NE(c.value("reason", "").find("the replay is not the bench here"), std::string::npos) << c.dump(1);
+      }
       if (c["case"] != "hold/pi" || c["metric"] != "rmse" || c["observed_change"].get<double>() < 1e-3) continue;
       ++code_nights;  // the cut gain's RMSE: 0.8 mA -> about 3 mA
       EXPECT_EQ(c["verdict"], "code") << b.night << ": " << c.dump(1) << "\n" << server.Log();
