@@ -31,6 +31,11 @@ constexpr double kMu0 = 4e-7 * M_PI;
 constexpr int kPolishReserve = 3000;
 
 double Seconds(Clock::time_point since) { return std::chrono::duration<double>(Clock::now() - since).count(); }
+// Where a stage started: the time and the work left (its steps: the difference).
+struct StageMark {
+  Clock::time_point t;
+  std::int64_t work;
+};
 
 std::vector<double> Smooth3(const std::vector<double>& v) {
   std::vector<double> s(v.size());
@@ -94,15 +99,17 @@ StatusOr<model::PlantParams> PlantOf(const model::PlantParams& family, const std
 
 // The runs' predictions on `threads` threads: the runs are independent (the identified model has no slow state
 // carried from run to run).
+// `steps` (when not null) gets the solver's steps over every run added: the work.
 StatusOr<std::vector<std::vector<double>>> PredictRuns(const Dataset& ds, const model::PlantParams& plant,
                                                        const std::vector<bool>& need, const model::SolverOptions& solver,
-                                                       int threads) {
+                                                       int threads, std::uint64_t* steps = nullptr) {
   std::vector<std::size_t> idx;
   for (std::size_t r = 0; r < ds.runs.size(); ++r)
     if (need.empty() || need[r]) idx.push_back(r);
   std::vector<std::vector<double>> out(ds.runs.size());
   const int nt = std::clamp(threads, 1, std::max<int>(1, static_cast<int>(idx.size())));
   std::vector<Status> st(nt, Status::Ok());
+  std::vector<std::uint64_t> counted(nt, 0);
   auto work = [&](int t) {
     PredictOptions po;
     po.solver = solver;
@@ -114,6 +121,7 @@ StatusOr<std::vector<std::vector<double>>> PredictRuns(const Dataset& ds, const 
         st[t] = p.status();
         return;
       }
+      counted[t] += p->ode_steps;
       out[idx[j]] = std::move(p->i_A[idx[j]]);
     }
   };
@@ -124,6 +132,8 @@ StatusOr<std::vector<std::vector<double>>> PredictRuns(const Dataset& ds, const 
     for (int t = 0; t < nt; ++t) pool.emplace_back(work, t);
     for (auto& th : pool) th.join();
   }
+  if (steps != nullptr)
+    for (auto c : counted) *steps += c;
   for (const auto& s : st)
     if (!s.ok()) return s;
   return out;
@@ -157,7 +167,17 @@ struct Stage {
   // Evaluations left for the whole identification (shared by every copy of the stage; MovingIdentifyOptions::
   // max_evaluations): the optimisers stop when it reaches 0.
   int* remaining = nullptr;
-  bool Exhausted() const { return remaining != nullptr && *remaining <= 0; }
+  // The solver's steps left for the whole identification (MovingIdentifyOptions::max_ode_steps; shared likewise):
+  // the work, which bounds the time where an evaluation's cost varies (a stiff candidate takes up to 17 times the
+  // steps of a typical one). `global_work_reserve`: a global search stops when the work left reaches it, so that
+  // its local polish and stage 6 keep theirs.
+  std::int64_t* work_left = nullptr;
+  std::int64_t global_work_reserve = 0;
+  int global_evaluations_done = 0;  // the global search's evaluations (Run), to say when the work ended it early
+  bool Exhausted() const {
+    return (remaining != nullptr && *remaining <= 0) || (work_left != nullptr && *work_left <= 0);
+  }
+  bool GlobalExhausted() const { return Exhausted() || (work_left != nullptr && *work_left <= global_work_reserve); }
   int evaluations = 0;
   double best = INFINITY;
   // What an evaluation that makes no valve, fails to simulate or gives a non-finite error returns: a large finite
@@ -204,7 +224,10 @@ struct Stage {
       if (!std::isfinite(v[p])) return fail(std::string("parameter ") + kNames[p] + " is not finite");
     auto p = plant_of(v);
     if (!p.ok()) return fail(p.status().message());
-    auto pred = PredictRuns(*ds, *p, mask, solver, threads);
+    std::uint64_t steps = 0;
+    auto pred = PredictRuns(*ds, *p, mask, solver, threads, &steps);
+    // A failed simulation's work counts too: the watchdog's are the costliest.
+    if (work_left != nullptr) *work_left -= static_cast<std::int64_t>(std::min<std::uint64_t>(steps, INT64_MAX / 2));
     if (!pred.ok()) return fail(pred.status().message());
     const double e = RmsOver(*ds, *pred, mask);
     if (!std::isfinite(e)) return fail("the simulated current is not finite");
@@ -228,7 +251,8 @@ struct Stage {
       } g{this, INFINITY, u};
       auto gf = [](const std::vector<double>& x, std::vector<double>&, void* data) -> double {
         auto* c = static_cast<GCtx*>(data);
-        if (c->s->Exhausted()) throw nlopt::forced_stop();
+        if (c->s->GlobalExhausted()) throw nlopt::forced_stop();
+        ++c->s->global_evaluations_done;
         const double e = c->s->Rms(c->s->At(x));
         if (e < c->best) c->best = e, c->at = x;
         return e;
@@ -799,6 +823,10 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
 
   // ---- the stages ----------------------------------------------------------------------------------------
   int remaining = options.max_evaluations;
+  // The work budget: the solver's steps (0: none).
+  const std::int64_t work_budget = options.max_ode_steps > 0 ? options.max_ode_steps : INT64_MAX / 4;
+  std::int64_t work_left = work_budget;
+  auto mark = [&] { return StageMark{Clock::now(), work_left}; };
   Stage st;
   st.ds = &ds;
   st.family = &family;
@@ -818,6 +846,7 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
   }
   st.threads = options.threads;
   st.remaining = &remaining;
+  st.work_left = &work_left;
   st.value = v;
   {
     double peak = 0.0;
@@ -827,11 +856,12 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
   }
   st.plant_of = [&family](const std::array<double, kCount>& x) { return PlantOf(family, x); };
   auto set_box = [&](int p, double lo_f, double hi_f) { st.box[p] = {st.value[p] / lo_f, st.value[p] * hi_f, true}; };
-  auto record_outer = [&](const std::string& name, Clock::time_point since, int evals, double best) {
-    id.stages.push_back({name, best, evals, Seconds(since)});
-    char buf[200];
-    std::snprintf(buf, sizeof buf, "stage %s: fit runs %.3f mA RMS after %d evaluations (%.1f s)", name.c_str(),
-                  best * 1e3, evals, Seconds(since));
+  auto record_outer = [&](const std::string& name, const StageMark& since, int evals, double best) {
+    const auto steps = static_cast<std::uint64_t>(since.work - work_left);
+    id.stages.push_back({name, best, evals, Seconds(since.t), steps});
+    char buf[300];
+    std::snprintf(buf, sizeof buf, "stage %s: fit runs %.3f mA RMS after %d evaluations, %.3g solver steps (%.1f s)",
+                  name.c_str(), best * 1e3, evals, static_cast<double>(steps), Seconds(since.t));
     say(buf);
   };
 
@@ -897,7 +927,7 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
   // worse than its start (a budget cut short, a box that had to move the start) is undone.
   auto polish = [&] {
     double before = st.Rms(st.value);
-    for (int pass = 0; pass < 10 && remaining > 0; ++pass) {
+    for (int pass = 0; pass < 10 && remaining > 0 && work_left > 0; ++pass) {
       const Stage start = st;
       stage3_boxes(st, 1.3, saturation);
       st.best = INFINITY;
@@ -939,7 +969,7 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
     eddy = w_eddy;
     if (!saturation) st.value[kBs] = 0.0;
     if (!eddy) st.value[kRp] = 1e6;
-    const auto since = Clock::now();
+    const auto since = mark();
     st.mask = fit;
     contain_start = true;
     polish();
@@ -949,7 +979,7 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
     // Stage 1, electrical: the samples before the plunger moves (up to 85 % of the first peak) with the plunger
     // held at the lower stop, where the coil is L0 with the eddy branch.
     {
-      const auto since = Clock::now();
+      const auto since = mark();
       Dataset early = ds;
       std::vector<bool> mask(ds.runs.size(), false);
       for (std::size_t r = 0; r < ds.runs.size(); ++r) {
@@ -998,7 +1028,7 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
     // which makes basins).
     auto stages_23 = [&](Stage st, const std::array<double, 3>& kmb, const std::string& tag) {
       auto set_box = [&](int p, double lo_f, double hi_f) { st.box[p] = {st.value[p] / lo_f, st.value[p] * hi_f, true}; };
-      auto record = [&](const std::string& name, Clock::time_point since, int evals, double best) {
+      auto record = [&](const std::string& name, const StageMark& since, int evals, double best) {
         record_outer(name + tag, since, evals, best);
       };
       st.value[kK] = kmb[0];
@@ -1006,7 +1036,7 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
       st.value[kB] = kmb[2];
       // Stage 2, magnetic and mechanical on whole curves, from a start the grid scan below chose.
       if (any_motion) {
-        const auto since = Clock::now();
+        const auto since = mark();
         const int before = st.evaluations;
         st.best = INFINITY;
         // L1 lies between L0 and what the held gap allows.
@@ -1032,7 +1062,7 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
       }
       // Stage 3: everything together.
       {
-        const auto since = Clock::now();
+        const auto since = mark();
         const int before = st.evaluations;
         st.best = INFINITY;
         stage3_boxes(st, 1.1, false);
@@ -1096,8 +1126,8 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
       Stage best4 = st;
       best4.best = INFINITY;
       constexpr std::size_t kForms = 3;  // Frohlich's knee, tanh, arctan (model/coil.h)
-      for (std::size_t e = 0; e < kForms * ends.size() && remaining > 0; ++e) {
-        const auto since = Clock::now();
+      for (std::size_t e = 0; e < kForms * ends.size() && remaining > 0 && work_left > 0; ++e) {
+        const auto since = mark();
         Stage s4 = ends[e / kForms];
         s4.value[kTanh] = static_cast<double>(e % kForms);  // every form the effect has
         s4.best = INFINITY;
@@ -1135,8 +1165,13 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
     if (any_motion && st.best > kReferenceIdentified * id.noise_floor_A) {
       const int global_evals = std::min(20000, remaining - 700 - kPolishReserve);
       if (global_evals >= 200) {
-        const auto since = Clock::now();
+        const auto since = mark();
         Stage g = st;
+        // The work kept back for the local polish after the search and stage 6, as the evaluations are: theirs
+        // at the mean work of an evaluation so far.
+        const double per_evaluation =
+            static_cast<double>(work_budget - work_left) / std::max(1, options.max_evaluations - remaining);
+        g.global_work_reserve = static_cast<std::int64_t>(per_evaluation * (700 + kPolishReserve));
         g.l1_ratio = false;  // boxes in L1 itself, a decade wide (PlantOf refuses a ratio outside the held gap's)
         const int before = g.evaluations;
         g.best = INFINITY;
@@ -1190,6 +1225,11 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
         }
         if (with_saturation) g.free.push_back(kBs);
         g.Run(600, global_evals);
+        if (g.global_evaluations_done < global_evals && work_left <= g.global_work_reserve)
+          id.notes.push_back("the work budget (" + Fmt(static_cast<double>(options.max_ode_steps)) +
+                             " solver steps) ended the global search after " +
+                             std::to_string(g.global_evaluations_done) + " of its " + std::to_string(global_evals) +
+                             " evaluations: candidates that simulate slowly (a light, stiff plunger) took it");
         record_outer("5 global (CRS2, " + std::to_string(global_evals) + " evaluations) and local, the fit being " +
                          Fmt(st.best / id.noise_floor_A) + "x the noise floor",
                      since, g.evaluations - before, g.best);
@@ -1201,8 +1241,8 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
       }
     }
     // Stage 6: the polish (above) from the best end.
-    if (remaining > 0) {
-      const auto since = Clock::now();
+    if (remaining > 0 && work_left > 0) {
+      const auto since = mark();
       const int before = st.evaluations;
       st.ds = &ds;
       st.mask = fit;
@@ -1497,9 +1537,13 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
   }
   id.evaluations = st.evaluations;
   id.seconds = Seconds(t0);
+  id.ode_steps = static_cast<std::uint64_t>(work_budget - work_left);
   if (remaining <= 0)
     id.notes.push_back("the evaluation budget (" + std::to_string(options.max_evaluations) +
                        " evaluations) ended a stage early: the fit may not have converged");
+  else if (work_left <= 0)
+    id.notes.push_back("the work budget (" + Fmt(static_cast<double>(options.max_ode_steps)) +
+                       " solver steps) ended a stage early: the fit may not have converged");
   return id;
 }
 
@@ -1532,7 +1576,11 @@ std::string MovingIdentificationJson(const MovingIdentification& id) {
   j["notes"] = id.notes;
   nlohmann::ordered_json stages = nlohmann::ordered_json::array();
   for (const auto& s : id.stages)
-    stages.push_back({{"stage", s.name}, {"fit_rmse_A", s.fit_rmse_A}, {"evaluations", s.evaluations}, {"seconds", s.seconds}});
+    stages.push_back({{"stage", s.name},
+                      {"fit_rmse_A", s.fit_rmse_A},
+                      {"evaluations", s.evaluations},
+                      {"ode_steps", s.ode_steps},
+                      {"seconds", s.seconds}});
   j["stages"] = stages;
   auto num = [](double x) { return std::isfinite(x) ? nlohmann::ordered_json(x) : nlohmann::ordered_json(nullptr); };
   j["fit_rmse_A"] = id.fit_rmse_A;
@@ -1566,6 +1614,7 @@ std::string MovingIdentificationJson(const MovingIdentification& id) {
     if (!id.prediction_undetermined.empty()) j["prediction_reason"] = id.prediction_undetermined;
   }
   j["evaluations"] = id.evaluations;
+  j["ode_steps"] = id.ode_steps;
   j["seconds"] = id.seconds;
   return j.dump(2);
 }

@@ -14,6 +14,7 @@
 // (l_c, A_e, x_t) are held at the family's values and the report names the combinations the data determine.
 #pragma once
 
+#include <cstdint>
 #include <functional>
 #include <map>
 #include <string>
@@ -126,6 +127,13 @@ struct MovingIdentifyOptions {
   // and on 2 idle cores an identification's wall time is at most its CPU time (docs/real-data.md, "A population
   // of valves").
   int max_evaluations = 20000;
+  // The work for all stages, in the solver's accepted and rejected steps (0: none), beside the evaluations: an
+  // evaluation's cost varies 20-fold (a candidate with a light plunger resonates at kHz and takes ~40000 steps
+  // where a typical one takes ~2000), so a count of evaluations does not bound the time and a count of steps does,
+  // deterministically. Off by default: at 1.5e8 the population's slowest valve went from 82 to 73 s and its
+  // global search got none of its evaluations (docs/real-data.md, "The work, counted"); a default needs the
+  // population's draws run again with it.
+  std::int64_t max_ode_steps = 0;
   int threads = 2;          // runs simulated concurrently
   model::SolverOptions solver = AttributionOptions::FastSolver();
   std::function<void(const std::string&)> progress;  // one line per stage (benchctl prints it on stderr)
@@ -153,6 +161,7 @@ struct MovingIdentification {
     double fit_rmse_A = 0.0;
     int evaluations = 0;
     double seconds = 0.0;
+    std::uint64_t ode_steps = 0;  // the solver's steps: the stage's work
   };
   std::vector<Stage> stages;
   double fit_rmse_A = 0.0;
@@ -178,6 +187,7 @@ struct MovingIdentification {
   std::vector<model::PlantParams> repeatability_draws;
   int evaluations = 0;
   double seconds = 0.0;
+  std::uint64_t ode_steps = 0;  // the solver's steps over every evaluation: the work
 };
 
 // True when the dataset is a moving valve seen through its switch-on current: waveform runs whose gate rises once

@@ -20,9 +20,15 @@ Phase PhaseOf(const model::Simulator& sim) {
 
 // Samples at arbitrary instants from rest: the gate is 0 before the first edge and toggles at each edge.
 Status PredictSamples(const model::PlantParams& plant, const model::DriverParams& driver, const RunData& run,
-                      const PredictOptions& opt, std::vector<double>* i_A, std::vector<Phase>* phase) {
+                      const PredictOptions& opt, std::vector<double>* i_A, std::vector<Phase>* phase,
+                      std::uint64_t* steps) {
   model::Plant p(plant);
   model::Simulator sim(p, driver, model::Conditions{run.supply_V, run.supply_pressure_Pa}, opt.solver);
+  struct Count {  // the work, however the function returns
+    const model::Simulator& sim;
+    std::uint64_t* steps;
+    ~Count() { *steps += sim.ode_steps(); }
+  } count{sim, steps};
   std::size_t edge = 0;
   int gate = 0;
   for (double t : run.t_s) {
@@ -42,9 +48,15 @@ Status PredictSamples(const model::PlantParams& plant, const model::DriverParams
 
 // Periodic steady state by shooting on the current at the rising edge, then the readings of one period.
 Status PredictPeriodic(const model::PlantParams& plant, const model::DriverParams& driver, const RunData& run,
-                       const PredictOptions& opt, std::vector<double>* i_A, std::vector<Phase>* phase) {
+                       const PredictOptions& opt, std::vector<double>* i_A, std::vector<Phase>* phase,
+                       std::uint64_t* steps) {
   model::Plant p(plant);
   model::Simulator sim(p, driver, model::Conditions{run.supply_V, run.supply_pressure_Pa}, opt.solver);
+  struct Count {
+    const model::Simulator& sim;
+    std::uint64_t* steps;
+    ~Count() { *steps += sim.ode_steps(); }
+  } count{sim, steps};
   const double T = 1.0 / run.pwm_Hz, on = run.on_time_s;
   const bool always_on = on >= T;
   double t = 0.0;
@@ -186,6 +198,7 @@ StatusOr<Predicted> Predict(const Dataset& ds, const model::PlantParams& plant, 
         }
         auto rep = ReplayRun(*p, driver, in, opt.solver);
         if (!rep.ok()) return rep.status().WithContext("run " + run.id);
+        out.ode_steps += rep->ode_steps;
         if (chain) {
           have_prev = true;
           prev_end_s = run.t_start_s + static_cast<double>(run.gate.size() - 1) * run.sample_period_s;
@@ -196,8 +209,8 @@ StatusOr<Predicted> Predict(const Dataset& ds, const model::PlantParams& plant, 
         ph = std::move(rep->phase);
         break;
       }
-      case RunKind::kSamples: st = PredictSamples(*p, driver, run, opt, &i_A, &ph); break;
-      case RunKind::kPeriodic: st = PredictPeriodic(*p, driver, run, opt, &i_A, &ph); break;
+      case RunKind::kSamples: st = PredictSamples(*p, driver, run, opt, &i_A, &ph, &out.ode_steps); break;
+      case RunKind::kPeriodic: st = PredictPeriodic(*p, driver, run, opt, &i_A, &ph, &out.ode_steps); break;
     }
     if (!st.ok()) return st.WithContext("run " + run.id);
     if (ds.sensor.offset_A != 0.0)

@@ -15,6 +15,7 @@
 #pragma once
 
 #include <cstddef>
+#include <cstdint>
 #include <vector>
 
 #include "common/status.h"
@@ -28,6 +29,7 @@ namespace vb::gap {
 struct Predicted {
   std::vector<std::vector<double>> i_A;     // per run: one per measured value (empty for runs not asked for)
   std::vector<std::vector<Phase>> phase;    // per run: the model's phase at each value
+  std::uint64_t ode_steps = 0;              // the solver's steps over every run simulated: the work (CPU time)
 };
 
 struct PredictOptions {

@@ -80,6 +80,7 @@ StatusOr<Replay> ReplayRun(const model::PlantParams& plant, const model::DriverP
   sim.EmitPendingSample(&col);
   out.final_dT_K = sim.coil_temperature_rise_K();
   out.final_im_A = sim.play_state_A();
+  out.ode_steps = sim.ode_steps();
   if (out.i_A.size() != n)
     return Status::Internal("replay produced " + std::to_string(out.i_A.size()) + " samples for " +
                             std::to_string(n));

@@ -37,6 +37,7 @@ struct Replay {
   std::vector<Phase> phase;
   double final_dT_K = 0.0;    // coil temperature rise at the end (coil_heating)
   double final_im_A = 0.0;    // core magnetisation state at the end (residual_magnetism)
+  std::uint64_t ode_steps = 0;  // the solver's accepted and rejected steps: the replay's work (its CPU time)
 };
 
 // The status of a simulation the watchdog stopped (model::SolverOptions): Aborted, with when and why.

@@ -79,6 +79,7 @@ struct Tally {
 int main(int argc, char** argv) {
   std::string sets = "practice3,practice4", only;
   int evaluations = vb::gap::MovingIdentifyOptions{}.max_evaluations;
+  std::int64_t ode_steps = -1;  // -1: MovingIdentifyOptions's
   int population = 0;
   // --ablate flow,stribeck,ladder,eddy,core,scope: the same draws with forms of the independent plant taken out,
   // to see which of them the identification's family misses (the draws are made first, so the valves are the same).
@@ -94,6 +95,8 @@ int main(int argc, char** argv) {
       only = argv[++a];
     } else if (arg == "--evaluations" && a + 1 < argc) {
       evaluations = std::atoi(argv[++a]);
+    } else if (arg == "--ode-steps" && a + 1 < argc) {
+      ode_steps = std::atoll(argv[++a]);
     } else if (arg == "--verbose") {
       verbose = true;
     } else if (arg == "--edges") {
@@ -134,14 +137,16 @@ int main(int argc, char** argv) {
       two_supplies = d == "two-supplies";
     } else {
       std::fprintf(stderr, "usage: perf_identify [--sets practice3,practice4|none] [--only SUBSTRING] [--evaluations N] "
-                           "[--population N] [--valves J,K,...] [--seed SEED] [--ablate flow,stribeck,ladder,eddy,core,scope] "
+                           "[--ode-steps N] [--population N] [--valves J,K,...] [--seed SEED] [--ablate flow,stribeck,ladder,eddy,core,scope] "
                            "[--design one-supply|two-supplies] [--verbose] [--edges]\n");
       return 2;
     }
   }
   const auto family = vb::model::Preset("taghizadeh2009");
   if (!family.ok()) return 1;
-  std::printf("load average at the start: %s; %d evaluations per identification\n", LoadAverage().c_str(), evaluations);
+  std::printf("load average at the start: %s; %d evaluations and %lld solver steps per identification\n",
+              LoadAverage().c_str(), evaluations,
+              static_cast<long long>(ode_steps >= 0 ? ode_steps : vb::gap::MovingIdentifyOptions{}.max_ode_steps));
   std::printf("%-18s %-9s %-9s %-52s %-4s %7s %7s\n", "case", "kind", "truth", "result", "ok", "s", "cpu_s");
   Tally all, predict, withheld;
   // The identification's verdict on its own prediction against what the holdouts show (valves), and the band's
@@ -174,6 +179,7 @@ int main(int argc, char** argv) {
         } else {
           vb::gap::MovingIdentifyOptions mo;
           mo.max_evaluations = evaluations;
+          if (ode_steps >= 0) mo.max_ode_steps = ode_steps;
           if (verbose) mo.progress = [](const std::string& l) { std::fprintf(stderr, "  %s\n", l.c_str()); };
           auto id = vb::gap::IdentifyMovingValve(*ds, *family, mo);
           if (!id.ok()) {
@@ -260,8 +266,13 @@ int main(int argc, char** argv) {
     const double c0 = CpuSeconds();
     vb::gap::MovingIdentifyOptions mo;
     mo.max_evaluations = evaluations;
+    if (ode_steps >= 0) mo.max_ode_steps = ode_steps;
     if (verbose) mo.progress = [](const std::string& l) { std::fprintf(stderr, "  %s\n", l.c_str()); };
     auto id = vb::gap::IdentifyMovingValve(ds, *family, mo);
+    if (id.ok() && verbose)
+      std::fprintf(stderr, "  %s: %.4g solver steps, %d evaluations, %.3g us of CPU per step\n",
+                   ("indep_" + std::to_string(j)).c_str(), static_cast<double>(id->ode_steps), id->evaluations,
+                   1e6 * (CpuSeconds() - c0) / std::max<double>(1.0, static_cast<double>(id->ode_steps)));
     const double s = std::chrono::duration<double>(Clock::now() - t0).count();
     const double cpu = CpuSeconds() - c0;
     char buf[200];
@@ -280,6 +291,12 @@ int main(int argc, char** argv) {
     std::snprintf(truth, sizeof truth, "%gV %.2gA", v.supply_V, v.supply_V / v.R_ohm);
     std::printf("%-18s %-9s %-9s %-52s %-4s %7.1f %7.1f\n", name, "predict", truth, buf, ok ? (tight ? "yes" : "yes~") : "NO",
                 s, cpu);
+    // Where the work budget (MovingIdentifyOptions::max_ode_steps) ended a stage: the valves it changed.
+    if (id.ok()) {
+      for (const auto& n : id->notes)
+        if (n.rfind("the work budget", 0) == 0)
+          std::printf("    %s: %.3g solver steps; %s\n", name, static_cast<double>(id->ode_steps), n.c_str());
+    }
     // Is a miss said beforehand (the identification's own verdict on its prediction,
     // MovingIdentification::prediction_undetermined)? And does the band cover what the holdout shows (RMSE within
     // 3x the noise and the band's spread together)?
