@@ -28,12 +28,16 @@ namespace vb::server {
 // `allowed` (the suite's tolerance plus noise), `valve_change` (tonight's valve minus the baseline's valve, replayed
 // under tonight's code), `sigma` (the replay's repeatability) and, when the tracking saw the valve change since
 // the baseline's night, what changed. "valve": the valve makes at least half the change; "code": its part is within
-// the allowance by 2 sigma and the tracking saw no change; else "undetermined" with why.
+// the allowance by 2 sigma, the tracking saw no change and the replay is the bench (below); else "undetermined"
+// with why.
 struct CaseVerdict {
   std::string verdict, why;
 };
+// `replay_off_tonight`: tonight's valve replayed under tonight's code minus what the bench measured tonight (NaN:
+// not known). "code" also needs it within the allowance: the valve's part read as small is only evidence where
+// the replay is the bench (both sides under one code, so valid whether the code changed or not).
 CaseVerdict DecideCase(double observed_change, double allowed, double valve_change, double sigma,
-                       const std::string& changed_since_baseline);
+                       const std::string& changed_since_baseline, double replay_off_tonight = NAN);
 
 // The same with the baseline's code replayed too, when the case's spec then differs from tonight's: the issue's
 // question taken literally, two factors each changed alone (docs/track.md, "The baseline's code"). `B`: the
@@ -43,6 +47,7 @@ struct CaseReplay {
   double valve_change = 0.0;  // T,t - B,t: tonight's valve under tonight's code (DecideCase above)
   double sigma = 0.0;         // the replay's repeatability (two identifications of one valve)
   std::string changed_since_baseline;
+  double replay_off_tonight = NAN;  // tonight's replay minus tonight's measurement (DecideCase above)
   bool baseline_code_known = false;  // the baseline's spec of this case found, and it differs from tonight's
   double code_change = 0.0;                 // B,t - B,b: tonight's code on the baseline's valve
   double valve_change_baseline_code = 0.0;  // T,b - B,b: tonight's valve under the baseline's code
