@@ -316,7 +316,8 @@ CaseVerdict DecideCase(const CaseReplay& r) {
                         100.0 * valve_share, 100.0 * code_share);
     return v;
   }
-  if (r.changed_since_baseline.empty() && std::abs(r.valve_change_baseline_code) + 2.0 * r.sigma_baseline_code <= r.allowed &&
+  if (r.changed_since_baseline.empty() &&
+      std::abs(r.valve_change_baseline_code) + 2.0 * r.sigma_baseline_code <= r.allowed &&
       !(std::abs(r.replay_off_tonight) > r.allowed))
     // As DecideCase's code rule: the valve's part within the allowance by 2 sigma and no change tracked; the spec
     // changed and moves the metric beyond the allowance, if not by half (the rest: code the spec does not show).
@@ -464,7 +465,8 @@ regress::Json BenchTwins::Attribute(const regress::RegressResult& result,
     out["reason"] = first_undetermined;
   } else if (valve > 0 && code > 0) {
     out["verdict"] = "undetermined";
-    out["reason"] = fmt::format("tonight's valve reproduces {} regressed metric(s) and not {}: both changed", valve, code);
+    out["reason"] =
+        fmt::format("tonight's valve reproduces {} regressed metric(s) and not {}: both changed", valve, code);
   } else if (valve > 0) {
     out["verdict"] = "valve";
     out["reason"] = "the same code on tonight's identified valve reproduces every regressed metric (the valve of "

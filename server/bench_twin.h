@@ -40,8 +40,8 @@ CaseVerdict DecideCase(double observed_change, double allowed, double valve_chan
                        const std::string& changed_since_baseline, double replay_off_tonight = NAN);
 
 // The same with the baseline's code replayed too, when the case's spec then differs from tonight's: the issue's
-// question taken literally, two factors each changed alone (docs/track.md, "The baseline's code"). `B`: the
-// baseline's valve, `T`: tonight's; `b`: the baseline's code, `t`: tonight's.
+// question taken literally, two factors each changed alone (docs/track.md, "The baseline's code replayed too").
+// `B`: the baseline's valve, `T`: tonight's; `b`: the baseline's code, `t`: tonight's.
 struct CaseReplay {
   double observed_change = 0.0, allowed = 0.0;
   double valve_change = 0.0;  // T,t - B,t: tonight's valve under tonight's code (DecideCase above)
@@ -63,7 +63,7 @@ CaseVerdict DecideCase(const CaseReplay& r);
 // The code the baseline was measured with: each case's spec (its first run's) from a stored batch, and which.
 struct BaselineCode {
   std::map<std::string, experiment::ExperimentSpec> specs;  // case -> spec
-  std::string from;  // "the baseline's batch 12" / "night 2026-11-01's suite (batch 40)"
+  std::string from;  // "the baseline's batch 12" / "night 2026-11-01's suite, batch 40"
 };
 
 class BenchTwins {

@@ -303,7 +303,8 @@ BaselineCode NightScheduler::BaselineCodeOf(const regress::Baseline& baseline,
     out.from = fmt::format("night {}'s suite, batch {}", night->first, batch);
   }
   auto store = pool_->Acquire();
-  auto listed = store.ok() ? runs::ListBatch(store->get(), batch) : StatusOr<std::vector<db::RunRecord>>(store.status());
+  auto listed =
+      store.ok() ? runs::ListBatch(store->get(), batch) : StatusOr<std::vector<db::RunRecord>>(store.status());
   if (!listed.ok()) {
     spdlog::warn("the baseline's code ({}): {}", out.from, listed.status().message());
     return BaselineCode{};
