@@ -273,6 +273,21 @@ CaseVerdict DecideCase(double observed_change, double allowed, double valve_chan
 CaseVerdict DecideCase(const CaseReplay& r) {
   // A spec change whose replay on the baseline's valve stays within the allowance is no change this metric sees
   // (another seed's jitter, a field the law does not read): DecideCase's rules, on tonight's code, decide.
+  if (r.spec_is_baseline_code) {
+    // The spec is the one the baseline ran. The valve's part toward the failure, less twice its repeatability, is
+    // beyond the allowance: the valve alone fails the night. Under half the change only because the replay is not
+    // the bench: the measured change less the replayed one is exactly the replay's distance from the bench on the
+    // baseline's side less tonight's. "both changed" would need a code change the spec does not show (the
+    // server's build): the trade, a build changed on the same night as the valve is called the valve's.
+    // Measured in the 60-night lab's fourth run (docs/track.md): the relaxing spring's map nights, 1.13 points of
+    // 2.52 (0.5 allowed, repeatability 0.12), the first night's valve replayed 1.4 points above the bench.
+    const double share = r.valve_change / r.observed_change;
+    if (share > 0.0 && share < 0.5 && std::abs(r.valve_change) - 2.0 * r.sigma > r.allowed)
+      return {"valve", fmt::format("the valve alone moves this metric {:.4g} toward the failure ({:.0f} % of the "
+                                   "change; allowed {:.4g}, the replay repeatable to {:.2g}), and the spec is the "
+                                   "baseline's: the rest is the replay's distance from the bench",
+                                   r.valve_change, 100.0 * share, r.allowed, r.sigma)};
+  }
   if (!r.baseline_code_known || !(std::abs(r.code_change) > r.allowed))
     return DecideCase(r.observed_change, r.allowed, r.valve_change, r.sigma, r.changed_since_baseline,
                       r.replay_off_tonight);
@@ -354,8 +369,9 @@ regress::Json BenchTwins::Attribute(const regress::RegressResult& result,
     const auto spec = specs.find(f.case_name);
     const auto ran = benches.find(f.case_name);
     const auto old_spec = baseline_code.specs.find(f.case_name);
-    const bool code_known =
-        spec != specs.end() && old_spec != baseline_code.specs.end() && !SameCode(old_spec->second, spec->second);
+    const bool same_spec =
+        spec != specs.end() && old_spec != baseline_code.specs.end() && SameCode(old_spec->second, spec->second);
+    const bool code_known = spec != specs.end() && old_spec != baseline_code.specs.end() && !same_spec;
     if (!std::isfinite(f.delta)) {
       why = "the metric has no value on one side";
     } else if (spec == specs.end() || ran == benches.end() || ran->second.empty()) {
@@ -411,6 +427,7 @@ regress::Json BenchTwins::Attribute(const regress::RegressResult& result,
       c["valve_share"] = valve_change / f.delta;
       CaseReplay replay{f.delta, f.allowed, valve_change, sigma, changed};
       replay.replay_off_tonight = tonight_sum / n - f.now.mean;
+      replay.spec_is_baseline_code = same_spec;
       if (code_known) {
         // Both codes on both valves: the code's change on the baseline's valve, the valve's under the baseline's
         // code, each with its own repeatability.
@@ -432,14 +449,15 @@ regress::Json BenchTwins::Attribute(const regress::RegressResult& result,
       // identified valves' replays (tonight's code) against what the bench measured on either side. Off by more
       // than the allowance, the identification does not carry this case (a valve identified from its switch-on
       // current replays a hold near its edge where the bench's valve is not: docs/track.md).
-      // The baseline's side only under the baseline's code, where it is known (the bench measured it under that;
-      // under tonight's code the difference would hold the code's change too).
+      // The baseline's side only under the baseline's code, where it is known or is tonight's (the bench measured it
+      // under that; under another code the difference would hold the code's change too).
       const double base_replay = (code_known ? reference_old_sum : reference_sum) / n;
       const double off_baseline = base_replay - f.baseline.mean, off_tonight = replay.replay_off_tonight;
-      if (code_known) c["replay_minus_measured_baseline"] = off_baseline;
+      const bool baseline_side = code_known || same_spec;  // the baseline's side under the baseline's code
+      if (baseline_side) c["replay_minus_measured_baseline"] = off_baseline;
       c["replay_minus_measured_tonight"] = off_tonight;
       if (verdict == "undetermined" &&
-          std::max(code_known ? std::abs(off_baseline) : 0.0, std::abs(off_tonight)) > f.allowed)
+          std::max(baseline_side ? std::abs(off_baseline) : 0.0, std::abs(off_tonight)) > f.allowed)
         why += fmt::format("; the identified valves replay this case at {:.4g} and {:.4g} where the bench measured "
                            "{:.4g} and {:.4g}: the replay is not the bench here (a health run at this case's "
                            "operating point would pin it)",

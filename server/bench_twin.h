@@ -48,6 +48,8 @@ struct CaseReplay {
   double sigma = 0.0;         // the replay's repeatability (two identifications of one valve)
   std::string changed_since_baseline;
   double replay_off_tonight = NAN;  // tonight's replay minus tonight's measurement (DecideCase above)
+  // The baseline's spec of this case found and equal to tonight's (but for tags): no code change the spec shows.
+  bool spec_is_baseline_code = false;
   bool baseline_code_known = false;  // the baseline's spec of this case found, and it differs from tonight's
   double code_change = 0.0;                 // B,t - B,b: tonight's code on the baseline's valve
   double valve_change_baseline_code = 0.0;  // T,b - B,b: tonight's valve under the baseline's code
@@ -57,7 +59,9 @@ struct CaseReplay {
 // of the failure: "code" when the code makes at least half and tonight's valve under the baseline's code less than
 // half even 2 sigma toward it (the failure does not reproduce with the old code: the code changed, whatever the
 // tracking saw); "valve" when the valve makes half and the code not; else "undetermined" saying which parts reach
-// how far. A spec change within the allowance (or none) leaves DecideCase's rules above.
+// how far. A spec change within the allowance (or none) leaves DecideCase's rules above, but for one: where the
+// spec is the baseline's and the valve's part alone fails the night (beyond the allowance toward the failure by 2
+// sigma), "valve" even under half the change (the rest is the replay's distance from the bench).
 CaseVerdict DecideCase(const CaseReplay& r);
 
 // The code the baseline was measured with: each case's spec (its first run's) from a stored batch, and which.

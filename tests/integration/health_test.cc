@@ -346,6 +346,24 @@ TEST(DecideCase, TheBaselinesCodeOnBothValves) {
       << "flagged: the rules above";
   r.changed_since_baseline.clear();
   EXPECT_EQ(server::DecideCase(r).verdict, "code");
+
+  // The spec is the baseline's (the 60-night lab's fourth run, the relaxing spring's map nights): the valve alone
+  // moves the map 1.13 points toward the failure of 2.52 (45 %), beyond the 0.5 allowed by more than twice its
+  // repeatability 0.12: the valve, the rest being the replay's distance from the bench. Within 2 sigma of the
+  // allowance, or against the failure, the rules above.
+  server::CaseReplay same{2.52, 0.5, 1.13, 0.12, ""};
+  same.replay_off_tonight = 0.0;
+  EXPECT_EQ(server::DecideCase(same).verdict, "undetermined");  // not known to be the baseline's spec
+  same.spec_is_baseline_code = true;
+  const auto spring = server::DecideCase(same);
+  EXPECT_EQ(spring.verdict, "valve");
+  EXPECT_NE(spring.why.find("the valve alone moves this metric 1.13 toward the failure (45 % of the change"),
+            std::string::npos) << spring.why;
+  same.sigma = 0.35;
+  EXPECT_EQ(server::DecideCase(same).verdict, "undetermined");
+  same.sigma = 0.12;
+  same.valve_change = -1.13;
+  EXPECT_EQ(server::DecideCase(same).verdict, "undetermined");
 }
 
 // Waits until the server has stored `n` nights; returns them newest first (an empty array on timeout).
