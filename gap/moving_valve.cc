@@ -168,7 +168,7 @@ struct Stage {
   // max_evaluations): the optimisers stop when it reaches 0.
   int* remaining = nullptr;
   // The solver's steps left for the whole identification (MovingIdentifyOptions::max_ode_steps; shared likewise):
-  // the work, which bounds the time where an evaluation's cost varies (a stiff candidate takes up to 17 times the
+  // the work, which bounds the time where an evaluation's cost varies (a stiff candidate takes up to 40 times the
   // steps of a typical one). `global_work_reserve`: a global search stops when the work left reaches it, so that
   // its local polish and stage 6 keep theirs.
   std::int64_t* work_left = nullptr;

@@ -128,7 +128,7 @@ struct MovingIdentifyOptions {
   // of valves").
   int max_evaluations = 20000;
   // The work for all stages, in the solver's accepted and rejected steps (0: none), beside the evaluations: an
-  // evaluation's cost varies 20-fold (a candidate with a light plunger resonates at kHz and takes ~40000 steps
+  // evaluation's cost varies 40-fold (a candidate with a light plunger resonates at kHz and takes ~40000 steps
   // where a typical one takes ~2000), so a count of evaluations does not bound the time and a count of steps does,
   // deterministically. Off by default: at 1.5e8 the population's slowest valve went from 82 to 73 s and its
   // global search got none of its evaluations (docs/real-data.md, "The work, counted"); a default needs the
