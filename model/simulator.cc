@@ -3,6 +3,10 @@
 #include <algorithm>
 #include <cmath>
 
+#include <boost/numeric/odeint.hpp>
+
+#include "model/event_locator.h"
+
 namespace vb::model {
 namespace {
 
@@ -52,6 +56,29 @@ const char* EventKindName(EventKind kind) {
   return "?";
 }
 
+struct Simulator::Ode {
+  using Stepper = boost::numeric::odeint::result_of::make_dense_output<
+      boost::numeric::odeint::runge_kutta_dopri5<State>>::type;
+  explicit Ode(const SolverOptions& o)
+      : stepper(boost::numeric::odeint::make_dense_output(o.abs_tol, o.rel_tol, o.max_step_s,
+                                                          boost::numeric::odeint::runge_kutta_dopri5<State>())) {
+    locator.time_tol_s = o.event_time_tol_s;
+  }
+  Stepper stepper;
+  EventLocatorOptions locator;
+};
+
+Simulator::OdeHolder::OdeHolder(const SolverOptions& options) : p_(std::make_unique<Ode>(options)) {}
+Simulator::OdeHolder::OdeHolder(const OdeHolder& other)
+    : p_(other.p_ ? std::make_unique<Ode>(*other.p_) : nullptr) {}
+Simulator::OdeHolder& Simulator::OdeHolder::operator=(const OdeHolder& other) {
+  if (this != &other) p_ = other.p_ ? std::make_unique<Ode>(*other.p_) : nullptr;
+  return *this;
+}
+Simulator::OdeHolder::OdeHolder(OdeHolder&& other) noexcept = default;
+Simulator::OdeHolder& Simulator::OdeHolder::operator=(OdeHolder&& other) noexcept = default;
+Simulator::OdeHolder::~OdeHolder() = default;
+
 Simulator::Simulator(const Plant& plant, const DriverParams& driver, const Conditions& conditions,
                      const SolverOptions& options)
     : plant_(plant),
@@ -59,8 +86,7 @@ Simulator::Simulator(const Plant& plant, const DriverParams& driver, const Condi
       cond_(conditions),
       opt_(options),
       sensor_(plant.params().effects),
-      stepper_(boost::numeric::odeint::make_dense_output(options.abs_tol, options.rel_tol, options.max_step_s,
-                                                         boost::numeric::odeint::runge_kutta_dopri5<State>())) {
+      ode_(options) {
   const PlantParams& p = plant_.params();
   x_lo_ = p.has_moving_part ? p.x_min_m : 0.0;
   x_hi_ = p.has_moving_part ? p.x_max_m : 0.0;
@@ -68,7 +94,6 @@ Simulator::Simulator(const Plant& plant, const DriverParams& driver, const Condi
   inv_x_scale_ = 1.0 / x_scale_;
   v_scale_ = x_scale_ / 1e-3;  // velocity in units of "full travel per millisecond"
   inv_v_scale_ = 1.0 / v_scale_;
-  locator_.time_tol_s = opt_.event_time_tol_s;
   Reset();
 }
 
@@ -481,7 +506,7 @@ void Simulator::AdvanceOde(const Segment& seg, double t_stop, SimObserver* obs) 
         }
       }
     }
-    stepper_.initialize(Scale(i_, x_, v_), t_, std::min(dt_guess_s_, opt_.max_step_s));
+    ode_->stepper.initialize(Scale(i_, x_, v_), t_, std::min(dt_guess_s_, opt_.max_step_s));
     ode_piece_v2_ = v2_int_;
     ode_piece_vi_ = vi_int_;
     stepper_valid_ = true;
@@ -509,16 +534,16 @@ void Simulator::AdvanceOde(const Segment& seg, double t_stop, SimObserver* obs) 
   if (seg.level_dir != 0) events[n_events++] = Ev::kLevel;
 
   for (;;) {
-    if (stepper_.current_time() <= t_ + kSameInstant_s) {
+    if (ode_->stepper.current_time() <= t_ + kSameInstant_s) {
       try {
-        stepper_.do_step(rhs);
+        ode_->stepper.do_step(rhs);
       } catch (const std::exception&) {
         // Boost.Odeint gives up after 500 rejected step-size adjustments (a NaN or an exploding derivative).
         Fail("the step-size control failed (the state or its derivative is not finite)");
         return;
       }
       ++ode_steps_;
-      for (double y : stepper_.current_state()) {
+      for (double y : ode_->stepper.current_state()) {
         if (!std::isfinite(y)) {
           Fail("the state is not finite (a non-physical parameter or input?)");
           return;
@@ -526,8 +551,8 @@ void Simulator::AdvanceOde(const Segment& seg, double t_stop, SimObserver* obs) 
       }
       // A step that collapses to nothing (a force of 1e308 N, a stiff non-physical parameter) would never reach
       // the end: stop with the reason instead of hanging.
-      const double scale = std::max(1e-6, std::abs(stepper_.current_time()));
-      tiny_steps_ = stepper_.current_time_step() < 1e-15 * scale ? tiny_steps_ + 1 : 0;
+      const double scale = std::max(1e-6, std::abs(ode_->stepper.current_time()));
+      tiny_steps_ = ode_->stepper.current_time_step() < 1e-15 * scale ? tiny_steps_ + 1 : 0;
       if (tiny_steps_ > 1000) {
         Fail("the integration stalled: steps below 1e-15 of the time scale (a non-physical input?)");
         return;
@@ -535,12 +560,12 @@ void Simulator::AdvanceOde(const Segment& seg, double t_stop, SimObserver* obs) 
       if (!CheckWatchdog()) return;
     }
     const double a = t_;
-    const double b = std::min(stepper_.current_time(), t_stop);
+    const double b = std::min(ode_->stepper.current_time(), t_stop);
     State yb;
-    if (b >= stepper_.current_time()) {
-      yb = stepper_.current_state();
+    if (b >= ode_->stepper.current_time()) {
+      yb = ode_->stepper.current_state();
     } else {
-      stepper_.calc_state(b, yb);
+      ode_->stepper.calc_state(b, yb);
     }
     const State ya = CurrentState();
     double best_t = b;
@@ -552,10 +577,10 @@ void Simulator::AdvanceOde(const Segment& seg, double t_stop, SimObserver* obs) 
       // The event function on the step's dense output (model/event_locator.h).
       auto g = [&](double t) {
         State y;
-        stepper_.calc_state(t, y);
+        ode_->stepper.calc_state(t, y);
         return EventFunction(ev, seg, t, y);
       };
-      const EventHit hit = LocateEvent(g, a, EventFunction(ev, seg, a, ya), b, gb, locator_);
+      const EventHit hit = LocateEvent(g, a, EventFunction(ev, seg, a, ya), b, gb, ode_->locator);
       if (hit.found == EventFound::kNone) continue;
       // Never let the state pass through a stop: the earliest event wins (at a tie, the first listed).
       if (hit.t_s < best_t || best_ev == Ev::kNone) {
@@ -571,7 +596,7 @@ void Simulator::AdvanceOde(const Segment& seg, double t_stop, SimObserver* obs) 
         DensePiece(const Simulator* sim, const Segment* seg) : sim_(sim), seg_(seg) {}
         void At(double t, double* i_A, double* x_m) const override {
           State y;
-          sim_->stepper_.calc_state(t, y);
+          sim_->ode_->stepper.calc_state(t, y);
           double i, x, v;
           sim_->Unscale(y, &i, &x, &v);
           if (seg_->blocked && sim_->plant_.params().effects.eddy_R_p_ohm == 0.0) i = 0.0;
@@ -590,7 +615,7 @@ void Simulator::AdvanceOde(const Segment& seg, double t_stop, SimObserver* obs) 
       const double limit = best_t - kSameInstant_s;
       for (double tk = SampleTime(next_sample_); tk < limit; tk = SampleTime(++next_sample_)) {
         State y;
-        stepper_.calc_state(tk, y);
+        ode_->stepper.calc_state(tk, y);
         double i, x, v;
         Unscale(y, &i, &x, &v);
         if (seg.blocked && fx.eddy_R_p_ohm == 0.0) i = 0.0;
@@ -602,10 +627,10 @@ void Simulator::AdvanceOde(const Segment& seg, double t_stop, SimObserver* obs) 
 
     {
       State y;
-      if (best_t >= stepper_.current_time()) {
-        y = stepper_.current_state();
+      if (best_t >= ode_->stepper.current_time()) {
+        y = ode_->stepper.current_state();
       } else {
-        stepper_.calc_state(best_t, y);
+        ode_->stepper.calc_state(best_t, y);
       }
       Unscale(y, &i_, &x_, &v_);
       v2_int_ = ode_piece_v2_ + y[3];
@@ -617,7 +642,7 @@ void Simulator::AdvanceOde(const Segment& seg, double t_stop, SimObserver* obs) 
     if (seg.blocked && fx.eddy_R_p_ohm == 0.0) i_ = 0.0;
     x_ = std::clamp(x_, x_lo_, x_hi_);
     if (best_ev != Ev::kNone) {
-      dt_guess_s_ = stepper_.current_time_step();
+      dt_guess_s_ = ode_->stepper.current_time_step();
       ApplyEvent(best_ev, seg, obs);
       return;
     }

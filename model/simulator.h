@@ -20,15 +20,13 @@
 
 #include <array>
 #include <chrono>
-#include <vector>
 #include <cstdint>
 #include <limits>
-
-#include <boost/numeric/odeint.hpp>
+#include <memory>
+#include <vector>
 
 #include "model/coil.h"
 #include "model/driver.h"
-#include "model/event_locator.h"
 #include "model/plant.h"
 #include "model/sensor.h"
 
@@ -176,8 +174,25 @@ class Simulator {
   // output i_m [A] (residual_magnetism). The current sensor is not part of the plant: see sensor_.
   using State = std::array<double, 7>;
   enum class Play : std::uint8_t { kInside, kRising, kFalling };  // residual_magnetism's mode
-  using Stepper = boost::numeric::odeint::result_of::make_dense_output<
-      boost::numeric::odeint::runge_kutta_dopri5<State>>::type;
+  // The Dormand-Prince stepper with its dense output and the event locator's options (Boost.Odeint, Boost.Math)
+  // live in simulator.cc: Odeint's headers cost about 3 s of compile time in each of the ~120 translation units
+  // that include this header, directly or through hw/emulated_bench.h. Held by value semantics (a copy of the
+  // simulator copies its stepper); allocated once at construction, never in AdvanceTo.
+  struct Ode;
+  class OdeHolder {
+   public:
+    explicit OdeHolder(const SolverOptions& options);
+    OdeHolder(const OdeHolder& other);
+    OdeHolder& operator=(const OdeHolder& other);
+    OdeHolder(OdeHolder&& other) noexcept;
+    OdeHolder& operator=(OdeHolder&& other) noexcept;
+    ~OdeHolder();
+    Ode* operator->() { return p_.get(); }
+    const Ode* operator->() const { return p_.get(); }
+
+   private:
+    std::unique_ptr<Ode> p_;
+  };
 
   // What the driver puts on the coil until the next driver event.
   using Segment = DriveSegment;
@@ -227,7 +242,6 @@ class Simulator {
   double v2_int_ = 0.0, vi_int_ = 0.0;   // running integrals up to t_
   double dT_ = 0.0;                       // coil temperature rise (coil_heating)
   CurrentSensor sensor_;                  // the measurement chain: fed at every sample
-  EventLocatorOptions locator_;           // from SolverOptions
   bool general_ = false;                  // effects or disturbances: integrate every piece
   double free_dir_ = 1.0;                 // direction of motion in a free piece (kinetic friction's sign)
   double im_ = 0.0;                       // play operator output (residual_magnetism)
@@ -260,7 +274,7 @@ class Simulator {
   int tiny_steps_ = 0;
   int stalled_pieces_ = 0;
 
-  Stepper stepper_;
+  OdeHolder ode_;
   bool stepper_valid_ = false;
   double dt_guess_s_ = 1e-6;
   std::uint64_t ode_steps_ = 0, restarts_ = 0;
