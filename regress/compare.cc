@@ -126,6 +126,24 @@ Measured Summarise(const std::vector<RunMetrics>& runs) {
   return m;
 }
 
+std::string BaselineNotOfRuns(const Baseline& baseline, const std::vector<RunMetrics>& runs) {
+  const Measured m = Summarise(runs);
+  if (baseline.cases.empty()) return "the baseline holds no case";
+  auto same = [](double a, double b) { return std::abs(a - b) <= 1e-9 * std::max({std::abs(a), std::abs(b), 1e-300}); };
+  for (const auto& [c, metrics] : baseline.cases) {
+    const auto got = m.stats.find(c);
+    if (got == m.stats.end()) return "case " + c + ": not among the runs";
+    for (const auto& [name, s] : metrics) {
+      const auto v = got->second.find(name);
+      if (v == got->second.end()) return "case " + c + ", metric " + name + ": not measured by the runs";
+      if (v->second.n != s.n || !same(v->second.mean, s.mean) || !same(v->second.spread, s.spread))
+        return fmt::format("case {}, metric {}: the baseline holds {:.6g} over {} runs, the runs give {:.6g} over {}",
+                           c, name, s.mean, s.n, v->second.mean, v->second.n);
+    }
+  }
+  return "";
+}
+
 Json BaselineToJson(const Baseline& b) {
   Json cases = Json::object();
   for (const auto& [c, metrics] : b.cases) {

@@ -55,6 +55,13 @@ Json BaselineToJson(const Baseline& b);
 // Errors name the field ("cases.pi.rmse.spread: must be finite and >= 0").
 StatusOr<Baseline> BaselineFromJson(const Json& j);
 
+// Whether `baseline` is the summary of `runs` ("benchctl baseline set --batch B" stores Summarise(runs).stats):
+// "" when every case and metric of the baseline is the runs' own (the same count, mean and spread to 1e-9
+// relative), else the first difference, for people ("case pi, metric rmse: the baseline holds 0.00081 over 3
+// runs, the runs give 0.00093 over 3"). A baseline's source names a batch by number only, and the same number on
+// another lab's server is another batch: this tells the two apart before its runs are read as the baseline's.
+std::string BaselineNotOfRuns(const Baseline& baseline, const std::vector<RunMetrics>& runs);
+
 enum class Verdict { kImproved, kUnchanged, kRegressed, kNew };
 const char* VerdictName(Verdict v);  // "improved", "unchanged", "regressed", "new"
 

@@ -288,33 +288,61 @@ StatusOr<std::int64_t> NightScheduler::RunNight(double fire_unix_s) {
 
 BaselineCode NightScheduler::BaselineCodeOf(const regress::Baseline& baseline,
                                             const std::map<std::string, StoredCheck>& suites) {
-  // The baseline's own runs when its source names a batch of this server ("benchctl baseline set --batch"); else
-  // the suite's runs of the night whose valve stands for the baseline's (the last night that started before it was
-  // made; none: the first night stored, as the replay's valve then is the bench's first check).
+  // The baseline's own runs when its source names a batch of this server ("benchctl baseline set --batch") and
+  // that batch's runs are the ones it summarises (a batch number from another lab's server names another batch
+  // here); else the suite's runs of the night whose valve stands for the baseline's (the last night that started
+  // before it was made; none: the first night stored, as the replay's valve then is the bench's first check).
   BaselineCode out;
-  std::int64_t batch = db::ServerBatchOfBaselineSource(baseline.source);
-  if (batch > 0) {
-    out.from = fmt::format("the baseline's batch {}", batch);
-  } else {
-    auto night = BaselineNight(suites, baseline.created_unix_s);
-    if (!night && !suites.empty()) night = *suites.begin();
-    if (!night) return out;
-    batch = night->second.batch_id;
-    out.from = fmt::format("night {}'s suite, batch {}", night->first, batch);
-  }
   auto store = pool_->Acquire();
-  auto listed =
-      store.ok() ? runs::ListBatch(store->get(), batch) : StatusOr<std::vector<db::RunRecord>>(store.status());
+  if (!store.ok()) {
+    spdlog::warn("the baseline's code: {}", store.status().message());
+    return out;
+  }
+  auto add_specs = [&out](const std::vector<db::RunRecord>& runs) {
+    for (const auto& run : runs) {
+      const std::string name = run.key.CaseName();
+      if (out.specs.count(name)) continue;  // each case's first run, as tonight's (RunNight's case_specs)
+      auto spec = experiment::ParseSpecJson(run.spec_json);
+      if (spec.ok()) out.specs.emplace(name, std::move(*spec));
+    }
+  };
+  std::string not_own;
+  if (const std::int64_t batch = db::ServerBatchOfBaselineSource(baseline.source); batch > 0) {
+    auto listed = runs::ListBatch(store->get(), batch);
+    std::vector<regress::RunMetrics> measured;
+    if (listed.ok()) {
+      for (const auto& r : *listed) {
+        regress::RunMetrics m;
+        m.run_id = r.id;
+        m.case_name = r.key.CaseName();
+        m.ok = r.status == db::RunStatus::kDone;
+        auto metrics = (*store)->GetMetrics(r.id);
+        if (metrics.ok())
+          for (const auto& x : *metrics) m.metrics[x.name] = x.value;
+        measured.push_back(std::move(m));
+      }
+    }
+    not_own = listed.ok() ? regress::BaselineNotOfRuns(baseline, measured) : listed.status().message();
+    if (not_own.empty()) {
+      out.from = fmt::format("the baseline's batch {}", batch);
+      add_specs(*listed);
+      return out;
+    }
+    not_own = fmt::format("the baseline's source names batch {}, which is not the baseline's here ({}); ", batch,
+                          not_own);
+    spdlog::warn("the baseline's code: {}", not_own);
+  }
+  auto night = BaselineNight(suites, baseline.created_unix_s);
+  if (!night && !suites.empty()) night = *suites.begin();
+  if (!night) return out;
+  const std::int64_t batch = night->second.batch_id;
+  out.from = not_own + fmt::format("night {}'s suite, batch {}", night->first, batch);
+  auto listed = runs::ListBatch(store->get(), batch);
   if (!listed.ok()) {
     spdlog::warn("the baseline's code ({}): {}", out.from, listed.status().message());
     return BaselineCode{};
   }
-  for (const auto& run : *listed) {
-    const std::string name = run.key.CaseName();
-    if (out.specs.count(name)) continue;  // each case's first run, as tonight's (RunNight's case_specs)
-    auto spec = experiment::ParseSpecJson(run.spec_json);
-    if (spec.ok()) out.specs.emplace(name, std::move(*spec));
-  }
+  add_specs(*listed);
   return out;
 }
 

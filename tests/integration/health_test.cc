@@ -551,11 +551,20 @@ TEST(BenchTwin, ACodeRegressionOnAFlaggedValveIsTheCodesWhenTheBaselinesCodeDoes
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
   for (const char* f : {"ci.json", "ci-current-hold.json"}) std::filesystem::copy_file(kSuites + f, dir + "/" + f);
+  {
+    // The baseline as another lab's server made it: its source names batch 1, which on this server is the first
+    // night's, not the baseline's runs. Its code is then the first night's suite (the night rule), the mismatch
+    // said; before, that batch's specs were taken as the baseline's code.
+    std::ifstream in(kSuites + "ci-baseline.json");
+    auto b = nlohmann::json::parse(in);
+    b["source"] = "server other-lab:50051 batch 1";
+    std::ofstream(dir + "/baseline.json") << b.dump(1);
+  }
   const std::string benches = R"([{"name": "emu-a", "kind": "emulated", "model": {"preset": "taghizadeh2009"}, )" +
                               std::string(kHealth) +
                               R"(, "drift": [{"parameter": "R", "step": 0.05, "from_night": 6}]}])";
-  testing::ServerProcess server(dir, R"("nights": {"cron": "0 2 * * *", "suite_file": "ci.json", "baseline_file": ")" +
-                                         kSuites + R"(ci-baseline.json"})", benches);
+  testing::ServerProcess server(
+      dir, R"("nights": {"cron": "0 2 * * *", "suite_file": "ci.json", "baseline_file": "baseline.json"})", benches);
   server.AddArg("--simulate-nights");
   server.AddArg(std::to_string(kNights));
   const std::string addr = server.Start();
@@ -587,6 +596,8 @@ TEST(BenchTwin, ACodeRegressionOnAFlaggedValveIsTheCodesWhenTheBaselinesCodeDoes
       ++code_nights;  // the cut gain's RMSE: 0.8 mA -> about 3 mA
       EXPECT_EQ(c["verdict"], "code") << b.night << ": " << c.dump(1) << "\n" << server.Log();
       EXPECT_NE(c.value("baseline_code", "").find("'s suite, batch"), std::string::npos) << c.dump(1);
+      EXPECT_EQ(c.value("baseline_code", "").rfind("the baseline's source names batch 1, which is not the "
+                                                   "baseline's here (case ", 0), 0u) << c.dump(1);
       if (c.value("reason", "").find("the valve changed since the baseline (bench emu-a's R up") != std::string::npos)
         ++flagged_code_nights;
     }

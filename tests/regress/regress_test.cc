@@ -255,6 +255,44 @@ TEST(CompareTest, ResultAndBaselineJsonRoundTrip) {
   EXPECT_EQ(ResultTable(*rr), ResultTable(r));
 }
 
+// A baseline made from a batch ("benchctl baseline set --batch") is that batch's summary, read back through its
+// JSON as the nights read it; the same batch number on another server (other runs, or the same cases measured
+// again) is not, and the first difference is named. The night's cause then does not take that batch's specs for
+// the baseline's code (server/nights.cc BaselineCodeOf).
+TEST(CompareTest, ABaselineIsTheSummaryOfItsOwnBatchOnly) {
+  const std::vector<RunMetrics> runs = {
+      {1, "pi repeat:0", "pi", true, "", {{"rmse", 0.0010}, {"switches", 100}}},
+      {2, "pi repeat:1", "pi", true, "", {{"rmse", 0.0013}, {"switches", 101}}},
+      {3, "hy", "hy", true, "", {{"rmse", 0.006}, {"switches", 7}}},
+  };
+  Baseline b;
+  b.name = "lab";
+  b.source = "server lab-a:50051 batch 12";
+  b.cases = Summarise(runs).stats;
+  auto read = BaselineFromJson(Json::parse(BaselineToJson(b).dump()));
+  ASSERT_TRUE(read.ok()) << read.status().message();
+  EXPECT_EQ(BaselineNotOfRuns(*read, runs), "");
+  // Runs the baseline did not summarise: a repeat more, a value measured again, a case it lacks.
+  auto more = runs;
+  more.push_back({4, "pi repeat:2", "pi", true, "", {{"rmse", 0.0010}, {"switches", 100}}});
+  EXPECT_EQ(BaselineNotOfRuns(*read, more).rfind("case pi, metric rmse: the baseline holds 0.00115 over 2 runs, "
+                                                 "the runs give 0.0011 over 3", 0), 0u)
+      << BaselineNotOfRuns(*read, more);
+  auto again = runs;
+  again[2].metrics["switches"] = 8;
+  EXPECT_EQ(BaselineNotOfRuns(*read, again), "case hy, metric switches: the baseline holds 7 over 1 runs, the runs "
+                                            "give 8 over 1");
+  EXPECT_EQ(BaselineNotOfRuns(*read, {runs[0], runs[1]}), "case hy: not among the runs");
+  auto fewer = runs;
+  fewer[2].metrics.erase("switches");
+  EXPECT_EQ(BaselineNotOfRuns(*read, fewer), "case hy, metric switches: not measured by the runs");
+  // The runs' own metrics beyond the baseline's (a metric added since) do not matter.
+  auto added = runs;
+  for (auto& r : added) r.metrics["effort_V2s"] = 1.0;
+  EXPECT_EQ(BaselineNotOfRuns(*read, added), "");
+  EXPECT_EQ(BaselineNotOfRuns(Baseline{}, runs), "the baseline holds no case");
+}
+
 TEST(JUnitTest, EscapesNames) {
   RegressResult r;
   r.suite = "s<&>";
