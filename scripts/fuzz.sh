@@ -2,7 +2,8 @@
 # Builds the libFuzzer targets of fuzz/ with clang (ASan + UBSan) into build-fuzz/ and runs each for a bounded
 # time. Exit 1 if any target finds a crash, a leak, undefined behaviour, a timeout or an out-of-memory; the
 # input that did it is in build-fuzz/artifacts/. docs/fuzzing.md has the targets and a longer campaign's figures.
-#   scripts/fuzz.sh [SECONDS_PER_TARGET]     default 20; CI (scripts/test.sh) uses the default
+#   scripts/fuzz.sh [SECONDS_PER_TARGET]     default 20; VB_FUZZ_SECONDS=N scripts/test.sh runs it after the suite
+# (CI's suite replays the targets' seeds and fixed-seed mutations in CTest instead: docs/fuzzing.md, "In CI").
 # Corpora grow in build-fuzz/corpus/<target>/ (kept between runs); the committed seeds are fuzz/corpus/<name>/.
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
