@@ -51,8 +51,15 @@ std::vector<Bytes> ReadDict(const std::filesystem::path& path, std::string* erro
     for (std::size_t k = open + 1; k < close; ++k) {
       if (line[k] != '\\' || k + 1 >= close) {
         t.push_back(static_cast<std::uint8_t>(line[k]));
-      } else if (line[k + 1] == 'x' && k + 3 < close) {
-        t.push_back(static_cast<std::uint8_t>(std::stoi(line.substr(k + 2, 2), nullptr, 16)));
+      } else if (line[k + 1] == 'x') {
+        const std::string hex = k + 3 < close ? line.substr(k + 2, 2) : std::string();
+        char* end = nullptr;
+        const long v = hex.size() == 2 ? std::strtol(hex.c_str(), &end, 16) : -1;
+        if (v < 0 || end == nullptr || *end != '\0') {
+          *error = "--dict: " + path.string() + " line " + std::to_string(n) + ": \\x needs two hex digits";
+          return {};
+        }
+        t.push_back(static_cast<std::uint8_t>(v));
         k += 3;
       } else {
         t.push_back(static_cast<std::uint8_t>(line[++k]));
@@ -99,7 +106,8 @@ Bytes Mutate(const std::vector<Bytes>& seeds, const std::vector<Bytes>& dict, st
       case 5:  // a block repeated
         if (!b.empty()) {
           const std::size_t at = pick(b.size()), n = 1 + pick(std::min<std::size_t>(b.size() - at, 64));
-          const Bytes block(b.begin() + static_cast<std::ptrdiff_t>(at), b.begin() + static_cast<std::ptrdiff_t>(at + n));
+          const Bytes block(b.begin() + static_cast<std::ptrdiff_t>(at),
+                            b.begin() + static_cast<std::ptrdiff_t>(at + n));
           b.insert(b.begin() + static_cast<std::ptrdiff_t>(at), block.begin(), block.end());
         }
         break;
@@ -134,7 +142,10 @@ Bytes Mutate(const std::vector<Bytes>& seeds, const std::vector<Bytes>& dict, st
 }
 
 int Usage(const char* why) {
-  std::fprintf(stderr, "replay: %s\nusage: replay [--mutations N] [--max-len BYTES] [--seed S] DIR...\n", why);
+  std::fprintf(stderr,
+               "replay: %s\nusage: replay [--mutations N] [--max-len BYTES] [--seed S] [--dict FILE] "
+               "[--save M FILE] DIR...\n",
+               why);
   return 2;
 }
 
