@@ -32,6 +32,7 @@ Json SummaryJson(const RunView& r) {
             {"wall_s", x.wall_s()},
             {"realtime_factor", factor},
             {"metrics_from", x.metrics_from_trajectory() ? "trajectory" : "samples"}};
+  if (!x.build().empty()) j["build"] = x.build();
   if (x.has_loop()) {
     const auto& l = x.loop();
     j["loop"] = {{"paced_ticks", l.ticks()},
@@ -111,6 +112,7 @@ std::string RunText(const RunView& r, bool history) {
       out += fmt::format("  loop: {} paced ticks, {} overruns, jitter p50 {:.1f} us, p99 {:.1f} us, max {:.1f} us\n",
                          x.loop().ticks(), x.loop().overruns(), x.loop().jitter_p50_s() * 1e6,
                          x.loop().jitter_p99_s() * 1e6, x.loop().jitter_max_s() * 1e6);
+    if (!x.build().empty()) out += fmt::format("  build: {}\n", x.build());
   }
   // With its unit and SI prefix, as the web's run page writes it (common/units.h): "rmse  953.3 µA".
   for (const auto& [name, value] : OrderedMetrics(r.metrics))

@@ -142,6 +142,13 @@ Status CheckExecution(const ExecutionRecord& e) {
                                    std::pair{"loop.jitter_max_s", e.loop->jitter_max_s}})
       if (!std::isfinite(v)) return Status::InvalidArgument(Cat("execution.", field, ": must be finite, got ", v));
   }
+  // A build is a short printable name ("valvebench 0.1.0 sha256:<32 hex>"); 200 characters leave room for a
+  // longer version string and keep a row's size bounded.
+  if (e.build.size() > 200)
+    return Status::InvalidArgument(Cat("execution.build: at most 200 characters, got ", e.build.size()));
+  for (unsigned char c : e.build)
+    if (c < 0x20 || c > 0x7e)
+      return Status::InvalidArgument(Cat("execution.build: printable ASCII only, got byte ", static_cast<int>(c)));
   return Status::Ok();
 }
 

@@ -124,6 +124,16 @@ Params& Params::Text(std::string_view v) {
   return *this;
 }
 
+Params& Params::TextOrNull(std::optional<std::string_view> v) {
+  if (v) return Text(*v);
+  types_.push_back(kTextOid);
+  lengths_.push_back(0);
+  owned_at_.push_back(-1);
+  ext_.push_back(nullptr);
+  null_.push_back(true);
+  return *this;
+}
+
 Params& Params::Bytes(const void* data, std::size_t size) {
   types_.push_back(kByteaOid);
   lengths_.push_back(static_cast<int>(size));

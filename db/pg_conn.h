@@ -41,6 +41,7 @@ class Params {
   Params& IntOrNull(std::optional<std::int64_t> v);  // nullopt becomes NULL
   Params& Bool(bool v);
   Params& Text(std::string_view v);
+  Params& TextOrNull(std::optional<std::string_view> v);  // nullopt becomes NULL
   Params& Bytes(const void* data, std::size_t size);
 
   std::size_t size() const { return types_.size(); }

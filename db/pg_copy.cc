@@ -22,7 +22,7 @@ namespace vb::db {
 namespace {
 
 // How a column travels: its SQLite value as the PostgreSQL parameter of the column's type.
-enum class Kind { kInt, kIntOrNull, kBool, kDouble, kDoubleOrNull, kText, kBlob };
+enum class Kind { kInt, kIntOrNull, kBool, kDouble, kDoubleOrNull, kText, kTextOrNull, kBlob };
 struct Column {
   const char* name;
   Kind kind;
@@ -34,7 +34,7 @@ struct Table {
   const char* identity = nullptr;  // id column whose sequence moves past the copied ids
 };
 
-// Every table of the SQLite schema (db/schema.cc, versions 1..6) with history worth moving, parents first. The
+// Every table of the SQLite schema (db/schema.cc, versions 1..7) with history worth moving, parents first. The
 // lab's runtime tables (hosts, stale_writes, nights_claimed) are not copied: they describe a lab's live hosts.
 std::vector<Table> Tables() {
   using K = Kind;
@@ -76,7 +76,8 @@ std::vector<Table> Tables() {
         {"loop_overruns", K::kIntOrNull},
         {"loop_jitter_p50_s", K::kDoubleOrNull},
         {"loop_jitter_p99_s", K::kDoubleOrNull},
-        {"loop_jitter_max_s", K::kDoubleOrNull}},
+        {"loop_jitter_max_s", K::kDoubleOrNull},
+        {"exec_build", K::kTextOrNull}},
        "id"},
       {"run_tags", "rowid", {{"run_id", K::kInt}, {"tag", K::kText}}},
       {"run_sweep",
@@ -267,6 +268,14 @@ StatusOr<CopySummary> CopySqliteToPostgres(const std::string& sqlite_path, const
           case Kind::kText: {
             const auto* s = reinterpret_cast<const char*>(sqlite3_column_text(row, c));
             p.Text(std::string_view(s != nullptr ? s : "", static_cast<std::size_t>(sqlite3_column_bytes(row, c))));
+            break;
+          }
+          case Kind::kTextOrNull: {
+            const auto* s = reinterpret_cast<const char*>(sqlite3_column_text(row, c));
+            if (null || s == nullptr)
+              p.TextOrNull(std::nullopt);
+            else
+              p.Text(std::string_view(s, static_cast<std::size_t>(sqlite3_column_bytes(row, c))));
             break;
           }
           case Kind::kBlob: {

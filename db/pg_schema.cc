@@ -177,6 +177,11 @@ ALTER TABLE runs
   ADD COLUMN loop_jitter_max_s double precision;
 )sql";
 
+// Version 7, as SQLite's version 7: which build executed a run (NULL: not known).
+constexpr const char* kV7 = R"sql(
+ALTER TABLE runs ADD COLUMN exec_build text;
+)sql";
+
 constexpr Migration kMigrations[] = {
     {1, "(SQLite's initial schema; on PostgreSQL part of version 5)", ""},
     {2, "(SQLite's baselines and regressions; on PostgreSQL part of version 5)", ""},
@@ -187,6 +192,7 @@ constexpr Migration kMigrations[] = {
      "nights_claimed",
      kV5},
     {6, "runs: exec_* and loop_* (what executing a run measured, its loop statistics)", kV6},
+    {7, "runs: exec_build (which build executed the run)", kV7},
 };
 
 // pg_advisory_xact_lock's key for migrations: any constant that no other application on the database uses

@@ -330,18 +330,22 @@ Status PgStore::Finish(const Lease& lease, RunStatus final_status, const std::st
                                 Params().Int(run_id).Text(RunStatusName(final_status)).Text(reason))
                          .status());
   if (execution) {
-    // What executing it measured (schema v6); the loop_* columns stay NULL for a loop that was not paced.
+    // What executing it measured (schema v6) and which build did (v7, NULL when not known); the loop_* columns
+    // stay NULL for a loop that was not paced.
     const ExecutionRecord& e = *execution;
     VB_RETURN_IF_ERROR(conn_
                            ->Exec("UPDATE runs SET exec_wall_s = $2, exec_simulated_s = $3, exec_samples = $4, "
-                                  "exec_control_ticks = $5, exec_metrics_from_trajectory = $6 WHERE id = $1",
+                                  "exec_control_ticks = $5, exec_metrics_from_trajectory = $6, "
+                                  "exec_build = $7 WHERE id = $1",
                                   Params()
                                       .Int(run_id)
                                       .Double(e.wall_s)
                                       .Double(e.simulated_s)
                                       .Int(e.samples)
                                       .Int(e.control_ticks)
-                                      .Int(e.metrics_from_trajectory ? 1 : 0))
+                                      .Int(e.metrics_from_trajectory ? 1 : 0)
+                                      .TextOrNull(e.build.empty() ? std::nullopt
+                                                                  : std::optional<std::string_view>(e.build)))
                            .status());
     if (e.loop) {
       VB_RETURN_IF_ERROR(conn_

@@ -41,6 +41,9 @@ struct ExecutionRecord {
   std::int64_t control_ticks = 0;       // ticks of the control loop
   bool metrics_from_trajectory = false; // the metrics' source: the exact trajectory (emulator) or the samples
   std::optional<LoopRecord> loop;       // paced runs only: nullopt when the loop was not paced
+  // Which build executed it (runs::ThisBuild: "valvebench VERSION sha256:DIGEST"; schema v7), "" when not known:
+  // every run finished before v7, and a process that could not read its own executable.
+  std::string build;
 };
 
 struct RunRecord {

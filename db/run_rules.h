@@ -46,16 +46,16 @@ StatusOr<RunStatus> StoredStatus(const std::string& text, std::string_view what)
 // The columns of a run row (every engine selects them in this order: "id, batch_id, name, controller,
 // bench_kind, bench_name, spec_json, submitter, priority, status, reason, requeue_on_interrupt, submitted,
 // started, finished, progress, key_name, repeat_index, split, t_start_s, fence, host, lease_expires", then the
-// execution's columns of schema v6) into a RunRecord, sweep point and tags left to the engine. Row: Int(col),
-// Text(col), Double(col), IsNull(col).
+// execution's columns of schema v6 and its build of v7) into a RunRecord, sweep point and tags left to the
+// engine. Row: Int(col), Text(col), Double(col), IsNull(col).
 #define VB_DB_RUN_COLUMNS                                                                                     \
   "id, batch_id, name, controller, bench_kind, bench_name, spec_json, submitter, priority, status, reason, "  \
   "requeue_on_interrupt, submitted, started, finished, progress, key_name, repeat_index, split, t_start_s, " \
   "fence, host, lease_expires, exec_wall_s, exec_simulated_s, exec_samples, exec_control_ticks, "            \
   "exec_metrics_from_trajectory, loop_ticks, loop_overruns, loop_jitter_p50_s, loop_jitter_p99_s, "          \
-  "loop_jitter_max_s"
+  "loop_jitter_max_s, exec_build"
 inline constexpr const char* kRunColumns = VB_DB_RUN_COLUMNS;
-inline constexpr int kRunColumnCount = 33;
+inline constexpr int kRunColumnCount = 34;
 
 
 template <typename Row>
@@ -101,6 +101,7 @@ StatusOr<RunRecord> RunFromRow(const Row& row) {
       l.jitter_max_s = row.Double(32);
       e.loop = l;
     }
+    if (!row.IsNull(33)) e.build = row.Text(33);
     r.execution = e;
   }
   return r;

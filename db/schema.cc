@@ -218,6 +218,13 @@ ALTER TABLE runs ADD COLUMN loop_jitter_p99_s REAL;
 ALTER TABLE runs ADD COLUMN loop_jitter_max_s REAL;
 )sql";
 
+// Version 7. Which build executed a run (docs/store.md, "Schema version 7"): the version and the digest of the
+// executable (runs::ThisBuild), written by Finish with the exec_* columns. NULL: not known (every run finished
+// before this version). The bench twin compares it with the baseline's runs' (docs/track.md).
+constexpr const char* kV7 = R"sql(
+ALTER TABLE runs ADD COLUMN exec_build TEXT;
+)sql";
+
 constexpr Migration kMigrations[] = {
     {1, "initial schema: batches, runs, run_tags, status_history, metrics, trace_chunks", kV1},
     {2, "baselines, baseline_metrics, regressions (benchctl baseline / regress / nights)",
@@ -226,6 +233,7 @@ constexpr Migration kMigrations[] = {
     {4, "trace_chunks: codec (compressed traces; older chunks stay raw float64)", kV4},
     {5, "runs: fence, host, lease_expires; hosts, stale_writes, nights_claimed (the lab)", kV5},
     {6, "runs: exec_* and loop_* (what executing a run measured, its loop statistics)", kV6},
+    {7, "runs: exec_build (which build executed the run)", kV7},
 };
 
 }  // namespace

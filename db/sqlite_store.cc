@@ -345,17 +345,20 @@ Status SqliteStore::Finish(const Lease& lease, RunStatus final_status, const std
   st.Bind(4, now);
   VB_RETURN_IF_ERROR(st.Run());
   if (execution) {
-    // What executing it measured (schema v6); the loop_* columns stay NULL for a loop that was not paced.
+    // What executing it measured (schema v6) and which build did (v7); the loop_* columns stay NULL for a loop
+    // that was not paced.
     const ExecutionRecord& e = *execution;
     VB_ASSIGN_OR_RETURN(Stmt ex, conn_.Prepare("UPDATE runs SET exec_wall_s = ?2, exec_simulated_s = ?3, "
                                                 "exec_samples = ?4, exec_control_ticks = ?5, "
-                                                "exec_metrics_from_trajectory = ?6 WHERE id = ?1"));
+                                                "exec_metrics_from_trajectory = ?6, exec_build = NULLIF(?7, '') "
+                                                "WHERE id = ?1"));
     ex.Bind(1, run_id);
     ex.Bind(2, e.wall_s);
     ex.Bind(3, e.simulated_s);
     ex.Bind(4, e.samples);
     ex.Bind(5, e.control_ticks);
     ex.Bind(6, e.metrics_from_trajectory);
+    ex.Bind(7, e.build);  // "" (not known) is stored as NULL (schema v7)
     VB_RETURN_IF_ERROR(ex.Run());
     if (e.loop) {
       VB_ASSIGN_OR_RETURN(Stmt lp, conn_.Prepare("UPDATE runs SET loop_ticks = ?2, loop_overruns = ?3, "

@@ -12,6 +12,7 @@
 #include "db/trace_writer.h"
 #include "experiment/spec.h"
 #include "hw/safety.h"
+#include "runs/build_identity.h"
 
 namespace vb::runs {
 
@@ -29,6 +30,7 @@ db::ExecutionRecord RecordedExecution(const experiment::RunSummary& summary) {
   e.samples = static_cast<std::int64_t>(summary.samples);
   e.control_ticks = static_cast<std::int64_t>(summary.ticks);
   e.metrics_from_trajectory = summary.metrics_from_trajectory;
+  e.build = ThisBuild();
   if (summary.loop.ticks > 0) {
     db::LoopRecord l;
     l.ticks = static_cast<std::int64_t>(summary.loop.ticks);

@@ -283,6 +283,8 @@ std::string ResultPayload(const SpooledResult& res) {
       Put<double>(&p, e.loop->jitter_p99_s);
       Put<double>(&p, e.loop->jitter_max_s);
     }
+    // The build after the loop (schema v7): a journal written before ends at the loop and still reads.
+    if (!e.build.empty()) PutString(&p, e.build);
   }
   return p;
 }
@@ -311,6 +313,7 @@ bool DecodeResult(std::string_view payload, SpooledResult* res) {
       return false;
     e.loop = l;
   }
+  if (!r.rest().empty() && !r.GetString(&e.build)) return false;
   res->execution = e;
   return r.rest().empty();
 }

@@ -5,11 +5,14 @@
 #include <spdlog/spdlog.h>
 
 #include "db/open_store.h"
+#include "runs/build_identity.h"
 
 namespace vb::runs {
 
 Worker::Worker(BenchSetup setup, Registry* registry)
-    : setup_(std::move(setup)), registry_(registry), faults_("bench " + setup_.name) {}
+    : setup_(std::move(setup)), registry_(registry), faults_("bench " + setup_.name) {
+  ThisBuild();  // the executable's digest read once now, not when the first run finishes (build_identity.h)
+}
 
 Worker::~Worker() { Stop(); }
 

@@ -212,6 +212,7 @@ grpc::Status BenchServiceImpl::FillRun(db::Store* store, const db::RunRecord& r,
     x->set_samples(e.samples);
     x->set_control_ticks(e.control_ticks);
     x->set_metrics_from_trajectory(e.metrics_from_trajectory);
+    x->set_build(e.build);
     if (e.loop) {
       auto* l = x->mutable_loop();
       l->set_ticks(e.loop->ticks);

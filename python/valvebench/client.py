@@ -127,13 +127,16 @@ class Run:
         self.finished_unix_s = proto.finished_unix_s
         # What executing it measured, stored with the run (None: it did not execute): wall_s, simulated_s,
         # samples, control_ticks, metrics_from_trajectory, and for a paced run "loop" (ticks, overruns,
-        # jitter_p50_s, jitter_p99_s, jitter_max_s), as benchctl show prints them.
+        # jitter_p50_s, jitter_p99_s, jitter_max_s) and "build" (which build executed it, when known), as
+        # benchctl show prints them.
         self.execution = None
         if proto.HasField("execution"):
             e = proto.execution
             self.execution = {"wall_s": e.wall_s, "simulated_s": e.simulated_s, "samples": e.samples,
                               "control_ticks": e.control_ticks,
                               "metrics_from_trajectory": e.metrics_from_trajectory}
+            if e.build:
+                self.execution["build"] = e.build
             if e.HasField("loop"):
                 self.execution["loop"] = {"ticks": e.loop.ticks, "overruns": e.loop.overruns,
                                           "jitter_p50_s": e.loop.jitter_p50_s, "jitter_p99_s": e.loop.jitter_p99_s,

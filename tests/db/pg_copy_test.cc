@@ -97,6 +97,7 @@ std::vector<std::int64_t> Populate(Store& s) {
   paced.loop->jitter_p50_s = 9.5e-6;
   paced.loop->jitter_p99_s = 7.25e-5;
   paced.loop->jitter_max_s = 2.5e-4;
+  paced.build = "valvebench 0.1.0 sha256:ffeeddccbbaa99887766554433221100";  // schema v7; `unpaced` has none
   EXPECT_TRUE(s.Finish(LeaseOf(**c0), RunStatus::kDone, "",
                        {{"rmse_A", 1.25e-3}, {"nan_metric", std::nan("")}, {"effort", -0.0}}, paced)
                   .ok());
@@ -157,6 +158,7 @@ void ExpectSameRun(const RunRecord& a, const RunRecord& b) {
   EXPECT_EQ(a.execution->samples, b.execution->samples);
   EXPECT_EQ(a.execution->control_ticks, b.execution->control_ticks);
   EXPECT_EQ(a.execution->metrics_from_trajectory, b.execution->metrics_from_trajectory);
+  EXPECT_EQ(a.execution->build, b.execution->build);
   ASSERT_EQ(a.execution->loop.has_value(), b.execution->loop.has_value());
   if (!a.execution->loop) return;
   EXPECT_EQ(a.execution->loop->ticks, b.execution->loop->ticks);
@@ -342,7 +344,7 @@ TEST_F(PgCopyTest, ANonEmptyTargetOrARunningSourceIsRefusedAndNothingIsCopied) {
   std::map<std::string, std::int64_t> rows(info->rows.begin(), info->rows.end());
   EXPECT_EQ(rows["runs"], 5);  // the first copy's, nothing more
   EXPECT_EQ(info->engine, "postgresql");
-  EXPECT_EQ(info->schema_version, 6);
+  EXPECT_EQ(info->schema_version, 7);
 
   // A source with a running run: refused (its server is still using it).
   const std::string busy = TempFile("busy");
@@ -395,7 +397,7 @@ TEST_F(PgCopyTest, BenchctlDbCopyAndInfoWithExitCodes) {
   ASSERT_FALSE(j.is_discarded()) << copied.out;
   EXPECT_EQ(j["rows"]["runs"], 5);
   EXPECT_EQ(j["rows"]["trace_chunks"], 4);
-  EXPECT_EQ(j["target_schema_version"], 6);
+  EXPECT_EQ(j["target_schema_version"], 7);
 
   Ran again = Benchctl(Cat("db copy --from ", source_, " --to ", to));
   EXPECT_EQ(again.code, 2) << again.out;  // refused: the target is not empty
@@ -406,7 +408,7 @@ TEST_F(PgCopyTest, BenchctlDbCopyAndInfoWithExitCodes) {
   auto ij = nlohmann::json::parse(info.out, nullptr, false);
   ASSERT_FALSE(ij.is_discarded()) << info.out;
   EXPECT_EQ(ij["engine"], "postgresql");
-  EXPECT_EQ(ij["schema_version"], 6);
+  EXPECT_EQ(ij["schema_version"], 7);
   EXPECT_EQ(ij["runs_by_status"]["done"], 1);
   EXPECT_EQ(ij["rows"]["baselines"], 2);
 

@@ -449,11 +449,11 @@ TEST_P(PgLabTest, HostsSavingABaselineUnderOneNameAtOnceGetSuccessiveVersions) {
 
 TEST_P(PgLabTest, SchemaIsAtTheCurrentVersionAndReopeningKeepsIt) {
   EXPECT_EQ(store().schema_version(), pg_schema::CurrentVersion());
-  EXPECT_EQ(pg_schema::CurrentVersion(), 6);
+  EXPECT_EQ(pg_schema::CurrentVersion(), 7);
   Submit(store(), {MakeRun("kept")});
   auto again = OpenAnother();
   ASSERT_NE(again, nullptr);
-  EXPECT_EQ(again->schema_version(), 6);
+  EXPECT_EQ(again->schema_version(), 7);
   auto runs = again->ListRuns(RunFilter{});
   ASSERT_TRUE(runs.ok());
   EXPECT_EQ(runs->size(), 1u);
@@ -536,7 +536,7 @@ TEST_P(PgLabTest, AVersion5DatabaseMigratesKeepingItsRuns) {
   }
   auto s = OpenStore(*fresh);
   ASSERT_TRUE(s.ok()) << s.status().ToString();
-  EXPECT_EQ((*s)->schema_version(), 6);
+  EXPECT_EQ((*s)->schema_version(), pg_schema::CurrentVersion());
   auto old = (*s)->GetRun(1);
   ASSERT_TRUE(old.ok()) << old.status().ToString();
   EXPECT_EQ(old->status, RunStatus::kDone);

@@ -205,8 +205,8 @@ TEST(StoreSchemaTest, NewDatabaseIsAtTheCurrentVersionInWalMode) {
     auto store = OpenOrDie(path);
     ASSERT_NE(store, nullptr);
     EXPECT_EQ(store->schema_version(), schema::CurrentVersion());
-    EXPECT_EQ(schema::CurrentVersion(), 6);  // v2: baselines and regressions; v3: run keys as fields; v4: codecs;
-    // v5: the lab (fences, hosts, stale writes, nights claimed); v6: what executing a run measured
+    EXPECT_EQ(schema::CurrentVersion(), 7);  // v2: baselines and regressions; v3: run keys as fields; v4: codecs;
+    // v5: the lab (fences, hosts, stale writes, nights claimed); v6: what executing a run measured; v7: its build
   }
   RawDb raw(path);
   EXPECT_EQ(raw.Int("PRAGMA user_version"), schema::CurrentVersion());
@@ -368,7 +368,7 @@ TEST(StoreSchemaTest, Version6KeepsOlderRunsAndStoresExecutionsFromThenOn) {
   }
   auto store = OpenOrDie(path);
   ASSERT_NE(store, nullptr);
-  EXPECT_EQ(store->schema_version(), 6);
+  EXPECT_EQ(store->schema_version(), schema::CurrentVersion());
   auto old = store->GetRun(1);
   ASSERT_TRUE(old.ok()) << old.status().ToString();
   EXPECT_EQ(old->status, RunStatus::kDone);
@@ -421,10 +421,11 @@ TEST(StoreSchemaTest, MigrationListWithAGapIsABug) {
 }
 
 void ExpectNewerSchemaRefused(const std::string& path, const char* journal_mode) {
+  const int kNewer = schema::CurrentVersion() + 1;  // a version this build does not know
   {
     RawDb raw(path);
     raw.Exec(Cat("PRAGMA journal_mode = ", journal_mode));
-    raw.Exec("CREATE TABLE future (a); INSERT INTO future VALUES (1); PRAGMA user_version = 7");
+    raw.Exec(Cat("CREATE TABLE future (a); INSERT INTO future VALUES (1); PRAGMA user_version = ", kNewer));
   }
   ASSERT_FALSE(FileExists(path + "-wal"));  // the last connection closed: checkpointed and removed
   const std::string before = ReadFileBytes(path);
@@ -432,12 +433,13 @@ void ExpectNewerSchemaRefused(const std::string& path, const char* journal_mode)
   auto store = OpenSqliteStore(path);
   ASSERT_FALSE(store.ok());
   EXPECT_EQ(store.status().code(), StatusCode::kFailedPrecondition);
-  EXPECT_NE(store.status().message().find("schema version 7"), std::string::npos) << store.status().message();
+  EXPECT_NE(store.status().message().find(Cat("schema version ", kNewer)), std::string::npos)
+      << store.status().message();
   EXPECT_NE(store.status().message().find(Cat("(", schema::CurrentVersion(), ")")), std::string::npos) << store.status().message();
   EXPECT_EQ(ReadFileBytes(path), before) << "the file was modified";
   RawDb raw(path);
   EXPECT_EQ(raw.Text("PRAGMA journal_mode"), journal_mode);
-  EXPECT_EQ(raw.Int("PRAGMA user_version"), 7);
+  EXPECT_EQ(raw.Int("PRAGMA user_version"), kNewer);
 }
 
 TEST(StoreSchemaTest, RefusesANewerSchemaWithoutTouchingTheFile) {
@@ -795,8 +797,8 @@ TEST_P(StoreRunTest, FinishWithMetricsAndHistory) {
 
 // What executing a run measured is written by the Finish that ends it and read back with the run, on both
 // engines and through another connection (a reopened store): a paced run's loop statistics, a run not paced
-// without them (absent, not zeros), a run that never executed without any. Bad numbers name the field and
-// change nothing.
+// without them (absent, not zeros), a run that never executed without any; the build that executed it, or none
+// ("" stored as NULL). Bad numbers and builds name the field and change nothing.
 TEST_P(StoreRunTest, ExecutionAndLoopStatisticsAreStoredWithTheRun) {
   Store* store = &this->store();
   auto ids = Submit(*store, {MakeRun("paced"), MakeRun("unpaced"), MakeRun("never")});
@@ -812,9 +814,11 @@ TEST_P(StoreRunTest, ExecutionAndLoopStatisticsAreStoredWithTheRun) {
   paced.loop->jitter_p50_s = 12.5e-6;
   paced.loop->jitter_p99_s = 81.25e-6;
   paced.loop->jitter_max_s = 1.5e-3;
+  paced.build = "valvebench 0.1.0 sha256:00112233445566778899aabbccddeeff";
   ExecutionRecord unpaced = paced;
   unpaced.loop.reset();
   unpaced.wall_s = 0.01;
+  unpaced.build = "";
 
   ASSERT_EQ(ClaimId(*store), ids[0]);
   ExecutionRecord bad = paced;
@@ -822,6 +826,15 @@ TEST_P(StoreRunTest, ExecutionAndLoopStatisticsAreStoredWithTheRun) {
   Status refused = store->Finish(vb::db::testing::CurrentLease(store, ids[0]), RunStatus::kDone, "", {}, bad);
   EXPECT_EQ(refused.code(), StatusCode::kInvalidArgument);
   EXPECT_NE(refused.message().find("execution.wall_s"), std::string::npos) << refused.message();
+  EXPECT_EQ(store->GetRun(ids[0])->status, RunStatus::kRunning);
+  bad = paced;
+  bad.build = "valvebench\n0.1.0";
+  refused = store->Finish(vb::db::testing::CurrentLease(store, ids[0]), RunStatus::kDone, "", {}, bad);
+  EXPECT_EQ(refused.code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(refused.message().find("execution.build"), std::string::npos) << refused.message();
+  bad.build = std::string(201, 'x');
+  refused = store->Finish(vb::db::testing::CurrentLease(store, ids[0]), RunStatus::kDone, "", {}, bad);
+  EXPECT_NE(refused.message().find("execution.build: at most 200"), std::string::npos) << refused.message();
   EXPECT_EQ(store->GetRun(ids[0])->status, RunStatus::kRunning);
   ASSERT_TRUE(store->Finish(vb::db::testing::CurrentLease(store, ids[0]), RunStatus::kDone, "", {{"rmse_A", 0.5}},
                             paced).ok());
@@ -847,9 +860,11 @@ TEST_P(StoreRunTest, ExecutionAndLoopStatisticsAreStoredWithTheRun) {
     EXPECT_EQ(a->execution->loop->jitter_p50_s, 12.5e-6);  // exact: stored as doubles
     EXPECT_EQ(a->execution->loop->jitter_p99_s, 81.25e-6);
     EXPECT_EQ(a->execution->loop->jitter_max_s, 1.5e-3);
+    EXPECT_EQ(a->execution->build, "valvebench 0.1.0 sha256:00112233445566778899aabbccddeeff");
     auto b = s.GetRun(ids[1]);
     ASSERT_TRUE(b.ok() && b->execution.has_value());
     EXPECT_EQ(b->execution->wall_s, 0.01);
+    EXPECT_EQ(b->execution->build, "") << "no build known: stored as NULL, read back as none";
     EXPECT_FALSE(b->execution->loop.has_value()) << "a loop that was not paced has no statistics";
     auto c = s.GetRun(ids[2]);
     ASSERT_TRUE(c.ok());

@@ -363,6 +363,7 @@ TEST(Spool, AfterACrashTheLeftoversAreUploadedOnceAndTheStopIsDated) {
     executed.loop->jitter_p50_s = 1e-5;
     executed.loop->jitter_p99_s = 4e-5;
     executed.loop->jitter_max_s = 6e-5;
+    executed.build = "valvebench 0.1.0 sha256:0123456789abcdef0123456789abcdef";
     ASSERT_TRUE((*j)->AppendResult({db::RunStatus::kDone, "", {{"rise_time_s", 0.01}}, -1.0, executed}).ok());
     auto j2 = spool->Begin(db::LeaseOf(second));
     ASSERT_TRUE(j2.ok());
@@ -398,6 +399,7 @@ TEST(Spool, AfterACrashTheLeftoversAreUploadedOnceAndTheStopIsDated) {
   ASSERT_TRUE(r->execution->loop.has_value());
   EXPECT_EQ(r->execution->loop->overruns, 2);
   EXPECT_EQ(r->execution->loop->jitter_p99_s, 4e-5);
+  EXPECT_EQ(r->execution->build, "valvebench 0.1.0 sha256:0123456789abcdef0123456789abcdef");
 
   ASSERT_EQ(*rig.store->RecoverAfterCrashAt("h", left->stopped_unix_s), 1);
   auto h = rig.store->History(second.id);

@@ -4,11 +4,14 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cstdio>
 #include <filesystem>
+#include <memory>
 #include <thread>
 
 #include "client/client.h"
 #include "experiment/spec.h"
+#include "runs/build_identity.h"
 #include "service/local_service.h"
 
 namespace vb {
@@ -91,6 +94,18 @@ TEST(LocalService, RunsGoThroughTheServiceAndAreVisibleToItsViews) {
   EXPECT_EQ(static_cast<std::size_t>(got->execution().samples()), kept->size());
   EXPECT_GT(got->execution().wall_s(), 0.0);
   EXPECT_FALSE(got->execution().has_loop());
+  // The build that executed it: this test's executable, named by its SHA-256 as sha256sum computes it.
+  EXPECT_EQ(got->execution().build(), runs::ThisBuild());
+  EXPECT_EQ(got->execution().build().rfind("valvebench ", 0), 0u) << got->execution().build();
+  {
+    // By pid: popen's shell would read its own /proc/self/exe.
+    const std::string cmd = "sha256sum /proc/" + std::to_string(::getpid()) + "/exe";
+    std::unique_ptr<FILE, int (*)(FILE*)> p(popen(cmd.c_str(), "r"), &pclose);
+    ASSERT_NE(p, nullptr);
+    std::string sum(32, '\0');
+    sum.resize(std::fread(sum.data(), 1, sum.size(), p.get()));
+    EXPECT_EQ(runs::BuildDigest(got->execution().build()), "sha256:" + sum);
+  }
   EXPECT_NE((*s)->Where().find("local store "), std::string::npos);
   EXPECT_TRUE((*s)->keeps_runs());
   s->reset();

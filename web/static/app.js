@@ -279,6 +279,7 @@ function executionRows(x) {
   if (l) rows.push(['loop', Number(l.ticks || 0) + ' paced ticks, ' + Number(l.overruns || 0) + ' overruns, jitter p50 ' +
     VBFormat.value(l.jitter_p50_s || 0, 's') + ', p99 ' + VBFormat.value(l.jitter_p99_s || 0, 's') + ', max ' +
     VBFormat.value(l.jitter_max_s || 0, 's')]);
+  if (x.build) rows.push(['build', String(x.build)]);
   return rows;
 }
 
