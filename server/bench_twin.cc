@@ -270,7 +270,34 @@ CaseVerdict DecideCase(double observed_change, double allowed, double valve_chan
                       100.0 * share, valve_change, allowed, sigma)};
 }
 
+void AddCaseBuild(CaseBuilds* builds, const std::string& case_name, const std::string& run_build) {
+  const auto [at, first] = builds->emplace(case_name, run_build);
+  if (!first && at->second != run_build) at->second.clear();  // two builds (or one unknown): not one known build
+}
+
 CaseVerdict DecideCase(const CaseReplay& r) {
+  if (r.spec_is_baseline_code && r.build_is_baseline) {
+    // Nothing that runs as code changed: the spec is the baseline's and the same executable ran both (its digest,
+    // runs/build_identity.h). The metric moved beyond the allowance, so the bench did: the valve or its wiring. The
+    // replay's share is said for what it shows, and a share the replay cannot account for says the health check
+    // does not see what moved.
+    const double share = r.valve_change / r.observed_change;
+    std::string why = "the spec and the build that ran it are the baseline's: no code changed, the bench did";
+    if (std::isfinite(share)) {
+      if (share >= 0.5)
+        why += fmt::format(" (tonight's identified valve replays {:.0f} % of the change)", 100.0 * share);
+      else if (!r.changed_since_baseline.empty())
+        why += fmt::format(" ({}; its identified valve replays {:.0f} % of the change: the rest is what the "
+                           "replay does not carry at this operating point)",
+                           r.changed_since_baseline, 100.0 * share);
+      else
+        why += fmt::format(" (tonight's identified valve replays only {:.0f} % of the change and the tracking "
+                           "flagged nothing: what moved is not seen by the health check, or not yet beyond its "
+                           "limits)",
+                           100.0 * share);
+    }
+    return {"valve", why};
+  }
   // A spec change whose replay on the baseline's valve stays within the allowance is no change this metric sees
   // (another seed's jitter, a field the law does not read): DecideCase's rules, on tonight's code, decide.
   if (r.spec_is_baseline_code) {
@@ -350,11 +377,12 @@ CaseVerdict DecideCase(const CaseReplay& r) {
 regress::Json BenchTwins::Attribute(const regress::RegressResult& result,
                                     const std::map<std::string, experiment::ExperimentSpec>& specs,
                                     const std::map<std::string, std::vector<std::string>>& benches,
-                                    const BaselineCode& baseline_code) const {
+                                    const BaselineCode& baseline_code, const CaseBuilds& builds) const {
   regress::Json cases = regress::Json::array();
   regress::Json baseline_valves = regress::Json::object();
   int valve = 0, code = 0, undetermined = 0;
   int code_replayed = 0;  // "code" cases whose code change the replay reproduced (DecideCase(CaseReplay))
+  int valve_by_build = 0;  // "valve" cases whose spec and build were the baseline's
   std::string first_undetermined;
   for (const auto& f : result.findings) {
     if (f.verdict != regress::Verdict::kRegressed) continue;
@@ -372,6 +400,14 @@ regress::Json BenchTwins::Attribute(const regress::RegressResult& result,
     const bool same_spec =
         spec != specs.end() && old_spec != baseline_code.specs.end() && SameCode(old_spec->second, spec->second);
     const bool code_known = spec != specs.end() && old_spec != baseline_code.specs.end() && !same_spec;
+    // One known build ran the case tonight and the same one ran the baseline's runs of it.
+    const auto build = builds.find(f.case_name);
+    const auto old_build = baseline_code.builds.find(f.case_name);
+    const bool same_build = build != builds.end() && old_build != baseline_code.builds.end() &&
+                            !build->second.empty() && build->second == old_build->second;
+    if (build != builds.end() && !build->second.empty()) c["build"] = build->second;
+    if (old_build != baseline_code.builds.end() && !old_build->second.empty())
+      c["baseline_build"] = old_build->second;
     if (!std::isfinite(f.delta)) {
       why = "the metric has no value on one side";
     } else if (spec == specs.end() || ran == benches.end() || ran->second.empty()) {
@@ -428,6 +464,7 @@ regress::Json BenchTwins::Attribute(const regress::RegressResult& result,
       CaseReplay replay{f.delta, f.allowed, valve_change, sigma, changed};
       replay.replay_off_tonight = tonight_sum / n - f.now.mean;
       replay.spec_is_baseline_code = same_spec;
+      replay.build_is_baseline = same_build;
       if (code_known) {
         // Both codes on both valves: the code's change on the baseline's valve, the valve's under the baseline's
         // code, each with its own repeatability.
@@ -462,9 +499,16 @@ regress::Json BenchTwins::Attribute(const regress::RegressResult& result,
                            "{:.4g} and {:.4g}: the replay is not the bench here (a health run at this case's "
                            "operating point would pin it)",
                            base_replay, tonight_sum / n, f.baseline.mean, f.now.mean);
+    } else if (std::isfinite(f.delta) && same_spec && same_build) {
+      // No replay (a bench without an identified check tonight, a replay that failed), but nothing that runs as
+      // code changed (DecideCase(CaseReplay)): the bench did, whatever the replay could not say.
+      verdict = "valve";
+      why = "the spec and the build that ran it are the baseline's: no code changed, the bench did (not replayed: " +
+            why + ")";
     } else {
       verdict = "undetermined";
     }
+    if (verdict == "valve" && same_spec && same_build) ++valve_by_build;
     c["verdict"] = verdict;
     if (!why.empty()) c["reason"] = why;
     (verdict == "valve" ? valve : verdict == "code" ? code : undetermined)++;
@@ -485,10 +529,17 @@ regress::Json BenchTwins::Attribute(const regress::RegressResult& result,
     out["verdict"] = "undetermined";
     out["reason"] =
         fmt::format("tonight's valve reproduces {} regressed metric(s) and not {}: both changed", valve, code);
+  } else if (valve > 0 && valve_by_build == valve) {
+    out["verdict"] = "valve";
+    out["reason"] = "every regressed case ran the baseline's spec on the baseline's build: no code changed, the "
+                    "bench did";
   } else if (valve > 0) {
     out["verdict"] = "valve";
-    out["reason"] = "the same code on tonight's identified valve reproduces every regressed metric (the valve of "
-                    "the baseline's night does not)";
+    out["reason"] = valve_by_build > 0
+                        ? "every regressed metric is the bench's: its case ran the baseline's spec and build, or "
+                          "the same code on tonight's identified valve reproduces it"
+                        : "the same code on tonight's identified valve reproduces every regressed metric (the valve "
+                          "of the baseline's night does not)";
   } else if (code_replayed == code) {
     out["verdict"] = "code";
     out["reason"] = "tonight's code on the baseline's night's valve makes at least half of every regressed metric's "

@@ -50,6 +50,9 @@ struct CaseReplay {
   double replay_off_tonight = NAN;  // tonight's replay minus tonight's measurement (DecideCase above)
   // The baseline's spec of this case found and equal to tonight's (but for tags): no code change the spec shows.
   bool spec_is_baseline_code = false;
+  // And every run of the case, tonight's and the baseline's, executed by one and the same build (the executable's
+  // digest, runs/build_identity.h): no code change at all, the spec's or the build's.
+  bool build_is_baseline = false;
   bool baseline_code_known = false;  // the baseline's spec of this case found, and it differs from tonight's
   double code_change = 0.0;                 // B,t - B,b: tonight's code on the baseline's valve
   double valve_change_baseline_code = 0.0;  // T,b - B,b: tonight's valve under the baseline's code
@@ -62,12 +65,24 @@ struct CaseReplay {
 // how far. A spec change within the allowance (or none) leaves DecideCase's rules above, but for one: where the
 // spec is the baseline's and the valve's part alone fails the night (beyond the allowance toward the failure by 2
 // sigma), "valve" even under half the change (the rest is the replay's distance from the bench).
+// Where the spec and the build are the baseline's (build_is_baseline), "valve": nothing that runs as code changed,
+// so what moved the metric is the bench (the valve, or the rest of its wiring); the replay's shares are said, not
+// needed. The trade: what a run does not record as code (a shared library another apt upgrade brought, a server
+// setting outside the spec) is called the bench's.
 CaseVerdict DecideCase(const CaseReplay& r);
+
+// Each case's build: the one build every run of the case recorded (db::ExecutionRecord::build); "" when a run of
+// it recorded none (it did not execute, or ran before schema version 7) or two runs name different builds.
+using CaseBuilds = std::map<std::string, std::string>;
+void AddCaseBuild(CaseBuilds* builds, const std::string& case_name, const std::string& run_build);
 
 // The code the baseline was measured with: each case's spec (its first run's) from a stored batch, and which.
 struct BaselineCode {
   std::map<std::string, experiment::ExperimentSpec> specs;  // case -> spec
   std::string from;  // "the baseline's batch 12" / "night 2026-11-01's suite, batch 40"
+  // Which build ran each case, from the baseline's own batch only: a night's suite standing in
+  // for the baseline's code is a proxy for its spec, but its build is that night's, not the baseline's.
+  CaseBuilds builds;
 };
 
 class BenchTwins {
@@ -120,11 +135,12 @@ class BenchTwins {
   // which benches ran the case tonight).
   // {"verdict": "valve" | "code" | "undetermined", "reason", "cases": [...], "baseline_valves": {bench: night}}.
   // `baseline_code`: the baseline's code (empty: not known); a case whose spec differs from it is replayed under
-  // both codes on both valves (DecideCase(CaseReplay)).
+  // both codes on both valves (DecideCase(CaseReplay)). `builds`: which build ran each case tonight (AddCaseBuild);
+  // a case whose spec and build are both the baseline's is the bench's, replayed or not.
   regress::Json Attribute(const regress::RegressResult& result,
                           const std::map<std::string, experiment::ExperimentSpec>& specs,
                           const std::map<std::string, std::vector<std::string>>& benches,
-                          const BaselineCode& baseline_code = {}) const;
+                          const BaselineCode& baseline_code = {}, const CaseBuilds& builds = {}) const;
 
  private:
   struct Twin {

@@ -196,6 +196,7 @@ StatusOr<std::int64_t> NightScheduler::RunNight(double fire_unix_s) {
   std::vector<v1::ExperimentSpec> specs;
   std::map<std::string, experiment::ExperimentSpec> case_specs;          // each case's first run (the replay's)
   std::map<std::string, std::vector<std::string>> case_benches;          // the benches that ran each case
+  CaseBuilds case_builds;                                                // the build that ran each case
   std::vector<RunKey> keys;
   for (auto& r : *runs) {
     keys.push_back(r.key);
@@ -233,6 +234,7 @@ StatusOr<std::int64_t> NightScheduler::RunNight(double fire_unix_s) {
         m.name = r.key.DisplayName();
         m.case_name = r.key.CaseName();
         m.ok = r.status == db::RunStatus::kDone;
+        AddCaseBuild(&case_builds, m.case_name, r.execution ? r.execution->build : "");
         auto& ran = case_benches[m.case_name];
         if (!r.bench_name.empty() && std::find(ran.begin(), ran.end(), r.bench_name) == ran.end())
           ran.push_back(r.bench_name);
@@ -281,7 +283,7 @@ StatusOr<std::int64_t> NightScheduler::RunNight(double fire_unix_s) {
   regress::Json j = regress::ResultToJson(r);
   j["started_unix_s"] = started_unix_s;
   j["night_number"] = night_number;
-  TwinNight(date, r, case_specs, case_benches, *baseline, &health, &j);
+  TwinNight(date, r, case_specs, case_benches, case_builds, *baseline, &health, &j);
   j["health"] = health;
   return SaveNight(date, batch_id, r.verdict(), j.dump(), clock_());
 }
@@ -326,6 +328,8 @@ BaselineCode NightScheduler::BaselineCodeOf(const regress::Baseline& baseline,
     if (not_own.empty()) {
       out.from = fmt::format("the baseline's batch {}", batch);
       add_specs(*listed);
+      for (const auto& run : *listed)
+        AddCaseBuild(&out.builds, run.key.CaseName(), run.execution ? run.execution->build : "");
       return out;
     }
     not_own = fmt::format("the baseline's source names batch {}, which is not the baseline's here ({}); ", batch,
@@ -349,7 +353,8 @@ BaselineCode NightScheduler::BaselineCodeOf(const regress::Baseline& baseline,
 void NightScheduler::TwinNight(const std::string& date, const regress::RegressResult& r,
                                const std::map<std::string, experiment::ExperimentSpec>& case_specs,
                                const std::map<std::string, std::vector<std::string>>& case_benches,
-                               const regress::Baseline& baseline, regress::Json* health, regress::Json* j) {
+                               const CaseBuilds& case_builds, const regress::Baseline& baseline, regress::Json* health,
+                               regress::Json* j) {
   const double baseline_created_unix_s = baseline.created_unix_s;
   bool checked = false;
   for (const auto& h : *health) checked = checked || h.contains("batch_id");
@@ -419,7 +424,8 @@ void NightScheduler::TwinNight(const std::string& date, const regress::RegressRe
       const auto night = BaselineNight(stored.checks[bench], baseline_created_unix_s);
       twins_.UseBaselineNight(bench, night ? night->first : "", night ? night->second.batch_id : 0);
     }
-    (*j)["cause"] = twins_.Attribute(r, case_specs, case_benches, BaselineCodeOf(baseline, stored.suites));
+    (*j)["cause"] =
+        twins_.Attribute(r, case_specs, case_benches, BaselineCodeOf(baseline, stored.suites), case_builds);
     spdlog::info("night {}: cause {}: {}", date, (*j)["cause"].value("verdict", ""),
                  (*j)["cause"].value("reason", ""));
   }

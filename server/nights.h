@@ -59,11 +59,12 @@ class NightScheduler {
   // measured on, and its code: the baseline's batch when its source names one here, else that night's suite).
   void TwinNight(const std::string& date, const regress::RegressResult& r,
                  const std::map<std::string, experiment::ExperimentSpec>& case_specs,
-                 const std::map<std::string, std::vector<std::string>>& case_benches, const regress::Baseline& baseline,
-                 regress::Json* health, regress::Json* j);
+                 const std::map<std::string, std::vector<std::string>>& case_benches, const CaseBuilds& case_builds,
+                 const regress::Baseline& baseline, regress::Json* health, regress::Json* j);
   // The code the baseline was measured with (server/bench_twin.h BaselineCode); empty with the reason logged when
   // its runs are not in the store. A batch its source names counts only if its runs summarise to the baseline
-  // (regress::BaselineNotOfRuns); otherwise the night rule, the mismatch said first in `from`.
+  // (regress::BaselineNotOfRuns); otherwise the night rule, the mismatch said first in `from`. The builds only from
+  // the baseline's own batch.
   BaselineCode BaselineCodeOf(const regress::Baseline& baseline, const std::map<std::string, StoredCheck>& suites);
   StatusOr<std::int64_t> SaveNight(const std::string& date, std::int64_t batch_id, const std::string& verdict,
                                    const std::string& result_json, double finished_unix_s);

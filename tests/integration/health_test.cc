@@ -21,6 +21,7 @@
 #include "db/sqlite_store.h"
 #include "model/params.h"
 #include "runs/bench_setup.h"
+#include "runs/query.h"
 #include "server/config.h"
 #include "server/bench_twin.h"
 #include "server/health_check.h"
@@ -366,6 +367,56 @@ TEST(DecideCase, TheBaselinesCodeOnBothValves) {
   EXPECT_EQ(server::DecideCase(same).verdict, "undetermined");
 }
 
+// The spec and the build that ran it are the baseline's: no code changed, so the bench did, whatever the replay
+// reads (the cases above that it leaves undetermined: the replay off the bench, a flagged valve's small part, an
+// operating edge). A spec or a build that differs, or one not known, leaves the replay's rules.
+TEST(DecideCase, TheBaselinesSpecAndBuildLeaveOnlyTheBench) {
+  server::CaseReplay r{-4.47, 0.5, -0.236, 0.042, ""};
+  r.replay_off_tonight = 6.74;
+  r.spec_is_baseline_code = true;
+  EXPECT_EQ(server::DecideCase(r).verdict, "undetermined") << "the spec alone: a build may have changed";
+  r.build_is_baseline = true;
+  const auto warm = server::DecideCase(r);
+  EXPECT_EQ(warm.verdict, "valve");
+  EXPECT_NE(warm.why.find("the spec and the build that ran it are the baseline's: no code changed, the bench did"),
+            std::string::npos) << warm.why;
+  EXPECT_NE(warm.why.find("replays only 5 % of the change and the tracking flagged nothing"), std::string::npos)
+      << warm.why;
+  r.changed_since_baseline = "bench emu-2's F0*x_max down since 2026-11-01";
+  EXPECT_NE(server::DecideCase(r).why.find("bench emu-2's F0*x_max down since 2026-11-01; its identified valve "
+                                           "replays 5 %"),
+            std::string::npos) << server::DecideCase(r).why;
+  r.valve_change = -4.0;
+  EXPECT_NE(server::DecideCase(r).why.find("tonight's identified valve replays 89 % of the change"), std::string::npos);
+  // A spec that differs (a build that matches says nothing then): both codes on both valves decide. Tonight's code
+  // on the baseline's valve makes 94 % of the change, tonight's valve under the baseline's code none: the code.
+  r.spec_is_baseline_code = false;
+  r.baseline_code_known = true;
+  r.code_change = -4.2;
+  r.valve_change_baseline_code = 0.01;
+  r.sigma_baseline_code = 0.01;
+  EXPECT_EQ(server::DecideCase(r).verdict, "code") << server::DecideCase(r).why;
+}
+
+// A case's build is the one build all its runs recorded; a run without one, or two builds, leave none.
+TEST(CaseBuilds, OneBuildForAllTheCasesRunsOrNone) {
+  server::CaseBuilds b;
+  server::AddCaseBuild(&b, "hold", "valvebench 0.1.0 sha256:aa");
+  server::AddCaseBuild(&b, "hold", "valvebench 0.1.0 sha256:aa");
+  server::AddCaseBuild(&b, "map", "valvebench 0.1.0 sha256:aa");
+  server::AddCaseBuild(&b, "map", "valvebench 0.1.0 sha256:bb");
+  server::AddCaseBuild(&b, "map", "valvebench 0.1.0 sha256:aa");
+  server::AddCaseBuild(&b, "step", "valvebench 0.1.0 sha256:aa");
+  server::AddCaseBuild(&b, "step", "");
+  server::AddCaseBuild(&b, "step", "valvebench 0.1.0 sha256:aa");
+  server::AddCaseBuild(&b, "late", "");
+  server::AddCaseBuild(&b, "late", "valvebench 0.1.0 sha256:aa");
+  EXPECT_EQ(b["hold"], "valvebench 0.1.0 sha256:aa");
+  EXPECT_EQ(b["map"], "");
+  EXPECT_EQ(b["step"], "");
+  EXPECT_EQ(b["late"], "");
+}
+
 // Waits until the server has stored `n` nights; returns them newest first (an empty array on timeout).
 nlohmann::json WaitForNights(const std::string& addr, std::size_t n, int timeout_s) {
   const std::string cmd =
@@ -664,6 +715,72 @@ TEST(BenchTwin, AfterARebaselineTheReplayComparesWithTheBaselinesNightsValve) {
         << list[k].dump(1);
   }
   EXPECT_GE(judged, 2) << list.dump(1);  // nights 5 and 6 at least read the new baseline
+}
+
+// The build recorded with each run settles "code or valve" where the spec is the baseline's: the lab sets its
+// baseline from night 1's suite batch on this server (so its runs, and the build that ran them, are known), and
+// the bench's coil is 15 % more resistive from night 3. Every regressed case judged against that baseline ran the
+// baseline's spec on the same executable: `valve`, because no code changed, said in each case's reason with both
+// builds in its record. Without the builds the same nights are decided by the replay alone.
+TEST(BenchTwin, TheBaselinesSpecAndBuildMakeARegressionTheBenchs) {
+  constexpr int kNights = 5;
+  const std::string dir = ::testing::TempDir() + "/vb-twin-build-" + std::to_string(::getpid());
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  for (const char* f : {"ci.json", "ci-current-hold.json"}) std::filesystem::copy_file(kSuites + f, dir + "/" + f);
+  std::filesystem::copy_file(kSuites + "ci-baseline.json", dir + "/baseline.json");
+  const std::string benches = R"([{"name": "emu-a", "kind": "emulated", "model": {"preset": "taghizadeh2009"}, )" +
+                              std::string(kHealth) +
+                              R"(, "drift": [{"parameter": "R", "step": 0.15, "from_night": 3}]}])";
+  testing::ServerProcess server(
+      dir, R"("nights": {"cron": "0 2 * * *", "suite_file": "ci.json", "baseline_file": "baseline.json"})", benches);
+  server.AddArg("--simulate-nights");
+  server.AddArg(std::to_string(kNights));
+  const std::string addr = server.Start();
+  ASSERT_FALSE(addr.empty()) << server.Log();
+
+  nlohmann::json first = WaitForNights(addr, 1, 200);
+  ASSERT_GE(first.size(), 1u) << server.Log();
+  const std::int64_t night1_batch = first[first.size() - 1]["batch_id"].get<std::int64_t>();
+  const auto set = testing::RunCommand(std::string(VB_BENCHCTL) + " baseline set night1 --batch " +
+                                       std::to_string(night1_batch) + " --json --server " + addr + " --token " +
+                                       testing::kOperatorToken);
+  ASSERT_EQ(set.exit_code, 0) << set.out;
+  {
+    std::ofstream(dir + "/baseline.json.new") << set.out.substr(set.out.find('{'));
+    std::filesystem::rename(dir + "/baseline.json.new", dir + "/baseline.json");
+  }
+  nlohmann::json list = WaitForNights(addr, kNights, 300);
+  ASSERT_EQ(list.size(), static_cast<std::size_t>(kNights)) << server.Log();
+
+  auto store = db::OpenSqliteStore(server.db_path());
+  ASSERT_TRUE(store.ok()) << store.status().message();
+  auto night1 = runs::ListBatch(store->get(), night1_batch);
+  ASSERT_TRUE(night1.ok() && !night1->empty());
+  ASSERT_TRUE((*night1)[0].execution.has_value());
+  const std::string build = (*night1)[0].execution->build;
+  EXPECT_EQ(build.rfind("valvebench ", 0), 0u) << build;
+  EXPECT_NE(build.find(" sha256:"), std::string::npos) << build;
+
+  auto briefs = (*store)->ListRegressions(/*nights_only=*/true, 100);
+  ASSERT_TRUE(briefs.ok()) << briefs.status().message();
+  int judged = 0;
+  for (const auto& b : *briefs) {
+    auto rec = (*store)->GetRegression(b.id);
+    ASSERT_TRUE(rec.ok()) << rec.status().message();
+    const auto j = nlohmann::json::parse(rec->result_json);
+    if (b.baseline_name != "night1" || !j.contains("cause")) continue;
+    ++judged;
+    EXPECT_EQ(j["cause"]["verdict"], "valve") << b.night << ": " << j["cause"].dump(1) << "\n" << server.Log();
+    EXPECT_NE(j["cause"].value("reason", "").find("the baseline's spec on the baseline's build"), std::string::npos)
+        << j["cause"].dump(1);
+    for (const auto& c : j["cause"]["cases"]) {
+      EXPECT_EQ(c.value("build", ""), build) << c.dump(1);
+      EXPECT_EQ(c.value("baseline_build", ""), build) << c.dump(1);
+      EXPECT_NE(c.value("reason", "").find("no code changed, the bench did"), std::string::npos) << c.dump(1);
+    }
+  }
+  EXPECT_GE(judged, 2) << "nights 3 to 5 regress, and at least two read the baseline of night 1\n" << list.dump(1);
 }
 
 }  // namespace
