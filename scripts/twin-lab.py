@@ -7,7 +7,7 @@ from the server and prints, per drift, the night it reaches 3 sigma of its param
 it was flagged (with the parameter), the flags on the clean benches, and each regressed night's cause against
 the truth.
 
-    scripts/twin-lab.py BUILD_DIR [--nights 60] [--work DIR] [--json OUT]
+    scripts/twin-lab.py BUILD_DIR [--nights 60] [--work DIR] [--json OUT] [--baseline-night K]
 
     scripts/twin-lab.py BUILD_DIR --evaluate-only --work DIR   (the same report from a lab already lived)
 
@@ -17,6 +17,12 @@ line "suite ... batch"). Truth per regressed case: "code" for the PI hold (the l
 night, else "valve" (only a changed valve can make an unchanged code regress). A night's truth: "code" or
 "valve" when all its regressed cases agree, "both" otherwise, which the twin can only call "undetermined"
 ("both changed"); it is counted right when its cause is the truth ("undetermined" for "both").
+
+The nights compare with examples/suites/ci-baseline.json (made elsewhere: its runs, and the build that ran them,
+are not this server's). With --baseline-night K the lab does what a lab would: once night K is stored, it sets
+the baseline from that night's suite batch on this server (`benchctl baseline set --batch`) and the nights after
+compare with it; each regressed case then knows whether its spec and build are the baseline's (docs/track.md,
+"The build recorded with each run").
 """
 import argparse
 import datetime
@@ -32,6 +38,7 @@ import time
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 TOKEN = "twin-lab-viewer"
+OPERATOR_TOKEN = "twin-lab-operator"
 
 # Each drift: the bench, the model parameter the emulator changes, the tracked quantities it moves (what the
 # current can see: docs/track.md point 2), its form. Chosen as a lab meets them: a corroding connector (R up
@@ -54,6 +61,8 @@ def main():
     ap.add_argument("--work", default="/tmp/vb-twin-lab")
     ap.add_argument("--json", default="")
     ap.add_argument("--evaluate-only", action="store_true", help="read the nights of the lab in --work again")
+    ap.add_argument("--baseline-night", type=int, default=0,
+                    help="set the baseline from this night's suite batch once it is stored (0: the example's)")
     a = ap.parse_args()
     if a.evaluate_only:
         return evaluate_again(a)
@@ -85,10 +94,14 @@ def main():
         if d:
             b["drift"] = d
         benches.append(b)
+    baseline_file = os.path.join(a.work, "baseline.json")
+    shutil.copy(os.path.join(suites, "ci-baseline.json"), baseline_file)
     config = {"listen_address": "127.0.0.1:0", "database_path": os.path.join(a.work, "runs.db"), "benches": benches,
-              "tokens": [{"user": "v", "role": "viewer", "token_sha256": hashlib.sha256(TOKEN.encode()).hexdigest()}],
+              "tokens": [{"user": "v", "role": "viewer", "token_sha256": hashlib.sha256(TOKEN.encode()).hexdigest()},
+                         {"user": "o", "role": "operator",
+                          "token_sha256": hashlib.sha256(OPERATOR_TOKEN.encode()).hexdigest()}],
               "nights": {"cron": "0 2 * * *", "suite_file": os.path.join(a.work, "ci.json"),
-                         "baseline_file": os.path.join(suites, "ci-baseline.json"), "timezone": "UTC"}}
+                         "baseline_file": baseline_file, "timezone": "UTC"}}
     with open(os.path.join(a.work, "server.json"), "w") as f:
         json.dump(config, f, indent=1)
 
@@ -101,6 +114,7 @@ def main():
                              str(a.nights)], stderr=log, stdout=subprocess.DEVNULL)
     addr = None
     swapped = set()
+    rebased = a.baseline_night <= 0
     done = 0
     try:
         while True:
@@ -119,6 +133,9 @@ def main():
             if stored != done:
                 done = stored
                 print("%5.0f s: %d of %d nights" % (time.time() - t0, done, a.nights), flush=True)
+            if not rebased and done >= a.baseline_night:
+                set_baseline(benchctl, addr, dates[a.baseline_night - 1], baseline_file)
+                rebased = True
             if done >= a.nights:
                 break
             if proc.poll() is not None:
@@ -129,6 +146,24 @@ def main():
         proc.terminate()
         proc.wait(timeout=60)
     return report_out(evaluate(nights, health_j, dates, elapsed), a.json)
+
+
+def set_baseline(benchctl, addr, date, path):
+    """The baseline from night `date`'s suite batch on this server, written into the file the nights read."""
+    listed = subprocess.run([benchctl, "nights", "--json", "--limit", "1000", "--server", addr, "--token", TOKEN],
+                            capture_output=True, text=True, timeout=600)
+    night = [n for n in json.loads(listed.stdout) if n.get("date") == date]
+    if not night:
+        sys.exit("night %s is not stored: %s" % (date, listed.stderr[:500]))
+    r = subprocess.run([benchctl, "baseline", "set", "lab-night-" + date, "--batch", str(night[0]["batch_id"]),
+                        "--json", "--server", addr, "--token", OPERATOR_TOKEN],
+                       capture_output=True, text=True, timeout=600)
+    if r.returncode != 0:
+        sys.exit("benchctl baseline set: " + (r.stderr or r.stdout)[:500])
+    with open(path + ".new", "w") as f:
+        f.write(r.stdout[r.stdout.find("{"):])
+    os.replace(path + ".new", path)
+    print("baseline set from night %s (batch %d)" % (date, night[0]["batch_id"]), flush=True)
 
 
 def read_lab(benchctl, addr):
