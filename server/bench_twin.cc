@@ -282,7 +282,7 @@ CaseVerdict DecideCase(const CaseReplay& r) {
     // replay's share is said for what it shows, and a share the replay cannot account for says the health check
     // does not see what moved.
     const double share = r.valve_change / r.observed_change;
-    std::string why = "the spec and the build that ran it are the baseline's: no code changed, the bench did";
+    std::string why = "the spec and the build that ran it are the baseline's code's: no code changed, the bench did";
     if (std::isfinite(share)) {
       if (share >= 0.5)
         why += fmt::format(" (tonight's identified valve replays {:.0f} % of the change)", 100.0 * share);
@@ -406,8 +406,10 @@ regress::Json BenchTwins::Attribute(const regress::RegressResult& result,
     const bool same_build = build != builds.end() && old_build != baseline_code.builds.end() &&
                             !build->second.empty() && build->second == old_build->second;
     if (build != builds.end() && !build->second.empty()) c["build"] = build->second;
-    if (old_build != baseline_code.builds.end() && !old_build->second.empty())
+    if (old_build != baseline_code.builds.end() && !old_build->second.empty()) {
       c["baseline_build"] = old_build->second;
+      c["baseline_code"] = baseline_code.from;
+    }
     if (!std::isfinite(f.delta)) {
       why = "the metric has no value on one side";
     } else if (spec == specs.end() || ran == benches.end() || ran->second.empty()) {
@@ -503,8 +505,8 @@ regress::Json BenchTwins::Attribute(const regress::RegressResult& result,
       // No replay (a bench without an identified check tonight, a replay that failed), but nothing that runs as
       // code changed (DecideCase(CaseReplay)): the bench did, whatever the replay could not say.
       verdict = "valve";
-      why = "the spec and the build that ran it are the baseline's: no code changed, the bench did (not replayed: " +
-            why + ")";
+      why = "the spec and the build that ran it are the baseline's code's: no code changed, the bench did (not "
+            "replayed: " + why + ")";
     } else {
       verdict = "undetermined";
     }
@@ -531,13 +533,13 @@ regress::Json BenchTwins::Attribute(const regress::RegressResult& result,
         fmt::format("tonight's valve reproduces {} regressed metric(s) and not {}: both changed", valve, code);
   } else if (valve > 0 && valve_by_build == valve) {
     out["verdict"] = "valve";
-    out["reason"] = "every regressed case ran the baseline's spec on the baseline's build: no code changed, the "
-                    "bench did";
+    out["reason"] = "every regressed case ran the spec and the build of the baseline's code (" + baseline_code.from +
+                    "): no code changed, the bench did";
   } else if (valve > 0) {
     out["verdict"] = "valve";
     out["reason"] = valve_by_build > 0
-                        ? "every regressed metric is the bench's: its case ran the baseline's spec and build, or "
-                          "the same code on tonight's identified valve reproduces it"
+                        ? "every regressed metric is the bench's: its case ran the spec and the build of the "
+                          "baseline's code, or the same code on tonight's identified valve reproduces it"
                         : "the same code on tonight's identified valve reproduces every regressed metric (the valve "
                           "of the baseline's night does not)";
   } else if (code_replayed == code) {

@@ -80,8 +80,9 @@ void AddCaseBuild(CaseBuilds* builds, const std::string& case_name, const std::s
 struct BaselineCode {
   std::map<std::string, experiment::ExperimentSpec> specs;  // case -> spec
   std::string from;  // "the baseline's batch 12" / "night 2026-11-01's suite, batch 40"
-  // Which build ran each case, from the baseline's own batch only: a night's suite standing in
-  // for the baseline's code is a proxy for its spec, but its build is that night's, not the baseline's.
+  // Which build ran each case: the baseline's own batch's; under the night rule, the night's build for the cases
+  // that night compared with this baseline and found within its allowance (it reproduced the baseline there, so
+  // only what changed since that night can fail tonight), else none (NightScheduler::BaselineCodeOf).
   CaseBuilds builds;
 };
 

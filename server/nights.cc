@@ -32,6 +32,32 @@ double WallClock() {
   return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
 }
 
+// The cases the stored night `night` compared with `baseline` itself (its name and version) and found within the
+// allowance on every metric: there that night's code, on that night's benches, reproduced the baseline. Empty
+// when the night is not stored, was compared with another baseline (or version), or its record does not read.
+std::set<std::string> CasesReproducingBaseline(db::Store* store, const std::string& night,
+                                               const regress::Baseline& baseline) {
+  std::set<std::string> within, regressed;
+  auto briefs = store->ListRegressions(/*nights_only=*/true, 1000);
+  if (!briefs.ok()) return {};
+  for (const auto& b : *briefs) {
+    if (b.night != night) continue;
+    if (b.baseline_name != baseline.name || b.baseline_version != baseline.version) return {};
+    auto rec = store->GetRegression(b.id);
+    if (!rec.ok()) return {};
+    const auto j = regress::Json::parse(rec->result_json, nullptr, false);
+    if (!j.is_object() || !j.contains("findings") || !j["findings"].is_array()) return {};
+    for (const auto& f : j["findings"]) {
+      if (!f.is_object() || !f.contains("case") || !f["case"].is_string()) continue;
+      const std::string name = f["case"].get<std::string>();
+      (f.value("verdict", "") == "regressed" || f.value("verdict", "") == "new" ? regressed : within).insert(name);
+    }
+    for (const auto& r : regressed) within.erase(r);
+    return within;
+  }
+  return {};
+}
+
 }  // namespace
 
 NightScheduler::NightScheduler(NightsSetup setup, std::vector<runs::BenchSetup> benches, StorePool* pool,
@@ -347,6 +373,15 @@ BaselineCode NightScheduler::BaselineCodeOf(const regress::Baseline& baseline,
     return BaselineCode{};
   }
   add_specs(*listed);
+  // That night's build stands for the baseline's only where the night reproduced the baseline: compared with it
+  // and within its allowance on every metric of the case. Then what differs between that night and tonight is
+  // all a regression tonight can come from; elsewhere (the night regressed too, or compared with another
+  // baseline) the baseline's runs may have run other code, and the build is not known.
+  const std::set<std::string> reproduced = CasesReproducingBaseline(store->get(), night->first, baseline);
+  for (const auto& run : *listed) {
+    const std::string name = run.key.CaseName();
+    AddCaseBuild(&out.builds, name, reproduced.count(name) && run.execution ? run.execution->build : "");
+  }
   return out;
 }
 

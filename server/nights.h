@@ -63,8 +63,8 @@ class NightScheduler {
                  const regress::Baseline& baseline, regress::Json* health, regress::Json* j);
   // The code the baseline was measured with (server/bench_twin.h BaselineCode); empty with the reason logged when
   // its runs are not in the store. A batch its source names counts only if its runs summarise to the baseline
-  // (regress::BaselineNotOfRuns); otherwise the night rule, the mismatch said first in `from`. The builds only from
-  // the baseline's own batch.
+  // (regress::BaselineNotOfRuns); otherwise the night rule, the mismatch said first in `from`. The builds: the own
+  // batch's; under the night rule that night's, for the cases it compared with this baseline and reproduced.
   BaselineCode BaselineCodeOf(const regress::Baseline& baseline, const std::map<std::string, StoredCheck>& suites);
   StatusOr<std::int64_t> SaveNight(const std::string& date, std::int64_t batch_id, const std::string& verdict,
                                    const std::string& result_json, double finished_unix_s);

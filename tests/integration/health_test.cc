@@ -378,7 +378,8 @@ TEST(DecideCase, TheBaselinesSpecAndBuildLeaveOnlyTheBench) {
   r.build_is_baseline = true;
   const auto warm = server::DecideCase(r);
   EXPECT_EQ(warm.verdict, "valve");
-  EXPECT_NE(warm.why.find("the spec and the build that ran it are the baseline's: no code changed, the bench did"),
+  EXPECT_NE(warm.why.find("the spec and the build that ran it are the baseline's code's: no code changed, the "
+                          "bench did"),
             std::string::npos) << warm.why;
   EXPECT_NE(warm.why.find("replays only 5 % of the change and the tracking flagged nothing"), std::string::npos)
       << warm.why;
@@ -446,7 +447,8 @@ const char kHealth[] =
 // needs more voltage). The server identifies each night's health check, tracks the bench over its stored nights
 // and, for the regressed nights, replays the failing case on the emulator with the bench's first-night valve and
 // tonight's valve under the same code: nights 1-5 pass with no valve change, nights 6-9 regress with the cause
-// "valve", and R is named since night 6 by night 9 at the latest. Why night 9: the tracking's reference is the
+// "valve" (by the build and the spec, both the first night's, which reproduced the baseline: nothing that runs as
+// code changed), and R is named since night 6 by night 9 at the latest. Why night 9: the tracking's reference is the
 // first five nights (TrackOptions::min_reference), so its self-starting z is a t with four degrees of freedom,
 // at most about 4-5 however large the step; z enters the CUSUM clipped at 3 unless the night before was also
 // beyond 3 (docs/track.md, "Outliers"): 2.5, then about 4 and 3.5 a night against h = 8.74.
@@ -490,6 +492,12 @@ TEST(BenchTwin, AValveThatChangedIsNamedAsTheCauseOfTheRegressedNights) {
   for (int k = kChange; k < kNights; ++k) {
     EXPECT_EQ(list[k]["verdict"], "regressed") << list[k].dump(1);
     EXPECT_EQ(list[k]["cause"], "valve") << list[k].dump(1) << why;
+    // The baseline file was made elsewhere, so its code is the first night's suite (the night rule), which
+    // compared with it and passed: that night's spec and build ran tonight too, so no code changed.
+    EXPECT_NE(list[k]["cause_reason"].get<std::string>().find("of the baseline's code (night " + dates[0] +
+                                                               "'s suite, batch "),
+              std::string::npos)
+        << list[k].dump(1);
     if (k < kNights - 1 && list[k]["valve_changes"].empty()) continue;  // not summed past h yet (above)
     ASSERT_FALSE(list[k]["valve_changes"].empty()) << list[k].dump(1) << why;
     const std::string first = list[k]["valve_changes"][0];
@@ -772,7 +780,9 @@ TEST(BenchTwin, TheBaselinesSpecAndBuildMakeARegressionTheBenchs) {
     if (b.baseline_name != "night1" || !j.contains("cause")) continue;
     ++judged;
     EXPECT_EQ(j["cause"]["verdict"], "valve") << b.night << ": " << j["cause"].dump(1) << "\n" << server.Log();
-    EXPECT_NE(j["cause"].value("reason", "").find("the baseline's spec on the baseline's build"), std::string::npos)
+    EXPECT_NE(j["cause"].value("reason", "").find("ran the spec and the build of the baseline's code (the baseline's "
+                                                  "batch "),
+              std::string::npos)
         << j["cause"].dump(1);
     for (const auto& c : j["cause"]["cases"]) {
       EXPECT_EQ(c.value("build", ""), build) << c.dump(1);
