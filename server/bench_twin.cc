@@ -291,10 +291,10 @@ CaseVerdict DecideCase(const CaseReplay& r) {
                            "replay does not carry at this operating point)",
                            r.changed_since_baseline, 100.0 * share);
       else
-        why += fmt::format(" (tonight's identified valve replays only {:.0f} % of the change and the tracking "
-                           "flagged nothing: what moved is not seen by the health check, or not yet beyond its "
-                           "limits)",
-                           100.0 * share);
+        why += fmt::format(" (tonight's identified valve replays {} and the tracking flagged nothing: what moved "
+                           "is not seen by the health check, or not yet beyond its limits)",
+                           share < 0.0 ? fmt::format("the change the other way ({:.0f} %)", 100.0 * share)
+                                       : fmt::format("only {:.0f} % of the change", 100.0 * share));
     }
     return {"valve", why};
   }

@@ -383,6 +383,10 @@ TEST(DecideCase, TheBaselinesSpecAndBuildLeaveOnlyTheBench) {
             std::string::npos) << warm.why;
   EXPECT_NE(warm.why.find("replays only 5 % of the change and the tracking flagged nothing"), std::string::npos)
       << warm.why;
+  r.valve_change = 0.9;  // the lab's night 21 (--baseline-night 2): the replay moves the map the other way
+  EXPECT_NE(server::DecideCase(r).why.find("replays the change the other way (-20 %)"), std::string::npos)
+      << server::DecideCase(r).why;
+  r.valve_change = -0.236;
   r.changed_since_baseline = "bench emu-2's F0*x_max down since 2026-11-01";
   EXPECT_NE(server::DecideCase(r).why.find("bench emu-2's F0*x_max down since 2026-11-01; its identified valve "
                                            "replays 5 %"),
@@ -665,6 +669,37 @@ TEST(BenchTwin, ACodeRegressionOnAFlaggedValveIsTheCodesWhenTheBaselinesCodeDoes
   EXPECT_GE(flagged_code_nights, 2) << server.Log();
 }
 
+// A lab's own baseline: `benchctl baseline set NAME --batch BATCH` on the server, written over the baseline file
+// the nights read (beside and renamed into place: a night never reads half a file). "" or what went wrong.
+std::string SetBaselineFromBatch(const std::string& addr, const std::string& name, std::int64_t batch,
+                                 const std::string& path) {
+  const auto set = testing::RunCommand(std::string(VB_BENCHCTL) + " baseline set " + name + " --batch " +
+                                       std::to_string(batch) + " --json --server " + addr + " --token " +
+                                       testing::kOperatorToken);
+  if (set.exit_code != 0 || set.out.find('{') == std::string::npos) return "benchctl baseline set: " + set.out;
+  std::ofstream(path + ".new") << set.out.substr(set.out.find('{'));
+  std::filesystem::rename(path + ".new", path);
+  return "";
+}
+
+// A lab directory with the examples' ci suite and baseline file (the nights' config kLabNights reads them), and
+// one emulated bench of the preset valve, checked each night, whose R steps up by `step` from `from_night`.
+std::string TwinLabDir(const std::string& name) {
+  const std::string dir = ::testing::TempDir() + "/vb-twin-" + name + "-" + std::to_string(::getpid());
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  for (const char* f : {"ci.json", "ci-current-hold.json"}) std::filesystem::copy_file(kSuites + f, dir + "/" + f);
+  std::filesystem::copy_file(kSuites + "ci-baseline.json", dir + "/baseline.json");
+  return dir;
+}
+std::string ResistanceStepBench(double step, int from_night) {
+  return R"([{"name": "emu-a", "kind": "emulated", "model": {"preset": "taghizadeh2009"}, )" + std::string(kHealth) +
+         R"(, "drift": [{"parameter": "R", "step": )" + std::to_string(step) + R"(, "from_night": )" +
+         std::to_string(from_night) + "}]}]";
+}
+constexpr char kLabNights[] =
+    R"("nights": {"cron": "0 2 * * *", "suite_file": "ci.json", "baseline_file": "baseline.json"})";
+
 // A lab re-baselines after its valve changed: the failure after that is the code's, not the valve's. The bench's
 // R is 15 % higher from night 2 (the map at duty 0.3 opens 58 % where it opened 97 %: those nights say `valve`);
 // once night 3 is stored the lab sets a baseline from night 3's suite batch on the server and points the nights
@@ -676,17 +711,8 @@ TEST(BenchTwin, ACodeRegressionOnAFlaggedValveIsTheCodesWhenTheBaselinesCodeDoes
 // (5 % of 0.76 mA): `undetermined`, "both changed".
 TEST(BenchTwin, AfterARebaselineTheReplayComparesWithTheBaselinesNightsValve) {
   constexpr int kNights = 6;
-  const std::string dir = ::testing::TempDir() + "/vb-twin-rebaseline-" + std::to_string(::getpid());
-  std::filesystem::remove_all(dir);
-  std::filesystem::create_directories(dir);
-  for (const char* f : {"ci.json", "ci-current-hold.json"})
-    std::filesystem::copy_file(kSuites + f, dir + "/" + f);
-  std::filesystem::copy_file(kSuites + "ci-baseline.json", dir + "/baseline.json");
-  const std::string benches = R"([{"name": "emu-a", "kind": "emulated", "model": {"preset": "taghizadeh2009"}, )" +
-                              std::string(kHealth) +
-                              R"(, "drift": [{"parameter": "R", "step": 0.15, "from_night": 2}]}])";
-  testing::ServerProcess server(
-      dir, R"("nights": {"cron": "0 2 * * *", "suite_file": "ci.json", "baseline_file": "baseline.json"})", benches);
+  const std::string dir = TwinLabDir("rebaseline");
+  testing::ServerProcess server(dir, kLabNights, ResistanceStepBench(0.15, 2));
   server.AddArg("--simulate-nights");
   server.AddArg(std::to_string(kNights));
   const std::string addr = server.Start();
@@ -700,14 +726,7 @@ TEST(BenchTwin, AfterARebaselineTheReplayComparesWithTheBaselinesNightsValve) {
   // reads half a file), then the baseline that the nights read each night.
   ASSERT_EQ(testing::WriteWorseCiSuite(kSuites, dir + "/worse"), "");
   std::filesystem::rename(dir + "/worse/ci-current-hold.json", dir + "/ci-current-hold.json");
-  const auto set = testing::RunCommand(std::string(VB_BENCHCTL) + " baseline set rebased --batch " +
-                                       std::to_string(night3_batch) + " --json --server " + addr + " --token " +
-                                       testing::kOperatorToken);
-  ASSERT_EQ(set.exit_code, 0) << set.out;
-  {
-    std::ofstream(dir + "/baseline.json.new") << set.out.substr(set.out.find('{'));
-    std::filesystem::rename(dir + "/baseline.json.new", dir + "/baseline.json");
-  }
+  ASSERT_EQ(SetBaselineFromBatch(addr, "rebased", night3_batch, dir + "/baseline.json"), "");
 
   nlohmann::json list = WaitForNights(addr, kNights, 280);
   ASSERT_EQ(list.size(), static_cast<std::size_t>(kNights)) << server.Log();
@@ -732,16 +751,8 @@ TEST(BenchTwin, AfterARebaselineTheReplayComparesWithTheBaselinesNightsValve) {
 // builds in its record. Without the builds the same nights are decided by the replay alone.
 TEST(BenchTwin, TheBaselinesSpecAndBuildMakeARegressionTheBenchs) {
   constexpr int kNights = 5;
-  const std::string dir = ::testing::TempDir() + "/vb-twin-build-" + std::to_string(::getpid());
-  std::filesystem::remove_all(dir);
-  std::filesystem::create_directories(dir);
-  for (const char* f : {"ci.json", "ci-current-hold.json"}) std::filesystem::copy_file(kSuites + f, dir + "/" + f);
-  std::filesystem::copy_file(kSuites + "ci-baseline.json", dir + "/baseline.json");
-  const std::string benches = R"([{"name": "emu-a", "kind": "emulated", "model": {"preset": "taghizadeh2009"}, )" +
-                              std::string(kHealth) +
-                              R"(, "drift": [{"parameter": "R", "step": 0.15, "from_night": 3}]}])";
-  testing::ServerProcess server(
-      dir, R"("nights": {"cron": "0 2 * * *", "suite_file": "ci.json", "baseline_file": "baseline.json"})", benches);
+  const std::string dir = TwinLabDir("build");
+  testing::ServerProcess server(dir, kLabNights, ResistanceStepBench(0.15, 3));
   server.AddArg("--simulate-nights");
   server.AddArg(std::to_string(kNights));
   const std::string addr = server.Start();
@@ -750,14 +761,7 @@ TEST(BenchTwin, TheBaselinesSpecAndBuildMakeARegressionTheBenchs) {
   nlohmann::json first = WaitForNights(addr, 1, 200);
   ASSERT_GE(first.size(), 1u) << server.Log();
   const std::int64_t night1_batch = first[first.size() - 1]["batch_id"].get<std::int64_t>();
-  const auto set = testing::RunCommand(std::string(VB_BENCHCTL) + " baseline set night1 --batch " +
-                                       std::to_string(night1_batch) + " --json --server " + addr + " --token " +
-                                       testing::kOperatorToken);
-  ASSERT_EQ(set.exit_code, 0) << set.out;
-  {
-    std::ofstream(dir + "/baseline.json.new") << set.out.substr(set.out.find('{'));
-    std::filesystem::rename(dir + "/baseline.json.new", dir + "/baseline.json");
-  }
+  ASSERT_EQ(SetBaselineFromBatch(addr, "night1", night1_batch, dir + "/baseline.json"), "");
   nlohmann::json list = WaitForNights(addr, kNights, 300);
   ASSERT_EQ(list.size(), static_cast<std::size_t>(kNights)) << server.Log();
 
