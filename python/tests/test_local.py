@@ -95,6 +95,7 @@ def test_spec_as_dict_and_as_message(local_client, repo):
     assert run.execution["samples"] == 101
     assert run.execution["wall_s"] > 0
     assert "loop" not in run.execution
+    assert run.execution["build"].startswith("valvebench ") and " sha256:" in run.execution["build"], run.execution
     assert local_client.get_run(run.id).execution == run.execution
     paced = local_client.run(dict(spec, name="py-paced", realtime=True))[0]  # 10 ms paced on the embedded bench
     assert paced.ok, paced.reason
