@@ -511,6 +511,12 @@ regress::Json BenchTwins::Attribute(const regress::RegressResult& result,
       verdict = "undetermined";
     }
     if (verdict == "valve" && same_spec && same_build) ++valve_by_build;
+    if (same_spec && build != builds.end() && old_build != baseline_code.builds.end() && !build->second.empty() &&
+        !old_build->second.empty() && build->second != old_build->second)
+      // The spec is the baseline's and the build is not: a code change the spec does not show, which the replay
+      // (on this server's build, both sides) cannot replay. Said, so that a `code` here reads as the build's.
+      why += std::string(why.empty() ? "" : "; ") + "the spec is the baseline's code's but the build is not (" +
+             old_build->second + " -> " + build->second + ")";
     c["verdict"] = verdict;
     if (!why.empty()) c["reason"] = why;
     (verdict == "valve" ? valve : verdict == "code" ? code : undetermined)++;

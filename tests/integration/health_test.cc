@@ -422,6 +422,44 @@ TEST(CaseBuilds, OneBuildForAllTheCasesRunsOrNone) {
   EXPECT_EQ(b["late"], "");
 }
 
+// Attribute on a case whose bench has no identified check tonight (nothing to replay): the same spec and build as
+// the baseline's code make it the bench's, saying it was not replayed; the same spec on another build is
+// undetermined and names both builds (a code change the spec does not show, which this server cannot replay).
+TEST(BenchTwin, WithoutAReplayTheSpecAndBuildStillDecideAndABuildChangeIsSaid) {
+  server::BenchTwins twins(nullptr);
+  regress::RegressResult result;
+  regress::Finding f;
+  f.case_name = "map";
+  f.metric = "mean_position_pct";
+  f.verdict = regress::Verdict::kRegressed;
+  f.baseline.mean = 97.5;
+  f.now.mean = 93.0;
+  f.delta = -4.5;
+  f.allowed = 0.5;
+  result.findings.push_back(f);
+  const std::map<std::string, experiment::ExperimentSpec> specs{{"map", experiment::ExperimentSpec{}}};
+  const std::map<std::string, std::vector<std::string>> benches{{"map", {"emu-a"}}};
+  server::BaselineCode baseline;
+  baseline.specs["map"] = experiment::ExperimentSpec{};
+  baseline.from = "the baseline's batch 7";
+  baseline.builds["map"] = "valvebench 0.1.0 sha256:aa";
+  auto same = twins.Attribute(result, specs, benches, baseline, {{"map", "valvebench 0.1.0 sha256:aa"}});
+  ASSERT_EQ(same["cases"].size(), 1u) << same.dump(1);
+  EXPECT_EQ(same["verdict"], "valve") << same.dump(1);
+  EXPECT_NE(same["cases"][0].value("reason", "").find("no code changed, the bench did (not replayed: bench emu-a "
+                                                      "ran it and has no identified health check tonight"),
+            std::string::npos) << same.dump(1);
+  EXPECT_EQ(same["cases"][0].value("baseline_code", ""), "the baseline's batch 7");
+  auto other = twins.Attribute(result, specs, benches, baseline, {{"map", "valvebench 0.1.0 sha256:bb"}});
+  EXPECT_EQ(other["verdict"], "undetermined") << other.dump(1);
+  EXPECT_NE(other["cases"][0].value("reason", "").find("the spec is the baseline's code's but the build is not "
+                                                       "(valvebench 0.1.0 sha256:aa -> valvebench 0.1.0 sha256:bb)"),
+            std::string::npos) << other.dump(1);
+  auto unknown = twins.Attribute(result, specs, benches, baseline, {{"map", ""}});
+  EXPECT_EQ(unknown["verdict"], "undetermined") << unknown.dump(1);
+  EXPECT_EQ(unknown["cases"][0].value("reason", "").find("build"), std::string::npos) << unknown.dump(1);
+}
+
 // Waits until the server has stored `n` nights; returns them newest first (an empty array on timeout).
 nlohmann::json WaitForNights(const std::string& addr, std::size_t n, int timeout_s) {
   const std::string cmd =
