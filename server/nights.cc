@@ -32,6 +32,20 @@ double WallClock() {
   return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
 }
 
+// What regress compares of one stored run: its key, whether it ended done (else why not) and its metrics.
+StatusOr<regress::RunMetrics> MeasuredRun(db::Store* store, const db::RunRecord& r) {
+  regress::RunMetrics m;
+  m.run_id = r.id;
+  m.name = r.key.DisplayName();
+  m.case_name = r.key.CaseName();
+  m.ok = r.status == db::RunStatus::kDone;
+  m.reason = m.ok ? "" : std::string(db::RunStatusName(r.status)) + (r.reason.empty() ? "" : ": " + r.reason);
+  auto metrics = store->GetMetrics(r.id);
+  if (!metrics.ok()) return metrics.status();
+  for (const auto& x : *metrics) m.metrics[x.name] = x.value;
+  return m;
+}
+
 // The cases the stored night `night` compared with `baseline` itself (its name and version) and found within the
 // allowance on every metric: there that night's code, on that night's benches, reproduced the baseline. Empty
 // when the night is not stored, was compared with another baseline (or version), or its record does not read.
@@ -255,20 +269,13 @@ StatusOr<std::int64_t> NightScheduler::RunNight(double fire_unix_s) {
     for (const auto& r : all) done = done && (Ended(r.status) || r.status == RunStatus::kInterrupted);  // nothing more will come
     if (done) {
       for (const auto& r : all) {
-        regress::RunMetrics m;
-        m.run_id = r.id;
-        m.name = r.key.DisplayName();
-        m.case_name = r.key.CaseName();
-        m.ok = r.status == db::RunStatus::kDone;
-        AddCaseBuild(&case_builds, m.case_name, r.execution ? r.execution->build : "");
-        auto& ran = case_benches[m.case_name];
+        auto m = MeasuredRun(store->get(), r);
+        if (!m.ok()) return error(m.status());
+        AddCaseBuild(&case_builds, m->case_name, r.execution ? r.execution->build : "");
+        auto& ran = case_benches[m->case_name];
         if (!r.bench_name.empty() && std::find(ran.begin(), ran.end(), r.bench_name) == ran.end())
           ran.push_back(r.bench_name);
-        m.reason = m.ok ? "" : std::string(db::RunStatusName(r.status)) + (r.reason.empty() ? "" : ": " + r.reason);
-        auto metrics = (*store)->GetMetrics(r.id);
-        if (!metrics.ok()) return error(metrics.status());
-        for (const auto& x : *metrics) m.metrics[x.name] = x.value;
-        measured.push_back(std::move(m));
+        measured.push_back(std::move(*m));
       }
       break;
     }
@@ -338,19 +345,13 @@ BaselineCode NightScheduler::BaselineCodeOf(const regress::Baseline& baseline,
   if (const std::int64_t batch = db::ServerBatchOfBaselineSource(baseline.source); batch > 0) {
     auto listed = runs::ListBatch(store->get(), batch);
     std::vector<regress::RunMetrics> measured;
-    if (listed.ok()) {
-      for (const auto& r : *listed) {
-        regress::RunMetrics m;
-        m.run_id = r.id;
-        m.case_name = r.key.CaseName();
-        m.ok = r.status == db::RunStatus::kDone;
-        auto metrics = (*store)->GetMetrics(r.id);
-        if (metrics.ok())
-          for (const auto& x : *metrics) m.metrics[x.name] = x.value;
-        measured.push_back(std::move(m));
-      }
+    Status read = listed.status();
+    for (std::size_t k = 0; read.ok() && k < listed->size(); ++k) {
+      auto m = MeasuredRun(store->get(), (*listed)[k]);
+      if (m.ok()) measured.push_back(std::move(*m));
+      read = m.status();  // a batch whose runs cannot be read cannot be checked: the night rule
     }
-    not_own = listed.ok() ? regress::BaselineNotOfRuns(baseline, measured) : listed.status().message();
+    not_own = read.ok() ? regress::BaselineNotOfRuns(baseline, measured) : read.message();
     if (not_own.empty()) {
       out.from = fmt::format("the baseline's batch {}", batch);
       add_specs(*listed);
