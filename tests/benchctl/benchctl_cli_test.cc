@@ -253,7 +253,8 @@ TEST(BenchctlCli, StoredRunCommandsWorkOnTheLocalStore) {
 }
 
 // A paced local run's loop statistics are stored with the run (issue 40): `run --local --realtime` prints them,
-// and so does `show` from another process, text and JSON; a run not paced shows its execution without a loop.
+// and so does `show` from another process, text and JSON, with the build that executed it; a run not paced shows
+// its execution without a loop.
 TEST(BenchctlCli, LoopStatisticsOfAPacedRunAreShownFromTheStore) {
   const std::string dir = ::testing::TempDir() + "/benchctl-loop-" + std::to_string(::getpid());
   std::filesystem::remove_all(dir);
@@ -284,6 +285,13 @@ TEST(BenchctlCli, LoopStatisticsOfAPacedRunAreShownFromTheStore) {
   EXPECT_GT(j["summary"]["loop"]["paced_ticks"].get<std::int64_t>(), 0);
   EXPECT_GE(j["summary"]["loop"]["jitter_max_s"].get<double>(), j["summary"]["loop"]["jitter_p50_s"].get<double>());
   EXPECT_EQ(j["summary"]["samples"], 1001);
+  // The build that executed it: this benchctl, named by its SHA-256 (docs/store.md, "Schema version 7").
+  Result sum = vb::testing::RunCommand(std::string("sha256sum ") + VB_BENCHCTL);
+  ASSERT_EQ(sum.exit_code, 0) << sum.out;
+  const std::string digest = "sha256:" + sum.out.substr(0, 32);
+  EXPECT_EQ(j["summary"].value("build", "").rfind("valvebench ", 0), 0u) << json.out;
+  EXPECT_NE(j["summary"].value("build", "").find(digest), std::string::npos) << json.out << "\n" << sum.out;
+  EXPECT_NE(shown.out.find("  build: valvebench "), std::string::npos) << shown.out;
 
   Result plain = cli("run --local " + spec + " --json");
   ASSERT_EQ(plain.exit_code, 0) << plain.out;
