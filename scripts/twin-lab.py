@@ -7,7 +7,7 @@ from the server and prints, per drift, the night it reaches 3 sigma of its param
 it was flagged (with the parameter), the flags on the clean benches, and each regressed night's cause against
 the truth.
 
-    scripts/twin-lab.py BUILD_DIR [--nights 60] [--work DIR] [--json OUT] [--baseline-night K]
+    scripts/twin-lab.py BUILD_DIR [--nights 60] [--work DIR] [--json OUT] [--baseline-night K] [--model JSON]
 
     scripts/twin-lab.py BUILD_DIR --evaluate-only --work DIR   (the same report from a lab already lived)
 
@@ -23,6 +23,9 @@ are not this server's). With --baseline-night K the lab does what a lab would: o
 the baseline from that night's suite batch on this server (`benchctl baseline set --batch`) and the nights after
 compare with it; each regressed case then knows whether its spec and build are the baseline's (docs/track.md,
 "The build recorded with each run").
+
+--model '{"params": {...}, "effects": [...]}' gives every bench another valve than the preset (a ModelSpec merged
+over {"preset": "taghizadeh2009"}); the examples' baseline is then not this valve's, so use --baseline-night.
 """
 import argparse
 import datetime
@@ -63,6 +66,7 @@ def main():
     ap.add_argument("--evaluate-only", action="store_true", help="read the nights of the lab in --work again")
     ap.add_argument("--baseline-night", type=int, default=0,
                     help="set the baseline from this night's suite batch once it is stored (0: the example's)")
+    ap.add_argument("--model", default="", help="a ModelSpec (JSON) merged over the preset for every bench")
     a = ap.parse_args()
     if a.evaluate_only:
         return evaluate_again(a)
@@ -88,7 +92,9 @@ def main():
     benches = []
     for k in range(1, 7):
         name = "emu-%d" % k
-        b = {"name": name, "kind": "emulated", "model": {"preset": "taghizadeh2009"}, "health": health,
+        model = {"preset": "taghizadeh2009"}
+        model.update(json.loads(a.model) if a.model else {})
+        b = {"name": name, "kind": "emulated", "model": model, "health": health,
              "current_noise_A": 0.002}
         d = [{kk: x[kk] for kk in ("parameter", "step", "per_night", "from_night")} for x in DRIFTS if x["bench"] == name]
         if d:
