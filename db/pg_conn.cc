@@ -94,9 +94,10 @@ Params& Params::Double(double v) {
   return *this;
 }
 
-Params& Params::DoubleOrNull(double v) {
-  if (!std::isnan(v)) return Double(v);
-  types_.push_back(kFloat8Oid);
+Params& Params::DoubleOrNull(double v) { return std::isnan(v) ? Null(kFloat8Oid) : Double(v); }
+
+Params& Params::Null(unsigned type) {
+  types_.push_back(type);
   lengths_.push_back(0);
   owned_at_.push_back(-1);
   ext_.push_back(nullptr);
@@ -104,15 +105,7 @@ Params& Params::DoubleOrNull(double v) {
   return *this;
 }
 
-Params& Params::IntOrNull(std::optional<std::int64_t> v) {
-  if (v) return Int(*v);
-  types_.push_back(kInt8Oid);
-  lengths_.push_back(0);
-  owned_at_.push_back(-1);
-  ext_.push_back(nullptr);
-  null_.push_back(true);
-  return *this;
-}
+Params& Params::IntOrNull(std::optional<std::int64_t> v) { return v ? Int(*v) : Null(kInt8Oid); }
 
 Params& Params::Bool(bool v) {
   Owned(kBoolOid, std::string(1, v ? '\1' : '\0'));
@@ -124,15 +117,7 @@ Params& Params::Text(std::string_view v) {
   return *this;
 }
 
-Params& Params::TextOrNull(std::optional<std::string_view> v) {
-  if (v) return Text(*v);
-  types_.push_back(kTextOid);
-  lengths_.push_back(0);
-  owned_at_.push_back(-1);
-  ext_.push_back(nullptr);
-  null_.push_back(true);
-  return *this;
-}
+Params& Params::TextOrNull(std::optional<std::string_view> v) { return v ? Text(*v) : Null(kTextOid); }
 
 Params& Params::Bytes(const void* data, std::size_t size) {
   types_.push_back(kByteaOid);

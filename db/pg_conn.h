@@ -51,6 +51,7 @@ class Params {
 
  private:
   void Owned(unsigned type, std::string bytes);
+  Params& Null(unsigned type);  // SQL NULL of the type
   std::vector<unsigned> types_;           // type OIDs
   std::vector<std::string> owned_;        // encoded values we own
   std::vector<std::ptrdiff_t> owned_at_;  // index into owned_, or -1: external (ext_)
