@@ -626,6 +626,8 @@ try:
     kv = driver.find_element(By.CSS_SELECTOR, ".kv").text
     check("the run page shows what executing the run measured (Run.execution, stored with the run)",
           re.search(r"execution\s+[0-9.]+ [mµ]?s simulated, \d+ samples, [0-9.]+ [mµ]?s wall", kv), kv[-300:])
+    check("the run page names the build that executed the run (Run.execution.build)",
+          re.search(r"build\s+valvebench \S+ sha256:[0-9a-f]{32}", kv), kv[-300:])
     # Issue 37: the one unit rule (common/units.h): the page writes a value as benchctl show and Python do.
     fmt = driver.execute_script("return [[81.13e-6, 'm^2'], [0.02773, 'kg'], [7.514e-4, 'kg/s'], [9.533e-4, 'A'],"
                                 " [8.67476e-05, 'W'], [2e-3, 'N s/m'], [0, 'kg']].map((c) => VBFormat.value(c[0], c[1]))")
