@@ -174,10 +174,28 @@ struct Stage {
   std::int64_t* work_left = nullptr;
   std::int64_t global_work_reserve = 0;
   int global_evaluations_done = 0;  // the global search's evaluations (Run), to say when the work ended it early
+  // Each Run's share of the work: its evaluations (local and global) at `work_per_evaluation` steps each, the
+  // budget's steps over its evaluations (0: no share). The stages' evaluation counts are their shares of the
+  // search; the work follows them, so a start whose candidates simulate eight times slower (a light, stiff
+  // plunger) gets an eighth of its evaluations instead of taking the global search's (docs/real-data.md, "The
+  // work, shared"). `run_work_used` counts the current Run's (and the start grid's) steps.
+  double work_per_evaluation = 0.0;
+  std::int64_t run_work_used = 0;
+  std::int64_t run_work_cap = INT64_MAX;
+  std::int64_t global_work_cap = INT64_MAX;
+  bool share_ended = false;  // the last Run stopped at its share of the work
+  bool ShareSpent() const { return run_work_used >= run_work_cap; }
   bool Exhausted() const {
-    return (remaining != nullptr && *remaining <= 0) || (work_left != nullptr && *work_left <= 0);
+    return (remaining != nullptr && *remaining <= 0) || (work_left != nullptr && *work_left <= 0) || ShareSpent();
   }
-  bool GlobalExhausted() const { return Exhausted() || (work_left != nullptr && *work_left <= global_work_reserve); }
+  bool GlobalExhausted() const {
+    return Exhausted() || (work_left != nullptr && *work_left <= global_work_reserve) ||
+           run_work_used >= global_work_cap;
+  }
+  // The share of `evaluations` evaluations (none when there is no budget).
+  std::int64_t ShareOf(int evaluations) const {
+    return work_per_evaluation > 0.0 ? static_cast<std::int64_t>(work_per_evaluation * evaluations) : INT64_MAX;
+  }
   int evaluations = 0;
   double best = INFINITY;
   // What an evaluation that makes no valve, fails to simulate or gives a non-finite error returns: a large finite
@@ -227,13 +245,19 @@ struct Stage {
     std::uint64_t steps = 0;
     auto pred = PredictRuns(*ds, *p, mask, solver, threads, &steps);
     // A failed simulation's work counts too: the watchdog's are the costliest.
-    if (work_left != nullptr) *work_left -= static_cast<std::int64_t>(std::min<std::uint64_t>(steps, INT64_MAX / 2));
+    const auto counted = static_cast<std::int64_t>(std::min<std::uint64_t>(steps, INT64_MAX / 2));
+    if (work_left != nullptr) *work_left -= counted;
+    run_work_used += counted;
     if (!pred.ok()) return fail(pred.status().message());
     const double e = RmsOver(*ds, *pred, mask);
     if (!std::isfinite(e)) return fail("the simulated current is not finite");
     return std::min(e, penalty);
   }
   void Run(int max_evaluations, int global_evaluations = 0) {
+    run_work_used = 0;
+    run_work_cap = ShareOf(max_evaluations + global_evaluations);
+    global_work_cap = ShareOf(global_evaluations);
+    share_ended = false;
     const unsigned k = static_cast<unsigned>(free.size());
     std::vector<double> u(k);
     for (unsigned j = 0; j < k; ++j) {
@@ -295,6 +319,8 @@ struct Stage {
     } catch (const std::exception&) {
       // Out of evaluations or a roundoff stop: NLopt leaves the best point it reached in x.
     }
+    share_ended = ShareSpent() || (global_evaluations > 0 && global_evaluations_done < global_evaluations &&
+                                   run_work_used >= global_work_cap);
     const auto v = At(x);
     const double e = Rms(v);
     // Keep the end only when it is a valve that simulates (else the stage is broken: the values stay as they were).
@@ -302,6 +328,9 @@ struct Stage {
       if (e <= best + 1e-15 || !std::isfinite(best)) best = e;
       value = v;
     }
+    run_work_used = 0;  // the shares are per Run: the next one (or the copy's) starts its own
+    run_work_cap = INT64_MAX;
+    global_work_cap = INT64_MAX;
   }
 };
 
@@ -847,6 +876,8 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
   st.threads = options.threads;
   st.remaining = &remaining;
   st.work_left = &work_left;
+  if (options.max_ode_steps > 0)
+    st.work_per_evaluation = static_cast<double>(options.max_ode_steps) / static_cast<double>(options.max_evaluations);
   st.value = v;
   {
     double peak = 0.0;
@@ -856,12 +887,19 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
   }
   st.plant_of = [&family](const std::array<double, kCount>& x) { return PlantOf(family, x); };
   auto set_box = [&](int p, double lo_f, double hi_f) { st.box[p] = {st.value[p] / lo_f, st.value[p] * hi_f, true}; };
-  auto record_outer = [&](const std::string& name, const StageMark& since, int evals, double best) {
+  // The stages that stopped at their share of the work (Stage::work_per_evaluation), for the note at the end.
+  std::vector<std::string> share_ended;
+  auto record_outer = [&](const std::string& name, const StageMark& since, int evals, double best,
+                          bool ended_by_share = false) {
     const auto steps = static_cast<std::uint64_t>(since.work - work_left);
     id.stages.push_back({name, best, evals, Seconds(since.t), steps});
-    char buf[300];
-    std::snprintf(buf, sizeof buf, "stage %s: fit runs %.3f mA RMS after %d evaluations, %.3g solver steps (%.1f s)",
-                  name.c_str(), best * 1e3, evals, static_cast<double>(steps), Seconds(since.t));
+    if (ended_by_share && std::find(share_ended.begin(), share_ended.end(), name.substr(0, name.find(' '))) ==
+                              share_ended.end())
+      share_ended.push_back(name.substr(0, name.find(' ')));
+    char buf[360];
+    std::snprintf(buf, sizeof buf, "stage %s: fit runs %.3f mA RMS after %d evaluations, %.3g solver steps (%.1f s)%s",
+                  name.c_str(), best * 1e3, evals, static_cast<double>(steps), Seconds(since.t),
+                  ended_by_share ? "; its share of the work ended it" : "");
     say(buf);
   };
 
@@ -925,13 +963,16 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
   // independent plant: the stages' end at 8.6 mA RMS went to 4.3 mA, 19.7 to 5.4).
   // A pass never leaves a worse point than it started from: Stage::Run keeps its end, and a pass whose end is
   // worse than its start (a budget cut short, a box that had to move the start) is undone.
+  bool polish_share_ended = false;
   auto polish = [&] {
     double before = st.Rms(st.value);
+    polish_share_ended = false;
     for (int pass = 0; pass < 10 && remaining > 0 && work_left > 0; ++pass) {
       const Stage start = st;
       stage3_boxes(st, 1.3, saturation);
       st.best = INFINITY;
       st.Run(std::min(remaining, 1500));
+      polish_share_ended = polish_share_ended || st.share_ended;
       if (!(st.best <= before)) {
         // The pass's free parameters stay (the uncertainty below is over them): a warm start's first pass starts
         // from a stage that had none, and a pass undone there left the identification with no free parameter
@@ -973,7 +1014,8 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
     st.mask = fit;
     contain_start = true;
     polish();
-    record_outer("warm start from the previous identification, all together", since, st.evaluations, st.best);
+    record_outer("warm start from the previous identification, all together", since, st.evaluations, st.best,
+                 polish_share_ended);
     evaluations = st.evaluations;
   } else {
     // Stage 1, electrical: the samples before the plunger moves (up to 85 % of the first peak) with the plunger
@@ -1011,7 +1053,7 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
       const int before = st.evaluations;
       st.Run(150);
       record_outer("1 electrical (R, L0" + std::string(eddy ? ", R_p" : "") + ") on the samples before motion", since,
-             st.evaluations - before, st.best);
+             st.evaluations - before, st.best, st.share_ended);
       st.ds = &ds;
       st.mask = fit;
       st.plant_of = [&family](const std::array<double, kCount>& x) { return PlantOf(family, x); };
@@ -1029,7 +1071,7 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
     auto stages_23 = [&](Stage st, const std::array<double, 3>& kmb, const std::string& tag) {
       auto set_box = [&](int p, double lo_f, double hi_f) { st.box[p] = {st.value[p] / lo_f, st.value[p] * hi_f, true}; };
       auto record = [&](const std::string& name, const StageMark& since, int evals, double best) {
-        record_outer(name + tag, since, evals, best);
+        record_outer(name + tag, since, evals, best, st.share_ended);
       };
       st.value[kK] = kmb[0];
       st.value[kM] = kmb[1];
@@ -1085,6 +1127,8 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
         g.mask = fit;
         const double r_hi = 0.98 * r_max * g.value[kL0];
         g.value[kL1] = std::clamp(g.value[kL1], 1.01 * g.value[kL0], r_hi);
+        g.run_work_used = 0;
+        g.run_work_cap = g.ShareOf(180);  // the grid's 180 points
         for (double kr : {0.05, 0.15, 0.5, 1.5, 5.0})
           for (double bf : {0.01, 0.1, 1.0, 10.0})
             for (int j = -4; j <= 4 && !g.Exhausted(); ++j) {
@@ -1144,7 +1188,7 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
         static const char* const kFormName[kForms] = {"knee", "tanh", "arctan"};
         record_outer("4 with magnetic saturation (B_sat, " + std::string(kFormName[e % kForms]) + ") from end " +
                          std::to_string(e / kForms + 1), since,
-                     s4.evaluations - before, s4.best);
+                     s4.evaluations - before, s4.best, s4.share_ended);
         evaluations += s4.evaluations - before;
         if (s4.best < best4.best) best4 = s4;
       }
@@ -1232,7 +1276,7 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
                              " evaluations: candidates that simulate slowly (a light, stiff plunger) took it");
         record_outer("5 global (CRS2, " + std::to_string(global_evals) + " evaluations) and local, the fit being " +
                          Fmt(st.best / id.noise_floor_A) + "x the noise floor",
-                     since, g.evaluations - before, g.best);
+                     since, g.evaluations - before, g.best, g.share_ended);
         evaluations += g.evaluations - before;
         if (g.best < st.best) {
           st = g;
@@ -1247,7 +1291,8 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
       st.ds = &ds;
       st.mask = fit;
       polish();
-      record_outer("6 polish: everything together, restarted in re-centred boxes", since, st.evaluations - before, st.best);
+      record_outer("6 polish: everything together, restarted in re-centred boxes", since, st.evaluations - before, st.best,
+                   polish_share_ended);
       evaluations += st.evaluations - before;
     }
   }
@@ -1544,6 +1589,15 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
   else if (work_left <= 0)
     id.notes.push_back("the work budget (" + Fmt(static_cast<double>(options.max_ode_steps)) +
                        " solver steps) ended a stage early: the fit may not have converged");
+  if (!share_ended.empty()) {
+    std::string which;
+    for (const auto& n : share_ended) which += (which.empty() ? "" : ", ") + n;
+    const bool many = share_ended.size() > 1;
+    id.notes.push_back((many ? "stages " : "stage ") + which + " stopped at " + (many ? "their" : "its") +
+                       " share of the work (" + Fmt(st.work_per_evaluation) + " solver steps per evaluation of " +
+                       (many ? "their" : "its") + " count): " + (many ? "their" : "its") +
+                       " candidates simulate slowly (a light, stiff plunger), and the budget bounds the time");
+  }
   return id;
 }
 

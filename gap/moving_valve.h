@@ -130,10 +130,14 @@ struct MovingIdentifyOptions {
   // The work for all stages, in the solver's accepted and rejected steps (0: none), beside the evaluations: an
   // evaluation's cost varies 40-fold (a candidate with a light plunger resonates at kHz and takes ~40000 steps
   // where a typical one takes ~2000), so a count of evaluations does not bound the time and a count of steps does,
-  // deterministically. Off by default: at 1.5e8 the population's slowest valve went from 82 to 73 s and its
-  // global search got none of its evaluations (docs/real-data.md, "The work, counted"); a default needs the
-  // population's draws run again with it.
-  std::int64_t max_ode_steps = 0;
+  // deterministically. It is shared among the stages as the evaluations are: each stage's run gets
+  // max_ode_steps / max_evaluations steps (5000 at the defaults) for each evaluation of its count, so a start
+  // whose candidates simulate slowly stops early instead of taking the global search's work. 1e8 steps is about
+  // 80 s of CPU at the 0.8 us a step measured on the slowest valves, under 60 s of wall time on 2 cores (the runs
+  // are simulated two at a time). On 120 new draws of the independent plant it changed the steps of 5 valves and
+  // the fit of 2 (one miss became a pass, no pass a miss), and cut the slowest from 212 to 54 s of CPU
+  // (docs/real-data.md, "Tenth round").
+  std::int64_t max_ode_steps = 100'000'000;
   int threads = 2;          // runs simulated concurrently
   model::SolverOptions solver = AttributionOptions::FastSolver();
   std::function<void(const std::string&)> progress;  // one line per stage (benchctl prints it on stderr)

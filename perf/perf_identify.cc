@@ -294,7 +294,7 @@ int main(int argc, char** argv) {
     // Where the work budget (MovingIdentifyOptions::max_ode_steps) ended a stage: the valves it changed.
     if (id.ok()) {
       for (const auto& n : id->notes)
-        if (n.rfind("the work budget", 0) == 0)
+        if (n.rfind("the work budget", 0) == 0 || n.find("share of the work (") != std::string::npos)
           std::printf("    %s: %.3g solver steps; %s\n", name, static_cast<double>(id->ode_steps), n.c_str());
     }
     // Is a miss said beforehand (the identification's own verdict on its prediction,
