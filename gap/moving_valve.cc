@@ -177,8 +177,8 @@ struct Stage {
   // Each Run's share of the work: its evaluations (local and global) at `work_per_evaluation` steps each, the
   // budget's steps over its evaluations (0: no share). The stages' evaluation counts are their shares of the
   // search; the work follows them, so a start whose candidates simulate eight times slower (a light, stiff
-  // plunger) gets an eighth of its evaluations instead of taking the global search's (docs/real-data.md, "The
-  // work, shared"). `run_work_used` counts the current Run's (and the start grid's) steps.
+  // plunger) gets an eighth of its evaluations instead of taking the global search's (docs/real-data.md, "Tenth
+  // round"). `run_work_used` counts the current Run's (and the start grid's) steps.
   double work_per_evaluation = 0.0;
   std::int64_t run_work_used = 0;
   std::int64_t run_work_cap = INT64_MAX;
