@@ -1311,6 +1311,7 @@ StatusOr<FittedDevice> ReferenceDevice(const Dataset& reference, const model::Pl
     // A moving valve with no parameter list: identified from scratch from its switch-on curves.
     MovingIdentifyOptions mo;
     mo.max_evaluations = fit.scratch_max_evaluations;
+    if (fit.scratch_max_ode_steps >= 0) mo.max_ode_steps = fit.scratch_max_ode_steps;
     mo.solver = fit.attribution.solver;
     mo.progress = fit.scratch_progress;
     auto id = IdentifyMovingValve(reference, nominal, mo);

@@ -5,6 +5,7 @@
 // fit so that a device far from the starting model is found in one call (docs/real-data.md).
 #pragma once
 
+#include <cstdint>
 #include <functional>
 #include <map>
 #include <string>
@@ -48,6 +49,8 @@ struct IdentifyOptions {
   std::function<void(const std::string&)> scratch_progress;
   // The evaluation budget of a from-scratch identification (MovingIdentifyOptions::max_evaluations).
   int scratch_max_evaluations = 20000;
+  // Its work budget in solver steps (MovingIdentifyOptions::max_ode_steps; -1: that option's default, 0: none).
+  std::int64_t scratch_max_ode_steps = -1;
 };
 
 // What the data says about each fitted parameter.

@@ -206,6 +206,7 @@ int main(int argc, char** argv) {
           vb::gap::DiagnoseOptions o;
           o.reference = &*reference;
           o.reference_fit.scratch_max_evaluations = evaluations;
+          if (ode_steps >= 0) o.reference_fit.scratch_max_ode_steps = ode_steps;
           if (verbose) o.reference_fit.scratch_progress = [](const std::string& l) { std::fprintf(stderr, "  %s\n", l.c_str()); };
           auto d = vb::gap::Diagnose(*target, *family, o);
           if (!d.ok()) {
