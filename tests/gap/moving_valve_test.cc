@@ -290,8 +290,8 @@ TEST(MovingValveSynthetic, TheWorkBudgetIsSharedAmongTheStagesAndSaysSo) {
   EXPECT_EQ(stage4, 9) << "three forms from each of three ends";
   bool said = false;
   for (const auto& n : id->notes)
-    said = said || (n.find("share of the work (100 solver steps per evaluation") != std::string::npos &&
-                    n.find("4") != std::string::npos);
+    said = said || (n.rfind("stages ", 0) == 0 && n.find(" 4,") != std::string::npos &&
+                    n.find("share of the work (100 solver steps per evaluation") != std::string::npos);
   EXPECT_TRUE(said) << MovingIdentificationReport(*id);
   for (const auto& n : id->notes) EXPECT_EQ(n.find("the work budget ("), std::string::npos) << n;
   EXPECT_TRUE(std::isfinite(id->fit_rmse_A));
