@@ -76,6 +76,18 @@ struct Tally {
 
 }  // namespace
 
+// A whole number for a flag, in [lo, hi] ("1e8" is read as 100000000); false with the flag named on stderr.
+static bool ParseWhole(const char* flag, const char* text, double lo, double hi, double* out) {
+  char* end = nullptr;
+  const double v = std::strtod(text, &end);
+  if (end == text || *end != '\0' || !std::isfinite(v) || v != std::floor(v) || v < lo || v > hi) {
+    std::fprintf(stderr, "%s: '%s' is not a whole number in [%.0f, %.0f]\n", flag, text, lo, hi);
+    return false;
+  }
+  *out = v;
+  return true;
+}
+
 int main(int argc, char** argv) {
   std::string sets = "practice3,practice4", only;
   int evaluations = vb::gap::MovingIdentifyOptions{}.max_evaluations;
@@ -94,9 +106,13 @@ int main(int argc, char** argv) {
     } else if (arg == "--only" && a + 1 < argc) {
       only = argv[++a];
     } else if (arg == "--evaluations" && a + 1 < argc) {
-      evaluations = std::atoi(argv[++a]);
+      double v = 0.0;
+      if (!ParseWhole("--evaluations", argv[++a], 100, 1e7, &v)) return 2;
+      evaluations = static_cast<int>(v);
     } else if (arg == "--ode-steps" && a + 1 < argc) {
-      ode_steps = std::atoll(argv[++a]);
+      double v = 0.0;  // 0: no budget
+      if (!ParseWhole("--ode-steps", argv[++a], 0, 1e15, &v)) return 2;
+      ode_steps = static_cast<std::int64_t>(v);
     } else if (arg == "--verbose") {
       verbose = true;
     } else if (arg == "--edges") {
@@ -113,7 +129,9 @@ int main(int argc, char** argv) {
         return 2;
       }
     } else if (arg == "--population" && a + 1 < argc) {
-      population = std::atoi(argv[++a]);
+      double v = 0.0;
+      if (!ParseWhole("--population", argv[++a], 0, 100000, &v)) return 2;
+      population = std::max(population, static_cast<int>(v));
     } else if (arg == "--valves" && a + 1 < argc) {
       std::stringstream list(argv[++a]);
       for (std::string j; std::getline(list, j, ',');) {
@@ -127,7 +145,9 @@ int main(int argc, char** argv) {
         population = std::max(population, static_cast<int>(n) + 1);
       }
     } else if (arg == "--seed" && a + 1 < argc) {
-      seed = static_cast<unsigned>(std::atoi(argv[++a]));
+      double v = 0.0;
+      if (!ParseWhole("--seed", argv[++a], 0, 4000000, &v)) return 2;
+      seed = static_cast<unsigned>(v);
     } else if (arg == "--design" && a + 1 < argc) {
       const std::string d = argv[++a];
       if (d != "one-supply" && d != "two-supplies") {
