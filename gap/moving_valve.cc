@@ -1596,7 +1596,8 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
     id.notes.push_back((many ? "stages " : "stage ") + which + " stopped at " + (many ? "their" : "its") +
                        " share of the work (" + Fmt(st.work_per_evaluation) + " solver steps per evaluation of " +
                        (many ? "their" : "its") + " count): " + (many ? "their" : "its") +
-                       " candidates simulate slowly (a light, stiff plunger), and the budget bounds the time");
+                       " candidates took more steps than that (as a light, stiff plunger's do), and the budget "
+                       "bounds the time");
   }
   return id;
 }
