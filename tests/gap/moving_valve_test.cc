@@ -47,8 +47,9 @@ bool Accepted(const std::string& verdict, const nlohmann::json& accept) {
 }
 
 // scratch_evaluations > 0: the reference's identification gets that many evaluations (a small count leaves it
-// unidentified, as a valve outside the family would).
-Diagnosis DiagnoseAgainst(const std::string& target_dir, const std::string& reference_dir, int scratch_evaluations = 0) {
+// unidentified, as a valve outside the family would); scratch_ode_steps >= 0: its step budget.
+Diagnosis DiagnoseAgainst(const std::string& target_dir, const std::string& reference_dir, int scratch_evaluations = 0,
+                          std::int64_t scratch_ode_steps = -1) {
   auto target = LoadDataset(target_dir, model::PresetNames());
   auto reference = LoadDataset(reference_dir, model::PresetNames());
   EXPECT_TRUE(target.ok()) << target.status().message();
@@ -56,6 +57,7 @@ Diagnosis DiagnoseAgainst(const std::string& target_dir, const std::string& refe
   DiagnoseOptions o;
   o.reference = &*reference;  // no reference_fit params: identified from scratch
   if (scratch_evaluations > 0) o.reference_fit.scratch_max_evaluations = scratch_evaluations;
+  o.reference_fit.scratch_max_ode_steps = scratch_ode_steps;
   auto d = Diagnose(*target, Family(), o);
   EXPECT_TRUE(d.ok()) << d.status().message();
   return d.ok() ? *d : Diagnosis{};
@@ -511,6 +513,31 @@ TEST(MovingValve, OneRunSaysNothingCanBeHeldOut) {
   EXPECT_EQ(d.verdict, "unknown");
   EXPECT_NE(d.verdict_reason.find("nothing can be held out"), std::string::npos) << d.verdict_reason;
   EXPECT_TRUE(d.ranking.empty());
+  Cleanup(ref);
+  Cleanup(tgt);
+}
+
+// A diagnosis's reference identified from scratch works within the step budget it is given
+// (IdentifyOptions::scratch_max_ode_steps), shared among its stages, and says so in the reference's notes: at 2e6
+// steps (100 an evaluation, where this valve's take about 280) every stage stops at its share. The one-run target
+// ends the diagnosis right after the reference.
+TEST(MovingValve, TheReferenceIsIdentifiedWithinTheStepBudgetItIsGiven) {
+  const fs::path ref = TempDir("budget_ref"), tgt = TempDir("budget_tgt");
+  ScopeChain scope;
+  ASSERT_TRUE(WriteSwitchOnSession(ref.string(), OtherValve(), Pressures(24.0, {1, 3, 6}), scope, "other").ok());
+  ASSERT_TRUE(
+      WriteSwitchOnSession(tgt.string(), OtherValve(), Pressures(24.0, {1}), scope, "other", "taghizadeh2009", 50).ok());
+  auto said = [](const Diagnosis& d) {
+    for (const auto& n : d.reference.notes)
+      if (n.find("share of the work (100 solver steps per evaluation") != std::string::npos) return true;
+    return false;
+  };
+  const Diagnosis budgeted = DiagnoseAgainst(tgt.string(), ref.string(), 0, 2'000'000);
+  EXPECT_TRUE(budgeted.reference.from_scratch);
+  EXPECT_TRUE(said(budgeted));
+  EXPECT_TRUE(std::isfinite(budgeted.reference.fit_rmse_A));
+  const Diagnosis by_default = DiagnoseAgainst(tgt.string(), ref.string());
+  EXPECT_FALSE(said(by_default)) << "the default budget (5000 steps an evaluation) does not bind on this valve";
   Cleanup(ref);
   Cleanup(tgt);
 }
