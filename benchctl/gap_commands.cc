@@ -21,6 +21,7 @@
 #include "client/client.h"
 #include "experiment/spec.h"
 #include "gap/diagnose.h"
+#include "gap/hold.h"
 #include "gap/import_request.h"
 #include "gap/stored_runs.h"
 #include "gap/suggest.h"
@@ -644,6 +645,7 @@ StatusOr<gap::Tracking> GapCli::TrackValve(std::vector<gap::TrackSession>* sessi
   if (!nominal.ok()) return nominal.status();
   for (auto& s : *sessions) {
     if (nominal->driver) s.dataset.driver = *nominal->driver;
+    s.holds = gap::TakeHoldRuns(&s.dataset);  // measured beside the identification (gap/hold.h)
     if (!gap::IsSwitchOnSession(s.dataset, nominal->plant))
       return Status::InvalidArgument("track: " + s.name + " is not a switch-on session of a moving valve "
                                      "(waveform runs from rest with one gate step, a reluctance-law family)");
@@ -681,7 +683,7 @@ int GapCli::Track() {
     if (!ds.ok()) return Fail(ds.status().WithContext("track"));
     std::string name = std::filesystem::path(dir).lexically_normal().filename().string();
     if (name.empty()) name = std::filesystem::path(dir).lexically_normal().parent_path().filename().string();
-    sessions.push_back({name, std::move(*ds)});
+    sessions.push_back({name, std::move(*ds), {}});
   }
   // Sessions named alike (night1/session, night2/session) are told apart by their parent directory.
   std::map<std::string, int> seen;
@@ -787,7 +789,7 @@ int GapCli::Health(const ClientFactory& make_client) {
       }
       auto ds = gap::DatasetOfStoredRuns(std::move(stored));
       if (!ds.ok()) return Fail(ds.status().WithContext("health " + bench + " night " + date));
-      sessions.push_back({date, std::move(*ds)});
+      sessions.push_back({date, std::move(*ds), {}});
     }
     std::fprintf(stderr, "benchctl: health: %s: %zu nights, %s to %s\n", bench.c_str(), sessions.size(),
                  sessions.front().name.c_str(), sessions.back().name.c_str());

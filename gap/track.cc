@@ -1,5 +1,6 @@
 #include "gap/track.h"
 
+#include "gap/hold.h"
 #include "gap/text_wrap.h"
 
 #include <boost/math/distributions/normal.hpp>
@@ -74,6 +75,12 @@ std::string Reading(const std::string& name) {
     return "the magnetic circuit: shorted turns move L0 and L1 by the same fraction, a core or gap change moves them "
            "apart";
   if (name == "R_p") return "eddy currents in the core (its material or lamination)";
+  if (name == "R_hold")
+    return "a warmer or aging winding (measured at the coil: a connector or a supply other than declared does not "
+           "move it, unless the coil voltage is not recorded); down: a cooler winding or shorted turns";
+  if (name == "L_hold")
+    return "the held coil's magnetic circuit: shorted turns (with the square of the turns left), a worn stop or "
+           "guide (the residual gap), a plunger that no longer holds";
   if (name == "F0*x_max")
     return "the spring's preload (a relaxing or replaced spring), the stroke, or dry friction in the guide (it "
            "opposes the pull-in as a preload does; the switch-on current does not tell them apart)";
@@ -274,6 +281,11 @@ SessionValues ValuesOfSession(const std::string& name, const Dataset& ds, const 
   return v;
 }
 
+void AddHoldValues(SessionValues* values, const std::vector<RunData>& holds, const model::DriverParams& driver) {
+  if (holds.empty()) return;
+  for (auto& d : HoldValues(holds, driver, &values->notes)) values->determined.push_back(std::move(d));
+}
+
 std::string SessionValuesJson(const SessionValues& v) {
   nlohmann::ordered_json j;
   j["session"] = v.name;
@@ -290,6 +302,7 @@ std::string SessionValuesJson(const SessionValues& v) {
                                {"sigma", NumJ(d.sigma)},
                                {"sigma_white", NumJ(d.sigma_white)},
                                {"determined", d.determined}});
+  if (!v.notes.empty()) j["notes"] = v.notes;
   return j.dump();
 }
 
@@ -320,6 +333,9 @@ StatusOr<SessionValues> SessionValuesFromJson(const std::string& json) {
       e.determined = d.value("determined", true);
       v.determined.push_back(std::move(e));
     }
+  if (j.contains("notes") && j["notes"].is_array())
+    for (const auto& n : j["notes"])
+      if (n.is_string()) v.notes.push_back(n.get<std::string>());
   return v;
 }
 
@@ -378,13 +394,13 @@ StatusOr<Tracking> TrackValues(const std::vector<SessionValues>& sessions, const
       if (s.error.empty())
         for (const auto& e : s.determined)
           if (e.name == d.name) v.value = e.value, v.sigma = e.sigma_white;
-      if (d.name == "R" && temperatures) {
+      if ((d.name == "R" || d.name == "R_hold") && temperatures) {
         const double f = 1.0 + alpha * (s.temperature_C - 20.0);
         v.value /= f, v.sigma /= f;
       }
       p.sessions.push_back(v);
     }
-    if (d.name == "R" && temperatures) p.meaning += " at 20 C";
+    if ((d.name == "R" || d.name == "R_hold") && temperatures) p.meaning += " at 20 C";
     TrackParameter(&p, options);
     t.parameters.push_back(std::move(p));
   }
@@ -408,8 +424,10 @@ StatusOr<Tracking> TrackValues(const std::vector<SessionValues>& sessions, const
     if (a.session_index != b.session_index) return a.session_index < b.session_index;
     return std::abs(a.z) > std::abs(b.z);
   });
-  for (std::size_t i = 0; i < sessions.size(); ++i)
+  for (std::size_t i = 0; i < sessions.size(); ++i) {
     if (!t.session_errors[i].empty()) t.notes.push_back("session " + t.sessions[i] + " not identified: " + t.session_errors[i]);
+    for (const auto& n : sessions[i].notes) t.notes.push_back("session " + t.sessions[i] + ": " + n);
+  }
   return t;
 }
 
@@ -493,7 +511,10 @@ StatusOr<std::vector<SessionValues>> IdentifySessions(const std::vector<TrackSes
       options.progress);
   std::vector<SessionValues> values;
   for (std::size_t i = 0; i < sessions.size(); ++i)
+  {
     values.push_back(ValuesOfSession(sessions[i].name, sessions[i].dataset, ids[i]));
+    AddHoldValues(&values.back(), sessions[i].holds, sessions[i].dataset.driver);
+  }
   return values;
 }
 

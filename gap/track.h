@@ -33,7 +33,8 @@ namespace vb::gap {
 
 struct TrackSession {
   std::string name;  // the directory's name
-  Dataset dataset;
+  Dataset dataset;   // its switch-on runs
+  std::vector<RunData> holds;  // its hold runs (gap/hold.h TakeHoldRuns), measured beside the identification
 };
 
 struct TrackOptions {
@@ -146,7 +147,8 @@ struct SessionValues {
   std::string error;                        // "" when identified
   double fit_rmse_A = NAN, noise_floor_A = NAN;
   double temperature_C = NAN;               // the runs' mean declared winding temperature (NaN: not every run declares)
-  std::vector<DeterminedValue> determined;  // the identification's, in its order
+  std::vector<DeterminedValue> determined;  // the identification's, in its order, then the hold's (R_hold, L_hold)
+  std::vector<std::string> notes;           // what could not be measured (a hold run, and why)
 };
 
 // A session identified for tracking: from scratch, then polished from its own end (anchor == nullptr: the first
@@ -155,6 +157,9 @@ struct SessionValues {
 StatusOr<MovingIdentification> IdentifyForTracking(const Dataset& ds, const model::PlantParams& family,
                                                    const MovingIdentification* anchor, const TrackOptions& options);
 SessionValues ValuesOfSession(const std::string& name, const Dataset& ds, const StatusOr<MovingIdentification>& id);
+// Adds the session's hold measurements (gap/hold.h HoldValues: R_hold, L_hold) to its values, and a note for
+// each hold run that could not be measured.
+void AddHoldValues(SessionValues* values, const std::vector<RunData>& holds, const model::DriverParams& driver);
 std::string SessionValuesJson(const SessionValues& v);
 StatusOr<SessionValues> SessionValuesFromJson(const std::string& json);
 

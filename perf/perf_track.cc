@@ -350,7 +350,7 @@ int main(int argc, char** argv) {
           }
           if (kind == "turns") v.N *= 0.98;
         }
-        sessions.push_back({"night" + std::to_string(night), Session(v, night, rng)});
+        sessions.push_back({"night" + std::to_string(night), Session(v, night, rng), {}});
       }
       auto identified = vb::gap::IdentifySessions(sessions, *family, o);
       if (!identified.ok()) {
