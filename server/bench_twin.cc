@@ -8,6 +8,7 @@
 #include <spdlog/spdlog.h>
 
 #include "experiment/runner.h"
+#include "gap/hold.h"
 #include "gap/stored_runs.h"
 #include "hw/emulated_bench.h"
 #include "model/params.h"
@@ -17,7 +18,8 @@
 
 namespace vb::server {
 
-StatusOr<gap::Dataset> BenchTwins::LoadCheck(std::int64_t batch_id, model::PlantParams* family) const {
+StatusOr<gap::Dataset> BenchTwins::LoadCheck(std::int64_t batch_id, model::PlantParams* family,
+                                              std::vector<gap::RunData>* holds) const {
   auto store = pool_->Acquire();
   if (!store.ok()) return store.status();
   auto listed = runs::ListBatch(store->get(), batch_id);
@@ -32,6 +34,10 @@ StatusOr<gap::Dataset> BenchTwins::LoadCheck(std::int64_t batch_id, model::Plant
   if (stored.empty()) return Status::FailedPrecondition(fmt::format("health check batch {}: no run finished", batch_id));
   auto ds = gap::DatasetOfStoredRuns(std::move(stored));
   if (!ds.ok()) return ds.status().WithContext(fmt::format("health check batch {}", batch_id));
+  auto held = gap::TakeHoldRuns(&*ds);  // the identification fits the switch-ons
+  if (holds != nullptr) *holds = std::move(held);
+  if (ds->runs.empty())
+    return Status::FailedPrecondition(fmt::format("health check batch {}: no switch-on run finished", batch_id));
   auto preset = model::Preset(ds->model.empty() ? "taghizadeh2009" : ds->model);
   if (!preset.ok()) return preset.status();
   *family = *preset;
@@ -50,7 +56,8 @@ gap::SessionValues BenchTwins::Identify(const std::string& bench, const std::str
   twin.flags.clear();  // tonight's tracking sets them again (SetFlags)
   gap::TrackOptions options;
   model::PlantParams family;
-  auto ds = LoadCheck(batch_id, &family);
+  std::vector<gap::RunData> holds;
+  auto ds = LoadCheck(batch_id, &family, &holds);
   if (!ds.ok()) return gap::ValuesOfSession(date, gap::Dataset{}, StatusOr<gap::MovingIdentification>(ds.status()));
   if (!twin.anchor && first_batch_id != 0 && first_batch_id != batch_id) {
     // The anchor is the bench's first check (docs/track.md, step 1), identified again after a restart: from
@@ -98,6 +105,7 @@ gap::SessionValues BenchTwins::Identify(const std::string& bench, const std::str
     }
   }
   gap::SessionValues values = gap::ValuesOfSession(date, *ds, id);
+  gap::AddHoldValues(&values, holds, ds->driver);
   if (id.ok()) {
     if (!twin.anchor) {
       twin.anchor = *id;
@@ -134,10 +142,12 @@ std::vector<gap::SessionValues> BenchTwins::Reidentify(const std::string& bench,
   for (const auto& [night, check] : checks) {
     if (night >= date || check.batch_id == 0) continue;
     model::PlantParams family;
-    auto ds = LoadCheck(check.batch_id, &family);
+    std::vector<gap::RunData> holds;
+    auto ds = LoadCheck(check.batch_id, &family, &holds);
     auto id = ds.ok() ? gap::IdentifyForTracking(*ds, family, &*t->second.anchor, gap::TrackOptions{})
                       : StatusOr<gap::MovingIdentification>(ds.status());
     out.push_back(gap::ValuesOfSession(night, ds.ok() ? *ds : gap::Dataset{}, id));
+    if (ds.ok()) gap::AddHoldValues(&out.back(), holds, ds->driver);
   }
   return out;
 }

@@ -157,7 +157,9 @@ class BenchTwins {
     const gap::MovingIdentification* Reference() const { return baseline ? &*baseline : anchor ? &*anchor : nullptr; }
     const std::string& ReferenceDate() const { return baseline ? baseline_date : anchor_date; }
   };
-  StatusOr<gap::Dataset> LoadCheck(std::int64_t batch_id, model::PlantParams* family) const;
+  // A night's health check as a switch-on session; its hold runs (gap/hold.h) are moved to *holds when given.
+  StatusOr<gap::Dataset> LoadCheck(std::int64_t batch_id, model::PlantParams* family,
+                                   std::vector<gap::RunData>* holds = nullptr) const;
 
   StorePool* pool_;
   std::map<std::string, Twin> twins_;

@@ -1,5 +1,6 @@
 #include "server/health_check.h"
 
+#include <algorithm>
 #include <cmath>
 
 #include <fmt/format.h>
@@ -30,6 +31,22 @@ Status ValidateHealthCheck(const v1::BenchConfig& b, const hw::Capabilities& cap
   if (h.record_rate_hz() != 0.0 && !(h.record_rate_hz() >= 1e3 && h.record_rate_hz() <= caps.max_sample_rate_Hz))
     return Status::InvalidArgument(fmt::format("{}.record_rate_Hz: must be in [1000, {}] Hz (the bench's limit), got {}",
                                                f, caps.max_sample_rate_Hz, h.record_rate_hz()));
+  const double duty = h.has_hold_duty() ? h.hold_duty() : kHealthDefaultHoldDuty;
+  if (duty == 0.0) return Status::Ok();  // no hold run
+  if (!(duty > 0.0 && duty < 1.0))
+    return Status::InvalidArgument(fmt::format("{}.hold_duty: must be in (0, 1) (0: no hold run), got {}", f, duty));
+  const double rate_Hz = h.record_rate_hz() > 0.0 ? h.record_rate_hz() : kHealthDefaultRate_Hz;
+  const double f_Hz = h.hold_frequency_hz() > 0.0 ? h.hold_frequency_hz() : kHealthDefaultHoldFrequency_Hz;
+  if (h.hold_frequency_hz() < 0.0 || !std::isfinite(h.hold_frequency_hz()) || f_Hz > rate_Hz / 10.0 ||
+      (caps.max_carrier_Hz > 0.0 && (f_Hz < caps.min_carrier_Hz || f_Hz > caps.max_carrier_Hz)))
+    return Status::InvalidArgument(fmt::format(
+        "{}.hold_frequency_Hz: {} Hz must be within the bench's carrier range [{}, {}] Hz and leave 10 samples a "
+        "period at {} Hz", f, f_Hz, caps.min_carrier_Hz, caps.max_carrier_Hz, rate_Hz));
+  const double hold_s = h.hold_s() != 0.0 ? h.hold_s() : kHealthDefaultHold_s;
+  if (!(hold_s * f_Hz >= 8.0) || hold_s > 10.0)
+    return Status::InvalidArgument(fmt::format(
+        "{}.hold_s: {} s holds {:.3g} periods at {} Hz; give at least 8 (the second half is measured, 3 whole "
+        "periods at least) and at most 10 s", f, hold_s, hold_s * f_Hz, f_Hz));
   return Status::Ok();
 }
 
@@ -75,33 +92,48 @@ std::vector<experiment::ExperimentSpec> HealthCheckSpecs(const runs::BenchSetup&
   const auto& h = bench.config.health();
   const double duration_s = h.duration_s() > 0.0 ? h.duration_s() : kHealthDefaultDuration_s;
   const double rate_Hz = h.record_rate_hz() > 0.0 ? h.record_rate_hz() : kHealthDefaultRate_Hz;
-  for (double v : h.supply_v())
-    for (double p : h.supply_pressure_pa()) {
-      experiment::ExperimentSpec s;
-      s.set_name(fmt::format("health-{:g}V-{:g}Pa", v, p));
-      s.set_description(fmt::format("nightly health check of {}: switch-on from rest at {:g} V and {:g} Pa", bench.name,
-                                    v, p));
-      for (const std::string& t : {std::string("health"), "health:" + bench.name, std::string("night"),
-                                   "night:" + date, runs::NightNumberTag(night_number)})
-        s.add_tags(t);
-      s.mutable_bench()->set_kind(std::string(BenchKindName(bench.kind)));
-      s.mutable_bench()->set_name(bench.name);
-      if (bench.kind == BenchKind::kEmulated) {
-        *s.mutable_bench()->mutable_model() = bench.model;
-        *s.mutable_bench()->mutable_driver() = bench.config.driver();
-      }
-      s.mutable_conditions()->set_supply_v(v);
-      s.mutable_conditions()->set_supply_pressure_pa(p);
-      auto* pwm = s.mutable_controller()->mutable_open_loop_pwm();
-      auto* off = pwm->add_segments();
-      off->set_start_s(0.0), off->set_frequency_hz(0.0), off->set_duty(0.0);
-      auto* on = pwm->add_segments();
-      on->set_start_s(kHealthPreTrigger_s), on->set_frequency_hz(0.0), on->set_duty(1.0);
-      s.set_duration_s(duration_s);
-      s.mutable_recording()->set_rate_hz(rate_Hz);
-      s.set_priority(kHealthPriority);
-      specs.push_back(std::move(s));
+  const double duty = h.has_hold_duty() ? h.hold_duty() : kHealthDefaultHoldDuty;
+  const double hold_Hz = h.hold_frequency_hz() > 0.0 ? h.hold_frequency_hz() : kHealthDefaultHoldFrequency_Hz;
+  const double hold_s = h.hold_s() > 0.0 ? h.hold_s() : kHealthDefaultHold_s;
+  const auto one = [&](double v, double p, bool hold) {
+    experiment::ExperimentSpec s;
+    s.set_name(fmt::format("health-{}{:g}V-{:g}Pa", hold ? "hold-" : "", v, p));
+    s.set_description(hold ? fmt::format("nightly health check of {}: switch-on from rest at {:g} V and {:g} Pa, then "
+                                         "a hold at duty {:g} and {:g} Hz for {:g} s",
+                                         bench.name, v, p, duty, hold_Hz, hold_s)
+                           : fmt::format("nightly health check of {}: switch-on from rest at {:g} V and {:g} Pa",
+                                         bench.name, v, p));
+    for (const std::string& t : {std::string("health"), "health:" + bench.name, std::string("night"), "night:" + date,
+                                 runs::NightNumberTag(night_number)})
+      s.add_tags(t);
+    s.mutable_bench()->set_kind(std::string(BenchKindName(bench.kind)));
+    s.mutable_bench()->set_name(bench.name);
+    if (bench.kind == BenchKind::kEmulated) {
+      *s.mutable_bench()->mutable_model() = bench.model;
+      *s.mutable_bench()->mutable_driver() = bench.config.driver();
     }
+    s.mutable_conditions()->set_supply_v(v);
+    s.mutable_conditions()->set_supply_pressure_pa(p);
+    auto* pwm = s.mutable_controller()->mutable_open_loop_pwm();
+    auto* off = pwm->add_segments();
+    off->set_start_s(0.0), off->set_frequency_hz(0.0), off->set_duty(0.0);
+    auto* on = pwm->add_segments();
+    on->set_start_s(kHealthPreTrigger_s), on->set_frequency_hz(0.0), on->set_duty(1.0);
+    if (hold) {
+      auto* held = pwm->add_segments();
+      held->set_start_s(duration_s), held->set_frequency_hz(hold_Hz), held->set_duty(duty);
+    }
+    s.set_duration_s(hold ? duration_s + hold_s : duration_s);
+    s.mutable_recording()->set_rate_hz(rate_Hz);
+    s.set_priority(kHealthPriority);
+    specs.push_back(std::move(s));
+  };
+  for (double v : h.supply_v())
+    for (double p : h.supply_pressure_pa()) one(v, p, false);
+  // One hold: at the first (the bench's declared) supply and the highest pressure, where the pressure's force on
+  // the held plunger is largest (R and L at the stop do not depend on it; a plunger that drops out does).
+  if (duty > 0.0)
+    one(h.supply_v(0), *std::max_element(h.supply_pressure_pa().begin(), h.supply_pressure_pa().end()), true);
   return specs;
 }
 

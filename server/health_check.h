@@ -1,6 +1,6 @@
 // The nightly health check of a bench (config "health"; issue 38, docs/track.md "On the server"): before each
 // night's suite, one switch-on run per supply and pressure on the bench, from rest (the gate low for 0.1 ms, then
-// high to the end), stored as any run. `benchctl health BENCH` tracks a bench's checks night by night (the same
+// high to the end), and one hold (the same switch-on, then PWM; gap/hold.h), stored as any run. `benchctl health BENCH` tracks a bench's checks night by night (the same
 // gap::TrackSessions as `benchctl track`). Each run is tagged "health", "health:<bench>", "night",
 // "night:<date>" and the night's number (runs::NightNumberTag), pinned to its bench, and queued ahead of the
 // suite (priority kHealthPriority).
@@ -19,6 +19,13 @@ constexpr int kHealthPriority = 100;
 constexpr double kHealthPreTrigger_s = 1e-4;   // the gate rises here (a recorded rest before it: the offset)
 constexpr double kHealthDefaultDuration_s = 0.0101;
 constexpr double kHealthDefaultRate_Hz = 1e5;
+// The hold (docs/track.md "The hold"): half the supply's current, where the ripple (V d (1 - d) / (f L)) is
+// largest; 1 kHz, so that a coil of 1 H at 12 V still ripples by 3 mA, above a scope's noise, with 100 samples
+// a period at 100 kHz; 0.1 s, so that a coil of 50 ms time constant has settled within a time constant by the
+// window's start (the second half; what remains is taken out through L).
+constexpr double kHealthDefaultHoldDuty = 0.5;
+constexpr double kHealthDefaultHoldFrequency_Hz = 1e3;
+constexpr double kHealthDefaultHold_s = 0.1;
 
 // Checks the bench's "health" block (when it has one) against its capabilities; the message names the field.
 Status ValidateHealthCheck(const valvebench::v1::BenchConfig& bench, const hw::Capabilities& caps,

@@ -143,17 +143,20 @@ TEST(ValveDrift, AStepAndARampFromTheirNight) {
   EXPECT_EQ(runs::NightNumberOf(spec), 17);
 }
 
-// The health check's runs: one per supply and pressure, from rest with one gate step, pinned to the bench,
-// tagged with the night, queued ahead of the suite.
-TEST(HealthCheck, OneSwitchOnRunPerSupplyAndPressure) {
+// The health check's runs: one per supply and pressure, from rest with one gate step, and one hold (the same
+// switch-on, then PWM) at the first supply and the highest pressure; pinned to the bench, tagged with the night,
+// queued ahead of the suite.
+TEST(HealthCheck, OneSwitchOnRunPerSupplyAndPressureAndAHold) {
   auto c = testing::MinimalConfig();
   auto* h = c.mutable_benches(0)->mutable_health();
   h->add_supply_v(24.0), h->add_supply_v(20.0);
   h->add_supply_pressure_pa(1e5), h->add_supply_pressure_pa(4e5);
   auto s = server::SettingsFromConfig(c, "");
   ASSERT_TRUE(s.ok()) << s.status().message();
-  const auto specs = server::HealthCheckSpecs(s->benches[0], "2026-11-29", 12);
-  ASSERT_EQ(specs.size(), 4u);
+  auto specs = server::HealthCheckSpecs(s->benches[0], "2026-11-29", 12);
+  ASSERT_EQ(specs.size(), 5u);
+  const auto hold = specs.back();
+  specs.pop_back();
   std::set<std::pair<double, double>> conditions;
   for (const auto& spec : specs) {
     conditions.insert({spec.conditions().supply_v(), spec.conditions().supply_pressure_pa()});
@@ -168,6 +171,37 @@ TEST(HealthCheck, OneSwitchOnRunPerSupplyAndPressure) {
     EXPECT_EQ(spec.controller().open_loop_pwm().segments(1).duty(), 1.0);
     EXPECT_DOUBLE_EQ(spec.duration_s(), server::kHealthDefaultDuration_s);
   }
+  EXPECT_EQ(hold.name(), "health-hold-24V-400000Pa");
+  EXPECT_EQ(hold.conditions().supply_v(), 24.0);
+  EXPECT_EQ(hold.conditions().supply_pressure_pa(), 4e5);
+  EXPECT_EQ(runs::NightNumberOf(hold), 12);
+  EXPECT_EQ(hold.priority(), server::kHealthPriority);
+  ASSERT_EQ(hold.controller().open_loop_pwm().segments_size(), 3);
+  const auto& pwm = hold.controller().open_loop_pwm().segments(2);
+  EXPECT_DOUBLE_EQ(pwm.start_s(), server::kHealthDefaultDuration_s);
+  EXPECT_EQ(pwm.duty(), server::kHealthDefaultHoldDuty);
+  EXPECT_EQ(pwm.frequency_hz(), server::kHealthDefaultHoldFrequency_Hz);
+  EXPECT_DOUBLE_EQ(hold.duration_s(), server::kHealthDefaultDuration_s + server::kHealthDefaultHold_s);
+  // No hold when its duty is 0; a duty, frequency or length it cannot measure is refused, naming the field.
+  h->set_hold_duty(0.0);
+  auto no_hold = server::SettingsFromConfig(c, "");
+  ASSERT_TRUE(no_hold.ok()) << no_hold.status().message();
+  EXPECT_EQ(server::HealthCheckSpecs(no_hold->benches[0], "2026-11-29", 12).size(), 4u);
+  h->set_hold_duty(1.0);
+  auto bad = server::SettingsFromConfig(c, "");
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.status().message().find("health.hold_duty"), std::string::npos) << bad.status().message();
+  h->set_hold_duty(0.4);
+  h->set_hold_frequency_hz(20e3);  // 5 samples a period at 100 kHz
+  bad = server::SettingsFromConfig(c, "");
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.status().message().find("health.hold_frequency_Hz"), std::string::npos) << bad.status().message();
+  h->set_hold_frequency_hz(1e3);
+  h->set_hold_s(0.005);  // 5 periods
+  bad = server::SettingsFromConfig(c, "");
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.status().message().find("health.hold_s"), std::string::npos) << bad.status().message();
+  h->clear_hold_duty(), h->clear_hold_frequency_hz(), h->clear_hold_s();
   EXPECT_EQ(conditions.size(), 4u);
   // A bench without the block has no check.
   c.mutable_benches(0)->clear_health();
@@ -542,21 +576,32 @@ TEST(BenchTwin, AValveThatChangedIsNamedAsTheCauseOfTheRegressedNights) {
         << list[k].dump(1);
     if (k < kNights - 1 && list[k]["valve_changes"].empty()) continue;  // not summed past h yet (above)
     ASSERT_FALSE(list[k]["valve_changes"].empty()) << list[k].dump(1) << why;
+    // The resistance, by the switch-on's identification (R) or by the hold (R_hold, the more precise: it is
+    // flagged on the same night with the larger z, so it comes first).
     const std::string first = list[k]["valve_changes"][0];
-    EXPECT_EQ(first.rfind("emu-a: R up", 0), 0u) << first;
+    EXPECT_TRUE(first.rfind("emu-a: R up", 0) == 0u || first.rfind("emu-a: R_hold up", 0) == 0u) << first;
     EXPECT_NE(first.find("since " + dates[kChange]), std::string::npos) << first;
   }
   EXPECT_EQ(std::vector<std::string>(bh.nights().begin(), bh.nights().end()), dates);
   ASSERT_GT(bh.flags_size(), 0) << why;
-  EXPECT_EQ(bh.flags(0).parameter(), "R") << bh.report();
+  EXPECT_TRUE(bh.flags(0).parameter() == "R" || bh.flags(0).parameter() == "R_hold") << bh.report();
   EXPECT_EQ(bh.flags(0).since(), dates[kChange]) << bh.report();
   EXPECT_LE(bh.flags(0).night(), dates[kNights - 1]) << bh.report();
+  std::set<std::string> tracked;
   for (const auto& p : bh.parameters()) {
+    tracked.insert(p.name());
     EXPECT_EQ(p.value_size(), kNights) << p.name();
-    if (p.name() == "R") {
+    if (p.name() == "R_hold") {
+      // The hold sees the winding's 15 % at once, and nothing else moves it: flagged on the change's night's
+      // first sessions after the reference, never before.
       EXPECT_EQ(p.flagged_night(), bh.flags(0).night());
+      EXPECT_GE(p.flagged_night(), dates[kChange]);
+    }
+    if (p.name() == "L_hold") {
+      EXPECT_TRUE(p.flagged_night().empty()) << bh.report();
     }
   }
+  EXPECT_TRUE(tracked.count("R") && tracked.count("R_hold") && tracked.count("L_hold")) << bh.report();
   EXPECT_NE(bh.report().find("FLAG"), std::string::npos) << bh.report();
   auto unknown = c.GetBenchHealth("emu-c");
   EXPECT_EQ(unknown.status().code(), StatusCode::kNotFound) << unknown.status().message();
@@ -573,7 +618,7 @@ TEST(BenchTwin, AValveThatChangedIsNamedAsTheCauseOfTheRegressedNights) {
   EXPECT_EQ(j["benches"][0]["sessions"], dates) << j.dump(1);
   ASSERT_FALSE(j["flags"].empty()) << j.dump(1);
   EXPECT_EQ(j["flags"][0]["bench"], "emu-a");
-  EXPECT_EQ(j["flags"][0]["parameter"], "R") << j["flags"].dump(1);
+  EXPECT_TRUE(j["flags"][0]["parameter"] == "R" || j["flags"][0]["parameter"] == "R_hold") << j["flags"].dump(1);
   EXPECT_EQ(j["flags"][0]["since"], dates[kChange]) << j["flags"].dump(1);
   EXPECT_NEAR(j["flags"][0]["change_relative"].get<double>(), 0.15, 0.02) << j["flags"][0].dump(1);
   for (const auto& f : j["flags"]) EXPECT_GE(f["session"].get<std::string>(), dates[kChange]) << f.dump();
@@ -594,7 +639,7 @@ TEST(BenchTwin, AValveThatChangedIsNamedAsTheCauseOfTheRegressedNights) {
   const auto night = xml.find("name=\"" + dates[kNights - 1] + "\"");
   ASSERT_NE(night, std::string::npos) << xml;
   EXPECT_EQ(xml.find("<failure type=\"regression\" message=\"cause: valve (", night), xml.find("<failure", night)) << xml;
-  EXPECT_NE(xml.find("valve changed: emu-a: R up", night), std::string::npos) << xml;
+  EXPECT_NE(xml.find("valve changed: emu-a: R", night), std::string::npos) << xml;
   EXPECT_NE(xml.find("failures=\"" + std::to_string(kNights - kChange) + "\""), std::string::npos) << xml;
 }
 
@@ -699,7 +744,8 @@ TEST(BenchTwin, ACodeRegressionOnAFlaggedValveIsTheCodesWhenTheBaselinesCodeDoes
       EXPECT_NE(c.value("baseline_code", "").find("'s suite, batch"), std::string::npos) << c.dump(1);
       EXPECT_EQ(c.value("baseline_code", "").rfind("the baseline's source names batch 1, which is not the "
                                                    "baseline's here (case ", 0), 0u) << c.dump(1);
-      if (c.value("reason", "").find("the valve changed since the baseline (bench emu-a's R up") != std::string::npos)
+      // The flag on the resistance: the switch-on's R or the hold's R_hold (the first, the larger z).
+      if (c.value("reason", "").find("the valve changed since the baseline (bench emu-a's R") != std::string::npos)
         ++flagged_code_nights;
     }
   }
