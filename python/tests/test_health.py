@@ -53,8 +53,11 @@ def test_health_is_a_dataframe_with_the_flagged_parameter(twin_server):
     # about 2.5, then 4 and more a night to the CUSUM, docs/track.md "Outliers") and not before night 6.
     assert r["value"].iloc[5] / r["value"].iloc[:5].mean() == pytest.approx(1.15, abs=0.02)
     assert not r["flagged"].iloc[:5].any()
+    # The hold measures the same winding (R_hold, the more precise: flagged first on the same night when both are).
+    h = df[df["parameter"] == "R_hold"].sort_values("night")
+    assert h["value"].iloc[5] / h["value"].iloc[:5].mean() == pytest.approx(1.15, abs=0.005)
     flags = df.attrs["flags"]
-    assert flags and flags[0]["parameter"] == "R" and flags[0]["since"] == nights[5], flags
+    assert flags and flags[0]["parameter"] in ("R", "R_hold") and flags[0]["since"] == nights[5], flags
     assert flags[0]["change_relative"] == pytest.approx(0.15, abs=0.02)
     # Every bench with checks: the same one here.
     assert set(c.health()["bench"]) == {"emu-a"}

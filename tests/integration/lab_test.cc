@@ -384,7 +384,7 @@ TEST(LabNights, TheClaimingHostChecksEveryLiveHostsBenches) {
   req.set_tag("health:b1");
   auto runs = viewer.ListRuns(req);
   ASSERT_TRUE(runs.ok()) << runs.status().message();
-  ASSERT_EQ(runs->runs_size(), 2);
+  ASSERT_EQ(runs->runs_size(), 3);  // the two switch-ons and the hold
   for (const auto& r : runs->runs()) {
     EXPECT_EQ(r.status(), v1::DONE) << r.reason();
     EXPECT_EQ(r.host(), "host-b");
