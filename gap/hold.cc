@@ -12,6 +12,9 @@ namespace {
 
 constexpr int kMinRises = 4;    // the pull-in and at least three PWM rises
 constexpr int kMinPeriods = 3;  // whole periods in the second half: a scatter to take a sigma from
+// Samples before the gate rises that make a baseline: fewer leave the offset (the health check records 500, so
+// that the offset's own error, noise / sqrt(500), is a few hundredths of a percent of a 0.1 A hold).
+constexpr std::size_t kMinBaselineSamples = 20;
 
 std::vector<std::size_t> Rises(const RunData& r) {
   std::vector<std::size_t> rises;
@@ -75,6 +78,21 @@ StatusOr<HoldMeasurement> MeasureHold(const RunData& r, const model::DriverParam
   const std::size_t a = edges.front(), b = edges.back();
   for (std::size_t k = a; k <= b; ++k)
     if (!std::isfinite(r.i_A[k])) return Status::InvalidArgument(fmt::format("{}: i_A[{}] is not a number", where, k));
+  // The baseline: a scope's offset shifts the mean current and so R (on an independent plant's draw, -0.78 mA
+  // on a 75 mA hold read R 1.05 % high).
+  std::vector<double> i(r.i_A.begin(), r.i_A.end());
+  double offset_sigma_A = 0.0;
+  if (rises[0] >= kMinBaselineSamples) {
+    double sum = 0.0, ss = 0.0;
+    for (std::size_t k = 0; k < rises[0]; ++k) {
+      if (!std::isfinite(i[k])) return Status::InvalidArgument(fmt::format("{}: i_A[{}] is not a number", where, k));
+      sum += i[k];
+    }
+    m.offset_A = sum / static_cast<double>(rises[0]);
+    for (std::size_t k = 0; k < rises[0]; ++k) ss += (i[k] - m.offset_A) * (i[k] - m.offset_A);
+    offset_sigma_A = std::sqrt(ss / static_cast<double>(rises[0] - 1) / static_cast<double>(rises[0]));
+    for (double& x : i) x -= m.offset_A;
+  }
   std::vector<double> v(n);
   if (m.voltage_measured) {
     for (std::size_t k = a; k <= b; ++k) {
@@ -92,7 +110,7 @@ StatusOr<HoldMeasurement> MeasureHold(const RunData& r, const model::DriverParam
     // The flyback diode conducts only while the current flows: a hold whose current stops in a period is not
     // a resistance and an inductance in series with a known voltage.
     double lowest = HUGE_VAL, highest = -HUGE_VAL;
-    for (std::size_t k = a; k <= b; ++k) lowest = std::min(lowest, r.i_A[k]), highest = std::max(highest, r.i_A[k]);
+    for (std::size_t k = a; k <= b; ++k) lowest = std::min(lowest, i[k]), highest = std::max(highest, i[k]);
     if (!(lowest > 0.05 * highest))
       return Status::InvalidArgument(fmt::format(
           "{}: the current falls to {:.4g} A of its {:.4g} A peak within a period (it stops, or nearly: "
@@ -110,7 +128,7 @@ StatusOr<HoldMeasurement> MeasureHold(const RunData& r, const model::DriverParam
     double sv = 0.0, si = 0.0;
     for (std::size_t k = e0; k < e1; ++k) {
       sv += v[k];
-      si += 0.5 * (r.i_A[k] + r.i_A[k + 1]);
+      si += 0.5 * (i[k] + i[k + 1]);
       on += r.gate[k] != 0;
     }
     volt_s[p] = sv * dt, amp_s[p] = si * dt;
@@ -148,8 +166,7 @@ StatusOr<HoldMeasurement> MeasureHold(const RunData& r, const model::DriverParam
   // var(noise) / var(i's part the regression uses); it is corrected with the noise of the current's second
   // differences (gap/dataset.h SecondDifferenceSigma).
   const double noise_A = [&] {
-    std::vector<double> w(r.i_A.begin() + static_cast<std::ptrdiff_t>(a),
-                          r.i_A.begin() + static_cast<std::ptrdiff_t>(b) + 1);
+    std::vector<double> w(i.begin() + static_cast<std::ptrdiff_t>(a), i.begin() + static_cast<std::ptrdiff_t>(b) + 1);
     return SecondDifferenceSigma(w);
   }();
   std::vector<double> L_p(periods);
@@ -159,9 +176,9 @@ StatusOr<HoldMeasurement> MeasureHold(const RunData& r, const model::DriverParam
     Eigen::VectorXd y(len);
     double psi = 0.0;
     for (std::size_t k = e0; k <= e1; ++k) {
-      if (k > e0) psi += (v[k - 1] - R * 0.5 * (r.i_A[k - 1] + r.i_A[k])) * dt;
+      if (k > e0) psi += (v[k - 1] - R * 0.5 * (i[k - 1] + i[k])) * dt;
       const std::size_t row = k - e0;
-      X(row, 0) = 1.0, X(row, 1) = r.i_A[k], X(row, 2) = static_cast<double>(row) * dt;
+      X(row, 0) = 1.0, X(row, 1) = i[k], X(row, 2) = static_cast<double>(row) * dt;
       y(row) = psi;
     }
     const Eigen::Vector3d beta = X.colPivHouseholderQr().solve(y);
@@ -192,7 +209,8 @@ StatusOr<HoldMeasurement> MeasureHold(const RunData& r, const model::DriverParam
     sv += bv;
   }
   m.R_ohm = sv / amp_total;
-  m.R_sigma_ohm = SigmaOfMean(R_b);
+  // The offset's error shifts the mean current: R's relative error is its share of the hold current.
+  m.R_sigma_ohm = std::hypot(SigmaOfMean(R_b), m.R_ohm * offset_sigma_A / m.hold_current_A);
   if (!std::isfinite(m.R_ohm) || !std::isfinite(m.L_H) || !(m.R_ohm > 0.0))
     return Status::InvalidArgument(
         fmt::format("{}: the hold gives R = {:.4g} ohm and L = {:.4g} H, not a coil's", where, m.R_ohm, m.L_H));

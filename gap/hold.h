@@ -30,7 +30,8 @@ std::vector<RunData> TakeHoldRuns(Dataset* ds);
 struct HoldMeasurement {
   double R_ohm = NAN, R_sigma_ohm = NAN;  // integral(v) / integral(i) over the settled periods, and its 1-sigma
   double L_H = NAN, L_sigma_H = NAN;      // psi's slope in i within a period (mean over periods), and its 1-sigma
-  double hold_current_A = NAN;            // the mean current over the settled periods
+  double hold_current_A = NAN;            // the mean current over the settled periods (offset removed)
+  double offset_A = 0.0;                  // the baseline removed: the mean before the gate rises (0: too few)
   double duty = NAN, frequency_Hz = NAN;  // the gate's, measured over those periods
   int periods = 0;                        // whole PWM periods measured (the hold's second half)
   bool voltage_measured = false;          // v_coil_V recorded; else the driver's voltages (see MeasureHold)
@@ -41,8 +42,10 @@ struct HoldMeasurement {
 // window's end minus its start, L (i_end - i_start)). The coil voltage is the recorded v_coil_V; without it, a
 // low-side driver with a flyback diode puts the supply on the coil while the gate is high and minus the diode's
 // drop while it is low (the current never stops in a hold), and R then includes any resistance between the
-// supply and the coil (a connector, the switch) for the gate's on-time. Each sigma is the periods' scatter over
-// sqrt(periods). InvalidArgument naming the run and the cause when the run is not a measurable hold.
+// supply and the coil (a connector, the switch) for the gate's on-time. A scope's baseline offset is removed:
+// the mean of the samples before the gate rises (at least kMinBaselineSamples; the health check records 5 ms).
+// Each sigma is measured from the periods' scatter (see hold.cc), the offset's added to R's. InvalidArgument
+// naming the run and the cause when the run is not a measurable hold.
 StatusOr<HoldMeasurement> MeasureHold(const RunData& r, const model::DriverParams& driver);
 
 // The tracked values of a session's hold runs: R_hold (inverse-variance mean over the runs) and L_hold (of the

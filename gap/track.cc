@@ -5,6 +5,7 @@
 
 #include <boost/math/distributions/normal.hpp>
 #include <boost/math/distributions/students_t.hpp>
+#include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
@@ -420,8 +421,30 @@ StatusOr<Tracking> TrackValues(const std::vector<SessionValues>& sessions, const
     f.projected_crossing = p.projected_crossing;
     t.flags.push_back(f);
   }
+  // The switch-on's R is a fit's value: a family that does not hold the valve's core or eddy ladder trades it
+  // against the inductances (the independent plant's shorted turns moved R by -1.1 % while the winding stayed).
+  // The hold's R_hold measures the winding itself, to a few times finer (gap/hold.h). When R is flagged and
+  // R_hold, tracked on that night, has not moved although it sees a third of R's change, the winding did not
+  // change: the flag says so and stands behind its night's others. Where R_hold moves too, nothing is said.
+  const TrackedParameter* hold_R = nullptr;
+  for (const auto& p : t.parameters)
+    if (p.name == "R_hold") hold_R = &p;
+  for (auto& f : t.flags) {
+    if (f.parameter != "R" || hold_R == nullptr || !(hold_R->smallest_step > 0.0) || !(std::abs(hold_R->center) > 0.0))
+      continue;
+    const bool moved = hold_R->flagged >= 0 && hold_R->flagged <= f.session_index;
+    const double sees = hold_R->smallest_step / std::abs(hold_R->center);
+    const double tonight = hold_R->sessions[f.session_index].value;
+    if (moved || !std::isfinite(tonight) || !(std::abs(f.change_relative) > 3.0 * sees)) continue;
+    f.contradicted_by = "R_hold";
+    f.meaning += fmt::format("; but R_hold, the winding measured at the hold, has not moved ({:+.2f} % tonight; it "
+                             "sees {:.2g} %): not the winding. The switch-on's R took another change: the magnetic "
+                             "circuit or shorted turns (L0, L1), the supply or the driver",
+                             100.0 * (tonight - hold_R->center) / std::abs(hold_R->center), 100.0 * sees);
+  }
   std::stable_sort(t.flags.begin(), t.flags.end(), [](const TrackFlag& a, const TrackFlag& b) {
     if (a.session_index != b.session_index) return a.session_index < b.session_index;
+    if (a.contradicted_by.empty() != b.contradicted_by.empty()) return a.contradicted_by.empty();
     return std::abs(a.z) > std::abs(b.z);
   });
   for (std::size_t i = 0; i < sessions.size(); ++i) {
@@ -503,17 +526,25 @@ StatusOr<std::vector<SessionValues>> IdentifySessions(const std::vector<TrackSes
   VB_RETURN_IF_ERROR(CheckTrackOptions(options));
   std::vector<std::string> names;
   for (const auto& s : sessions) names.push_back(s.name);
+  // A session's hold runs (given apart, or still in its dataset) are measured beside the identification, which
+  // fits the switch-ons.
+  std::vector<Dataset> switch_ons;
+  std::vector<std::vector<RunData>> holds;
+  for (const auto& s : sessions) {
+    switch_ons.push_back(s.dataset);
+    holds.push_back(s.holds);
+    for (auto& h : TakeHoldRuns(&switch_ons.back())) holds.back().push_back(std::move(h));
+  }
   const auto ids = IdentifyAnchored(
       names,
       [&](std::size_t i, const MovingIdentification* anchor) {
-        return IdentifyForTracking(sessions[i].dataset, family, anchor, options);
+        return IdentifyForTracking(switch_ons[i], family, anchor, options);
       },
       options.progress);
   std::vector<SessionValues> values;
-  for (std::size_t i = 0; i < sessions.size(); ++i)
-  {
-    values.push_back(ValuesOfSession(sessions[i].name, sessions[i].dataset, ids[i]));
-    AddHoldValues(&values.back(), sessions[i].holds, sessions[i].dataset.driver);
+  for (std::size_t i = 0; i < sessions.size(); ++i) {
+    values.push_back(ValuesOfSession(sessions[i].name, switch_ons[i], ids[i]));
+    AddHoldValues(&values.back(), holds[i], switch_ons[i].driver);
   }
   return values;
 }
@@ -569,7 +600,9 @@ std::string TrackingJson(const Tracking& t) {
                      {"direction", f.direction},
                      {"change", NumJ(f.change)}, {"change_relative", NumJ(f.change_relative)}, {"z", NumJ(f.z)},
                      {"since", f.since}, {"drift_per_session", NumJ(f.drift_per_session)},
-                     {"drift_sigma", NumJ(f.drift_sigma)}, {"projected_crossing_session", NumJ(f.projected_crossing)}});
+                     {"drift_sigma", NumJ(f.drift_sigma)}, {"projected_crossing_session", NumJ(f.projected_crossing)},
+                     {"contradicted_by", f.contradicted_by.empty() ? nlohmann::ordered_json()
+                                                                   : nlohmann::ordered_json(f.contradicted_by)}});
   j["flags"] = flags;
   j["notes"] = t.notes;
   return j.dump(2);

@@ -113,6 +113,10 @@ struct TrackFlag {
   std::string since;                           // the session the change started (the CUSUM's estimate)
   double drift_per_session = NAN, drift_sigma = NAN;
   double projected_crossing = NAN;
+  // The tracked quantity that measures the same thing more directly and did not move (R's flag against the hold's
+  // R_hold: the winding did not change, the switch-on's R took another change). "" when none. Such a flag is
+  // listed after its session's others: it is a change of the identified value, not of what it is named after.
+  std::string contradicted_by;
 };
 
 struct Tracking {

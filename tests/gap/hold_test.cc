@@ -22,13 +22,15 @@ struct HoldPlan {
   double duty = 0.5;
   double noise_A = 1e-3;
   unsigned seed = 1;
+  double pre_s = 1e-4;    // the gate low before the switch-on (the baseline)
+  double offset_A = 0.0;  // the scope's baseline offset
 };
 
 // A hold run as the health check records it: the gate low 0.1 ms, high for the pull-in, then PWM; the current
 // with white noise; no coil voltage (the driver's voltages are used).
 RunData SimulateHold(const model::PlantParams& plant, const HoldPlan& plan) {
   constexpr double dt = 1e-5;
-  const auto n = static_cast<std::size_t>(std::llround((1e-4 + plan.pull_in_s + plan.hold_s) / dt)) + 1;
+  const auto n = static_cast<std::size_t>(std::llround((plan.pre_s + plan.pull_in_s + plan.hold_s) / dt)) + 1;
   RunData r;
   r.id = "hold";
   r.supply_V = plan.supply_V;
@@ -36,7 +38,7 @@ RunData SimulateHold(const model::PlantParams& plant, const HoldPlan& plan) {
   r.gate.resize(n);
   const auto period = static_cast<long>(std::llround(1.0 / plan.frequency_Hz / dt));
   const auto high = static_cast<long>(std::llround(plan.duty / plan.frequency_Hz / dt));
-  const auto on = static_cast<long>(std::llround(1e-4 / dt)),
+  const auto on = static_cast<long>(std::llround(plan.pre_s / dt)),
              hold = on + static_cast<long>(std::llround(plan.pull_in_s / dt));
   for (std::size_t k = 0; k < n; ++k) {
     const long j = static_cast<long>(k);
@@ -52,7 +54,7 @@ RunData SimulateHold(const model::PlantParams& plant, const HoldPlan& plan) {
   std::normal_distribution<double> noise(0.0, plan.noise_A);
   for (std::size_t k = 0; k < n; ++k) {
     r.t_s.push_back(static_cast<double>(k) * dt);
-    r.i_A.push_back(rep->i_A[k] + noise(rng));
+    r.i_A.push_back(rep->i_A[k] + noise(rng) + plan.offset_A);
   }
   EXPECT_NEAR(rep->x_m.back(), plant.x_max_m, 1e-9) << "the plunger is held through the hold";
   return r;
@@ -80,6 +82,23 @@ TEST(Hold, MeasuresTheWindingsResistanceWithoutAModelOfTheValve) {
   EXPECT_LT(m->R_sigma_ohm, 0.001 * plant.R_ohm);
   EXPECT_GT(m->L_H, 0.0);
   EXPECT_LT(m->L_sigma_H, 0.02 * m->L_H);
+}
+
+// A scope's baseline offset is the mean before the gate rises (the health check records 5 ms of it); a short
+// baseline leaves it, and R then carries it (-5 mA on a 0.9 A hold: R 0.55 % high).
+TEST(Hold, RemovesTheScopesOffsetFromTheBaselineBeforeTheGate) {
+  const auto plant = Valve();
+  HoldPlan plan;
+  plan.pre_s = 5e-3, plan.offset_A = -5e-3, plan.hold_s = 0.1;
+  const auto m = MeasureHold(SimulateHold(plant, plan), model::DriverParams{});
+  ASSERT_TRUE(m.ok()) << m.status().message();
+  EXPECT_NEAR(m->offset_A, -5e-3, 3e-4);
+  EXPECT_NEAR(m->R_ohm / plant.R_ohm, 1.0, 0.001) << m->R_ohm;
+  plan.pre_s = 1e-4;  // 10 samples: no baseline
+  const auto left = MeasureHold(SimulateHold(plant, plan), model::DriverParams{});
+  ASSERT_TRUE(left.ok()) << left.status().message();
+  EXPECT_EQ(left->offset_A, 0.0);
+  EXPECT_GT(left->R_ohm / plant.R_ohm, 1.004) << left->R_ohm;
 }
 
 TEST(Hold, SeparatesAResistanceChangeFromShortedTurns) {
@@ -210,6 +229,56 @@ TEST(Hold, ItsSigmasAreTheSpreadOverRecordings) {
   EXPECT_GT(mean(L_sigma) / sd(L), 0.8) << sd(L);
   EXPECT_LT(mean(L_sigma) / sd(L), 1.6) << sd(L);
   EXPECT_LT(std::abs(mean(R) - plant.R_ohm), 3.0 * sd(R) / std::sqrt(40.0)) << mean(R);
+}
+
+// The switch-on's R flagged while the hold's R_hold, which sees a small fraction of that change, stays: the flag
+// says the winding did not change and stands behind the night's other flag (as the independent plant's shorted
+// turns, seed 38's bench 5: R -1.1 % and L0 -1.8 % on one night, R_hold still; here larger, so that both flag on
+// the same night). Where R_hold moves too, R's flag is plain.
+TEST(Hold, AnRFlagTheHoldDoesNotSeeIsNotTheWinding) {
+  const auto nights = [](double R_hold_step) {
+    std::vector<SessionValues> out;
+    std::mt19937 rng(7);
+    std::normal_distribution<double> n01;
+    for (int n = 0; n < 20; ++n) {
+      SessionValues v;
+      v.name = "night" + std::to_string(n + 1);
+      v.fit_rmse_A = v.noise_floor_A = 1e-3;
+      const bool after = n >= 10;
+      const auto add = [&](const char* name, double center, double rel_sigma, double step) {
+        DeterminedValue d;
+        d.name = name;
+        d.value = center * (1.0 + rel_sigma * n01(rng) + (after ? step : 0.0));
+        d.sigma = d.sigma_white = center * rel_sigma;
+        v.determined.push_back(d);
+      };
+      add("R", 185.0, 0.002, -0.06);   // the switch-on's: 0.2 % a night
+      add("L0", 0.136, 0.003, -0.06);  // a smaller z than R's on the same night: the order is the contradiction's
+      add("R_hold", 155.0, 0.0003, R_hold_step);
+      out.push_back(v);
+    }
+    return out;
+  };
+  auto t = TrackValues(nights(0.0), TrackOptions{});
+  ASSERT_TRUE(t.ok()) << t.status().message();
+  ASSERT_GE(t->flags.size(), 2u) << TrackingReport(*t);
+  EXPECT_EQ(t->flags[0].parameter, "L0") << TrackingReport(*t);
+  const TrackFlag* r = nullptr;
+  for (const auto& f : t->flags) r = f.parameter == "R" ? &f : r;
+  ASSERT_NE(r, nullptr) << TrackingReport(*t);
+  EXPECT_EQ(r->contradicted_by, "R_hold");
+  // On the same night with the larger z, yet behind L0: the order is the contradiction's.
+  EXPECT_EQ(r->session_index, t->flags[0].session_index) << TrackingReport(*t);
+  EXPECT_GT(std::abs(r->z), std::abs(t->flags[0].z)) << TrackingReport(*t);
+  EXPECT_NE(r->meaning.find("not the winding"), std::string::npos) << r->meaning;
+  for (const auto& f : t->flags) EXPECT_NE(f.parameter, "R_hold") << TrackingReport(*t);
+  // The winding itself 6 % lower: R_hold flags with R, and R's flag is the winding's.
+  t = TrackValues(nights(-0.06), TrackOptions{});
+  ASSERT_TRUE(t.ok()) << t.status().message();
+  for (const auto& f : t->flags) EXPECT_TRUE(f.contradicted_by.empty()) << f.parameter << ": " << f.meaning;
+  bool hold_flagged = false;
+  for (const auto& f : t->flags) hold_flagged = hold_flagged || f.parameter == "R_hold";
+  EXPECT_TRUE(hold_flagged) << TrackingReport(*t);
 }
 
 }  // namespace
