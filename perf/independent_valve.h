@@ -20,6 +20,7 @@
 #include <array>
 #include <cmath>
 #include <cstddef>
+#include <cstdint>
 #include <random>
 #include <string>
 #include <vector>
@@ -74,9 +75,12 @@ inline double SteelH(double B) {
   return B < 0 ? -H : H;
 }
 
-// The switch-on current (noise-free) sampled every v.dt_s: n samples, the gate rising at sample `on`.
-inline std::vector<double> SimulateSwitchOn(const IndependentValve& v, double supply_V, double P_Pa, std::size_t n,
-                                            std::size_t on) {
+// The current (noise-free) sampled every v.dt_s under a gate per sample: 1 puts the supply on the coil; 0 the
+// flyback diode's -0.7 V while the winding conducts (the last sample's current above 0), else nothing. The
+// driver switches delay_s after the gate. A switch-on (SimulateSwitchOn), or a PWM hold after one.
+inline std::vector<double> SimulateGate(const IndependentValve& v, double supply_V, double P_Pa,
+                                        const std::vector<std::int8_t>& gate) {
+  const std::size_t n = gate.size();
   constexpr double mu0 = 4e-7 * M_PI;
   // State: lambda, i2 (second rung), x (from the rest position toward the open stop), xv.
   std::array<double, 4> s{0.0, 0.0, 0.0, 0.0};
@@ -114,12 +118,15 @@ inline std::vector<double> SimulateSwitchOn(const IndependentValve& v, double su
   };
   std::vector<double> out(n, 0.0);
   supply_V *= v.supply_gain;
-  on += static_cast<std::size_t>(std::llround(v.delay_s / v.dt_s));
+  const auto delay = static_cast<std::size_t>(std::llround(v.delay_s / v.dt_s));
   const int sub = 20;
   const double h = v.dt_s / sub;
+  bool started = false;  // from rest until the driver first switches on: nothing to integrate
   for (std::size_t k = 0; k < n; ++k) {
-    const double V = k >= on ? supply_V : 0.0;
-    if (k >= on) {
+    const bool high = k >= delay && gate[k - delay] != 0;
+    started = started || high;
+    const double V = high ? supply_V : (k > 0 && out[k - 1] > 0.0 ? -0.7 : 0.0);
+    if (started) {
       for (int j = 0; j < sub; ++j) {
         // Sticking: at rest (on a stop, or not yet moved) while the net force is within static friction.
         const double B = s[0] / (v.N * v.A_m2);
@@ -151,6 +158,14 @@ inline std::vector<double> SimulateSwitchOn(const IndependentValve& v, double su
     out[k] = current_mag(s[0], s[2]) + vL / v.Re1_ohm + s[1];
   }
   return out;
+}
+
+// The switch-on current (noise-free) sampled every v.dt_s: n samples, the gate rising at sample `on`.
+inline std::vector<double> SimulateSwitchOn(const IndependentValve& v, double supply_V, double P_Pa, std::size_t n,
+                                            std::size_t on) {
+  std::vector<std::int8_t> gate(n, 0);
+  for (std::size_t k = on; k < n; ++k) gate[k] = 1;
+  return SimulateGate(v, supply_V, P_Pa, gate);
 }
 
 // One valve of the population, drawn from `rng`: 12, 24 or 48 V; a final current of 0.15 to 1.2 A; a stroke of

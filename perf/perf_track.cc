@@ -1,7 +1,7 @@
 // A simulated lab for the bench twin (issue 38, docs/track.md): benches whose valves are drawn from the
 // independent plant (perf/independent_valve.h: a B-H table core, an eddy ladder, Stribeck friction, a flow-
-// dependent pressure force; no code shared with model/), one switch-on session per night at conditions a little
-// off the nominal ones, and on every second bench a change of its own kind from a night drawn at random:
+// dependent pressure force; no code shared with model/), one health check per night at conditions a little
+// off the nominal ones (four switch-ons and the server's hold: gap/hold.h), and on every second bench a change of its own kind from a night drawn at random:
 //   resistance: R + 0.25 % per night (a connector corroding, a winding aging);
 //   spring:     k and the preload - 1 % per night (a spring relaxing);
 //   turns:      N - 2 % at once (shorted turns).
@@ -85,6 +85,27 @@ vb::gap::Dataset Session(const vb::perf::IndependentValve& v, int night, std::mt
     }
     ds.runs.push_back(std::move(run));
   }
+  // The server's health check's hold (server/health_check.h defaults): a 5 ms baseline, the switch-on at the
+  // night's supply and the highest pressure, then PWM at duty 0.5 and 1 kHz for 0.1 s (gap/hold.h measures
+  // R_hold and L_hold).
+  vb::gap::RunData hold;
+  hold.id = "night" + std::to_string(night) + "_hold";
+  hold.supply_V = V;
+  hold.supply_pressure_Pa = 4e5 * (1.0 + jitter(rng));
+  hold.t_start_s = 2.0 * r;
+  hold.split = vb::Split::kFit;
+  hold.sample_period_s = v.dt_s;
+  const auto rise = static_cast<std::size_t>(std::llround(5e-3 / v.dt_s));
+  const std::size_t pull_in = rise + static_cast<std::size_t>(std::llround(0.01 / v.dt_s));
+  const auto period = static_cast<std::size_t>(std::llround(1e-3 / v.dt_s));
+  const std::size_t hold_n = pull_in + static_cast<std::size_t>(std::llround(0.1 / v.dt_s)) + 1;
+  for (std::size_t k = 0; k < hold_n; ++k) {
+    hold.t_s.push_back(static_cast<double>(k) * v.dt_s);
+    hold.gate.push_back(k < rise ? 0 : k < pull_in ? 1 : ((k - pull_in) % period) < period / 2 ? 1 : 0);
+  }
+  hold.i_A = vb::perf::Capture(v, vb::perf::SimulateGate(v, hold.supply_V, hold.supply_pressure_Pa, hold.gate), rise,
+                               rng);
+  ds.runs.push_back(std::move(hold));
   return ds;
 }
 
@@ -372,9 +393,9 @@ int main(int argc, char** argv) {
     }
     if (report) std::printf("%s\n", vb::gap::TrackingReport(*t).c_str());
     std::set<std::string> expect;
-    if (kind == "resistance") expect = {"R"};
+    if (kind == "resistance") expect = {"R", "R_hold"};
     if (kind == "spring") expect = {"k*x_max^2", "F0*x_max"};
-    if (kind == "turns") expect = {"L0", "L1"};
+    if (kind == "turns") expect = {"L0", "L1", "L_hold"};  // this plant keeps R: R_hold must not move
     std::string first = "none";
     int flag_night = -1;
     if (!t->flags.empty()) {
