@@ -117,13 +117,16 @@ std::vector<experiment::ExperimentSpec> HealthCheckSpecs(const runs::BenchSetup&
     auto* pwm = s.mutable_controller()->mutable_open_loop_pwm();
     auto* off = pwm->add_segments();
     off->set_start_s(0.0), off->set_frequency_hz(0.0), off->set_duty(0.0);
+    // The hold's switch-on starts after a longer baseline and lasts as the switch-ons do after their rise.
+    const double rise_s = hold ? kHealthHoldBaseline_s : kHealthPreTrigger_s;
+    const double hold_from_s = rise_s + duration_s - kHealthPreTrigger_s;
     auto* on = pwm->add_segments();
-    on->set_start_s(kHealthPreTrigger_s), on->set_frequency_hz(0.0), on->set_duty(1.0);
+    on->set_start_s(rise_s), on->set_frequency_hz(0.0), on->set_duty(1.0);
     if (hold) {
       auto* held = pwm->add_segments();
-      held->set_start_s(duration_s), held->set_frequency_hz(hold_Hz), held->set_duty(duty);
+      held->set_start_s(hold_from_s), held->set_frequency_hz(hold_Hz), held->set_duty(duty);
     }
-    s.set_duration_s(hold ? duration_s + hold_s : duration_s);
+    s.set_duration_s(hold ? hold_from_s + hold_s : duration_s);
     s.mutable_recording()->set_rate_hz(rate_Hz);
     s.set_priority(kHealthPriority);
     specs.push_back(std::move(s));

@@ -26,6 +26,9 @@ constexpr double kHealthDefaultRate_Hz = 1e5;
 constexpr double kHealthDefaultHoldDuty = 0.5;
 constexpr double kHealthDefaultHoldFrequency_Hz = 1e3;
 constexpr double kHealthDefaultHold_s = 0.1;
+// The hold's gate stays low this long first: the baseline a scope's offset is taken from (gap/hold.h; 500
+// samples at 100 kHz).
+constexpr double kHealthHoldBaseline_s = 5e-3;
 
 // Checks the bench's "health" block (when it has one) against its capabilities; the message names the field.
 Status ValidateHealthCheck(const valvebench::v1::BenchConfig& bench, const hw::Capabilities& caps,

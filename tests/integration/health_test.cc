@@ -177,11 +177,14 @@ TEST(HealthCheck, OneSwitchOnRunPerSupplyAndPressureAndAHold) {
   EXPECT_EQ(runs::NightNumberOf(hold), 12);
   EXPECT_EQ(hold.priority(), server::kHealthPriority);
   ASSERT_EQ(hold.controller().open_loop_pwm().segments_size(), 3);
+  // A 5 ms baseline (the scope's offset), the switch-on as long as the others', then the PWM.
+  const double pull_in_s = server::kHealthDefaultDuration_s - server::kHealthPreTrigger_s;
+  EXPECT_DOUBLE_EQ(hold.controller().open_loop_pwm().segments(1).start_s(), server::kHealthHoldBaseline_s);
   const auto& pwm = hold.controller().open_loop_pwm().segments(2);
-  EXPECT_DOUBLE_EQ(pwm.start_s(), server::kHealthDefaultDuration_s);
+  EXPECT_DOUBLE_EQ(pwm.start_s(), server::kHealthHoldBaseline_s + pull_in_s);
   EXPECT_EQ(pwm.duty(), server::kHealthDefaultHoldDuty);
   EXPECT_EQ(pwm.frequency_hz(), server::kHealthDefaultHoldFrequency_Hz);
-  EXPECT_DOUBLE_EQ(hold.duration_s(), server::kHealthDefaultDuration_s + server::kHealthDefaultHold_s);
+  EXPECT_DOUBLE_EQ(hold.duration_s(), server::kHealthHoldBaseline_s + pull_in_s + server::kHealthDefaultHold_s);
   // No hold when its duty is 0; a duty, frequency or length it cannot measure is refused, naming the field.
   h->set_hold_duty(0.0);
   auto no_hold = server::SettingsFromConfig(c, "");
