@@ -425,22 +425,26 @@ StatusOr<Tracking> TrackValues(const std::vector<SessionValues>& sessions, const
   // against the inductances (the independent plant's shorted turns moved R by -1.1 % while the winding stayed).
   // The hold's R_hold measures the winding itself, to a few times finer (gap/hold.h). When R is flagged and
   // R_hold, tracked on that night, has not moved although it sees a third of R's change, the winding did not
-  // change: the flag says so and stands behind its night's others. Where R_hold moves too, nothing is said.
+  // change: the flag says so and stands behind its night's others. Where R_hold moves too (flagged in R's
+  // direction on any night, or a third of R's change tonight), nothing is said.
   const TrackedParameter* hold_R = nullptr;
   for (const auto& p : t.parameters)
     if (p.name == "R_hold") hold_R = &p;
   for (auto& f : t.flags) {
     if (f.parameter != "R" || hold_R == nullptr || !(hold_R->smallest_step > 0.0) || !(std::abs(hold_R->center) > 0.0))
       continue;
-    const bool moved = hold_R->flagged >= 0 && hold_R->flagged <= f.session_index;
+    const bool moved = hold_R->flagged >= 0 && hold_R->direction == f.direction;
     const double sees = hold_R->smallest_step / std::abs(hold_R->center);
     const double tonight = hold_R->sessions[f.session_index].value;
-    if (moved || !std::isfinite(tonight) || !(std::abs(f.change_relative) > 3.0 * sees)) continue;
+    const double tonight_relative = (tonight - hold_R->center) / std::abs(hold_R->center);
+    if (moved || !std::isfinite(tonight) || !(std::abs(f.change_relative) > 3.0 * sees) ||
+        !(std::abs(tonight_relative) < std::abs(f.change_relative) / 3.0))
+      continue;
     f.contradicted_by = "R_hold";
     f.meaning += fmt::format("; but R_hold, the winding measured at the hold, has not moved ({:+.2f} % tonight; it "
                              "sees {:.2g} %): not the winding. The switch-on's R took another change: the magnetic "
                              "circuit or shorted turns (L0, L1), the supply or the driver",
-                             100.0 * (tonight - hold_R->center) / std::abs(hold_R->center), 100.0 * sees);
+                             100.0 * tonight_relative, 100.0 * sees);
   }
   std::stable_sort(t.flags.begin(), t.flags.end(), [](const TrackFlag& a, const TrackFlag& b) {
     if (a.session_index != b.session_index) return a.session_index < b.session_index;

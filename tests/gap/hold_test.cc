@@ -279,6 +279,16 @@ TEST(Hold, AnRFlagTheHoldDoesNotSeeIsNotTheWinding) {
   bool hold_flagged = false;
   for (const auto& f : t->flags) hold_flagged = hold_flagged || f.parameter == "R_hold";
   EXPECT_TRUE(hold_flagged) << TrackingReport(*t);
+  // R_hold moving later than R, or by a third of R's change without a flag, still says the winding changed.
+  for (const double later : {-0.06, -0.03}) {
+    auto late = nights(later);
+    for (int n = 10; n < 14; ++n)
+      for (auto& d : late[n].determined)
+        if (d.name == "R_hold") d.value = 155.0 * (1.0 + 0.0003 * (n % 2 ? 1.0 : -1.0));  // before it moves
+    t = TrackValues(late, TrackOptions{});
+    ASSERT_TRUE(t.ok()) << t.status().message();
+    for (const auto& f : t->flags) EXPECT_TRUE(f.contradicted_by.empty()) << later << " " << TrackingReport(*t);
+  }
 }
 
 }  // namespace
