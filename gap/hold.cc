@@ -250,7 +250,7 @@ std::vector<DeterminedValue> HoldValues(const std::vector<RunData>& holds, const
   L.unit = std::string("H");
   L.meaning = fmt::format(
       "the coil's inductance at the held stop and {:.3g} A (the flux's slope over the hold's "
-      "ripple at {:.3g} Hz)",
+      "ripple at {:.0f} Hz)",
       at_lowest.hold_current_A, at_lowest.frequency_Hz);
   L.value = at_lowest.L_H;
   L.sigma = L.sigma_white = at_lowest.L_sigma_H;
