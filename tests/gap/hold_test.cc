@@ -85,7 +85,7 @@ TEST(Hold, MeasuresTheWindingsResistanceWithoutAModelOfTheValve) {
 }
 
 // A scope's baseline offset is the mean before the gate rises (the health check records 5 ms of it); a short
-// baseline leaves it, and R then carries it (-5 mA on a 0.9 A hold: R 0.55 % high).
+// baseline leaves it, and R then carries it (-5 mA is 0.55 % of the 0.91 A hold: the test asks for 0.4 %).
 TEST(Hold, RemovesTheScopesOffsetFromTheBaselineBeforeTheGate) {
   const auto plant = Valve();
   HoldPlan plan;
