@@ -15,6 +15,15 @@ constexpr int kMinPeriods = 3;  // whole periods in the second half: a scatter t
 // Samples before the gate rises that make a baseline: fewer leave the offset (the health check records 500, so
 // that the offset's own error, noise / sqrt(500), is a few hundredths of a percent of a 0.1 A hold).
 constexpr std::size_t kMinBaselineSamples = 20;
+// The largest share of the voltage's integral the settling correction may carry (MeasureHold). The correction's
+// error is that share times L's relative error. L's sigma is propagated into R's; what it does not hold is L's
+// bias: the ripple's L is the coil's at the PWM frequency, where eddy currents lower it, while the settling is
+// slow, and a ripple of a few ADC steps misreads it (a 0.2 s coil measured 8 ms after its pull-in, its ripple
+// half a step, read 238 ohm for 10). At a share of 0.5, an L 10 % off moves R by 5 %. The trade: a slow coil
+// whose L the ripple does read right is refused too (the tests' valve at a tenth of its R, 40 ms of hold: share
+// above 0.5, and it would have read 1.2956 ohm for 1.3); the refusal asks for a longer hold. The health check's
+// 0.1 s gives a coil of L/R 50 ms a share of about 0.23.
+constexpr double kMaxSettlingShare = 0.5;
 
 std::vector<std::size_t> Rises(const RunData& r) {
   std::vector<std::size_t> rises;
@@ -78,6 +87,35 @@ StatusOr<HoldMeasurement> MeasureHold(const RunData& r, const model::DriverParam
   const std::size_t a = edges.front(), b = edges.back();
   for (std::size_t k = a; k <= b; ++k)
     if (!std::isfinite(r.i_A[k])) return Status::InvalidArgument(fmt::format("{}: i_A[{}] is not a number", where, k));
+  // A clipped capture (the scope's range, a saturated amplifier) holds the current at one value while the gate
+  // switches; the mean over a period is then not the coil's, and R comes out as wrong as the clip is deep (a
+  // 24 V, 20 ohm hold clipped at 0.3 A read 30.7 ohm with a sigma of 0.1 %). Noise never repeats one value for
+  // long, a clip does: a run of equal samples at the window's highest (or lowest) value that spans a gate edge
+  // and lasts more than a quarter of a period is refused. The same rule refuses a noise-free ripple of under
+  // about two steps of the ADC, whose mean the steps bias as much and whose L cannot be read.
+  {
+    const double period_samples = static_cast<double>(b - a) / periods;
+    double hi = -HUGE_VAL, lo = HUGE_VAL;
+    for (std::size_t k = a; k <= b; ++k) hi = std::max(hi, r.i_A[k]), lo = std::min(lo, r.i_A[k]);
+    for (const double level : {hi, lo}) {
+      std::size_t k = a;
+      while (k <= b) {
+        if (r.i_A[k] != level) {
+          ++k;
+          continue;
+        }
+        std::size_t e = k;
+        bool both_gates = false;
+        while (e + 1 <= b && r.i_A[e + 1] == level) both_gates = both_gates || (r.gate[e + 1] != r.gate[k]), ++e;
+        if (both_gates && static_cast<double>(e - k + 1) > period_samples / 4.0)
+          return Status::InvalidArgument(fmt::format(
+              "{}: the current stays at {:.5g} A for {} samples ({:.2g} of a PWM period) while the gate switches: "
+              "clipped by the scope's range (or a ripple below its step); record the hold within range",
+              where, level, e - k + 1, static_cast<double>(e - k + 1) / period_samples));
+        k = e + 1;
+      }
+    }
+  }
   // The baseline: a scope's offset shifts the mean current and so R (on an independent plant's draw, -0.78 mA
   // on a 75 mA hold read R 1.05 % high).
   std::vector<double> i(r.i_A.begin(), r.i_A.end());
@@ -209,8 +247,21 @@ StatusOr<HoldMeasurement> MeasureHold(const RunData& r, const model::DriverParam
     sv += bv;
   }
   m.R_ohm = sv / amp_total;
+  // What the settling correction carries: L times the current's change over the window, against the voltage's
+  // integral. Its error is L's error times that share, so L's sigma enters R's; and beyond half the hold is more
+  // correction than measurement, a share L's regression cannot bear (a 0.2 s coil measured 8 ms after its
+  // pull-in read 238 ohm for 10, with a sigma of 6 %): refused.
+  double settle_total_A = 0.0, volt_total = 0.0;
+  for (int p = 0; p < periods; ++p) settle_total_A += settle_A[p], volt_total += volt_s[p];
+  const double settling_share = std::abs(m.L_H * settle_total_A) / std::abs(volt_total);
+  if (!(settling_share <= kMaxSettlingShare))
+    return Status::InvalidArgument(fmt::format(
+        "{}: the current is still settling in the hold's second half (its mean moves by {:.3g} A, {:.0f} % of "
+        "the coil voltage's integral); a longer hold (several L/R) or a lower inductance's coil",
+        where, std::abs(mean_A.back() - mean_A.front()), 100.0 * settling_share));
   // The offset's error shifts the mean current: R's relative error is its share of the hold current.
-  m.R_sigma_ohm = std::hypot(SigmaOfMean(R_b), m.R_ohm * offset_sigma_A / m.hold_current_A);
+  m.R_sigma_ohm = std::hypot(std::hypot(SigmaOfMean(R_b), m.R_ohm * offset_sigma_A / m.hold_current_A),
+                             m.L_sigma_H * settle_total_A / amp_total);
   if (!std::isfinite(m.R_ohm) || !std::isfinite(m.L_H) || !(m.R_ohm > 0.0))
     return Status::InvalidArgument(
         fmt::format("{}: the hold gives R = {:.4g} ohm and L = {:.4g} H, not a coil's", where, m.R_ohm, m.L_H));
@@ -254,7 +305,7 @@ std::vector<DeterminedValue> HoldValues(const std::vector<RunData>& holds, const
       at_lowest.hold_current_A, at_lowest.frequency_Hz);
   L.value = at_lowest.L_H;
   L.sigma = L.sigma_white = at_lowest.L_sigma_H;
-  if (std::isfinite(L.value) && std::isfinite(L.sigma) && L.sigma > 0.0) out.push_back(L);
+  if (std::isfinite(L.value) && L.value > 0.0 && std::isfinite(L.sigma) && L.sigma > 0.0) out.push_back(L);
   return out;
 }
 

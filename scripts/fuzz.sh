@@ -30,6 +30,7 @@ targets=(
   fuzz_gateway:gateway:16384
   fuzz_scope_csv:scope_csv:8192
   fuzz_identify:identify:2048
+  fuzz_hold:hold:20000
   fuzz_regress_records:regress_records:16384
 )
 mkdir -p "$build/artifacts"
