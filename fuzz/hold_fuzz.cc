@@ -8,7 +8,8 @@
 //           inverted;
 //   byte 1: the supply, byte / 8 V (0 included: not given);
 //   byte 2: the sample period, 1 us x (1 + byte);
-//   byte 3: the pattern's samples per PWM period, 2 + byte % 120;
+//   byte 3: the pattern's samples per PWM period, 2 + byte % 120; from 120 up, the pattern's last third is a
+//           drop-out tail (the gate low);
 //   byte 4: the pattern's duty, byte / 255;
 //   byte 5: the pattern's samples before the gate rises (the baseline), byte;
 //   then per sample: the current's byte, then with v_coil_V a voltage byte ((byte - 128) / 100 of the supply, a
@@ -52,6 +53,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   const std::size_t period = 2 + data[3] % 120;
   const double duty = data[4] / 255.0;
   const std::size_t baseline = data[5];
+  const bool dropout_tail = data[3] >= 120;
   const std::size_t per_sample = 1 + (with_v ? 1 : 0) + (gate_from_data ? 1 : 0);
   const std::size_t n = std::min<std::size_t>((size - 6) / per_sample, 6000);
   if (n < 2) return 0;
@@ -69,7 +71,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     int gate = 0;
     if (gate_from_data) {
       gate = *p++ & 1;
-    } else if (k >= baseline) {
+    } else if (k >= baseline && !(dropout_tail && 3 * k >= 2 * n)) {
       // The pull-in: the first two periods on, then the duty's share of each period.
       const std::size_t j = k - baseline;
       gate = j < 2 * period || static_cast<double>(j % period) < duty * static_cast<double>(period) ? 1 : 0;
@@ -90,6 +92,13 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     Check(std::isfinite(m->hold_current_A), "current");
     Check(std::isfinite(m->offset_A), "offset");
     Check(std::isfinite(m->duty) && std::isfinite(m->frequency_Hz), "gate");
+  }
+  auto d = vb::gap::MeasureDropOut(run);
+  if (!d.ok()) {
+    if (d.status().message().empty()) std::abort();
+  } else {
+    Check(std::isfinite(d->i_A) && std::isfinite(d->sigma_A) && d->sigma_A > 0.0, "drop-out current");
+    Check(std::isfinite(d->t_s) && std::isfinite(d->rise_A), "drop-out's time");
   }
   // The night's values from two copies of the run (the inverse-variance mean and the lowest supply's L).
   std::vector<vb::gap::RunData> holds{run, run};

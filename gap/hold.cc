@@ -5,6 +5,7 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
+#include <utility>
 
 namespace vb::gap {
 
@@ -15,6 +16,9 @@ constexpr int kMinPeriods = 3;  // whole periods in the second half: a scatter t
 // Samples before the gate rises that make a baseline: fewer leave the offset (the health check records 500, so
 // that the offset's own error, noise / sqrt(500), is a few hundredths of a percent of a 0.1 A hold).
 constexpr std::size_t kMinBaselineSamples = 20;
+// A drop-out tail: the gate low after the PWM for at least this many of its periods (the health check's 50 ms is
+// 50 at 1 kHz). Shorter stretches are the PWM's own off-times, or a run cut at its end.
+constexpr double kMinDropOutPeriods = 4.0;
 // The largest share of the voltage's integral the settling correction may carry (MeasureHold). The correction's
 // error is that share times L's relative error. L's sigma is propagated into R's; what it does not hold is L's
 // bias: the ripple's L is the coil's at the PWM frequency, where eddy currents lower it, while the settling is
@@ -30,6 +34,29 @@ std::vector<std::size_t> Rises(const RunData& r) {
   for (std::size_t k = 1; k < r.gate.size(); ++k)
     if (r.gate[k] != 0 && r.gate[k - 1] == 0) rises.push_back(k);
   return rises;
+}
+
+// Where the PWM ends: the gate's last fall when the gate stays low after it for at least kMinDropOutPeriods of
+// the PWM's periods (a drop-out tail), else the run's end.
+std::size_t PwmEnd(const RunData& r, const std::vector<std::size_t>& rises) {
+  const std::size_t n = r.gate.size();
+  if (rises.size() < 3) return n;
+  const double period = static_cast<double>(rises.back() - rises[1]) / static_cast<double>(rises.size() - 2);
+  std::size_t f = n;
+  while (f > 0 && r.gate[f - 1] == 0) --f;
+  if (f == 0 || f <= rises.back()) return n;
+  return static_cast<double>(n - f) >= kMinDropOutPeriods * period ? f : n;
+}
+
+// The scope's baseline offset: the mean of the samples before the gate first rises (0 with fewer than
+// kMinBaselineSamples), and its sigma. NaN samples make it NaN.
+std::pair<double, double> Baseline(const RunData& r, std::size_t first_rise) {
+  if (first_rise < kMinBaselineSamples) return {0.0, 0.0};
+  double sum = 0.0, ss = 0.0;
+  for (std::size_t k = 0; k < first_rise; ++k) sum += r.i_A[k];
+  const double mean = sum / static_cast<double>(first_rise);
+  for (std::size_t k = 0; k < first_rise; ++k) ss += (r.i_A[k] - mean) * (r.i_A[k] - mean);
+  return {mean, std::sqrt(ss / static_cast<double>(first_rise - 1) / static_cast<double>(first_rise))};
 }
 
 double Mean(const std::vector<double>& v) {
@@ -70,8 +97,8 @@ StatusOr<HoldMeasurement> MeasureHold(const RunData& r, const model::DriverParam
   if (r.gate.size() != n || !(dt > 0.0))
     return Status::InvalidArgument(fmt::format("{}: gate and i_A differ in length", where));
   const auto rises = Rises(r);
-  // The second half, from the first PWM rise to the end: the first half lets the current settle.
-  const std::size_t mid = (rises[1] + n - 1) / 2;
+  // The second half, from the first PWM rise to the PWM's end: the first half lets the current settle.
+  const std::size_t mid = (rises[1] + PwmEnd(r, rises) - 1) / 2;
   std::vector<std::size_t> edges;
   for (std::size_t j = 1; j < rises.size(); ++j)
     if (rises[j] >= mid) edges.push_back(rises[j]);
@@ -119,18 +146,10 @@ StatusOr<HoldMeasurement> MeasureHold(const RunData& r, const model::DriverParam
   // The baseline: a scope's offset shifts the mean current and so R (on an independent plant's draw, -0.78 mA
   // on a 75 mA hold read R 1.05 % high).
   std::vector<double> i(r.i_A.begin(), r.i_A.end());
-  double offset_sigma_A = 0.0;
-  if (rises[0] >= kMinBaselineSamples) {
-    double sum = 0.0, ss = 0.0;
-    for (std::size_t k = 0; k < rises[0]; ++k) {
-      if (!std::isfinite(i[k])) return Status::InvalidArgument(fmt::format("{}: i_A[{}] is not a number", where, k));
-      sum += i[k];
-    }
-    m.offset_A = sum / static_cast<double>(rises[0]);
-    for (std::size_t k = 0; k < rises[0]; ++k) ss += (i[k] - m.offset_A) * (i[k] - m.offset_A);
-    offset_sigma_A = std::sqrt(ss / static_cast<double>(rises[0] - 1) / static_cast<double>(rises[0]));
-    for (double& x : i) x -= m.offset_A;
-  }
+  const auto [offset_A, offset_sigma_A] = Baseline(r, rises[0]);
+  if (!std::isfinite(offset_A)) return Status::InvalidArgument(fmt::format("{}: a baseline sample is not a number", where));
+  m.offset_A = offset_A;
+  for (double& x : i) x -= m.offset_A;
   std::vector<double> v(n);
   if (m.voltage_measured) {
     for (std::size_t k = a; k <= b; ++k) {
@@ -268,6 +287,100 @@ StatusOr<HoldMeasurement> MeasureHold(const RunData& r, const model::DriverParam
   return m;
 }
 
+StatusOr<DropOutMeasurement> MeasureDropOut(const RunData& r) {
+  const std::string where = fmt::format("hold run {}", r.id);
+  if (!IsHoldRun(r) || r.i_A.size() != r.gate.size() || !(r.sample_period_s > 0.0))
+    return Status::InvalidArgument(fmt::format("{}: not a hold (the gate must rise once, then switch)", where));
+  const auto rises = Rises(r);
+  const std::size_t n = r.i_A.size(), f = PwmEnd(r, rises);
+  if (f == n)
+    return Status::InvalidArgument(fmt::format(
+        "{}: no drop-out tail (the gate low for at least {:g} PWM periods after the hold)", where, kMinDropOutPeriods));
+  const auto [offset_A, offset_sigma_A] = Baseline(r, rises[0]);
+  (void)offset_sigma_A;
+  if (!std::isfinite(offset_A))
+    return Status::InvalidArgument(fmt::format("{}: a baseline sample is not a number", where));
+  std::vector<double> tail(r.i_A.begin() + static_cast<std::ptrdiff_t>(f), r.i_A.end());
+  for (std::size_t k = 0; k < tail.size(); ++k) {
+    if (!std::isfinite(tail[k]))
+      return Status::InvalidArgument(fmt::format("{}: i_A[{}] is not a number", where, f + k));
+    tail[k] -= offset_A;
+  }
+  // A centred moving mean over w samples (w a 400th of the tail: the release dip lasts the plunger's flight,
+  // hundreds of samples at the health check's rate) and the noise left on it.
+  const std::size_t len = tail.size(), w = std::max<std::size_t>(1, len / 400), half = w / 2;
+  std::vector<double> smooth(len);
+  for (std::size_t k = 0; k < len; ++k) {
+    const std::size_t lo = k >= half ? k - half : 0, hi = std::min(len - 1, k + half);
+    double sum = 0.0;
+    for (std::size_t j = lo; j <= hi; ++j) sum += tail[j];
+    smooth[k] = sum / static_cast<double>(hi - lo + 1);
+  }
+  const double sigma_A = SecondDifferenceSigma(tail) / std::sqrt(static_cast<double>(w));
+  // The dip: the lowest current so far, once the current has risen 4 sigma above it (a chance of 3e-5 a sample
+  // for noise on a flat bottom; on a decay, where each sample lies below the last, less). Not near zero, where
+  // the current's end is flat and noise alone makes minima (ten sigma above zero and 2 % of the current at the
+  // gate's fall), and not within the gate edge's first 50 us or two smoothing widths (a switching spike).
+  const std::size_t start =
+      std::max<std::size_t>(2 * w, static_cast<std::size_t>(std::ceil(50e-6 / r.sample_period_s)));
+  if (start + 2 >= len)
+    return Status::InvalidArgument(fmt::format("{}: the drop-out tail is too short to measure", where));
+  const double at_fall_A = smooth[std::min(start, len - 1)];
+  const double floor_A = std::max(10.0 * sigma_A, 0.02 * at_fall_A);
+  std::size_t k_min = start;
+  for (std::size_t k = start; k < len; ++k) {
+    if (smooth[k] < smooth[k_min]) k_min = k;
+    if (smooth[k_min] <= floor_A) break;
+    if (smooth[k] > smooth[k_min] + 4.0 * sigma_A) {
+      DropOutMeasurement d;
+      double peak = smooth[k_min];
+      for (std::size_t j = k_min; j < len; ++j) peak = std::max(peak, smooth[j]);
+      d.rise_A = peak - smooth[k_min];
+      // The bottom from every sample near it, not the smoothed series' lowest point (which noise biases low and
+      // scatters by the smoothing's sigma): a parabola by least squares over the samples within a fifth of the
+      // rise (and at least 3 sigma) of the lowest, its vertex the drop-out current. Its sigma from the fit's
+      // covariance and the samples' noise; the lowest point where the fit is not a valley within its samples.
+      const double within = std::max(3.0 * sigma_A, 0.2 * d.rise_A);
+      std::size_t lo = k_min, hi = k_min;
+      while (lo > start && smooth[lo - 1] <= smooth[k_min] + within) --lo;
+      while (hi + 1 < len && smooth[hi + 1] <= smooth[k_min] + within) ++hi;
+      d.i_A = smooth[k_min];
+      d.sigma_A = sigma_A;
+      d.t_s = static_cast<double>(k_min) * r.sample_period_s;
+      if (hi - lo + 1 >= 5) {
+        const std::size_t m = hi - lo + 1;
+        const double scale = static_cast<double>(m) / 2.0;  // the abscissa in units of half the region
+        Eigen::MatrixXd X(m, 3);
+        Eigen::VectorXd y(m);
+        for (std::size_t j = 0; j < m; ++j) {
+          const double u = (static_cast<double>(lo + j) - static_cast<double>(k_min)) / scale;
+          X(j, 0) = 1.0, X(j, 1) = u, X(j, 2) = u * u;
+          y(j) = tail[lo + j];
+        }
+        const Eigen::Vector3d beta = X.colPivHouseholderQr().solve(y);
+        const double a = beta(2), b = beta(1), c = beta(0);
+        const double u0 = a > 0.0 ? -b / (2.0 * a) : NAN;
+        const double lo_u = (static_cast<double>(lo) - static_cast<double>(k_min)) / scale,
+                     hi_u = (static_cast<double>(hi) - static_cast<double>(k_min)) / scale;
+        if (std::isfinite(u0) && u0 >= lo_u && u0 <= hi_u) {
+          const double noise2 = (y - X * beta).squaredNorm() / static_cast<double>(m - 3);
+          const Eigen::Matrix3d cov = noise2 * (X.transpose() * X).inverse();
+          const Eigen::Vector3d g(1.0, -b / (2.0 * a), b * b / (4.0 * a * a));
+          d.i_A = c - b * b / (4.0 * a);
+          d.sigma_A = std::sqrt(std::max(g.dot(cov * g), 0.0));
+          d.t_s = (static_cast<double>(k_min) + u0 * scale) * r.sample_period_s;
+        }
+      }
+      if (!(d.sigma_A > 0.0)) d.sigma_A = sigma_A;
+      return d;
+    }
+  }
+  return Status::InvalidArgument(fmt::format(
+      "{}: no release dip in the drop-out tail ({:.3g} s): the current fell from {:.4g} A to {:.4g} A without the "
+      "plunger letting go (stuck at its stop, a tail too short for the coil's decay, or a decay too fast)",
+      where, static_cast<double>(len) * r.sample_period_s, at_fall_A, smooth[k_min]));
+}
+
 std::vector<DeterminedValue> HoldValues(const std::vector<RunData>& holds, const model::DriverParams& driver,
                                         std::vector<std::string>* notes) {
   std::vector<DeterminedValue> out;
@@ -286,26 +399,52 @@ std::vector<DeterminedValue> HoldValues(const std::vector<RunData>& holds, const
     w_sum += w, wr_sum += w * m->R_ohm;
     if (lowest == nullptr || r.supply_V < lowest->supply_V) lowest = &r, at_lowest = *m;
   }
-  if (lowest == nullptr || !(w_sum > 0.0)) return out;
-  DeterminedValue R;
-  R.name = std::string("R_hold");
-  R.unit = std::string("ohm");
-  R.meaning = measured_v ? "the winding's resistance from the hold (mean coil voltage over mean current, plunger held)"
-                         : "the resistance from the hold (the driver's voltage over the mean current, plunger held): "
-                           "the winding and what lies between it and the supply while the gate is on";
-  R.value = wr_sum / w_sum;
-  R.sigma = R.sigma_white = 1.0 / std::sqrt(w_sum);
-  out.push_back(R);
-  DeterminedValue L;
-  L.name = std::string("L_hold");
-  L.unit = std::string("H");
-  L.meaning = fmt::format(
-      "the coil's inductance at the held stop and {:.3g} A (the flux's slope over the hold's "
-      "ripple at {:.0f} Hz)",
-      at_lowest.hold_current_A, at_lowest.frequency_Hz);
-  L.value = at_lowest.L_H;
-  L.sigma = L.sigma_white = at_lowest.L_sigma_H;
-  if (std::isfinite(L.value) && L.value > 0.0 && std::isfinite(L.sigma) && L.sigma > 0.0) out.push_back(L);
+  // R and L from the runs measured (none: the drop-out may still be, it needs no voltage).
+  if (lowest != nullptr && w_sum > 0.0) {
+    DeterminedValue R;
+    R.name = std::string("R_hold");
+    R.unit = std::string("ohm");
+    R.meaning = measured_v ? "the winding's resistance from the hold (mean coil voltage over mean current, plunger held)"
+                           : "the resistance from the hold (the driver's voltage over the mean current, plunger held): "
+                             "the winding and what lies between it and the supply while the gate is on";
+    R.value = wr_sum / w_sum;
+    R.sigma = R.sigma_white = 1.0 / std::sqrt(w_sum);
+    out.push_back(R);
+    DeterminedValue L;
+    L.name = std::string("L_hold");
+    L.unit = std::string("H");
+    L.meaning = fmt::format(
+        "the coil's inductance at the held stop and {:.3g} A (the flux's slope over the hold's "
+        "ripple at {:.0f} Hz)",
+        at_lowest.hold_current_A, at_lowest.frequency_Hz);
+    L.value = at_lowest.L_H;
+    L.sigma = L.sigma_white = at_lowest.L_sigma_H;
+    if (std::isfinite(L.value) && L.value > 0.0 && std::isfinite(L.sigma) && L.sigma > 0.0) out.push_back(L);
+  }
+  // The drop-out, of every run with a tail (a run without one has not asked for it: no note).
+  double wd_sum = 0.0, wdi_sum = 0.0;
+  for (const auto& r : holds) {
+    const auto rises = Rises(r);
+    if (!IsHoldRun(r) || PwmEnd(r, rises) == r.gate.size()) continue;
+    auto d = MeasureDropOut(r);
+    if (!d.ok()) {
+      if (notes != nullptr) notes->push_back(d.status().message());
+      continue;
+    }
+    if (!(d->sigma_A > 0.0)) continue;
+    const double w = 1.0 / (d->sigma_A * d->sigma_A);
+    wd_sum += w, wdi_sum += w * d->i_A;
+  }
+  if (wd_sum > 0.0) {
+    DeterminedValue D;
+    D.name = std::string("i_dropout");
+    D.unit = std::string("A");
+    D.meaning = "the current at which the plunger leaves its stop as the held coil de-energises (the release dip): "
+                "the spring's force at the stop against the pull per ampere squared";
+    D.value = wdi_sum / wd_sum;
+    D.sigma = D.sigma_white = 1.0 / std::sqrt(wd_sum);
+    out.push_back(D);
+  }
   return out;
 }
 

@@ -48,9 +48,29 @@ struct HoldMeasurement {
 // naming the run and the cause when the run is not a measurable hold.
 StatusOr<HoldMeasurement> MeasureHold(const RunData& r, const model::DriverParams& driver);
 
-// The tracked values of a session's hold runs: R_hold (inverse-variance mean over the runs) and L_hold (of the
+// The drop-out at the hold's end (the classic release test): the gate falls and stays low, the current decays
+// through the flyback diode, and the plunger leaves its stop when the pull, 1/2 i^2 dL/dx (seed 000 eq. 8),
+// falls below the spring's force at the stop (and the pressure's, eq. 9-10). As the gap opens L falls and the
+// flux linkage, continuous, pushes the current up: a dip, the mirror of the pull-in's. The current at the dip's
+// bottom is the drop-out current: i^2 is the spring's force at the stop over the pull per ampere squared, with no
+// model of the valve. A relaxing spring lowers it (by half the force's fraction), shorted turns raise it (the
+// pull per ampere falls with the square of the turns), the winding's resistance barely moves it (it sets how fast
+// the current gets there, not where the plunger lets go).
+struct DropOutMeasurement {
+  double i_A = NAN, sigma_A = NAN;  // the current at the dip's bottom (offset removed), and its 1-sigma
+  double t_s = NAN;                 // from the gate's last fall to the dip's bottom
+  double rise_A = NAN;              // how far the current rises after it (what makes it a release, not noise)
+};
+
+// Measures the drop-out of a hold run whose gate stays low after the PWM (at least kMinDropOutPeriods PWM periods
+// long). InvalidArgument naming the run and the cause: no such tail, or no dip within it (a plunger that does
+// not let go before the current dies: stuck, a tail too short, or a driver whose decay is too fast for it).
+StatusOr<DropOutMeasurement> MeasureDropOut(const RunData& r);
+
+// The tracked values of a session's hold runs: R_hold (inverse-variance mean over the runs), L_hold (of the
 // run with the lowest supply: L depends on the hold current through the core's saturation, so runs at other
-// supplies are not averaged). A run that cannot be measured adds a note instead.
+// supplies are not averaged) and, for runs with a drop-out tail, i_dropout (inverse-variance mean). A run that
+// cannot be measured adds a note instead.
 std::vector<DeterminedValue> HoldValues(const std::vector<RunData>& holds, const model::DriverParams& driver,
                                         std::vector<std::string>* notes);
 

@@ -82,6 +82,11 @@ std::string Reading(const std::string& name) {
   if (name == "L_hold")
     return "the held coil's magnetic circuit: shorted turns (with the square of the turns left), a worn stop or "
            "guide (the residual gap), a plunger that no longer holds";
+  if (name == "i_dropout")
+    return "down: the spring's force at the held stop weaker (a relaxing or broken spring, a lower pressure on "
+           "the plunger); up: the pull per ampere weaker (shorted turns, a wider residual gap at the stop) or the "
+           "spring stronger. A more resistive winding lowers it by a tenth to a quarter of its own change (the "
+           "current decays faster while the plunger starts to move)";
   if (name == "F0*x_max")
     return "the spring's preload (a relaxing or replaced spring), the stroke, or dry friction in the guide (it "
            "opposes the pull-in as a preload does; the switch-on current does not tell them apart)";

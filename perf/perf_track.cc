@@ -86,8 +86,8 @@ vb::gap::Dataset Session(const vb::perf::IndependentValve& v, int night, std::mt
     ds.runs.push_back(std::move(run));
   }
   // The server's health check's hold (server/health_check.h defaults): a 5 ms baseline, the switch-on at the
-  // night's supply and the highest pressure, then PWM at duty 0.5 and 1 kHz for 0.1 s (gap/hold.h measures
-  // R_hold and L_hold).
+  // night's supply and the highest pressure, then PWM at duty 0.5 and 1 kHz for 0.1 s, then the gate low for
+  // 0.05 s (gap/hold.h measures R_hold and L_hold, and i_dropout from the release dip).
   vb::gap::RunData hold;
   hold.id = "night" + std::to_string(night) + "_hold";
   hold.supply_V = V;
@@ -98,10 +98,11 @@ vb::gap::Dataset Session(const vb::perf::IndependentValve& v, int night, std::mt
   const auto rise = static_cast<std::size_t>(std::llround(5e-3 / v.dt_s));
   const std::size_t pull_in = rise + static_cast<std::size_t>(std::llround(0.01 / v.dt_s));
   const auto period = static_cast<std::size_t>(std::llround(1e-3 / v.dt_s));
-  const std::size_t hold_n = pull_in + static_cast<std::size_t>(std::llround(0.1 / v.dt_s)) + 1;
+  const std::size_t tail = pull_in + static_cast<std::size_t>(std::llround(0.1 / v.dt_s));
+  const std::size_t hold_n = tail + static_cast<std::size_t>(std::llround(0.05 / v.dt_s)) + 1;
   for (std::size_t k = 0; k < hold_n; ++k) {
     hold.t_s.push_back(static_cast<double>(k) * v.dt_s);
-    hold.gate.push_back(k < rise ? 0 : k < pull_in ? 1 : ((k - pull_in) % period) < period / 2 ? 1 : 0);
+    hold.gate.push_back(k < rise || k >= tail ? 0 : k < pull_in ? 1 : ((k - pull_in) % period) < period / 2 ? 1 : 0);
   }
   hold.i_A = vb::perf::Capture(v, vb::perf::SimulateGate(v, hold.supply_V, hold.supply_pressure_Pa, hold.gate), rise,
                                rng);
@@ -394,8 +395,9 @@ int main(int argc, char** argv) {
     if (report) std::printf("%s\n", vb::gap::TrackingReport(*t).c_str());
     std::set<std::string> expect;
     if (kind == "resistance") expect = {"R", "R_hold"};
-    if (kind == "spring") expect = {"k*x_max^2", "F0*x_max"};
-    if (kind == "turns") expect = {"L0", "L1", "L_hold"};  // this plant keeps R: R_hold must not move
+    if (kind == "spring") expect = {"k*x_max^2", "F0*x_max", "i_dropout"};  // the force at the stop: down
+    // This plant keeps R when turns short: R_hold must not move. The pull per ampere falls: i_dropout up.
+    if (kind == "turns") expect = {"L0", "L1", "L_hold", "i_dropout"};
     std::string first = "none";
     int flag_night = -1;
     if (!t->flags.empty()) {

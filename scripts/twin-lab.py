@@ -47,13 +47,15 @@ OPERATOR_TOKEN = "twin-lab-operator"
 # current can see: docs/track.md point 2), its form. Chosen as a lab meets them: a corroding connector (R up
 # 0.5 % a night), a relaxing spring (k down 1 % a night: the preload F0 = k (x_min + delta) falls with it),
 # shorted turns (N down 3 % at once: L0 and L1 fall by about 6 %). The hold (gap/hold.h) measures the winding's
-# resistance (R_hold) and the held coil's inductance (L_hold) beside the switch-on's identification.
+# resistance (R_hold) and the held coil's inductance (L_hold) beside the switch-on's identification, and its
+# drop-out the current at which the plunger lets go (i_dropout: the spring's force at the stop against the pull
+# per ampere squared, so a relaxing spring lowers it and shorted turns raise it).
 DRIFTS = [
     {"bench": "emu-1", "parameter": "R", "step": 0.0, "per_night": 0.005, "from_night": 20, "moves": ["R", "R_hold"]},
     {"bench": "emu-2", "parameter": "k", "step": 0.0, "per_night": -0.01, "from_night": 30,
-     "moves": ["F0*x_max", "k*x_max^2"]},
+     "moves": ["F0*x_max", "k*x_max^2", "i_dropout"]},
     {"bench": "emu-3", "parameter": "N", "step": -0.03, "per_night": 0.0, "from_night": 40,
-     "moves": ["L0", "L1", "L_hold"]},
+     "moves": ["L0", "L1", "L_hold", "i_dropout"]},
 ]
 CLEAN = ["emu-4", "emu-5", "emu-6"]
 CODE_NIGHTS = [25, 45]

@@ -47,6 +47,11 @@ Status ValidateHealthCheck(const v1::BenchConfig& b, const hw::Capabilities& cap
     return Status::InvalidArgument(fmt::format(
         "{}.hold_s: {} s holds {:.3g} periods at {} Hz; give at least 8 (the second half is measured, 3 whole "
         "periods at least) and at most 10 s", f, hold_s, hold_s * f_Hz, f_Hz));
+  if (h.has_dropout_s() && !(h.dropout_s() == 0.0 || (h.dropout_s() >= 4.0 / f_Hz && h.dropout_s() <= 10.0)))
+    return Status::InvalidArgument(fmt::format(
+        "{}.dropout_s: {} s; give 0 (no drop-out) or at least 4 PWM periods ({:.3g} s at {} Hz: shorter is the "
+        "PWM's own off-time) and at most 10 s",
+        f, h.dropout_s(), 4.0 / f_Hz, f_Hz));
   return Status::Ok();
 }
 
@@ -95,12 +100,14 @@ std::vector<experiment::ExperimentSpec> HealthCheckSpecs(const runs::BenchSetup&
   const double duty = h.has_hold_duty() ? h.hold_duty() : kHealthDefaultHoldDuty;
   const double hold_Hz = h.hold_frequency_hz() > 0.0 ? h.hold_frequency_hz() : kHealthDefaultHoldFrequency_Hz;
   const double hold_s = h.hold_s() > 0.0 ? h.hold_s() : kHealthDefaultHold_s;
+  const double dropout_s = h.has_dropout_s() ? h.dropout_s() : kHealthDefaultDropOut_s;
   const auto one = [&](double v, double p, bool hold) {
     experiment::ExperimentSpec s;
     s.set_name(fmt::format("health-{}{:g}V-{:g}Pa", hold ? "hold-" : "", v, p));
     s.set_description(hold ? fmt::format("nightly health check of {}: switch-on from rest at {:g} V and {:g} Pa, then "
-                                         "a hold at duty {:g} and {:g} Hz for {:g} s",
-                                         bench.name, v, p, duty, hold_Hz, hold_s)
+                                         "a hold at duty {:g} and {:g} Hz for {:g} s{}",
+                                         bench.name, v, p, duty, hold_Hz, hold_s,
+                                         dropout_s > 0.0 ? fmt::format(", then {:g} s of drop-out", dropout_s) : "")
                            : fmt::format("nightly health check of {}: switch-on from rest at {:g} V and {:g} Pa",
                                          bench.name, v, p));
     for (const std::string& t : {std::string("health"), "health:" + bench.name, std::string("night"), "night:" + date,
@@ -125,8 +132,12 @@ std::vector<experiment::ExperimentSpec> HealthCheckSpecs(const runs::BenchSetup&
     if (hold) {
       auto* held = pwm->add_segments();
       held->set_start_s(hold_from_s), held->set_frequency_hz(hold_Hz), held->set_duty(duty);
+      if (dropout_s > 0.0) {
+        auto* released = pwm->add_segments();
+        released->set_start_s(hold_from_s + hold_s), released->set_frequency_hz(0.0), released->set_duty(0.0);
+      }
     }
-    s.set_duration_s(hold ? hold_from_s + hold_s : duration_s);
+    s.set_duration_s(hold ? hold_from_s + hold_s + dropout_s : duration_s);
     s.mutable_recording()->set_rate_hz(rate_Hz);
     s.set_priority(kHealthPriority);
     specs.push_back(std::move(s));

@@ -1,6 +1,6 @@
 // The nightly health check of a bench (config "health"; issue 38, docs/track.md "On the server"): before each
 // night's suite, one switch-on run per supply and pressure on the bench, from rest (the gate low for 0.1 ms, then
-// high to the end), and one hold (the same switch-on, then PWM; gap/hold.h), stored as any run. `benchctl health BENCH` tracks a bench's checks night by night (the same
+// high to the end), and one hold (the same switch-on, then PWM, then the gate low for the drop-out; gap/hold.h), stored as any run. `benchctl health BENCH` tracks a bench's checks night by night (the same
 // gap::TrackSessions as `benchctl track`). Each run is tagged "health", "health:<bench>", "night",
 // "night:<date>" and the night's number (runs::NightNumberTag), pinned to its bench, and queued ahead of the
 // suite (priority kHealthPriority).
@@ -29,6 +29,10 @@ constexpr double kHealthDefaultHold_s = 0.1;
 // The hold's gate stays low this long first: the baseline a scope's offset is taken from (gap/hold.h; 500
 // samples at 100 kHz).
 constexpr double kHealthHoldBaseline_s = 5e-3;
+// After the hold the gate stays low this long: the drop-out (gap/hold.h MeasureDropOut). The current decays
+// through the flyback diode with the held coil's L/R and the plunger lets go on the way down; 50 ms is a
+// coil of 50 ms time constant falling to a third of its hold current (and 50 periods at 1 kHz).
+constexpr double kHealthDefaultDropOut_s = 0.05;
 
 // Checks the bench's "health" block (when it has one) against its capabilities; the message names the field.
 Status ValidateHealthCheck(const valvebench::v1::BenchConfig& bench, const hw::Capabilities& caps,

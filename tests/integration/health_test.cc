@@ -176,15 +176,32 @@ TEST(HealthCheck, OneSwitchOnRunPerSupplyAndPressureAndAHold) {
   EXPECT_EQ(hold.conditions().supply_pressure_pa(), 4e5);
   EXPECT_EQ(runs::NightNumberOf(hold), 12);
   EXPECT_EQ(hold.priority(), server::kHealthPriority);
-  ASSERT_EQ(hold.controller().open_loop_pwm().segments_size(), 3);
-  // A 5 ms baseline (the scope's offset), the switch-on as long as the others', then the PWM.
+  ASSERT_EQ(hold.controller().open_loop_pwm().segments_size(), 4);
+  // A 5 ms baseline (the scope's offset), the switch-on as long as the others', then the PWM, then the drop-out.
   const double pull_in_s = server::kHealthDefaultDuration_s - server::kHealthPreTrigger_s;
   EXPECT_DOUBLE_EQ(hold.controller().open_loop_pwm().segments(1).start_s(), server::kHealthHoldBaseline_s);
   const auto& pwm = hold.controller().open_loop_pwm().segments(2);
   EXPECT_DOUBLE_EQ(pwm.start_s(), server::kHealthHoldBaseline_s + pull_in_s);
   EXPECT_EQ(pwm.duty(), server::kHealthDefaultHoldDuty);
   EXPECT_EQ(pwm.frequency_hz(), server::kHealthDefaultHoldFrequency_Hz);
-  EXPECT_DOUBLE_EQ(hold.duration_s(), server::kHealthHoldBaseline_s + pull_in_s + server::kHealthDefaultHold_s);
+  const auto& released = hold.controller().open_loop_pwm().segments(3);
+  EXPECT_DOUBLE_EQ(released.start_s(), server::kHealthHoldBaseline_s + pull_in_s + server::kHealthDefaultHold_s);
+  EXPECT_EQ(released.duty(), 0.0);
+  EXPECT_DOUBLE_EQ(hold.duration_s(), server::kHealthHoldBaseline_s + pull_in_s + server::kHealthDefaultHold_s +
+                                          server::kHealthDefaultDropOut_s);
+  // dropout_s 0: the run ends with the hold; a drop-out shorter than 4 PWM periods is refused, naming the field.
+  h->set_dropout_s(0.0);
+  auto no_dropout = server::SettingsFromConfig(c, "");
+  ASSERT_TRUE(no_dropout.ok()) << no_dropout.status().message();
+  const auto held = server::HealthCheckSpecs(no_dropout->benches[0], "2026-11-29", 12).back();
+  EXPECT_EQ(held.controller().open_loop_pwm().segments_size(), 3);
+  EXPECT_DOUBLE_EQ(held.duration_s(), server::kHealthHoldBaseline_s + pull_in_s + server::kHealthDefaultHold_s);
+  h->set_dropout_s(0.002);
+  auto short_dropout = server::SettingsFromConfig(c, "");
+  ASSERT_FALSE(short_dropout.ok());
+  EXPECT_NE(short_dropout.status().message().find("health.dropout_s"), std::string::npos)
+      << short_dropout.status().message();
+  h->clear_dropout_s();
   // No hold when its duty is 0; a duty, frequency or length it cannot measure is refused, naming the field.
   h->set_hold_duty(0.0);
   auto no_hold = server::SettingsFromConfig(c, "");
@@ -604,7 +621,8 @@ TEST(BenchTwin, AValveThatChangedIsNamedAsTheCauseOfTheRegressedNights) {
       EXPECT_TRUE(p.flagged_night().empty()) << bh.report();
     }
   }
-  EXPECT_TRUE(tracked.count("R") && tracked.count("R_hold") && tracked.count("L_hold")) << bh.report();
+  EXPECT_TRUE(tracked.count("R") && tracked.count("R_hold") && tracked.count("L_hold") && tracked.count("i_dropout"))
+      << bh.report();
   EXPECT_NE(bh.report().find("FLAG"), std::string::npos) << bh.report();
   auto unknown = c.GetBenchHealth("emu-c");
   EXPECT_EQ(unknown.status().code(), StatusCode::kNotFound) << unknown.status().message();

@@ -20,7 +20,8 @@ async function pageHealth(main, m, params) {
   main.replaceChildren(el('h1', {text: 'Bench health'}),
     el('p', {class: 'muted', text: 'Each checked bench\'s valve, identified from its nightly health check (a switch-on run per ' +
       'supply and pressure before the suite, and a PWM hold that measures R_hold and L_hold without a model of the ' +
-      'valve; a bench\'s "health" block). Per parameter: its value each night with the ' +
+      'valve, then its drop-out, i_dropout: the current at which the plunger lets go; a bench\'s "health" block). ' +
+      'Per parameter: its value each night with the ' +
       'identification\'s 1-sigma, the reference\'s mean and its limits (mean -+ 3 sigma), and the night a self-starting ' +
       'two-sided CUSUM flagged it. A failed night names the valve or the code as its cause on the Nights page.'}), box);
   try {
