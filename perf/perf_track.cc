@@ -9,7 +9,8 @@
 // night the change reaches 3 sigma of the tracked parameter it should show in, the delay; and for the lab: false
 // flags per clean bench-night and changes flagged in time, with Wilson intervals.
 //   perf_track [--benches 6] [--nights 60] [--seed 38] [--only BENCH] [--clean] [--report] [--verbose]
-//              [--previous-detector] [--values-out FILE | --values-in FILE [--resample N [--length L]]]
+//              [--previous-detector] [--values-out FILE | --values-in FILE [--resample N [--length L]]
+//              [--contradiction N]]
 // --clean: every bench keeps its valve (the in-control draws the detector's false-alarm rate is measured on).
 // --values-out FILE: each session's identified values, one line per session ("bench kind from JSON"), so the
 // detector can be run again on them without identifying (--values-in FILE: the benches, kinds and change nights
@@ -23,6 +24,9 @@
 // in-control series flagged (against the target's expected rate), and a step of 3 pool sigma at session 20 and
 // a drift of 0.25 pool sigma per session from session 15 (3 sigma at 27) flagged within 5 sessions of 3 sigma,
 // and before the change. First it prints the pools' tails: the values beyond 3 and 8 robust sigma of their pool.
+// --contradiction N (with --values-in): the rule that calls an R flag "not the winding" when R_hold has not moved,
+// on N draws per clean bench of its nights' (R, R_hold) pairs with a step on R alone or on both (Contradiction).
+// The draws' seed is --seed; the files are made with --values-out.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -251,6 +255,83 @@ int Resample(const std::vector<Pool>& pools, int n, int length, unsigned seed, b
   return 0;
 }
 
+// The rule that says an R flag is "not the winding" (gap/track.cc, TrackFlag::contradicted_by), on draws: each
+// clean bench's nights that have both R and R_hold are a pool of pairs (one night's two values, as identified
+// and measured together); n series of `length` nights are drawn from it (the first 8 without replacement), and a
+// step of `size` times R's own standard deviation over the pool is added from session 20 to R alone (a change
+// the winding did not make: the rule should say so) or to R and R_hold by the same fraction (the winding: it
+// must not). Printed per size: the series whose R was flagged from session 20 on, and of those the share
+// contradicted, with Wilson intervals; a winding's change contradicted is the rule's error.
+int Contradiction(const std::map<int, std::vector<vb::gap::SessionValues>>& benches, int n, int length,
+                  unsigned seed) {
+  const int step_at = 19;  // 0-based: session 20
+  std::printf("the R flag's contradiction by R_hold, on draws: %d series of %d sessions per clean bench, step at "
+              "session 20, seed %u\n", n, length, seed);
+  std::printf("%-10s %-8s %10s %28s\n", "step", "change", "R flagged", "said \"not the winding\"");
+  for (const double size : {3.0, 6.0, 12.0}) {
+    for (const bool winding : {false, true}) {
+      std::mt19937 rng(seed);
+      long flagged = 0, contradicted = 0, series = 0;
+      for (const auto& [b, sessions] : benches) {
+        struct Night {
+          vb::gap::DeterminedValue R, R_hold;
+        };
+        std::vector<Night> pool;
+        for (const auto& v : sessions) {
+          Night night;
+          int found = 0;
+          for (const auto& d : v.determined)
+            if (d.determined && std::isfinite(d.value)) {
+              if (d.name == "R") night.R = d, found |= 1;
+              if (d.name == "R_hold") night.R_hold = d, found |= 2;
+            }
+          if (found == 3) pool.push_back(night);
+        }
+        if (pool.size() < 20) continue;
+        double m = 0.0, s2 = 0.0;
+        for (const auto& x : pool) m += x.R.value / pool.size();
+        for (const auto& x : pool) s2 += (x.R.value - m) * (x.R.value - m) / (pool.size() - 1);
+        const double rel = size * std::sqrt(s2) / m;  // the step, relative
+        std::uniform_int_distribution<std::size_t> pick(0, pool.size() - 1);
+        for (int k = 0; k < n; ++k) {
+          std::vector<Night> draw = pool;
+          std::shuffle(draw.begin(), draw.end(), rng);
+          draw.resize(std::min<std::size_t>(draw.size(), 8));
+          while (static_cast<int>(draw.size()) < length) draw.push_back(pool[pick(rng)]);
+          std::vector<vb::gap::SessionValues> values;
+          for (int j = 0; j < length; ++j) {
+            vb::gap::SessionValues v;
+            v.name = "night" + std::to_string(j + 1);
+            Night night = draw[j];
+            if (j >= step_at) {
+              night.R.value *= 1.0 + rel;
+              if (winding) night.R_hold.value *= 1.0 + rel;
+            }
+            v.determined = {night.R, night.R_hold};
+            values.push_back(std::move(v));
+          }
+          auto t = vb::gap::TrackValues(values, vb::gap::TrackOptions{});
+          ++series;
+          if (!t.ok()) continue;
+          for (const auto& f : t->flags)
+            if (f.parameter == "R" && f.session_index >= step_at) {
+              ++flagged;
+              contradicted += !f.contradicted_by.empty();
+              break;
+            }
+        }
+      }
+      const Wilson w = Interval(static_cast<int>(contradicted), static_cast<int>(flagged));
+      char size_s[32];
+      std::snprintf(size_s, sizeof size_s, "%.0f R sd", size);
+      std::printf("%-10s %-8s %6ld/%-6ld %12ld (%.3f [%.3f, %.3f])\n", size_s, winding ? "winding" : "R only",
+                  flagged, series, contradicted, flagged ? static_cast<double>(contradicted) / flagged : 0.0, w.lo,
+                  w.hi);
+    }
+  }
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -260,7 +341,7 @@ int main(int argc, char** argv) {
   int only = -1;
   bool all_clean = false, previous = false;
   std::string values_out, values_in;
-  int resample = 0, length = 60;
+  int resample = 0, length = 60, contradiction = 0;
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--benches") && i + 1 < argc) benches = std::atoi(argv[++i]);
     else if (!std::strcmp(argv[i], "--nights") && i + 1 < argc) nights = std::atoi(argv[++i]);
@@ -273,6 +354,7 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[i], "--values-out") && i + 1 < argc) values_out = argv[++i];
     else if (!std::strcmp(argv[i], "--values-in") && i + 1 < argc) values_in = argv[++i];
     else if (!std::strcmp(argv[i], "--resample") && i + 1 < argc) resample = std::atoi(argv[++i]);
+    else if (!std::strcmp(argv[i], "--contradiction") && i + 1 < argc) contradiction = std::atoi(argv[++i]);
     else if (!std::strcmp(argv[i], "--length") && i + 1 < argc) length = std::atoi(argv[++i]);
     else {
       std::fprintf(stderr,
@@ -322,6 +404,16 @@ int main(int argc, char** argv) {
       read[b].values.push_back(std::move(*v));
     }
     benches = read.empty() ? 0 : read.rbegin()->first + 1;
+  }
+  if (contradiction > 0) {
+    if (read.empty()) {
+      std::fprintf(stderr, "perf_track: --contradiction needs --values-in FILE\n");
+      return 2;
+    }
+    std::map<int, std::vector<vb::gap::SessionValues>> clean;
+    for (const auto& [b, bench] : read)
+      if (bench.kind == "clean") clean[b] = bench.values;
+    return Contradiction(clean, contradiction, length, seed);
   }
   if (resample > 0) {
     if (read.empty()) {
