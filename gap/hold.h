@@ -54,8 +54,8 @@ StatusOr<HoldMeasurement> MeasureHold(const RunData& r, const model::DriverParam
 // flux linkage, continuous, pushes the current up: a dip, the mirror of the pull-in's. The current at the dip's
 // bottom is the drop-out current: i^2 is the spring's force at the stop over the pull per ampere squared, with no
 // model of the valve. A relaxing spring lowers it (by half the force's fraction), shorted turns raise it (the
-// pull per ampere falls with the square of the turns), the winding's resistance barely moves it (it sets how fast
-// the current gets there, not where the plunger lets go).
+// pull per ampere falls with the square of the turns), a more resistive winding lowers it by a tenth to a quarter
+// of its own change (it sets how fast the current falls while the plunger starts to move, not where it lets go).
 struct DropOutMeasurement {
   double i_A = NAN, sigma_A = NAN;  // the current at the dip's bottom (offset removed), and its 1-sigma
   double t_s = NAN;                 // from the gate's last fall to the dip's bottom

@@ -1,6 +1,7 @@
 // The nightly health check of a bench (config "health"; issue 38, docs/track.md "On the server"): before each
 // night's suite, one switch-on run per supply and pressure on the bench, from rest (the gate low for 0.1 ms, then
-// high to the end), and one hold (the same switch-on, then PWM, then the gate low for the drop-out; gap/hold.h), stored as any run. `benchctl health BENCH` tracks a bench's checks night by night (the same
+// high to the end), and one hold (the same switch-on, then PWM, then the gate low for the drop-out; gap/hold.h),
+// stored as any run. `benchctl health BENCH` tracks a bench's checks night by night (the same
 // gap::TrackSessions as `benchctl track`). Each run is tagged "health", "health:<bench>", "night",
 // "night:<date>" and the night's number (runs::NightNumberTag), pinned to its bench, and queued ahead of the
 // suite (priority kHealthPriority).
