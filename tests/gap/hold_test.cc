@@ -30,8 +30,8 @@ struct HoldPlan {
 };
 
 // A hold run as the health check records it: the gate low 0.1 ms, high for the pull-in, then PWM (then, with
-// tail_s, the gate low: the drop-out); the current
-// with white noise; no coil voltage (the driver's voltages are used).
+// tail_s, the gate low: the drop-out); the current with white noise; no coil voltage (the driver's voltages are
+// used).
 RunData SimulateHold(const model::PlantParams& plant, const HoldPlan& plan) {
   constexpr double dt = 1e-5;
   const auto n =
