@@ -848,6 +848,30 @@ double SecondDifferenceSigma(const std::vector<double>& i) {
   return std::sqrt(s / static_cast<double>(i.size() - 2) / 6.0);
 }
 
+double SecondDifferenceSigma(const std::vector<double>& i, const std::vector<int8_t>& gate, double sample_period_s) {
+  if (i.size() < 3 || gate.size() != i.size() || !(sample_period_s > 0.0) || !std::isfinite(sample_period_s))
+    return SecondDifferenceSigma(i);
+  const auto guard = static_cast<std::ptrdiff_t>(std::max(2.0, std::ceil(kNoiseEdgeGuard_s / sample_period_s)));
+  const auto n = static_cast<std::ptrdiff_t>(i.size());
+  // near[k]: sample k lies within the guard of an edge (an edge between samples e and e + 1).
+  std::vector<bool> near(i.size(), false);
+  for (std::ptrdiff_t e = 0; e + 1 < n; ++e) {
+    if (gate[static_cast<std::size_t>(e)] == gate[static_cast<std::size_t>(e + 1)]) continue;
+    for (std::ptrdiff_t k = std::max<std::ptrdiff_t>(0, e - guard); k <= std::min(n - 1, e + 1 + guard); ++k)
+      near[static_cast<std::size_t>(k)] = true;
+  }
+  double s = 0.0;
+  std::size_t used = 0;
+  for (std::size_t k = 2; k < i.size(); ++k) {
+    if (near[k] || near[k - 1] || near[k - 2]) continue;
+    const double d2 = i[k] - 2.0 * i[k - 1] + i[k - 2];
+    s += d2 * d2;
+    ++used;
+  }
+  if (2 * used < i.size() - 2) return SecondDifferenceSigma(i);
+  return std::sqrt(s / static_cast<double>(used) / 6.0);
+}
+
 std::string_view RunKindName(RunKind k) {
   switch (k) {
     case RunKind::kWaveform: return "waveform";

@@ -102,8 +102,18 @@ struct Dataset {
 std::vector<std::string> DefaultKnownModels();
 
 // White-noise sigma of a densely sampled current from its second differences, sqrt(mean(d2^2) / 6): the
-// smooth coil current barely contributes at 50 kHz.
+// smooth coil current barely contributes at 50 kHz. Between the gate's edges only: see the overload below.
 double SecondDifferenceSigma(const std::vector<double>& i);
+
+// The same, leaving out the second differences within kNoiseEdgeGuard_s (and at least two samples) of a gate
+// edge. An edge is a step of the coil's voltage: the current's slope jumps there by V / L and, with an eddy
+// path or a switching spike, the current itself, so one second difference at a 50 kHz switch-on edge can be
+// 100x the noise, and a 10 ms capture has only one edge to average it over (practice4's p41_1: 3.0 mA from all
+// samples, 0.46 mA between the edges, against 0.46 mA its chain declares). The guard spans the eddy rungs'
+// decay (20-40 us on practice4's valves). When the guard would leave fewer than half the samples (a PWM
+// waveform sampled a few times per period), every sample is used, as the first form does.
+inline constexpr double kNoiseEdgeGuard_s = 50e-6;
+double SecondDifferenceSigma(const std::vector<double>& i, const std::vector<int8_t>& gate, double sample_period_s);
 
 // The standard error of each measured value from what the dataset says: a reading's spread over its repeats,
 // the ADC step and the declared noise (per raw reading, divided by averaging and repeats). Empty when the

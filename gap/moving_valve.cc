@@ -683,10 +683,11 @@ StatusOr<MovingIdentification> IdentifyMovingValve(const Dataset& ds_in, const m
   id.holdout_runs = static_cast<int>(ds.runs.size()) - id.fit_runs;
   if (id.fit_runs == 0) return Status::InvalidArgument("identify: every run is a holdout run: nothing to fit on");
   if (id.holdout_runs == 0) id.split_note = "the manifest holds no run out: every run is fitted, none predicted unseen";
-  // The noise floor from the data (white noise from second differences), and what the dataset declares.
+  // The noise floor from the data (white noise from second differences between the gate's edges: the switch-on
+  // edge is a step of the drive, not noise), and what the dataset declares.
   double n2 = 0.0;
   for (const auto& r : ds.runs) {
-    double s = SecondDifferenceSigma(r.i_A);
+    double s = SecondDifferenceSigma(r.i_A, r.gate, r.sample_period_s);
     const auto se = DeclaredStandardErrors(ds, r);
     if (!se.empty()) s = std::max(s, se.front());
     n2 += s * s;
