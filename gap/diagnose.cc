@@ -1017,6 +1017,9 @@ StatusOr<Predicted> MeasureGap(const Dataset& ds, const model::PlantParams& nomi
   auto nominal_pred = Predict(ds, nominal, popt);
   if (!nominal_pred.ok()) return nominal_pred.status();
   const std::vector<std::vector<double>>& nominal_i = nominal_pred->i_A;
+  // A switch-on capture's noise is read between its gate's edges, as its identification reads it (gap/dataset.h:
+  // the one edge of a 10 ms capture can triple the estimate). PWM waveforms keep every sample, as calibrated.
+  const bool switch_on = IsSwitchOnSession(ds, nominal);
   for (std::size_t r = 0; r < ds.runs.size(); ++r) {
     const RunData& run = ds.runs[r];
     const bool holdout = split[r] == Split::kHoldout;
@@ -1035,7 +1038,9 @@ StatusOr<Predicted> MeasureGap(const Dataset& ds, const model::PlantParams& nomi
     // The noise of each value: declared (spread over repeats, ADC step, declared noise) and, for waveforms,
     // estimated from the data; the larger of the two.
     const std::vector<double> se = DeclaredStandardErrors(ds, run);
-    const double sigma = run.kind == RunKind::kWaveform ? SecondDifferenceSigma(run.i_A) : 0.0;
+    const double sigma = run.kind != RunKind::kWaveform ? 0.0
+                         : switch_on ? SecondDifferenceSigma(run.i_A, run.gate, run.sample_period_s)
+                                     : SecondDifferenceSigma(run.i_A);
     if (se.empty() && run.kind != RunKind::kWaveform) {
       return Status::InvalidArgument("run " + run.id + ": no noise level: its readings carry no spread (sd_A with "
                                      "repeats) and the dataset declares none (sensor.noise_A or sensor.adc_lsb_V)");
