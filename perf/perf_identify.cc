@@ -20,7 +20,7 @@
 //
 // Usage: perf_identify [--sets practice3,practice4 | --sets none] [--only SUBSTRING] [--evaluations N] [--verbose]
 //                      [--edges] [--population N] [--valves J,K,...] [--seed SEED] [--ablate flow,stribeck,ladder,eddy,core,scope]
-//                      [--design one-supply|two-supplies]
+//                      [--design one-supply|two-supplies] [--noise]
 // --valves J,K,...: only these draws of the population (indep_J; each draw has its own seed, so a subset is the
 // same valves as in the whole run).
 // --design two-supplies: each draw's session gets a fourth fit run, at 0.75x the supply and 1 bar (appended, so
@@ -30,6 +30,9 @@
 // edge along the supply (RunMarks::edge_log_supply) and the same for the drawn valve itself (noise-free, the
 // same dip threshold), the fit's multiple of the noise floor and whether the prediction was trusted: the data
 // the pull-in-edge rule is calibrated on (docs/real-data.md, "Eighth round").
+// --noise: no identification; each drawn run's noise estimate from second differences, with every sample and
+// between the gate's edges, against the chain's own noise (the draw's), as percentiles (docs/real-data.md,
+// "Eleventh round").
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
@@ -96,7 +99,7 @@ int main(int argc, char** argv) {
   // --ablate flow,stribeck,ladder,eddy,core,scope: the same draws with forms of the independent plant taken out,
   // to see which of them the identification's family misses (the draws are made first, so the valves are the same).
   std::string ablate;
-  bool verbose = false, edges = false, two_supplies = false;
+  bool verbose = false, edges = false, two_supplies = false, noise_only = false;
   unsigned seed = 35;
   std::set<int> valves;  // --valves: empty = every draw
   for (int a = 1; a < argc; ++a) {
@@ -117,6 +120,8 @@ int main(int argc, char** argv) {
       verbose = true;
     } else if (arg == "--edges") {
       edges = true;
+    } else if (arg == "--noise") {
+      noise_only = true;
     } else if (arg == "--ablate" && a + 1 < argc) {
       ablate = argv[++a];
       std::stringstream forms(ablate);
@@ -158,7 +163,7 @@ int main(int argc, char** argv) {
     } else {
       std::fprintf(stderr, "usage: perf_identify [--sets practice3,practice4|none] [--only SUBSTRING] [--evaluations N] "
                            "[--ode-steps N] [--population N] [--valves J,K,...] [--seed SEED] [--ablate flow,stribeck,ladder,eddy,core,scope] "
-                           "[--design one-supply|two-supplies] [--verbose] [--edges]\n");
+                           "[--design one-supply|two-supplies] [--verbose] [--edges] [--noise]\n");
       return 2;
     }
   }
@@ -268,6 +273,9 @@ int main(int argc, char** argv) {
     double applied;          // the bias the identification judged its edges with (its fit runs' design)
   };
   std::vector<EdgeRun> edge_runs;
+  // --noise: each run's noise estimate from second differences over the chain's own noise, with every sample and
+  // between the gate's edges (gap/dataset.h), without identifying anything.
+  std::vector<double> noise_ratio_all, noise_ratio_between;
   for (int j = 0; j < population; ++j) {
     if (!valves.empty() && !valves.count(j)) continue;
     std::mt19937 rng(seed * 1000u + static_cast<unsigned>(j));
@@ -283,6 +291,16 @@ int main(int argc, char** argv) {
         {v.supply_V, 1}, {v.supply_V, 2}, {v.supply_V, 4}, {v.supply_V, 6, true}, {0.75 * v.supply_V, 4, true}};
     if (two_supplies) runs.push_back({0.75 * v.supply_V, 1});
     const vb::gap::Dataset ds = vb::perf::IndependentSession(v, runs, rng, "independent-" + std::to_string(j), true);
+    if (noise_only) {
+      // The chain's own noise per sample: one sweep's noise averaged over the sweeps, and the rounding to the
+      // scope's step (uniform, step^2 / 12).
+      const double chain_A = std::sqrt(v.noise_A * v.noise_A / v.averaged + v.lsb_A * v.lsb_A / 12.0);
+      for (const auto& run : ds.runs) {
+        noise_ratio_all.push_back(vb::gap::SecondDifferenceSigma(run.i_A) / chain_A);
+        noise_ratio_between.push_back(vb::gap::SecondDifferenceSigma(run.i_A, run.gate, run.sample_period_s) / chain_A);
+      }
+      continue;
+    }
     const auto t0 = Clock::now();
     const double c0 = CpuSeconds();
     vb::gap::MovingIdentifyOptions mo;
@@ -418,6 +436,24 @@ int main(int argc, char** argv) {
     std::printf("band     holdout runs within 3x hypot(noise, band spread): %d of %d (%.0f-%.0f %%); measured pull-in "
                 "among the draws' outcomes: %d of %d\n",
                 band.covered, band.runs, 100.0 * clo, 100.0 * chi, band.outcome_seen, band.runs);
+  }
+  if (noise_only && !noise_ratio_all.empty()) {
+    // How far each estimate lies from the chain's noise, over every run of the draws: its percentiles and how
+    // many runs it reads over 1.5x (a fit at the noise would then be judged against a floor half again too high)
+    // or under 0.67x.
+    for (auto* pr : {&noise_ratio_all, &noise_ratio_between}) {
+      std::vector<double> r = *pr;
+      std::sort(r.begin(), r.end());
+      const int n = static_cast<int>(r.size());
+      auto q = [&](double f) { return r[static_cast<std::size_t>(std::clamp(static_cast<int>(std::ceil(f * n)) - 1, 0, n - 1))]; };
+      const int over = static_cast<int>(std::count_if(r.begin(), r.end(), [](double x) { return x > 1.5; }));
+      const int under = static_cast<int>(std::count_if(r.begin(), r.end(), [](double x) { return x < 1.0 / 1.5; }));
+      const auto [olo, ohi] = Wilson(over, n);
+      std::printf("noise    %s: estimate / chain over %d runs: 5th %.2f, median %.2f, 95th %.2f, largest %.2f; over 1.5x "
+                  "%d (%.1f %%, Wilson 95 %% %.1f-%.1f %%), under 1/1.5 %d\n",
+                  pr == &noise_ratio_all ? "every sample       " : "between gate edges", n, q(0.05), q(0.5), q(0.95),
+                  r.back(), over, 100.0 * over / n, 100.0 * olo, 100.0 * ohi, under);
+    }
   }
   // One block per fit-run design the identifications judged their edges with (MovingIdentification::
   // pull_in_edge_design: pulling-in fit runs at one supply or at two), each with the bias its rule applies: a
